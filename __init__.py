@@ -1,0 +1,7 @@
+"""Urban Synthesis QGIS plugin entry point."""
+
+
+def classFactory(iface):  # noqa: N802 (QGIS API name)
+    from .plugin.plugin import UrbanSynthesisPlugin
+
+    return UrbanSynthesisPlugin(iface)

@@ -1,0 +1,61 @@
+"""Progress reporting and cancellation for long engine work, independent of QGIS.
+
+Engine functions take an optional ``progress`` (a :class:`Progress`) and call
+``progress.step(fraction)`` in their loops; cancellation raises :class:`Canceled`
+so that work stops promptly wherever it is. ``qgis_io`` adapts a QgsProcessingFeedback.
+"""
+from __future__ import annotations
+
+from typing import Callable, Optional
+
+
+class InputError(ValueError):
+    """Bad input the user can fix (empty layer, missing field, absurd parameter)."""
+
+
+class Canceled(RuntimeError):
+    """The user canceled the operation."""
+
+
+class Progress:
+    """Maps engine-local fractions [0, 1] onto a sub-range of an outer progress bar.
+
+    Parameters
+    ----------
+    report : callable(float percent) or None
+    is_canceled : callable() -> bool or None
+    log : callable(str) or None
+        Informational messages (counts of repaired or skipped features ...).
+    """
+
+    def __init__(self, report: Optional[Callable[[float], None]] = None,
+                 is_canceled: Optional[Callable[[], bool]] = None,
+                 log: Optional[Callable[[str], None]] = None,
+                 start: float = 0.0, end: float = 100.0):
+        self._report = report
+        self._is_canceled = is_canceled
+        self._log = log
+        self.start = start
+        self.end = end
+
+    def sub(self, a: float, b: float) -> "Progress":
+        """A child progress covering fractions a..b of this one."""
+        span = self.end - self.start
+        return Progress(self._report, self._is_canceled, self._log,
+                        self.start + a * span, self.start + b * span)
+
+    def step(self, fraction: float) -> None:
+        """Report progress and raise :class:`Canceled` if the user asked to stop."""
+        if self._is_canceled is not None and self._is_canceled():
+            raise Canceled("Canceled by the user.")
+        if self._report is not None:
+            f = min(max(fraction, 0.0), 1.0)
+            self._report(self.start + f * (self.end - self.start))
+
+    def info(self, message: str) -> None:
+        if self._log is not None:
+            self._log(message)
+
+
+def ensure(progress: Optional[Progress]) -> Progress:
+    return progress if progress is not None else Progress()

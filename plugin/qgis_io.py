@@ -1,0 +1,354 @@
+"""The only module that converts between QGIS objects and engine data.
+
+Data flows one way: QGIS layer -> :func:`read_source` (features reprojected into a local
+metric CRS, geometries as shapely arrays, attributes as a pandas DataFrame) -> engine ->
+:func:`write_sink` (back to the input CRS). Engine errors (:class:`InputError`) become
+:class:`QgsProcessingException` with the layer's name; cancellation stops the algorithm.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Dict, Iterable, List, Optional, Sequence
+
+import numpy as np
+import pandas as pd
+import shapely
+from qgis.core import (
+    QgsCoordinateReferenceSystem,
+    QgsCoordinateTransform,
+    QgsFeature,
+    QgsFeatureRequest,
+    QgsFeatureSink,
+    QgsField,
+    QgsFields,
+    QgsGeometry,
+    QgsPointXY,
+    QgsProcessingException,
+    QgsProcessingFeedback,
+    QgsProject,
+    QgsRectangle,
+    QgsUnitTypes,
+    QgsWkbTypes,
+)
+from qgis.PyQt.QtCore import QVariant
+
+from .progress import Canceled, InputError, Progress
+
+_GEOM_NAMES = {QgsWkbTypes.PointGeometry: "points", QgsWkbTypes.LineGeometry: "lines",
+               QgsWkbTypes.PolygonGeometry: "polygons"}
+_KIND_TO_GEOMTYPE = {"points": QgsWkbTypes.PointGeometry, "lines": QgsWkbTypes.LineGeometry,
+                     "polygons": QgsWkbTypes.PolygonGeometry}
+_WEB_MERCATOR = {"EPSG:3857", "EPSG:900913", "EPSG:3785", "EPSG:102100", "EPSG:102113"}
+
+
+# --------------------------------------------------------------------------- CRS
+
+def working_crs(crs: QgsCoordinateReferenceSystem, extent_in_crs: QgsRectangle,
+                context) -> QgsCoordinateReferenceSystem:
+    """The metric CRS the engine works in.
+
+    A projected CRS in metres is used as is, except Web Mercator (its scale error is 1.5x at
+    50 degrees latitude, so lengths and areas would be wrong); anything else is replaced by
+    the UTM zone of the data's centre.
+    """
+    if (crs.isValid() and not crs.isGeographic()
+            and crs.mapUnits() == QgsUnitTypes.DistanceMeters
+            and crs.authid() not in _WEB_MERCATOR):
+        return crs
+    wgs84 = QgsCoordinateReferenceSystem("EPSG:4326")
+    centre = extent_in_crs.center()
+    if crs.isValid() and crs != wgs84:
+        tr = QgsCoordinateTransform(crs, wgs84, context.transformContext())
+        centre = tr.transform(centre)
+    lon, lat = centre.x(), centre.y()
+    if not (math.isfinite(lon) and math.isfinite(lat)):
+        raise QgsProcessingException("Cannot find a metric CRS for the data: its extent is not finite.")
+    zone = int((lon + 180.0) // 6.0) % 60 + 1
+    return QgsCoordinateReferenceSystem(f"EPSG:{32600 + zone if lat >= 0 else 32700 + zone}")
+
+
+@dataclass
+class Frame:
+    """Features of one layer in the working CRS."""
+
+    geometry: np.ndarray          # shapely geometries
+    attributes: pd.DataFrame      # one row per geometry, original field names
+    fids: np.ndarray              # feature ids in the source
+    source_crs: QgsCoordinateReferenceSystem
+    crs: QgsCoordinateReferenceSystem  # the working CRS
+    name: str
+
+    def __len__(self):
+        return len(self.geometry)
+
+
+def layer_name(alg, parameters, name, context) -> str:
+    """A name for messages: the layer's name, else the parameter's description."""
+    layer = None
+    try:
+        layer = alg.parameterAsVectorLayer(parameters, name, context)
+    except Exception:  # noqa: BLE001 - sources that are not layers (e.g. feature iterators)
+        layer = None
+    if layer is not None and layer.name():
+        return f"'{layer.name()}'"
+    definition = alg.parameterDefinition(name)
+    return f"'{definition.description()}'" if definition is not None else f"'{name}'"
+
+
+def read_source(alg, parameters, name: str, context, feedback,
+                kind: Optional[str] = None, required_fields: Sequence[str] = (),
+                target_crs: Optional[QgsCoordinateReferenceSystem] = None,
+                repair: bool = True, optional: bool = False) -> Optional[Frame]:
+    """Read a feature source parameter into a :class:`Frame` in a metric working CRS.
+
+    Raises a QgsProcessingException naming the layer for: a missing layer, the wrong geometry
+    type, missing fields, no features with geometry. Null geometries are skipped and invalid
+    ones repaired (``make_valid``), both with a count in the log. The source is never modified.
+    """
+    source = alg.parameterAsSource(parameters, name, context)
+    label = layer_name(alg, parameters, name, context)
+    if source is None:
+        if optional:
+            return None
+        raise QgsProcessingException(f"Layer {label} could not be loaded.")
+    if kind is not None:
+        gtype = QgsWkbTypes.geometryType(source.wkbType())
+        if gtype != _KIND_TO_GEOMTYPE[kind]:
+            got = _GEOM_NAMES.get(gtype, "no geometry")
+            raise QgsProcessingException(
+                f"Layer {label} has {got}; {kind} are needed.")
+    field_names = [f.name() for f in source.fields()]
+    missing = [f for f in required_fields if f not in field_names]
+    if missing:
+        raise QgsProcessingException(
+            f"Layer {label} has no field {', '.join(repr(m) for m in missing)} "
+            f"(fields: {', '.join(field_names) or 'none'}).")
+    src_crs = source.sourceCrs()
+    if target_crs is None:
+        extent = source.sourceExtent()
+        if extent.isNull() or extent.isEmpty() and extent.width() == 0 and extent.height() == 0:
+            extent = None
+        if extent is None:
+            # streaming providers (the OSM driver) may not know their extent: read first
+            target_crs = None
+        else:
+            target_crs = working_crs(src_crs, extent, context)
+    request = QgsFeatureRequest()
+    wkbs: List[bytes] = []
+    rows: List[list] = []
+    fids: List[int] = []
+    n_null = 0
+    total = source.featureCount()
+    step = 100.0 / total if total and total > 0 else 0
+    for i, feature in enumerate(source.getFeatures(request)):
+        if feedback is not None and feedback.isCanceled():
+            raise QgsProcessingException("Canceled by the user.")
+        geom = feature.geometry()
+        if geom is None or geom.isNull() or geom.isEmpty():
+            n_null += 1
+            continue
+        wkbs.append(bytes(geom.asWkb()))
+        rows.append(feature.attributes())
+        fids.append(feature.id())
+        if step and feedback is not None and i % 1000 == 0:
+            feedback.setProgress(i * step)
+    if not wkbs:
+        raise QgsProcessingException(
+            f"Layer {label} is empty: it has no features with a geometry"
+            + (f" ({n_null} null geometries skipped)." if n_null else "."))
+    geoms = shapely.from_wkb(np.array(wkbs, dtype=object))
+    if target_crs is None:
+        b = shapely.total_bounds(geoms)
+        target_crs = working_crs(src_crs, QgsRectangle(*b), context)
+    if src_crs.isValid() and target_crs != src_crs:
+        geoms = _transform(geoms, src_crs, target_crs, context)
+    if n_null and feedback is not None:
+        feedback.pushInfo(f"{label}: {n_null} features with a null or empty geometry skipped.")
+    if repair and kind in ("polygons", "lines"):
+        invalid = ~shapely.is_valid(geoms)
+        if invalid.any():
+            fixed = shapely.make_valid(geoms[invalid])
+            fixed = np.array([_keep_dimension(g, kind) for g in fixed], dtype=object)
+            geoms[invalid] = fixed
+            if feedback is not None:
+                feedback.pushInfo(f"{label}: {int(invalid.sum())} invalid geometries repaired.")
+        empty = shapely.is_empty(geoms) | shapely.is_missing(geoms)
+        if empty.any():
+            keep = ~empty
+            geoms = geoms[keep]
+            rows = [r for r, k in zip(rows, keep) if k]
+            fids = [f for f, k in zip(fids, keep) if k]
+            if feedback is not None:
+                feedback.pushInfo(f"{label}: {int(empty.sum())} geometries could not be repaired and were skipped.")
+            if len(geoms) == 0:
+                raise QgsProcessingException(f"Layer {label} has no valid geometry.")
+    attrs = pd.DataFrame([[_py(v) for v in r] for r in rows], columns=field_names)
+    return Frame(geoms, attrs, np.asarray(fids), src_crs, target_crs, label)
+
+
+def _keep_dimension(geom, kind):
+    """make_valid may return a collection: keep only the parts of the wanted dimension."""
+    if geom is None:
+        return None
+    dim = 2 if kind == "polygons" else 1
+    parts = [p for p in shapely.get_parts(geom) if shapely.get_dimensions(p) == dim]
+    if not parts:
+        return shapely.from_wkt("GEOMETRYCOLLECTION EMPTY")
+    if dim == 2:
+        return shapely.union_all(parts) if len(parts) > 1 else parts[0]
+    return shapely.multilinestrings(parts) if len(parts) > 1 else parts[0]
+
+
+def _py(value):
+    """QVariant nulls and Qt types -> plain Python values."""
+    if value is None:
+        return None
+    if isinstance(value, QVariant):
+        return None if value.isNull() else value.value()
+    if hasattr(value, "isNull") and callable(value.isNull) and value.isNull():
+        return None
+    return value
+
+
+def _crs_string(crs: QgsCoordinateReferenceSystem) -> str:
+    return crs.authid() or crs.toWkt(QgsCoordinateReferenceSystem.WKT_PREFERRED)
+
+
+def _transform(geoms: np.ndarray, src, dst, context) -> np.ndarray:
+    """Reproject shapely geometries, vectorised over all coordinates.
+
+    Uses Debian's pyproj (built on the same PROJ as QGIS, see DESIGN.md) when available,
+    else QGIS's own transform point by point.
+    """
+    coords = shapely.get_coordinates(geoms)
+    if len(coords) == 0:
+        return geoms
+    try:
+        from pyproj import Transformer
+
+        tr = Transformer.from_crs(_crs_string(src), _crs_string(dst), always_xy=True)
+        x, y = tr.transform(coords[:, 0], coords[:, 1])
+        out = np.column_stack([x, y])
+    except ImportError:  # pragma: no cover - QGIS without pyproj
+        ctx = context.transformContext() if context else QgsProject.instance().transformContext()
+        qtr = QgsCoordinateTransform(src, dst, ctx)
+        out = np.array([[p.x(), p.y()] for p in
+                        (qtr.transform(QgsPointXY(x, y)) for x, y in coords)])
+    if not np.isfinite(out).all():
+        raise QgsProcessingException(
+            f"Some coordinates cannot be transformed from {src.authid()} to {dst.authid()}.")
+    return shapely.set_coordinates(shapely.force_2d(geoms).copy(), out)
+
+
+def reproject(geoms: np.ndarray, src, dst, context) -> np.ndarray:
+    if src == dst or not src.isValid() or not dst.isValid():
+        return geoms
+    return _transform(np.asarray(geoms, dtype=object), src, dst, context)
+
+
+# --------------------------------------------------------------------------- sinks
+
+_QVARIANT = {"int": QVariant.LongLong, "float": QVariant.Double, "str": QVariant.String,
+             "bool": QVariant.Bool}
+
+
+def make_fields(spec: Sequence[tuple]) -> QgsFields:
+    """``spec`` is a sequence of (name, type) with type in int / float / str / bool."""
+    fields = QgsFields()
+    for name, typ in spec:
+        fields.append(QgsField(name, _QVARIANT[typ]))
+    return fields
+
+
+def write_sink(alg, parameters, name: str, context, geoms: np.ndarray, table: pd.DataFrame,
+               spec: Sequence[tuple], wkb_type, out_crs: QgsCoordinateReferenceSystem,
+               work_crs: QgsCoordinateReferenceSystem, feedback=None) -> Optional[str]:
+    """Write engine results to a feature sink parameter, back in ``out_crs``.
+
+    ``spec`` lists the output fields (name, type); ``table`` holds their values per row.
+    Returns the destination id (None when the output was not requested).
+    """
+    fields = make_fields(spec)
+    sink, dest_id = alg.parameterAsSink(parameters, name, context, fields, wkb_type, out_crs)
+    if sink is None:
+        return None
+    geoms = np.asarray(geoms, dtype=object)
+    if len(geoms):
+        geoms = reproject(geoms, work_crs, out_crs, context)
+    wkbs = shapely.to_wkb(geoms) if len(geoms) else []
+    columns = [table[n].to_numpy() if n in table else np.full(len(geoms), None) for n, _ in spec]
+    casts = [_caster(t) for _, t in spec]
+    features = []
+    multi = QgsWkbTypes.isMultiType(wkb_type)
+    for i, wkb in enumerate(wkbs):
+        if feedback is not None and feedback.isCanceled():
+            raise QgsProcessingException("Canceled by the user.")
+        f = QgsFeature(fields)
+        g = QgsGeometry()
+        g.fromWkb(wkb)
+        if multi and not g.isMultipart():
+            g.convertToMultiType()
+        f.setGeometry(g)
+        f.setAttributes([cast(col[i]) for cast, col in zip(casts, columns)])
+        features.append(f)
+    if not sink.addFeatures(features, QgsFeatureSink.FastInsert):
+        raise QgsProcessingException(f"Could not write the output {name}: {sink.lastError()}")
+    return dest_id
+
+
+def _caster(typ):
+    def cast(value):
+        if value is None:
+            return None
+        if isinstance(value, float) and not math.isfinite(value):
+            return None
+        try:
+            if pd.isna(value):
+                return None
+        except (TypeError, ValueError):
+            pass
+        if typ == "int":
+            return int(value)
+        if typ == "float":
+            return float(value)
+        if typ == "bool":
+            return bool(value)
+        return str(value)
+    return cast
+
+
+# --------------------------------------------------------------------------- engine calls
+
+def progress_for(feedback: Optional[QgsProcessingFeedback], start: float = 0.0,
+                 end: float = 100.0) -> Progress:
+    if feedback is None:
+        return Progress(start=start, end=end)
+    return Progress(feedback.setProgress, feedback.isCanceled, feedback.pushInfo, start, end)
+
+
+def run_engine(label: str, fn, *args, **kwargs):
+    """Call an engine function; its InputError becomes a QgsProcessingException naming ``label``."""
+    try:
+        return fn(*args, **kwargs)
+    except Canceled as exc:
+        raise QgsProcessingException(str(exc)) from exc
+    except InputError as exc:
+        raise QgsProcessingException(f"{label}: {exc}") from exc
+
+
+def field_values(frame: Frame, field: Optional[str], default=None) -> np.ndarray:
+    if field and field in frame.attributes:
+        return frame.attributes[field].to_numpy(dtype=object)
+    return np.full(len(frame), default, dtype=object)
+
+
+def check_number(value, name: str, lo: float = None, hi: float = None):
+    """Raise a clear error for absurd numeric parameters (QGIS checks min/max only in the GUI)."""
+    if value is None or not math.isfinite(value):
+        raise QgsProcessingException(f"Parameter {name} must be a finite number.")
+    if lo is not None and value < lo:
+        raise QgsProcessingException(f"Parameter {name} = {value} is too small (minimum {lo}).")
+    if hi is not None and value > hi:
+        raise QgsProcessingException(f"Parameter {name} = {value} is too large (maximum {hi}).")
+    return value

@@ -1,0 +1,1 @@
+"""One QgsProcessingAlgorithm per file: parameters, help, progress, cancellation, one engine call."""
