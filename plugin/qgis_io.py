@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Dict, Iterable, List, Optional, Sequence
 
 import numpy as np
@@ -25,6 +26,7 @@ from qgis.core import (
     QgsGeometry,
     QgsPointXY,
     QgsProcessingException,
+    QgsProcessingFeatureSource,
     QgsProcessingFeedback,
     QgsProject,
     QgsRectangle,
@@ -141,7 +143,9 @@ def read_source(alg, parameters, name: str, context, feedback,
     n_null = 0
     total = source.featureCount()
     step = 100.0 / total if total and total > 0 else 0
-    for i, feature in enumerate(source.getFeatures(request)):
+    # invalid geometries are repaired below (and counted), not rejected by the context's check
+    features = source.getFeatures(request, QgsProcessingFeatureSource.FlagSkipGeometryValidityChecks)
+    for i, feature in enumerate(features):
         if feedback is not None and feedback.isCanceled():
             raise QgsProcessingException("Canceled by the user.")
         geom = feature.geometry()
@@ -352,3 +356,62 @@ def check_number(value, name: str, lo: float = None, hi: float = None):
     if hi is not None and value > hi:
         raise QgsProcessingException(f"Parameter {name} = {value} is too large (maximum {hi}).")
     return value
+
+
+# --------------------------------------------------------------------------- OSM attributes
+
+def subset(frame: Frame, keep) -> Frame:
+    keep = np.asarray(keep, dtype=bool)
+    return Frame(frame.geometry[keep], frame.attributes[keep].reset_index(drop=True),
+                 frame.fids[keep], frame.source_crs, frame.crs, frame.name)
+
+
+def osm_tag_column(frame: Frame, key: str) -> Optional[np.ndarray]:
+    """Values of an attribute that may be a field or a key inside OSM's ``other_tags``.
+
+    Returns None when neither holds it.
+    """
+    from .roads import parse_other_tags
+
+    if key in frame.attributes:
+        return frame.attributes[key].to_numpy(dtype=object)
+    if "other_tags" in frame.attributes:
+        values = np.array([parse_other_tags(t).get(key) for t in frame.attributes["other_tags"]],
+                          dtype=object)
+        if any(v is not None for v in values):
+            return values
+    return None
+
+
+def osm_vertical_layers(frame: Frame) -> np.ndarray:
+    """OSM vertical layer per feature from layer / bridge / tunnel fields or other_tags."""
+    from .roads import vertical_layer
+
+    cols = [osm_tag_column(frame, k) for k in ("layer", "bridge", "tunnel")]
+    cols = [c if c is not None else np.full(len(frame), None, dtype=object) for c in cols]
+    return np.array([vertical_layer(a, b, c) for a, b, c in zip(*cols)], dtype=np.int64)
+
+
+# --------------------------------------------------------------------------- styles
+
+STYLES = Path(__file__).resolve().parent.parent / "resources" / "styles"
+_POST_PROCESSORS = []  # QGIS does not own Python post-processors: keep them alive
+
+
+def style_output(context, dest_id: Optional[str], qml_name: str) -> None:
+    """Load an output with a shipped QML style when QGIS loads it on completion."""
+    from qgis.core import QgsProcessingLayerPostProcessorInterface
+
+    qml = STYLES / qml_name
+    if not dest_id or not qml.exists() or not context.willLoadLayerOnCompletion(dest_id):
+        return
+
+    class _Styler(QgsProcessingLayerPostProcessorInterface):
+        def postProcessLayer(self, layer, ctx, feedback):  # noqa: N802
+            if layer is not None and layer.isValid():
+                layer.loadNamedStyle(str(qml))
+                layer.triggerRepaint()
+
+    styler = _Styler()
+    _POST_PROCESSORS.append(styler)
+    context.layerToLoadOnCompletionDetails(dest_id).setPostProcessor(styler)

@@ -377,7 +377,8 @@ def merge_degree2_chains(g: RoadGraph) -> RoadGraph:
     if n_comp == m:
         return g
     lengths = g.length
-    merged = shapely.line_merge(shapely.multilinestrings(g.geometry, indices=comp))
+    by_comp = np.argsort(comp, kind="stable")
+    merged = shapely.line_merge(shapely.multilinestrings(g.geometry[by_comp], indices=comp[by_comp]))
     # representative (longest) member of each component carries the attributes
     order = np.lexsort((-lengths, comp))
     rep = order[np.r_[True, comp[order][1:] != comp[order][:-1]]]

@@ -1,0 +1,209 @@
+"""urbansynth:extractroadhierarchy - clean, node and rank a road layer."""
+import numpy as np
+import shapely
+from qgis.core import (
+    QgsProcessing,
+    QgsProcessingAlgorithm,
+    QgsProcessingException,
+    QgsProcessingParameterEnum,
+    QgsProcessingParameterFeatureSink,
+    QgsProcessingParameterFeatureSource,
+    QgsProcessingParameterField,
+    QgsProcessingParameterNumber,
+    QgsProcessingParameterString,
+    QgsWkbTypes,
+)
+
+from ..plugin import hierarchy, qgis_io, roads
+from .common import AlgorithmBase, parse_class_list
+
+ROAD_FIELDS = [
+    ("edge_id", "int"), ("level", "int"), ("road_class", "str"), ("length_m", "float"),
+    ("street_id", "int"), ("name", "str"), ("osm_layer", "int"), ("node_from", "int"),
+    ("node_to", "int"), ("tortuosity", "float"), ("arterial_source", "str"),
+]
+INTERSECTION_FIELDS = [
+    ("node_id", "int"), ("degree", "int"), ("street_a", "int"), ("street_b", "int"),
+    ("level_a", "int"), ("level_b", "int"), ("tortuosity_a", "float"), ("tortuosity_b", "float"),
+    ("dist_mean_a", "float"), ("dist_var_a", "float"), ("dist_mean_b", "float"),
+    ("dist_var_b", "float"), ("angle_mean_a", "float"), ("angle_var_a", "float"),
+    ("angle_mean_b", "float"), ("angle_var_b", "float"), ("block_area", "float"),
+    ("parcel_area", "float"),
+]
+
+
+class ExtractRoadHierarchy(AlgorithmBase):
+    INPUT = "INPUT"
+    CLASS_FIELD = "CLASS_FIELD"
+    CLASSES = "CLASSES"
+    METHOD = "METHOD"
+    ARTERIAL_CLASSES = "ARTERIAL_CLASSES"
+    ARTERIAL_SHARE = "ARTERIAL_SHARE"
+    SNAP_TOLERANCE = "SNAP_TOLERANCE"
+    MIN_DANGLE_LENGTH = "MIN_DANGLE_LENGTH"
+    MAX_DEFLECTION = "MAX_DEFLECTION"
+    PARCELS = "PARCELS"
+    PARCEL_RADIUS = "PARCEL_RADIUS"
+    OUTPUT = "OUTPUT"
+    OUTPUT_INTERSECTIONS = "OUTPUT_INTERSECTIONS"
+
+    METHOD_KEYS = ["osm", "topological", "both"]
+
+    def name(self):
+        return "extractroadhierarchy"
+
+    def displayName(self):  # noqa: N802
+        return "Extract road hierarchy"
+
+    def group(self):
+        return "Analysis"
+
+    def groupId(self):  # noqa: N802
+        return "analysis"
+
+    def shortHelpString(self):  # noqa: N802
+        return (
+            "Cleans a road line layer into a planar street graph and ranks every street.\n\n"
+            "Lines are filtered to drivable classes, noded at real crossings (bridges and tunnels, "
+            "from the OSM tags layer/bridge/tunnel, only connect where they share a node), "
+            "close nodes are snapped, duplicates and dangling slivers dropped and chains through "
+            "degree-2 nodes merged. Edges are grouped into continuous streets by the straightest "
+            "continuation at each intersection; level 0 are arterials (OSM classes, or the longest "
+            "and straightest streets), and every street meeting a level-k street gets level k+1 "
+            "(stream order with loops handled; Hartmann, ch. 4.1; Aliaga et al. 2008, sec. 5).\n\n"
+            "Outputs: roads with level, road_class, length_m and street_id; intersection points with "
+            "the attributes of Aliaga et al. 2008 (levels of the two streets, tortuosity, mean and "
+            "variance of the distance and angle between consecutive intersections, mean block or "
+            "parcel area nearby). Results are in the input CRS; the work is done in a local metric CRS."
+        )
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        self.add(QgsProcessingParameterFeatureSource(
+            self.INPUT, "Road lines", [QgsProcessing.TypeVectorLine]),
+            "Any line layer: the 'lines' layer of an .osm.pbf file, a cadastre or road shapefile.")
+        self.add(QgsProcessingParameterField(
+            self.CLASS_FIELD, "Road class field", defaultValue="highway",
+            parentLayerParameterName=self.INPUT, optional=True),
+            "Field with the road class (OSM 'highway'). If the layer lacks it, an OSM "
+            "'other_tags' field is searched; without classes, all lines are used and arterials "
+            "are chosen topologically.")
+        self.add(QgsProcessingParameterString(
+            self.CLASSES, "Drivable classes (comma-separated, empty = all)",
+            defaultValue=",".join(roads.DRIVABLE_CLASSES), optional=True),
+            "Only lines with one of these classes are kept. Leave empty to keep every line.",
+            advanced=True)
+        self.add(QgsProcessingParameterEnum(
+            self.METHOD, "Arterial selection", options=[
+                "OSM classes", "Topological (longest / straightest streets)",
+                "Both (OSM classes where present, else topological)"], defaultValue=2),
+            "How level-0 streets are chosen before the stream-order propagation.")
+        self.add(QgsProcessingParameterString(
+            self.ARTERIAL_CLASSES, "Arterial classes (comma-separated)",
+            defaultValue=",".join(roads.ARTERIAL_CLASSES)),
+            "Road classes taken as arterials (level 0) by the OSM-class method.", advanced=True)
+        self.add(QgsProcessingParameterNumber(
+            self.ARTERIAL_SHARE, "Arterial share of street length (topological)",
+            QgsProcessingParameterNumber.Double, defaultValue=0.1, minValue=0.001, maxValue=1.0),
+            "Share of the total street length taken as arterials when they are chosen "
+            "topologically (Aliaga et al.: 'a small percentage of the longest streets').",
+            advanced=True)
+        self.add(QgsProcessingParameterNumber(
+            self.SNAP_TOLERANCE, "Node snapping tolerance (m)", QgsProcessingParameterNumber.Double,
+            defaultValue=1.0, minValue=0.0, maxValue=50.0),
+            "Intersections closer than this are merged; duplicate edges within it are dropped.",
+            advanced=True)
+        self.add(QgsProcessingParameterNumber(
+            self.MIN_DANGLE_LENGTH, "Minimum dead-end length (m)", QgsProcessingParameterNumber.Double,
+            defaultValue=5.0, minValue=0.0, maxValue=500.0),
+            "Dead-end edges shorter than this are removed as digitising slivers.", advanced=True)
+        self.add(QgsProcessingParameterNumber(
+            self.MAX_DEFLECTION, "Maximum deflection of a continuous street (degrees)",
+            QgsProcessingParameterNumber.Double, defaultValue=45.0, minValue=0.0, maxValue=90.0),
+            "Two edges continue one street through an intersection if they deflect less than this.",
+            advanced=True)
+        self.add(QgsProcessingParameterFeatureSource(
+            self.PARCELS, "Parcels (optional)", [QgsProcessing.TypeVectorPolygon], optional=True),
+            "Cadastre parcels: when given, intersections get the mean parcel area nearby "
+            "(Aliaga's a(v)); otherwise only the mean block area.")
+        self.add(QgsProcessingParameterNumber(
+            self.PARCEL_RADIUS, "Parcel search radius (m)", QgsProcessingParameterNumber.Double,
+            defaultValue=100.0, minValue=1.0, maxValue=5000.0),
+            "Parcels within this distance of an intersection count as nearby.", advanced=True)
+        self.add(QgsProcessingParameterFeatureSink(
+            self.OUTPUT, "Road hierarchy", QgsProcessing.TypeVectorLine),
+            "Cleaned road edges with level (0 = arterial), road_class, length_m, street_id.")
+        self.add(QgsProcessingParameterFeatureSink(
+            self.OUTPUT_INTERSECTIONS, "Intersections", QgsProcessing.TypeVectorPoint,
+            optional=True, createByDefault=True),
+            "Intersection and street-end points with the Aliaga et al. 2008 attributes.")
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        frame = qgis_io.read_source(self, parameters, self.INPUT, context, feedback, kind="lines")
+        label = frame.name
+        class_field = self.parameterAsString(parameters, self.CLASS_FIELD, context)
+        classes = parse_class_list(self.parameterAsString(parameters, self.CLASSES, context))
+        method = self.METHOD_KEYS[self.parameterAsEnum(parameters, self.METHOD, context)]
+        arterial = parse_class_list(self.parameterAsString(parameters, self.ARTERIAL_CLASSES, context))
+        share = qgis_io.check_number(self.parameterAsDouble(parameters, self.ARTERIAL_SHARE, context),
+                                     self.ARTERIAL_SHARE, 0.001, 1.0)
+        snap = qgis_io.check_number(self.parameterAsDouble(parameters, self.SNAP_TOLERANCE, context),
+                                    self.SNAP_TOLERANCE, 0.0, 50.0)
+        dangle = qgis_io.check_number(self.parameterAsDouble(parameters, self.MIN_DANGLE_LENGTH, context),
+                                      self.MIN_DANGLE_LENGTH, 0.0, 500.0)
+        deflection = qgis_io.check_number(self.parameterAsDouble(parameters, self.MAX_DEFLECTION, context),
+                                          self.MAX_DEFLECTION, 0.0, 90.0)
+        radius = qgis_io.check_number(self.parameterAsDouble(parameters, self.PARCEL_RADIUS, context),
+                                      self.PARCEL_RADIUS, 1.0, 5000.0)
+
+        road_class = qgis_io.osm_tag_column(frame, class_field or "highway")
+        if road_class is None:
+            if class_field and class_field != "highway":
+                raise QgsProcessingException(f"Layer {label} has no field '{class_field}'.")
+            feedback.pushInfo(f"{label} has no road classes: all lines are used and arterials "
+                              "are chosen topologically.")
+            if method == "osm":
+                method = "topological"
+        elif classes:
+            keep = [c in classes for c in road_class]
+            n_keep = sum(keep)
+            feedback.pushInfo(f"{n_keep} of {len(frame)} lines have a drivable class.")
+            if n_keep == 0:
+                raise QgsProcessingException(
+                    f"Layer {label}: no line has one of the drivable classes "
+                    f"({', '.join(sorted(classes))}) in field '{class_field}'.")
+            frame = qgis_io.subset(frame, keep)
+            road_class = road_class[keep]
+        z_layer = qgis_io.osm_vertical_layers(frame)
+        name = qgis_io.osm_tag_column(frame, "name")
+
+        graph = qgis_io.run_engine(label, roads.clean_network, frame.geometry, road_class, name,
+                                   z_layer, snap_tolerance=snap, min_dangle_length=dangle,
+                                   progress=qgis_io.progress_for(feedback, 5, 40))
+        feedback.pushInfo(f"Street graph: {graph.n_edges} edges, {len(graph.nodes)} nodes.")
+        h = qgis_io.run_engine(label, hierarchy.road_hierarchy, graph, method, arterial or
+                               roads.ARTERIAL_CLASSES, share, deflection,
+                               progress=qgis_io.progress_for(feedback, 40, 70))
+        counts = ", ".join(f"level {lv}: {n}" for lv, n in enumerate(
+            np.bincount(h.street_level)) if n)
+        feedback.pushInfo(f"{h.streets.n} streets ({counts}).")
+
+        parcels = None
+        parcels_frame = qgis_io.read_source(self, parameters, self.PARCELS, context, feedback,
+                                            kind="polygons", target_crs=frame.crs, optional=True)
+        if parcels_frame is not None:
+            parcels = parcels_frame.geometry
+        results = {}
+        results[self.OUTPUT] = qgis_io.write_sink(
+            self, parameters, self.OUTPUT, context, graph.geometry, h.roads_table(), ROAD_FIELDS,
+            QgsWkbTypes.LineString, frame.source_crs, frame.crs, feedback)
+        qgis_io.style_output(context, results[self.OUTPUT], "roads_by_level.qml")
+        feedback.setProgress(85)
+        if self.OUTPUT_INTERSECTIONS in parameters and parameters[self.OUTPUT_INTERSECTIONS] is not None:
+            table = hierarchy.intersection_attributes(graph, h.streets, h.street_level,
+                                                      parcels=parcels, parcel_radius=radius)
+            points = shapely.points(graph.nodes)
+            results[self.OUTPUT_INTERSECTIONS] = qgis_io.write_sink(
+                self, parameters, self.OUTPUT_INTERSECTIONS, context, points, table,
+                INTERSECTION_FIELDS, QgsWkbTypes.Point, frame.source_crs, frame.crs, feedback)
+        feedback.setProgress(100)
+        return results
