@@ -89,6 +89,7 @@ def _deflection(a, b):
 
 def build_streets(graph: RoadGraph, max_deflection: float = 45.0,
                   name_penalty: float = 30.0, rank_penalty: float = 8.0,
+                  separate_classes: Optional[Sequence[str]] = None,
                   progress: Optional[Progress] = None) -> Streets:
     """Group edges into continuous streets by greedy best-continuation pairing at nodes.
 
@@ -106,6 +107,8 @@ def build_streets(graph: RoadGraph, max_deflection: float = 45.0,
     node, edge, ang, chord_ang = _incidences(graph)
     names = graph.name
     ranks = graph.class_rank
+    sep = set(separate_classes or ())
+    in_sep = np.array([c in sep for c in graph.road_class], dtype=bool)
     order = np.argsort(node, kind="stable")
     node_s, edge_s, ang_s, chord_s = node[order], edge[order], ang[order], chord_ang[order]
     bounds = np.flatnonzero(np.r_[True, node_s[1:] != node_s[:-1], True])
@@ -126,7 +129,7 @@ def build_streets(graph: RoadGraph, max_deflection: float = 45.0,
         costs = []
         for i, j in cand:
             ei, ej = es[i], es[j]
-            if ei == ej:  # both ends of a self-loop
+            if ei == ej or in_sep[ei] != in_sep[ej]:  # self-loop ends; arterial class ends
                 continue
             defl = _deflection(angs[i], angs[j])
             if defl > max_deflection:
@@ -306,7 +309,8 @@ def intersection_attributes(graph: RoadGraph, streets: Streets, street_level: np
     chord = np.linalg.norm(graph.nodes[graph.v] - graph.nodes[graph.u], axis=1)
     # per-street statistics (Aliaga sec. 3.1.1 (ii) and (iv))
     valid = chord > 1e-6
-    tort = np.where(valid, lengths / np.maximum(chord, 1e-9), np.nan)
+    # node coordinates are rounded to the millimetre: clip the ratio at its definition's 1
+    tort = np.where(valid, np.maximum(lengths / np.maximum(chord, 1e-9), 1.0), np.nan)
     cnt = np.bincount(sid[valid], minlength=ns).astype(float)
     with np.errstate(invalid="ignore", divide="ignore"):
         tort_mean = np.bincount(sid[valid], tort[valid], minlength=ns) / cnt
@@ -405,7 +409,8 @@ class Hierarchy:
             "osm_layer": g.z_layer,
             "node_from": g.u,
             "node_to": g.v,
-            "tortuosity": np.where(chord > 1e-6, length / np.maximum(chord, 1e-9), np.nan),
+            "tortuosity": np.where(chord > 1e-6, np.maximum(length / np.maximum(chord, 1e-9), 1.0),
+                                   np.nan),
             "arterial_source": self.seed_kind[self.streets.street_id],
         })
 
@@ -416,7 +421,9 @@ def road_hierarchy(graph: RoadGraph, method: str = "both",
                    progress: Optional[Progress] = None) -> Hierarchy:
     """Streets and stream-order levels of a clean road graph (see module docstring)."""
     progress = ensure(progress)
-    streets = build_streets(graph, max_deflection=max_deflection, progress=progress.sub(0.0, 0.6))
+    separate = arterial_classes if method in ("osm", "both") else None
+    streets = build_streets(graph, max_deflection=max_deflection, separate_classes=separate,
+                            progress=progress.sub(0.0, 0.6))
     level, seed_kind = assign_levels(graph, streets, method, arterial_classes, arterial_share,
                                      progress=progress.sub(0.6, 1.0))
     return Hierarchy(graph, streets, level, seed_kind)

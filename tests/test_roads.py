@@ -1,0 +1,112 @@
+"""Engine tests of road cleaning: hand-made cases with known answers + invariants on Helsinki."""
+import numpy as np
+import pytest
+import shapely
+from shapely.geometry import LineString
+
+from urban_synthesis.plugin import roads
+from urban_synthesis.plugin.progress import Canceled, InputError, Progress
+
+from helpers import helsinki_roads, assert_planar
+
+
+def test_crossing_lines_are_noded():
+    g = roads.clean_network([LineString([(0, 0), (100, 0)]), LineString([(50, -50), (50, 50)])])
+    assert g.n_edges == 4
+    assert len(g.nodes) == 5
+    assert sorted(g.degree) == [1, 1, 1, 1, 4]
+
+
+def test_bridge_does_not_connect_to_road_below():
+    g = roads.clean_network([LineString([(0, 0), (100, 0)]), LineString([(50, -50), (50, 50)])],
+                            z_layer=[0, 1])
+    assert g.n_edges == 2
+    assert sorted(g.degree) == [1, 1, 1, 1]
+
+
+def test_bridge_connects_where_it_shares_a_node():
+    # the bridge starts on a vertex (an OSM node) of the ground road
+    ground = LineString([(0, 0), (50, 0), (100, 0)])
+    bridge = LineString([(50, 0), (50, 80)])
+    g = roads.clean_network([ground, bridge], z_layer=[0, 1])
+    assert g.n_edges == 3
+    assert sorted(g.degree) == [1, 1, 1, 3]
+
+
+def test_degree2_chains_are_merged_with_longest_part_attributes():
+    parts = [LineString([(0, 0), (10, 0)]), LineString([(10, 0), (60, 0)]),
+             LineString([(60, 0), (70, 5)])]
+    g = roads.clean_network(parts, road_class=["service", "residential", "service"],
+                            min_dangle_length=0)
+    assert g.n_edges == 1
+    assert g.road_class[0] == "residential"
+    assert g.length[0] == pytest.approx(10 + 50 + np.hypot(10, 5))
+
+
+def test_duplicates_and_reversed_duplicates_are_dropped():
+    a = LineString([(0, 0), (100, 0)])
+    g = roads.clean_network([a, a.reverse(), LineString([(0, 0), (100, 0.2)])],
+                            road_class=["residential", "primary", "residential"])
+    assert g.n_edges == 1
+    assert g.road_class[0] == "primary"  # the more important duplicate is kept
+
+
+def test_short_dangles_are_pruned_long_ones_kept():
+    base = [LineString([(0, 0), (100, 0)]), LineString([(0, 0), (0, 100)]),
+            LineString([(0, 100), (100, 100)]), LineString([(100, 0), (100, 100)])]
+    stub = LineString([(50, 0), (50, 2)])
+    street = LineString([(50, 100), (50, 60)])
+    g = roads.clean_network(base + [stub, street], min_dangle_length=5.0)
+    lengths = np.sort(g.length)
+    assert lengths[0] == pytest.approx(40.0)  # the 40 m dead end survives
+    assert not np.any(np.isclose(lengths, 2.0))
+
+
+def test_close_nodes_are_snapped():
+    g = roads.clean_network([LineString([(0, 0), (100, 0)]), LineString([(100.4, 0.3), (200, 0)]),
+                             LineString([(100, 0), (100, 100)])], snap_tolerance=1.0)
+    assert sorted(g.degree) == [1, 1, 1, 3]
+
+
+def test_other_tags_and_vertical_layer():
+    tags = roads.parse_other_tags('"bridge"=>"yes","layer"=>"2","name:fi"=>"Katu \\"x\\""')
+    assert tags == {"bridge": "yes", "layer": "2", "name:fi": 'Katu "x"'}
+    assert roads.vertical_layer("2", "yes", None) == 2
+    assert roads.vertical_layer(None, "yes", None) == 1
+    assert roads.vertical_layer(None, None, "yes") == -1
+    assert roads.vertical_layer("x", None, None) == 0
+    assert roads.parse_other_tags(None) == {}
+
+
+def test_bad_input_raises_input_error():
+    with pytest.raises(InputError):
+        roads.clean_network([])
+    with pytest.raises(InputError):
+        roads.clean_network([LineString([(0, 0), (0, 0)])])
+    with pytest.raises(InputError):
+        roads.clean_network([LineString([(0, 0), (1, 0)])], snap_tolerance=-1)
+
+
+def test_cancel_stops_cleaning():
+    with pytest.raises(Canceled):
+        roads.clean_network([LineString([(0, 0), (1, 0)])], progress=Progress(is_canceled=lambda: True))
+
+
+def test_helsinki_graph_invariants():
+    df = helsinki_roads()
+    g = roads.clean_network(df.geometry.values, df.highway.values, df.name.values, df.z.values)
+    assert g.n_edges > 150
+    assert (g.length > 0).all()
+    # no degree-2 nodes are left except on isolated rings (u == v)
+    deg = g.degree
+    ring_nodes = set(g.u[g.u == g.v])
+    assert all(n in ring_nodes for n in np.flatnonzero(deg == 2))
+    # no duplicate edges
+    lo, hi = np.minimum(g.u, g.v), np.maximum(g.u, g.v)
+    pairs = set()
+    for i, (a, b) in enumerate(zip(lo, hi)):
+        if (a, b) in pairs:
+            others = [j for j in range(i) if (lo[j], hi[j]) == (a, b)]
+            assert all(shapely.hausdorff_distance(g.geometry[i], g.geometry[j]) > 1.0 for j in others)
+        pairs.add((a, b))
+    assert_planar(g.geometry, g.z_layer)
