@@ -205,5 +205,6 @@ class ExtractRoadHierarchy(AlgorithmBase):
             results[self.OUTPUT_INTERSECTIONS] = qgis_io.write_sink(
                 self, parameters, self.OUTPUT_INTERSECTIONS, context, points, table,
                 INTERSECTION_FIELDS, QgsWkbTypes.Point, frame.source_crs, frame.crs, feedback)
+            qgis_io.style_output(context, results[self.OUTPUT_INTERSECTIONS], "intersections.qml")
         feedback.setProgress(100)
         return results

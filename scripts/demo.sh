@@ -1,0 +1,39 @@
+#!/usr/bin/env bash
+# The whole foundation chain on the bundled Helsinki example, through qgis_process.bin:
+# roads -> hierarchy + intersections -> blocks + buildings -> example databases -> metrics,
+# written to out/demo.gpkg (one layer per output), out/*.gpkg databases, out/demo_metrics.html
+# and a rendered preview out/demo.png.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+QP=scripts/qgis-process
+OUT="$PWD/out"
+GPKG="$OUT/demo.gpkg"
+HEL="$PWD/data/examples/Helsinki.osm.pbf"
+BUB="$PWD/data/examples/bubenec.gpkg"
+mkdir -p "$OUT"
+rm -f "$GPKG" "$OUT"/helsinki_*.gpkg "$OUT/demo_metrics.html" "$OUT/demo.png"
+layer() { echo "ogr:dbname='$GPKG' table=\"$1\" (geom)"; }
+
+run() {
+  local alg=$1; shift
+  local t0=$(date +%s%N)
+  "$QP" run "urbansynth:$alg" -- "$@" > "$OUT/.last.log" 2>&1 || { cat "$OUT/.last.log"; echo "demo: $alg failed" >&2; exit 1; }
+  local ms=$(( ($(date +%s%N) - t0) / 1000000 ))
+  printf '  %-24s %5d.%03d s (incl. QGIS start-up)\n' "$alg" $((ms / 1000)) $((ms % 1000))
+}
+
+echo "Urban Synthesis demo on Helsinki (OpenStreetMap, ODbL)"
+run extractroadhierarchy "INPUT=$HEL|layername=lines" "OUTPUT=$(layer roads)" \
+    "OUTPUT_INTERSECTIONS=$(layer intersections)"
+run extractblocks "ROADS=$GPKG|layername=roads" "BUILDINGS=$HEL|layername=multipolygons" \
+    "OUTPUT=$(layer blocks)" "OUTPUT_BUILDINGS=$(layer buildings)"
+run buildfragmentdatabase "ROADS=$GPKG|layername=roads" "OUTPUT=$OUT/helsinki_fragments.gpkg"
+run buildblockdatabase "BLOCKS=$GPKG|layername=blocks" "BUILDINGS=$GPKG|layername=buildings" \
+    "OUTPUT=$OUT/helsinki_blocks.gpkg"
+run layoutmetrics "ROADS=$GPKG|layername=roads" "BLOCKS=$GPKG|layername=blocks" \
+    "BUILDINGS=$GPKG|layername=buildings" "EXAMPLE_ROADS=$BUB|layername=streets" \
+    "EXAMPLE_BUILDINGS=$BUB|layername=buildings" \
+    "OUTPUT=$(layer metrics)" "OUTPUT_HTML=$OUT/demo_metrics.html"
+QT_QPA_PLATFORM=offscreen .venv/bin/python scripts/render_preview.py "$GPKG" "$OUT/demo.png"
+rm -f "$OUT/.last.log"
+echo "wrote $GPKG, $OUT/helsinki_fragments.gpkg, $OUT/helsinki_blocks.gpkg, $OUT/demo_metrics.html, $OUT/demo.png"

@@ -1,0 +1,79 @@
+"""Regenerate the QML styles in resources/styles with PyQGIS (run with the venv's python).
+
+The QML files are committed; this script documents how they were made.
+"""
+import os
+import sys
+from pathlib import Path
+
+os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+from qgis.core import (  # noqa: E402
+    QgsApplication, QgsCategorizedSymbolRenderer, QgsFillSymbol, QgsGraduatedSymbolRenderer,
+    QgsLineSymbol, QgsMarkerSymbol, QgsRendererCategory, QgsRendererRange, QgsSingleSymbolRenderer,
+    QgsVectorLayer,
+)
+
+OUT = Path(__file__).resolve().parent.parent / "resources" / "styles"
+LEVEL_COLOURS = ["#d7301f", "#fc8d59", "#fdcc8a", "#6baed6", "#3182bd", "#9e9ac8", "#bdbdbd"]
+LEVEL_WIDTHS = [1.6, 1.1, 0.8, 0.6, 0.45, 0.35, 0.3]
+
+
+def roads_by_level():
+    layer = QgsVectorLayer("LineString?field=level:integer", "roads", "memory")
+    cats = []
+    for lv, (col, w) in enumerate(zip(LEVEL_COLOURS, LEVEL_WIDTHS)):
+        sym = QgsLineSymbol.createSimple({"line_color": col, "line_width": str(w),
+                                          "capstyle": "round", "joinstyle": "round"})
+        cats.append(QgsRendererCategory(lv, sym, f"level {lv}" + (" (arterial)" if lv == 0 else "")))
+    other = QgsLineSymbol.createSimple({"line_color": "#bdbdbd", "line_width": "0.3"})
+    cats.append(QgsRendererCategory(None, other, "deeper levels"))
+    renderer = QgsCategorizedSymbolRenderer("level", cats)
+    renderer.setUsingSymbolLevels(True)
+    layer.setRenderer(renderer)
+    # arterials drawn on top
+    for i, cat in enumerate(renderer.categories()):
+        for sl in cat.symbol().symbolLayers():
+            sl.setRenderingPass(len(cats) - i)
+    layer.saveNamedStyle(str(OUT / "roads_by_level.qml"))
+
+
+def blocks():
+    layer = QgsVectorLayer("Polygon?field=area_m2:double", "blocks", "memory")
+    sym = QgsFillSymbol.createSimple({"color": "#f2efe9", "outline_color": "#a39e93",
+                                      "outline_width": "0.2"})
+    layer.setRenderer(QgsSingleSymbolRenderer(sym))
+    layer.saveNamedStyle(str(OUT / "blocks.qml"))
+
+
+def buildings_by_height():
+    layer = QgsVectorLayer("Polygon?field=height_m:double", "buildings", "memory")
+    breaks = [(0, 6, "#fee8c8"), (6, 12, "#fdbb84"), (12, 20, "#fc8d59"), (20, 35, "#e34a33"),
+              (35, 1000, "#b30000")]
+    ranges = []
+    for lo, hi, col in breaks:
+        sym = QgsFillSymbol.createSimple({"color": col, "outline_color": "#7f2704",
+                                          "outline_width": "0.1"})
+        ranges.append(QgsRendererRange(lo, hi, sym, f"{lo} - {hi} m" if hi < 1000 else f"> {lo} m"))
+    renderer = QgsGraduatedSymbolRenderer("height_m", ranges)
+    layer.setRenderer(renderer)
+    layer.saveNamedStyle(str(OUT / "buildings_by_height.qml"))
+
+
+def intersections():
+    layer = QgsVectorLayer("Point?field=degree:integer", "intersections", "memory")
+    sym = QgsMarkerSymbol.createSimple({"name": "circle", "color": "#252525", "size": "1.2",
+                                        "outline_style": "no"})
+    layer.setRenderer(QgsSingleSymbolRenderer(sym))
+    layer.saveNamedStyle(str(OUT / "intersections.qml"))
+
+
+if __name__ == "__main__":
+    app = QgsApplication([], False)
+    app.initQgis()
+    OUT.mkdir(parents=True, exist_ok=True)
+    roads_by_level()
+    blocks()
+    buildings_by_height()
+    intersections()
+    print("styles written to", OUT)
+    sys.exit(0)

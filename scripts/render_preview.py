@@ -1,0 +1,62 @@
+"""Render a PNG preview of a demo GeoPackage with the shipped QML styles (PyQGIS, headless)."""
+import os
+import sys
+from pathlib import Path
+
+os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+from qgis.core import (  # noqa: E402
+    QgsApplication, QgsMapRendererCustomPainterJob, QgsMapSettings, QgsVectorLayer,
+)
+from qgis.PyQt.QtCore import QSize, Qt  # noqa: E402
+from qgis.PyQt.QtGui import QColor, QFont, QImage, QPainter  # noqa: E402
+
+STYLES = Path(__file__).resolve().parent.parent / "resources" / "styles"
+# bottom to top
+LAYERS = [("blocks", "blocks.qml"), ("buildings", "buildings_by_height.qml"),
+          ("roads", "roads_by_level.qml")]
+
+
+def render(gpkg: str, png: str, title: str = "Helsinki: road hierarchy, blocks and buildings",
+           size: int = 1400) -> None:
+    layers = []
+    for name, qml in LAYERS:
+        layer = QgsVectorLayer(f"{gpkg}|layername={name}", name, "ogr")
+        if not layer.isValid():
+            continue
+        layer.loadNamedStyle(str(STYLES / qml))
+        layers.append(layer)
+    if not layers:
+        raise SystemExit(f"no layer to render in {gpkg}")
+    roads = next((lyr for lyr in layers if lyr.name() == "roads"), layers[-1])
+    settings = QgsMapSettings()
+    settings.setLayers(list(reversed(layers)))  # first is drawn on top
+    settings.setDestinationCrs(roads.crs())
+    extent = roads.extent()
+    extent.scale(1.05)
+    settings.setOutputSize(QSize(size, size))
+    settings.setExtent(extent)
+    settings.setBackgroundColor(QColor("white"))
+    settings.setOutputDpi(120)
+    image = QImage(QSize(size, size), QImage.Format_ARGB32_Premultiplied)
+    image.fill(Qt.white)
+    painter = QPainter(image)
+    job = QgsMapRendererCustomPainterJob(settings, painter)
+    job.start()
+    job.waitForFinished()
+    painter.setPen(QColor("#222222"))
+    font = QFont("DejaVu Sans", 16)
+    painter.setFont(font)
+    painter.drawText(20, 36, title)
+    font.setPointSize(10)
+    painter.setFont(font)
+    painter.drawText(20, size - 16, "Map data (c) OpenStreetMap contributors, ODbL. "
+                     "Roads coloured by level (red = arterial), buildings by height.")
+    painter.end()
+    image.save(png)
+
+
+if __name__ == "__main__":
+    app = QgsApplication([], False)
+    app.initQgis()
+    render(sys.argv[1], sys.argv[2])
+    print("wrote", sys.argv[2])

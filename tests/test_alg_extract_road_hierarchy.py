@@ -1,0 +1,152 @@
+"""urbansynth:extractroadhierarchy through real QGIS (processing.run and qgis_process.bin)."""
+import numpy as np
+import pytest
+import shapely
+
+from conftest import BUBENEC, HELSINKI, bubenec_layer, helsinki_layer, run_qgis_process
+from helpers import assert_planar
+
+
+def _features(layer):
+    feats = list(layer.getFeatures())
+    fields = [f.name() for f in layer.fields()]
+    rows = [dict(zip(fields, f.attributes())) for f in feats]
+    geoms = shapely.from_wkb([bytes(f.geometry().asWkb()) for f in feats])
+    return rows, geoms
+
+
+def test_helsinki_hierarchy(qgis_processing, tmp_path):
+    out = qgis_processing.run("urbansynth:extractroadhierarchy", {
+        "INPUT": helsinki_layer("lines"), "OUTPUT": "memory:", "OUTPUT_INTERSECTIONS": "memory:"})
+    roads_layer, points = out["OUTPUT"], out["OUTPUT_INTERSECTIONS"]
+    assert roads_layer.crs().authid() == "EPSG:4326"  # back in the input CRS
+    rows, geoms = _features(roads_layer)
+    assert len(rows) > 150
+    levels = np.array([r["level"] for r in rows])
+    assert levels.min() == 0 and 3 <= levels.max() <= 5
+    assert {"primary", "secondary", "residential"} <= {r["road_class"] for r in rows}
+    assert all(r["road_class"] not in ("footway", "cycleway", "service") for r in rows)
+    assert all(r["length_m"] > 0 for r in rows)
+    # lengths are metric (not degrees): Helsinki's network is tens of kilometres
+    assert 20_000 < sum(r["length_m"] for r in rows) < 200_000
+    # primaries are arterials
+    assert all(r["level"] == 0 for r in rows if r["road_class"] == "primary")
+    # planar in a metric CRS (bridges may cross what they pass over)
+    utm = shapely.transform(geoms, lambda c: c * [111_000 * np.cos(np.radians(60.17)), 111_000])
+    assert_planar(utm, [r["osm_layer"] for r in rows])
+    prow, _ = _features(points)
+    assert points.featureCount() > 100
+    deg = np.array([r["degree"] for r in prow])
+    assert set(np.unique(deg)) <= {1, 2, 3, 4, 5, 6}
+    assert all(r["level_a"] is not None for r in prow)
+
+
+def test_bubenec_without_classes_uses_topological_levels(qgis_processing):
+    out = qgis_processing.run("urbansynth:extractroadhierarchy", {
+        "INPUT": bubenec_layer("streets"), "PARCELS": bubenec_layer("plots"),
+        "OUTPUT": "memory:", "OUTPUT_INTERSECTIONS": "memory:"})
+    rows, _ = _features(out["OUTPUT"])
+    assert out["OUTPUT"].crs().authid() == "EPSG:3857"
+    levels = {r["level"] for r in rows}
+    assert 0 in levels and len(levels) >= 2
+    assert all(r["arterial_source"] in ("", "topological", "component") for r in rows)
+    prow, _ = _features(out["OUTPUT_INTERSECTIONS"])
+    # with parcels, intersections carry the mean parcel area nearby (Aliaga's a(v))
+    areas = [r["parcel_area"] for r in prow if r["parcel_area"] is not None]
+    assert len(areas) > len(prow) / 2 and 100 < np.median(areas) < 5000
+
+
+def test_input_is_not_modified(qgis_processing, tmp_path):
+    from qgis.core import QgsVectorLayer
+
+    import shutil
+    copy = tmp_path / "bubenec.gpkg"
+    shutil.copy(BUBENEC, copy)
+    before = copy.read_bytes()
+    qgis_processing.run("urbansynth:extractroadhierarchy", {
+        "INPUT": f"{copy}|layername=streets", "OUTPUT": "memory:"})
+    layer = QgsVectorLayer(f"{copy}|layername=streets", "s", "ogr")
+    assert layer.featureCount() == 35
+    assert copy.read_bytes() == before
+
+
+def test_point_layer_is_rejected(qgis_processing):
+    from qgis.core import QgsProcessingException
+
+    with pytest.raises(QgsProcessingException, match="lines are needed|line"):
+        qgis_processing.run("urbansynth:extractroadhierarchy", {
+            "INPUT": helsinki_layer("points"), "OUTPUT": "memory:"})
+
+
+def test_empty_layer_is_rejected(qgis_processing):
+    from qgis.core import QgsProcessingException, QgsVectorLayer
+
+    empty = QgsVectorLayer("LineString?crs=EPSG:3067&field=highway:string", "empty roads", "memory")
+    with pytest.raises(QgsProcessingException, match="empty roads.*empty"):
+        qgis_processing.run("urbansynth:extractroadhierarchy", {"INPUT": empty, "OUTPUT": "memory:"})
+
+
+def test_no_drivable_class_is_a_clear_error(qgis_processing):
+    from qgis.core import QgsProcessingException
+
+    with pytest.raises(QgsProcessingException, match="drivable classes"):
+        qgis_processing.run("urbansynth:extractroadhierarchy", {
+            "INPUT": helsinki_layer("lines"), "CLASSES": "no_such_class", "OUTPUT": "memory:"})
+
+
+def test_missing_explicit_class_field_is_a_clear_error(qgis_processing):
+    from qgis.core import QgsProcessingException
+
+    with pytest.raises(QgsProcessingException, match="no field 'fclass'"):
+        qgis_processing.run("urbansynth:extractroadhierarchy", {
+            "INPUT": bubenec_layer("streets"), "CLASS_FIELD": "fclass", "OUTPUT": "memory:"})
+
+
+def test_null_and_invalid_geometries_are_skipped_or_repaired(qgis_processing):
+    from qgis.core import QgsFeature, QgsGeometry, QgsVectorLayer
+
+    layer = QgsVectorLayer("LineString?crs=EPSG:3067&field=highway:string", "dirty", "memory")
+    feats = []
+    for wkt, cls in [("LINESTRING(0 0, 200 0)", "primary"), ("LINESTRING(100 -100, 100 100)", "residential"),
+                     (None, "residential"), ("LINESTRING(50 50, 50 50)", "residential")]:
+        f = QgsFeature(layer.fields())
+        if wkt:
+            f.setGeometry(QgsGeometry.fromWkt(wkt))
+        f.setAttributes([cls])
+        feats.append(f)
+    layer.dataProvider().addFeatures(feats)
+    from qgis.core import QgsProcessingFeedback
+
+    class Log(QgsProcessingFeedback):
+        messages = []
+
+        def pushInfo(self, info):  # noqa: N802
+            self.messages.append(info)
+
+    fb = Log()
+    out = qgis_processing.run("urbansynth:extractroadhierarchy", {"INPUT": layer, "OUTPUT": "memory:"},
+                              feedback=fb)
+    assert out["OUTPUT"].featureCount() == 4
+    assert any("null" in m for m in fb.messages)
+
+
+def test_cancel_stops_the_algorithm(qgis_processing):
+    from qgis.core import QgsProcessingException, QgsProcessingFeedback
+
+    fb = QgsProcessingFeedback()
+    fb.cancel()
+    with pytest.raises(QgsProcessingException, match="Cancel"):
+        qgis_processing.run("urbansynth:extractroadhierarchy", {
+            "INPUT": helsinki_layer("lines"), "OUTPUT": "memory:"}, feedback=fb)
+
+
+def test_qgis_process_run_exits_zero(tmp_path):
+    out = tmp_path / "roads.gpkg"
+    code, result, err = run_qgis_process("extractroadhierarchy", {
+        "INPUT": helsinki_layer("lines"), "OUTPUT": out,
+        "OUTPUT_INTERSECTIONS": tmp_path / "intersections.gpkg"})
+    assert code == 0, err
+    assert result is not None and "OUTPUT" in result["results"]
+    import pyogrio
+
+    assert pyogrio.read_info(out)["features"] > 150
