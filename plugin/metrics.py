@@ -44,7 +44,7 @@ __all__ = [
     "Scalar", "Distribution", "MetricsResult", "COMPARISON_COLUMNS",
     "road_graph", "road_metrics", "block_faces", "block_metrics", "parcel_metrics",
     "footprint_metrics", "compute_layout_metrics", "compare", "two_sample",
-    "rectangle_sides", "corner_angles", "edge_bearings", "intersection_angles",
+    "rectangle_sides", "corner_angles", "street_bearings", "intersection_angles",
     "orientation_entropy", "landuse_category",
 ]
 
@@ -134,8 +134,13 @@ class MetricsResult:
 
 # --------------------------------------------------------------------------- helpers
 
-def _as_array(geoms, what: str, dim: int) -> np.ndarray:
-    """Geometries as a flat object array of non-empty geometries of dimension ``dim``."""
+def _as_array(geoms, what: str, dim: int, notes: Optional[List[str]] = None) -> np.ndarray:
+    """Geometries as a flat object array of non-empty geometries of dimension ``dim``.
+
+    A layer with no geometry of that dimension is an :class:`InputError`; stray geometries
+    of another dimension (a repaired footprint that collapsed to a line) are dropped and
+    counted in ``notes``.
+    """
     if isinstance(geoms, shapely.Geometry):
         geoms = [geoms]
     arr = np.asarray(geoms, dtype=object).ravel()
@@ -143,11 +148,15 @@ def _as_array(geoms, what: str, dim: int) -> np.ndarray:
     if len(arr) == 0:
         raise InputError(f"the {what} layer has no geometries")
     dims = shapely.get_dimensions(arr)
-    if (dims != dim).any():
+    wrong = dims != dim
+    if wrong.all():
         want = {1: "lines", 2: "polygons"}[dim]
-        got = shapely.get_type_id(arr[dims != dim][0])
-        raise InputError(f"the {what} layer must contain {want}, not "
-                         f"{shapely.GeometryType(got).name.lower()}s")
+        got = shapely.GeometryType(shapely.get_type_id(arr[0])).name.lower()
+        raise InputError(f"the {what} layer must contain {want}, not {got}s")
+    if wrong.any():
+        arr = arr[~wrong]
+        if notes is not None:
+            notes.append(f"{what}: {int(wrong.sum())} geometries of another dimension ignored.")
     return arr
 
 
@@ -304,38 +313,53 @@ def road_graph(lines, snap_tolerance: float = 0.5, progress: Optional[Progress] 
                          merge_degree2=True, progress=progress)
 
 
-def edge_bearings(graph: RoadGraph) -> np.ndarray:
-    """Compass bearing (degrees clockwise from grid north, [0, 360)) from u to v of each edge.
+def street_bearings(lines, step: float = 10.0) -> Tuple[np.ndarray, np.ndarray]:
+    """Compass bearings of the straight pieces of street lines, with the piece lengths.
 
-    As OSMnx, the bearing is that of the straight chord between the end nodes; self-loops
-    have none (NaN).
+    Lines are cut into pieces of at most ``step`` metres, so that the bearings sample the
+    streets by length: a curve counts with each of its directions, and an L-shaped street
+    (a grid corner, whose degree-2 node the graph merges) counts as two directions, not as
+    its diagonal chord.
+
+    Returns
+    -------
+    bearings : degrees clockwise from grid north, in [0, 360)
+    lengths : length (m) of each piece
     """
-    d = graph.nodes[graph.v] - graph.nodes[graph.u]
-    bearing = np.degrees(np.arctan2(d[:, 0], d[:, 1])) % 360.0
-    bearing[(graph.u == graph.v) | (np.hypot(d[:, 0], d[:, 1]) == 0)] = np.nan
-    return bearing
+    lines = shapely.segmentize(np.asarray(lines, dtype=object), step)
+    coords, idx = shapely.get_coordinates(lines, return_index=True)
+    same = idx[1:] == idx[:-1]
+    d = (coords[1:] - coords[:-1])[same]
+    length = np.hypot(d[:, 0], d[:, 1])
+    keep = length > 0
+    d, length = d[keep], length[keep]
+    return np.degrees(np.arctan2(d[:, 0], d[:, 1])) % 360.0, length
 
 
-def orientation_entropy(bearings, num_bins: int = 36) -> float:
+def orientation_entropy(bearings, weights=None, num_bins: int = 36) -> float:
     """Shannon entropy (nats) of street bearings, counted in both directions.
 
     Bins are centred on 0, 10, 20 ... degrees (OSMnx splits 2 x num_bins bins and merges
     neighbours), so a north-south / east-west grid falls into exactly 4 bins:
-    H = ln 4 = 1.386; uniformly spread bearings give ln 36 = 3.584.
+    H = ln 4 = 1.386; uniformly spread bearings give ln 36 = 3.584. With the pieces of
+    :func:`street_bearings` weighted by length this is OSMnx's
+    ``orientation_entropy(G, weight="length")`` on the unsimplified graph.
 
     References
     ----------
     Boeing 2019, eq. 1; ``osmnx.bearing.orientation_entropy``.
     """
     b = np.asarray(bearings, dtype=float)
-    b = b[np.isfinite(b)]
-    if len(b) == 0:
+    w = np.ones(len(b)) if weights is None else np.asarray(weights, dtype=float)
+    ok = np.isfinite(b) & np.isfinite(w)
+    b, w = b[ok], w[ok]
+    if len(b) == 0 or w.sum() <= 0:
         return float("nan")
     both = np.concatenate([b % 360.0, (b + 180.0) % 360.0])
     width = 360.0 / num_bins
     bins = np.floor(((both + width / 2) % 360.0) / width).astype(np.int64) % num_bins
-    p = np.bincount(bins, minlength=num_bins) / len(both)
-    p = p[p > 0]
+    p = np.bincount(bins, weights=np.concatenate([w, w]), minlength=num_bins)
+    p = p[p > 0] / p.sum()
     return float(-(p * np.log(p)).sum())
 
 
@@ -384,17 +408,19 @@ def road_metrics(roads, area=None, snap_tolerance: float = 0.5, bearing_length: 
     snap_tolerance : float
         Nodes closer than this (m) are one node (see :func:`road_graph`).
     bearing_length : float
-        Length (m) of the start of each street that gives its direction at a node.
+        Length (m) of the start of each street that gives its direction at a node, and of
+        the pieces whose bearings sample the streets (:func:`street_bearings`).
 
     Returns
     -------
     MetricsResult
         kind ``roads``; distributions ``segment_length`` (m, per edge between nodes of
-        degree != 2), ``node_degree``, ``intersection_angle`` (degrees), ``edge_bearing``
-        (degrees, folded into [0, 180)); scalars ``edges``, ``nodes``, ``dead_ends_per_km2``
-        (s_d), ``intersections_per_km2`` (s_i, degree >= 3), ``street_length_km_per_km2``
-        (s_l), ``orientation_entropy`` (nats, Boeing 2019), ``orientation_order``
-        (phi = 1 - ((H - ln 4) / (ln 36 - ln 4))^2, 1 for a grid, 0 for disorder).
+        degree != 2), ``node_degree``, ``intersection_angle`` (degrees), ``street_bearing``
+        (degrees, folded into [0, 180), one per piece of ``bearing_length`` m, so weighted by
+        length); scalars ``edges``, ``nodes``, ``dead_ends_per_km2`` (s_d, degree 1),
+        ``intersections_per_km2`` (s_i, degree >= 3), ``street_length_km_per_km2`` (s_l),
+        ``orientation_entropy`` (nats, Boeing 2019, length-weighted), ``orientation_order``
+        (phi = 1 - ((H - ln 4) / (ln 36 - ln 4))^2: 1 for a grid, 0 for uniform bearings).
 
     References
     ----------
@@ -419,15 +445,15 @@ def road_metrics(roads, area=None, snap_tolerance: float = 0.5, bearing_length: 
     km2 = area_m2 / M2_PER_KM2
     deg = graph.degree
     length = graph.length
-    bearing = edge_bearings(graph)
+    bearing, piece_length = street_bearings(graph.geometry, bearing_length)
     res = MetricsResult()
     res.add_distribution("roads", "segment_length", length, "m", "Segment length")
     res.add_distribution("roads", "node_degree", deg, "", "Node degree")
     res.add_distribution("roads", "intersection_angle", intersection_angles(graph, bearing_length),
                          "°", "Intersection angle")
-    res.add_distribution("roads", "edge_bearing", bearing % 180.0, "°", "Street bearing")
+    res.add_distribution("roads", "street_bearing", bearing % 180.0, "°", "Street bearing")
     progress.step(0.9)
-    h = orientation_entropy(bearing)
+    h = orientation_entropy(bearing, piece_length)
     h_grid, h_max = np.log(4.0), np.log(36.0)
     res.add_scalar("roads", "edges", graph.n_edges, "", "Street segments")
     res.add_scalar("roads", "nodes", len(graph.nodes), "", "Nodes")
@@ -741,12 +767,12 @@ def compute_layout_metrics(roads=None, blocks=None, parcels=None, buildings=None
         raise InputError("the road half-width must be a non-negative number")
     if landuse is not None and parcels is None:
         raise InputError("land-use values need a parcel layer")
-    roads = None if roads is None else _as_array(roads, "roads", 1)
-    blocks = None if blocks is None else _as_array(blocks, "blocks", 2)
-    parcels = None if parcels is None else _as_array(parcels, "parcels", 2)
-    buildings = None if buildings is None else _as_array(buildings, "buildings", 2)
-    area_m2, source = _area_m2(area, roads, blocks, parcels, buildings)
     res = MetricsResult()
+    roads = None if roads is None else _as_array(roads, "roads", 1, res.notes)
+    blocks = None if blocks is None else _as_array(blocks, "blocks", 2, res.notes)
+    parcels = None if parcels is None else _as_array(parcels, "parcels", 2, res.notes)
+    buildings = None if buildings is None else _as_array(buildings, "buildings", 2, res.notes)
+    area_m2, source = _area_m2(area, roads, blocks, parcels, buildings)
     res.add_scalar("layout", "area_km2", area_m2 / M2_PER_KM2, "km²", "Area for densities")
     res.notes.append(f"Densities are per km² of the {source} ({area_m2 / M2_PER_KM2:.3f} km²).")
     progress.step(0.02)

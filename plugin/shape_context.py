@@ -234,12 +234,15 @@ def radial_edges(scale: float, n_radial: int = N_RADIAL, inner: float = INNER,
 # --------------------------------------------------------------------------- histograms
 
 def shape_contexts(samples: np.ndarray, edges: np.ndarray, n_angular: int = N_ANGULAR,
-                   chunk: int = 128) -> np.ndarray:
+                   chunk: int = 64) -> np.ndarray:
     """Log-polar shape-context histograms of every sample of every shape.
 
     For sample i, every other sample j is binned by the distance |p_j - p_i| (absolute
-    ``edges``) and by the angle of p_j - p_i measured from the tangent at p_i, which makes
-    the histogram rotation invariant. Bins are ordered radial-major: ``r * n_angular + a``.
+    ``edges``, in metres) and by the angle of p_j - p_i measured from the tangent at p_i,
+    which makes the histogram rotation invariant. Angular bin a is *centred* on
+    ``a * 2 pi / n_angular`` from the tangent: samples on the same straight edge lie at
+    exactly 0 or pi, and a bin border there would let round-off flip them between bins.
+    Bins are ordered radial-major: ``r * n_angular + a``.
 
     Parameters
     ----------
@@ -248,7 +251,7 @@ def shape_contexts(samples: np.ndarray, edges: np.ndarray, n_angular: int = N_AN
     n_angular : int
         Angular bins (thesis ch. 5.1: 8).
     chunk : int
-        Shapes per vectorised block (bounds memory to chunk * n * n values).
+        Shapes per vectorised block (bounds memory to a few chunk * n * n arrays).
 
     Returns
     -------
@@ -267,24 +270,55 @@ def shape_contexts(samples: np.ndarray, edges: np.ndarray, n_angular: int = N_AN
     k, n, _ = samples.shape
     if n > 256:
         raise InputError("at most 256 samples per boundary (histogram counts are 8-bit)")
+    if n_angular < 1:
+        raise InputError("at least one angular bin is needed")
     edges = np.asarray(edges, dtype=np.float64)
     n_radial = len(edges) - 1
     n_bins = n_radial * n_angular
     out = np.zeros((k, n, n_bins), dtype=np.uint8)
-    inner_edges = edges[1:-1]
-    off_diag = ~np.eye(n, dtype=bool)
+    inner_sq = (edges[1:-1] ** 2).astype(np.float32)
+    diag = np.arange(n)
     for a in range(0, k, chunk):
         s = samples[a:a + chunk]
         m = len(s)
-        phi = tangent_angles(s)                                   # (m, n)
-        d = s[:, None, :, :] - s[:, :, None, :]                   # d[:, i, j] = p_j - p_i
-        r = np.hypot(d[..., 0], d[..., 1])
-        theta = np.arctan2(d[..., 1], d[..., 0]) - phi[:, :, None]
-        abin = np.floor(np.mod(theta, 2 * np.pi) * (n_angular / (2 * np.pi))).astype(np.int64)
-        np.clip(abin, 0, n_angular - 1, out=abin)                # mod can round up to 2*pi
-        rbin = np.searchsorted(inner_edges, r, side="right")
-        flat = (np.arange(m * n).reshape(m, n, 1) * n_bins + rbin * n_angular + abin)
-        counts = np.bincount(flat[:, off_diag].ravel(), minlength=m * n * n_bins)
+        # relative coordinates in float32 (metres around the shape: ample precision) keep
+        # the (m, n, n) temporaries small; x and y apart avoid strided access
+        centre = s.mean(axis=1, keepdims=True)
+        x = (s[..., 0] - centre[..., 0]).astype(np.float32)
+        y = (s[..., 1] - centre[..., 1]).astype(np.float32)
+        phi = tangent_angles(s)
+        if n_angular == 8:
+            phi = phi - np.pi / 8  # octant borders at multiples of 45 degrees (fast path)
+        else:
+            phi = phi - np.pi / n_angular
+        cos = np.cos(phi).astype(np.float32)[:, :, None]
+        sin = np.sin(phi).astype(np.float32)[:, :, None]
+        dx = x[:, None, :] - x[:, :, None]                         # p_j - p_i
+        dy = y[:, None, :] - y[:, :, None]
+        u = dx * cos + dy * sin                                    # tangent frame of p_i
+        w = dy * cos - dx * sin
+        r2 = dx * dx
+        r2 += dy * dy
+        del dx, dy
+        rbin = np.zeros(r2.shape, dtype=np.int32)
+        for e in inner_sq:
+            rbin += r2 >= e
+        if n_angular == 8:
+            # octant from signs and |w| >= |u|: three comparisons instead of an arctan2
+            un, wn = u < 0, w < 0
+            steep = np.abs(w) >= np.abs(u)
+            odd = un ^ wn                                          # quadrants 1 and 3
+            abin = (wn.astype(np.int32) * 4 + odd.astype(np.int32) * 2
+                    + (steep ^ odd).astype(np.int32))
+        else:
+            ang = np.mod(np.arctan2(w, u), 2 * np.pi)
+            abin = np.minimum((ang * (n_angular / (2 * np.pi))).astype(np.int32), n_angular - 1)
+        flat = rbin
+        flat *= n_angular
+        flat += abin
+        flat += (np.arange(m * n, dtype=np.int32) * n_bins).reshape(m, n, 1)
+        flat[:, diag, diag] = m * n * n_bins                       # self pairs: a dummy slot
+        counts = np.bincount(flat.ravel(), minlength=m * n * n_bins + 1)[:-1]
         out[a:a + m] = counts.reshape(m, n, n_bins)
     return out[0] if single else out
 
@@ -300,7 +334,7 @@ def bin_centres(samples: np.ndarray, edges: np.ndarray, n_angular: int = N_ANGUL
     """World coordinates of the log-polar bin centres around every sample.
 
     The centre of radial bin r is at the geometric mean of its edges, the centre of angular
-    bin a at ``(a + 1/2) * 2 pi / n_angular`` from the local tangent; bins are ordered like
+    bin a at ``a * 2 pi / n_angular`` from the local tangent; bins are ordered like
     :func:`shape_contexts`.
 
     Returns
@@ -312,7 +346,7 @@ def bin_centres(samples: np.ndarray, edges: np.ndarray, n_angular: int = N_ANGUL
     edges = np.asarray(edges, dtype=np.float64)
     n_radial = len(edges) - 1
     rad = np.sqrt(edges[:-1] * edges[1:])
-    ang = (np.arange(n_angular) + 0.5) * (2 * np.pi / n_angular)
+    ang = np.arange(n_angular) * (2 * np.pi / n_angular)
     rr = np.repeat(rad, n_angular)                   # (B,) radial-major
     aa = np.tile(ang, n_radial)
     phi = tangent_angles(samples)[..., None] + aa    # (..., n, B)
