@@ -43,7 +43,7 @@ from .roads import RoadGraph
 
 __all__ = [
     "MIN_BLOCK_AREA", "MIN_BLOCK_WIDTH", "MIN_SHARE", "BLOCK_FIELDS", "BlockExtraction",
-    "block_faces", "minimum_rectangles", "shape_metrics", "assign_to_blocks",
+    "planar_faces", "block_faces", "minimum_rectangles", "shape_metrics", "assign_to_blocks",
     "extract_blocks",
 ]
 
@@ -93,20 +93,225 @@ class BlockExtraction:
 
 # --------------------------------------------------------------------------- faces
 
+def planar_faces(lines: Sequence, node: bool = True):
+    """Bounded faces of a line network, traced on its half-edge structure.
+
+    Gives the faces of ``shapely.polygonize`` (dead-end streets and bridges between loops
+    bound no face; a component enclosed by a face becomes a hole of it) in time that grows
+    linearly: the faces are the cycles of the half-edge permutation
+    ``next(h) = clockwise-next(twin(h))`` of a doubly connected edge list (de Berg et al.,
+    *Computational Geometry*, 2008, ch. 2.2), found for all half-edges at once with numpy.
+
+    Parameters
+    ----------
+    lines : array of LineString / MultiLineString, metric CRS
+    node : bool
+        Node the lines first (``shapely.node``) so that they meet only at end points.
+        Skip it only for lines known to be noded (e.g. one layer of a cleaned graph).
+
+    Returns
+    -------
+    faces : ndarray of Polygon
+        The bounded faces (valid, pairwise non-overlapping), in no particular order.
+    area, perimeter : float arrays
+        Their areas and perimeters (holes included), from the traced coordinates.
+
+    Examples
+    --------
+    >>> import shapely
+    >>> square = shapely.LineString([(0, 0), (10, 0), (10, 10), (0, 10), (0, 0)])
+    >>> dead_end = shapely.LineString([(5, 5), (10, 5)])
+    >>> faces, area, _ = planar_faces([square, dead_end])
+    >>> len(faces), float(area[0])
+    (1, 100.0)
+    """
+    net = _Network(lines, node)
+    return net.faces()
+
+
+class _Network:
+    """Noded linework as flat arrays: the half-edge structure behind :func:`planar_faces`.
+
+    Half-edge ``h < m`` runs along edge ``h`` from its first to its last vertex, ``h + m``
+    runs back; ``org`` is the node a half-edge leaves, ``angle`` its initial direction.
+    """
+
+    def __init__(self, lines: Sequence, node: bool = True):
+        lines = np.asarray(lines, dtype=object)
+        lines = lines[~(shapely.is_missing(lines) | shapely.is_empty(lines))]
+        if not (shapely.get_type_id(lines) == 1).all():  # get_parts copies: only when needed
+            lines = shapely.get_parts(lines)
+        if node and len(lines):
+            lines = shapely.get_parts(shapely.node(shapely.multilinestrings(lines)))
+        coords, idx = shapely.get_coordinates(lines, return_index=True)
+        counts = np.bincount(idx, minlength=len(lines))
+        last = np.cumsum(counts) - 1
+        first = last - counts + 1
+        # drop zero-length pieces and degenerate closed ones (a closed edge needs 4 points)
+        seg = np.hypot(*np.diff(coords, axis=0).T) if len(coords) else np.zeros(0)
+        length = np.bincount(idx[1:], seg * (idx[1:] == idx[:-1]), minlength=len(lines))
+        closed = np.all(coords[first] == coords[last], axis=1)
+        keep = (length > 0) & (~closed | (counts >= 4))
+        self.first, self.last = first[keep], last[keep]
+        # centred coordinates keep the shoelace sums exact far from the CRS origin
+        self.origin = coords.mean(axis=0) if len(coords) else np.zeros(2)
+        self.coords = coords - self.origin
+        m = self.m = len(self.first)
+        f, l = self.first, self.last
+        # node ids: noding makes the end points of touching lines bit-identical
+        ends = np.concatenate([self.coords[f], self.coords[l]])
+        _, org = np.unique(ends[:, 0] + 1j * ends[:, 1], return_inverse=True)
+        self.org = org.reshape(-1)
+        self.node_xy = ends
+        d = np.concatenate([self.coords[f + 1] - self.coords[f], self.coords[l - 1] - self.coords[l]])
+        self.twin = np.r_[np.arange(m, 2 * m), np.arange(m)]
+        # rotation system: around each node, the half-edge clockwise-next of each one
+        order = np.lexsort((np.arctan2(d[:, 1], d[:, 0]), self.org))
+        so = self.org[order]
+        h = np.arange(2 * m)
+        group_start = np.r_[True, so[1:] != so[:-1]] if m else np.zeros(0, bool)
+        group_end = np.r_[so[1:] != so[:-1], True] if m else np.zeros(0, bool)
+        last_pos = np.minimum.accumulate(np.where(group_end, h, 2 * m)[::-1])[::-1]
+        clockwise = np.empty(2 * m, dtype=np.int64)
+        clockwise[order] = order[np.where(group_start, last_pos, h - 1)]
+        self.nxt = clockwise[self.twin]  # bounded faces on the left, walked counter-clockwise
+
+    def dead_ends(self) -> np.ndarray:
+        """Points of the nodes of degree 1 (street ends)."""
+        deg = np.bincount(self.org)
+        first_h = np.unique(self.org, return_index=True)[1]
+        return shapely.points(self.node_xy[first_h[deg == 1]] + self.origin)
+
+    def faces(self):
+        empty = np.empty(0, dtype=object), np.zeros(0), np.zeros(0)
+        m = self.m
+        if m == 0:
+            return empty
+        alive = np.arange(2 * m)
+        label, seq = _cycles(self.nxt)
+        # an edge with the same walk on both sides (a dead end, a bridge between two loops)
+        # bounds no face: remove it from the rotation system and label the walks again
+        same = label[:m] == label[m:]
+        if same.any():
+            removed = np.r_[same, same]
+            nxt = self.nxt.copy()
+            bad = ~removed & removed[nxt]
+            while bad.any():  # skip removed half-edges around the node (few rounds)
+                nxt[bad] = nxt[self.twin[nxt[bad]]]
+                bad = ~removed & removed[nxt]
+            alive = np.flatnonzero(~removed)
+            if len(alive) == 0:
+                return empty
+            compact = np.cumsum(~removed) - 1
+            label, seq = _cycles(compact[nxt[alive]])
+            seq = alive[seq]
+        return _walk_polygons(self, alive, label, seq)
+
+
+def _cycles(nxt: np.ndarray):
+    """Cycles of a permutation: a label per element and all elements in cycle order.
+
+    Pointer jumping (list ranking): after t rounds every element knows the minimum over the
+    next 2**t elements of its cycle, so log2(n) rounds of whole-array operations find each
+    cycle's smallest element; a second jumping pass gives each element's distance to it.
+    """
+    k = len(nxt)
+    ar = np.arange(k)
+    rep, succ = ar.copy(), nxt.copy()
+    for _ in range(max(int(k - 1).bit_length(), 1)):
+        rep = np.minimum(rep, rep[succ])
+        succ = succ[succ]
+    is_rep = rep == ar
+    label = (np.cumsum(is_rep) - 1)[rep]
+    size = np.bincount(label)
+    start = np.r_[0, np.cumsum(size)[:-1]]
+    # distance of each element to the last one of its cycle (the one before the smallest)
+    is_last = nxt == rep
+    succ = np.where(is_last, ar, nxt)
+    dist = (~is_last).astype(np.int64)
+    while True:
+        succ2 = succ[succ]
+        if np.array_equal(succ2, succ):
+            break
+        dist = dist + dist[succ]
+        succ = succ2
+    seq = np.empty(k, dtype=np.int64)
+    seq[start[label] + size[label] - 1 - dist] = ar
+    return label, seq
+
+
+def _walk_polygons(net: "_Network", alive, label, seq):
+    """Polygons of the counter-clockwise walks, with the clockwise walks as their holes.
+
+    ``label`` is indexed like ``alive`` (the half-edges still in the structure), ``seq``
+    lists half-edge ids grouped by walk in walking order.
+    """
+    m = net.m
+    walk_of = np.empty(2 * m, dtype=np.int64)
+    walk_of[alive] = label
+    e = np.where(seq < m, seq, seq - m)
+    first, last = net.first[e], net.last[e]
+    n_c = last - first                             # coordinates per half-edge, end excluded
+    rep_idx = np.repeat(np.arange(len(seq)), n_c)
+    j = np.arange(len(rep_idx)) - np.repeat(np.cumsum(n_c) - n_c, n_c)
+    cidx = np.where((seq < m)[rep_idx], first[rep_idx] + j, last[rep_idx] - j)
+    xy = net.coords[cidx]
+    ring = walk_of[seq][rep_idx]                   # non-decreasing
+    n_ring = label.max() + 1
+    ring_start = np.searchsorted(ring, np.arange(n_ring))
+    k = np.arange(1, len(ring) + 1)
+    wrap = np.r_[ring[1:] != ring[:-1], True]
+    k[wrap] = ring_start[ring[wrap]]
+    x, y = xy[:, 0], xy[:, 1]
+    area = 0.5 * np.bincount(ring, x * y[k] - x[k] * y, minlength=n_ring)
+    perimeter = np.bincount(ring, np.hypot(x[k] - x, y[k] - y), minlength=n_ring)
+    is_shell = area > 0
+    is_hole = area < 0       # the outer boundary of each connected component
+
+    def rings_of(mask):
+        sel = mask[ring]
+        compact = (np.cumsum(mask) - 1)[ring[sel]]
+        return shapely.linearrings(xy[sel] + net.origin, indices=compact)
+
+    faces = shapely.polygons(rings_of(is_shell)) if is_shell.any() else np.empty(0, dtype=object)
+    face_area, face_perimeter = area[is_shell], perimeter[is_shell]
+    holes = np.flatnonzero(is_hole)
+    if len(holes) and len(faces):
+        # a component inside a face is a hole of the smallest face containing it
+        probe = shapely.points(xy[ring_start[holes]] + net.origin)
+        h_i, f_i = shapely.STRtree(faces).query(probe, predicate="within")
+        if len(h_i):
+            best = np.lexsort((face_area[f_i], h_i))
+            best = best[np.r_[True, h_i[best][1:] != h_i[best][:-1]]]
+            h_i, f_i = h_i[best], f_i[best]
+            hole_rings = rings_of(is_hole)
+            np.add.at(face_area, f_i, area[holes][h_i])
+            np.add.at(face_perimeter, f_i, perimeter[holes][h_i])
+            for face in np.unique(f_i):
+                faces[face] = shapely.polygons(shapely.get_exterior_ring(faces[face]),
+                                               holes=hole_rings[h_i[f_i == face]])
+    # a face whose walk touches itself at a vertex (a loop hanging into it) is an
+    # invalid ring; make_valid turns it into the polygon with a hole that it is
+    for i in np.flatnonzero(~shapely.is_valid(faces)):
+        faces[i] = _largest_polygon(shapely.make_valid(faces[i]))
+        face_area[i], face_perimeter[i] = shapely.area(faces[i]), shapely.length(faces[i])
+    return faces, face_area, face_perimeter
+
+
 def block_faces(lines: Sequence, min_area: float = MIN_BLOCK_AREA,
-                min_width: float = MIN_BLOCK_WIDTH):
+                min_width: float = MIN_BLOCK_WIDTH, node: bool = True):
     """Bounded faces of a street network, without the sliver faces.
 
     Parameters
     ----------
     lines : array of LineString
-        Street centrelines in a metric CRS. They are noded together first (edges of
-        different vertical layers may cross without a node in the street graph, and
-        snapping may move an end slightly across a neighbour), so any line set works.
+        Street centrelines in a metric CRS.
     min_area : float
         Faces smaller than this (m²) are dropped.
     min_width : float
         Faces whose mean width ``2 * area / perimeter`` is under this (m) are dropped.
+    node : bool
+        Node the lines first (see :func:`planar_faces`).
 
     Returns
     -------
@@ -130,31 +335,47 @@ def block_faces(lines: Sequence, min_area: float = MIN_BLOCK_AREA,
     >>> len(faces), counts["n_faces"]
     (4, 4)
     """
+    return _filtered_faces(_Network(lines, node), min_area, min_width)
+
+
+def _filtered_faces(net: "_Network", min_area: float, min_width: float):
     if min_area < 0 or min_width < 0:
         raise InputError("the minimum block area and width must not be negative")
-    lines = np.asarray(lines, dtype=object)
-    lines = lines[~(shapely.is_missing(lines) | shapely.is_empty(lines))]
-    if len(lines) == 0:
-        raise InputError("no road lines")
-    noded = shapely.get_parts(shapely.node(shapely.multilinestrings(shapely.get_parts(lines))))
-    faces = shapely.get_parts(shapely.polygonize(noded))
+    if net.m == 0:
+        raise InputError("no road lines with a length")
+    faces, area, perimeter = net.faces()
     n_faces = len(faces)
     if n_faces == 0:
         raise InputError("no closed block: the roads form no closed face")
-    area = shapely.area(faces)
-    perimeter = shapely.length(faces)
     small = area < min_area
     thin = ~small & (2.0 * area < min_width * perimeter)
     faces = faces[~(small | thin)]
-    # polygonize returns valid faces for noded input; repair defensively all the same
-    invalid = ~shapely.is_valid(faces)
-    if invalid.any():
-        faces[invalid] = [_largest_polygon(shapely.make_valid(f)) for f in faces[invalid]]
-        faces = faces[~shapely.is_empty(faces)]
     bounds = shapely.bounds(faces)
     order = np.lexsort((np.round(bounds[:, 0], 3), np.round(bounds[:, 1], 3)))
     return faces[order], {"n_faces": n_faces, "n_small": int(small.sum()),
                           "n_thin": int(thin.sum())}
+
+
+def _planar_lines(graph: RoadGraph) -> np.ndarray:
+    """The edges of a cleaned graph, noded where edges of different vertical layers cross.
+
+    :func:`roads.clean_network` nodes each vertical layer on its own (a bridge does not
+    connect to the street below), so its edges are planar per layer. For the faces, every
+    drivable edge is a block boundary whatever its layer (as in the thesis's planar street
+    graph and momepy's enclosures): only the few edges off the ground layer and the edges
+    they touch are noded again.
+    """
+    lines = np.asarray(graph.geometry, dtype=object)
+    z = np.asarray(graph.z_layer)
+    off = np.flatnonzero(z != 0)
+    if len(off) == 0 or len(off) == len(z):
+        return lines
+    _, touched = shapely.STRtree(lines).query(lines[off], predicate="intersects")
+    involved = np.zeros(len(lines), dtype=bool)
+    involved[off] = True
+    involved[touched] = True
+    noded = shapely.get_parts(shapely.node(shapely.multilinestrings(lines[involved])))
+    return np.concatenate([lines[~involved], noded])
 
 
 def _largest_polygon(geom):
@@ -243,18 +464,20 @@ def shape_metrics(polygons: Sequence) -> pd.DataFrame:
     Hartmann, thesis ch. 4.2 (evaluation of StreetGAN): "compactness = block area / area of
     its minimum bounding box; aspect ratio = shorter / longer side of the minimum bounding box".
     """
-    polygons = np.asarray(polygons, dtype=object)
-    area = shapely.area(polygons)
+    return pd.DataFrame(_shape_columns(np.asarray(polygons, dtype=object)))
+
+
+def _shape_columns(polygons: np.ndarray, area: Optional[np.ndarray] = None) -> dict:
+    area = shapely.area(polygons) if area is None else area
     length, width, angle = minimum_rectangles(polygons)
     rect = length * width
     with np.errstate(divide="ignore", invalid="ignore"):
         compactness = np.where(rect > 0, np.minimum(area / rect, 1.0), np.nan)
         aspect = np.where(length > 0, width / length, np.nan)
-    return pd.DataFrame({
-        "area_m2": area, "perimeter_m": shapely.length(polygons), "compactness": compactness,
-        "aspect_ratio": aspect, "mbr_length_m": length, "mbr_width_m": width,
-        "mbr_angle_deg": angle, "n_holes": shapely.get_num_interior_rings(polygons),
-    })
+    return {"area_m2": area, "perimeter_m": shapely.length(polygons),
+            "compactness": compactness, "aspect_ratio": aspect, "mbr_length_m": length,
+            "mbr_width_m": width, "mbr_angle_deg": angle,
+            "n_holes": shapely.get_num_interior_rings(polygons)}
 
 
 # --------------------------------------------------------------------------- contents
@@ -328,10 +551,6 @@ def _membership_table(index: np.ndarray, share: np.ndarray, block_ids: np.ndarra
     return pd.DataFrame({"block_id": ids, "block_share": share, "in_block": inside})
 
 
-def _dead_end_points(graph: RoadGraph) -> np.ndarray:
-    return shapely.points(graph.nodes[graph.degree == 1])
-
-
 # --------------------------------------------------------------------------- main API
 
 def extract_blocks(roads, buildings: Optional[Sequence] = None,
@@ -374,61 +593,54 @@ def extract_blocks(roads, buildings: Optional[Sequence] = None,
     """
     progress = ensure(progress)
     if isinstance(roads, RoadGraph):
-        lines, dead_ends = roads.geometry, _dead_end_points(roads)
+        # a cleaned graph is planar per layer: node only across layers (cheap)
+        net = _Network(_planar_lines(roads), node=False)
+        dead_ends = shapely.points(roads.nodes[roads.degree == 1])
     else:
-        lines = np.asarray(roads, dtype=object)
-        from .roads import graph_from_lines
-
-        parts = shapely.get_parts(lines)
-        noded = shapely.get_parts(shapely.node(shapely.multilinestrings(parts)))
-        none = np.full(len(noded), None, dtype=object)
-        dead_ends = _dead_end_points(graph_from_lines(noded, none, none, np.zeros(len(noded)),
-                                                      np.arange(len(noded))))
-    progress.step(0.0)
-    faces, counts = block_faces(lines, min_area, min_width)
+        net = _Network(roads, node=True)
+        dead_ends = net.dead_ends()
+    progress.step(0.1)
+    faces, counts = _filtered_faces(net, min_area, min_width)
     progress.step(0.4)
     if len(faces) == 0:
         raise InputError(
             f"no closed block: all {counts['n_faces']} faces of the roads are smaller than "
             f"{min_area:g} m² or narrower than {min_width:g} m (lower the minimum block area "
             "or width)")
-    table = shape_metrics(faces)
-    block_ids = np.arange(1, len(faces) + 1, dtype=np.int64)
-    table.insert(0, "block_id", block_ids)
+    n = len(faces)
+    columns = {"block_id": np.arange(1, n + 1, dtype=np.int64)}
+    columns.update(_shape_columns(faces))
     tree = shapely.STRtree(faces)
     progress.step(0.55)
 
+    # dead-end streets stay inside their block (they bound no face): count their ends
     _, hit = tree.query(dead_ends, predicate="within")
-    table["n_dead_ends"] = np.bincount(hit, minlength=len(faces))
-    stats = dict(counts, n_blocks=len(faces))
-
-    result = BlockExtraction(faces, table, stats=stats)
-    covered = np.zeros(len(faces))
+    columns["n_dead_ends"] = np.bincount(hit, minlength=n)
+    stats = dict(counts, n_blocks=n)
+    result = BlockExtraction(faces, None, stats=stats)
+    columns["n_buildings"] = np.zeros(n, dtype=np.int64)
+    covered = np.zeros(n)
     if buildings is not None:
         b = np.asarray(buildings, dtype=object)
         index, share = assign_to_blocks(faces, b, min_share, tree)
         inside = index >= 0
-        table["n_buildings"] = np.bincount(index[inside], minlength=len(faces))
-        covered = np.bincount(index[inside], shapely.area(b[inside]) * share[inside],
-                              minlength=len(faces))
-        result.buildings = _membership_table(index, share, block_ids)
+        columns["n_buildings"] = np.bincount(index[inside], minlength=n)
+        covered = np.bincount(index[inside], shapely.area(b[inside]) * share[inside], minlength=n)
+        result.buildings = _membership_table(index, share, columns["block_id"])
         stats["n_buildings"] = len(b)
         stats["n_buildings_in_blocks"] = int(inside.sum())
-    else:
-        table["n_buildings"] = 0
     progress.step(0.8)
     # overlapping footprints (dirty OSM) could count twice: a coverage is at most 1
-    table["building_coverage"] = np.minimum(covered / table["area_m2"].to_numpy(), 1.0)
+    columns["building_coverage"] = np.minimum(covered / columns["area_m2"], 1.0)
+    columns["n_parcels"] = np.zeros(n, dtype=np.int64)
     if parcels is not None:
         p = np.asarray(parcels, dtype=object)
         index, share = assign_to_blocks(faces, p, min_share, tree)
         inside = index >= 0
-        table["n_parcels"] = np.bincount(index[inside], minlength=len(faces))
-        result.parcels = _membership_table(index, share, block_ids)
+        columns["n_parcels"] = np.bincount(index[inside], minlength=n)
+        result.parcels = _membership_table(index, share, columns["block_id"])
         stats["n_parcels"] = len(p)
         stats["n_parcels_in_blocks"] = int(inside.sum())
-    else:
-        table["n_parcels"] = 0
-    result.table = table[[name for name, _ in BLOCK_FIELDS]]
+    result.table = pd.DataFrame({name: columns[name] for name, _ in BLOCK_FIELDS})
     progress.step(1.0)
     return result

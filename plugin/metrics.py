@@ -29,14 +29,16 @@ Boeing, G. (2019). Urban spatial order: street network orientation, configuratio
 """
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
-from typing import Dict, Iterable, List, Optional, Sequence, Tuple, Union
+from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 import pandas as pd
 import shapely
 from scipy import stats
 
+from . import blocks as _blocks
 from .progress import InputError, Progress, ensure
 from .roads import RoadGraph, clean_network
 
@@ -44,7 +46,7 @@ __all__ = [
     "Scalar", "Distribution", "MetricsResult", "COMPARISON_COLUMNS",
     "road_graph", "road_metrics", "block_faces", "block_metrics", "parcel_metrics",
     "footprint_metrics", "compute_layout_metrics", "compare", "two_sample",
-    "rectangle_sides", "corner_angles", "street_bearings", "intersection_angles",
+    "corner_angles", "street_bearings", "intersection_angles",
     "orientation_entropy", "landuse_category",
 ]
 
@@ -134,122 +136,69 @@ class MetricsResult:
 
 # --------------------------------------------------------------------------- helpers
 
-def _as_array(geoms, what: str, dim: int, notes: Optional[List[str]] = None) -> np.ndarray:
+def _as_array(geoms, what: str, dim: int, notes: Optional[List[str]] = None,
+              return_mask: bool = False):
     """Geometries as a flat object array of non-empty geometries of dimension ``dim``.
 
-    A layer with no geometry of that dimension is an :class:`InputError`; stray geometries
-    of another dimension (a repaired footprint that collapsed to a line) are dropped and
-    counted in ``notes``.
+    A layer with no geometry of that dimension is an :class:`InputError`; missing, empty and
+    stray geometries of another dimension (a repaired footprint that collapsed to a line)
+    are dropped and counted in ``notes``. With ``return_mask``, also returns which input
+    geometries were kept (to filter per-feature values alike).
     """
     if isinstance(geoms, shapely.Geometry):
         geoms = [geoms]
     arr = np.asarray(geoms, dtype=object).ravel()
-    arr = arr[~(shapely.is_missing(arr) | shapely.is_empty(arr))] if len(arr) else arr
     if len(arr) == 0:
         raise InputError(f"the {what} layer has no geometries")
-    dims = shapely.get_dimensions(arr)
-    wrong = dims != dim
-    if wrong.all():
+    present = ~(shapely.is_missing(arr) | shapely.is_empty(arr))
+    if not present.any():
+        raise InputError(f"the {what} layer has no geometries")
+    dims = np.full(len(arr), -1)
+    dims[present] = shapely.get_dimensions(arr[present])
+    keep = dims == dim
+    if not keep.any():
         want = {1: "lines", 2: "polygons"}[dim]
-        got = shapely.GeometryType(shapely.get_type_id(arr[0])).name.lower()
+        got = shapely.GeometryType(shapely.get_type_id(arr[present][0])).name.lower()
         raise InputError(f"the {what} layer must contain {want}, not {got}s")
-    if wrong.any():
-        arr = arr[~wrong]
-        if notes is not None:
-            notes.append(f"{what}: {int(wrong.sum())} geometries of another dimension ignored.")
-    return arr
+    if not keep.all() and notes is not None:
+        notes.append(f"{what}: {int((~keep).sum())} empty geometries or geometries of another "
+                     "dimension ignored.")
+    return (arr[keep], keep) if return_mask else arr[keep]
 
 
-def _area_m2(area, *layers) -> Tuple[float, str]:
-    """Area for densities: the study area, else the convex hull of the given layers."""
+def _area(area, *layers) -> Tuple[Optional[shapely.Geometry], float, str]:
+    """Area for densities: (polygon or None, m², description).
+
+    ``area`` is a study polygon (or an array of polygons, united), a number of m², or None
+    for the convex hull of the given layers.
+    """
     if area is not None:
-        if isinstance(area, (int, float, np.floating)):
+        if isinstance(area, (int, float, np.integer, np.floating)):
             a = float(area)
             if not a > 0:
                 raise InputError("the study area must be positive")
-            return a, "given"
+            return None, a, "given area"
         polys = _as_array(area, "study area", 2)
-        a = float(shapely.area(shapely.union_all(polys)))
+        geom = polys[0] if len(polys) == 1 else shapely.union_all(polys)
+        a = float(shapely.area(geom))
         if not a > 0:
             raise InputError("the study area polygon has no area")
-        return a, "study area"
-    present = [np.asarray(x, dtype=object).ravel() for x in layers if x is not None]
-    hull = shapely.convex_hull(shapely.union_all(np.concatenate(present))) if present else None
+        shapely.prepare(geom)
+        return geom, a, "study area"
+    coords = [shapely.get_coordinates(np.asarray(x, dtype=object)) for x in layers if x is not None]
+    hull = shapely.convex_hull(shapely.multipoints(np.vstack(coords))) if coords else None
     a = float(shapely.area(hull)) if hull is not None else 0.0
     if not a > 0:
-        raise InputError("the layers span no area (pass a study area for densities)")
-    return a, "convex hull of the input"
+        raise InputError("the layers span no area (give a study area for the densities)")
+    shapely.prepare(hull)
+    return hull, a, "convex hull of the input"
 
 
-def rectangle_sides(polygons, chunk_pairs: int = 2_000_000) -> Tuple[np.ndarray, np.ndarray]:
-    """Long and short sides of the minimum-area bounding rectangle of each geometry.
-
-    Rotating calipers, vectorised: the minimum-area rectangle has a side on an edge of the
-    convex hull (Freeman & Shapira 1975), so every hull edge direction is tried. (GEOS 3.11's
-    ``oriented_envelope`` minimises the width, not the area, which is not Yang's MBR.)
-
-    Parameters
-    ----------
-    polygons : array of geometries
-    chunk_pairs : int
-        Memory bound: hulls are processed in chunks of about this many (edge, vertex) pairs.
-
-    Returns
-    -------
-    long, short : float arrays (the short side is 0 for degenerate, collinear input)
-    """
-    geoms = np.asarray(polygons, dtype=object)
-    n = len(geoms)
-    hull = shapely.convex_hull(geoms)
-    long = shapely.length(hull)  # a segment's length; replaced below for true polygons
-    short = np.zeros(n)
-    is_poly = shapely.get_type_id(hull) == 3
-    long[~is_poly & (shapely.get_type_id(hull) == 0)] = 0.0
-    poly = np.flatnonzero(is_poly)
-    if len(poly) == 0:
-        return long, short
-    coords, idx = shapely.get_coordinates(shapely.get_exterior_ring(hull[poly]), return_index=True)
-    counts = np.bincount(idx, minlength=len(poly))  # closed rings: vertices + 1
-    start = np.r_[0, np.cumsum(counts)[:-1]]
-    cost = (counts - 1) * counts
-    bounds = np.r_[0, np.flatnonzero(np.diff(np.cumsum(cost) // chunk_pairs)) + 1, len(poly)]
-    best_area = np.full(len(poly), np.inf)
-    best_a = np.zeros(len(poly))
-    best_b = np.zeros(len(poly))
-    for lo, hi in zip(bounds[:-1], bounds[1:]):
-        g = np.arange(lo, hi)
-        n_edges = counts[g] - 1
-        # one row per (edge, vertex of the same hull)
-        edge_hull = np.repeat(g, n_edges)
-        edge_start = np.repeat(start[g], n_edges) + _ranges(n_edges)
-        d = coords[edge_start + 1] - coords[edge_start]
-        d /= np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-300)[:, None]
-        reps = counts[edge_hull]
-        pair_edge = np.repeat(np.arange(len(edge_hull)), reps)
-        pt = coords[np.repeat(start[edge_hull], reps) + _ranges(reps)]
-        u = np.einsum("ij,ij->i", pt, d[pair_edge])
-        v = pt[:, 1] * d[pair_edge, 0] - pt[:, 0] * d[pair_edge, 1]
-        cut = np.r_[0, np.cumsum(reps)[:-1]]
-        along = np.maximum.reduceat(u, cut) - np.minimum.reduceat(u, cut)
-        across = np.maximum.reduceat(v, cut) - np.minimum.reduceat(v, cut)
-        area = along * across
-        order = np.lexsort((area, edge_hull))  # per hull, the smallest area first
-        first = order[np.r_[True, edge_hull[order][1:] != edge_hull[order][:-1]]]
-        h = edge_hull[first]
-        best_area[h], best_a[h], best_b[h] = area[first], along[first], across[first]
-    long[poly] = np.maximum(best_a, best_b)
-    short[poly] = np.minimum(best_a, best_b)
-    return long, short
-
-
-def _ranges(lengths: np.ndarray) -> np.ndarray:
-    """Concatenated ``arange(k)`` for each k in ``lengths``."""
-    lengths = np.asarray(lengths, dtype=np.int64)
-    total = int(lengths.sum())
-    if total == 0:
-        return np.zeros(0, dtype=np.int64)
-    offsets = np.repeat(np.cumsum(lengths) - lengths, lengths)
-    return np.arange(total) - offsets
+def _inside(area_geom, geoms) -> np.ndarray:
+    """Which elements count for a density: those whose point on surface lies in the area."""
+    if area_geom is None:
+        return np.ones(len(geoms), dtype=bool)
+    return shapely.intersects(area_geom, shapely.point_on_surface(geoms))
 
 
 def corner_angles(polygons, straight: float = STRAIGHT_ANGLE) -> Tuple[np.ndarray, np.ndarray]:
@@ -273,7 +222,8 @@ def corner_angles(polygons, straight: float = STRAIGHT_ANGLE) -> Tuple[np.ndarra
     owner : int array, index into ``polygons`` of each angle
     """
     parts, owner = shapely.get_parts(np.asarray(polygons, dtype=object), return_index=True)
-    rings = shapely.remove_repeated_points(shapely.get_exterior_ring(parts), 1e-9)
+    # vertices within a centimetre of the previous one are digitising noise, not corners
+    rings = shapely.remove_repeated_points(shapely.get_exterior_ring(parts), 0.01)
     coords, ring = shapely.get_coordinates(rings, return_index=True)
     counts = np.bincount(ring, minlength=len(rings))
     # drop each ring's closing vertex; rings of fewer than 3 distinct points have no corners
@@ -301,16 +251,23 @@ def corner_angles(polygons, straight: float = STRAIGHT_ANGLE) -> Tuple[np.ndarra
 
 # --------------------------------------------------------------------------- roads
 
-def road_graph(lines, snap_tolerance: float = 0.5, progress: Optional[Progress] = None) -> RoadGraph:
+def road_graph(lines, snap_tolerance: float = 0.5, z_layer=None,
+               progress: Optional[Progress] = None) -> RoadGraph:
     """The street graph the road metrics are measured on.
 
-    Lines are noded at crossings, nodes closer than ``snap_tolerance`` merged and chains
-    through degree-2 nodes merged (OSM splits ways anywhere), but no dangle is pruned: a
-    layout's own dead ends are part of what is measured.
+    Lines are noded at crossings (per vertical layer ``z_layer`` when given, so bridges do
+    not make intersections), nodes closer than ``snap_tolerance`` merged and chains through
+    degree-2 nodes merged (OSM splits ways anywhere), but no dangle is pruned: a layout's own
+    dead ends are part of what is measured.
     """
-    lines = _as_array(lines, "roads", 1)
-    return clean_network(lines, snap_tolerance=snap_tolerance, min_dangle_length=0.0,
-                         merge_degree2=True, progress=progress)
+    lines, kept = _as_array(lines, "roads", 1, return_mask=True)
+    if z_layer is not None:
+        z_layer = np.asarray(z_layer)
+        if len(z_layer) != len(kept):
+            raise InputError(f"{len(z_layer)} vertical layers for {len(kept)} road lines")
+        z_layer = z_layer[kept]
+    return clean_network(lines, z_layer=z_layer, snap_tolerance=snap_tolerance,
+                         min_dangle_length=0.0, merge_degree2=True, progress=progress)
 
 
 def street_bearings(lines, step: float = 10.0) -> Tuple[np.ndarray, np.ndarray]:
@@ -440,11 +397,19 @@ def road_metrics(roads, area=None, snap_tolerance: float = 0.5, bearing_length: 
         graph, lines = roads, roads.geometry
     else:
         lines = _as_array(roads, "roads", 1)
-        graph = road_graph(lines, snap_tolerance, progress.sub(0.0, 0.7))
-    area_m2, source = _area_m2(area, lines)
+        graph = road_graph(lines, snap_tolerance, progress=progress.sub(0.0, 0.7))
+    area_geom, area_m2, source = _area(area, lines)
     km2 = area_m2 / M2_PER_KM2
     deg = graph.degree
     length = graph.length
+    # densities count the network inside the area (all of it for the default hull)
+    node_in = (np.ones(len(graph.nodes), dtype=bool) if area_geom is None else
+               shapely.intersects_xy(area_geom, graph.nodes[:, 0], graph.nodes[:, 1]))
+    length_in = length.copy()
+    if area_geom is not None:
+        cut = ~shapely.within(graph.geometry, area_geom)
+        with np.errstate(invalid="ignore"):
+            length_in[cut] = shapely.length(shapely.intersection(graph.geometry[cut], area_geom))
     bearing, piece_length = street_bearings(graph.geometry, bearing_length)
     res = MetricsResult()
     res.add_distribution("roads", "segment_length", length, "m", "Segment length")
@@ -457,32 +422,40 @@ def road_metrics(roads, area=None, snap_tolerance: float = 0.5, bearing_length: 
     h_grid, h_max = np.log(4.0), np.log(36.0)
     res.add_scalar("roads", "edges", graph.n_edges, "", "Street segments")
     res.add_scalar("roads", "nodes", len(graph.nodes), "", "Nodes")
-    res.add_scalar("roads", "street_length_km_per_km2", length.sum() / 1000.0 / km2, "km/km²",
-                   "Street length per km² (s_l)")
-    res.add_scalar("roads", "intersections_per_km2", (deg >= 3).sum() / km2, "1/km²",
+    res.add_scalar("roads", "street_length_km_per_km2", length_in.sum() / 1000.0 / km2,
+                   "km/km²", "Street length per km² (s_l)")
+    res.add_scalar("roads", "intersections_per_km2", ((deg >= 3) & node_in).sum() / km2, "1/km²",
                    "Intersections per km² (s_i)")
-    res.add_scalar("roads", "dead_ends_per_km2", (deg == 1).sum() / km2, "1/km²",
+    res.add_scalar("roads", "dead_ends_per_km2", ((deg == 1) & node_in).sum() / km2, "1/km²",
                    "Dead ends per km² (s_d)")
     res.add_scalar("roads", "orientation_entropy", h, "nats", "Orientation entropy")
     res.add_scalar("roads", "orientation_order", 1.0 - ((h - h_grid) / (h_max - h_grid)) ** 2, "",
                    "Orientation order φ")
-    res.notes.append(f"Road densities use {area_m2 / M2_PER_KM2:.3f} km² ({source}).")
+    if area is None:
+        res.notes.append(f"Road densities are per km² of the {source} ({km2:.3f} km²).")
     progress.step(1.0)
     return res
 
 
 # --------------------------------------------------------------------------- blocks
 
-def block_faces(roads, min_area: float = 10.0, snap_tolerance: float = 0.5) -> np.ndarray:
-    """City blocks as the faces of the planar road graph (dead ends stay inside their block).
+def block_faces(roads, min_area: float = _blocks.MIN_BLOCK_AREA,
+                min_width: float = _blocks.MIN_BLOCK_WIDTH,
+                snap_tolerance: float = 0.5) -> np.ndarray:
+    """City blocks as the faces of the road graph, as ``extractblocks`` makes them.
 
-    Faces under ``min_area`` m² are slivers between dual carriageways and are dropped.
-    ``roads`` is an array of lines or a :class:`RoadGraph`; returns an array of polygons
-    (possibly empty when no street closes a face).
+    Delegates to :func:`plugin.blocks.block_faces` (dead ends stay inside their block;
+    faces under ``min_area`` m² or thinner than ``min_width`` m are slivers between dual
+    carriageways and are dropped), so that a layout is measured on the same blocks the
+    toolbox extracts. ``roads`` is an array of lines or a :class:`RoadGraph`; returns an
+    empty array when no street closes a face.
     """
     graph = roads if isinstance(roads, RoadGraph) else road_graph(roads, snap_tolerance)
-    faces = shapely.get_parts(shapely.polygonize(graph.geometry))
-    return faces[shapely.area(faces) >= min_area]
+    try:
+        faces, _ = _blocks.block_faces(graph.geometry, min_area, min_width)
+    except InputError:  # the roads close no face: no blocks, not an error here
+        return np.zeros(0, dtype=object)
+    return faces
 
 
 def block_metrics(blocks, area=None) -> MetricsResult:
@@ -506,21 +479,21 @@ def block_metrics(blocks, area=None) -> MetricsResult:
     Hartmann thesis ch. 4.2 (area, compactness, aspect ratio); Yang et al. 2013, sec. 7
     (b_n, b_max, b_avg, b_min).
     """
-    blocks = _as_array(blocks, "blocks", 2)
-    area_m2, _ = _area_m2(area, blocks)
-    a = shapely.area(blocks)
-    long, short = rectangle_sides(blocks)
-    boundary = shapely.length(blocks)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        compact = a / (long * short)
-        aspect = short / long
     res = MetricsResult()
+    blocks = _as_array(blocks, "blocks", 2, res.notes)
+    area_geom, area_m2, _ = _area(area, blocks)
+    shape = _blocks.shape_metrics(blocks)
+    a = shape["area_m2"].to_numpy()
+    compact = shape["compactness"].to_numpy()
+    aspect = shape["aspect_ratio"].to_numpy()
+    boundary = shape["perimeter_m"].to_numpy()
     res.add_distribution("blocks", "area", a, "m²", "Block area")
     res.add_distribution("blocks", "compactness", compact, "", "Block compactness")
     res.add_distribution("blocks", "aspect_ratio", aspect, "", "Block aspect ratio")
     res.add_distribution("blocks", "boundary_length", boundary, "m", "Block boundary length")
     res.add_scalar("blocks", "count", len(blocks), "", "Blocks")
-    res.add_scalar("blocks", "blocks_per_km2", len(blocks) / (area_m2 / M2_PER_KM2), "1/km²",
+    km2 = area_m2 / M2_PER_KM2
+    res.add_scalar("blocks", "blocks_per_km2", _inside(area_geom, blocks).sum() / km2, "1/km²",
                    "Blocks per km² (b_n)")
     res.add_scalar("blocks", "b_max", boundary.max(), "m", "Max. block boundary (b_max)")
     res.add_scalar("blocks", "b_avg", boundary.mean(), "m", "Mean block boundary (b_avg)")
@@ -547,7 +520,8 @@ def landuse_category(values) -> np.ndarray:
     out = []
     for v in values:
         t = "" if v is None else str(v).strip().lower()
-        out.append("r" if t in _RESIDENTIAL else "p" if t in _PARK else "s" if t in _STREET else "o")
+        out.append("r" if t in _RESIDENTIAL else "p" if t in _PARK else
+                   "s" if t in _STREET else "o")
     return np.asarray(out, dtype=object)
 
 
@@ -587,25 +561,32 @@ def parcel_metrics(parcels, area=None, landuse=None,
     >>> r.scalar("parcels", "p_angle"), r.scalar("parcels", "p_area")
     (0.0, 1.0)
     """
-    parcels = _as_array(parcels, "parcels", 2)
+    res = MetricsResult()
+    parcels, kept = _as_array(parcels, "parcels", 2, res.notes, return_mask=True)
+    if landuse is not None:
+        landuse = np.asarray(landuse, dtype=object)
+        if len(landuse) == len(kept):
+            landuse = landuse[kept]
+        elif len(landuse) != len(parcels):
+            raise InputError(f"{len(landuse)} land-use values for {len(kept)} parcels")
     n = len(parcels)
-    area_m2, _ = _area_m2(area, parcels)
+    area_geom, area_m2, _ = _area(area, parcels)
     a = shapely.area(parcels)
-    long, short = rectangle_sides(parcels)
+    long, short, _ = _blocks.minimum_rectangles(parcels)
     with np.errstate(divide="ignore", invalid="ignore"):
-        p_area = (long * short) / a
+        p_area = np.where(a > 0, long * short / a, np.nan)
     angles, owner = corner_angles(parcels, straight)
     dev = np.abs(angles - 90.0)
     n_corners = np.bincount(owner, minlength=n)
     with np.errstate(divide="ignore", invalid="ignore"):
         p_angle = np.bincount(owner, weights=dev, minlength=n) / n_corners
     bad = (np.nan_to_num(p_angle) > UNDESIRABLE_ANGLE) | (np.nan_to_num(p_area) > UNDESIRABLE_AREA)
-    res = MetricsResult()
     res.add_distribution("parcels", "area", a, "m²", "Parcel area")
     res.add_distribution("parcels", "p_angle", p_angle, "°", "Parcel angle deviation p_angle")
     res.add_distribution("parcels", "p_area", p_area, "", "Parcel area distortion p_area")
     res.add_scalar("parcels", "count", n, "", "Parcels")
-    res.add_scalar("parcels", "p_n_per_km2", n / (area_m2 / M2_PER_KM2), "1/km²",
+    km2 = area_m2 / M2_PER_KM2
+    res.add_scalar("parcels", "p_n_per_km2", _inside(area_geom, parcels).sum() / km2, "1/km²",
                    "Parcels per km² (p_n)")
     res.add_scalar("parcels", "p_angle", dev.mean() if len(dev) else np.nan, "°",
                    "Mean corner deviation from 90° (p_angle)")
@@ -617,9 +598,13 @@ def parcel_metrics(parcels, area=None, landuse=None,
                    "Share of undesirable parcels")
     if landuse is not None:
         cat = landuse_category(landuse)
-        if len(cat) != n:
-            raise InputError(f"{len(cat)} land-use values for {n} parcels")
-        share = {c: 100.0 * a[cat == c].sum() / area_m2 for c in ("r", "p", "o", "s")}
+        # land inside the area only, so that the four shares add up to 100 %
+        a_in = a.copy()
+        if area_geom is not None:
+            cut = ~shapely.within(parcels, area_geom)
+            with np.errstate(invalid="ignore"):
+                a_in[cut] = shapely.area(shapely.intersection(parcels[cut], area_geom))
+        share = {c: 100.0 * a_in[cat == c].sum() / area_m2 for c in ("r", "p", "o", "s")}
         rest = max(0.0, 100.0 - share["r"] - share["p"] - share["o"] - share["s"])
         res.add_scalar("parcels", "l_s", share["s"] + rest, "%", "Land use: streets (l_s)")
         res.add_scalar("parcels", "l_r", share["r"], "%", "Land use: residential (l_r)")
@@ -633,7 +618,8 @@ def parcel_metrics(parcels, area=None, landuse=None,
 def _pair_intersection_area(a: np.ndarray, b: np.ndarray, ia: np.ndarray, ib: np.ndarray):
     if len(ia) == 0:
         return np.zeros(0)
-    return shapely.area(shapely.intersection(a[ia], b[ib]))
+    with np.errstate(invalid="ignore"):
+        return shapely.area(shapely.intersection(a[ia], b[ib]))
 
 
 def footprint_metrics(footprints, blocks=None, roads=None, road_half_width: float = 3.0,
@@ -664,13 +650,14 @@ def footprint_metrics(footprints, blocks=None, roads=None, road_half_width: floa
         to 0.1 % of their area), ``road_overlap_area`` (m²), ``road_overlap_count``.
         DESIGN.md: overlaps and footprints outside blocks must be 0 in a synthesis.
     """
-    fp = _as_array(footprints, "buildings", 2)
-    area_m2, _ = _area_m2(area, fp)
-    fa = shapely.area(fp)
     res = MetricsResult()
+    fp = _as_array(footprints, "buildings", 2, res.notes)
+    area_geom, area_m2, _ = _area(area, fp)
+    fa = shapely.area(fp)
     res.add_distribution("buildings", "area", fa, "m²", "Footprint area")
     res.add_scalar("buildings", "count", len(fp), "", "Footprints")
-    res.add_scalar("buildings", "per_km2", len(fp) / (area_m2 / M2_PER_KM2), "1/km²",
+    km2 = area_m2 / M2_PER_KM2
+    res.add_scalar("buildings", "per_km2", _inside(area_geom, fp).sum() / km2, "1/km²",
                    "Footprints per km²")
 
     tree = shapely.STRtree(fp)
@@ -682,7 +669,7 @@ def footprint_metrics(footprints, blocks=None, roads=None, road_half_width: floa
                    "Pairs of overlapping footprints")
 
     if blocks is not None:
-        blocks = _as_array(blocks, "blocks", 2)
+        blocks = _as_array(blocks, "blocks", 2, res.notes)
         ba = shapely.area(blocks)
         fi, bi = shapely.STRtree(blocks).query(fp, predicate="intersects")
         inter = _pair_intersection_area(fp, blocks, fi, bi)
@@ -698,7 +685,7 @@ def footprint_metrics(footprints, blocks=None, roads=None, road_half_width: floa
                        "Footprints not inside one block")
 
     if roads is not None:
-        roads = _as_array(roads, "roads", 1)
+        roads = _as_array(roads, "roads", 1, res.notes)
         surface = shapely.buffer(roads, road_half_width, quad_segs=4)
         fi, ri = shapely.STRtree(surface).query(fp, predicate="intersects")
         hit = _pair_intersection_area(fp, surface, fi, ri) > OVERLAP_EPS
@@ -722,9 +709,10 @@ def footprint_metrics(footprints, blocks=None, roads=None, road_half_width: floa
 # --------------------------------------------------------------------------- top level
 
 def compute_layout_metrics(roads=None, blocks=None, parcels=None, buildings=None, area=None,
-                           landuse=None, road_half_width: float = 3.0,
+                           landuse=None, road_z_layer=None, road_half_width: float = 3.0,
                            snap_tolerance: float = 0.5, bearing_length: float = 10.0,
-                           min_block_area: float = 10.0,
+                           min_block_area: float = _blocks.MIN_BLOCK_AREA,
+                           min_block_width: float = _blocks.MIN_BLOCK_WIDTH,
                            progress: Optional[Progress] = None) -> MetricsResult:
     """All measures of one layout, from whichever layers are given.
 
@@ -737,14 +725,19 @@ def compute_layout_metrics(roads=None, blocks=None, parcels=None, buildings=None
     parcels, buildings : arrays of polygons, optional
     area : polygon(s) or float (m²), optional
         Study area for all densities; default: the convex hull of all given layers, so that
-        every density of one layout is per the same km².
+        every density of one layout is per the same km². Densities count what lies inside
+        a study polygon: street length clipped to it, nodes in it, blocks, parcels and
+        footprints whose point on surface is in it (distributions keep every element).
     landuse : labels per parcel, optional (land-use shares, :func:`parcel_metrics`)
+    road_z_layer : int per road line, optional
+        OSM vertical layer: roads of different layers cross without an intersection.
     road_half_width : float
         Half the road width (m) for the road surface of the footprint overlap test.
     snap_tolerance, bearing_length : float
         See :func:`road_metrics`.
-    min_block_area : float
-        Road-graph faces smaller than this (m²) are slivers, not blocks.
+    min_block_area, min_block_width : float
+        Road-graph faces smaller (m²) or thinner (m) than this are slivers, not blocks
+        (:func:`block_faces`).
     progress : Progress, optional
 
     Returns
@@ -768,39 +761,53 @@ def compute_layout_metrics(roads=None, blocks=None, parcels=None, buildings=None
     if landuse is not None and parcels is None:
         raise InputError("land-use values need a parcel layer")
     res = MetricsResult()
-    roads = None if roads is None else _as_array(roads, "roads", 1, res.notes)
+    if roads is not None:
+        roads, kept = _as_array(roads, "roads", 1, res.notes, return_mask=True)
+        if road_z_layer is not None:
+            road_z_layer = np.asarray(road_z_layer)
+            if len(road_z_layer) != len(kept):
+                raise InputError(f"{len(road_z_layer)} vertical layers for {len(kept)} road lines")
+            road_z_layer = road_z_layer[kept]
     blocks = None if blocks is None else _as_array(blocks, "blocks", 2, res.notes)
-    parcels = None if parcels is None else _as_array(parcels, "parcels", 2, res.notes)
+    if parcels is not None:
+        parcels, kept = _as_array(parcels, "parcels", 2, res.notes, return_mask=True)
+        if landuse is not None:
+            landuse = np.asarray(landuse, dtype=object)
+            if len(landuse) != len(kept):
+                raise InputError(f"{len(landuse)} land-use values for {len(kept)} parcels")
+            landuse = landuse[kept]
     buildings = None if buildings is None else _as_array(buildings, "buildings", 2, res.notes)
-    area_m2, source = _area_m2(area, roads, blocks, parcels, buildings)
+    area_geom, area_m2, source = _area(area, roads, blocks, parcels, buildings)
+    area = area_geom if area_geom is not None else area_m2
     res.add_scalar("layout", "area_km2", area_m2 / M2_PER_KM2, "km²", "Area for densities")
     res.notes.append(f"Densities are per km² of the {source} ({area_m2 / M2_PER_KM2:.3f} km²).")
     progress.step(0.02)
 
     graph = None
     if roads is not None:
-        graph = road_graph(roads, snap_tolerance, progress.sub(0.02, 0.5))
-        res.extend(road_metrics(graph, area_m2, bearing_length=bearing_length,
+        graph = road_graph(roads, snap_tolerance, road_z_layer, progress.sub(0.02, 0.5))
+        res.extend(road_metrics(graph, area, bearing_length=bearing_length,
                                 progress=progress.sub(0.5, 0.6)))
         res.notes.append(f"Road graph: {len(roads)} lines -> {graph.n_edges} street segments "
                          f"between {len(graph.nodes)} nodes.")
     progress.step(0.6)
     if blocks is None and graph is not None:
-        faces = block_faces(graph, min_block_area)
+        faces = block_faces(graph, min_block_area, min_block_width)
         if len(faces):
             blocks = faces
-            res.notes.append(f"Blocks: {len(faces)} faces of the road graph "
-                             f"(faces under {min_block_area:g} m² dropped as slivers).")
+            res.notes.append(f"Blocks: {len(faces)} faces of the road graph (faces under "
+                             f"{min_block_area:g} m² or thinner than {min_block_width:g} m "
+                             "dropped as slivers).")
         else:
             res.notes.append("Blocks: the roads close no face, so there are no block metrics.")
     if blocks is not None:
-        res.extend(block_metrics(blocks, area_m2))
+        res.extend(block_metrics(blocks, area))
     progress.step(0.7)
     if parcels is not None:
-        res.extend(parcel_metrics(parcels, area_m2, landuse))
+        res.extend(parcel_metrics(parcels, area, landuse))
     progress.step(0.8)
     if buildings is not None:
-        res.extend(footprint_metrics(buildings, blocks, roads, road_half_width, area_m2))
+        res.extend(footprint_metrics(buildings, blocks, roads, road_half_width, area))
     progress.step(1.0)
     return res
 
@@ -829,7 +836,10 @@ def two_sample(candidate, example) -> Dict[str, float]:
         wn = w / sd
     else:
         wn = 0.0 if w == 0 else np.nan
-    ks = stats.ks_2samp(c, e)
+    with warnings.catch_warnings():
+        # ties make the exact p-value fail over to the asymptotic one: expected, not news
+        warnings.simplefilter("ignore", RuntimeWarning)
+        ks = stats.ks_2samp(c, e)
     return dict(wasserstein=w, wasserstein_norm=wn, ks_stat=float(ks.statistic),
                 ks_pvalue=float(ks.pvalue))
 
@@ -842,11 +852,25 @@ def _rel_diff(c: float, e: float) -> float:
     return (c - e) / abs(e)
 
 
+def _mean(values: np.ndarray) -> float:
+    return float(values.mean()) if len(values) else np.nan
+
+
+def _axial_mean(degrees: np.ndarray) -> float:
+    """Mean direction of axial data (a street at 10° is the same as at 190°), in [0, 180)."""
+    if not len(degrees):
+        return np.nan
+    t = np.radians(2.0 * np.asarray(degrees))
+    return float(np.degrees(np.arctan2(np.sin(t).mean(), np.cos(t).mean())) / 2.0 % 180.0)
+
+
 def compare(candidate: MetricsResult, example: Optional[MetricsResult] = None) -> pd.DataFrame:
     """One row per measure: candidate and example values and their distance.
 
     Distributions give one row with ``statistic`` = 'mean' (the means of both samples and
-    their relative difference) and the two-sample distances of :func:`two_sample`; scalars
+    their relative difference; 'axial_mean' for street bearings, whose plain mean means
+    nothing) and the two-sample distances of :func:`two_sample` (for bearings on the
+    [0, 180) line, ignoring the wrap-around); scalars
     give one row with ``statistic`` = 'value' and the relative difference
     (candidate - example) / |example|. Measures present on one side only keep NaN on the
     other. Without an example, the rows just list the candidate.
@@ -878,9 +902,10 @@ def compare(candidate: MetricsResult, example: Optional[MetricsResult] = None) -
         if typ == "d":
             cv = c.values if c is not None else np.zeros(0)
             ev = e.values if e is not None else np.zeros(0)
-            cm = float(cv.mean()) if len(cv) else np.nan
-            em = float(ev.mean()) if len(ev) else np.nan
-            row.update(statistic="mean", candidate=cm, example=em, rel_diff=_rel_diff(cm, em),
+            statistic, mean = ("axial_mean", _axial_mean) if ref.unit == "°" and \
+                name.endswith("bearing") else ("mean", _mean)
+            cm, em = mean(cv), mean(ev)
+            row.update(statistic=statistic, candidate=cm, example=em, rel_diff=_rel_diff(cm, em),
                        n_candidate=len(cv), n_example=len(ev), **two_sample(cv, ev))
         else:
             cs = c.value if c is not None else np.nan

@@ -1,0 +1,308 @@
+"""urbansynth:extractblocks - city blocks from roads; footprints and parcels assigned to blocks."""
+import shapely
+from qgis.core import (
+    QgsProcessing,
+    QgsProcessingException,
+    QgsProcessingParameterFeatureSink,
+    QgsProcessingParameterFeatureSource,
+    QgsProcessingParameterField,
+    QgsProcessingParameterNumber,
+    QgsProcessingParameterString,
+    QgsWkbTypes,
+)
+from qgis.PyQt.QtCore import QVariant
+
+from ..plugin import blocks, building_attributes, qgis_io, roads
+from .common import AlgorithmBase, parse_class_list
+
+MEMBERSHIP_FIELDS = [("source_fid", "int"), ("block_id", "int"), ("block_share", "float"),
+                     ("in_block", "bool"), ("area_m2", "float")]
+BUILDING_FIELDS = MEMBERSHIP_FIELDS + building_attributes.ATTRIBUTE_FIELDS
+#: Tag columns of GDAL's OSM 'multipolygons' layer (or cadastre fields) read when present.
+TAG_FIELDS = ("height", "building:height", "building:levels", "levels", "roof:shape",
+              "building:use", "amenity", "shop", "office", "tourism", "craft", "industrial",
+              "religion", "healthcare", "leisure")
+_INT_TYPES = (QVariant.Int, QVariant.LongLong, QVariant.UInt, QVariant.ULongLong)
+
+
+class ExtractBlocks(AlgorithmBase):
+    ROADS = "ROADS"
+    CLASS_FIELD = "CLASS_FIELD"
+    CLASSES = "CLASSES"
+    BUILDINGS = "BUILDINGS"
+    PARCELS = "PARCELS"
+    MIN_BLOCK_AREA = "MIN_BLOCK_AREA"
+    MIN_BLOCK_WIDTH = "MIN_BLOCK_WIDTH"
+    STOREY_HEIGHT = "STOREY_HEIGHT"
+    HEIGHT_FIELD = "HEIGHT_FIELD"
+    LEVELS_FIELD = "LEVELS_FIELD"
+    OUTPUT = "OUTPUT"
+    OUTPUT_BUILDINGS = "OUTPUT_BUILDINGS"
+    OUTPUT_PARCELS = "OUTPUT_PARCELS"
+
+    def name(self):
+        return "extractblocks"
+
+    def displayName(self):  # noqa: N802
+        return "Extract city blocks"
+
+    def group(self):
+        return "Analysis"
+
+    def groupId(self):  # noqa: N802
+        return "analysis"
+
+    def shortHelpString(self):  # noqa: N802
+        return (
+            "City blocks are the faces of the planar street graph (Hartmann, ch. 4.1 and 5.1): "
+            "the road lines are filtered to drivable classes, cleaned and noded, and every "
+            "closed face becomes a block; dead-end streets stay inside their block. Faces "
+            "that are traffic islands or slivers between dual carriageways (smaller than the "
+            "minimum area or narrower than the minimum mean width) are dropped.\n\n"
+            "Blocks get area, perimeter, compactness (area / minimum bounding rectangle), "
+            "aspect ratio (shorter / longer side of that rectangle), dead-end and building "
+            "counts and building coverage. Each building and parcel gets the block_id of the "
+            "block holding most of its area (at least half); features outside every closed "
+            "block (common at the edge of a clipped extract) are kept with an empty block_id "
+            "and in_block = false. Buildings also get height_m (from height tags or fields, "
+            "else levels x storey height, flagged height_estimated), levels and a normalised "
+            "building_type from OSM tags. Outputs are in the CRS of their input layer."
+        )
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        self.add(QgsProcessingParameterFeatureSource(
+            self.ROADS, "Road lines", [QgsProcessing.TypeVectorLine]),
+            "Any road line layer: the output of 'Extract road hierarchy', the 'lines' layer of "
+            "an .osm.pbf file, or a cadastre street layer.")
+        self.add(QgsProcessingParameterField(
+            self.CLASS_FIELD, "Road class field", defaultValue="highway",
+            parentLayerParameterName=self.ROADS, optional=True),
+            "Field with the road class (OSM 'highway'; also searched in 'other_tags'). When "
+            "the layer has no such field, every line is a block boundary.")
+        self.add(QgsProcessingParameterString(
+            self.CLASSES, "Drivable classes (comma-separated, empty = all)",
+            defaultValue=",".join(roads.DRIVABLE_CLASSES), optional=True),
+            "Only lines of these classes bound blocks (footways and service roads would cut "
+            "blocks into courtyards). Leave empty to use every line.", advanced=True)
+        self.add(QgsProcessingParameterFeatureSource(
+            self.BUILDINGS, "Building footprints (optional)", [QgsProcessing.TypeVectorPolygon],
+            optional=True),
+            "Footprints, e.g. the 'multipolygons' layer of an .osm.pbf file (only features with "
+            "a 'building' value are used) or a cadastre building layer.")
+        self.add(QgsProcessingParameterFeatureSource(
+            self.PARCELS, "Parcels (optional)", [QgsProcessing.TypeVectorPolygon],
+            optional=True),
+            "Cadastre parcels; each gets the block_id of the block holding most of it.")
+        self.add(QgsProcessingParameterNumber(
+            self.MIN_BLOCK_AREA, "Minimum block area (m²)", QgsProcessingParameterNumber.Double,
+            defaultValue=blocks.MIN_BLOCK_AREA, minValue=0.0, maxValue=1e7),
+            "Faces smaller than this are traffic islands or junction artefacts, not blocks.",
+            advanced=True)
+        self.add(QgsProcessingParameterNumber(
+            self.MIN_BLOCK_WIDTH, "Minimum mean block width (m)",
+            QgsProcessingParameterNumber.Double, defaultValue=blocks.MIN_BLOCK_WIDTH,
+            minValue=0.0, maxValue=1000.0),
+            "Faces whose mean width (2 x area / perimeter) is under this are slivers between "
+            "dual carriageways or slip roads.", advanced=True)
+        self.add(QgsProcessingParameterNumber(
+            self.STOREY_HEIGHT, "Storey height (m)", QgsProcessingParameterNumber.Double,
+            defaultValue=building_attributes.STOREY_HEIGHT, minValue=0.5, maxValue=20.0),
+            "Metres per storey: heights are estimated from levels (and levels from heights) "
+            "with it when a building has only one of them.", advanced=True)
+        self.add(QgsProcessingParameterField(
+            self.HEIGHT_FIELD, "Building height field (cadastre)",
+            parentLayerParameterName=self.BUILDINGS, optional=True),
+            "A field with the building height in metres; it wins over OSM height tags.",
+            advanced=True)
+        self.add(QgsProcessingParameterField(
+            self.LEVELS_FIELD, "Number of storeys field (cadastre)",
+            parentLayerParameterName=self.BUILDINGS, optional=True),
+            "A field with the number of storeys; it wins over OSM building:levels.",
+            advanced=True)
+        self.add(QgsProcessingParameterFeatureSink(
+            self.OUTPUT, "City blocks", QgsProcessing.TypeVectorPolygon),
+            "Block polygons with block_id, area_m2, perimeter_m, compactness, aspect_ratio, "
+            "n_dead_ends, n_buildings, building_coverage, n_parcels.")
+        self.add(QgsProcessingParameterFeatureSink(
+            self.OUTPUT_BUILDINGS, "Buildings with blocks and attributes",
+            QgsProcessing.TypeVectorPolygon, optional=True, createByDefault=True),
+            "The footprints with their fields plus block_id, in_block, height_m, "
+            "height_estimated, levels, building_type and the raw tag values.")
+        self.add(QgsProcessingParameterFeatureSink(
+            self.OUTPUT_PARCELS, "Parcels with blocks", QgsProcessing.TypeVectorPolygon,
+            optional=True, createByDefault=True),
+            "The parcels with their fields plus block_id and in_block.")
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        min_area = qgis_io.check_number(
+            self.parameterAsDouble(parameters, self.MIN_BLOCK_AREA, context),
+            self.MIN_BLOCK_AREA, 0.0, 1e7)
+        min_width = qgis_io.check_number(
+            self.parameterAsDouble(parameters, self.MIN_BLOCK_WIDTH, context),
+            self.MIN_BLOCK_WIDTH, 0.0, 1000.0)
+        storey = qgis_io.check_number(
+            self.parameterAsDouble(parameters, self.STOREY_HEIGHT, context),
+            self.STOREY_HEIGHT, 0.5, 20.0)
+        class_field = self.parameterAsString(parameters, self.CLASS_FIELD, context)
+        classes = parse_class_list(self.parameterAsString(parameters, self.CLASSES, context))
+
+        frame = qgis_io.read_source(self, parameters, self.ROADS, context, feedback, kind="lines")
+        frame = self._drivable(frame, class_field, classes, feedback)
+        graph = qgis_io.run_engine(
+            frame.name, roads.clean_network, frame.geometry,
+            qgis_io.osm_tag_column(frame, class_field or "highway"), None,
+            qgis_io.osm_vertical_layers(frame), merge_degree2=False,
+            progress=qgis_io.progress_for(feedback, 5, 30))
+        feedback.pushInfo(f"Street graph: {graph.n_edges} edges, {len(graph.nodes)} nodes.")
+
+        buildings = self._buildings(parameters, context, feedback, frame.crs)
+        parcels = qgis_io.read_source(self, parameters, self.PARCELS, context, feedback,
+                                      kind="polygons", target_crs=frame.crs, optional=True)
+        result = qgis_io.run_engine(
+            frame.name, blocks.extract_blocks, graph,
+            None if buildings is None else buildings.geometry,
+            None if parcels is None else parcels.geometry,
+            min_area=min_area, min_width=min_width,
+            progress=qgis_io.progress_for(feedback, 40, 70))
+        self._log(result.stats, feedback)
+
+        results = {}
+        results[self.OUTPUT] = qgis_io.write_sink(
+            self, parameters, self.OUTPUT, context, result.geometry, result.table,
+            blocks.BLOCK_FIELDS, QgsWkbTypes.Polygon, frame.source_crs, frame.crs, feedback)
+        qgis_io.style_output(context, results[self.OUTPUT], "blocks.qml")
+        feedback.setProgress(80)
+        if buildings is not None:
+            heights, levels = self._cadastre_fields(parameters, context, buildings)
+            attrs = building_attributes.building_attributes(
+                len(buildings), building=qgis_io.field_values(buildings, "building"),
+                other_tags=qgis_io.field_values(buildings, "other_tags"),
+                tags={k: buildings.attributes[k].to_numpy(dtype=object)
+                      for k in TAG_FIELDS if k in buildings.attributes},
+                height=heights, levels=levels, storey_height=storey)
+            n_h = int(attrs["height_m"].notna().sum())
+            n_est = int(attrs["height_estimated"].fillna(False).sum())
+            feedback.pushInfo(f"Buildings: {n_h} of {len(buildings)} have a height "
+                              f"({n_est} estimated from levels x {storey:g} m).")
+            table = result.buildings.join(attrs)
+            results[self.OUTPUT_BUILDINGS] = self._write_features(
+                parameters, self.BUILDINGS, self.OUTPUT_BUILDINGS, context, feedback, buildings,
+                table, BUILDING_FIELDS)
+            qgis_io.style_output(context, results[self.OUTPUT_BUILDINGS],
+                                 "buildings_by_height.qml")
+        feedback.setProgress(90)
+        if parcels is not None:
+            results[self.OUTPUT_PARCELS] = self._write_features(
+                parameters, self.PARCELS, self.OUTPUT_PARCELS, context, feedback, parcels,
+                result.parcels, MEMBERSHIP_FIELDS)
+        feedback.setProgress(100)
+        return results
+
+    # ----------------------------------------------------------------------- helpers
+
+    def _drivable(self, frame, class_field, classes, feedback):
+        """Keep the lines of a drivable class (all lines when the layer has no classes)."""
+        road_class = qgis_io.osm_tag_column(frame, class_field or "highway")
+        if road_class is not None and all(c is None or c == "" for c in road_class):
+            road_class = None
+        if road_class is None:
+            if class_field and class_field != "highway":
+                raise QgsProcessingException(
+                    f"Layer {frame.name} has no field '{class_field}' with road classes.")
+            feedback.pushInfo(f"{frame.name} has no road classes: every line bounds blocks.")
+            return frame
+        if not classes:
+            return frame
+        keep = [c in classes for c in road_class]
+        n_keep = sum(keep)
+        feedback.pushInfo(f"{n_keep} of {len(frame)} lines have a drivable class.")
+        if n_keep == 0:
+            raise QgsProcessingException(
+                f"Layer {frame.name}: no line has one of the drivable classes "
+                f"({', '.join(sorted(classes))}) in field '{class_field or 'highway'}'.")
+        return qgis_io.subset(frame, keep)
+
+    def _buildings(self, parameters, context, feedback, crs):
+        frame = qgis_io.read_source(self, parameters, self.BUILDINGS, context, feedback,
+                                    kind="polygons", target_crs=crs, optional=True)
+        if frame is None or "building" not in frame.attributes:
+            return frame
+        # an OSM multipolygons layer also holds land use, parks, water ...: only buildings
+        value = frame.attributes["building"].to_numpy(dtype=object)
+        keep = [v is not None and str(v).strip() not in ("", "no") for v in value]
+        n_drop = len(frame) - sum(keep)
+        if n_drop:
+            feedback.pushInfo(f"{frame.name}: {n_drop} of {len(frame)} polygons have no "
+                              "'building' value and are not buildings; they are skipped.")
+        if not any(keep):
+            raise QgsProcessingException(
+                f"Layer {frame.name} has a 'building' field but no feature with a value in it.")
+        return qgis_io.subset(frame, keep)
+
+    def _cadastre_fields(self, parameters, context, frame):
+        values = []
+        for name in (self.HEIGHT_FIELD, self.LEVELS_FIELD):
+            field = self.parameterAsString(parameters, name, context)
+            if field and field not in frame.attributes:
+                raise QgsProcessingException(
+                    f"Layer {frame.name} has no field '{field}' (parameter {name}).")
+            values.append(frame.attributes[field].to_numpy(dtype=object) if field else None)
+        return values
+
+    def _write_features(self, parameters, source_name, name, context, feedback, frame, table,
+                        fields):
+        """Write features with their source fields plus ``fields`` (ours win on a clash)."""
+        # field names compare case-insensitively: GeoPackage and shapefiles do
+        ours = {f.lower() for f, _ in fields}
+        source = self.parameterAsSource(parameters, source_name, context)
+        carried = []
+        for field in source.fields():
+            if field.name().lower() in ours or field.name() not in frame.attributes:
+                if field.name().lower() in ours:
+                    feedback.pushInfo(f"{frame.name}: field '{field.name()}' is replaced by "
+                                      "the computed one.")
+                continue
+            kind = ("int" if field.type() in _INT_TYPES else "float"
+                    if field.type() == QVariant.Double else "bool"
+                    if field.type() == QVariant.Bool else "str")
+            carried.append((field.name(), kind))
+        out = table.copy()
+        for field, kind in carried:
+            column = frame.attributes[field]
+            out[field] = column if kind != "str" else column.map(_text)
+        out["source_fid"] = frame.fids
+        out["area_m2"] = shapely.area(frame.geometry)
+        return qgis_io.write_sink(self, parameters, name, context, frame.geometry, out,
+                                  carried + fields, QgsWkbTypes.MultiPolygon, frame.source_crs,
+                                  frame.crs, feedback)
+
+    @staticmethod
+    def _log(stats, feedback):
+        feedback.pushInfo(
+            f"{stats['n_blocks']} blocks from {stats['n_faces']} closed faces "
+            f"({stats['n_small']} too small and {stats['n_thin']} too thin dropped).")
+        if "n_buildings" in stats:
+            n, k = stats["n_buildings"], stats["n_buildings_in_blocks"]
+            feedback.pushInfo(
+                f"{k} of {n} buildings ({100.0 * k / max(n, 1):.0f} %) lie in a block; the "
+                f"other {n - k} are outside every closed block (beyond the outermost street "
+                "loop of the extract, or on a dropped sliver) and keep an empty block_id.")
+        if "n_parcels" in stats:
+            n, k = stats["n_parcels"], stats["n_parcels_in_blocks"]
+            feedback.pushInfo(f"{k} of {n} parcels lie in a block; the other {n - k} keep an "
+                              "empty block_id (street parcels, parcels across blocks, outside).")
+
+
+def _text(value):
+    """Dates and other Qt values as ISO text; plain values unchanged."""
+    if value is None or isinstance(value, (str, int, float, bool)):
+        return value
+    to_string = getattr(value, "toString", None)
+    if to_string is not None:
+        try:
+            from qgis.PyQt.QtCore import Qt
+
+            return to_string(Qt.ISODate)
+        except TypeError:
+            return to_string()
+    return str(value)

@@ -1,0 +1,223 @@
+"""urbansynth:layoutmetrics - quality and similarity metrics of a layout against its example."""
+import numpy as np
+import shapely
+from qgis.core import (
+    QgsCoordinateReferenceSystem,
+    QgsProcessing,
+    QgsProcessingException,
+    QgsProcessingParameterFeatureSink,
+    QgsProcessingParameterFeatureSource,
+    QgsProcessingParameterField,
+    QgsProcessingParameterFileDestination,
+    QgsProcessingParameterNumber,
+    QgsWkbTypes,
+)
+
+from ..plugin import metrics, qgis_io, report
+from .common import AlgorithmBase
+
+
+class LayoutMetrics(AlgorithmBase):
+    ROADS = "ROADS"
+    BLOCKS = "BLOCKS"
+    PARCELS = "PARCELS"
+    BUILDINGS = "BUILDINGS"
+    EXAMPLE_ROADS = "EXAMPLE_ROADS"
+    EXAMPLE_BLOCKS = "EXAMPLE_BLOCKS"
+    EXAMPLE_PARCELS = "EXAMPLE_PARCELS"
+    EXAMPLE_BUILDINGS = "EXAMPLE_BUILDINGS"
+    STUDY_AREA = "STUDY_AREA"
+    EXAMPLE_STUDY_AREA = "EXAMPLE_STUDY_AREA"
+    ROAD_HALF_WIDTH = "ROAD_HALF_WIDTH"
+    LANDUSE_FIELD = "LANDUSE_FIELD"
+    OUTPUT = "OUTPUT"
+    OUTPUT_HTML = "OUTPUT_HTML"
+
+    #: (parameter, engine argument, geometry kind) of the candidate and the example layers
+    CANDIDATE = [(ROADS, "roads", "lines"), (BLOCKS, "blocks", "polygons"),
+                 (PARCELS, "parcels", "polygons"), (BUILDINGS, "buildings", "polygons")]
+    EXAMPLE = [(EXAMPLE_ROADS, "roads", "lines"), (EXAMPLE_BLOCKS, "blocks", "polygons"),
+               (EXAMPLE_PARCELS, "parcels", "polygons"),
+               (EXAMPLE_BUILDINGS, "buildings", "polygons")]
+
+    def name(self):
+        return "layoutmetrics"
+
+    def displayName(self):  # noqa: N802
+        return "Layout metrics"
+
+    def group(self):
+        return "Analysis"
+
+    def groupId(self):  # noqa: N802
+        return "analysis"
+
+    def shortHelpString(self):  # noqa: N802
+        return (
+            "Measures a layout and, when example layers are given, how closely it resembles "
+            "its example.\n\n"
+            "Give any of roads, blocks, parcels and buildings (at least one). Roads: segment "
+            "length, node degree, intersection angle and street bearing distributions, dead ends, "
+            "intersections and street length per km², orientation entropy. Blocks (the faces of "
+            "the road graph when no block layer is given): area, compactness, aspect ratio, "
+            "boundary length, blocks per km². Parcels: the Yang et al. 2013 Table 1 measures "
+            "p_n, p_angle, p_area, undesirable parcels (p_angle > 15° or p_area > 1.2) and, with "
+            "a land-use field, the land-use shares. Buildings: coverage, overlaps between "
+            "footprints and with the road surface, footprints outside blocks, setback.\n\n"
+            "Outputs: a table with one row per measure (candidate and example values, "
+            "Wasserstein distance and Kolmogorov-Smirnov statistic of every distribution) and "
+            "an HTML report with histograms of example and candidate side by side. Each layer "
+            "set is measured in its own local metric CRS."
+        )
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        line, poly = [QgsProcessing.TypeVectorLine], [QgsProcessing.TypeVectorPolygon]
+        self.add(QgsProcessingParameterFeatureSource(
+            self.ROADS, "Roads", line, optional=True),
+            "Road centrelines of the layout to measure (e.g. a synthesis, or the output of "
+            "Extract road hierarchy). They are noded into a street graph; nothing is filtered.")
+        self.add(QgsProcessingParameterFeatureSource(
+            self.BLOCKS, "Blocks", poly, optional=True),
+            "City blocks. When missing, blocks are the faces of the road graph (as Extract "
+            "blocks makes them).")
+        self.add(QgsProcessingParameterFeatureSource(
+            self.PARCELS, "Parcels", poly, optional=True),
+            "Parcels (cadastre plots or a subdivision) for the Yang et al. 2013 parcel measures.")
+        self.add(QgsProcessingParameterFeatureSource(
+            self.BUILDINGS, "Buildings", poly, optional=True),
+            "Building footprints for coverage, overlap and setback measures.")
+        self.add(QgsProcessingParameterFeatureSource(
+            self.EXAMPLE_ROADS, "Example roads", line, optional=True),
+            "Roads of the example the layout should resemble.")
+        self.add(QgsProcessingParameterFeatureSource(
+            self.EXAMPLE_BLOCKS, "Example blocks", poly, optional=True),
+            "Blocks of the example (else the faces of the example roads).")
+        self.add(QgsProcessingParameterFeatureSource(
+            self.EXAMPLE_PARCELS, "Example parcels", poly, optional=True),
+            "Parcels of the example.")
+        self.add(QgsProcessingParameterFeatureSource(
+            self.EXAMPLE_BUILDINGS, "Example buildings", poly, optional=True),
+            "Building footprints of the example.")
+        self.add(QgsProcessingParameterFeatureSource(
+            self.STUDY_AREA, "Study area", poly, optional=True),
+            "Polygon(s) whose area the densities (per km²) of the layout refer to. Default: the "
+            "convex hull of all given layers.")
+        self.add(QgsProcessingParameterFeatureSource(
+            self.EXAMPLE_STUDY_AREA, "Example study area", poly, optional=True),
+            "Polygon(s) for the densities of the example. Default: the convex hull of the "
+            "example layers.", advanced=True)
+        self.add(QgsProcessingParameterNumber(
+            self.ROAD_HALF_WIDTH, "Road half-width (m)", QgsProcessingParameterNumber.Double,
+            defaultValue=3.0, minValue=0.0, maxValue=100.0),
+            "The road surface is the centrelines buffered by this on each side; footprints "
+            "must not overlap it, and setbacks are measured from its edge.", advanced=True)
+        self.add(QgsProcessingParameterField(
+            self.LANDUSE_FIELD, "Land-use field of the parcels",
+            parentLayerParameterName=self.PARCELS, optional=True),
+            "Parcel field with the land use (residential / park / street / other labels, matched "
+            "case-insensitively) for the Yang 2013 shares l_s, l_r, l_p, l_o. The example "
+            "parcels use a field of the same name when they have one.", advanced=True)
+        self.add(QgsProcessingParameterFeatureSink(
+            self.OUTPUT, "Layout metrics table", QgsProcessing.TypeVector),
+            "One row per measure: kind, metric, statistic, unit, candidate and example values, "
+            "relative difference, Wasserstein distance (raw and divided by the example's "
+            "standard deviation), Kolmogorov-Smirnov statistic and p-value, sample sizes.")
+        self.add(QgsProcessingParameterFileDestination(
+            self.OUTPUT_HTML, "Layout metrics report", "HTML files (*.html)"),
+            "Self-contained HTML report with the tables and the histograms.")
+
+    # ------------------------------------------------------------------ helpers
+
+    def _given(self, parameters, name):
+        value = parameters.get(name)
+        return value is not None and value != ""
+
+    def _read_set(self, parameters, context, feedback, layers, area_name, landuse_field):
+        """Read one layer set (candidate or example) into engine arguments, one metric CRS."""
+        kwargs, names, crs = {}, [], None
+        for name, arg, kind in layers:
+            if not self._given(parameters, name):
+                continue
+            frame = qgis_io.read_source(self, parameters, name, context, feedback, kind=kind,
+                                        target_crs=crs)
+            crs = frame.crs
+            kwargs[arg] = frame.geometry
+            if arg == "roads":  # bridges and tunnels cross without an intersection
+                kwargs["road_z_layer"] = qgis_io.osm_vertical_layers(frame)
+            names.append(f"{arg}: {frame.name} ({len(frame)} features)")
+            if arg == "parcels" and landuse_field:
+                if landuse_field in frame.attributes:
+                    kwargs["landuse"] = frame.attributes[landuse_field].to_numpy(dtype=object)
+                else:
+                    feedback.pushInfo(f"{frame.name} has no field '{landuse_field}': no land-use "
+                                      "shares for it.")
+        if kwargs and self._given(parameters, area_name):
+            area = qgis_io.read_source(self, parameters, area_name, context, feedback,
+                                       kind="polygons", target_crs=crs)
+            kwargs["area"] = area.geometry
+            names.append(f"study area: {area.name}")
+        return kwargs, names, crs
+
+    # ------------------------------------------------------------------ run
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        if not any(self._given(parameters, name) for name, _, _ in self.CANDIDATE):
+            raise QgsProcessingException(
+                "No layer to measure: give at least one of Roads, Blocks, Parcels or Buildings.")
+        half_width = qgis_io.check_number(
+            self.parameterAsDouble(parameters, self.ROAD_HALF_WIDTH, context),
+            self.ROAD_HALF_WIDTH, 0.0, 100.0)
+        landuse_field = self.parameterAsString(parameters, self.LANDUSE_FIELD, context)
+        html_path = self.parameterAsFileOutput(parameters, self.OUTPUT_HTML, context)
+
+        cand_args, cand_names, cand_crs = self._read_set(
+            parameters, context, feedback, self.CANDIDATE, self.STUDY_AREA, landuse_field)
+        if not cand_args:
+            raise QgsProcessingException(
+                "No layer to measure could be loaded: check Roads, Blocks, Parcels and Buildings.")
+        feedback.setProgress(10)
+        candidate = qgis_io.run_engine(
+            "Layout", metrics.compute_layout_metrics, road_half_width=half_width,
+            progress=qgis_io.progress_for(feedback, 10, 45), **cand_args)
+        for note in candidate.notes:
+            feedback.pushInfo(f"Layout: {note}")
+
+        example = None
+        ex_args, ex_names, ex_crs = self._read_set(
+            parameters, context, feedback, self.EXAMPLE, self.EXAMPLE_STUDY_AREA, landuse_field)
+        if ex_args:
+            example = qgis_io.run_engine(
+                "Example", metrics.compute_layout_metrics, road_half_width=half_width,
+                progress=qgis_io.progress_for(feedback, 50, 80), **ex_args)
+            for note in example.notes:
+                feedback.pushInfo(f"Example: {note}")
+        elif self._given(parameters, self.EXAMPLE_STUDY_AREA):
+            feedback.reportError("An example study area was given without example layers; "
+                                 "it is ignored.")
+        table = metrics.compare(candidate, example)
+        feedback.pushInfo(f"{len(table)} measures"
+                          + (" compared with the example." if example is not None else "."))
+        feedback.setProgress(82)
+
+        results = {}
+        # a geometry-less table: every row gets an empty point, which the sink drops
+        results[self.OUTPUT] = qgis_io.write_sink(
+            self, parameters, self.OUTPUT, context,
+            np.array([shapely.Point()] * len(table), dtype=object), table,
+            list(metrics.COMPARISON_COLUMNS), QgsWkbTypes.NoGeometry,
+            QgsCoordinateReferenceSystem(), QgsCoordinateReferenceSystem(), feedback)
+        feedback.setProgress(85)
+
+        meta = {"Layout": "; ".join(cand_names),
+                "Layout CRS (metric)": cand_crs.authid() if cand_crs else ""}
+        if example is not None:
+            meta["Example"] = "; ".join(ex_names)
+            meta["Example CRS (metric)"] = ex_crs.authid() if ex_crs else ""
+        meta["Road half-width"] = f"{half_width:g} m"
+        if html_path:
+            qgis_io.run_engine("Report", report.write_report, html_path, candidate, example,
+                               table, "Layout metrics", meta,
+                               progress=qgis_io.progress_for(feedback, 85, 100))
+            results[self.OUTPUT_HTML] = html_path
+        feedback.setProgress(100)
+        return results

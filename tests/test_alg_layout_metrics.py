@@ -1,0 +1,153 @@
+"""urbansynth:layoutmetrics through real QGIS (processing.run and qgis_process.bin)."""
+import math
+
+import pytest
+
+from conftest import bubenec_layer, helsinki_layer, run_qgis_process
+
+ALG = "urbansynth:layoutmetrics"
+
+
+def _rows(layer):
+    """Features as dicts, QGIS NULLs as None."""
+    from qgis.PyQt.QtCore import QVariant
+
+    fields = [f.name() for f in layer.fields()]
+    return [{k: None if isinstance(v, QVariant) and v.isNull() else v
+             for k, v in zip(fields, f.attributes())} for f in layer.getFeatures()]
+
+
+def _row(rows, kind, metric):
+    return next(r for r in rows if r["kind"] == kind and r["metric"] == metric)
+
+
+def test_helsinki_against_bubenec(qgis_processing, tmp_path):
+    from qgis.core import QgsWkbTypes
+
+    html = tmp_path / "report.html"
+    out = qgis_processing.run(ALG, {
+        "ROADS": helsinki_layer("lines"),
+        "EXAMPLE_ROADS": bubenec_layer("streets"), "EXAMPLE_PARCELS": bubenec_layer("plots"),
+        "EXAMPLE_BUILDINGS": bubenec_layer("buildings"),
+        "OUTPUT": "memory:", "OUTPUT_HTML": str(html)})
+    table = out["OUTPUT"]
+    assert table.wkbType() == QgsWkbTypes.NoGeometry
+    rows = _rows(table)
+    assert {r["kind"] for r in rows} == {"layout", "roads", "blocks", "parcels", "buildings"}
+    for metric in ("segment_length", "node_degree", "intersection_angle", "street_bearing"):
+        r = _row(rows, "roads", metric)
+        assert r["statistic"] in ("mean", "axial_mean")
+        assert r["n_candidate"] > 1000 and r["n_example"] > 20
+        assert r["wasserstein"] > 0 and 0 < r["ks_stat"] <= 1 and 0 <= r["ks_pvalue"] <= 1
+        assert r["wasserstein_norm"] == pytest.approx(r["wasserstein_norm"])  # not NULL
+    # Helsinki lines include footways: a dense network, tens of km per km², metric units
+    s_l = _row(rows, "roads", "street_length_km_per_km2")
+    assert 20 < s_l["candidate"] < 300 and 1 < s_l["example"] < 50
+    entropy = _row(rows, "roads", "orientation_entropy")
+    assert math.log(4) < entropy["candidate"] < math.log(36)
+    assert entropy["rel_diff"] == pytest.approx((entropy["candidate"] - entropy["example"])
+                                                / entropy["example"])
+    # blocks come from the road faces on both sides
+    assert _row(rows, "blocks", "count")["candidate"] > 50
+    assert _row(rows, "blocks", "count")["example"] == 7
+    # parcels and footprints exist only in the example
+    p_area = _row(rows, "parcels", "p_area")
+    assert p_area["candidate"] is None and p_area["example"] >= 1
+    assert _row(rows, "buildings", "overlap_area")["example"] == 0
+    text = html.read_text(encoding="utf-8")
+    assert text.count("<img") >= 10 and "data:image/png;base64," in text
+    for name in ("segment_length", "intersection_angle", "orientation_entropy", "p_angle",
+                 "Wasserstein", "Kolmogorov"):
+        assert name in text
+    assert out["OUTPUT_HTML"] == str(html)
+
+
+def test_identical_layouts_have_zero_distance(qgis_processing, tmp_path):
+    out = qgis_processing.run(ALG, {
+        "ROADS": bubenec_layer("streets"), "PARCELS": bubenec_layer("plots"),
+        "BUILDINGS": bubenec_layer("buildings"),
+        "EXAMPLE_ROADS": bubenec_layer("streets"), "EXAMPLE_PARCELS": bubenec_layer("plots"),
+        "EXAMPLE_BUILDINGS": bubenec_layer("buildings"),
+        "OUTPUT": "memory:", "OUTPUT_HTML": str(tmp_path / "same.html")})
+    rows = _rows(out["OUTPUT"])
+    dists = [r for r in rows if r["statistic"] != "value"]
+    assert len(dists) >= 12
+    assert all(r["wasserstein"] == pytest.approx(0, abs=1e-9) for r in dists)
+    assert all(r["ks_stat"] == pytest.approx(0) for r in dists)
+    scalars = [r for r in rows if r["statistic"] == "value"]
+    assert all(r["rel_diff"] in (None, pytest.approx(0, abs=1e-9)) for r in scalars)
+    # Bubeneč, measured in UTM 33N: 407 parcels, Yang's measures within their ranges
+    assert _row(rows, "parcels", "count")["candidate"] == 407
+    assert 0 <= _row(rows, "parcels", "p_angle")["candidate"] <= 90
+    assert _row(rows, "parcels", "p_area")["candidate"] >= 1
+    assert _row(rows, "buildings", "count")["candidate"] == 144
+
+
+def test_parcels_alone_with_land_use_and_study_area(qgis_processing, tmp_path):
+    out = qgis_processing.run(ALG, {
+        "PARCELS": bubenec_layer("plots"), "LANDUSE_FIELD": "TYPPPD_KOD",
+        "STUDY_AREA": bubenec_layer("tessellation"),
+        "OUTPUT": "memory:", "OUTPUT_HTML": str(tmp_path / "parcels.html")})
+    rows = _rows(out["OUTPUT"])
+    assert {r["kind"] for r in rows} == {"layout", "parcels"}
+    assert all(r["example"] is None for r in rows)
+    # the cadastre code is no residential / park label: all parcel land is 'other'
+    shares = {m: _row(rows, "parcels", m)["candidate"] for m in ("l_s", "l_r", "l_p", "l_o")}
+    assert shares["l_r"] == 0 and shares["l_p"] == 0 and shares["l_o"] > 0
+    assert sum(shares.values()) == pytest.approx(100.0)
+    # densities count the parcels inside the study area (the building plots' tessellation)
+    area = _row(rows, "layout", "area_km2")["candidate"]
+    assert 0.05 < area < 1.0
+    inside = _row(rows, "parcels", "p_n_per_km2")["candidate"] * area
+    assert inside == pytest.approx(round(inside)) and 100 < inside < 407
+
+
+def test_no_input_is_rejected(qgis_processing, tmp_path):
+    from qgis.core import QgsProcessingException
+
+    with pytest.raises(QgsProcessingException, match="No layer to measure"):
+        qgis_processing.run(ALG, {"EXAMPLE_ROADS": bubenec_layer("streets"),
+                                  "OUTPUT": "memory:", "OUTPUT_HTML": str(tmp_path / "x.html")})
+
+
+def test_wrong_geometry_and_empty_layers_are_rejected(qgis_processing, tmp_path):
+    from qgis.core import QgsProcessingException, QgsVectorLayer
+
+    with pytest.raises(QgsProcessingException, match="points; lines are needed"):
+        qgis_processing.run(ALG, {"ROADS": helsinki_layer("points"), "OUTPUT": "memory:",
+                                  "OUTPUT_HTML": str(tmp_path / "x.html")})
+    with pytest.raises(QgsProcessingException, match="lines; polygons are needed"):
+        qgis_processing.run(ALG, {"BUILDINGS": bubenec_layer("streets"), "OUTPUT": "memory:",
+                                  "OUTPUT_HTML": str(tmp_path / "x.html")})
+    empty = QgsVectorLayer("LineString?crs=EPSG:3857", "no roads", "memory")
+    with pytest.raises(QgsProcessingException, match="'no roads' is empty"):
+        qgis_processing.run(ALG, {"ROADS": empty, "OUTPUT": "memory:",
+                                  "OUTPUT_HTML": str(tmp_path / "x.html")})
+
+
+def test_cancel(qgis_processing, tmp_path):
+    from qgis.core import QgsProcessingException, QgsProcessingFeedback
+
+    feedback = QgsProcessingFeedback()
+    feedback.cancel()
+    with pytest.raises(QgsProcessingException, match="Canceled"):
+        qgis_processing.run(ALG, {"ROADS": bubenec_layer("streets"), "OUTPUT": "memory:",
+                                  "OUTPUT_HTML": str(tmp_path / "x.html")}, feedback=feedback)
+    assert not (tmp_path / "x.html").exists()
+
+
+def test_qgis_process_exit_code(tmp_path):
+    html = tmp_path / "report.html"
+    table = tmp_path / "metrics.gpkg"
+    code, out, err = run_qgis_process("layoutmetrics", {
+        "ROADS": bubenec_layer("streets"), "PARCELS": bubenec_layer("plots"),
+        "BUILDINGS": bubenec_layer("buildings"), "EXAMPLE_ROADS": helsinki_layer("lines"),
+        "OUTPUT": table, "OUTPUT_HTML": html})
+    assert code == 0, err
+    assert html.exists() and "<img" in html.read_text(encoding="utf-8")
+    assert out is not None and out["results"]["OUTPUT_HTML"] == str(html)
+    import sqlite3
+
+    with sqlite3.connect(table) as db:
+        n, = db.execute("SELECT count(*) FROM metrics").fetchone()
+    assert n > 30

@@ -1,0 +1,302 @@
+"""Engine tests of plugin.metrics and plugin.report (no QGIS)."""
+import math
+
+import numpy as np
+import pytest
+import shapely
+
+from urban_synthesis.plugin import metrics as M
+from urban_synthesis.plugin import report as R
+from urban_synthesis.plugin.progress import Canceled, InputError, Progress
+
+
+def grid(n=4, spacing=100.0, overhang=0.0):
+    """n horizontal and n vertical streets: (n-1)^2 square blocks."""
+    end = (n - 1) * spacing
+    h = [shapely.LineString([(-overhang, y), (end + overhang, y)]) for y in np.arange(n) * spacing]
+    v = [shapely.LineString([(x, -overhang), (x, end + overhang)]) for x in np.arange(n) * spacing]
+    return np.array(h + v, dtype=object)
+
+
+def rhombus(side=10.0, angle=60.0):
+    a = math.radians(angle)
+    dx, dy = side * math.cos(a), side * math.sin(a)
+    return shapely.Polygon([(0, 0), (side, 0), (side + dx, dy), (dx, dy)])
+
+
+# --------------------------------------------------------------------------- roads
+
+def test_grid_road_metrics():
+    r = M.road_metrics(grid(4), area=300.0 * 300.0)
+    deg = r.distribution("roads", "node_degree")
+    # corners have degree 2 and are merged away; 8 T junctions on the sides, 4 crosses inside
+    assert sorted(np.unique(deg, return_counts=True)[1]) == [4, 8]
+    assert set(deg) == {3, 4}
+    angles = r.distribution("roads", "intersection_angle")
+    # crosses: 4 x 90; T junctions: 90, 90, 180
+    assert np.allclose(np.sort(angles), np.r_[np.full(32, 90.0), np.full(8, 180.0)])
+    assert r.scalar("roads", "dead_ends_per_km2") == 0
+    assert r.scalar("roads", "intersections_per_km2") == pytest.approx(12 / 0.09)
+    # 8 streets of 300 m on 0.09 km²
+    assert r.scalar("roads", "street_length_km_per_km2") == pytest.approx(2.4 / 0.09)
+    # bearings of both directions fall into 4 of 36 bins: ln 4, order 1
+    assert r.scalar("roads", "orientation_entropy") == pytest.approx(math.log(4))
+    assert r.scalar("roads", "orientation_order") == pytest.approx(1.0)
+    assert set(np.round(r.distribution("roads", "street_bearing"))) == {0.0, 90.0}
+    seg = r.distribution("roads", "segment_length")
+    assert seg.sum() == pytest.approx(2400.0)
+
+
+def test_dead_ends_and_default_area():
+    r = M.road_metrics(grid(2, 100.0, overhang=50.0))
+    # a '#' of two crossing pairs: 4 crosses, 8 dead ends; area = hull of the lines
+    deg = r.distribution("roads", "node_degree")
+    assert (deg == 1).sum() == 8 and (deg == 4).sum() == 4
+    hull_km2 = shapely.convex_hull(shapely.union_all(grid(2, 100.0, 50.0))).area / 1e6
+    assert r.scalar("roads", "dead_ends_per_km2") == pytest.approx(8 / hull_km2)
+
+
+def test_bridges_do_not_make_intersections():
+    lines = [shapely.LineString([(0, 50), (100, 50)]), shapely.LineString([(50, 0), (50, 100)])]
+    flat = M.compute_layout_metrics(roads=lines)
+    assert flat.scalar("roads", "intersections_per_km2") > 0
+    bridge = M.compute_layout_metrics(roads=lines, road_z_layer=[0, 1])
+    assert bridge.scalar("roads", "intersections_per_km2") == 0
+    assert (bridge.distribution("roads", "node_degree") == 1).all()
+
+
+def test_orientation_entropy_bounds():
+    assert M.orientation_entropy([0.0, 90.0, 180.0, 270.0]) == pytest.approx(math.log(4))
+    assert M.orientation_entropy([0.0]) == pytest.approx(math.log(2))
+    uniform = np.arange(0.0, 360.0, 10.0)
+    assert M.orientation_entropy(uniform) == pytest.approx(math.log(36))
+    # bins are centred on multiples of 10 degrees: 4.9 and -4.9 share the 0 bin
+    assert M.orientation_entropy([4.9, 355.1]) == pytest.approx(math.log(2))
+
+
+def test_intersection_angles_use_the_first_metres():
+    # a Y: two streets leave at +-30 degrees and bend away after 10 m
+    stem = shapely.LineString([(0, 0), (0, -100)])
+    left = shapely.LineString([(0, 0), (-5, 8.66), (-100, 8.66)])
+    right = shapely.LineString([(0, 0), (5, 8.66), (100, 8.66)])
+    r = M.road_metrics([stem, left, right], area=1e4, bearing_length=10.0)
+    assert np.allclose(np.sort(r.distribution("roads", "intersection_angle")), [60, 150, 150],
+                       atol=0.1)
+
+
+# --------------------------------------------------------------------------- blocks
+
+def test_block_metrics_of_grid_faces():
+    r = M.compute_layout_metrics(roads=grid(4))
+    area = r.distribution("blocks", "area")
+    assert len(area) == 9 and np.allclose(area, 1e4)
+    assert np.allclose(r.distribution("blocks", "compactness"), 1.0)
+    assert np.allclose(r.distribution("blocks", "aspect_ratio"), 1.0)
+    assert r.scalar("blocks", "b_max") == r.scalar("blocks", "b_min") == pytest.approx(400.0)
+    assert r.scalar("blocks", "blocks_per_km2") == pytest.approx(9 / 0.09)
+
+
+def test_block_aspect_ratio_is_short_over_long():
+    r = M.block_metrics([shapely.box(0, 0, 100, 25), rhombus(100.0, 60.0)], area=1e6)
+    assert r.distribution("blocks", "aspect_ratio")[0] == pytest.approx(0.25)
+    # rhombus: the best rectangle lies on a side: 150 x 86.6 for an area of 8660
+    assert r.distribution("blocks", "compactness")[1] == pytest.approx(1 / 1.5)
+    assert r.scalar("blocks", "blocks_per_km2") == 2
+
+
+# --------------------------------------------------------------------------- parcels
+
+def test_rectangle_parcel():
+    r = M.parcel_metrics([shapely.box(0, 0, 30, 18)])
+    assert r.scalar("parcels", "p_angle") == 0.0
+    assert r.scalar("parcels", "p_area") == pytest.approx(1.0)
+    assert r.scalar("parcels", "undesirable_count") == 0
+
+
+def test_rhombus_parcel():
+    r = M.parcel_metrics([rhombus(10.0, 60.0)])
+    # corners of 60 and 120 degrees: all deviate by 30; the MBR holds 1.5 x the area
+    assert r.scalar("parcels", "p_angle") == pytest.approx(30.0)
+    assert r.scalar("parcels", "p_area") == pytest.approx(1.5)
+    assert r.scalar("parcels", "undesirable_count") == 1
+    assert r.scalar("parcels", "undesirable_share") == pytest.approx(100.0)
+
+
+def test_straight_vertices_and_reflex_corners_are_handled():
+    # a rectangle digitised with extra vertices on its sides (a 175-degree kink and a
+    # collinear point): those are not corners
+    p = shapely.Polygon([(0, 0), (15, 0), (30, 0), (30, 9), (30.8, 18), (0, 18)])
+    angles, owner = M.corner_angles([p])
+    assert len(angles) == 4 and (owner == 0).all()
+    # an L-shape: its reflex corner (270 degrees) counts as 90
+    ell = shapely.Polygon([(0, 0), (2, 0), (2, 1), (1, 1), (1, 2), (0, 2)])
+    angles, _ = M.corner_angles([ell])
+    assert np.allclose(angles, 90.0) and len(angles) == 6
+    r = M.parcel_metrics([ell])
+    assert r.scalar("parcels", "p_angle") == 0.0
+    assert r.scalar("parcels", "p_area") == pytest.approx(4 / 3)
+
+
+def test_land_use_shares():
+    parcels = [shapely.box(0, 0, 40, 100), shapely.box(50, 0, 90, 100),
+               shapely.box(100, 0, 110, 100)]
+    r = M.parcel_metrics(parcels, area=shapely.box(0, 0, 110, 100),
+                         landuse=["Residential", "park", "shop"])
+    assert r.scalar("parcels", "l_r") == pytest.approx(4000 / 110)
+    assert r.scalar("parcels", "l_p") == pytest.approx(4000 / 110)
+    assert r.scalar("parcels", "l_o") == pytest.approx(1000 / 110)
+    assert r.scalar("parcels", "l_s") == pytest.approx(2000 / 110)  # the land between parcels
+    with pytest.raises(InputError, match="land-use values"):
+        M.parcel_metrics(parcels, landuse=["r"])
+
+
+def test_bubenec_plots_invariants():
+    import pyogrio
+
+    from conftest import BUBENEC
+
+    plots = pyogrio.read_dataframe(BUBENEC, layer="plots").to_crs(32633)
+    geoms = np.asarray(plots.geometry.array, dtype=object)
+    r = M.parcel_metrics(geoms)
+    n = len(geoms)
+    assert r.scalar("parcels", "count") == n == 407
+    p_area = r.distribution("parcels", "p_area")
+    p_angle = r.distribution("parcels", "p_angle")
+    assert len(p_area) == n and (p_area >= 1 - 1e-9).all()
+    assert len(p_angle) == n and (p_angle >= 0).all() and (p_angle <= 90).all()
+    assert 0 <= r.scalar("parcels", "p_angle") <= 90
+    bad = (p_angle > 15) | (p_area > 1.2)
+    assert r.scalar("parcels", "undesirable_count") == bad.sum()
+    assert 0 < bad.sum() < n
+    # cadastre parcels are mostly near-rectangular: the median is close to Yang's maps
+    assert 1.0 <= np.median(p_area) < 1.3 and np.median(p_angle) < 15
+    assert r.scalar("parcels", "p_n_per_km2") > 100
+
+
+# --------------------------------------------------------------------------- footprints
+
+def test_footprint_overlaps_coverage_and_outside():
+    a = shapely.box(10, 10, 30, 30)
+    b = shapely.box(20, 20, 40, 40)          # overlaps a by 10 x 10
+    c = shapely.box(60, 10, 70, 20)          # alone
+    d = shapely.box(95, 40, 110, 50)         # half outside the block, on the road
+    blocks = [shapely.box(0, 0, 100, 100)]
+    roads = [shapely.LineString([(103, -50), (103, 150)])]
+    r = M.footprint_metrics([a, b, c, d], blocks=blocks, roads=roads, road_half_width=3.0,
+                            area=1e4)
+    assert r.scalar("buildings", "overlap_area") == pytest.approx(100.0)
+    assert r.scalar("buildings", "overlapping_pairs") == 1
+    assert r.scalar("buildings", "outside_blocks") == 1
+    # footprint area inside the block: 400 + 400 + 100 + 50 = 950 of 10 000
+    assert r.scalar("buildings", "coverage") == pytest.approx(0.095)
+    # the road surface spans x = 100..106: d covers 6 x 10 of it
+    assert r.scalar("buildings", "road_overlap_area") == pytest.approx(60.0)
+    assert r.scalar("buildings", "road_overlap_count") == 1
+    setback = r.distribution("buildings", "setback")
+    assert setback[2] == pytest.approx(103 - 70 - 3) and setback[3] < 0
+    assert r.scalar("buildings", "per_km2") == pytest.approx(400.0)
+
+
+def test_touching_footprints_do_not_overlap():
+    r = M.footprint_metrics([shapely.box(0, 0, 10, 10), shapely.box(10, 0, 20, 10)])
+    assert r.scalar("buildings", "overlap_area") == 0
+    assert r.scalar("buildings", "overlapping_pairs") == 0
+
+
+# --------------------------------------------------------------------------- comparison
+
+def test_identical_and_shifted_distributions():
+    rng = np.random.default_rng(1)
+    x = rng.normal(100.0, 10.0, 500)
+    same = M.two_sample(x, x)
+    assert same["wasserstein"] == 0 and same["ks_stat"] == 0 and same["ks_pvalue"] == 1
+    shifted = M.two_sample(x + 20.0, x)
+    assert shifted["wasserstein"] == pytest.approx(20.0)
+    assert shifted["wasserstein_norm"] == pytest.approx(20.0 / np.std(x))
+    assert shifted["ks_stat"] > 0.5 and shifted["ks_pvalue"] < 1e-6
+    assert np.isnan(M.two_sample([], x)["wasserstein"])
+
+
+def test_compare_rows():
+    cand = M.compute_layout_metrics(roads=grid(4, 100.0))
+    ex = M.compute_layout_metrics(roads=grid(5, 80.0))
+    table = M.compare(cand, ex)
+    assert list(table.columns) == [c for c, _ in M.COMPARISON_COLUMNS]
+    seg = table[(table.kind == "roads") & (table.metric == "segment_length")].iloc[0]
+    assert seg.statistic == "mean" and seg.wasserstein > 0 and seg.n_example > seg.n_candidate
+    ent = table[(table.kind == "roads") & (table.metric == "orientation_entropy")].iloc[0]
+    assert ent.statistic == "value" and ent.rel_diff == pytest.approx(0.0)
+    blocks = table[(table.kind == "blocks") & (table.metric == "area")].iloc[0]
+    assert blocks.rel_diff == pytest.approx(1e4 / 6400 - 1)
+    self_table = M.compare(cand, cand)
+    dist = self_table[self_table.statistic != "value"]
+    assert (dist.wasserstein == 0).all() and (dist.ks_stat == 0).all()
+    # kinds come in a fixed order, distributions before scalars
+    assert list(dict.fromkeys(table.kind)) == ["layout", "roads", "blocks"]
+    alone = M.compare(cand)
+    assert alone.example.isna().all() and (alone.n_example == 0).all()
+    # bearings are axial: 175 and 5 degrees average to 0, not 90
+    bearing = table[table.metric == "street_bearing"].iloc[0]
+    assert bearing.statistic == "axial_mean"
+    assert M._axial_mean(np.array([175.0, 5.0])) == pytest.approx(0.0, abs=1e-9) or \
+        M._axial_mean(np.array([175.0, 5.0])) == pytest.approx(180.0)
+
+
+def test_study_area_counts_only_what_is_inside():
+    # the study area covers the left part of a 3 x 3 block grid (x <= 140)
+    area = shapely.box(0, 0, 140, 300)
+    r = M.compute_layout_metrics(roads=grid(4), area=area)
+    assert r.scalar("layout", "area_km2") == pytest.approx(0.042)
+    # street length inside: 4 horizontal x 140 m + 2 vertical x 300 m
+    assert r.scalar("roads", "street_length_km_per_km2") == pytest.approx(1.16 / 0.042)
+    # nodes at x = 0 (2 T's) and x = 100 (2 crosses + 2 T's)
+    assert r.scalar("roads", "intersections_per_km2") == pytest.approx(6 / 0.042)
+    # blocks whose point on surface lies inside: the 3 blocks of the left column
+    assert r.scalar("blocks", "blocks_per_km2") == pytest.approx(3 / 0.042)
+    assert len(r.distribution("blocks", "area")) == 9  # distributions keep every block
+
+
+def test_bad_input():
+    with pytest.raises(InputError, match="no layer"):
+        M.compute_layout_metrics()
+    with pytest.raises(InputError, match="must contain lines"):
+        M.compute_layout_metrics(roads=[shapely.Point(0, 0)])
+    with pytest.raises(InputError, match="must contain polygons"):
+        M.compute_layout_metrics(parcels=grid(2))
+    with pytest.raises(InputError, match="no geometries"):
+        M.compute_layout_metrics(buildings=[])
+    with pytest.raises(InputError, match="half-width"):
+        M.compute_layout_metrics(roads=grid(2), road_half_width=-1)
+    # stray geometries of another dimension are dropped with a note
+    r = M.compute_layout_metrics(buildings=[shapely.box(0, 0, 1, 1),
+                                            shapely.LineString([(0, 0), (1, 1)])])
+    assert r.scalar("buildings", "count") == 1 and any("ignored" in n for n in r.notes)
+
+
+def test_cancel_stops_the_work():
+    with pytest.raises(Canceled):
+        M.compute_layout_metrics(roads=grid(4), progress=Progress(is_canceled=lambda: True))
+
+
+# --------------------------------------------------------------------------- report
+
+def test_report_is_self_contained(tmp_path):
+    cand = M.compute_layout_metrics(roads=grid(4, 100.0),
+                                    parcels=[shapely.box(0, 0, 30, 18), rhombus()],
+                                    buildings=[shapely.box(10, 10, 30, 30)])
+    ex = M.compute_layout_metrics(roads=grid(5, 80.0), parcels=[shapely.box(0, 0, 30, 20)])
+    steps = []
+    path = R.write_report(tmp_path / "r" / "report.html", cand, ex, title="Grid vs grid",
+                          meta={"Layout": "grid <4>"}, progress=Progress(report=steps.append))
+    text = open(path, encoding="utf-8").read()
+    assert text.startswith("<!DOCTYPE html>") and text.rstrip().endswith("</html>")
+    assert text.count("<img") >= 8 and "data:image/png;base64," in text
+    for name in ("segment_length", "intersection_angle", "p_angle", "p_area", "orientation_entropy",
+                 "Wasserstein", "grid &lt;4&gt;"):
+        assert name in text
+    assert "src='http" not in text and "<script" not in text
+    assert steps and steps[-1] == pytest.approx(100.0)
+    # the buildings exist only in the candidate: still plotted, no distance
+    alone = R.render_report(cand)
+    assert "Colours" not in alone and "Wasserstein</th>" not in alone
+    assert alone.count("<img") >= 8
