@@ -123,8 +123,10 @@ class LayoutMetrics(AlgorithmBase):
             "relative difference, Wasserstein distance (raw and divided by the example's "
             "standard deviation), Kolmogorov-Smirnov statistic and p-value, sample sizes.")
         self.add(QgsProcessingParameterFileDestination(
-            self.OUTPUT_HTML, "Layout metrics report", "HTML files (*.html)"),
-            "Self-contained HTML report with the tables and the histograms.")
+            self.OUTPUT_HTML, "Layout metrics report", "HTML files (*.html)", optional=True,
+            createByDefault=True),
+            "Self-contained HTML report with the tables and the histograms (skip it to get "
+            "only the table, e.g. in a model).")
 
     # ------------------------------------------------------------------ helpers
 
