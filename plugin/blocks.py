@@ -4,10 +4,12 @@ Hartmann's thesis defines a city block as a minimal cycle of the planar street g
 (ch. 4.1.2: "a fragment whose interior has only dead-end streets is stored as a city
 block"; ch. 5.1: "query blocks are the minimal cycles of the input street graph", a block
 being D = (B, P), its boundary polygon and its footprints). The minimal cycles of a planar
-embedded graph are its bounded faces, so blocks are computed here by polygonizing the
-noded street edges (``shapely.polygonize``): edges that bound no face (dead-end streets and
-the bridges of the graph between two loops) lie inside a block and do not split it, as in
-the thesis.
+embedded graph are its bounded faces, so blocks are the faces of the noded street edges,
+traced on their half-edge structure (:func:`planar_faces`, the same faces as
+``shapely.polygonize`` in linear time): edges that bound no face (dead-end streets and the
+bridges of the graph between two loops) lie inside a block and do not split it, as in the
+thesis. Every drivable edge bounds blocks whatever its vertical layer (the thesis's street
+graph is planar; bridges and tunnels of city streets are short).
 
 Real OSM makes artefact faces (DESIGN.md, "Real example data"): dual carriageways, slip
 roads and traffic islands close small or thin faces that are road surface, not blocks.
@@ -25,9 +27,10 @@ They are kept, not deleted, so the caller decides what to do with them.
 Shape measures follow the thesis (ch. 4.2 evaluation): compactness = block area / area of
 the minimum bounding rectangle, aspect ratio = shorter / longer side of that rectangle.
 
-Everything is vectorised with shapely 2 / numpy; the minimum-area rectangles use a numpy
-rotating-calipers pass over the convex hulls (GEOS 3.11's oriented envelope costs about a
-millisecond per polygon).
+Everything is vectorised with shapely 2 / numpy, with no Python loop over edges, faces or
+features; the minimum-area rectangles are rotating calipers done by binary search on the
+convex hulls' edge angles (GEOS 3.11's oriented envelope costs about a millisecond per
+polygon).
 """
 from __future__ import annotations
 
@@ -54,6 +57,9 @@ MIN_BLOCK_AREA = 400.0
 MIN_BLOCK_WIDTH = 8.0
 #: A building or parcel belongs to the block holding at least this share of its area.
 MIN_SHARE = 0.5
+
+#: Walks enclosing less than this (m²) are the zero-area cycles of duplicate edges.
+_MIN_FACE_AREA = 1e-6
 
 #: Per-block attributes of :attr:`BlockExtraction.table` with their types.
 BLOCK_FIELDS = [
@@ -89,6 +95,29 @@ class BlockExtraction:
     buildings: Optional[pd.DataFrame] = None
     parcels: Optional[pd.DataFrame] = None
     stats: dict = field(default_factory=dict)
+
+
+# --------------------------------------------------------------------------- array helpers
+
+def _group_starts(keys: np.ndarray) -> np.ndarray:
+    """True where a run of equal values in ``keys`` begins."""
+    out = np.ones(len(keys), dtype=bool)
+    np.not_equal(keys[1:], keys[:-1], out=out[1:])
+    return out
+
+
+def _group_ends(keys: np.ndarray) -> np.ndarray:
+    """True where a run of equal values in ``keys`` ends."""
+    out = np.ones(len(keys), dtype=bool)
+    np.not_equal(keys[1:], keys[:-1], out=out[:-1])
+    return out
+
+
+def _offsets(counts: np.ndarray) -> np.ndarray:
+    """Start of each group in a concatenation of groups of the given sizes."""
+    out = np.zeros(len(counts), dtype=np.int64)
+    np.cumsum(counts[:-1], out=out[1:])
+    return out
 
 
 # --------------------------------------------------------------------------- faces
@@ -164,13 +193,13 @@ class _Network:
         self.org = org.reshape(-1)
         self.node_xy = ends
         d = np.concatenate([self.coords[f + 1] - self.coords[f], self.coords[l - 1] - self.coords[l]])
-        self.twin = np.r_[np.arange(m, 2 * m), np.arange(m)]
+        self.twin = np.concatenate([np.arange(m, 2 * m), np.arange(m)])
         # rotation system: around each node, the half-edge clockwise-next of each one
         order = np.lexsort((np.arctan2(d[:, 1], d[:, 0]), self.org))
         so = self.org[order]
         h = np.arange(2 * m)
-        group_start = np.r_[True, so[1:] != so[:-1]] if m else np.zeros(0, bool)
-        group_end = np.r_[so[1:] != so[:-1], True] if m else np.zeros(0, bool)
+        group_start = _group_starts(so)
+        group_end = _group_ends(so)
         last_pos = np.minimum.accumulate(np.where(group_end, h, 2 * m)[::-1])[::-1]
         clockwise = np.empty(2 * m, dtype=np.int64)
         clockwise[order] = order[np.where(group_start, last_pos, h - 1)]
@@ -193,7 +222,7 @@ class _Network:
         # bounds no face: remove it from the rotation system and label the walks again
         same = label[:m] == label[m:]
         if same.any():
-            removed = np.r_[same, same]
+            removed = np.concatenate([same, same])
             nxt = self.nxt.copy()
             bad = ~removed & removed[nxt]
             while bad.any():  # skip removed half-edges around the node (few rounds)
@@ -224,7 +253,7 @@ def _cycles(nxt: np.ndarray):
     is_rep = rep == ar
     label = (np.cumsum(is_rep) - 1)[rep]
     size = np.bincount(label)
-    start = np.r_[0, np.cumsum(size)[:-1]]
+    start = _offsets(size)
     # distance of each element to the last one of its cycle (the one before the smallest)
     is_last = nxt == rep
     succ = np.where(is_last, ar, nxt)
@@ -260,13 +289,15 @@ def _walk_polygons(net: "_Network", alive, label, seq):
     n_ring = label.max() + 1
     ring_start = np.searchsorted(ring, np.arange(n_ring))
     k = np.arange(1, len(ring) + 1)
-    wrap = np.r_[ring[1:] != ring[:-1], True]
+    wrap = _group_ends(ring)
     k[wrap] = ring_start[ring[wrap]]
     x, y = xy[:, 0], xy[:, 1]
     area = 0.5 * np.bincount(ring, x * y[k] - x[k] * y, minlength=n_ring)
     perimeter = np.bincount(ring, np.hypot(x[k] - x, y[k] - y), minlength=n_ring)
-    is_shell = area > 0
-    is_hole = area < 0       # the outer boundary of each connected component
+    # counter-clockwise walks bound faces; the zero-area walks between duplicate edges do
+    # not; each clockwise walk is the outer boundary of a connected component
+    is_shell = area > _MIN_FACE_AREA
+    is_hole = area < -_MIN_FACE_AREA
 
     def rings_of(mask):
         sel = mask[ring]
@@ -277,22 +308,34 @@ def _walk_polygons(net: "_Network", alive, label, seq):
     face_area, face_perimeter = area[is_shell], perimeter[is_shell]
     holes = np.flatnonzero(is_hole)
     if len(holes) and len(faces):
-        # a component inside a face is a hole of the smallest face containing it
+        # a component inside a face is a hole of the smallest face containing it; a
+        # component enclosing more than the largest face (the whole network, usually)
+        # lies inside none, which saves the tree in the common case
+        holes = holes[-area[holes] < face_area.max()]
+    if len(holes) and len(faces):
         probe = shapely.points(xy[ring_start[holes]] + net.origin)
         h_i, f_i = shapely.STRtree(faces).query(probe, predicate="within")
         if len(h_i):
             best = np.lexsort((face_area[f_i], h_i))
-            best = best[np.r_[True, h_i[best][1:] != h_i[best][:-1]]]
+            best = best[_group_starts(h_i[best])]
             h_i, f_i = h_i[best], f_i[best]
-            hole_rings = rings_of(is_hole)
+            hole_mask = np.zeros(n_ring, dtype=bool)
+            hole_mask[holes] = True
+            hole_rings = rings_of(hole_mask)
             np.add.at(face_area, f_i, area[holes][h_i])
             np.add.at(face_perimeter, f_i, perimeter[holes][h_i])
             for face in np.unique(f_i):
                 faces[face] = shapely.polygons(shapely.get_exterior_ring(faces[face]),
                                                holes=hole_rings[h_i[f_i == face]])
-    # a face whose walk touches itself at a vertex (a loop hanging into it) is an
-    # invalid ring; make_valid turns it into the polygon with a hole that it is
-    for i in np.flatnonzero(~shapely.is_valid(faces)):
+    # in a planar graph a walk that visits no node twice is a simple ring; a face whose
+    # walk touches itself (a loop hanging into it at one node) is an invalid ring, which
+    # make_valid turns into the polygon with a hole that it is
+    node_key = walk_of[seq] * (net.org.max() + 1) + net.org[seq]
+    node_key.sort()
+    touching = np.zeros(n_ring, dtype=bool)
+    touching[node_key[1:][node_key[1:] == node_key[:-1]] // (net.org.max() + 1)] = True
+    suspect = np.flatnonzero(touching[is_shell])
+    for i in suspect[~shapely.is_valid(faces[suspect])]:
         faces[i] = _largest_polygon(shapely.make_valid(faces[i]))
         face_area[i], face_perimeter[i] = shapely.area(faces[i]), shapely.length(faces[i])
     return faces, face_area, face_perimeter
@@ -362,14 +405,15 @@ def _planar_lines(graph: RoadGraph) -> np.ndarray:
     :func:`roads.clean_network` nodes each vertical layer on its own (a bridge does not
     connect to the street below), so its edges are planar per layer. For the faces, every
     drivable edge is a block boundary whatever its layer (as in the thesis's planar street
-    graph and momepy's enclosures): only the few edges off the ground layer and the edges
+    graph and momepy's enclosures): only the few edges off the main layer and the edges
     they touch are noded again.
     """
     lines = np.asarray(graph.geometry, dtype=object)
-    z = np.asarray(graph.z_layer)
-    off = np.flatnonzero(z != 0)
-    if len(off) == 0 or len(off) == len(z):
+    layers, count = np.unique(np.asarray(graph.z_layer), return_inverse=False,
+                              return_counts=True)
+    if len(layers) <= 1:
         return lines
+    off = np.flatnonzero(np.asarray(graph.z_layer) != layers[np.argmax(count)])
     _, touched = shapely.STRtree(lines).query(lines[off], predicate="intersects")
     involved = np.zeros(len(lines), dtype=bool)
     involved[off] = True
@@ -388,10 +432,13 @@ def _largest_polygon(geom):
 # --------------------------------------------------------------------------- shape
 
 def minimum_rectangles(polygons: Sequence):
-    """Minimum-area bounding rectangles of polygons, vectorised (rotating calipers).
+    """Minimum-area bounding rectangles of polygons, vectorised rotating calipers.
 
     The minimum-area rectangle has a side on an edge of the convex hull (Freeman &
-    Shapira 1975), so every hull edge direction is tried for every polygon at once.
+    Shapira 1975). For every hull edge the three other sides touch the hull at its support
+    vertices in the edge's directions; on a convex polygon walked counter-clockwise, the
+    edge angles increase through one turn, so each support vertex is found by a binary
+    search over the hull's edge angles (all edges of all polygons at once).
 
     Parameters
     ----------
@@ -400,9 +447,16 @@ def minimum_rectangles(polygons: Sequence):
     Returns
     -------
     length, width : float arrays
-        Longer and shorter side of the rectangle (m).
+        Longer and shorter side of the rectangle (m); 0 for degenerate polygons.
     angle : float array
         Direction of the longer side in degrees, in [0, 180) counter-clockwise from east.
+
+    Examples
+    --------
+    >>> import shapely
+    >>> rect = shapely.affinity.rotate(shapely.box(0, 0, 40, 10), 30, origin=(0, 0))
+    >>> [round(float(v[0]), 6) for v in minimum_rectangles([rect])]
+    [40.0, 10.0, 30.0]
     """
     polygons = np.asarray(polygons, dtype=object)
     n = len(polygons)
@@ -411,34 +465,43 @@ def minimum_rectangles(polygons: Sequence):
         return length, width, angle
     hulls = shapely.convex_hull(polygons)
     ok = shapely.get_type_id(hulls) == 3  # degenerate hulls (points, lines) have no area
+    if not ok.any():
+        return length, width, angle
     rings = shapely.get_exterior_ring(hulls[ok])
+    # the search below needs counter-clockwise rings (GEOS returns clockwise hulls)
+    rings = np.where(shapely.is_ccw(rings), rings, shapely.reverse(rings))
     coords, idx = shapely.get_coordinates(rings, return_index=True)
-    # consecutive vertices of one ring make an edge (the ring repeats its first vertex)
-    same = idx[1:] == idx[:-1]
-    e0 = np.flatnonzero(same)
-    d = coords[e0 + 1] - coords[e0]
-    d /= np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-12)[:, None]
-    edge_poly = idx[e0]
-    # pair every edge with every vertex of its own hull: sum of squared hull sizes
-    counts = np.bincount(idx, minlength=ok.sum())
-    starts = np.r_[0, np.cumsum(counts)[:-1]]
-    n_vert = counts[edge_poly]
-    pair_edge = np.repeat(np.arange(len(e0)), n_vert)
-    offset = np.arange(len(pair_edge)) - np.repeat(np.cumsum(n_vert) - n_vert, n_vert)
-    pair_vert = starts[edge_poly][pair_edge] + offset
-    p = coords[pair_vert]
-    u = d[pair_edge]
-    s = p[:, 0] * u[:, 0] + p[:, 1] * u[:, 1]           # along the edge
-    t = -p[:, 0] * u[:, 1] + p[:, 1] * u[:, 0]          # across the edge
-    edge_starts = np.r_[0, np.cumsum(n_vert)[:-1]]
-    along = np.maximum.reduceat(s, edge_starts) - np.minimum.reduceat(s, edge_starts)
-    across = np.maximum.reduceat(t, edge_starts) - np.minimum.reduceat(t, edge_starts)
+    # vertex i starts edge i; the ring repeats its first vertex at its end
+    e0 = np.flatnonzero(idx[1:] == idx[:-1])
+    v = coords[e0]
+    hull = idx[e0]
+    d = coords[e0 + 1] - v
+    alpha = np.arctan2(d[:, 1], d[:, 0])
+    start = _group_starts(hull)
+    first_of = np.flatnonzero(start)            # first edge of each hull
+    n_edges = np.diff(np.append(first_of, len(hull)))
+    # edge angles relative to the first edge of their hull: increasing in [0, 2 pi)
+    rel = np.mod(alpha - alpha[first_of][hull], 2 * np.pi)
+    rel[start] = 0.0
+    key = hull * 8.0 + rel
+
+    def support(turn):
+        """Index of the vertex extreme in direction (edge angle + turn - pi/2)."""
+        target = hull * 8.0 + np.mod(rel + turn, 2 * np.pi)
+        i = np.searchsorted(key, target, side="left")
+        end = first_of[hull] + n_edges[hull]
+        return np.where(i >= end, first_of[hull], i)
+
+    u = d / np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-300)[:, None]
+    hi_along, lo_along, far = support(np.pi / 2), support(1.5 * np.pi), support(np.pi)
+    along = np.einsum("ij,ij->i", v[hi_along] - v[lo_along], u)
+    w = v[far] - v
+    across = u[:, 0] * w[:, 1] - u[:, 1] * w[:, 0]
     area = along * across
-    # the best edge per polygon: sort by (polygon, area) and take the first of each
-    order = np.lexsort((area, edge_poly))
-    first = order[np.r_[True, edge_poly[order][1:] != edge_poly[order][:-1]]]
-    a, b = along[first], across[first]
-    dir_long = np.where((a >= b)[:, None], d[first], np.column_stack([-d[first, 1], d[first, 0]]))
+    order = np.lexsort((area, hull))
+    best = order[_group_starts(hull[order])]
+    a, b = along[best], across[best]
+    dir_long = np.where((a >= b)[:, None], u[best], np.column_stack([-u[best, 1], u[best, 0]]))
     length[ok] = np.maximum(a, b)
     width[ok] = np.minimum(a, b)
     angle[ok] = np.degrees(np.arctan2(dir_long[:, 1], dir_long[:, 0])) % 180.0
@@ -537,7 +600,7 @@ def assign_to_blocks(blocks: Sequence, geometries: Sequence, min_share: float = 
             with np.errstate(divide="ignore", invalid="ignore"):
                 s = np.where(area > 0, shapely.area(shapely.intersection(geoms[g], blocks[b])) / area, 0.0)
             order = np.lexsort((-s, g))
-            best = order[np.r_[True, g[order][1:] != g[order][:-1]]]
+            best = order[_group_starts(g[order])]
             ok = s[best] >= min_share
             index[g[best[ok]]] = b[best[ok]]
             share[g[best[ok]]] = np.minimum(s[best[ok]], 1.0)

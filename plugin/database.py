@@ -164,6 +164,10 @@ def _write_tables(path: str, descriptors: Descriptors, ids: np.ndarray, id_name:
                   metadata: Dict[str, str], relief=None) -> None:
     """Add the non-spatial tables (descriptors, metadata, relief) to a GeoPackage."""
     con = sqlite3.connect(path)
+    # the file is a temporary one, renamed into place when complete: no need to pay for
+    # journal and fsync (they took longer than writing the descriptors)
+    con.execute("PRAGMA synchronous = OFF")
+    con.execute("PRAGMA journal_mode = MEMORY")
     try:
         with con:
             con.execute(f"CREATE TABLE descriptors (fid INTEGER PRIMARY KEY AUTOINCREMENT, "

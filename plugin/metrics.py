@@ -642,9 +642,9 @@ def footprint_metrics(footprints, blocks=None, roads=None, road_half_width: floa
     -------
     MetricsResult
         kind ``buildings``; distributions ``area`` (m²), ``coverage`` (per block, footprint
-        area inside the block / block area), ``setback`` (distance to the nearest road
-        centreline minus ``road_half_width``, m; negative when the footprint reaches into
-        the road surface); scalars ``count``, ``per_km2``, ``overlap_area`` (m², summed over
+        area inside the block / block area; overlapping footprints count twice),
+        ``setback`` (distance to the nearest road centreline minus ``road_half_width``, m;
+        negative when the footprint reaches into the road surface); scalars ``count``, ``per_km2``, ``overlap_area`` (m², summed over
         pairs of footprints), ``overlapping_pairs``, ``coverage`` (total footprint area in
         blocks / total block area), ``outside_blocks`` (footprints not inside one block, up
         to 0.1 % of their area), ``road_overlap_area`` (m²), ``road_overlap_count``.
@@ -690,7 +690,7 @@ def footprint_metrics(footprints, blocks=None, roads=None, road_half_width: floa
         fi, ri = shapely.STRtree(surface).query(fp, predicate="intersects")
         hit = _pair_intersection_area(fp, surface, fi, ri) > OVERLAP_EPS
         touched = np.unique(fi[hit])
-        # union per footprint so that overlapping road buffers are not counted twice
+        # unions on both sides: buffers overlap at every junction, footprints may overlap
         road_area = 0.0
         if len(touched):
             union = shapely.union_all(surface[np.unique(ri[hit])])

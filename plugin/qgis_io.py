@@ -101,7 +101,8 @@ def layer_name(alg, parameters, name, context) -> str:
 def read_source(alg, parameters, name: str, context, feedback,
                 kind: Optional[str] = None, required_fields: Sequence[str] = (),
                 target_crs: Optional[QgsCoordinateReferenceSystem] = None,
-                repair: bool = True, optional: bool = False) -> Optional[Frame]:
+                repair: bool = True, optional: bool = False,
+                progress_range: tuple = (0.0, 5.0)) -> Optional[Frame]:
     """Read a feature source parameter into a :class:`Frame` in a metric working CRS.
 
     Raises a QgsProcessingException naming the layer for: a missing layer, the wrong geometry
@@ -142,7 +143,8 @@ def read_source(alg, parameters, name: str, context, feedback,
     fids: List[int] = []
     n_null = 0
     total = source.featureCount()
-    step = 100.0 / total if total and total > 0 else 0
+    p0, p1 = progress_range
+    step = (p1 - p0) / total if total and total > 0 else 0
     # invalid geometries are repaired below (and counted), not rejected by the context's check
     features = source.getFeatures(request, QgsProcessingFeatureSource.FlagSkipGeometryValidityChecks)
     for i, feature in enumerate(features):
@@ -156,12 +158,32 @@ def read_source(alg, parameters, name: str, context, feedback,
         rows.append(feature.attributes())
         fids.append(feature.id())
         if step and feedback is not None and i % 1000 == 0:
-            feedback.setProgress(i * step)
+            feedback.setProgress(p0 + i * step)
     if not wkbs:
         raise QgsProcessingException(
             f"Layer {label} is empty: it has no features with a geometry"
             + (f" ({n_null} null geometries skipped)." if n_null else "."))
-    geoms = shapely.from_wkb(np.array(wkbs, dtype=object))
+    geoms = shapely.from_wkb(np.array(wkbs, dtype=object), on_invalid="ignore")
+    unreadable = np.flatnonzero(shapely.is_missing(geoms))
+    if len(unreadable):
+        # GEOS refuses some OSM geometries outright (rings of < 4 points): let QGIS repair them
+        for i in unreadable:
+            g = QgsGeometry()
+            g.fromWkb(wkbs[i])
+            fixed = g.makeValid()
+            if fixed is not None and not fixed.isEmpty():
+                geoms[i] = shapely.from_wkb(bytes(fixed.asWkb()), on_invalid="ignore")
+        bad = shapely.is_missing(geoms)
+        if feedback is not None:
+            feedback.pushInfo(f"{label}: {len(unreadable)} unreadable geometries repaired by QGIS"
+                              + (f", {int(bad.sum())} skipped." if bad.any() else "."))
+        if bad.any():
+            keep = ~bad
+            geoms = geoms[keep]
+            rows = [r for r, k in zip(rows, keep) if k]
+            fids = [f for f, k in zip(fids, keep) if k]
+            if len(geoms) == 0:
+                raise QgsProcessingException(f"Layer {label} has no readable geometry.")
     if target_crs is None:
         b = shapely.total_bounds(geoms)
         target_crs = working_crs(src_crs, QgsRectangle(*b), context)

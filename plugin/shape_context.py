@@ -9,9 +9,11 @@ The retrieval machinery of Hartmann's thesis, used for road fragments (ch. 4.1.2
   and Puzicha 2000), **rotation invariant** because angles are measured from the local
   tangent, and **scale aware** because the radial bin edges are absolute distances in
   metres (the thesis does *not* normalise by the mean distance, so a block twice as large
-  is a worse match). The edges are ``scale * logspace(1/8 .. 2)`` where ``scale`` is one
-  number per database (the median mean inter-sample distance of its shapes), stored with
-  the database so that queries use the same bins;
+  is a worse match). The text's tangent alignment is used, not the centre-of-gravity
+  alignment of the caption of the thesis's Fig. 4.5. The edges are
+  ``scale * logspace(1/8 .. 2)`` where ``scale`` is one number per database (the median
+  mean inter-sample distance of its shapes), stored with the database so that queries use
+  the same bins;
 - the per-point shape cost C^S is Belongie's chi-square distance, the elevation cost C^E
   compares the slopes from each sample to its bin centres (thesis eq. 4.3), combined as
   ``gamma * C^S + (1 - gamma) * C^E`` (eq. 4.2; the thesis gives no gamma);
@@ -330,7 +332,8 @@ def normalised_histograms(counts: np.ndarray) -> np.ndarray:
     return (counts / np.maximum(total, 1)).astype(np.float32)
 
 
-def bin_centres(samples: np.ndarray, edges: np.ndarray, n_angular: int = N_ANGULAR) -> np.ndarray:
+def bin_centres(samples: np.ndarray, edges: np.ndarray,
+                n_angular: int = N_ANGULAR) -> Tuple[np.ndarray, np.ndarray]:
     """World coordinates of the log-polar bin centres around every sample.
 
     The centre of radial bin r is at the geometric mean of its edges, the centre of angular
@@ -640,6 +643,8 @@ def cyclic_dtw_costs(cost: np.ndarray, n_offsets: Optional[int] = 3,
     cost = np.asarray(cost, dtype=np.float64)
     n, m = cost.shape[-2:]
     lead = cost.shape[:-2]
+    if n_offsets is not None and n_offsets < 1:
+        raise InputError("at least one DTW start offset must be tried")
     if n_offsets is None or 3 * n_offsets >= m:
         offsets = np.broadcast_to(np.arange(m), lead + (m,))
     else:
@@ -737,9 +742,10 @@ def cyclic_dtw(cost: np.ndarray, n_offsets: Optional[int] = None,
 
     Examples
     --------
-    >>> c = np.ones((4, 4)) - np.eye(4)[:, [1, 2, 3, 0]]
-    >>> cyclic_dtw(c).offset
-    1
+    >>> c = 1.0 - np.roll(np.eye(4), 1, axis=1)   # zero cost where j = i + 1 (mod 4)
+    >>> r = cyclic_dtw(c)
+    >>> r.offset, float(r.cost), r.sigma.tolist()
+    (1, 0.0, [1, 2, 3, 0])
     """
     cost = np.asarray(cost, dtype=np.float64)
     if cost.ndim != 2 or min(cost.shape) == 0:

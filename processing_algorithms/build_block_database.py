@@ -80,7 +80,9 @@ class BuildBlockDatabase(AlgorithmBase):
 
         block_ids = None
         if id_field and id_field in block_frame.attributes:
-            raw = pd.to_numeric(block_frame.attributes[id_field], errors="coerce").to_numpy()
+            # the blocks' own ids, when they are usable, so that buildings can refer to them
+            raw = pd.to_numeric(block_frame.attributes[id_field], errors="coerce").to_numpy(
+                dtype=np.float64, na_value=np.nan)
             if np.isfinite(raw).all() and len(np.unique(raw)) == len(raw) and \
                     (raw == np.round(raw)).all():
                 block_ids = raw.astype(np.int64)
@@ -88,14 +90,15 @@ class BuildBlockDatabase(AlgorithmBase):
                 feedback.pushInfo(f"{label}: field '{id_field}' is not a unique whole number per "
                                   "block; blocks are numbered 1..n and buildings assigned by "
                                   "location.")
+        own_ids = block_ids is not None
         if block_ids is None:
             block_ids = np.arange(1, len(block_frame) + 1)
 
         b_label = building_frame.name
-        by_field = block_ids is not None and id_field and id_field in building_frame.attributes \
-            and id_field in block_frame.attributes
+        by_field = own_ids and id_field in building_frame.attributes
         if by_field:
-            bid = pd.to_numeric(building_frame.attributes[id_field], errors="coerce").to_numpy()
+            bid = pd.to_numeric(building_frame.attributes[id_field], errors="coerce").to_numpy(
+                dtype=np.float64, na_value=np.nan)
             known = np.isin(bid, block_ids) & np.isfinite(bid)
             if not known.any():
                 feedback.pushInfo(f"{b_label}: no building names one of the blocks in "

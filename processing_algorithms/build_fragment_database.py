@@ -1,5 +1,6 @@
-"""urbansynth:buildfragmentdatabase - hierarchical road fragments with shape and terrain descriptors."""
+"""urbansynth:buildfragmentdatabase - road fragments per level with shape and terrain descriptors."""
 import numpy as np
+import pandas as pd
 import shapely
 from qgis.core import (
     QgsCoordinateReferenceSystem,
@@ -105,8 +106,9 @@ class BuildFragmentDatabase(AlgorithmBase):
             "'Extract road hierarchy'.")
         self.add(QgsProcessingParameterField(
             self.LEVEL_FIELD, "Level field", defaultValue="level",
-            parentLayerParameterName=self.ROADS, type=QgsProcessingParameterField.Numeric),
-            "Integer street level (0 = arterial, larger = more local).")
+            parentLayerParameterName=self.ROADS, type=QgsProcessingParameterField.Numeric,
+            optional=True),
+            "Integer street level (0 = arterial, larger = more local); 'level' when left empty.")
         self.add(QgsProcessingParameterRasterLayer(
             self.DEM, "Elevation model (optional)", optional=True),
             "A DEM in any CRS: adds the relief change, mean slope, slope descriptors and a "
@@ -138,19 +140,14 @@ class BuildFragmentDatabase(AlgorithmBase):
         label = frame.name
         min_area = qgis_io.check_number(self.parameterAsDouble(parameters, self.MIN_AREA, context),
                                         self.MIN_AREA, 0.0, 1e6)
-        min_width = qgis_io.check_number(self.parameterAsDouble(parameters, self.MIN_WIDTH, context),
-                                         self.MIN_WIDTH, 0.0, 1000.0)
+        min_width = qgis_io.check_number(
+            self.parameterAsDouble(parameters, self.MIN_WIDTH, context), self.MIN_WIDTH, 0.0, 1000.0)
         cell = qgis_io.check_number(self.parameterAsDouble(parameters, self.DEM_CELL_SIZE, context),
                                     self.DEM_CELL_SIZE, 0.5, 100.0)
         output = self.parameterAsFileOutput(parameters, self.OUTPUT, context)
 
-        raw = frame.attributes[level_field].to_numpy(dtype=object)
-        levels = np.full(len(raw), np.nan)
-        for i, v in enumerate(raw):  # QVariant-free values; strings from text fields too
-            try:
-                levels[i] = float(v) if v is not None else np.nan
-            except (TypeError, ValueError):
-                levels[i] = np.nan
+        levels = pd.to_numeric(frame.attributes[level_field], errors="coerce").to_numpy(
+            dtype=np.float64, na_value=np.nan)
         bad = ~np.isfinite(levels) | (levels < 0) | (levels != np.round(levels))
         if bad.all():
             raise QgsProcessingException(

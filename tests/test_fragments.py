@@ -15,7 +15,8 @@ def levelled_grid():
     lines, levels = [], []
     lines.append(shapely.LineString([(0, 0), (400, 0), (400, 400), (0, 400), (0, 0)]))
     levels.append(0)
-    lines += [shapely.LineString([(200, 0), (200, 400)]), shapely.LineString([(0, 200), (400, 200)])]
+    lines += [shapely.LineString([(200, 0), (200, 400)]),
+              shapely.LineString([(0, 200), (400, 200)])]
     levels += [1, 1]
     for x in (100, 300):
         lines.append(shapely.LineString([(x, 0), (x, 200)]))

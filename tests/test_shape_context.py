@@ -248,7 +248,8 @@ def test_alignment_from_dtw_correspondences_maps_the_shape_back():
     s = sc.sample_boundaries([POLY, q])
     s_rolled = np.roll(s[1], 23, axis=0)
     _, h = descriptors([POLY])
-    hq = sc.normalised_histograms(sc.shape_contexts(s_rolled, sc.radial_edges(sc.default_scale(s[:1]))))
+    edges = sc.radial_edges(sc.default_scale(s[:1]))
+    hq = sc.normalised_histograms(sc.shape_contexts(s_rolled, edges))
     r = sc.cyclic_dtw(sc.chi2_cost(hq, h[0]))
     rot, t, rms = sc.rigid_align(s[0][r.path[:, 1]], s_rolled[r.path[:, 0]])
     assert np.allclose(rot, rotation(-1.3), atol=1e-6) and rms < 1e-6
