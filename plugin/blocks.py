@@ -192,7 +192,8 @@ class _Network:
         _, org = np.unique(ends[:, 0] + 1j * ends[:, 1], return_inverse=True)
         self.org = org.reshape(-1)
         self.node_xy = ends
-        d = np.concatenate([self.coords[f + 1] - self.coords[f], self.coords[l - 1] - self.coords[l]])
+        d = np.concatenate([self.coords[f + 1] - self.coords[f],
+                            self.coords[l - 1] - self.coords[l]])
         self.twin = np.concatenate([np.arange(m, 2 * m), np.arange(m)])
         # rotation system: around each node, the half-edge clockwise-next of each one
         order = np.lexsort((np.arctan2(d[:, 1], d[:, 0]), self.org))
@@ -572,7 +573,8 @@ def assign_to_blocks(blocks: Sequence, geometries: Sequence, min_share: float = 
     --------
     >>> import shapely
     >>> blocks = [shapely.box(0, 0, 10, 10), shapely.box(10, 0, 20, 10)]
-    >>> index, share = assign_to_blocks(blocks, [shapely.box(6, 2, 12, 4), shapely.box(30, 0, 31, 1)])
+    >>> features = [shapely.box(6, 2, 12, 4), shapely.box(30, 0, 31, 1)]
+    >>> index, share = assign_to_blocks(blocks, features)
     >>> index.tolist(), share.round(2).tolist()
     ([0, -1], [0.67, 0.0])
     """
@@ -598,7 +600,8 @@ def assign_to_blocks(blocks: Sequence, geometries: Sequence, min_share: float = 
             g = rest[g]
             area = shapely.area(geoms[g])
             with np.errstate(divide="ignore", invalid="ignore"):
-                s = np.where(area > 0, shapely.area(shapely.intersection(geoms[g], blocks[b])) / area, 0.0)
+                inter = shapely.area(shapely.intersection(geoms[g], blocks[b]))
+                s = np.where(area > 0, inter / area, 0.0)
             order = np.lexsort((-s, g))
             best = order[_group_starts(g[order])]
             ok = s[best] >= min_share
@@ -653,6 +656,17 @@ def extract_blocks(roads, buildings: Optional[Sequence] = None,
     ----------
     Hartmann, thesis ch. 4.1.2 (blocks keep their dead-end streets) and ch. 5.1 (a block
     is its boundary polygon and its footprints); DESIGN.md, "Real example data".
+
+    Examples
+    --------
+    >>> import shapely
+    >>> grid = [shapely.LineString([(0, y), (200, y)]) for y in (0, 100, 200)] + \\
+    ...        [shapely.LineString([(x, 0), (x, 200)]) for x in (0, 100, 200)]
+    >>> result = extract_blocks(grid, buildings=[shapely.box(10, 10, 30, 30)])
+    >>> result.table[["block_id", "area_m2", "n_buildings"]].values.tolist()[:2]
+    [[1.0, 10000.0, 1.0], [2.0, 10000.0, 0.0]]
+    >>> result.buildings.block_id.tolist()
+    [1]
     """
     progress = ensure(progress)
     if isinstance(roads, RoadGraph):

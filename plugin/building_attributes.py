@@ -96,7 +96,8 @@ _HINT_DEFAULT = {"shop": "commercial", "office": "commercial", "craft": "industr
                  "healthcare": "public"}
 
 _NUMBER = r"[-+]?\d+(?:[.,]\d+)?"
-_FEET_INCHES = re.compile(rf"^\s*({_NUMBER})\s*(?:'|ft|feet|foot)\s*(?:({_NUMBER})\s*(?:\"|''|in|inch|inches)?)?\s*$")
+_FEET_INCHES = re.compile(
+    rf"^\s*({_NUMBER})\s*(?:'|ft|feet|foot)\s*(?:({_NUMBER})\s*(?:\"|''|in|inch|inches)?)?\s*$")
 _WITH_UNIT = re.compile(rf"^\s*({_NUMBER})\s*(m|meter|meters|metre|metres|cm|mm|km)?\s*$")
 
 
@@ -160,7 +161,8 @@ def parse_height(value) -> float:
         h = math.nan
         m = _FEET_INCHES.match(part)
         if m:
-            h = _to_float(m.group(1)) * 0.3048 + (_to_float(m.group(2)) * 0.0254 if m.group(2) else 0)
+            inches = _to_float(m.group(2)) if m.group(2) else 0.0
+            h = _to_float(m.group(1)) * 0.3048 + inches * 0.0254
         else:
             m = _WITH_UNIT.match(part)
             if m:

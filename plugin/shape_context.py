@@ -653,9 +653,18 @@ def cyclic_dtw_costs(cost: np.ndarray, n_offsets: Optional[int] = 3,
         near = pad[..., 0:m].copy()
         for delta in range(1, 7):
             np.minimum(near, pad[..., delta:delta + m], out=near)
-        di = _diag_index(n, m)
-        cols = (np.arange(m)[:, None] + di[None, :]) % m                # (s, n)
-        ranking = near[..., np.arange(n)[None, :], cols].sum(-1)       # (..., s)
+        if n == m:
+            # diagonal s of the column-doubled matrix, for every s, as a strided view
+            near2 = np.concatenate([near, near], axis=-1)
+            st = near2.strides
+            diags = np.lib.stride_tricks.as_strided(
+                near2, shape=near2.shape[:-2] + (m, n),
+                strides=st[:-2] + (st[-1], st[-2] + st[-1]), writeable=False)
+            ranking = diags.sum(-1)                                    # (..., s)
+        else:
+            di = _diag_index(n, m)
+            cols = (np.arange(m)[:, None] + di[None, :]) % m            # (s, n)
+            ranking = near[..., np.arange(n)[None, :], cols].sum(-1)   # (..., s)
         best = np.argpartition(ranking, n_offsets - 1, axis=-1)[..., :n_offsets]
         offsets = np.concatenate([best - 1, best, best + 1], axis=-1) % m
     offsets = np.ascontiguousarray(offsets)
@@ -680,11 +689,18 @@ def dtw_path(cost: np.ndarray, offset: int = 0) -> Tuple[float, np.ndarray]:
     c = np.roll(cost, -int(offset), axis=1)
     d = np.empty((n, m))
     d[0] = np.cumsum(c[0])
+    s = np.cumsum(c, axis=1)
+    diag = np.empty(m)
+    diag[0] = np.inf
     for i in range(1, n):
         prev = d[i - 1]
-        t = c[i] + np.minimum(prev, np.r_[np.inf, prev[:-1]])
-        s = np.cumsum(c[i])
-        d[i] = s + np.minimum.accumulate(t - s)
+        diag[1:] = prev[:-1]
+        t = np.minimum(prev, diag)
+        t += c[i] - s[i]
+        np.minimum.accumulate(t, out=t)
+        d[i] = t + s[i]
+    # backtrack on plain floats: a scalar loop of at most n + m steps
+    rows = d.tolist()
     i, j = n - 1, m - 1
     path = [(i, j)]
     while i > 0 or j > 0:
@@ -693,10 +709,10 @@ def dtw_path(cost: np.ndarray, offset: int = 0) -> Tuple[float, np.ndarray]:
         elif j == 0:
             i -= 1
         else:
-            step = np.argmin((d[i - 1, j - 1], d[i - 1, j], d[i, j - 1]))
-            if step == 0:
+            a, b, e = rows[i - 1][j - 1], rows[i - 1][j], rows[i][j - 1]
+            if a <= b and a <= e:
                 i, j = i - 1, j - 1
-            elif step == 1:
+            elif b <= e:
                 i -= 1
             else:
                 j -= 1

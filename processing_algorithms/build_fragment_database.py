@@ -1,4 +1,4 @@
-"""urbansynth:buildfragmentdatabase - road fragments per level with shape and terrain descriptors."""
+"""urbansynth:buildfragmentdatabase - road fragments per level, shape and terrain descriptors."""
 import numpy as np
 import pandas as pd
 import shapely
@@ -41,14 +41,15 @@ def read_dem(layer, work_crs: QgsCoordinateReferenceSystem, bounds, cell_size: f
         outputBounds=(x0 - margin, y0 - margin, x1 + margin, y1 + margin),
         xRes=cell_size, yRes=cell_size, resampleAlg="bilinear", dstNodata=float("nan"),
         outputType=gdal.GDT_Float32, multithread=False)
-    gdal.UseExceptions()
+    # no gdal.UseExceptions(): it would switch the bindings' error mode for all of QGIS
     try:
         ds = gdal.Warp("", source, options=options)
-    except RuntimeError as exc:
+    except RuntimeError as exc:  # exceptions already enabled by someone else
         raise QgsProcessingException(
             f"DEM '{layer.name()}' cannot be read or reprojected: {exc}") from exc
     if ds is None:
-        raise QgsProcessingException(f"DEM '{layer.name()}' cannot be read or reprojected.")
+        raise QgsProcessingException(f"DEM '{layer.name()}' cannot be read or reprojected: "
+                                     f"{gdal.GetLastErrorMsg() or 'unknown GDAL error'}.")
     band = ds.GetRasterBand(1)
     grid = band.ReadAsArray().astype(np.float64)
     nodata = band.GetNoDataValue()
@@ -141,7 +142,7 @@ class BuildFragmentDatabase(AlgorithmBase):
         min_area = qgis_io.check_number(self.parameterAsDouble(parameters, self.MIN_AREA, context),
                                         self.MIN_AREA, 0.0, 1e6)
         min_width = qgis_io.check_number(
-            self.parameterAsDouble(parameters, self.MIN_WIDTH, context), self.MIN_WIDTH, 0.0, 1000.0)
+            self.parameterAsDouble(parameters, self.MIN_WIDTH, context), self.MIN_WIDTH, 0, 1000)
         cell = qgis_io.check_number(self.parameterAsDouble(parameters, self.DEM_CELL_SIZE, context),
                                     self.DEM_CELL_SIZE, 0.5, 100.0)
         output = self.parameterAsFileOutput(parameters, self.OUTPUT, context)

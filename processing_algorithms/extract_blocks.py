@@ -1,4 +1,5 @@
 """urbansynth:extractblocks - city blocks from roads; footprints and parcels assigned to blocks."""
+import numpy as np
 import shapely
 from qgis.core import (
     QgsProcessing,
@@ -147,15 +148,17 @@ class ExtractBlocks(AlgorithmBase):
         classes = parse_class_list(self.parameterAsString(parameters, self.CLASSES, context))
 
         frame = qgis_io.read_source(self, parameters, self.ROADS, context, feedback, kind="lines")
-        frame = self._drivable(frame, class_field, classes, feedback)
+        frame, road_class = self._drivable(frame, class_field, classes, feedback)
+        # one vertical layer: every drivable edge bounds blocks, bridges and tunnels too
+        # (blocks.py), so the graph is noded at every crossing and no OSM layer is parsed
         graph = qgis_io.run_engine(
-            frame.name, roads.clean_network, frame.geometry,
-            qgis_io.osm_tag_column(frame, class_field or "highway"), None,
-            qgis_io.osm_vertical_layers(frame), merge_degree2=False,
-            progress=qgis_io.progress_for(feedback, 5, 30))
+            frame.name, roads.clean_network, frame.geometry, road_class, None, None,
+            merge_degree2=False, progress=qgis_io.progress_for(feedback, 5, 30))
         feedback.pushInfo(f"Street graph: {graph.n_edges} edges, {len(graph.nodes)} nodes.")
 
         buildings = self._buildings(parameters, context, feedback, frame.crs)
+        if buildings is not None:
+            heights, levels = self._cadastre_fields(parameters, context, buildings)
         parcels = qgis_io.read_source(self, parameters, self.PARCELS, context, feedback,
                                       kind="polygons", target_crs=frame.crs, optional=True)
         result = qgis_io.run_engine(
@@ -173,9 +176,8 @@ class ExtractBlocks(AlgorithmBase):
         qgis_io.style_output(context, results[self.OUTPUT], "blocks.qml")
         feedback.setProgress(80)
         if buildings is not None:
-            heights, levels = self._cadastre_fields(parameters, context, buildings)
-            attrs = building_attributes.building_attributes(
-                len(buildings), building=qgis_io.field_values(buildings, "building"),
+            attrs = qgis_io.run_engine(
+                buildings.name, building_attributes.building_attributes, len(buildings), building=qgis_io.field_values(buildings, "building"),
                 other_tags=qgis_io.field_values(buildings, "other_tags"),
                 tags={k: buildings.attributes[k].to_numpy(dtype=object)
                       for k in TAG_FIELDS if k in buildings.attributes},
@@ -201,7 +203,7 @@ class ExtractBlocks(AlgorithmBase):
     # ----------------------------------------------------------------------- helpers
 
     def _drivable(self, frame, class_field, classes, feedback):
-        """Keep the lines of a drivable class (all lines when the layer has no classes)."""
+        """Lines of a drivable class and their classes (all lines when there are no classes)."""
         road_class = qgis_io.osm_tag_column(frame, class_field or "highway")
         if road_class is not None and all(c is None or c == "" for c in road_class):
             road_class = None
@@ -210,17 +212,17 @@ class ExtractBlocks(AlgorithmBase):
                 raise QgsProcessingException(
                     f"Layer {frame.name} has no field '{class_field}' with road classes.")
             feedback.pushInfo(f"{frame.name} has no road classes: every line bounds blocks.")
-            return frame
+            return frame, None
         if not classes:
-            return frame
-        keep = [c in classes for c in road_class]
-        n_keep = sum(keep)
+            return frame, road_class
+        keep = np.array([c in classes for c in road_class], dtype=bool)
+        n_keep = int(keep.sum())
         feedback.pushInfo(f"{n_keep} of {len(frame)} lines have a drivable class.")
         if n_keep == 0:
             raise QgsProcessingException(
                 f"Layer {frame.name}: no line has one of the drivable classes "
                 f"({', '.join(sorted(classes))}) in field '{class_field or 'highway'}'.")
-        return qgis_io.subset(frame, keep)
+        return qgis_io.subset(frame, keep), road_class[keep]
 
     def _buildings(self, parameters, context, feedback, crs):
         frame = qgis_io.read_source(self, parameters, self.BUILDINGS, context, feedback,

@@ -96,17 +96,67 @@ def test_bubenec_blocks_buildings_parcels(qgis_processing):
     assert sum(b["n_parcels"] for b in blocks) == sum(r["in_block"] for r in parcels)
 
 
-def _memory_layer(kind, wkts=(), crs="EPSG:3857"):
+def _memory_layer(kind, wkts=(), crs="EPSG:3857", fields="", rows=None):
+    """A memory layer; ``fields`` in the memory provider's syntax, e.g. 'field=h:double'."""
     from qgis.core import QgsFeature, QgsGeometry, QgsVectorLayer
 
-    layer = QgsVectorLayer(f"{kind}?crs={crs}", "test input", "memory")
+    layer = QgsVectorLayer(f"{kind}?crs={crs}{fields}", "test input", "memory")
     feats = []
-    for wkt in wkts:
-        f = QgsFeature()
+    for i, wkt in enumerate(wkts):
+        f = QgsFeature(layer.fields())
         f.setGeometry(QgsGeometry.fromWkt(wkt))
+        if rows is not None:
+            f.setAttributes(list(rows[i]))
         feats.append(f)
     layer.dataProvider().addFeatures(feats)
     return layer
+
+
+GRID_WKT = [f"LINESTRING (0 {y}, 200 {y})" for y in (0, 100, 200)] + \
+    [f"LINESTRING ({x} 0, {x} 200)" for x in (0, 100, 200)]
+
+
+def test_cadastre_height_and_levels_fields(qgis_processing):
+    """A metric cadastre: heights and storeys from fields named by the user."""
+    roads_layer = _memory_layer("LineString", GRID_WKT, crs="EPSG:32633")
+    buildings = _memory_layer(
+        "Polygon", ["POLYGON ((10 10, 30 10, 30 30, 10 30, 10 10))",
+                    "POLYGON ((110 10, 130 10, 130 30, 110 30, 110 10))",
+                    "POLYGON ((10 110, 30 110, 30 130, 10 130, 10 110))"],
+        crs="EPSG:32633", fields="&field=vyska:double&field=podlazi:integer",
+        rows=[(12.5, None), (None, 4), (None, None)])
+    out = qgis_processing.run("urbansynth:extractblocks", {
+        "ROADS": roads_layer, "BUILDINGS": buildings, "HEIGHT_FIELD": "vyska",
+        "LEVELS_FIELD": "podlazi", "STOREY_HEIGHT": 3.5, "OUTPUT": "memory:",
+        "OUTPUT_BUILDINGS": "memory:"})
+    blocks, geoms = _features(out["OUTPUT"])
+    assert len(blocks) == 4
+    assert [round(b["area_m2"]) for b in blocks] == [10_000] * 4
+    assert out["OUTPUT"].crs().authid() == "EPSG:32633"
+    rows, _ = _features(out["OUTPUT_BUILDINGS"])
+    assert [r["block_id"] for r in rows] == [1, 2, 3]
+    assert [r["height_m"] for r in rows] == [12.5, 14.0, None]
+    assert [r["height_estimated"] for r in rows] == [False, True, None]
+    assert [r["levels"] for r in rows] == [4.0, 4.0, None]   # round(12.5 / 3.5) = 4
+    assert rows[0]["vyska"] == 12.5 and rows[1]["podlazi"] == 4  # source fields kept
+
+
+def test_missing_class_field_is_rejected(qgis_processing):
+    from qgis.core import QgsProcessingException
+
+    with pytest.raises(QgsProcessingException, match="no field 'druh'"):
+        qgis_processing.run("urbansynth:extractblocks", {
+            "ROADS": bubenec_layer("streets"), "CLASS_FIELD": "druh", "OUTPUT": "memory:"})
+
+
+def test_cancel_stops_the_algorithm(qgis_processing):
+    from qgis.core import QgsProcessingException, QgsProcessingFeedback
+
+    feedback = QgsProcessingFeedback()
+    feedback.cancel()
+    with pytest.raises(QgsProcessingException, match="[Cc]ancel"):
+        qgis_processing.run("urbansynth:extractblocks", {
+            "ROADS": bubenec_layer("streets"), "OUTPUT": "memory:"}, feedback=feedback)
 
 
 def test_point_layer_is_rejected(qgis_processing):

@@ -205,7 +205,8 @@ def test_planar_faces_match_polygonize_on_helsinki(helsinki_graph):
 def test_tiled_helsinki_repeats_the_blocks(helsinki_graph):
     lines = helsinki_graph.geometry
     x0, y0, x1, y1 = shapely.total_bounds(lines)
-    tiles = np.concatenate([shapely.transform(lines, lambda c, i=i, j=j: c + [i * (x1 - x0), j * (y1 - y0)])
+    w, h = x1 - x0, y1 - y0
+    tiles = np.concatenate([shapely.transform(lines, lambda c, i=i, j=j: c + [i * w, j * h])
                             for i in range(3) for j in range(3)])
     one = blocks.extract_blocks(lines)
     nine = blocks.extract_blocks(tiles)

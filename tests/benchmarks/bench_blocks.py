@@ -17,8 +17,8 @@
   within the street faces, a different and much heavier product.
 
 Each time is the best of several runs after one warm-up run (small inputs are repeated
-for about a second: single runs of a few milliseconds are noisy on a shared machine). Run this file to print
-the Helsinki and the 10 x 10 tiled Helsinki numbers.
+for about a second: single runs of a few milliseconds are noisy on a shared machine).
+Run this file to print the Helsinki and the 10 x 10 tiled Helsinki numbers.
 """
 from __future__ import annotations
 
