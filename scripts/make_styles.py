@@ -9,13 +9,13 @@ from pathlib import Path
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 from qgis.core import (  # noqa: E402
     QgsApplication, QgsCategorizedSymbolRenderer, QgsFillSymbol, QgsGraduatedSymbolRenderer,
-    QgsLineSymbol, QgsMarkerSymbol, QgsRendererCategory, QgsRendererRange, QgsSingleSymbolRenderer,
+    QgsLineSymbol, QgsMarkerSymbol, QgsRendererCategory, QgsRendererRange, QgsRuleBasedRenderer, QgsSingleSymbolRenderer,
     QgsVectorLayer,
 )
 
 OUT = Path(__file__).resolve().parent.parent / "resources" / "styles"
-LEVEL_COLOURS = ["#d7301f", "#fc8d59", "#fdcc8a", "#6baed6", "#3182bd", "#9e9ac8", "#bdbdbd"]
-LEVEL_WIDTHS = [1.6, 1.1, 0.8, 0.6, 0.45, 0.35, 0.3]
+LEVEL_COLOURS = ["#b2182b", "#ef6548", "#e6ab02", "#1b9e77", "#7570b3", "#999999", "#bdbdbd"]
+LEVEL_WIDTHS = [0.9, 0.65, 0.5, 0.4, 0.32, 0.26, 0.22]
 
 
 def roads_by_level():
@@ -47,15 +47,19 @@ def blocks():
 
 def buildings_by_height():
     layer = QgsVectorLayer("Polygon?field=height_m:double", "buildings", "memory")
-    breaks = [(0, 6, "#fee8c8"), (6, 12, "#fdbb84"), (12, 20, "#fc8d59"), (20, 35, "#e34a33"),
-              (35, 1000, "#b30000")]
-    ranges = []
+    breaks = [(0, 6, "#c6dbef"), (6, 12, "#9ecae1"), (12, 20, "#6baed6"), (20, 35, "#3182bd"),
+              (35, 1000, "#08519c")]
+    root = QgsRuleBasedRenderer.Rule(None)
     for lo, hi, col in breaks:
-        sym = QgsFillSymbol.createSimple({"color": col, "outline_color": "#7f2704",
+        sym = QgsFillSymbol.createSimple({"color": col, "outline_color": "#08306b",
                                           "outline_width": "0.1"})
-        ranges.append(QgsRendererRange(lo, hi, sym, f"{lo} - {hi} m" if hi < 1000 else f"> {lo} m"))
-    renderer = QgsGraduatedSymbolRenderer("height_m", ranges)
-    layer.setRenderer(renderer)
+        label = f"{lo} - {hi} m" if hi < 1000 else f"> {lo} m"
+        root.appendChild(QgsRuleBasedRenderer.Rule(
+            sym, filterExp=f'"height_m" >= {lo} AND "height_m" < {hi}', label=label))
+    unknown = QgsFillSymbol.createSimple({"color": "#d9d9d9", "outline_color": "#737373",
+                                          "outline_width": "0.1"})
+    root.appendChild(QgsRuleBasedRenderer.Rule(unknown, elseRule=True, label="height unknown"))
+    layer.setRenderer(QgsRuleBasedRenderer(root))
     layer.saveNamedStyle(str(OUT / "buildings_by_height.qml"))
 
 
