@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Dict, Iterable, List, Optional, Sequence
+from typing import List, Optional, Sequence
 
 import numpy as np
 import pandas as pd
@@ -93,6 +93,10 @@ def layer_name(alg, parameters, name, context) -> str:
     except Exception:  # noqa: BLE001 - sources that are not layers (e.g. feature iterators)
         layer = None
     if layer is not None and layer.name():
+        # 'Helsinki' is both the lines and the multipolygons of one .osm.pbf: say which
+        sub = layer.source().split("|layername=")
+        if len(sub) > 1 and sub[1].split("|")[0] and sub[1].split("|")[0] != layer.name():
+            return f"'{layer.name()} ({sub[1].split('|')[0]})'"
         return f"'{layer.name()}'"
     definition = alg.parameterDefinition(name)
     return f"'{definition.description()}'" if definition is not None else f"'{name}'"
@@ -102,7 +106,8 @@ def read_source(alg, parameters, name: str, context, feedback,
                 kind: Optional[str] = None, required_fields: Sequence[str] = (),
                 target_crs: Optional[QgsCoordinateReferenceSystem] = None,
                 repair: bool = True, optional: bool = False,
-                progress_range: tuple = (0.0, 5.0)) -> Optional[Frame]:
+                progress_range: tuple = (0.0, 5.0),
+                expression: Optional[str] = None) -> Optional[Frame]:
     """Read a feature source parameter into a :class:`Frame` in a metric working CRS.
 
     Raises a QgsProcessingException naming the layer for: a missing layer, the wrong geometry
@@ -138,6 +143,9 @@ def read_source(alg, parameters, name: str, context, feedback,
         else:
             target_crs = working_crs(src_crs, extent, context)
     request = QgsFeatureRequest()
+    if expression:
+        # filtering in the provider saves converting features the caller drops anyway
+        request.setFilterExpression(expression)
     wkbs: List[bytes] = []
     rows: List[list] = []
     fids: List[int] = []
@@ -227,13 +235,9 @@ def _keep_dimension(geom, kind):
 
 
 def _py(value):
-    """QVariant nulls and Qt types -> plain Python values."""
-    if value is None:
-        return None
+    """QVariant nulls -> None; other values unchanged (the hot path of reading attributes)."""
     if isinstance(value, QVariant):
         return None if value.isNull() else value.value()
-    if hasattr(value, "isNull") and callable(value.isNull) and value.isNull():
-        return None
     return value
 
 
@@ -407,11 +411,25 @@ def osm_tag_column(frame: Frame, key: str) -> Optional[np.ndarray]:
 
 def osm_vertical_layers(frame: Frame) -> np.ndarray:
     """OSM vertical layer per feature from layer / bridge / tunnel fields or other_tags."""
-    from .roads import vertical_layer
+    from .roads import parse_other_tags, vertical_layer
 
-    cols = [osm_tag_column(frame, k) for k in ("layer", "bridge", "tunnel")]
-    cols = [c if c is not None else np.full(len(frame), None, dtype=object) for c in cols]
-    return np.array([vertical_layer(a, b, c) for a, b, c in zip(*cols)], dtype=np.int64)
+    keys = ("layer", "bridge", "tunnel")
+    n = len(frame)
+    cols = {k: frame.attributes[k].to_numpy(dtype=object) for k in keys if k in frame.attributes}
+    tags = frame.attributes["other_tags"].to_numpy(dtype=object) \
+        if "other_tags" in frame.attributes else np.full(n, None, dtype=object)
+    out = np.zeros(n, dtype=np.int64)
+    for i in range(n):
+        values = {k: c[i] for k, c in cols.items()}
+        text = tags[i]
+        # parse other_tags once per feature, and only when it can hold one of the keys
+        if text and len(values) < 3 and any(k in text for k in keys):
+            parsed = parse_other_tags(text)
+            for k in keys:
+                values.setdefault(k, parsed.get(k))
+        if values:
+            out[i] = vertical_layer(values.get("layer"), values.get("bridge"), values.get("tunnel"))
+    return out
 
 
 # --------------------------------------------------------------------------- styles

@@ -128,10 +128,15 @@ class RoadGraph:
 # --------------------------------------------------------------------------- helpers
 
 def _node_ids(points: np.ndarray, decimals: int = 3):
-    """Integer ids for coordinates equal to the millimetre."""
+    """Integer ids for coordinates equal to the millimetre.
+
+    Coordinates are packed into one complex number each: a 1-D unique is several times
+    faster than ``np.unique(axis=0)`` on rows.
+    """
     keys = np.round(points, decimals)
-    uniq, inv = np.unique(keys, axis=0, return_inverse=True)
-    return uniq, inv.reshape(-1)
+    packed = keys[:, 0] + 1j * keys[:, 1]
+    uniq, inv = np.unique(packed, return_inverse=True)
+    return np.column_stack([uniq.real, uniq.imag]), inv.reshape(-1)
 
 
 def _endpoints(geoms: np.ndarray):
@@ -150,9 +155,8 @@ def _attach_attributes(pieces: np.ndarray, originals: np.ndarray, original_index
 
 
 def _split_at_vertices(geoms: np.ndarray, split_mask_fn):
-    """Split linestrings at interior vertices selected by ``split_mask_fn(coords, inv)``."""
+    """Split linestrings at interior vertices selected by ``split_mask_fn(coords)``."""
     coords, line_idx = shapely.get_coordinates(geoms, return_index=True)
-    n = len(coords)
     first = np.r_[True, line_idx[1:] != line_idx[:-1]]
     last = np.r_[line_idx[1:] != line_idx[:-1], True]
     interior = ~(first | last)
@@ -366,7 +370,6 @@ def merge_degree2_chains(g: RoadGraph) -> RoadGraph:
     inc_edge = np.concatenate([np.arange(m), np.arange(m)])
     sel = deg[inc_node] == 2
     order = np.argsort(inc_node[sel], kind="stable")
-    nodes2 = inc_node[sel][order]
     edges2 = inc_edge[sel][order]
     e1, e2 = edges2[0::2], edges2[1::2]
     ok = e1 != e2  # a self-loop on a degree-2 node is an isolated ring: nothing to join

@@ -1,8 +1,11 @@
 """Shared plumbing of the urbansynth algorithms (identity, icon, parameter help)."""
 from pathlib import Path
 
-from qgis.core import QgsProcessingAlgorithm, QgsProcessingParameterDefinition
+import numpy as np
+from qgis.core import QgsProcessingAlgorithm, QgsProcessingException, QgsProcessingParameterDefinition
 from qgis.PyQt.QtGui import QIcon
+
+from ..plugin import qgis_io
 
 ICON = Path(__file__).resolve().parent.parent / "resources" / "icons" / "urbansynth.svg"
 
@@ -35,3 +38,31 @@ def parse_class_list(text):
     if not text:
         return set()
     return {c.strip() for c in str(text).split(",") if c.strip()}
+
+
+def drivable_lines(frame, class_field, classes, feedback):
+    """Keep the lines of a drivable class.
+
+    Returns (frame, road_class), road_class being None when the layer has no classes (no
+    such field, not in OSM ``other_tags`` either, or all empty): then every line is kept.
+    An explicitly chosen class field that does not exist is an error.
+    """
+    road_class = qgis_io.osm_tag_column(frame, class_field or "highway")
+    if road_class is not None and all(c is None or c == "" for c in road_class):
+        road_class = None
+    if road_class is None:
+        if class_field and class_field != "highway":
+            raise QgsProcessingException(f"Layer {frame.name} has no field '{class_field}' "
+                                         "with road classes.")
+        feedback.pushInfo(f"{frame.name} has no road classes: every line is used.")
+        return frame, None
+    if not classes:
+        return frame, road_class
+    keep = np.array([c in classes for c in road_class], dtype=bool)
+    n_keep = int(keep.sum())
+    feedback.pushInfo(f"{n_keep} of {len(frame)} lines have a drivable class.")
+    if n_keep == 0:
+        raise QgsProcessingException(
+            f"Layer {frame.name}: no line has one of the drivable classes "
+            f"({', '.join(sorted(classes))}) in field '{class_field or 'highway'}'.")
+    return qgis_io.subset(frame, keep), road_class[keep]

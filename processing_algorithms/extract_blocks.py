@@ -1,5 +1,4 @@
 """urbansynth:extractblocks - city blocks from roads; footprints and parcels assigned to blocks."""
-import numpy as np
 import shapely
 from qgis.core import (
     QgsProcessing,
@@ -14,7 +13,7 @@ from qgis.core import (
 from qgis.PyQt.QtCore import QVariant
 
 from ..plugin import blocks, building_attributes, qgis_io, roads
-from .common import AlgorithmBase, parse_class_list
+from .common import AlgorithmBase, drivable_lines, parse_class_list
 
 MEMBERSHIP_FIELDS = [("source_fid", "int"), ("block_id", "int"), ("block_share", "float"),
                      ("in_block", "bool"), ("area_m2", "float")]
@@ -148,7 +147,7 @@ class ExtractBlocks(AlgorithmBase):
         classes = parse_class_list(self.parameterAsString(parameters, self.CLASSES, context))
 
         frame = qgis_io.read_source(self, parameters, self.ROADS, context, feedback, kind="lines")
-        frame, road_class = self._drivable(frame, class_field, classes, feedback)
+        frame, road_class = drivable_lines(frame, class_field, classes, feedback)
         # one vertical layer: every drivable edge bounds blocks, bridges and tunnels too
         # (blocks.py), so the graph is noded at every crossing and no OSM layer is parsed
         graph = qgis_io.run_engine(
@@ -201,28 +200,6 @@ class ExtractBlocks(AlgorithmBase):
         return results
 
     # ----------------------------------------------------------------------- helpers
-
-    def _drivable(self, frame, class_field, classes, feedback):
-        """Lines of a drivable class and their classes (all lines when there are no classes)."""
-        road_class = qgis_io.osm_tag_column(frame, class_field or "highway")
-        if road_class is not None and all(c is None or c == "" for c in road_class):
-            road_class = None
-        if road_class is None:
-            if class_field and class_field != "highway":
-                raise QgsProcessingException(
-                    f"Layer {frame.name} has no field '{class_field}' with road classes.")
-            feedback.pushInfo(f"{frame.name} has no road classes: every line bounds blocks.")
-            return frame, None
-        if not classes:
-            return frame, road_class
-        keep = np.array([c in classes for c in road_class], dtype=bool)
-        n_keep = int(keep.sum())
-        feedback.pushInfo(f"{n_keep} of {len(frame)} lines have a drivable class.")
-        if n_keep == 0:
-            raise QgsProcessingException(
-                f"Layer {frame.name}: no line has one of the drivable classes "
-                f"({', '.join(sorted(classes))}) in field '{class_field or 'highway'}'.")
-        return qgis_io.subset(frame, keep), road_class[keep]
 
     def _buildings(self, parameters, context, feedback, crs):
         frame = qgis_io.read_source(self, parameters, self.BUILDINGS, context, feedback,

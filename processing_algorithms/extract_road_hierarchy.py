@@ -3,8 +3,6 @@ import numpy as np
 import shapely
 from qgis.core import (
     QgsProcessing,
-    QgsProcessingAlgorithm,
-    QgsProcessingException,
     QgsProcessingParameterEnum,
     QgsProcessingParameterFeatureSink,
     QgsProcessingParameterFeatureSource,
@@ -15,7 +13,7 @@ from qgis.core import (
 )
 
 from ..plugin import hierarchy, qgis_io, roads
-from .common import AlgorithmBase, parse_class_list
+from .common import AlgorithmBase, drivable_lines, parse_class_list
 
 ROAD_FIELDS = [
     ("edge_id", "int"), ("level", "int"), ("road_class", "str"), ("length_m", "float"),
@@ -155,24 +153,10 @@ class ExtractRoadHierarchy(AlgorithmBase):
         radius = qgis_io.check_number(self.parameterAsDouble(parameters, self.PARCEL_RADIUS, context),
                                       self.PARCEL_RADIUS, 1.0, 5000.0)
 
-        road_class = qgis_io.osm_tag_column(frame, class_field or "highway")
-        if road_class is None:
-            if class_field and class_field != "highway":
-                raise QgsProcessingException(f"Layer {label} has no field '{class_field}'.")
-            feedback.pushInfo(f"{label} has no road classes: all lines are used and arterials "
-                              "are chosen topologically.")
-            if method == "osm":
-                method = "topological"
-        elif classes:
-            keep = [c in classes for c in road_class]
-            n_keep = sum(keep)
-            feedback.pushInfo(f"{n_keep} of {len(frame)} lines have a drivable class.")
-            if n_keep == 0:
-                raise QgsProcessingException(
-                    f"Layer {label}: no line has one of the drivable classes "
-                    f"({', '.join(sorted(classes))}) in field '{class_field}'.")
-            frame = qgis_io.subset(frame, keep)
-            road_class = road_class[keep]
+        frame, road_class = drivable_lines(frame, class_field, classes, feedback)
+        if road_class is None and method == "osm":
+            feedback.pushInfo("Without road classes, arterials are chosen topologically.")
+            method = "topological"
         z_layer = qgis_io.osm_vertical_layers(frame)
         name = qgis_io.osm_tag_column(frame, "name")
 

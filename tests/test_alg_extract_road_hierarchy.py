@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 import shapely
 
-from conftest import BUBENEC, HELSINKI, bubenec_layer, helsinki_layer, run_qgis_process
+from conftest import BUBENEC, bubenec_layer, helsinki_layer, run_qgis_process
 from helpers import assert_planar
 
 
