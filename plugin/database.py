@@ -37,6 +37,7 @@ database, retrieval, Procrustes alignment).
 """
 from __future__ import annotations
 
+import contextlib
 import datetime as _dt
 import json
 import os
@@ -258,11 +259,23 @@ def _atomic_target(path: str) -> str:
     return os.path.join(folder, f".{os.path.basename(path)}.{uuid.uuid4().hex[:8]}.tmp.gpkg")
 
 
-def _finish(tmp: str, path: str) -> None:
-    os.replace(tmp, path)
-    for suffix in ("-wal", "-shm", "-journal"):
-        if os.path.exists(tmp + suffix):
-            os.remove(tmp + suffix)
+@contextlib.contextmanager
+def _atomic_gpkg(path: str):
+    """Yield a temporary file next to ``path``; it replaces ``path`` only when the block
+    completes, so a failure or a cancel never leaves a half-written database behind."""
+    tmp = _atomic_target(path)
+    sidecars = ("-wal", "-shm", "-journal")
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+        raise
+    finally:
+        for suffix in sidecars:
+            if os.path.exists(tmp + suffix):
+                os.remove(tmp + suffix)
 
 
 def _metadata(fmt: str, crs: str, source: str, descriptors: Descriptors,
@@ -306,8 +319,7 @@ def write_fragment_database(path: str, fragments: Fragments, crs: str, source: s
     progress.step(0.4)
     table = fragments.table
     ids = table["fragment_id"].to_numpy()
-    tmp = _atomic_target(path)
-    try:
+    with _atomic_gpkg(path) as tmp:
         _write_layer(table, fragments.geometry, crs, tmp, "fragments", "Polygon")
         progress.step(0.6)
         streets = pd.DataFrame({
@@ -329,12 +341,6 @@ def write_fragment_database(path: str, fragments: Fragments, crs: str, source: s
             "has_relief": str(int(relief is not None)),
             **(extra or {})})
         _write_tables(tmp, desc, ids, "fragment_id", meta, relief)
-        _finish(tmp, path)
-    except BaseException:
-        for p in (tmp, tmp + "-wal", tmp + "-shm", tmp + "-journal"):
-            if os.path.exists(p):
-                os.remove(p)
-        raise
     progress.step(1.0)
     return desc
 
@@ -410,8 +416,7 @@ def write_block_database(path: str, blocks: Sequence, buildings: Sequence,
     for name in attrs.columns:
         if name not in btable:
             btable[name] = _plain_column(attrs[name])
-    tmp = _atomic_target(path)
-    try:
+    with _atomic_gpkg(path) as tmp:
         _write_layer(table, blocks, crs, tmp, "blocks", "Polygon")
         progress.step(0.6)
         _write_layer(btable, buildings, crs, tmp, "buildings", "MultiPolygon")
@@ -419,12 +424,6 @@ def write_block_database(path: str, blocks: Sequence, buildings: Sequence,
         meta = _metadata(BLOCK_FORMAT, crs, source, desc, {
             "n_blocks": len(blocks), "n_buildings": len(buildings), **(extra or {})})
         _write_tables(tmp, desc, ids, "block_id", meta)
-        _finish(tmp, path)
-    except BaseException:
-        for p in (tmp, tmp + "-wal", tmp + "-shm", tmp + "-journal"):
-            if os.path.exists(p):
-                os.remove(p)
-        raise
     progress.step(1.0)
     return desc
 

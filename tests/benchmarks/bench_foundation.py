@@ -87,8 +87,9 @@ def tiled_inputs(workdir, n):
 
     lines = pyogrio.read_dataframe(HELSINKI, layer="lines")
     lines = lines[lines.highway.isin(roads_mod.DRIVABLE_CLASSES)].to_crs(32635)
-    polys = pyogrio.read_dataframe(HELSINKI, layer="multipolygons")
-    polys = polys[polys.building.notna()].to_crs(32635)
+    # 2-point rings of dirty OSM: GEOS cannot read them; the algorithm itself repairs them
+    polys = pyogrio.read_dataframe(HELSINKI, layer="multipolygons", on_invalid="ignore")
+    polys = polys[polys.building.notna() & polys.geometry.notna()].to_crs(32635)
     x0, y0, x1, y1 = lines.total_bounds
     dx, dy = x1 - x0 + 50.0, y1 - y0 + 50.0
     out = []
