@@ -107,11 +107,14 @@ def read_source(alg, parameters, name: str, context, feedback,
                 target_crs: Optional[QgsCoordinateReferenceSystem] = None,
                 repair: bool = True, optional: bool = False,
                 progress_range: tuple = (0.0, 5.0),
-                expression: Optional[str] = None) -> Optional[Frame]:
+                expression: Optional[str] = None,
+                fields: Optional[Sequence[str]] = None) -> Optional[Frame]:
     """Read a feature source parameter into a :class:`Frame` in a metric working CRS.
 
     Raises a QgsProcessingException naming the layer for: a missing layer, the wrong geometry
-    type, missing fields, no features with geometry. Null geometries are skipped and invalid
+    type, missing fields, no features with geometry. ``fields`` limits the attributes read
+    to those named (the ones that exist): reading every attribute of a wide OSM layer costs
+    more than the algorithms themselves. Null geometries are skipped and invalid
     ones repaired (``make_valid``), both with a count in the log. The source is never modified.
     """
     source = alg.parameterAsSource(parameters, name, context)
@@ -126,12 +129,15 @@ def read_source(alg, parameters, name: str, context, feedback,
             got = _GEOM_NAMES.get(gtype, "no geometry")
             raise QgsProcessingException(
                 f"Layer {label} has {got}; {kind} are needed.")
-    field_names = [f.name() for f in source.fields()]
-    missing = [f for f in required_fields if f not in field_names]
+    all_names = [f.name() for f in source.fields()]
+    field_names = all_names if fields is None else \
+        [f for f in dict.fromkeys(fields) if f and f in all_names]
+    field_idx = [all_names.index(f) for f in field_names]
+    missing = [f for f in required_fields if f not in all_names]
     if missing:
         raise QgsProcessingException(
             f"Layer {label} has no field {', '.join(repr(m) for m in missing)} "
-            f"(fields: {', '.join(field_names) or 'none'}).")
+            f"(fields: {', '.join(all_names) or 'none'}).")
     src_crs = source.sourceCrs()
     if target_crs is None:
         extent = source.sourceExtent()
@@ -146,6 +152,8 @@ def read_source(alg, parameters, name: str, context, feedback,
     if expression:
         # filtering in the provider saves converting features the caller drops anyway
         request.setFilterExpression(expression)
+    if fields is not None:
+        request.setSubsetOfAttributes(field_idx)
     wkbs: List[bytes] = []
     rows: List[list] = []
     fids: List[int] = []
@@ -163,7 +171,8 @@ def read_source(alg, parameters, name: str, context, feedback,
             n_null += 1
             continue
         wkbs.append(bytes(geom.asWkb()))
-        rows.append(feature.attributes())
+        rows.append(feature.attributes() if fields is None else
+                    [feature.attribute(i) for i in field_idx])
         fids.append(feature.id())
         if step and feedback is not None and i % 1000 == 0:
             feedback.setProgress(p0 + i * step)
@@ -307,12 +316,13 @@ def write_sink(alg, parameters, name: str, context, geoms: np.ndarray, table: pd
     if len(geoms):
         geoms = reproject(geoms, work_crs, out_crs, context)
     wkbs = shapely.to_wkb(geoms) if len(geoms) else []
-    columns = [table[n].to_numpy() if n in table else np.full(len(geoms), None) for n, _ in spec]
-    casts = [_caster(t) for _, t in spec]
+    n = len(geoms)
+    columns = [_column_values(table[f] if f in table else None, typ, n) for f, typ in spec]
+    rows = list(zip(*columns)) if columns else [()] * n
     features = []
     multi = QgsWkbTypes.isMultiType(wkb_type)
     for i, wkb in enumerate(wkbs):
-        if feedback is not None and feedback.isCanceled():
+        if feedback is not None and i % 1000 == 0 and feedback.isCanceled():
             raise QgsProcessingException("Canceled by the user.")
         f = QgsFeature(fields)
         g = QgsGeometry()
@@ -320,32 +330,38 @@ def write_sink(alg, parameters, name: str, context, geoms: np.ndarray, table: pd
         if multi and not g.isMultipart():
             g.convertToMultiType()
         f.setGeometry(g)
-        f.setAttributes([cast(col[i]) for cast, col in zip(casts, columns)])
+        f.setAttributes(list(rows[i]))
         features.append(f)
     if not sink.addFeatures(features, QgsFeatureSink.FastInsert):
         raise QgsProcessingException(f"Could not write the output {name}: {sink.lastError()}")
     return dest_id
 
 
-def _caster(typ):
-    def cast(value):
-        if value is None:
-            return None
-        if isinstance(value, float) and not math.isfinite(value):
-            return None
-        try:
-            if pd.isna(value):
-                return None
-        except (TypeError, ValueError):
-            pass
+def _column_values(column, typ: str, n: int) -> list:
+    """A column as a list of plain Python values of the field type, None for missing.
+
+    Vectorised per column (pandas / numpy), not per value: writing is a hot path.
+    """
+    if column is None:
+        return [None] * n
+    series = pd.Series(np.asarray(column, dtype=object))
+    missing = series.isna().to_numpy()
+    if typ in ("int", "float", "bool"):
+        numbers = pd.to_numeric(series.where(~missing), errors="coerce").to_numpy(dtype=float)
+        missing |= ~np.isfinite(numbers)
+        numbers = np.where(missing, 0.0, numbers)
         if typ == "int":
-            return int(value)
-        if typ == "float":
-            return float(value)
-        if typ == "bool":
-            return bool(value)
-        return str(value)
-    return cast
+            values = numbers.astype(np.int64).tolist()
+        elif typ == "bool":
+            values = (numbers != 0).tolist()
+        else:
+            values = numbers.tolist()
+    else:
+        values = [v if isinstance(v, str) else str(v) for v in series.tolist()]
+    if missing.any():
+        for i in np.flatnonzero(missing):
+            values[i] = None
+    return values
 
 
 # --------------------------------------------------------------------------- engine calls

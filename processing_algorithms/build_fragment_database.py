@@ -137,7 +137,8 @@ class BuildFragmentDatabase(AlgorithmBase):
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         level_field = self.parameterAsString(parameters, self.LEVEL_FIELD, context) or "level"
         frame = qgis_io.read_source(self, parameters, self.ROADS, context, feedback,
-                                    kind="lines", required_fields=[level_field])
+                                    kind="lines", required_fields=[level_field],
+                                    fields=[level_field])
         label = frame.name
         min_area = qgis_io.check_number(self.parameterAsDouble(parameters, self.MIN_AREA, context),
                                         self.MIN_AREA, 0.0, 1e6)

@@ -146,7 +146,8 @@ class ExtractBlocks(AlgorithmBase):
         class_field = self.parameterAsString(parameters, self.CLASS_FIELD, context)
         classes = parse_class_list(self.parameterAsString(parameters, self.CLASSES, context))
 
-        frame = qgis_io.read_source(self, parameters, self.ROADS, context, feedback, kind="lines")
+        frame = qgis_io.read_source(self, parameters, self.ROADS, context, feedback, kind="lines",
+                                    fields=[class_field or "highway", "other_tags"])
         frame, road_class = drivable_lines(frame, class_field, classes, feedback)
         # one vertical layer: every drivable edge bounds blocks, bridges and tunnels too
         # (blocks.py), so the graph is noded at every crossing and no OSM layer is parsed

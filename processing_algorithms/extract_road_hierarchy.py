@@ -136,9 +136,11 @@ class ExtractRoadHierarchy(AlgorithmBase):
             "Intersection and street-end points with the Aliaga et al. 2008 attributes.")
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
-        frame = qgis_io.read_source(self, parameters, self.INPUT, context, feedback, kind="lines")
-        label = frame.name
         class_field = self.parameterAsString(parameters, self.CLASS_FIELD, context)
+        frame = qgis_io.read_source(self, parameters, self.INPUT, context, feedback, kind="lines",
+                                    fields=[class_field or "highway", "name", "layer", "bridge",
+                                            "tunnel", "other_tags"])
+        label = frame.name
         classes = parse_class_list(self.parameterAsString(parameters, self.CLASSES, context))
         method = self.METHOD_KEYS[self.parameterAsEnum(parameters, self.METHOD, context)]
         arterial = parse_class_list(self.parameterAsString(parameters, self.ARTERIAL_CLASSES, context))
