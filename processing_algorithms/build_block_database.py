@@ -70,12 +70,14 @@ class BuildBlockDatabase(AlgorithmBase):
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         id_field = (self.parameterAsString(parameters, self.BLOCK_ID_FIELD, context) or "").strip()
         output = self.parameterAsFileOutput(parameters, self.OUTPUT, context)
+        # only the fields the database keeps: wide OSM layers are slow to convert
         block_frame = qgis_io.read_source(self, parameters, self.BLOCKS, context, feedback,
-                                          kind="polygons")
+                                          kind="polygons", fields=[id_field])
         label = block_frame.name
         feedback.setProgress(10)
         building_frame = qgis_io.read_source(self, parameters, self.BUILDINGS, context, feedback,
-                                             kind="polygons", target_crs=block_frame.crs)
+                                             kind="polygons", target_crs=block_frame.crs,
+                                             fields=[id_field, *database.BUILDING_FIELDS])
         feedback.setProgress(25)
 
         block_ids = None
