@@ -26,7 +26,9 @@ class UrbanSynthesisProvider(QgsProcessingProvider):
         from ..processing_algorithms.build_block_database import BuildBlockDatabase
         from ..processing_algorithms.build_fragment_database import BuildFragmentDatabase
         from ..processing_algorithms.layout_metrics import LayoutMetrics
+        from ..processing_algorithms.grow_roads import GrowRoads
+        from ..processing_algorithms.subdivide_parcels import SubdivideParcels
 
         for alg in (ExtractRoadHierarchy(), ExtractBlocks(), BuildBlockDatabase(),
-                    BuildFragmentDatabase(), LayoutMetrics()):
+                    BuildFragmentDatabase(), LayoutMetrics(), GrowRoads(), SubdivideParcels()):
             self.addAlgorithm(alg)

@@ -63,6 +63,32 @@ def buildings_by_height():
     layer.saveNamedStyle(str(OUT / "buildings_by_height.qml"))
 
 
+def parcels_by_quality():
+    """Parcels coloured by Yang et al. 2013's quality (Fig. 12: good blue, undesirable red);
+    parcels without street frontage get a dashed outline."""
+    layer = QgsVectorLayer("Polygon?field=undesirable:boolean&field=has_street_access:boolean",
+                           "parcels", "memory")
+    root = QgsRuleBasedRenderer.Rule(None)
+    rules = [
+        ('"undesirable" AND "has_street_access"', "#ef8a62", "solid",
+         "undesirable (p_angle > 15° or p_area > 1.2)"),
+        ('NOT "undesirable" AND "has_street_access"', "#67a9cf", "solid", "good"),
+        ('"undesirable" AND NOT "has_street_access"', "#ef8a62", "dash",
+         "undesirable, no street access"),
+        ('NOT "undesirable" AND NOT "has_street_access"', "#67a9cf", "dash",
+         "good, no street access"),
+    ]
+    for expression, colour, outline, label in rules:
+        sym = QgsFillSymbol.createSimple({"color": colour, "outline_color": "#252525",
+                                          "outline_width": "0.15", "outline_style": outline})
+        root.appendChild(QgsRuleBasedRenderer.Rule(sym, filterExp=expression, label=label))
+    unknown = QgsFillSymbol.createSimple({"color": "#d9d9d9", "outline_color": "#737373",
+                                          "outline_width": "0.15"})
+    root.appendChild(QgsRuleBasedRenderer.Rule(unknown, elseRule=True, label="quality unknown"))
+    layer.setRenderer(QgsRuleBasedRenderer(root))
+    layer.saveNamedStyle(str(OUT / "parcels_by_quality.qml"))
+
+
 def intersections():
     layer = QgsVectorLayer("Point?field=degree:integer", "intersections", "memory")
     sym = QgsMarkerSymbol.createSimple({"name": "circle", "color": "#252525", "size": "1.2",
@@ -79,5 +105,6 @@ if __name__ == "__main__":
     blocks()
     buildings_by_height()
     intersections()
+    parcels_by_quality()
     print("styles written to", OUT)
     sys.exit(0)

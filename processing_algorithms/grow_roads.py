@@ -1,0 +1,313 @@
+"""urbansynth:growroads - procedural road growth with street patterns (Scharl 2010, ch. 4.2)."""
+import math
+
+import numpy as np
+import shapely
+from qgis.core import (
+    QgsCoordinateTransform,
+    QgsProcessing,
+    QgsProcessingException,
+    QgsProcessingParameterBoolean,
+    QgsProcessingParameterEnum,
+    QgsProcessingParameterFeatureSink,
+    QgsProcessingParameterFeatureSource,
+    QgsProcessingParameterNumber,
+    QgsProcessingParameterPoint,
+    QgsProcessingParameterRasterLayer,
+    QgsRectangle,
+    QgsWkbTypes,
+)
+
+from ..plugin import growth, qgis_io
+from ..plugin.progress import InputError
+from .build_fragment_database import read_dem
+from .common import AlgorithmBase
+
+ROAD_FIELDS = [("edge_id", "int"), ("level", "int"), ("road_class", "str"), ("pattern", "str"),
+               ("width_m", "float"), ("length_m", "float")]
+#: Rasters are resampled to at most this many cells across the boundary.
+MAX_RASTER_CELLS = 2048
+
+
+def _raster_cell_size(layer, work_crs, bounds, context) -> float:
+    """Cell size (m) for a raster in the working CRS: its own resolution, at least 1 m, and
+    coarse enough that the boundary spans at most MAX_RASTER_CELLS cells."""
+    ext = layer.extent()
+    native = max(layer.rasterUnitsPerPixelX(), layer.rasterUnitsPerPixelY())
+    try:  # the resolution in metres: the length of one pixel's diagonal, transformed
+        tr = QgsCoordinateTransform(layer.crs(), work_crs, context.transformContext())
+        c = ext.center()
+        box = tr.transformBoundingBox(QgsRectangle(c.x(), c.y(), c.x() + native, c.y() + native))
+        native_m = max(box.width(), box.height())
+    except Exception:  # noqa: BLE001 - an unknown CRS: trust the number as metres
+        native_m = native
+    span = max(bounds[2] - bounds[0], bounds[3] - bounds[1])
+    cell = max(native_m if math.isfinite(native_m) and native_m > 0 else 1.0, 1.0)
+    return max(cell, span / MAX_RASTER_CELLS)
+
+
+class GrowRoads(AlgorithmBase):
+    BOUNDARY = "BOUNDARY"
+    MAJOR_ROADS = "MAJOR_ROADS"
+    GROW_MAJOR = "GROW_MAJOR"
+    MAJOR_PATTERN = "MAJOR_PATTERN"
+    MINOR_PATTERN = "MINOR_PATTERN"
+    CENTER = "CENTER"
+    MAJOR_SEGMENT_LENGTH = "MAJOR_SEGMENT_LENGTH"
+    MINOR_SEGMENT_LENGTH = "MINOR_SEGMENT_LENGTH"
+    LENGTH_DEVIATION = "LENGTH_DEVIATION"
+    ANGLE_DEVIATION = "ANGLE_DEVIATION"
+    BRANCH_PROBABILITY = "BRANCH_PROBABILITY"
+    SNAP_DISTANCE = "SNAP_DISTANCE"
+    MIN_STREET_DISTANCE = "MIN_STREET_DISTANCE"
+    MAJOR_WIDTH = "MAJOR_WIDTH"
+    MINOR_WIDTH = "MINOR_WIDTH"
+    MAX_SEGMENTS = "MAX_SEGMENTS"
+    DEM = "DEM"
+    MAX_SLOPE = "MAX_SLOPE"
+    OBSTACLES = "OBSTACLES"
+    DENSITY = "DENSITY"
+    SEED = "SEED"
+    OUTPUT = "OUTPUT"
+
+    PATTERN_KEYS = list(growth.PATTERNS)  # organic, grid, radial
+    #: GrowthSettings names -> parameter names, for the engine's messages
+    ENGINE_NAMES = {"major_length": MAJOR_SEGMENT_LENGTH, "minor_length": MINOR_SEGMENT_LENGTH,
+                    "snap_distance": SNAP_DISTANCE, "min_street_distance": MIN_STREET_DISTANCE,
+                    "max_slope": MAX_SLOPE}
+
+    def name(self):
+        return "growroads"
+
+    def displayName(self):  # noqa: N802
+        return "Grow roads (procedural patterns)"
+
+    def group(self):
+        return "Synthesis"
+
+    def groupId(self):  # noqa: N802
+        return "synthesis"
+
+    def shortHelpString(self):  # noqa: N802
+        return (
+            "Grows a street network inside a boundary polygon, procedurally, after Parish & "
+            "Müller (2001) and Weber et al. (2009) as described by Scharl (2010, ch. 4.2).\n\n"
+            "Major roads grow first over the whole boundary (from the sketched major roads, if "
+            "given, else from a seed at the centre or the densest place); then every quarter "
+            "(face of the major network, and the outskirts between the major roads and the "
+            "boundary) is filled with minor roads. Each level follows its pattern: organic "
+            "(random turns, branches at varied angles), grid (main directions, right-angle "
+            "branches, regular blocks) or radial (spokes and rings around the centre point).\n\n"
+            "Local constraints keep the network clean: streets end at the first road they cross, "
+            "snap to nearby junctions, extend to a road just ahead, are clipped to the boundary, "
+            "near-parallel duplicates are dropped; with a DEM no grown segment is steeper than "
+            "the maximum slope (streets turn to follow the terrain), and no road enters the "
+            "obstacles (water, parks). A density raster guides seeds and growth.\n\n"
+            "Output: planar roads with level (0 major, 1 minor), road_class, pattern, width_m and "
+            "length_m, one straight feature per grown segment, in the boundary's CRS. The same "
+            "seed gives the same network."
+        )
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        d = growth.GrowthSettings()
+        patterns = ["Organic", "Grid", "Radial"]
+        self.add(QgsProcessingParameterFeatureSource(
+            self.BOUNDARY, "Boundary", [QgsProcessing.TypeVectorPolygon]),
+            "Polygon(s) of the city region: every road is grown inside them (Scharl's mask). "
+            "Several features are merged.")
+        self.add(QgsProcessingParameterFeatureSource(
+            self.MAJOR_ROADS, "Sketched major roads (optional)", [QgsProcessing.TypeVectorLine],
+            optional=True),
+            "Major roads drawn by hand: clipped to the boundary and kept as they are (level 0, "
+            "pattern 'sketch'); growth continues from their dead ends and branches off them.")
+        self.add(QgsProcessingParameterBoolean(
+            self.GROW_MAJOR, "Grow more major roads", defaultValue=True),
+            "Unchecked with sketched major roads: keep only the sketch as the major network and "
+            "fill its quarters with minor roads.")
+        self.add(QgsProcessingParameterEnum(
+            self.MAJOR_PATTERN, "Major road pattern", options=patterns, defaultValue=1),
+            "Organic: random turns of up to the angle deviation, branches at 90° ± it. Grid: "
+            "main directions from the sketch or the boundary's rectangle, right-angle branches. "
+            "Radial: spokes out of the centre point and rings around it.")
+        self.add(QgsProcessingParameterEnum(
+            self.MINOR_PATTERN, "Minor road pattern", options=patterns, defaultValue=1),
+            "Pattern inside the quarters; a grid quarter takes the direction of its own "
+            "minimum bounding rectangle.")
+        self.add(QgsProcessingParameterPoint(
+            self.CENTER, "Centre of the radial pattern (optional)", optional=True),
+            "Spokes and rings of the radial pattern are around this point; default: the "
+            "boundary's centroid.")
+        self.add(QgsProcessingParameterNumber(
+            self.MAJOR_SEGMENT_LENGTH, "Major segment length (m)",
+            QgsProcessingParameterNumber.Double, defaultValue=d.major_length, minValue=5.0,
+            maxValue=10000.0),
+            "Nominal length of one major road segment: about the side of a quarter.")
+        self.add(QgsProcessingParameterNumber(
+            self.MINOR_SEGMENT_LENGTH, "Minor segment length (m)",
+            QgsProcessingParameterNumber.Double, defaultValue=d.minor_length, minValue=5.0,
+            maxValue=10000.0),
+            "Nominal length of one minor road segment: about the side of a city block.")
+        self.add(QgsProcessingParameterNumber(
+            self.LENGTH_DEVIATION, "Segment length deviation (%)",
+            QgsProcessingParameterNumber.Double, defaultValue=100 * d.length_deviation,
+            minValue=0.0, maxValue=90.0),
+            "Each segment is the nominal length ± up to this share (a fifth of it for grids, "
+            "whose blocks stay regular).", advanced=True)
+        self.add(QgsProcessingParameterNumber(
+            self.ANGLE_DEVIATION, "Angle deviation (degrees)",
+            QgsProcessingParameterNumber.Double, defaultValue=d.angle_deviation, minValue=0.0,
+            maxValue=90.0),
+            "Largest random turn of an organic street per segment, and of an organic branch "
+            "away from 90°. Grid streets deviate at most a tenth of it (2° at most); radial "
+            "streets are re-oriented exactly.")
+        self.add(QgsProcessingParameterNumber(
+            self.BRANCH_PROBABILITY, "Branch probability",
+            QgsProcessingParameterNumber.Double, defaultValue=d.branch_probability,
+            minValue=0.0, maxValue=1.0),
+            "Chance that a new street branches off each side of a street end.")
+        self.add(QgsProcessingParameterNumber(
+            self.SNAP_DISTANCE, "Snapping distance (m)", QgsProcessingParameterNumber.Double,
+            defaultValue=d.snap_distance, minValue=0.0, maxValue=5000.0),
+            "A street end this close to a junction snaps to it, and to a road this close "
+            "ahead is extended to it; must be under half the shorter segment length.",
+            advanced=True)
+        self.add(QgsProcessingParameterNumber(
+            self.MIN_STREET_DISTANCE, "Minimum street distance (m)",
+            QgsProcessingParameterNumber.Double, defaultValue=d.min_street_distance,
+            minValue=0.0, maxValue=5000.0),
+            "Near-parallel streets closer than this are duplicates: the newer one is dropped.",
+            advanced=True)
+        self.add(QgsProcessingParameterNumber(
+            self.MAJOR_WIDTH, "Major road width (m)", QgsProcessingParameterNumber.Double,
+            defaultValue=d.major_width, minValue=0.0, maxValue=200.0),
+            "Written to width_m of major roads (used by street surfaces).", advanced=True)
+        self.add(QgsProcessingParameterNumber(
+            self.MINOR_WIDTH, "Minor road width (m)", QgsProcessingParameterNumber.Double,
+            defaultValue=d.minor_width, minValue=0.0, maxValue=200.0),
+            "Written to width_m of minor roads.", advanced=True)
+        self.add(QgsProcessingParameterNumber(
+            self.MAX_SEGMENTS, "Maximum number of segments", QgsProcessingParameterNumber.Integer,
+            defaultValue=d.max_segments, minValue=1, maxValue=1000000),
+            "Safety cap: growth stops after this many segments (quarters nearest the centre "
+            "are filled first).", advanced=True)
+        self.add(QgsProcessingParameterRasterLayer(
+            self.DEM, "Elevation model (optional)", optional=True),
+            "A DEM in any CRS: grown segments steeper than the maximum slope turn (by up to "
+            "45°) or are dropped.")
+        self.add(QgsProcessingParameterNumber(
+            self.MAX_SLOPE, "Maximum slope (%)", QgsProcessingParameterNumber.Double,
+            defaultValue=100 * d.max_slope, minValue=0.1, maxValue=100.0),
+            "Steepest grade of a grown segment along its length, with a DEM.")
+        self.add(QgsProcessingParameterFeatureSource(
+            self.OBSTACLES, "Obstacles (optional)", [QgsProcessing.TypeVectorPolygon],
+            optional=True),
+            "Water, parks, protected land: no grown road enters them; streets are shortened "
+            "or turn away.")
+        self.add(QgsProcessingParameterRasterLayer(
+            self.DENSITY, "Population density (optional)", optional=True),
+            "Any density raster (normalised by its maximum): the first seed goes to the "
+            "densest place near the centre, major roads head for population, and growth, "
+            "branching and block size follow density; nothing grows where it is 0.")
+        self.add(QgsProcessingParameterNumber(
+            self.SEED, "Random seed", QgsProcessingParameterNumber.Integer, defaultValue=1,
+            minValue=0),
+            "The same seed and inputs give the same network.")
+        self.add(QgsProcessingParameterFeatureSink(
+            self.OUTPUT, "Grown roads", QgsProcessing.TypeVectorLine),
+            "Roads with level (0 major, 1 minor), road_class, pattern, width_m, length_m.")
+
+    def _number(self, parameters, name, context, lo, hi):
+        return qgis_io.check_number(self.parameterAsDouble(parameters, name, context), name, lo, hi)
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        frame = qgis_io.read_source(self, parameters, self.BOUNDARY, context, feedback,
+                                    kind="polygons", fields=[])
+        label = frame.name
+        crs = frame.crs
+        num = self._number
+        settings = growth.GrowthSettings(
+            major_pattern=self.PATTERN_KEYS[self.parameterAsEnum(parameters, self.MAJOR_PATTERN,
+                                                                 context)],
+            minor_pattern=self.PATTERN_KEYS[self.parameterAsEnum(parameters, self.MINOR_PATTERN,
+                                                                 context)],
+            major_length=num(parameters, self.MAJOR_SEGMENT_LENGTH, context, 5.0, 10000.0),
+            minor_length=num(parameters, self.MINOR_SEGMENT_LENGTH, context, 5.0, 10000.0),
+            length_deviation=num(parameters, self.LENGTH_DEVIATION, context, 0.0, 90.0) / 100.0,
+            angle_deviation=num(parameters, self.ANGLE_DEVIATION, context, 0.0, 90.0),
+            branch_probability=num(parameters, self.BRANCH_PROBABILITY, context, 0.0, 1.0),
+            snap_distance=num(parameters, self.SNAP_DISTANCE, context, 0.0, 5000.0),
+            min_street_distance=num(parameters, self.MIN_STREET_DISTANCE, context, 0.0, 5000.0),
+            major_width=num(parameters, self.MAJOR_WIDTH, context, 0.0, 200.0),
+            minor_width=num(parameters, self.MINOR_WIDTH, context, 0.0, 200.0),
+            max_segments=int(qgis_io.check_number(
+                self.parameterAsInt(parameters, self.MAX_SEGMENTS, context), self.MAX_SEGMENTS,
+                1, 1000000)),
+            max_slope=num(parameters, self.MAX_SLOPE, context, 0.1, 100.0) / 100.0,
+            grow_major=self.parameterAsBoolean(parameters, self.GROW_MAJOR, context),
+        )
+        seed = self.parameterAsInt(parameters, self.SEED, context)
+        if seed < 0:
+            raise QgsProcessingException(f"Parameter {self.SEED} must not be negative.")
+        try:
+            settings = settings.validated()
+        except InputError as exc:
+            message = str(exc)
+            for engine_name, name in self.ENGINE_NAMES.items():  # say it in the toolbox's words
+                message = message.replace(engine_name, name)
+            raise QgsProcessingException(f"Invalid parameters: {message}.") from exc
+
+        sketch = qgis_io.read_source(self, parameters, self.MAJOR_ROADS, context, feedback,
+                                     kind="lines", target_crs=crs, optional=True, fields=[])
+        obstacles = qgis_io.read_source(self, parameters, self.OBSTACLES, context, feedback,
+                                        kind="polygons", target_crs=crs, optional=True, fields=[])
+        center = None
+        if parameters.get(self.CENTER) not in (None, ""):
+            point = self.parameterAsPoint(parameters, self.CENTER, context, crs)
+            center = (point.x(), point.y())
+        feedback.setProgress(5)
+
+        bounds = shapely.total_bounds(frame.geometry)
+        dem = None
+        dem_layer = self.parameterAsRasterLayer(parameters, self.DEM, context)
+        if dem_layer is not None:
+            cell = _raster_cell_size(dem_layer, crs, bounds, context)
+            dem = read_dem(dem_layer, crs, bounds, cell, feedback)
+            feedback.pushInfo(f"DEM resampled to {cell:.1f} m cells; maximum slope "
+                              f"{100 * settings.max_slope:g} %.")
+        density = None
+        density_layer = self.parameterAsRasterLayer(parameters, self.DENSITY, context)
+        if density_layer is not None:
+            cell = _raster_cell_size(density_layer, crs, bounds, context)
+            try:
+                density = read_dem(density_layer, crs, bounds, cell)
+            except QgsProcessingException as exc:
+                raise QgsProcessingException(
+                    f"Density raster '{density_layer.name()}' has no value over the boundary "
+                    "or cannot be reprojected: check that they overlap.") from exc
+        feedback.setProgress(10)
+
+        result = qgis_io.run_engine(
+            label, growth.grow_roads, frame.geometry, settings=settings,
+            major_roads=None if sketch is None else sketch.geometry, center=center, dem=dem,
+            obstacles=None if obstacles is None else obstacles.geometry, density=density,
+            seed=seed, progress=qgis_io.progress_for(feedback, 10, 90))
+        st = result.stats
+        feedback.pushInfo(
+            f"{st['segments']} segments grown ({st['major_segments']} major, "
+            f"{st['minor_segments']} minor) in {st['quarters']} quarters from "
+            f"{st['proposals']} proposals in {st['seconds']:.1f} s; output: "
+            f"{len(result.geometry)} planar edges.")
+        if st["rejected"]:
+            feedback.pushInfo("Proposals dropped by the local constraints: " + ", ".join(
+                f"{k} {v}" for k, v in st["rejected"].items()) + ".")
+        if st["capped"]:
+            feedback.pushWarning(f"Growth stopped at the cap of {settings.max_segments} "
+                                 f"segments ({self.MAX_SEGMENTS}); outer quarters may be empty.")
+        table = result.table()
+        table.insert(0, "edge_id", np.arange(1, len(table) + 1))
+        dest = qgis_io.write_sink(self, parameters, self.OUTPUT, context, result.geometry, table,
+                                  ROAD_FIELDS, QgsWkbTypes.LineString, frame.source_crs, crs,
+                                  feedback)
+        qgis_io.style_output(context, dest, "roads_by_level.qml")
+        feedback.setProgress(100)
+        return {self.OUTPUT: dest}

@@ -1,0 +1,303 @@
+"""urbansynth:subdivideparcels - blocks shrunk by their streets and subdivided into parcels."""
+import numpy as np
+from qgis.core import (
+    QgsProcessing,
+    QgsProcessingException,
+    QgsProcessingParameterBoolean,
+    QgsProcessingParameterEnum,
+    QgsProcessingParameterFeatureSink,
+    QgsProcessingParameterFeatureSource,
+    QgsProcessingParameterField,
+    QgsProcessingParameterNumber,
+    QgsWkbTypes,
+)
+
+from ..plugin import blocks, parcels, qgis_io, roads
+from .common import AlgorithmBase, drivable_lines
+
+
+class SubdivideParcels(AlgorithmBase):
+    BLOCKS = "BLOCKS"
+    ROADS = "ROADS"
+    STREET_WIDTH_FIELD = "STREET_WIDTH_FIELD"
+    METHOD = "METHOD"
+    MAX_AREA = "MAX_AREA"
+    MIN_AREA = "MIN_AREA"
+    MIN_WIDTH = "MIN_WIDTH"
+    LOT_WIDTH = "LOT_WIDTH"
+    IRREGULARITY = "IRREGULARITY"
+    STREET_WIDTH = "STREET_WIDTH"
+    FORCE_STREET_ACCESS = "FORCE_STREET_ACCESS"
+    SEED = "SEED"
+    OUTPUT = "OUTPUT"
+
+    MAX_AREA_LIMIT = 1e7
+    MAX_WIDTH_LIMIT = 1000.0
+
+    def name(self):
+        return "subdivideparcels"
+
+    def displayName(self):  # noqa: N802
+        return "Subdivide blocks into parcels"
+
+    def group(self):
+        return "Synthesis"
+
+    def groupId(self):  # noqa: N802
+        return "synthesis"
+
+    def shortHelpString(self):  # noqa: N802
+        return (
+            "Subdivides city blocks into building parcels (Scharl 2010, ch. 4.2.6). Blocks "
+            "come from a block layer (e.g. the output of 'Extract city blocks') or are "
+            "extracted from road lines; they are first shrunk by half the street width on "
+            "every side (per road with a width field), so parcels stop at the street's edge.\n\n"
+            "Recursive (Weber et al. 2009, CityEngine 'Recursive') cuts a lot perpendicular "
+            "to its long axis near the middle until it is under the maximum area, never "
+            "below the minimum area or width and, with 'Force street access', never cutting "
+            "a lot off the street. Skeleton (Vanegas et al. 2012, CityEngine 'Skeleton') "
+            "makes strips along each street and cuts them every lot width, so every parcel "
+            "has frontage; corner regions go to one street's strip.\n\n"
+            "Parcels get block_id, area_m2, frontage_m (length on the street), "
+            "has_street_access and Yang et al.'s (2013) quality: p_angle (mean deviation of "
+            "the corners from 90°), p_area (minimum bounding rectangle area / area) and "
+            "undesirable (p_angle > 15 or p_area > 1.2). Output is in the input layer's CRS."
+        )
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        # METHOD values in the order of the engine's registry, read when the algorithm is
+        # built: methods registered later are appended, so enum indices stay valid
+        self.method_keys = list(parcels.method_names())
+        self.add(QgsProcessingParameterFeatureSource(
+            self.BLOCKS, "Blocks", [QgsProcessing.TypeVectorPolygon], optional=True),
+            "Block polygons outlined by street centrelines, e.g. the output of 'Extract city "
+            "blocks' (its block_id is kept). Give either Blocks or Roads.")
+        self.add(QgsProcessingParameterFeatureSource(
+            self.ROADS, "Roads (instead of blocks)", [QgsProcessing.TypeVectorLine],
+            optional=True),
+            "Road centrelines: blocks are extracted from them as 'Extract city blocks' does "
+            "(OSM lines are filtered to drivable 'highway' classes; a layer without that field "
+            "uses every line), and each block is shrunk by the width of its own streets. "
+            "Give either Blocks or Roads.")
+        self.add(QgsProcessingParameterField(
+            self.STREET_WIDTH_FIELD, "Street width field (on roads)",
+            parentLayerParameterName=self.ROADS, type=QgsProcessingParameterField.Numeric,
+            optional=True),
+            "Full street width in metres per road line; roads with an empty value use the "
+            "street width below. Only with Roads.")
+        self.add(QgsProcessingParameterEnum(
+            self.METHOD, "Subdivision method",
+            options=[parcels.METHODS[k].label for k in self.method_keys], defaultValue=0),
+            "Recursive: split lots across their long axis until under the maximum area "
+            "(Scharl 4.2.6). Skeleton: strips along every street cut every lot width, every "
+            "parcel with street frontage (Vanegas et al. 2012).")
+        self.add(QgsProcessingParameterNumber(
+            self.MAX_AREA, "Maximum parcel area (m²)", QgsProcessingParameterNumber.Double,
+            defaultValue=parcels.DEFAULT_MAX_AREA, minValue=1.0, maxValue=self.MAX_AREA_LIMIT),
+            "Recursive: lots larger than this are split again. Skeleton: lots are made "
+            "narrower than the lot width to stay under it (never under the minimum width).")
+        self.add(QgsProcessingParameterNumber(
+            self.LOT_WIDTH, "Lot width along the street (m)", QgsProcessingParameterNumber.Double,
+            defaultValue=parcels.DEFAULT_LOT_WIDTH, minValue=0.1, maxValue=self.MAX_WIDTH_LIMIT),
+            "Skeleton: target frontage of a parcel (Yang et al. 2013 aim at 18 m).")
+        self.add(QgsProcessingParameterNumber(
+            self.IRREGULARITY, "Irregularity (0-1)", QgsProcessingParameterNumber.Double,
+            defaultValue=parcels.DEFAULT_IRREGULARITY, minValue=0.0, maxValue=1.0),
+            "0 gives regular lots. Recursive: cuts move up to 25 % of the lot length off the "
+            "middle and turn up to 15° off the perpendicular at 1. Skeleton: cuts move up to "
+            "40 % of a lot width at 1.")
+        self.add(QgsProcessingParameterNumber(
+            self.STREET_WIDTH, "Street width (m)", QgsProcessingParameterNumber.Double,
+            defaultValue=parcels.DEFAULT_STREET_WIDTH, minValue=0.0,
+            maxValue=self.MAX_WIDTH_LIMIT),
+            "Full width of the streets (blocks shrink by half of it on every side); with "
+            "Roads and a street width field, the width of roads without a value. 0 keeps "
+            "the blocks as they are.")
+        self.add(QgsProcessingParameterBoolean(
+            self.FORCE_STREET_ACCESS, "Force street access", defaultValue=True),
+            "Recursive: a cut that would leave a lot without street frontage is not made "
+            "(the lot stays larger). Any method: lots left without frontage are merged into "
+            "a neighbour. Off: recursive makes inner lots (Scharl's deleteInnerLots off).")
+        self.add(QgsProcessingParameterNumber(
+            self.SEED, "Random seed", QgsProcessingParameterNumber.Integer, defaultValue=1,
+            minValue=0),
+            "The same seed gives the same parcels; each block draws its own random numbers, "
+            "so a block's parcels do not change when other blocks are added.")
+        self.add(QgsProcessingParameterNumber(
+            self.MIN_AREA, "Minimum parcel area (m²)", QgsProcessingParameterNumber.Double,
+            defaultValue=parcels.DEFAULT_MIN_AREA, minValue=0.0, maxValue=self.MAX_AREA_LIMIT),
+            "No cut makes a parcel smaller; smaller skeleton pieces merge into a neighbour; "
+            "pieces of shrunk blocks smaller than this get no parcel.", advanced=True)
+        self.add(QgsProcessingParameterNumber(
+            self.MIN_WIDTH, "Minimum parcel width (m)", QgsProcessingParameterNumber.Double,
+            defaultValue=parcels.DEFAULT_MIN_WIDTH, minValue=0.0,
+            maxValue=self.MAX_WIDTH_LIMIT),
+            "No cut makes a parcel narrower (the short side of its minimum bounding "
+            "rectangle).", advanced=True)
+        self.add(QgsProcessingParameterFeatureSink(
+            self.OUTPUT, "Parcels", QgsProcessing.TypeVectorPolygon),
+            "Parcels with parcel_id, block_id, area_m2, frontage_m, has_street_access, "
+            "p_angle, p_area, undesirable and method, styled by Yang's quality.")
+
+    # ----------------------------------------------------------------------- checks
+
+    def _given(self, parameters, name):
+        value = parameters.get(name)
+        return value is not None and value != ""
+
+    def _input_error(self, parameters):
+        """A sentence for a wrong choice of inputs, or None."""
+        blocks_given = self._given(parameters, self.BLOCKS)
+        roads_given = self._given(parameters, self.ROADS)
+        if blocks_given and roads_given:
+            return ("Give either Blocks or Roads, not both: blocks are subdivided as they are, "
+                    "roads are first turned into blocks.")
+        if not blocks_given and not roads_given:
+            return "Give the Blocks to subdivide, or Roads to extract the blocks from."
+        if blocks_given and self._given(parameters, self.STREET_WIDTH_FIELD):
+            return "The street width field belongs to Roads; with Blocks use Street width."
+        return None
+
+    def checkParameterValues(self, parameters, context):  # noqa: N802
+        ok, message = super().checkParameterValues(parameters, context)
+        if not ok:
+            return ok, message
+        message = self._input_error(parameters)
+        return (False, message) if message else (True, "")
+
+    # ----------------------------------------------------------------------- run
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        message = self._input_error(parameters)
+        if message:
+            raise QgsProcessingException(message)
+        method = self.method_keys[self.parameterAsEnum(parameters, self.METHOD, context)]
+        number = {}
+        for name, lo, hi in ((self.MAX_AREA, 0.0, self.MAX_AREA_LIMIT),
+                             (self.MIN_AREA, 0.0, self.MAX_AREA_LIMIT),
+                             (self.MIN_WIDTH, 0.0, self.MAX_WIDTH_LIMIT),
+                             (self.LOT_WIDTH, 0.0, self.MAX_WIDTH_LIMIT),
+                             (self.IRREGULARITY, 0.0, 1.0),
+                             (self.STREET_WIDTH, 0.0, self.MAX_WIDTH_LIMIT)):
+            number[name] = qgis_io.check_number(
+                self.parameterAsDouble(parameters, name, context), name, lo, hi)
+        if number[self.MAX_AREA] <= number[self.MIN_AREA]:
+            raise QgsProcessingException(
+                f"The maximum parcel area ({number[self.MAX_AREA]:g} m²) must be larger than "
+                f"the minimum parcel area ({number[self.MIN_AREA]:g} m²).")
+        settings = parcels.SubdivisionSettings(
+            max_area=number[self.MAX_AREA], min_area=number[self.MIN_AREA],
+            min_width=number[self.MIN_WIDTH], lot_width=number[self.LOT_WIDTH],
+            irregularity=number[self.IRREGULARITY],
+            force_street_access=self.parameterAsBoolean(parameters, self.FORCE_STREET_ACCESS,
+                                                        context))
+        qgis_io.run_engine("Parameters", settings.validate)
+        seed = int(qgis_io.check_number(self.parameterAsInt(parameters, self.SEED, context),
+                                        self.SEED, 0))
+        street_width = number[self.STREET_WIDTH]
+
+        if self._given(parameters, self.BLOCKS):
+            frame, block_geoms, block_ids, road_lines, road_widths = \
+                self._blocks(parameters, context, feedback)
+        else:
+            frame, block_geoms, block_ids, road_lines, road_widths = \
+                self._blocks_from_roads(parameters, context, feedback)
+
+        result = qgis_io.run_engine(
+            frame.name, parcels.subdivide_blocks, block_geoms, method, settings, seed=seed,
+            block_ids=block_ids, street_width=street_width, roads=road_lines,
+            road_widths=road_widths, progress=qgis_io.progress_for(feedback, 30, 90))
+        self._log(result.stats, method, feedback)
+        if len(result.geometry) == 0:
+            raise QgsProcessingException(
+                f"{frame.name}: no parcel: every block is narrower than its streets or smaller "
+                "than the minimum parcel area (lower the street width or the minimum area).")
+        dest = qgis_io.write_sink(
+            self, parameters, self.OUTPUT, context, result.geometry, result.table,
+            parcels.PARCEL_FIELDS, QgsWkbTypes.Polygon, frame.source_crs, frame.crs, feedback)
+        qgis_io.style_output(context, dest, "parcels_by_quality.qml")
+        feedback.setProgress(100)
+        return {self.OUTPUT: dest}
+
+    # ----------------------------------------------------------------------- helpers
+
+    def _blocks(self, parameters, context, feedback):
+        frame = qgis_io.read_source(self, parameters, self.BLOCKS, context, feedback,
+                                    kind="polygons", fields=["block_id"])
+        ids = None
+        if "block_id" in frame.attributes:
+            values = frame.attributes["block_id"].to_numpy(dtype=object)
+            try:
+                numbers = np.array([int(v) for v in values], dtype=np.int64)
+            except (TypeError, ValueError):
+                numbers = None
+            if numbers is not None and len(np.unique(numbers)) == len(numbers):
+                ids = numbers
+            else:
+                feedback.pushInfo(f"{frame.name}: block_id is not a unique whole number per "
+                                  "block; blocks are numbered 1..n in layer order instead.")
+        feedback.pushInfo(f"{len(frame)} blocks read from {frame.name}; every block edge is "
+                          "taken as a street.")
+        feedback.setProgress(30)
+        return frame, frame.geometry, ids, None, None
+
+    def _blocks_from_roads(self, parameters, context, feedback):
+        width_field = self.parameterAsString(parameters, self.STREET_WIDTH_FIELD, context)
+        frame = qgis_io.read_source(
+            self, parameters, self.ROADS, context, feedback, kind="lines",
+            fields=[width_field, "highway", "other_tags"],
+            required_fields=[width_field] if width_field else ())
+        frame, road_class = drivable_lines(frame, None, set(roads.DRIVABLE_CLASSES), feedback)
+        widths = None
+        if width_field:
+            widths = np.array([_number(v) for v in frame.attributes[width_field]], dtype=float)
+            if (widths < 0).any():
+                raise QgsProcessingException(
+                    f"Layer {frame.name}: {int((widths < 0).sum())} roads have a negative "
+                    f"street width in field '{width_field}'.")
+            n_missing = int(np.isnan(widths).sum())
+            if n_missing:
+                feedback.pushInfo(f"{frame.name}: {n_missing} roads have no width in "
+                                  f"'{width_field}' and use the street width.")
+        graph = qgis_io.run_engine(
+            frame.name, roads.clean_network, frame.geometry, road_class, None, None,
+            merge_degree2=False, progress=qgis_io.progress_for(feedback, 5, 20))
+        extraction = qgis_io.run_engine(
+            frame.name, blocks.extract_blocks, graph,
+            progress=qgis_io.progress_for(feedback, 20, 30))
+        stats = extraction.stats
+        feedback.pushInfo(
+            f"{stats['n_blocks']} blocks from {stats['n_faces']} closed faces of the roads "
+            f"({stats['n_small']} too small and {stats['n_thin']} too thin dropped, as in "
+            "'Extract city blocks').")
+        road_widths = None if widths is None else widths[graph.source]
+        return (frame, extraction.geometry, extraction.table["block_id"].to_numpy(),
+                graph.geometry, road_widths)
+
+    @staticmethod
+    def _log(stats, method, feedback):
+        feedback.pushInfo(f"{stats['n_lots']} parcels ({method}) in {stats['n_blocks']} blocks.")
+        if stats["n_empty_blocks"]:
+            feedback.pushInfo(f"{stats['n_empty_blocks']} blocks are narrower than their "
+                              "streets (or smaller than the minimum area after shrinking) and "
+                              "get no parcel.")
+        if stats["n_over_max_area"]:
+            feedback.pushInfo(f"{stats['n_over_max_area']} parcels stay larger than the maximum "
+                              "area: every cut would have made a piece too small, too thin or "
+                              "without street access.")
+        if stats["n_without_access"]:
+            feedback.pushInfo(f"{stats['n_without_access']} parcels have no street frontage.")
+        if stats["n_merged_for_access"]:
+            feedback.pushInfo(f"{stats['n_merged_for_access']} lots without street frontage "
+                              "were merged into a neighbour.")
+        feedback.pushInfo(f"{stats['n_undesirable']} parcels are undesirable by Yang's "
+                          "criteria (p_angle > 15° or p_area > 1.2).")
+
+
+def _number(value):
+    """A width value as a float; empty or non-numeric values are NaN (use the default)."""
+    try:
+        out = float(value)
+    except (TypeError, ValueError):
+        return float("nan")
+    return out

@@ -1,0 +1,173 @@
+"""urbansynth:growroads through real QGIS (processing.run and qgis_process.bin)."""
+import json
+
+import numpy as np
+import pytest
+import shapely
+
+from conftest import run_qgis_process
+from helpers import assert_planar
+
+# a Helsinki-sized 1 km x 1 km square in ETRS-TM35FIN (EPSG:3067), central Helsinki
+X0, Y0 = 385000.0, 6671000.0
+SQUARE = f"POLYGON(({X0} {Y0}, {X0 + 1000} {Y0}, {X0 + 1000} {Y0 + 1000}, {X0} {Y0 + 1000}, " \
+         f"{X0} {Y0}))"
+
+
+def _layer(wkts, geometry="Polygon", crs="EPSG:3067", name="layer"):
+    from qgis.core import QgsFeature, QgsGeometry, QgsVectorLayer
+
+    layer = QgsVectorLayer(f"{geometry}?crs={crs}", name, "memory")
+    features = []
+    for wkt in wkts:
+        f = QgsFeature()
+        f.setGeometry(QgsGeometry.fromWkt(wkt))
+        features.append(f)
+    layer.dataProvider().addFeatures(features)
+    return layer
+
+
+def _features(layer):
+    feats = list(layer.getFeatures())
+    fields = [f.name() for f in layer.fields()]
+    rows = [dict(zip(fields, f.attributes())) for f in feats]
+    geoms = shapely.from_wkb([bytes(f.geometry().asWkb()) for f in feats])
+    return rows, geoms
+
+
+def _write_geotiff(path, array, x0, y0, cell, epsg=3067):
+    from osgeo import gdal, osr
+
+    rows, cols = array.shape
+    ds = gdal.GetDriverByName("GTiff").Create(str(path), cols, rows, 1, gdal.GDT_Float32)
+    ds.SetGeoTransform((x0, cell, 0.0, y0, 0.0, -cell))
+    srs = osr.SpatialReference()
+    srs.ImportFromEPSG(epsg)
+    ds.SetProjection(srs.ExportToWkt())
+    ds.GetRasterBand(1).WriteArray(array)
+    ds.FlushCache()
+    ds = None
+    return str(path)
+
+
+@pytest.mark.parametrize("pattern", [0, 1, 2])
+def test_patterns_on_a_helsinki_square(qgis_processing, pattern):
+    out = qgis_processing.run("urbansynth:growroads", {
+        "BOUNDARY": _layer([SQUARE]), "MAJOR_PATTERN": pattern, "MINOR_PATTERN": pattern,
+        "SEED": 3, "OUTPUT": "memory:"})
+    layer = out["OUTPUT"]
+    assert layer.crs().authid() == "EPSG:3067"
+    rows, geoms = _features(layer)
+    assert len(rows) > 150
+    assert [f.name() for f in layer.fields()] == ["edge_id", "level", "road_class", "pattern",
+                                                  "width_m", "length_m"]
+    assert {r["level"] for r in rows} == {0, 1}
+    assert all(r["road_class"] == ("major" if r["level"] == 0 else "minor") for r in rows)
+    assert {r["pattern"] for r in rows} == {["organic", "grid", "radial"][pattern]}
+    np.testing.assert_allclose([r["length_m"] for r in rows], shapely.length(geoms), rtol=1e-9)
+    square = shapely.from_wkt(SQUARE)
+    assert shapely.covers(square.buffer(1e-6), geoms).all()
+    assert_planar(geoms)
+
+
+def test_geographic_boundary_terrain_obstacles_density_sketch(qgis_processing, tmp_path):
+    """Every optional input at once; a WGS 84 boundary comes back in WGS 84."""
+    from qgis.core import QgsCoordinateReferenceSystem, QgsCoordinateTransform, QgsProject
+
+    to_wgs = QgsCoordinateTransform(QgsCoordinateReferenceSystem("EPSG:3067"),
+                                    QgsCoordinateReferenceSystem("EPSG:4326"),
+                                    QgsProject.instance())
+    from qgis.core import QgsGeometry
+
+    g = QgsGeometry.fromWkt(SQUARE)
+    g.transform(to_wgs)
+    boundary = _layer([g.asWkt(12)], crs="EPSG:4326")
+    # a 25 m high hill (the DEM is in EPSG:3067, the boundary in WGS 84)
+    cell = 10.0
+    xs = X0 - 100 + cell * (np.arange(120) + 0.5)
+    ys = Y0 + 1100 - cell * (np.arange(120) + 0.5)
+    x, y = np.meshgrid(xs, ys)
+    hill = 60.0 * np.exp(-((x - X0 - 300) ** 2 + (y - Y0 - 650) ** 2) / (2 * 180.0 ** 2))
+    dem = _write_geotiff(tmp_path / "dem.tif", hill, X0 - 100, Y0 + 1100, cell)
+    density = _write_geotiff(tmp_path / "density.tif", 1.0 + (x - X0) / 1000.0,
+                             X0 - 100, Y0 + 1100, cell)
+    lake = shapely.Point(X0 + 700, Y0 + 350).buffer(150)
+    sketch = f"LINESTRING({X0 - 50} {Y0 + 500}, {X0 + 1050} {Y0 + 520})"
+    out = qgis_processing.run("urbansynth:growroads", {
+        "BOUNDARY": boundary, "MAJOR_ROADS": _layer([sketch], "LineString"),
+        "OBSTACLES": _layer([lake.wkt]), "DEM": dem, "MAX_SLOPE": 8.0, "DENSITY": density,
+        "MAJOR_PATTERN": 0, "MINOR_PATTERN": 2, "CENTER": f"{X0 + 500},{Y0 + 500} [EPSG:3067]",
+        "SEED": 2, "OUTPUT": "memory:"})
+    layer = out["OUTPUT"]
+    assert layer.crs().authid() == "EPSG:4326"
+    rows, geoms = _features(layer)
+    assert len(rows) > 100
+    assert {r["pattern"] for r in rows} == {"sketch", "organic", "radial"}
+    # lengths are metres, not degrees
+    assert 20 < np.median([r["length_m"] for r in rows]) < 250
+    # check the constraints in the metric CRS
+    from urban_synthesis.plugin.growth import segment_slopes
+    from urban_synthesis.plugin.shape_context import DemGrid
+
+    back = QgsCoordinateTransform(QgsCoordinateReferenceSystem("EPSG:4326"),
+                                  QgsCoordinateReferenceSystem("EPSG:3067"),
+                                  QgsProject.instance())
+    metric = []
+    for f in layer.getFeatures():
+        fg = f.geometry()
+        fg.transform(back)
+        metric.append(shapely.from_wkb(bytes(fg.asWkb())))
+    metric = np.array(metric, dtype=object)
+    grown = np.array([r["pattern"] != "sketch" for r in rows])
+    with np.errstate(invalid="ignore"):  # GEOS's empty results carry a NaN z
+        inside = shapely.length(shapely.intersection(metric[grown], lake.buffer(-0.01)))
+    assert inside.max() < 1e-6
+    grid = DemGrid(hill, (X0 - 100, cell, 0.0, Y0 + 1100, 0.0, -cell))
+    # the algorithm resamples the DEM with GDAL: allow for its interpolation
+    assert segment_slopes(metric[grown], grid).max() <= 0.08 * 1.05
+
+
+@pytest.mark.parametrize("params, match", [
+    ({"BOUNDARY": "empty"}, "empty"),
+    ({"BOUNDARY": "points"}, "BOUNDARY|polygons"),
+    ({"MINOR_SEGMENT_LENGTH": 100000.0}, "MINOR_SEGMENT_LENGTH"),
+    ({"MAX_SLOPE": 0.0}, "MAX_SLOPE"),
+    ({"SNAP_DISTANCE": 45.0}, "SNAP_DISTANCE"),
+    ({"BOUNDARY": "tiny"}, "too small"),
+    ({"OBSTACLES": "cover"}, "obstacles cover the whole boundary"),
+])
+def test_bad_input(qgis_processing, params, match):
+    from qgis.core import QgsProcessingException
+
+    layers = {
+        "empty": lambda: _layer([]),
+        "points": lambda: _layer([f"POINT({X0} {Y0})"], "Point"),
+        "tiny": lambda: _layer([f"POLYGON(({X0} {Y0}, {X0 + 5} {Y0}, {X0 + 5} {Y0 + 5}, "
+                                f"{X0} {Y0}))"]),
+        "cover": lambda: _layer([shapely.from_wkt(SQUARE).buffer(5).wkt]),
+    }
+    p = {"BOUNDARY": _layer([SQUARE]), "OUTPUT": "memory:"}
+    for k, v in params.items():
+        p[k] = layers[v]() if isinstance(v, str) else v
+    with pytest.raises(QgsProcessingException, match=match):
+        qgis_processing.run("urbansynth:growroads", p)
+
+
+def test_qgis_process_run(tmp_path):
+    boundary = tmp_path / "boundary.geojson"
+    boundary.write_text(json.dumps({
+        "type": "FeatureCollection",
+        "crs": {"type": "name", "properties": {"name": "urn:ogc:def:crs:EPSG::3067"}},
+        "features": [{"type": "Feature", "properties": {},
+                      "geometry": shapely.geometry.mapping(shapely.from_wkt(SQUARE))}]}))
+    out = tmp_path / "roads.gpkg"
+    code, result, err = run_qgis_process("growroads", {
+        "BOUNDARY": str(boundary), "MAJOR_PATTERN": 2, "MINOR_PATTERN": 1, "SEED": 4,
+        "OUTPUT": str(out)})
+    assert code == 0, err
+    assert result is not None and result["results"]["OUTPUT"].startswith(str(out))
+    import pyogrio
+
+    info = pyogrio.read_info(out)
+    assert info["features"] > 150
+    assert {"level", "road_class", "pattern", "length_m"} <= set(info["fields"])

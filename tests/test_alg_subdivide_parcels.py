@@ -1,0 +1,172 @@
+"""urbansynth:subdivideparcels through real QGIS (processing.run and qgis_process.bin)."""
+import numpy as np
+import pytest
+import shapely
+
+from conftest import bubenec_layer, run_qgis_process
+from urban_synthesis.plugin import parcels
+
+ALG = "urbansynth:subdivideparcels"
+FIELDS = [name for name, _ in parcels.PARCEL_FIELDS]
+#: Web Mercator areas are 1 / cos²(latitude) too large; Bubeneč lies at 50.1° N
+MERCATOR_AREA = 1.0 / np.cos(np.radians(50.1)) ** 2
+
+
+def _features(layer):
+    from qgis.PyQt.QtCore import QVariant
+
+    names = [f.name() for f in layer.fields()]
+    feats = list(layer.getFeatures())
+    rows = [{k: None if isinstance(v, QVariant) and v.isNull() else v
+             for k, v in zip(names, f.attributes())} for f in feats]
+    geoms = shapely.from_wkb([bytes(f.geometry().asWkb()) for f in feats])
+    return rows, geoms
+
+
+def _memory_layer(kind, wkts=(), crs="EPSG:32633", fields="", rows=None):
+    from qgis.core import QgsFeature, QgsGeometry, QgsVectorLayer
+
+    layer = QgsVectorLayer(f"{kind}?crs={crs}{fields}", "test input", "memory")
+    feats = []
+    for i, wkt in enumerate(wkts):
+        f = QgsFeature(layer.fields())
+        f.setGeometry(QgsGeometry.fromWkt(wkt))
+        if rows is not None:
+            f.setAttributes(list(rows[i]))
+        feats.append(f)
+    layer.dataProvider().addFeatures(feats)
+    return layer
+
+
+@pytest.fixture(scope="module")
+def bubenec_blocks(qgis_processing):
+    out = qgis_processing.run("urbansynth:extractblocks", {
+        "ROADS": bubenec_layer("streets"), "OUTPUT": "memory:"})
+    return _features(out["OUTPUT"])
+
+
+@pytest.mark.parametrize("method", [0, 1], ids=["recursive", "skeleton"])
+def test_bubenec_from_roads(qgis_processing, bubenec_blocks, method):
+    out = qgis_processing.run(ALG, {"ROADS": bubenec_layer("streets"), "METHOD": method,
+                                    "SEED": 3, "OUTPUT": "memory:"})
+    layer = out["OUTPUT"]
+    assert layer.crs().authid() == "EPSG:3857"  # back in the input CRS
+    assert [f.name() for f in layer.fields()] == FIELDS
+    rows, geoms = _features(layer)
+    assert 50 < len(rows) < 200
+    assert shapely.is_valid(geoms).all()
+    assert [r["parcel_id"] for r in rows] == list(range(1, len(rows) + 1))
+    assert {r["method"] for r in rows} == {parcels.method_names()[method]}
+    # metric areas and lengths, computed in UTM, not in Web Mercator
+    area = np.array([r["area_m2"] for r in rows])
+    assert np.allclose(area * MERCATOR_AREA, shapely.area(geoms), rtol=0.01)
+    assert area.min() >= parcels.DEFAULT_MIN_AREA - 1e-6
+    # every parcel with street frontage (skeleton by construction, recursive with the
+    # default FORCE_STREET_ACCESS), inside the block of its block_id, 6 m off the streets
+    assert all(r["has_street_access"] and r["frontage_m"] >= parcels.MIN_FRONTAGE for r in rows)
+    block_rows, block_geoms = bubenec_blocks
+    by_id = {r["block_id"]: g for r, g in zip(block_rows, block_geoms)}
+    assert {r["block_id"] for r in rows} == set(by_id)
+    for r, g in zip(rows, geoms):
+        assert shapely.within(g, by_id[r["block_id"]])
+    for r in rows:
+        assert isinstance(r["undesirable"], bool)
+        assert r["undesirable"] == (r["p_angle"] > 15 or r["p_area"] > 1.2)
+
+
+def test_blocks_input_keeps_block_ids_and_seed(qgis_processing):
+    blocks = qgis_processing.run("urbansynth:extractblocks", {
+        "ROADS": bubenec_layer("streets"), "OUTPUT": "memory:"})["OUTPUT"]
+    params = {"BLOCKS": blocks, "METHOD": 0, "IRREGULARITY": 0.8, "MAX_AREA": 600,
+              "STREET_WIDTH": 10, "OUTPUT": "memory:"}
+    first = _features(qgis_processing.run(ALG, dict(params, SEED=5))["OUTPUT"])
+    again = _features(qgis_processing.run(ALG, dict(params, SEED=5))["OUTPUT"])
+    other = _features(qgis_processing.run(ALG, dict(params, SEED=6))["OUTPUT"])
+    assert shapely.to_wkb(first[1]).tolist() == shapely.to_wkb(again[1]).tolist()
+    assert shapely.to_wkb(first[1]).tolist() != shapely.to_wkb(other[1]).tolist()
+    assert {r["block_id"] for r in first[0]} == set(range(1, 8))
+    area = np.array([r["area_m2"] for r in first[0]])
+    # recursive splits until under MAX_AREA, except where a cut would cut a lot off the street
+    assert np.mean(area <= 600 * 1.001) > 0.8
+    assert all(r["has_street_access"] for r in first[0])
+
+
+def test_street_width_field(qgis_processing):
+    """Per-road widths: the two 200 m roads at y = 0 and y = 200 are 20 m wide."""
+    wkts = [f"LINESTRING (0 {y}, 200 {y})" for y in (0, 100, 200)] + \
+        [f"LINESTRING ({x} 0, {x} 200)" for x in (0, 100, 200)]
+    roads = _memory_layer("LineString", wkts, fields="&field=width:double",
+                          rows=[(20.0,), (None,), (20.0,), (None,), (None,), (None,)])
+    out = qgis_processing.run(ALG, {"ROADS": roads, "STREET_WIDTH_FIELD": "width",
+                                    "STREET_WIDTH": 8, "METHOD": 1, "OUTPUT": "memory:"})
+    rows, geoms = _features(out["OUTPUT"])
+    assert out["OUTPUT"].crs().authid() == "EPSG:32633"
+    per_block = {}
+    for r in rows:
+        per_block[r["block_id"]] = per_block.get(r["block_id"], 0.0) + r["area_m2"]
+    # every block: 100 m minus 4 + 4 m across, 100 m minus 10 (20 m road) + 4 m along
+    assert sorted(per_block) == [1, 2, 3, 4]
+    assert all(a == pytest.approx(92 * 86, rel=1e-4) for a in per_block.values())
+    assert shapely.is_valid(geoms).all()
+
+
+def test_bad_input(qgis_processing):
+    from qgis.core import QgsProcessingException
+
+    def fails(params, match):
+        with pytest.raises(QgsProcessingException, match=match):
+            qgis_processing.run(ALG, dict(params, OUTPUT="memory:"))
+
+    streets = bubenec_layer("streets")
+    fails({}, "Give the Blocks to subdivide, or Roads")
+    fails({"ROADS": streets, "BLOCKS": bubenec_layer("plots")}, "not both")
+    fails({"ROADS": streets, "MAX_AREA": 100, "MIN_AREA": 200}, "must be larger than")
+    fails({"ROADS": streets, "LOT_WIDTH": 5, "MIN_WIDTH": 8}, "lot width")
+    fails({"ROADS": _memory_layer("LineString")}, "empty")
+    fails({"ROADS": bubenec_layer("buildings")}, "has polygons; lines are needed")
+    fails({"BLOCKS": streets}, "has lines; polygons are needed")
+    negative = _memory_layer("LineString", ["LINESTRING (0 0, 100 0)"],
+                             fields="&field=width:double", rows=[(-4.0,)])
+    fails({"ROADS": negative, "STREET_WIDTH_FIELD": "width"}, "negative street width")
+    fails({"BLOCKS": bubenec_layer("plots"), "STREET_WIDTH_FIELD": "ID"}, "belongs to Roads")
+    fails({"ROADS": _memory_layer("LineString", ["LINESTRING (0 0, 100 0)"])},
+          "no closed block")
+    fails({"BLOCKS": _memory_layer("Polygon", ["POLYGON ((0 0, 8 0, 8 100, 0 100, 0 0))"])},
+          "no parcel")
+
+
+def test_qgis_process_run(tmp_path):
+    """One real qgis_process.bin run: exit code 0 (no native-library crash at exit)."""
+    target = tmp_path / "parcels.gpkg"
+    code, out, err = run_qgis_process("subdivideparcels", {
+        "ROADS": bubenec_layer("streets"), "METHOD": 1, "MAX_AREA": 800, "SEED": 2,
+        "OUTPUT": str(target)})
+    assert code == 0, err
+    assert out is not None and target.exists()
+    import pyogrio
+
+    df = pyogrio.read_dataframe(target)
+    assert 60 < len(df) < 200 and list(df.columns[:len(FIELDS)]) == FIELDS
+    assert df.has_street_access.all()
+    # skeleton lots are narrowed to stay under MAX_AREA; corner lots take the corner too
+    assert df.area_m2.median() < 800 and (df.area_m2 <= 800 * 1.001).mean() > 0.75
+
+
+def test_quality_style(qgis_app):
+    """The shipped style colours parcels by Yang's criteria (Fig. 12: good / undesirable)."""
+    from pathlib import Path
+
+    from qgis.core import QgsRuleBasedRenderer, QgsVectorLayer
+
+    qml = Path(parcels.__file__).resolve().parents[1] / "resources" / "styles" / \
+        "parcels_by_quality.qml"
+    layer = QgsVectorLayer("Polygon?field=undesirable:boolean&field=has_street_access:boolean",
+                           "parcels", "memory")
+    message, ok = layer.loadNamedStyle(str(qml))
+    assert ok, message
+    renderer = layer.renderer()
+    assert isinstance(renderer, QgsRuleBasedRenderer)
+    rules = renderer.rootRule().children()
+    assert [r.filterExpression() for r in rules[:2]] == [
+        '"undesirable" AND "has_street_access"', 'NOT "undesirable" AND "has_street_access"']
+    assert rules[0].symbol().color().name() != rules[1].symbol().color().name()
