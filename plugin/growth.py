@@ -21,8 +21,15 @@ network from seed segments with a priority queue of road *proposals*:
 The network grows in two stages (sec. 4.2): major roads over the whole boundary, then the
 quarters, the faces of the major network (sec. 4.2.4), are filled with minor roads. Scharl
 closes the outskirts with a bulged convex hull (sec. 4.2.5) so that minor roads also reach
-the city edge; here the boundary itself plays that role: the outskirts are the boundary
-minus the major faces, one more quarter per connected piece, clipped like the others.
+the city edge; here the boundary itself plays that role: the quarters are the faces of the
+major roads together with the boundary's rings, so the outskirts (the boundary minus the
+major faces) become quarters too, split where major roads reach the boundary. Each quarter
+gets a seed street at its barycentre (sec. 4.2.1); places left farther than
+``GAP_FACTOR`` segment lengths from every road get further seeds (Scharl's random fallback
+seeds, scored by their distance to the roads).
+
+Slopes are exact for the bilinear DEM surface (:func:`segment_slopes`): no sampling of a
+grown segment, at any spacing, finds a grade over ``max_slope``.
 
 Proposals never test all segments pairwise: segments are kept in a uniform grid hash
 (a dict of cell -> segment ids, cell size about one minor segment), and every proposal

@@ -192,8 +192,9 @@ class GrowRoads(AlgorithmBase):
             "are filled first).", advanced=True)
         self.add(QgsProcessingParameterRasterLayer(
             self.DEM, "Elevation model (optional)", optional=True),
-            "A DEM in any CRS: grown segments steeper than the maximum slope turn (by up to "
-            "45°) or are dropped.")
+            "A DEM in any CRS, resampled bilinearly to the boundary's working CRS: grown "
+            "segments steeper than the maximum slope turn (by up to 45°) or are dropped. "
+            "Areas without heights count as flat.")
         self.add(QgsProcessingParameterNumber(
             self.MAX_SLOPE, "Maximum slope (%)", QgsProcessingParameterNumber.Double,
             defaultValue=100 * d.max_slope, minValue=0.1, maxValue=100.0),
