@@ -65,7 +65,7 @@ from .shape_context import DemGrid
 __all__ = [
     "PATTERNS", "MAJOR", "MINOR", "ROAD_CLASSES", "MIN_ANGLE", "MAX_DEGREE", "GAP_FACTOR",
     "GrowthSettings", "GrowthResult", "grow_roads", "segment_slopes", "chord_slopes",
-    "network_statistics",
+    "network_statistics", "mask_polygons",
 ]
 
 #: Street patterns of Scharl sec. 4.2.2 ("basic" is called organic here).
@@ -236,6 +236,35 @@ def _as_grid(raster, what: str) -> Optional[DemGrid]:
     except (TypeError, ValueError):
         raise InputError(f"the {what} must be a DemGrid or (array, geotransform)") from None
     return DemGrid(np.asarray(array, dtype=np.float64), geotransform)
+
+
+def mask_polygons(mask: np.ndarray, geotransform) -> np.ndarray:
+    """Polygons covering the true cells of a raster mask (an obstacle raster).
+
+    Runs of true cells in each row become one rectangle (numpy run-length coding), and the
+    rectangles are unioned: far fewer geometries than one box per cell.
+
+    Parameters
+    ----------
+    mask : (rows, cols) bool array
+    geotransform : GDAL geotransform (x0, dx, 0, y0, 0, dy) of the grid (north up)
+
+    Returns
+    -------
+    ndarray of Polygon (empty when no cell is set)
+    """
+    mask = np.asarray(mask, dtype=bool)
+    if not mask.any():
+        return np.empty(0, dtype=object)
+    x0, dx, _, y0, _, dy = geotransform
+    padded = np.pad(mask, ((0, 0), (1, 1))).astype(np.int8)
+    change = np.diff(padded, axis=1)
+    rows_s, cols_s = np.nonzero(change == 1)   # a run starts at this column
+    rows_e, cols_e = np.nonzero(change == -1)  # and ends before this one
+    # np.nonzero walks row by row, so starts and ends pair up in order
+    boxes = shapely.box(x0 + cols_s * dx, y0 + rows_s * dy, x0 + cols_e * dx, y0 + (rows_e + 1) * dy)
+    merged = shapely.union_all(boxes)
+    return shapely.get_parts(merged)
 
 
 def _as_area(geoms, what: str, required: bool):

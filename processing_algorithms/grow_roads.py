@@ -66,6 +66,7 @@ class GrowRoads(AlgorithmBase):
     DEM = "DEM"
     MAX_SLOPE = "MAX_SLOPE"
     OBSTACLES = "OBSTACLES"
+    OBSTACLE_RASTER = "OBSTACLE_RASTER"
     DENSITY = "DENSITY"
     SEED = "SEED"
     OUTPUT = "OUTPUT"
@@ -205,6 +206,10 @@ class GrowRoads(AlgorithmBase):
             "Water, parks, protected land: no grown road enters them; streets are shortened "
             "or turn away.")
         self.add(QgsProcessingParameterRasterLayer(
+            self.OBSTACLE_RASTER, "Obstacle raster (optional)", optional=True),
+            "A raster in any CRS whose cells with a value above 0 are obstacles (a water or "
+            "land-use mask); used together with the obstacle polygons.")
+        self.add(QgsProcessingParameterRasterLayer(
             self.DENSITY, "Population density (optional)", optional=True),
             "Any density raster (normalised by its maximum): the first seed goes to the "
             "densest place near the centre, major roads head for population, and growth, "
@@ -285,12 +290,32 @@ class GrowRoads(AlgorithmBase):
                 raise QgsProcessingException(
                     f"Density raster '{density_layer.name()}' has no value over the boundary "
                     "or cannot be reprojected: check that they overlap.") from exc
+        obstacle_raster = self.parameterAsRasterLayer(parameters, self.OBSTACLE_RASTER, context)
+        if obstacle_raster is not None:
+            cell = _raster_cell_size(obstacle_raster, crs, bounds, context)
+            try:
+                grid = read_dem(obstacle_raster, crs, bounds, cell)
+            except QgsProcessingException as exc:
+                raise QgsProcessingException(
+                    f"Obstacle raster '{obstacle_raster.name()}' has no value over the boundary "
+                    "or cannot be reprojected: check that they overlap.") from exc
+            with np.errstate(invalid="ignore"):
+                cells = growth.mask_polygons(np.isfinite(grid.array) & (grid.array > 0),
+                                             grid.geotransform)
+            feedback.pushInfo(f"Obstacle raster: {len(cells)} obstacle areas.")
+            if len(cells):
+                obstacles_geoms = cells if obstacles is None else \
+                    np.concatenate([obstacles.geometry, cells])
+            else:
+                obstacles_geoms = None if obstacles is None else obstacles.geometry
+        else:
+            obstacles_geoms = None if obstacles is None else obstacles.geometry
         feedback.setProgress(10)
 
         result = qgis_io.run_engine(
             label, growth.grow_roads, frame.geometry, settings=settings,
             major_roads=None if sketch is None else sketch.geometry, center=center, dem=dem,
-            obstacles=None if obstacles is None else obstacles.geometry, density=density,
+            obstacles=obstacles_geoms, density=density,
             seed=seed, progress=qgis_io.progress_for(feedback, 10, 90))
         st = result.stats
         feedback.pushInfo(

@@ -171,3 +171,22 @@ def test_qgis_process_run(tmp_path):
     info = pyogrio.read_info(out)
     assert info["features"] > 150
     assert {"level", "road_class", "pattern", "length_m"} <= set(info["fields"])
+
+
+def test_obstacle_raster_keeps_roads_out_of_masked_cells(qgis_processing, tmp_path):
+    """Cells above 0 in an obstacle raster are obstacles, like obstacle polygons."""
+    square = shapely.from_wkt(SQUARE)
+    x0, y0, x1, y1 = square.bounds
+    cell = 20.0
+    cols, rows = int((x1 - x0) / cell), int((y1 - y0) / cell)
+    mask = np.zeros((rows, cols), dtype=np.float32)
+    mask[rows // 4: rows // 2, cols // 4: 3 * cols // 4] = 1.0  # a lake across the middle
+    tif = _write_geotiff(tmp_path / "water.tif", mask, x0, y1, cell)
+    out = qgis_processing.run("urbansynth:growroads", {
+        "BOUNDARY": _layer([SQUARE]), "OBSTACLE_RASTER": tif, "SEED": 2, "OUTPUT": "memory:"})
+    _, geoms = _features(out["OUTPUT"])
+    assert len(geoms) > 50
+    lake = shapely.box(x0 + cols // 4 * cell, y1 - rows // 2 * cell,
+                       x0 + 3 * cols // 4 * cell, y1 - rows // 4 * cell)
+    inside = shapely.length(shapely.intersection(geoms, lake.buffer(-0.5)))
+    assert inside.sum() < 1e-6
