@@ -44,6 +44,8 @@ test: setup
 
 bench: setup $(VENV)/.bench-installed
 	QT_QPA_PLATFORM=offscreen $(PY) tests/benchmarks/bench_foundation.py
+	QT_QPA_PLATFORM=offscreen $(PY) tests/benchmarks/bench_growth.py
+	QT_QPA_PLATFORM=offscreen $(PY) tests/benchmarks/bench_parcels.py
 
 package:
 	@mkdir -p build/dist
