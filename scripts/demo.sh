@@ -34,6 +34,12 @@ run layoutmetrics "ROADS=$GPKG|layername=roads" "BLOCKS=$GPKG|layername=blocks" 
     "BUILDINGS=$GPKG|layername=buildings" "EXAMPLE_ROADS=$BUB|layername=streets" \
     "EXAMPLE_BUILDINGS=$BUB|layername=buildings" \
     "OUTPUT=$(layer metrics)" "OUTPUT_HTML=$OUT/demo_metrics.html"
-QT_QPA_PLATFORM=offscreen .venv/bin/python scripts/render_preview.py "$GPKG" "$OUT/demo.png"
+run subdivideparcels "BLOCKS=$GPKG|layername=blocks" "METHOD=1" "OUTPUT=$(layer parcels)"
+# a new district grown inside the convex hull of the Helsinki roads (grid major, organic minor)
+"$QP" run qgis:minimumboundinggeometry -- "INPUT=$GPKG|layername=roads" TYPE=3 \
+    "OUTPUT=$(layer boundary)" > "$OUT/.last.log" 2>&1 || { cat "$OUT/.last.log"; exit 1; }
+run growroads "BOUNDARY=$GPKG|layername=boundary" MAJOR_PATTERN=1 MINOR_PATTERN=0 SEED=1 \
+    "OUTPUT=$(layer grown_roads)"
+QT_QPA_PLATFORM=offscreen .venv/bin/python scripts/render_preview.py "$GPKG" "$OUT/demo.png" "$OUT/demo_parcels.png"
 rm -f "$OUT/.last.log"
-echo "wrote $GPKG, $OUT/helsinki_fragments.gpkg, $OUT/helsinki_blocks.gpkg, $OUT/demo_metrics.html, $OUT/demo.png"
+echo "wrote $GPKG, $OUT/helsinki_fragments.gpkg, $OUT/helsinki_blocks.gpkg, $OUT/demo_metrics.html, $OUT/demo.png, $OUT/demo_parcels.png"

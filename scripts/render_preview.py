@@ -14,12 +14,14 @@ STYLES = Path(__file__).resolve().parent.parent / "resources" / "styles"
 # bottom to top
 LAYERS = [("blocks", "blocks.qml"), ("buildings", "buildings_by_height.qml"),
           ("roads", "roads_by_level.qml")]
+PARCEL_LAYERS = [("parcels", "parcels_by_quality.qml"), ("roads", "roads_by_level.qml")]
 
 
 def render(gpkg: str, png: str, title: str = "Helsinki: road hierarchy, blocks and buildings",
-           size: int = 1400) -> None:
+           size: int = 1400, layer_styles=LAYERS, extent_layer: str = "roads",
+           footer: str = "Roads coloured by level (red = arterial), buildings by height.") -> None:
     layers = []
-    for name, qml in LAYERS:
+    for name, qml in layer_styles:
         layer = QgsVectorLayer(f"{gpkg}|layername={name}", name, "ogr")
         if not layer.isValid():
             continue
@@ -27,7 +29,7 @@ def render(gpkg: str, png: str, title: str = "Helsinki: road hierarchy, blocks a
         layers.append(layer)
     if not layers:
         raise SystemExit(f"no layer to render in {gpkg}")
-    roads = next((lyr for lyr in layers if lyr.name() == "roads"), layers[-1])
+    roads = next((lyr for lyr in layers if lyr.name() == extent_layer), layers[-1])
     settings = QgsMapSettings()
     settings.setLayers(list(reversed(layers)))  # first is drawn on top
     settings.setDestinationCrs(roads.crs())
@@ -49,8 +51,7 @@ def render(gpkg: str, png: str, title: str = "Helsinki: road hierarchy, blocks a
     painter.drawText(20, 36, title)
     font.setPointSize(10)
     painter.setFont(font)
-    painter.drawText(20, size - 16, "Map data (c) OpenStreetMap contributors, ODbL. "
-                     "Roads coloured by level (red = arterial), buildings by height.")
+    painter.drawText(20, size - 16, "Map data (c) OpenStreetMap contributors, ODbL. " + footer)
     painter.end()
     image.save(png)
 
@@ -60,3 +61,8 @@ if __name__ == "__main__":
     app.initQgis()
     render(sys.argv[1], sys.argv[2])
     print("wrote", sys.argv[2])
+    if len(sys.argv) > 3:  # subdivideparcels on the Helsinki blocks
+        render(sys.argv[1], sys.argv[3], "Helsinki blocks subdivided into skeleton parcels",
+               layer_styles=PARCEL_LAYERS,
+               footer="Parcels: blue = good, red = undesirable (Yang et al. 2013).")
+        print("wrote", sys.argv[3])
