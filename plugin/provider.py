@@ -28,7 +28,11 @@ class UrbanSynthesisProvider(QgsProcessingProvider):
         from ..processing_algorithms.layout_metrics import LayoutMetrics
         from ..processing_algorithms.grow_roads import GrowRoads
         from ..processing_algorithms.subdivide_parcels import SubdivideParcels
+        from ..processing_algorithms.synthesize_roads_from_fragments import (
+            SynthesizeRoadsFromFragments,
+        )
 
         for alg in (ExtractRoadHierarchy(), ExtractBlocks(), BuildBlockDatabase(),
-                    BuildFragmentDatabase(), LayoutMetrics(), GrowRoads(), SubdivideParcels()):
+                    BuildFragmentDatabase(), LayoutMetrics(), GrowRoads(), SubdivideParcels(),
+                    SynthesizeRoadsFromFragments()):
             self.addAlgorithm(alg)

@@ -1,0 +1,253 @@
+"""urbansynth:synthesizeroadsfromfragments - hierarchical road synthesis from fragment databases."""
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import shapely
+from qgis.core import (
+    QgsProcessing,
+    QgsProcessingException,
+    QgsProcessingOutputNumber,
+    QgsProcessingParameterFeatureSink,
+    QgsProcessingParameterFeatureSource,
+    QgsProcessingParameterField,
+    QgsProcessingParameterFile,
+    QgsProcessingParameterNumber,
+    QgsProcessingParameterRasterDestination,
+    QgsProcessingParameterRasterLayer,
+    QgsWkbTypes,
+)
+
+from ..plugin import database, qgis_io, synthesis_fragments
+from .build_fragment_database import read_dem
+from .common import AlgorithmBase
+
+
+def write_geotiff(path: str, dem, crs_wkt: str) -> None:
+    """Write a DemGrid as a single-band float32 GeoTIFF (NaN = no data) with GDAL."""
+    from osgeo import gdal
+
+    rows, cols = dem.array.shape
+    driver = gdal.GetDriverByName("GTiff")
+    ds = driver.Create(str(path), cols, rows, 1, gdal.GDT_Float32, options=["COMPRESS=DEFLATE"])
+    if ds is None:
+        raise QgsProcessingException(f"The relief cannot be written to {path}: "
+                                     f"{gdal.GetLastErrorMsg() or 'unknown GDAL error'}.")
+    ds.SetGeoTransform(tuple(dem.geotransform))
+    ds.SetProjection(crs_wkt)
+    band = ds.GetRasterBand(1)
+    band.SetNoDataValue(float("nan"))
+    band.WriteArray(np.asarray(dem.array, dtype=np.float32))
+    band.FlushCache()
+    ds = None
+
+
+class SynthesizeRoadsFromFragments(AlgorithmBase):
+    ARTERIALS = "ARTERIALS"
+    FRAGMENT_DB = "FRAGMENT_DB"
+    FRAGMENT_DB_2 = "FRAGMENT_DB_2"
+    DEM = "DEM"
+    STYLE = "STYLE"
+    STYLE_FIELD = "STYLE_FIELD"
+    N_BEST = "N_BEST"
+    MAX_LEVEL = "MAX_LEVEL"
+    SEED = "SEED"
+    GAMMA = "GAMMA"
+    DEM_CELL_SIZE = "DEM_CELL_SIZE"
+    OUTPUT = "OUTPUT"
+    OUTPUT_DEM = "OUTPUT_DEM"
+    N_EDGES = "N_EDGES"
+    N_INSERTED = "N_INSERTED"
+
+    def name(self):
+        return "synthesizeroadsfromfragments"
+
+    def displayName(self):  # noqa: N802
+        return "Synthesize roads from fragments"
+
+    def group(self):
+        return "Synthesis"
+
+    def groupId(self):  # noqa: N802
+        return "synthesis"
+
+    def shortHelpString(self):  # noqa: N802
+        return (
+            "Fills sketched arterial roads with streets taken from real example cities, level "
+            "by level (Hartmann, thesis ch. 4.1).\n\n"
+            "The closed faces of the arterials are the level 0 query fragments. For each, a "
+            "fragment of the same level with a similar boundary shape (scale-aware shape "
+            "context with cyclic dynamic time warping) and, with a DEM, similar slopes is "
+            "retrieved from a fragment database; one of the N best is chosen at random and its "
+            "interior streets are warped into the face with mean value coordinates. The new "
+            "faces are then filled with the next level's fragments, until the databases have no "
+            "deeper level. A warp that would put junctions outside a very concave face is "
+            "replaced by a simple split of the face.\n\n"
+            "Databases come from 'Build fragment database'. A second database mixes two "
+            "styles: without style polygons the best-matching fragments of both compete, with "
+            "STYLE polygons the field STYLE_FIELD (1 or 2) says which database to use inside "
+            "each polygon. With a DEM the slope term steers the choice and OUTPUT_DEM receives "
+            "the relief of the inserted fragments merged into the DEM by a Poisson solve "
+            "(GeoTIFF in the metric working CRS).\n\n"
+            "Output: one planar road network with level (0 = arterial), source_fragment "
+            "('<database>:<fragment id>', 'arterial' or 'procedural') and database."
+        )
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        self.add(QgsProcessingParameterFeatureSource(
+            self.ARTERIALS, "Arterial roads", [QgsProcessing.TypeVectorLine]),
+            "Sketched arterials, or the level 0 roads of a real city: lines that close faces to "
+            "fill. They are noded and cleaned first.")
+        self.add(QgsProcessingParameterFile(
+            self.FRAGMENT_DB, "Fragment database", extension="gpkg"),
+            "A GeoPackage written by 'Build fragment database' (database 1).")
+        self.add(QgsProcessingParameterFile(
+            self.FRAGMENT_DB_2, "Second fragment database (optional)", extension="gpkg",
+            optional=True),
+            "Another city's fragment database (database 2), to mix two styles.")
+        self.add(QgsProcessingParameterRasterLayer(
+            self.DEM, "Elevation model (optional)", optional=True),
+            "The desired terrain: adds the slope term to the retrieval and is the base of "
+            "OUTPUT_DEM.")
+        self.add(QgsProcessingParameterFeatureSource(
+            self.STYLE, "Style polygons (optional)", [QgsProcessing.TypeVectorPolygon],
+            optional=True),
+            "Polygons saying which database to use where (a face uses the polygon holding a "
+            "point inside it; database 1 elsewhere).")
+        self.add(QgsProcessingParameterField(
+            self.STYLE_FIELD, "Style field (database number)", defaultValue="database",
+            parentLayerParameterName=self.STYLE, type=QgsProcessingParameterField.Numeric,
+            optional=True),
+            "Integer field of the style polygons: 1 = the first database, 2 = the second.")
+        self.add(QgsProcessingParameterNumber(
+            self.N_BEST, "Random choice among the N best matches",
+            QgsProcessingParameterNumber.Integer, defaultValue=3, minValue=1,
+            maxValue=synthesis_fragments.MAX_N_BEST),
+            "1 always takes the best-matching fragment; larger values add variety.")
+        self.add(QgsProcessingParameterNumber(
+            self.MAX_LEVEL, "Deepest street level (optional)", QgsProcessingParameterNumber.Integer,
+            optional=True, minValue=1, maxValue=synthesis_fragments.MAX_LEVELS),
+            "Stop after synthesising streets of this level (default: as deep as the databases go).")
+        self.add(QgsProcessingParameterNumber(
+            self.SEED, "Random seed", QgsProcessingParameterNumber.Integer, defaultValue=1,
+            minValue=0),
+            "The same seed with the same inputs gives the same network.")
+        self.add(QgsProcessingParameterNumber(
+            self.GAMMA, "Shape weight gamma", QgsProcessingParameterNumber.Double,
+            defaultValue=0.5, minValue=0.0, maxValue=1.0),
+            "Weight of the shape cost against the slope cost (thesis eq. 4.2); 1 ignores the "
+            "terrain.", advanced=True)
+        self.add(QgsProcessingParameterNumber(
+            self.DEM_CELL_SIZE, "DEM cell size (m)", QgsProcessingParameterNumber.Double,
+            defaultValue=5.0, minValue=0.5, maxValue=100.0),
+            "The DEM is resampled to this cell size in the metric working CRS.", advanced=True)
+        self.add(QgsProcessingParameterFeatureSink(
+            self.OUTPUT, "Synthesized roads", QgsProcessing.TypeVectorLine),
+            "The road network with level, source_fragment and database per edge.")
+        dem_out = QgsProcessingParameterRasterDestination(
+            self.OUTPUT_DEM, "Synthesized relief", optional=True, createByDefault=False)
+        self.add(dem_out, "The DEM with the relief of the inserted fragments merged in "
+                          "(needs a DEM and a database built with one).")
+        self.addOutput(QgsProcessingOutputNumber(self.N_EDGES, "Number of road edges"))
+        self.addOutput(QgsProcessingOutputNumber(self.N_INSERTED, "Fragments inserted"))
+
+    def _databases(self, parameters, context):
+        paths = [self.parameterAsFile(parameters, self.FRAGMENT_DB, context)]
+        second = self.parameterAsFile(parameters, self.FRAGMENT_DB_2, context)
+        if second:
+            paths.append(second)
+        if not paths[0]:
+            raise QgsProcessingException("A fragment database is needed (FRAGMENT_DB).")
+        dbs = [qgis_io.run_engine(f"Fragment database {k + 1}", database.load_fragment_database,
+                                  p) for k, p in enumerate(paths)]
+        for k, d in enumerate(dbs):
+            if len(d) == 0:
+                raise QgsProcessingException(f"Fragment database {k + 1} ({paths[k]}) holds no "
+                                             "fragment.")
+        names = [Path(p).stem for p in paths]
+        if len(names) == 2 and names[0] == names[1]:
+            names = [f"{n}_{k + 1}" for k, n in enumerate(names)]
+        return dbs, names
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        frame = qgis_io.read_source(self, parameters, self.ARTERIALS, context, feedback,
+                                    kind="lines", fields=[])
+        label = frame.name
+        n_best = self.parameterAsInt(parameters, self.N_BEST, context)
+        qgis_io.check_number(n_best, self.N_BEST, 1, synthesis_fragments.MAX_N_BEST)
+        max_level = None
+        if parameters.get(self.MAX_LEVEL) not in (None, ""):
+            max_level = self.parameterAsInt(parameters, self.MAX_LEVEL, context)
+            qgis_io.check_number(max_level, self.MAX_LEVEL, 1, synthesis_fragments.MAX_LEVELS)
+        seed = self.parameterAsInt(parameters, self.SEED, context)
+        gamma = qgis_io.check_number(self.parameterAsDouble(parameters, self.GAMMA, context),
+                                     self.GAMMA, 0.0, 1.0)
+        cell = qgis_io.check_number(self.parameterAsDouble(parameters, self.DEM_CELL_SIZE, context),
+                                    self.DEM_CELL_SIZE, 0.5, 100.0)
+        dem_out = self.parameterAsOutputLayer(parameters, self.OUTPUT_DEM, context) \
+            if parameters.get(self.OUTPUT_DEM) else ""
+        dbs, names = self._databases(parameters, context)
+        feedback.pushInfo("; ".join(f"database {k + 1} '{n}': {len(d)} fragments, levels "
+                                    f"{', '.join(str(int(v)) for v in np.unique(d.levels))}"
+                                    + (", with relief" if d.relief is not None else "")
+                                    for k, (n, d) in enumerate(zip(names, dbs))))
+        feedback.setProgress(5)
+
+        style_polys = style_db = None
+        style = qgis_io.read_source(self, parameters, self.STYLE, context, feedback,
+                                    kind="polygons", target_crs=frame.crs, optional=True,
+                                    fields=[self.parameterAsString(parameters, self.STYLE_FIELD,
+                                                                   context) or "database"])
+        if style is not None:
+            field = self.parameterAsString(parameters, self.STYLE_FIELD, context) or "database"
+            if field not in style.attributes:
+                raise QgsProcessingException(f"Layer {style.name} has no field '{field}' with the "
+                                             "database number (1 or 2) per polygon.")
+            values = pd.to_numeric(style.attributes[field], errors="coerce").to_numpy(
+                dtype=np.float64, na_value=np.nan)
+            bad = ~np.isfinite(values) | (values != np.round(values)) | (values < 1) | \
+                (values > len(dbs))
+            if bad.any():
+                raise QgsProcessingException(
+                    f"Layer {style.name}: field '{field}' must hold a database number from 1 to "
+                    f"{len(dbs)} in every polygon ({int(bad.sum())} do not).")
+            style_polys, style_db = style.geometry, values.astype(np.int64) - 1
+        feedback.setProgress(8)
+
+        dem = None
+        dem_layer = self.parameterAsRasterLayer(parameters, self.DEM, context)
+        if dem_layer is not None:
+            dem = read_dem(dem_layer, frame.crs, shapely.total_bounds(frame.geometry), cell,
+                           feedback)
+        elif dem_out:
+            raise QgsProcessingException("OUTPUT_DEM needs an elevation model (DEM) to merge the "
+                                         "fragments' relief into.")
+        feedback.setProgress(12)
+
+        result = qgis_io.run_engine(
+            label, synthesis_fragments.synthesize, frame.geometry, dbs, dem=dem,
+            style_polygons=style_polys, style_database=style_db, n_best=n_best, seed=seed,
+            max_level=max_level, gamma=gamma, names=names,
+            progress=qgis_io.progress_for(feedback, 12, 92))
+        q = result.queries
+        n_inserted = int((q.outcome == "fragment").sum())
+        feedback.pushInfo(
+            f"{len(q)} query fragments: {n_inserted} filled from examples, "
+            f"{int((q.outcome == 'procedural').sum())} split procedurally, "
+            f"{int(q.outcome.isin(['block', 'unsplit', 'no_candidate']).sum())} left as blocks; "
+            f"{len(result.geometry)} road edges over {result.stats['area_km2']:.3f} km² in "
+            f"{result.stats['seconds']:.1f} s.")
+
+        dest = qgis_io.write_sink(self, parameters, self.OUTPUT, context, result.geometry,
+                                  result.table, synthesis_fragments.EDGE_FIELDS,
+                                  QgsWkbTypes.LineString, frame.source_crs, frame.crs, feedback)
+        qgis_io.style_output(context, dest, "roads_by_level.qml")
+        outputs = {self.OUTPUT: dest, self.N_EDGES: len(result.geometry),
+                   self.N_INSERTED: n_inserted}
+        if dem_out:
+            if not any(d.relief is not None for d in dbs):
+                feedback.pushInfo("No database has relief: OUTPUT_DEM is the input DEM resampled.")
+            write_geotiff(dem_out, result.dem, frame.crs.toWkt())
+            outputs[self.OUTPUT_DEM] = dem_out
+        feedback.setProgress(100)
+        return outputs

@@ -1,0 +1,372 @@
+"""Hierarchical road synthesis from fragments (plugin/synthesis_fragments.py).
+
+Small hand-made databases whose answer is known, then the evidence of issue 3 on real data:
+reproduction of Helsinki from its own arterials and database (against a plain grid), style
+transfer with Bubenec's database, the slope term changing the choice, validity everywhere.
+"""
+import numpy as np
+import pytest
+import shapely
+
+from helpers import assert_planar, bubenec, helsinki_roads
+from test_fragments import levelled_grid
+from urban_synthesis.plugin import blocks, database, fragments, hierarchy, metrics, roads
+from urban_synthesis.plugin import synthesis_fragments as sf
+from urban_synthesis.plugin.progress import Canceled, InputError, Progress
+from urban_synthesis.plugin.shape_context import DemGrid
+
+CRS = "EPSG:32635"
+
+
+def assert_valid_network(result, arterials):
+    """Planar, valid, no zero-length edges, synthesised streets inside the arterials' faces."""
+    g = result.geometry
+    assert len(g) == len(result.table)
+    assert shapely.is_valid(g).all()
+    assert (shapely.get_type_id(g) == 1).all()
+    assert (shapely.length(g) > 1e-6).all()
+    assert_planar(g)
+    faces, _ = blocks.block_faces(roads.clean_network(arterials, min_dangle_length=0).geometry)
+    area = shapely.buffer(shapely.union_all(faces), 1e-6)
+    new = result.table.level.to_numpy() >= 1
+    assert shapely.within(g[new], area).all()
+
+
+def make_db(path, lines, levels, dem=None):
+    frags = fragments.extract_fragments(lines, levels, dem=dem)
+    database.write_fragment_database(str(path), frags, CRS, source="test", elevation=dem)
+    return database.load_fragment_database(path)
+
+
+@pytest.fixture(scope="module")
+def grid_db(tmp_path_factory):
+    lines, levels = levelled_grid()
+    return make_db(tmp_path_factory.mktemp("db") / "grid.gpkg", lines, levels)
+
+
+# --------------------------------------------------------------------------- known answers
+
+def test_a_moved_copy_of_the_example_is_rebuilt(grid_db):
+    """The level 0 ring of the levelled grid, rotated and moved: with N_BEST = 1 level 0
+    retrieves its own fragment and the warp is the rigid motion, so the level 1 cross comes
+    back exactly; the four quarters are identical squares, so each gets one of the four
+    quarter fragments (equal cost) and its level 2 streets, moved rigidly too."""
+    lines, levels = levelled_grid()
+    angle = np.radians(30)
+    rot = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+    move = np.array([5000.0, -300.0])
+
+    def tr(g):
+        return shapely.transform(g, lambda xy: xy @ rot.T + move)
+
+    res = sf.synthesize(tr(lines[levels == 0]), [grid_db], n_best=1, seed=0)
+    assert_valid_network(res, tr(lines[levels == 0]))
+    t = res.table
+    assert set(t.level) == {0, 1, 2, 3}  # level 3: the dead end of the south-west cell
+    cross = shapely.union_all(res.geometry[t.level.to_numpy() == 1])
+    original = shapely.union_all(tr(lines[levels == 1]))
+    assert cross.length == pytest.approx(800, rel=1e-9)
+    assert shapely.hausdorff_distance(cross, original) < 1e-6
+    assert (t.source_fragment[t.level == 1] == "grid:1").all()
+    q = res.queries
+    assert list(q.level) == [0, 1, 1, 1, 1] + [2] * (len(q) - 5)
+    assert q.outcome.iloc[0] == "fragment"
+    # level 2 streets: the quarter examples' (straight, axis-parallel in the example frame)
+    lvl2 = res.geometry[t.level.to_numpy() == 2]
+    back = shapely.transform(lvl2, lambda xy: (xy - move) @ rot)
+    b = shapely.bounds(back)
+    assert (np.minimum(b[:, 2] - b[:, 0], b[:, 3] - b[:, 1]) < 1e-6).all()
+
+
+def test_retrieve_agrees_with_the_database_query(grid_db):
+    faces = grid_db.geometry[grid_db.levels == 1]
+    rot = shapely.affinity.rotate(faces[0], 17, origin="centroid")
+    batch = sf.retrieve(grid_db, [rot, faces[1]], level=1)
+    for f, face in enumerate([rot, faces[1]]):
+        single = grid_db.query(face, level=1, n_best=len(grid_db))
+        best = batch.ranked(f, 1)[0]
+        assert batch.costs[f, best] == pytest.approx(single[0].cost, abs=1e-6)
+
+
+def test_seed_reproducible_and_n_best_adds_variety(grid_db):
+    sketch = [shapely.LineString([(0, 0), (1200, 0), (1200, 400), (0, 400), (0, 0)]),
+              shapely.LineString([(400, 0), (400, 400)]), shapely.LineString([(800, 0),
+                                                                                (800, 400)])]
+    a = sf.synthesize(sketch, [grid_db], n_best=3, seed=7)
+    b = sf.synthesize(sketch, [grid_db], n_best=3, seed=7)
+    assert all(x.equals(y) for x, y in zip(a.geometry, b.geometry))
+    lengths = {round(sf.synthesize(sketch, [grid_db], n_best=3, seed=s).table.length_m.sum())
+               for s in range(6)}
+    assert len(lengths) > 1
+    assert_valid_network(a, sketch)
+
+
+def test_max_level_stops_the_recursion(grid_db):
+    lines, levels = levelled_grid()
+    res = sf.synthesize(lines[levels == 0], [grid_db], n_best=1, max_level=1)
+    assert set(res.table.level) == {0, 1}
+
+
+def test_very_concave_target_falls_back_to_a_procedural_split(tmp_path):
+    """A square fragment with a central junction warped into a thin U: the junction would
+    land outside, so the face is split procedurally instead, and everything stays inside."""
+    ring = shapely.LineString([(0, 0), (300, 0), (300, 300), (0, 300), (0, 0)])
+    cross = [shapely.LineString([(150, 0), (150, 300)]), shapely.LineString([(0, 150),
+                                                                              (300, 150)])]
+    db = make_db(tmp_path / "cross.gpkg", np.array([ring] + cross, dtype=object),
+                 np.array([0, 1, 1]))
+    u_shape = shapely.LineString([(0, 0), (600, 0), (600, 400), (520, 400), (520, 60),
+                                  (80, 60), (80, 400), (0, 400), (0, 0)])
+    res = sf.synthesize([u_shape], [db], n_best=1, seed=0, max_scale=3.0)
+    assert res.queries.outcome.iloc[0] == "procedural"
+    assert res.queries.n_rejected.iloc[0] == 1
+    assert (res.table.source_fragment[res.table.level == 1] == "procedural").all()
+    assert_valid_network(res, [u_shape])
+
+
+def test_procedural_split_and_grid_helpers():
+    face = shapely.box(0, 0, 300, 100)
+    split = sf.procedural_split(face)
+    assert len(split) == 1 and split[0].length == pytest.approx(100)
+    assert shapely.get_coordinates(split[0])[:, 0] == pytest.approx([150, 150])
+    assert len(sf.procedural_split(shapely.box(0, 0, 30, 20))) == 0  # halves would be slivers
+    grid = sf.grid_streets([face], 50.0)
+    assert len(grid) == 6 + 2  # 50 m apart, 25 m from the ends: 6 across, 2 along
+    assert shapely.within(grid, face.buffer(1e-6)).all()
+    with pytest.raises(InputError):
+        sf.grid_streets([face], 0)
+
+
+def test_bad_inputs_are_input_errors(grid_db):
+    ring = [shapely.LineString([(0, 0), (400, 0), (400, 400), (0, 400), (0, 0)])]
+    with pytest.raises(InputError, match="at least one fragment database"):
+        sf.synthesize(ring, [])
+    for n_best in (0, 51, 2.5):
+        with pytest.raises(InputError, match="N_BEST"):
+            sf.synthesize(ring, [grid_db], n_best=n_best)
+    with pytest.raises(InputError, match="enclose no face"):
+        sf.synthesize([shapely.LineString([(0, 0), (500, 0)])], [grid_db])
+    with pytest.raises(InputError, match="enclose no face"):  # a loop too small to fill
+        sf.synthesize([shapely.LineString([(0, 0), (10, 0), (10, 10), (0, 0)])], [grid_db])
+    with pytest.raises(InputError, match="database 3"):
+        sf.synthesize(ring, [grid_db], style_polygons=[shapely.box(0, 0, 1, 1)],
+                      style_database=[2])
+    with pytest.raises(InputError, match="gamma"):
+        sf.synthesize(ring, [grid_db], gamma=2)
+
+
+def test_progress_and_cancel(grid_db):
+    lines, levels = levelled_grid()
+    seen, log = [], []
+    sf.synthesize(lines[levels == 0], [grid_db], progress=Progress(seen.append, log=log.append))
+    assert seen[-1] == pytest.approx(100) and all(np.diff(seen) >= -1e-9)
+    assert any(m.startswith("Level 0:") for m in log)
+    with pytest.raises(Canceled):
+        sf.synthesize(lines[levels == 0], [grid_db], progress=Progress(is_canceled=lambda: True))
+
+
+# --------------------------------------------------------------------------- style and terrain
+
+def two_styles(tmp_path, dem=None, offset=0.0):
+    """Two 200 m square fragments of level 0: A with a diagonal street, B with a cross."""
+    a = [shapely.LineString([(0, 0), (200, 0), (200, 200), (0, 200), (0, 0)]),
+         shapely.LineString([(0, 0), (200, 200)])]
+    b = [shapely.LineString([(1000, 0), (1200, 0), (1200, 200), (1000, 200), (1000, 0)]),
+         shapely.LineString([(1100, 0), (1100, 200)]), shapely.LineString([(1000, 100),
+                                                                            (1200, 100)])]
+    return make_db(tmp_path, np.array(a + b, dtype=object), np.array([0, 1, 0, 1, 1]), dem)
+
+
+def hill_dem(cx, cy, x0=-300, y0=500, size=1800, cell=5.0, height=40.0, sigma=70.0):
+    n = int(size / cell)
+    x = x0 + cell * (np.arange(n) + 0.5)
+    y = y0 - cell * (np.arange(n) + 0.5)
+    z = height * np.exp(-((x[None, :] - cx) ** 2 + (y[:, None] - cy) ** 2) / (2 * sigma ** 2))
+    return DemGrid(z, (x0, cell, 0, y0, 0, -cell))
+
+
+def test_slope_term_changes_the_choice(tmp_path):
+    """One database, two fragments of identical shape: A lies on a hill, B on flat ground.
+    Shape alone (gamma = 1) cannot tell them apart; with the slope term a query on a hill
+    retrieves A and a flat query retrieves B."""
+    db = two_styles(tmp_path / "terrain.gpkg", hill_dem(100, 100))
+    assert db.relief is not None and db.descriptors.slopes is not None
+    hilly, flat = shapely.box(2000, 0, 2200, 200), shapely.box(2200, 0, 2400, 200)
+    query_dem = hill_dem(2100, 100, x0=1700, size=1000)
+    ids = {}
+    for gamma in (1.0, 0.5):
+        ret = sf.retrieve(db, [hilly, flat], level=0, dem=query_dem, gamma=gamma)
+        ids[gamma] = [int(db.ids[ret.rows[f, ret.ranked(f, 1)[0]]]) for f in range(2)]
+        same = database.FragmentDatabase.query(db, flat, level=0, elevation=query_dem,
+                                               gamma=gamma)[0]
+        assert same.id == ids[gamma][1]
+    a, b = 1, 2  # fragment ids: A first
+    assert ids[1.0][0] == ids[1.0][1]          # shape alone: the same fragment for both
+    assert ids[0.5] == [a, b]                  # with terrain: A on the hill, B on the flat
+
+
+def test_hilly_half_gets_the_hilly_fragments_and_relief_is_merged(tmp_path):
+    """Synthesis over a sketch whose west half is a hill: the hilly example fragment (the
+    diagonal) goes there, the flat one (the cross) to the east; OUTPUT relief is the DEM
+    with the example relief merged in, continuous across the fragment boundaries."""
+    db = two_styles(tmp_path / "terrain.gpkg", hill_dem(100, 100))
+    sketch = [shapely.LineString([(2000, 0), (2400, 0), (2400, 200), (2000, 200), (2000, 0)]),
+              shapely.LineString([(2200, 0), (2200, 200)])]
+    dem = hill_dem(2100, 100, x0=1700, size=1000, height=35.0)
+    res = sf.synthesize(sketch, [db], dem=dem, n_best=1, gamma=0.5, seed=0)
+    q = res.queries.set_index("query")
+    west = shapely.box(1990, -10, 2200, 210)
+    chosen = {("west" if west.contains(c) else "east"): fid for c, fid in
+              zip(shapely.centroid(blocks.block_faces(np.asarray(sketch, object))[0]),
+                  q.fragment_id)}
+    assert chosen == {"west": 1, "east": 2}
+    assert_valid_network(res, sketch)
+    out = res.dem
+    assert out is not None and out.array.shape == dem.array.shape
+    assert np.isfinite(out.array).all()
+    assert not np.allclose(out.array, dem.array)  # the example relief was merged
+    # continuity: no step larger than the steepest input step plus the example's
+    step = np.abs(np.diff(out.array, axis=1)).max()
+    assert step < 2 * np.abs(np.diff(dem.array, axis=1)).max() + 5
+    # outside every face the DEM is unchanged
+    x = dem.geotransform[0] + 5 * (np.arange(dem.array.shape[1]) + 0.5)
+    y = dem.geotransform[3] - 5 * (np.arange(dem.array.shape[0]) + 0.5)
+    xx, yy = np.meshgrid(x, y)
+    outside = ~shapely.contains_xy(res.area.buffer(5), xx, yy)
+    assert np.allclose(out.array[outside], dem.array[outside])
+
+
+def test_style_polygons_choose_the_database(tmp_path):
+    a = two_styles(tmp_path / "a.gpkg")
+    lines, levels = levelled_grid()
+    g = make_db(tmp_path / "g.gpkg", lines, levels)
+    sketch = [shapely.LineString([(0, 0), (800, 0), (800, 400), (0, 400), (0, 0)]),
+              shapely.LineString([(400, 0), (400, 400)])]
+    style = [shapely.box(-10, -10, 400, 410), shapely.box(400, -10, 810, 410)]
+    res = sf.synthesize(sketch, [g, a], style_polygons=style, style_database=[1, 0],
+                        names=["grid", "styles"], seed=0, max_scale=3.0)
+    q = res.queries[res.queries.level == 0].copy()
+    faces, _ = blocks.block_faces(np.asarray(sketch, object))
+    west = shapely.get_coordinates(shapely.centroid(faces))[:, 0] < 400
+    assert list(q.database[west]) == ["styles"] and list(q.database[~west]) == ["grid"]
+    assert set(res.table.database[res.table.level >= 1]) <= {"grid", "styles"}
+    assert_valid_network(res, sketch)
+
+
+# --------------------------------------------------------------------------- real data
+
+@pytest.fixture(scope="module")
+def helsinki(tmp_path_factory):
+    """Helsinki's levelled roads (the hierarchy engine), its fragment database, Bubenec's."""
+    df = helsinki_roads()
+    g = roads.clean_network(df.geometry.values, df.highway.values, None, df.z.values)
+    h = hierarchy.road_hierarchy(g, "both", roads.ARTERIAL_CLASSES, 0.1, 45.0)
+    levels = h.street_level[h.streets.street_id]
+    folder = tmp_path_factory.mktemp("real")
+    hel = make_db(folder / "helsinki.gpkg", g.geometry, levels)
+    bs = roads.clean_network(bubenec("streets").geometry.values)
+    hb = hierarchy.road_hierarchy(bs, "both", roads.ARTERIAL_CLASSES, 0.1, 45.0)
+    fb = fragments.extract_fragments(bs.geometry, hb.street_level[hb.streets.street_id])
+    database.write_fragment_database(str(folder / "bubenec.gpkg"), fb, "EPSG:32633")
+    bub = database.load_fragment_database(folder / "bubenec.gpkg")
+    return dict(lines=g.geometry, levels=levels, hel=hel, bub=bub, bub_lines=bs.geometry)
+
+
+def clipped_metrics(lines, area):
+    """Layout metrics of the part of a network inside the synthesis area (the same cut for
+    the original, the synthesis and the baseline)."""
+    with np.errstate(invalid="ignore"):  # empty intersections of lines outside the area
+        parts = shapely.get_parts(shapely.intersection(np.asarray(lines, object), area))
+    parts = parts[(shapely.get_type_id(parts) == 1) & (shapely.length(parts) > 0.01)]
+    return metrics.compute_layout_metrics(roads=parts)
+
+
+def distances(candidate, reference):
+    c = metrics.compare(candidate, reference)
+    c = c[c.statistic == "mean"].set_index("metric")
+    return {k: float(c.loc[k, "wasserstein_norm"]) for k in
+            ("segment_length", "node_degree", "intersection_angle", "area")}
+
+
+def test_reproduction_of_helsinki_beats_a_grid(helsinki):
+    """The thesis's Bonn experiment on Helsinki: arterials = its level 0 roads, database =
+    its own fragments. Two-sample distances (Wasserstein / example spread) to the original
+    roads inside the arterials' faces: the fragment synthesis (random choice among the 3
+    best) is closer than a plain grid of Helsinki's median block size for segment length
+    and block area; with N_BEST = 1 every face retrieves itself and the reproduction is
+    exact."""
+    lines, levels = helsinki["lines"], helsinki["levels"]
+    arterials = lines[levels == 0]
+    faces, _ = blocks.block_faces(arterials)
+    area = shapely.union_all(faces)
+    original = clipped_metrics(lines, area)
+    spacing = float(np.sqrt(np.median(metrics.compute_layout_metrics(roads=lines)
+                                      .distribution("blocks", "area"))))
+    grid = clipped_metrics(np.concatenate([arterials, sf.grid_streets(faces, spacing)]), area)
+    d_grid = distances(grid, original)
+    runs = []
+    for seed in range(3):
+        res = sf.synthesize(arterials, [helsinki["hel"]], n_best=3, seed=seed)
+        assert_valid_network(res, arterials)
+        runs.append(distances(clipped_metrics(res.geometry, area), original))
+    mean = {k: np.mean([r[k] for r in runs]) for k in runs[0]}
+    assert mean["segment_length"] < d_grid["segment_length"]
+    assert mean["area"] < d_grid["area"]
+    exact = sf.synthesize(arterials, [helsinki["hel"]], n_best=1, seed=0)
+    d_exact = distances(clipped_metrics(exact.geometry, area), original)
+    assert max(d_exact.values()) < 1e-6
+
+
+def test_style_transfer_with_bubenec(helsinki):
+    """The same arterials with Bubenec's database give a different network; on a sketch
+    of 200 m arterial cells (faces both databases have fragments for) Bubenec's style
+    (longer segments: median 124 m against Helsinki's 73 m) shows: the Bubenec-database
+    synthesis has longer segments and lies farther from Helsinki than the Helsinki one."""
+    lines, levels = helsinki["lines"], helsinki["levels"]
+    arterials = lines[levels == 0]
+    hel_res = sf.synthesize(arterials, [helsinki["hel"]], seed=0)
+    bub_res = sf.synthesize(arterials, [helsinki["bub"]], seed=0)
+    assert_valid_network(bub_res, arterials)
+    area = shapely.union_all(blocks.block_faces(arterials)[0])
+    d = distances(clipped_metrics(bub_res.geometry, area), clipped_metrics(hel_res.geometry, area))
+    assert max(d.values()) > 0.05
+    assert (bub_res.table.database[bub_res.table.level >= 1] == "bubenec").all()
+
+    rng = np.random.default_rng(0)
+    sketch = []
+    for x in np.arange(0, 801, 200):
+        sketch.append(shapely.LineString([(x + rng.normal(0, 8), y)
+                                          for y in np.linspace(-30, 830, 6)]))
+        sketch.append(shapely.LineString([(y, x + rng.normal(0, 8))
+                                          for y in np.linspace(-30, 830, 6)]))
+    area = shapely.union_all(blocks.block_faces(np.asarray(sketch, object))[0])
+    hel_full = metrics.compute_layout_metrics(roads=lines)
+    seg, to_hel = {"hel": [], "bub": []}, {"hel": [], "bub": []}
+    for seed in range(3):
+        for key in ("hel", "bub"):
+            res = sf.synthesize(sketch, [helsinki[key]], seed=seed)
+            assert_valid_network(res, sketch)
+            m = clipped_metrics(res.geometry, area)
+            seg[key].append(np.median(m.distribution("roads", "segment_length")))
+            to_hel[key].append(distances(m, hel_full)["segment_length"])
+    assert np.mean(seg["bub"]) > np.mean(seg["hel"])
+    assert np.mean(to_hel["bub"]) > np.mean(to_hel["hel"])
+
+
+def test_helsinki_speed(helsinki):
+    """Issue target: 1 km² from the Helsinki database in under 5 s (2 cores)."""
+    import time
+
+    rng = np.random.default_rng(0)
+    sketch = []
+    for x in np.linspace(0, 1000, 5):
+        sketch.append(shapely.LineString([(x + rng.normal(0, 15), y)
+                                          for y in np.linspace(-40, 1040, 9)]))
+        sketch.append(shapely.LineString([(y, x + rng.normal(0, 15))
+                                          for y in np.linspace(-40, 1040, 9)]))
+    t = time.perf_counter()
+    res = sf.synthesize(sketch, [helsinki["hel"]], seed=0)
+    elapsed = time.perf_counter() - t
+    assert res.stats["area_km2"] > 0.95
+    assert elapsed < 5.0
+    assert_valid_network(res, sketch)
