@@ -250,7 +250,8 @@ def _py(value):
     return value
 
 
-def _crs_string(crs: QgsCoordinateReferenceSystem) -> str:
+def crs_text(crs: QgsCoordinateReferenceSystem) -> str:
+    """A CRS as text for PROJ/GDAL and for databases: the authority id, else the WKT."""
     return crs.authid() or crs.toWkt(QgsCoordinateReferenceSystem.WKT_PREFERRED)
 
 
@@ -266,7 +267,7 @@ def _transform(geoms: np.ndarray, src, dst, context) -> np.ndarray:
     try:
         from pyproj import Transformer
 
-        tr = Transformer.from_crs(_crs_string(src), _crs_string(dst), always_xy=True)
+        tr = Transformer.from_crs(crs_text(src), crs_text(dst), always_xy=True)
         x, y = tr.transform(coords[:, 0], coords[:, 1])
         out = np.column_stack([x, y])
     except ImportError:  # pragma: no cover - QGIS without pyproj
@@ -471,3 +472,85 @@ def style_output(context, dest_id: Optional[str], qml_name: str) -> None:
     styler = _Styler()
     _POST_PROCESSORS.append(styler)
     context.layerToLoadOnCompletionDetails(dest_id).setPostProcessor(styler)
+
+
+# --------------------------------------------------------------------------- rasters
+
+def read_raster(layer, work_crs: QgsCoordinateReferenceSystem, bounds, cell_size: float,
+                feedback=None, what: str = "DEM"):
+    """Warp a raster layer into the working CRS over ``bounds`` (+ a margin) with GDAL.
+
+    The engine works on a numpy grid with a geotransform (a :class:`DemGrid`); GDAL (the
+    same library QGIS uses) reprojects and resamples the raster bilinearly into an
+    in-memory dataset first. ``what`` names the raster in messages (DEM, density ...).
+    """
+    from osgeo import gdal
+
+    from .shape_context import DemGrid
+
+    source = layer.source().split("|")[0]
+    margin = 4 * cell_size
+    x0, y0, x1, y1 = bounds
+    options = gdal.WarpOptions(
+        format="MEM", dstSRS=crs_text(work_crs), srcSRS=crs_text(layer.crs()) or None,
+        outputBounds=(x0 - margin, y0 - margin, x1 + margin, y1 + margin),
+        xRes=cell_size, yRes=cell_size, resampleAlg="bilinear", dstNodata=float("nan"),
+        outputType=gdal.GDT_Float32, multithread=False)
+    # no gdal.UseExceptions(): it would switch the bindings' error mode for all of QGIS
+    try:
+        ds = gdal.Warp("", source, options=options)
+    except RuntimeError as exc:  # exceptions already enabled by someone else
+        raise QgsProcessingException(
+            f"{what} '{layer.name()}' cannot be read or reprojected: {exc}") from exc
+    if ds is None:
+        raise QgsProcessingException(f"{what} '{layer.name()}' cannot be read or reprojected: "
+                                     f"{gdal.GetLastErrorMsg() or 'unknown GDAL error'}.")
+    band = ds.GetRasterBand(1)
+    grid = band.ReadAsArray().astype(np.float64)
+    nodata = band.GetNoDataValue()
+    dem = DemGrid(grid, ds.GetGeoTransform(), nodata)
+    valid = np.isfinite(dem.array)
+    if not valid.any():
+        raise QgsProcessingException(
+            f"{what} '{layer.name()}' has no value over the input's extent: check that they "
+            "overlap.")
+    if feedback is not None and not valid.all():
+        feedback.pushInfo(f"{what}: {100 * (1 - valid.mean()):.0f} % of the input's extent has "
+                          "no value there.")
+    return dem
+
+
+def raster_cell_size(layer, work_crs, bounds, context, max_cells: int = 2048) -> float:
+    """Cell size (m) for a raster in the working CRS: its own resolution, at least 1 m, and
+    coarse enough that the input's extent spans at most ``max_cells`` cells."""
+    ext = layer.extent()
+    native = max(layer.rasterUnitsPerPixelX(), layer.rasterUnitsPerPixelY())
+    try:  # the resolution in metres: the length of one pixel's diagonal, transformed
+        tr = QgsCoordinateTransform(layer.crs(), work_crs, context.transformContext())
+        c = ext.center()
+        box = tr.transformBoundingBox(QgsRectangle(c.x(), c.y(), c.x() + native, c.y() + native))
+        native_m = max(box.width(), box.height())
+    except Exception:  # noqa: BLE001 - an unknown CRS: trust the number as metres
+        native_m = native
+    span = max(bounds[2] - bounds[0], bounds[3] - bounds[1])
+    cell = max(native_m if math.isfinite(native_m) and native_m > 0 else 1.0, 1.0)
+    return max(cell, span / max_cells)
+
+
+def write_geotiff(path: str, dem, crs_wkt: str) -> None:
+    """Write a DemGrid as a single-band float32 GeoTIFF (NaN = no data) with GDAL."""
+    from osgeo import gdal
+
+    rows, cols = dem.array.shape
+    driver = gdal.GetDriverByName("GTiff")
+    ds = driver.Create(str(path), cols, rows, 1, gdal.GDT_Float32, options=["COMPRESS=DEFLATE"])
+    if ds is None:
+        raise QgsProcessingException(f"The relief cannot be written to {path}: "
+                                     f"{gdal.GetLastErrorMsg() or 'unknown GDAL error'}.")
+    ds.SetGeoTransform(tuple(dem.geotransform))
+    ds.SetProjection(crs_wkt)
+    band = ds.GetRasterBand(1)
+    band.SetNoDataValue(float("nan"))
+    band.WriteArray(np.asarray(dem.array, dtype=np.float32))
+    band.FlushCache()
+    ds = None

@@ -11,7 +11,6 @@ from qgis.core import (
 )
 
 from ..plugin import blocks, database, qgis_io
-from .build_fragment_database import _crs_text
 from .common import AlgorithmBase
 
 
@@ -122,7 +121,7 @@ class BuildBlockDatabase(AlgorithmBase):
         source = f"blocks {label}, buildings {b_label}"
         qgis_io.run_engine(label, database.write_block_database, output, block_frame.geometry,
                            building_frame.geometry[known], bid[known].astype(np.int64),
-                           _crs_text(block_frame.crs), block_ids=block_ids,
+                           qgis_io.crs_text(block_frame.crs), block_ids=block_ids,
                            building_attributes=attrs, source=source,
                            progress=qgis_io.progress_for(feedback, 30, 100))
         n_buildings = int(known.sum())

@@ -3,7 +3,6 @@ import numpy as np
 import pandas as pd
 import shapely
 from qgis.core import (
-    QgsCoordinateReferenceSystem,
     QgsProcessing,
     QgsProcessingException,
     QgsProcessingOutputNumber,
@@ -15,53 +14,7 @@ from qgis.core import (
 )
 
 from ..plugin import blocks, database, fragments, qgis_io
-from ..plugin.shape_context import DemGrid
 from .common import AlgorithmBase
-
-
-def _crs_text(crs: QgsCoordinateReferenceSystem) -> str:
-    """What the database records as its CRS: the authority id, else the WKT."""
-    return crs.authid() or crs.toWkt(QgsCoordinateReferenceSystem.WKT_PREFERRED)
-
-
-def read_dem(layer, work_crs: QgsCoordinateReferenceSystem, bounds, cell_size: float,
-             feedback=None) -> DemGrid:
-    """Warp a raster layer into the working CRS over ``bounds`` (+ a margin) with GDAL.
-
-    The engine works on a numpy grid with a geotransform; GDAL (the same library QGIS uses)
-    reprojects and resamples the DEM bilinearly into an in-memory dataset first.
-    """
-    from osgeo import gdal
-
-    source = layer.source().split("|")[0]
-    margin = 4 * cell_size
-    x0, y0, x1, y1 = bounds
-    options = gdal.WarpOptions(
-        format="MEM", dstSRS=_crs_text(work_crs), srcSRS=_crs_text(layer.crs()) or None,
-        outputBounds=(x0 - margin, y0 - margin, x1 + margin, y1 + margin),
-        xRes=cell_size, yRes=cell_size, resampleAlg="bilinear", dstNodata=float("nan"),
-        outputType=gdal.GDT_Float32, multithread=False)
-    # no gdal.UseExceptions(): it would switch the bindings' error mode for all of QGIS
-    try:
-        ds = gdal.Warp("", source, options=options)
-    except RuntimeError as exc:  # exceptions already enabled by someone else
-        raise QgsProcessingException(
-            f"DEM '{layer.name()}' cannot be read or reprojected: {exc}") from exc
-    if ds is None:
-        raise QgsProcessingException(f"DEM '{layer.name()}' cannot be read or reprojected: "
-                                     f"{gdal.GetLastErrorMsg() or 'unknown GDAL error'}.")
-    band = ds.GetRasterBand(1)
-    grid = band.ReadAsArray().astype(np.float64)
-    nodata = band.GetNoDataValue()
-    dem = DemGrid(grid, ds.GetGeoTransform(), nodata)
-    valid = np.isfinite(dem.array)
-    if not valid.any():
-        raise QgsProcessingException(
-            f"DEM '{layer.name()}' has no value over the roads' extent: check that they overlap.")
-    if feedback is not None and not valid.all():
-        feedback.pushInfo(f"DEM: {100 * (1 - valid.mean()):.0f} % of the roads' extent has no "
-                          "height; slopes there are taken as 0.")
-    return dem
 
 
 class BuildFragmentDatabase(AlgorithmBase):
@@ -163,7 +116,7 @@ class BuildFragmentDatabase(AlgorithmBase):
         dem = None
         dem_layer = self.parameterAsRasterLayer(parameters, self.DEM, context)
         if dem_layer is not None:
-            dem = read_dem(dem_layer, frame.crs, shapely.total_bounds(lines), cell, feedback)
+            dem = qgis_io.read_raster(dem_layer, frame.crs, shapely.total_bounds(lines), cell, feedback)
             feedback.pushInfo(f"DEM resampled to {dem.array.shape[1]} x {dem.array.shape[0]} "
                               f"cells of {cell:g} m.")
         feedback.setProgress(15)
@@ -181,7 +134,7 @@ class BuildFragmentDatabase(AlgorithmBase):
         source = f"{label} (field '{level_field}')" + (
             f", DEM '{dem_layer.name()}'" if dem_layer is not None else "")
         qgis_io.run_engine(label, database.write_fragment_database, output, frags,
-                           _crs_text(frame.crs), source=source, elevation=dem,
+                           qgis_io.crs_text(frame.crs), source=source, elevation=dem,
                            extra={"min_area_m2": min_area, "min_width_m": min_width,
                                   "relief_cell_m": cell if dem is not None else None},
                            progress=qgis_io.progress_for(feedback, 60, 100))

@@ -1,10 +1,8 @@
 """urbansynth:growroads - procedural road growth with street patterns (Scharl 2010, ch. 4.2)."""
-import math
 
 import numpy as np
 import shapely
 from qgis.core import (
-    QgsCoordinateTransform,
     QgsProcessing,
     QgsProcessingException,
     QgsProcessingParameterBoolean,
@@ -14,38 +12,15 @@ from qgis.core import (
     QgsProcessingParameterNumber,
     QgsProcessingParameterPoint,
     QgsProcessingParameterRasterLayer,
-    QgsRectangle,
     QgsWkbTypes,
 )
 
 from ..plugin import growth, qgis_io
 from ..plugin.progress import InputError
-from .build_fragment_database import read_dem
 from .common import AlgorithmBase
 
 ROAD_FIELDS = [("edge_id", "int"), ("level", "int"), ("road_class", "str"), ("pattern", "str"),
                ("width_m", "float"), ("length_m", "float")]
-#: Rasters are resampled to at most this many cells across the boundary.
-MAX_RASTER_CELLS = 2048
-
-
-def _raster_cell_size(layer, work_crs, bounds, context) -> float:
-    """Cell size (m) for a raster in the working CRS: its own resolution, at least 1 m, and
-    coarse enough that the boundary spans at most MAX_RASTER_CELLS cells."""
-    ext = layer.extent()
-    native = max(layer.rasterUnitsPerPixelX(), layer.rasterUnitsPerPixelY())
-    try:  # the resolution in metres: the length of one pixel's diagonal, transformed
-        tr = QgsCoordinateTransform(layer.crs(), work_crs, context.transformContext())
-        c = ext.center()
-        box = tr.transformBoundingBox(QgsRectangle(c.x(), c.y(), c.x() + native, c.y() + native))
-        native_m = max(box.width(), box.height())
-    except Exception:  # noqa: BLE001 - an unknown CRS: trust the number as metres
-        native_m = native
-    span = max(bounds[2] - bounds[0], bounds[3] - bounds[1])
-    cell = max(native_m if math.isfinite(native_m) and native_m > 0 else 1.0, 1.0)
-    return max(cell, span / MAX_RASTER_CELLS)
-
-
 class GrowRoads(AlgorithmBase):
     BOUNDARY = "BOUNDARY"
     MAJOR_ROADS = "MAJOR_ROADS"
@@ -276,25 +251,25 @@ class GrowRoads(AlgorithmBase):
         dem = None
         dem_layer = self.parameterAsRasterLayer(parameters, self.DEM, context)
         if dem_layer is not None:
-            cell = _raster_cell_size(dem_layer, crs, bounds, context)
-            dem = read_dem(dem_layer, crs, bounds, cell, feedback)
+            cell = qgis_io.raster_cell_size(dem_layer, crs, bounds, context)
+            dem = qgis_io.read_raster(dem_layer, crs, bounds, cell, feedback)
             feedback.pushInfo(f"DEM resampled to {cell:.1f} m cells; maximum slope "
                               f"{100 * settings.max_slope:g} %.")
         density = None
         density_layer = self.parameterAsRasterLayer(parameters, self.DENSITY, context)
         if density_layer is not None:
-            cell = _raster_cell_size(density_layer, crs, bounds, context)
+            cell = qgis_io.raster_cell_size(density_layer, crs, bounds, context)
             try:
-                density = read_dem(density_layer, crs, bounds, cell)
+                density = qgis_io.read_raster(density_layer, crs, bounds, cell)
             except QgsProcessingException as exc:
                 raise QgsProcessingException(
                     f"Density raster '{density_layer.name()}' has no value over the boundary "
                     "or cannot be reprojected: check that they overlap.") from exc
         obstacle_raster = self.parameterAsRasterLayer(parameters, self.OBSTACLE_RASTER, context)
         if obstacle_raster is not None:
-            cell = _raster_cell_size(obstacle_raster, crs, bounds, context)
+            cell = qgis_io.raster_cell_size(obstacle_raster, crs, bounds, context)
             try:
-                grid = read_dem(obstacle_raster, crs, bounds, cell)
+                grid = qgis_io.read_raster(obstacle_raster, crs, bounds, cell)
             except QgsProcessingException as exc:
                 raise QgsProcessingException(
                     f"Obstacle raster '{obstacle_raster.name()}' has no value over the boundary "

@@ -19,27 +19,7 @@ from qgis.core import (
 )
 
 from ..plugin import database, qgis_io, synthesis_fragments
-from .build_fragment_database import read_dem
 from .common import AlgorithmBase
-
-
-def write_geotiff(path: str, dem, crs_wkt: str) -> None:
-    """Write a DemGrid as a single-band float32 GeoTIFF (NaN = no data) with GDAL."""
-    from osgeo import gdal
-
-    rows, cols = dem.array.shape
-    driver = gdal.GetDriverByName("GTiff")
-    ds = driver.Create(str(path), cols, rows, 1, gdal.GDT_Float32, options=["COMPRESS=DEFLATE"])
-    if ds is None:
-        raise QgsProcessingException(f"The relief cannot be written to {path}: "
-                                     f"{gdal.GetLastErrorMsg() or 'unknown GDAL error'}.")
-    ds.SetGeoTransform(tuple(dem.geotransform))
-    ds.SetProjection(crs_wkt)
-    band = ds.GetRasterBand(1)
-    band.SetNoDataValue(float("nan"))
-    band.WriteArray(np.asarray(dem.array, dtype=np.float32))
-    band.FlushCache()
-    ds = None
 
 
 class SynthesizeRoadsFromFragments(AlgorithmBase):
@@ -217,7 +197,7 @@ class SynthesizeRoadsFromFragments(AlgorithmBase):
         dem = None
         dem_layer = self.parameterAsRasterLayer(parameters, self.DEM, context)
         if dem_layer is not None:
-            dem = read_dem(dem_layer, frame.crs, shapely.total_bounds(frame.geometry), cell,
+            dem = qgis_io.read_raster(dem_layer, frame.crs, shapely.total_bounds(frame.geometry), cell,
                            feedback)
         elif dem_out:
             raise QgsProcessingException("OUTPUT_DEM needs an elevation model (DEM) to merge the "
@@ -247,7 +227,7 @@ class SynthesizeRoadsFromFragments(AlgorithmBase):
         if dem_out:
             if not any(d.relief is not None for d in dbs):
                 feedback.pushInfo("No database has relief: OUTPUT_DEM is the input DEM resampled.")
-            write_geotiff(dem_out, result.dem, frame.crs.toWkt())
+            qgis_io.write_geotiff(dem_out, result.dem, frame.crs.toWkt())
             outputs[self.OUTPUT_DEM] = dem_out
         feedback.setProgress(100)
         return outputs
