@@ -40,6 +40,15 @@ run subdivideparcels "BLOCKS=$GPKG|layername=blocks" "METHOD=1" "OUTPUT=$(layer 
     "OUTPUT=$(layer boundary)" > "$OUT/.last.log" 2>&1 || { cat "$OUT/.last.log"; exit 1; }
 run growroads "BOUNDARY=$GPKG|layername=boundary" MAJOR_PATTERN=1 MINOR_PATTERN=0 SEED=1 \
     "OUTPUT=$(layer grown_roads)"
-QT_QPA_PLATFORM=offscreen .venv/bin/python scripts/render_preview.py "$GPKG" "$OUT/demo.png" "$OUT/demo_parcels.png"
+# hierarchical fragment synthesis (thesis ch. 4.1): Helsinki's arterials refilled from its own
+# fragment database, compared with the original roads
+"$QP" run native:extractbyattribute -- "INPUT=$GPKG|layername=roads" FIELD=level OPERATOR=0 \
+    VALUE=0 "OUTPUT=$(layer arterials)" > "$OUT/.last.log" 2>&1 || { cat "$OUT/.last.log"; exit 1; }
+run synthesizeroadsfromfragments "ARTERIALS=$GPKG|layername=arterials" \
+    "FRAGMENT_DB=$OUT/helsinki_fragments.gpkg" N_BEST=3 SEED=1 "OUTPUT=$(layer synthesized_roads)"
+run layoutmetrics "ROADS=$GPKG|layername=synthesized_roads" "EXAMPLE_ROADS=$GPKG|layername=roads" \
+    "OUTPUT=$(layer synthesis_metrics)" "OUTPUT_HTML=$OUT/synthesis_metrics.html"
+QT_QPA_PLATFORM=offscreen .venv/bin/python scripts/render_preview.py "$GPKG" "$OUT/demo.png" "$OUT/demo_parcels.png" \
+    "$OUT/demo_fragments.png"
 rm -f "$OUT/.last.log"
-echo "wrote $GPKG, $OUT/helsinki_fragments.gpkg, $OUT/helsinki_blocks.gpkg, $OUT/demo_metrics.html, $OUT/demo.png, $OUT/demo_parcels.png"
+echo "wrote $GPKG, $OUT/helsinki_fragments.gpkg, $OUT/helsinki_blocks.gpkg, $OUT/demo_metrics.html, $OUT/demo.png, $OUT/demo_parcels.png, $OUT/demo_fragments.png, $OUT/synthesis_metrics.html"

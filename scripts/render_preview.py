@@ -14,6 +14,7 @@ STYLES = Path(__file__).resolve().parent.parent / "resources" / "styles"
 # bottom to top
 LAYERS = [("blocks", "blocks.qml"), ("buildings", "buildings_by_height.qml"),
           ("roads", "roads_by_level.qml")]
+SYNTHESIS_LAYERS = [("synthesized_roads", "roads_by_level.qml")]
 PARCEL_LAYERS = [("parcels", "parcels_by_quality.qml"), ("roads", "roads_by_level.qml")]
 
 
@@ -66,3 +67,8 @@ if __name__ == "__main__":
                layer_styles=PARCEL_LAYERS,
                footer="Parcels: blue = good, red = undesirable (Yang et al. 2013).")
         print("wrote", sys.argv[3])
+    if len(sys.argv) > 4:  # synthesizeroadsfromfragments on the Helsinki arterials
+        render(sys.argv[1], sys.argv[4], "Helsinki arterials refilled from Helsinki's fragments",
+               layer_styles=SYNTHESIS_LAYERS, extent_layer="synthesized_roads",
+               footer="Synthesised streets coloured by level (red = the given arterials).")
+        print("wrote", sys.argv[4])
