@@ -15,6 +15,7 @@ from .common import AlgorithmBase
 
 
 class BuildBlockDatabase(AlgorithmBase):
+    GROUP_ID = "databases"
     BLOCKS = "BLOCKS"
     BUILDINGS = "BUILDINGS"
     BLOCK_ID_FIELD = "BLOCK_ID_FIELD"
@@ -27,12 +28,6 @@ class BuildBlockDatabase(AlgorithmBase):
 
     def displayName(self):  # noqa: N802
         return "Build block database"
-
-    def group(self):
-        return "Example databases"
-
-    def groupId(self):  # noqa: N802
-        return "databases"
 
     def shortHelpString(self):  # noqa: N802
         return (

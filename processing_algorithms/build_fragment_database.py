@@ -18,6 +18,7 @@ from .common import AlgorithmBase
 
 
 class BuildFragmentDatabase(AlgorithmBase):
+    GROUP_ID = "databases"
     ROADS = "ROADS"
     LEVEL_FIELD = "LEVEL_FIELD"
     DEM = "DEM"
@@ -32,12 +33,6 @@ class BuildFragmentDatabase(AlgorithmBase):
 
     def displayName(self):  # noqa: N802
         return "Build fragment database"
-
-    def group(self):
-        return "Example databases"
-
-    def groupId(self):  # noqa: N802
-        return "databases"
 
     def shortHelpString(self):  # noqa: N802
         return (

@@ -10,8 +10,23 @@ from ..plugin import qgis_io
 ICON = Path(__file__).resolve().parent.parent / "resources" / "icons" / "urbansynth.svg"
 
 
+#: Toolbox groups: id -> name.
+GROUPS = {"analysis": "Analysis", "databases": "Example databases", "synthesis": "Synthesis"}
+
+
 class AlgorithmBase(QgsProcessingAlgorithm):
-    """Base for every urbansynth algorithm: icon, instance creation and ``add``."""
+    """Base for every urbansynth algorithm: group, icon, instance creation and ``add``.
+
+    Subclasses set ``GROUP_ID`` (a key of :data:`GROUPS`).
+    """
+
+    GROUP_ID = "analysis"
+
+    def group(self):
+        return GROUPS[self.GROUP_ID]
+
+    def groupId(self):  # noqa: N802
+        return self.GROUP_ID
 
     def createInstance(self):  # noqa: N802 (QGIS API)
         return type(self)()

@@ -26,6 +26,7 @@ _INT_TYPES = (QVariant.Int, QVariant.LongLong, QVariant.UInt, QVariant.ULongLong
 
 
 class ExtractBlocks(AlgorithmBase):
+    GROUP_ID = "analysis"
     ROADS = "ROADS"
     CLASS_FIELD = "CLASS_FIELD"
     CLASSES = "CLASSES"
@@ -45,12 +46,6 @@ class ExtractBlocks(AlgorithmBase):
 
     def displayName(self):  # noqa: N802
         return "Extract city blocks"
-
-    def group(self):
-        return "Analysis"
-
-    def groupId(self):  # noqa: N802
-        return "analysis"
 
     def shortHelpString(self):  # noqa: N802
         return (

@@ -31,6 +31,7 @@ INTERSECTION_FIELDS = [
 
 
 class ExtractRoadHierarchy(AlgorithmBase):
+    GROUP_ID = "analysis"
     INPUT = "INPUT"
     CLASS_FIELD = "CLASS_FIELD"
     CLASSES = "CLASSES"
@@ -52,12 +53,6 @@ class ExtractRoadHierarchy(AlgorithmBase):
 
     def displayName(self):  # noqa: N802
         return "Extract road hierarchy"
-
-    def group(self):
-        return "Analysis"
-
-    def groupId(self):  # noqa: N802
-        return "analysis"
 
     def shortHelpString(self):  # noqa: N802
         return (

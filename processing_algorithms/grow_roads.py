@@ -22,6 +22,7 @@ from .common import AlgorithmBase
 ROAD_FIELDS = [("edge_id", "int"), ("level", "int"), ("road_class", "str"), ("pattern", "str"),
                ("width_m", "float"), ("length_m", "float")]
 class GrowRoads(AlgorithmBase):
+    GROUP_ID = "synthesis"
     BOUNDARY = "BOUNDARY"
     MAJOR_ROADS = "MAJOR_ROADS"
     GROW_MAJOR = "GROW_MAJOR"
@@ -57,12 +58,6 @@ class GrowRoads(AlgorithmBase):
 
     def displayName(self):  # noqa: N802
         return "Grow roads (procedural patterns)"
-
-    def group(self):
-        return "Synthesis"
-
-    def groupId(self):  # noqa: N802
-        return "synthesis"
 
     def shortHelpString(self):  # noqa: N802
         return (

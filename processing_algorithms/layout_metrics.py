@@ -18,6 +18,7 @@ from .common import AlgorithmBase
 
 
 class LayoutMetrics(AlgorithmBase):
+    GROUP_ID = "analysis"
     ROADS = "ROADS"
     BLOCKS = "BLOCKS"
     PARCELS = "PARCELS"
@@ -45,12 +46,6 @@ class LayoutMetrics(AlgorithmBase):
 
     def displayName(self):  # noqa: N802
         return "Layout metrics"
-
-    def group(self):
-        return "Analysis"
-
-    def groupId(self):  # noqa: N802
-        return "analysis"
 
     def shortHelpString(self):  # noqa: N802
         return (

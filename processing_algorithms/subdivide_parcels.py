@@ -17,6 +17,7 @@ from .common import AlgorithmBase, drivable_lines
 
 
 class SubdivideParcels(AlgorithmBase):
+    GROUP_ID = "synthesis"
     BLOCKS = "BLOCKS"
     ROADS = "ROADS"
     STREET_WIDTH_FIELD = "STREET_WIDTH_FIELD"
@@ -39,12 +40,6 @@ class SubdivideParcels(AlgorithmBase):
 
     def displayName(self):  # noqa: N802
         return "Subdivide blocks into parcels"
-
-    def group(self):
-        return "Synthesis"
-
-    def groupId(self):  # noqa: N802
-        return "synthesis"
 
     def shortHelpString(self):  # noqa: N802
         return (

@@ -23,6 +23,7 @@ from .common import AlgorithmBase
 
 
 class SynthesizeRoadsFromFragments(AlgorithmBase):
+    GROUP_ID = "synthesis"
     ARTERIALS = "ARTERIALS"
     FRAGMENT_DB = "FRAGMENT_DB"
     FRAGMENT_DB_2 = "FRAGMENT_DB_2"
@@ -44,12 +45,6 @@ class SynthesizeRoadsFromFragments(AlgorithmBase):
 
     def displayName(self):  # noqa: N802
         return "Synthesize roads from fragments"
-
-    def group(self):
-        return "Synthesis"
-
-    def groupId(self):  # noqa: N802
-        return "synthesis"
 
     def shortHelpString(self):  # noqa: N802
         return (

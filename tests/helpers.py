@@ -45,3 +45,21 @@ def assert_planar(lines, z_layer=None, tol=1e-6):
     # the intersection of two edges must be a subset of their end points
     bad = ~shapely.covers(shapely.buffer(ends, tol), inter) if len(a) else np.zeros(0, bool)
     assert not bad.any(), f"{int(bad.sum())} pairs of edges cross or overlap away from a node"
+
+
+def layer_features(layer):
+    """A QGIS layer's features as (rows: list of dicts with NULL as None, shapely geometries)."""
+    from qgis.PyQt.QtCore import QVariant
+
+    feats = list(layer.getFeatures())
+    names = [f.name() for f in layer.fields()]
+    rows = [{k: None if isinstance(v, QVariant) and v.isNull() else v
+             for k, v in zip(names, f.attributes())} for f in feats]
+    geoms = shapely.from_wkb([bytes(f.geometry().asWkb()) if f.hasGeometry() else None
+                              for f in feats]) if feats else np.empty(0, dtype=object)
+    return rows, geoms
+
+
+def layer_rows(layer):
+    """A QGIS layer's attribute rows (dicts, NULL as None)."""
+    return layer_features(layer)[0]

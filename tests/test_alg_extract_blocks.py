@@ -4,18 +4,7 @@ import pytest
 import shapely
 
 from conftest import bubenec_layer, helsinki_layer, run_qgis_process
-
-
-def _features(layer):
-    feats = list(layer.getFeatures())
-    fields = [f.name() for f in layer.fields()]
-    rows = [dict(zip(fields, [None if _null(v) else v for v in f.attributes()])) for f in feats]
-    geoms = shapely.from_wkb([bytes(f.geometry().asWkb()) for f in feats])
-    return rows, geoms
-
-
-def _null(value):
-    return value is None or (hasattr(value, "isNull") and value.isNull())
+from helpers import layer_features
 
 
 def _utm_area(geoms, lat):
@@ -34,7 +23,7 @@ def helsinki(qgis_processing):
 def test_helsinki_blocks(helsinki):
     layer = helsinki["OUTPUT"]
     assert layer.crs().authid() == "EPSG:4326"  # back in the input CRS
-    rows, geoms = _features(layer)
+    rows, geoms = layer_features(layer)
     assert 40 <= len(rows) <= 70
     assert [r["block_id"] for r in rows] == list(range(1, len(rows) + 1))
     assert shapely.is_valid(geoms).all()
@@ -51,7 +40,7 @@ def test_helsinki_blocks(helsinki):
 def test_helsinki_buildings(helsinki):
     layer = helsinki["OUTPUT_BUILDINGS"]
     assert layer.crs().authid() == "EPSG:4326"
-    rows, _ = _features(layer)
+    rows, _ = layer_features(layer)
     # only polygons with a 'building' value: about 490 of Helsinki's multipolygons
     assert 450 < len(rows) < 520
     names = [f.name() for f in layer.fields()]
@@ -79,9 +68,9 @@ def test_bubenec_blocks_buildings_parcels(qgis_processing):
         "OUTPUT_PARCELS": "memory:"})
     for key in ("OUTPUT", "OUTPUT_BUILDINGS", "OUTPUT_PARCELS"):
         assert out[key].crs().authid() == "EPSG:3857"
-    blocks, _ = _features(out["OUTPUT"])
+    blocks, _ = layer_features(out["OUTPUT"])
     assert len(blocks) == 7  # DESIGN.md: Bubeneč has 7 closed blocks
-    buildings, _ = _features(out["OUTPUT_BUILDINGS"])
+    buildings, _ = layer_features(out["OUTPUT_BUILDINGS"])
     assert len(buildings) == 144
     assert "uID" in buildings[0]
     # the two north-western courtyard blocks are not closed by streets in this extract
@@ -89,7 +78,7 @@ def test_bubenec_blocks_buildings_parcels(qgis_processing):
     assert sum(b["n_buildings"] for b in blocks) == sum(r["in_block"] for r in buildings)
     # no height data in this cadastre extract: nothing is invented
     assert all(r["height_m"] is None and r["building_type"] == "unknown" for r in buildings)
-    parcels, _ = _features(out["OUTPUT_PARCELS"])
+    parcels, _ = layer_features(out["OUTPUT_PARCELS"])
     assert len(parcels) == 407
     assert {"ID", "KATUZE_KOD", "block_id", "in_block"} <= set(parcels[0])
     assert sum(r["in_block"] for r in parcels) == 143  # the rest: streets, open blocks
@@ -129,11 +118,11 @@ def test_cadastre_height_and_levels_fields(qgis_processing):
         "ROADS": roads_layer, "BUILDINGS": buildings, "HEIGHT_FIELD": "vyska",
         "LEVELS_FIELD": "podlazi", "STOREY_HEIGHT": 3.5, "OUTPUT": "memory:",
         "OUTPUT_BUILDINGS": "memory:"})
-    blocks, geoms = _features(out["OUTPUT"])
+    blocks, geoms = layer_features(out["OUTPUT"])
     assert len(blocks) == 4
     assert [round(b["area_m2"]) for b in blocks] == [10_000] * 4
     assert out["OUTPUT"].crs().authid() == "EPSG:32633"
-    rows, _ = _features(out["OUTPUT_BUILDINGS"])
+    rows, _ = layer_features(out["OUTPUT_BUILDINGS"])
     assert [r["block_id"] for r in rows] == [1, 2, 3]
     assert [r["height_m"] for r in rows] == [12.5, 14.0, None]
     assert [r["height_estimated"] for r in rows] == [False, True, None]

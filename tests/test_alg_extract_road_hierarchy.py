@@ -4,15 +4,7 @@ import pytest
 import shapely
 
 from conftest import BUBENEC, bubenec_layer, helsinki_layer, run_qgis_process
-from helpers import assert_planar
-
-
-def _features(layer):
-    feats = list(layer.getFeatures())
-    fields = [f.name() for f in layer.fields()]
-    rows = [dict(zip(fields, f.attributes())) for f in feats]
-    geoms = shapely.from_wkb([bytes(f.geometry().asWkb()) for f in feats])
-    return rows, geoms
+from helpers import assert_planar, layer_features
 
 
 def test_helsinki_hierarchy(qgis_processing, tmp_path):
@@ -20,7 +12,7 @@ def test_helsinki_hierarchy(qgis_processing, tmp_path):
         "INPUT": helsinki_layer("lines"), "OUTPUT": "memory:", "OUTPUT_INTERSECTIONS": "memory:"})
     roads_layer, points = out["OUTPUT"], out["OUTPUT_INTERSECTIONS"]
     assert roads_layer.crs().authid() == "EPSG:4326"  # back in the input CRS
-    rows, geoms = _features(roads_layer)
+    rows, geoms = layer_features(roads_layer)
     assert len(rows) > 150
     levels = np.array([r["level"] for r in rows])
     assert levels.min() == 0 and 3 <= levels.max() <= 5
@@ -34,7 +26,7 @@ def test_helsinki_hierarchy(qgis_processing, tmp_path):
     # planar in a metric CRS (bridges may cross what they pass over)
     utm = shapely.transform(geoms, lambda c: c * [111_000 * np.cos(np.radians(60.17)), 111_000])
     assert_planar(utm, [r["osm_layer"] for r in rows])
-    prow, _ = _features(points)
+    prow, _ = layer_features(points)
     assert points.featureCount() > 100
     deg = np.array([r["degree"] for r in prow])
     assert set(np.unique(deg)) <= {1, 2, 3, 4, 5, 6}
@@ -45,12 +37,12 @@ def test_bubenec_without_classes_uses_topological_levels(qgis_processing):
     out = qgis_processing.run("urbansynth:extractroadhierarchy", {
         "INPUT": bubenec_layer("streets"), "PARCELS": bubenec_layer("plots"),
         "OUTPUT": "memory:", "OUTPUT_INTERSECTIONS": "memory:"})
-    rows, _ = _features(out["OUTPUT"])
+    rows, _ = layer_features(out["OUTPUT"])
     assert out["OUTPUT"].crs().authid() == "EPSG:3857"
     levels = {r["level"] for r in rows}
     assert 0 in levels and len(levels) >= 2
     assert all(r["arterial_source"] in ("", "topological", "component") for r in rows)
-    prow, _ = _features(out["OUTPUT_INTERSECTIONS"])
+    prow, _ = layer_features(out["OUTPUT_INTERSECTIONS"])
     # with parcels, intersections carry the mean parcel area nearby (Aliaga's a(v))
     areas = [r["parcel_area"] for r in prow if r["parcel_area"] is not None]
     assert len(areas) > len(prow) / 2 and 100 < np.median(areas) < 5000

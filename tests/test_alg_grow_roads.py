@@ -6,7 +6,7 @@ import pytest
 import shapely
 
 from conftest import run_qgis_process
-from helpers import assert_planar
+from helpers import assert_planar, layer_features
 
 # a Helsinki-sized 1 km x 1 km square in ETRS-TM35FIN (EPSG:3067), central Helsinki
 X0, Y0 = 385000.0, 6671000.0
@@ -25,14 +25,6 @@ def _layer(wkts, geometry="Polygon", crs="EPSG:3067", name="layer"):
         features.append(f)
     layer.dataProvider().addFeatures(features)
     return layer
-
-
-def _features(layer):
-    feats = list(layer.getFeatures())
-    fields = [f.name() for f in layer.fields()]
-    rows = [dict(zip(fields, f.attributes())) for f in feats]
-    geoms = shapely.from_wkb([bytes(f.geometry().asWkb()) for f in feats])
-    return rows, geoms
 
 
 def _write_geotiff(path, array, x0, y0, cell, epsg=3067):
@@ -57,7 +49,7 @@ def test_patterns_on_a_helsinki_square(qgis_processing, pattern):
         "SEED": 3, "OUTPUT": "memory:"})
     layer = out["OUTPUT"]
     assert layer.crs().authid() == "EPSG:3067"
-    rows, geoms = _features(layer)
+    rows, geoms = layer_features(layer)
     assert len(rows) > 150
     assert [f.name() for f in layer.fields()] == ["edge_id", "level", "road_class", "pattern",
                                                   "width_m", "length_m"]
@@ -100,7 +92,7 @@ def test_geographic_boundary_terrain_obstacles_density_sketch(qgis_processing, t
         "SEED": 2, "OUTPUT": "memory:"})
     layer = out["OUTPUT"]
     assert layer.crs().authid() == "EPSG:4326"
-    rows, geoms = _features(layer)
+    rows, geoms = layer_features(layer)
     assert len(rows) > 100
     assert {r["pattern"] for r in rows} == {"sketch", "organic", "radial"}
     # lengths are metres, not degrees
@@ -184,7 +176,7 @@ def test_obstacle_raster_keeps_roads_out_of_masked_cells(qgis_processing, tmp_pa
     tif = _write_geotiff(tmp_path / "water.tif", mask, x0, y1, cell)
     out = qgis_processing.run("urbansynth:growroads", {
         "BOUNDARY": _layer([SQUARE]), "OBSTACLE_RASTER": tif, "SEED": 2, "OUTPUT": "memory:"})
-    _, geoms = _features(out["OUTPUT"])
+    _, geoms = layer_features(out["OUTPUT"])
     assert len(geoms) > 50
     lake = shapely.box(x0 + cols // 4 * cell, y1 - rows // 2 * cell,
                        x0 + 3 * cols // 4 * cell, y1 - rows // 4 * cell)

@@ -4,17 +4,9 @@ import math
 import pytest
 
 from conftest import bubenec_layer, helsinki_layer, run_qgis_process
+from helpers import layer_rows
 
 ALG = "urbansynth:layoutmetrics"
-
-
-def _rows(layer):
-    """Features as dicts, QGIS NULLs as None."""
-    from qgis.PyQt.QtCore import QVariant
-
-    fields = [f.name() for f in layer.fields()]
-    return [{k: None if isinstance(v, QVariant) and v.isNull() else v
-             for k, v in zip(fields, f.attributes())} for f in layer.getFeatures()]
 
 
 def _row(rows, kind, metric):
@@ -32,7 +24,7 @@ def test_helsinki_against_bubenec(qgis_processing, tmp_path):
         "OUTPUT": "memory:", "OUTPUT_HTML": str(html)})
     table = out["OUTPUT"]
     assert table.wkbType() == QgsWkbTypes.NoGeometry
-    rows = _rows(table)
+    rows = layer_rows(table)
     assert {r["kind"] for r in rows} == {"layout", "roads", "blocks", "parcels", "buildings"}
     for metric in ("segment_length", "node_degree", "intersection_angle", "street_bearing"):
         r = _row(rows, "roads", metric)
@@ -69,7 +61,7 @@ def test_identical_layouts_have_zero_distance(qgis_processing, tmp_path):
         "EXAMPLE_ROADS": bubenec_layer("streets"), "EXAMPLE_PARCELS": bubenec_layer("plots"),
         "EXAMPLE_BUILDINGS": bubenec_layer("buildings"), "OUTPUT": "memory:"})
     assert "OUTPUT_HTML" not in out  # the report is optional
-    rows = _rows(out["OUTPUT"])
+    rows = layer_rows(out["OUTPUT"])
     dists = [r for r in rows if r["statistic"] != "value"]
     assert len(dists) >= 12
     assert all(r["wasserstein"] == pytest.approx(0, abs=1e-9) for r in dists)
@@ -88,7 +80,7 @@ def test_parcels_alone_with_land_use_and_study_area(qgis_processing, tmp_path):
         "PARCELS": bubenec_layer("plots"), "LANDUSE_FIELD": "TYPPPD_KOD",
         "STUDY_AREA": bubenec_layer("tessellation"),
         "OUTPUT": "memory:", "OUTPUT_HTML": str(tmp_path / "parcels.html")})
-    rows = _rows(out["OUTPUT"])
+    rows = layer_rows(out["OUTPUT"])
     assert {r["kind"] for r in rows} == {"layout", "parcels"}
     assert all(r["example"] is None for r in rows)
     # the cadastre code is no residential / park label: all parcel land is 'other'

@@ -4,23 +4,13 @@ import pytest
 import shapely
 
 from conftest import bubenec_layer, run_qgis_process
+from helpers import layer_features
 from urban_synthesis.plugin import parcels
 
 ALG = "urbansynth:subdivideparcels"
 FIELDS = [name for name, _ in parcels.PARCEL_FIELDS]
 #: Web Mercator areas are 1 / cos²(latitude) too large; Bubeneč lies at 50.1° N
 MERCATOR_AREA = 1.0 / np.cos(np.radians(50.1)) ** 2
-
-
-def _features(layer):
-    from qgis.PyQt.QtCore import QVariant
-
-    names = [f.name() for f in layer.fields()]
-    feats = list(layer.getFeatures())
-    rows = [{k: None if isinstance(v, QVariant) and v.isNull() else v
-             for k, v in zip(names, f.attributes())} for f in feats]
-    geoms = shapely.from_wkb([bytes(f.geometry().asWkb()) for f in feats])
-    return rows, geoms
 
 
 def _memory_layer(kind, wkts=(), crs="EPSG:32633", fields="", rows=None):
@@ -42,7 +32,7 @@ def _memory_layer(kind, wkts=(), crs="EPSG:32633", fields="", rows=None):
 def bubenec_blocks(qgis_processing):
     out = qgis_processing.run("urbansynth:extractblocks", {
         "ROADS": bubenec_layer("streets"), "OUTPUT": "memory:"})
-    return _features(out["OUTPUT"])
+    return layer_features(out["OUTPUT"])
 
 
 @pytest.mark.parametrize("method", [0, 1], ids=["recursive", "skeleton"])
@@ -52,7 +42,7 @@ def test_bubenec_from_roads(qgis_processing, bubenec_blocks, method):
     layer = out["OUTPUT"]
     assert layer.crs().authid() == "EPSG:3857"  # back in the input CRS
     assert [f.name() for f in layer.fields()] == FIELDS
-    rows, geoms = _features(layer)
+    rows, geoms = layer_features(layer)
     assert 50 < len(rows) < 200
     assert shapely.is_valid(geoms).all()
     assert [r["parcel_id"] for r in rows] == list(range(1, len(rows) + 1))
@@ -79,9 +69,9 @@ def test_blocks_input_keeps_block_ids_and_seed(qgis_processing):
         "ROADS": bubenec_layer("streets"), "OUTPUT": "memory:"})["OUTPUT"]
     params = {"BLOCKS": blocks, "METHOD": 0, "IRREGULARITY": 0.8, "MAX_AREA": 600,
               "STREET_WIDTH": 10, "OUTPUT": "memory:"}
-    first = _features(qgis_processing.run(ALG, dict(params, SEED=5))["OUTPUT"])
-    again = _features(qgis_processing.run(ALG, dict(params, SEED=5))["OUTPUT"])
-    other = _features(qgis_processing.run(ALG, dict(params, SEED=6))["OUTPUT"])
+    first = layer_features(qgis_processing.run(ALG, dict(params, SEED=5))["OUTPUT"])
+    again = layer_features(qgis_processing.run(ALG, dict(params, SEED=5))["OUTPUT"])
+    other = layer_features(qgis_processing.run(ALG, dict(params, SEED=6))["OUTPUT"])
     assert shapely.to_wkb(first[1]).tolist() == shapely.to_wkb(again[1]).tolist()
     assert shapely.to_wkb(first[1]).tolist() != shapely.to_wkb(other[1]).tolist()
     assert {r["block_id"] for r in first[0]} == set(range(1, 8))
@@ -99,7 +89,7 @@ def test_street_width_field(qgis_processing):
                           rows=[(20.0,), (None,), (20.0,), (None,), (None,), (None,)])
     out = qgis_processing.run(ALG, {"ROADS": roads, "STREET_WIDTH_FIELD": "width",
                                     "STREET_WIDTH": 8, "METHOD": 1, "OUTPUT": "memory:"})
-    rows, geoms = _features(out["OUTPUT"])
+    rows, geoms = layer_features(out["OUTPUT"])
     assert out["OUTPUT"].crs().authid() == "EPSG:32633"
     per_block = {}
     for r in rows:

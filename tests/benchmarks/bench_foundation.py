@@ -129,7 +129,7 @@ def main(quick=False):
         results["scale"] = scale
 
         try:
-            import momepy  # noqa: F401
+            import momepy  # noqa: F401 (fail here, not half-way, without momepy)
             from bench_blocks import bench_block_extraction, helsinki_drivable_lines, tile_lines
 
             lines = helsinki_drivable_lines()
