@@ -14,7 +14,15 @@ GeoPackage), then:
   intersection angle and block area between the original roads inside the arterials'
   faces and: the fragment synthesis (N_BEST = 3, mean of seeds 0-4), the same with
   N_BEST = 1 (self-retrieval: exact), a plain grid of Helsinki's median block size, the
-  synthesis from Bubenec's database, and the bare arterials.
+  synthesis from Bubenec's database, and the bare arterials;
+- style transfer with a real second style: a grid the plugin grows itself (growroads,
+  GRID major 250 m / minor 80 m over 2 km x 2 km, seed 1, levels 0 major / 1 minor) gives
+  a second fragment database; a noisy 4 x 4 sketch of arterials 250 m apart is synthesised
+  (N_BEST = 3, seeds 0-4) with Helsinki's database, with the grid's, and with both (style
+  polygons: grid west, Helsinki east, half each), and the table gives the normalised
+  Wasserstein distance of segment length, intersection angle, block area and block
+  compactness and the |difference| of orientation entropy (nats) of each synthesis (and
+  of each example) to each example, with the share of intersection angles within 90 ± 10°.
 
 The thesis reports no runtime (ch. 4.1.4). Results go to
 ``tests/benchmarks/results/fragment_synthesis.json``.
@@ -36,7 +44,7 @@ for p in (ROOT / "build" / "plugins", ROOT / "tests"):
         sys.path.insert(0, str(p))
 
 from urban_synthesis.plugin import (  # noqa: E402
-    blocks, database, fragments, hierarchy, metrics, roads)
+    blocks, database, fragments, growth, hierarchy, metrics, roads)
 from urban_synthesis.plugin import synthesis_fragments as sf  # noqa: E402
 
 RESULTS = ROOT / "tests" / "benchmarks" / "results" / "fragment_synthesis.json"
@@ -89,7 +97,7 @@ def time_synthesis(arterials, dbs, repeat: int = 3):
 
 
 def clipped_metrics(lines, area):
-    with np.errstate(invalid="ignore"):
+    with np.errstate(invalid="ignore", divide="ignore"):
         parts = shapely.get_parts(shapely.intersection(np.asarray(lines, object), area))
     parts = parts[(shapely.get_type_id(parts) == 1) & (shapely.length(parts) > 0.01)]
     return metrics.compute_layout_metrics(roads=parts)
@@ -130,6 +138,97 @@ def reproduction(lines, levels, hel, bub, seeds=range(5)):
     return rows, spacing, float(area.area) / 1e6
 
 
+STYLE_MEASURES = {("roads", "segment_length"): "segment_length",
+                  ("roads", "intersection_angle"): "intersection_angle",
+                  ("blocks", "area"): "block_area", ("blocks", "compactness"): "block_compactness"}
+STYLE_COLUMNS = tuple(STYLE_MEASURES.values()) + ("orientation_entropy",)
+
+
+def grown_grid_database(folder: Path):
+    """The second style: growroads' GRID pattern, 2 km x 2 km, levels from the growth."""
+    s = growth.GrowthSettings(major_pattern="grid", minor_pattern="grid", major_length=250.0,
+                              minor_length=80.0)
+    grown = growth.grow_roads(shapely.box(0, 0, 2000, 2000), settings=s, seed=1)
+    f = fragments.extract_fragments(grown.geometry, grown.level)
+    database.write_fragment_database(str(folder / "grid.gpkg"), f, "EPSG:32635")
+    return grown.geometry, database.load_fragment_database(folder / "grid.gpkg")
+
+
+def sketch_cells(cell: float = 250.0, n: int = 4, seed: int = 0):
+    rng = np.random.default_rng(seed)
+    out = []
+    for x in np.arange(0, cell * n + 1, cell):
+        ys = np.linspace(-30, cell * n + 30, 6)
+        out.append(shapely.LineString([(x + rng.normal(0, 8), y) for y in ys]))
+        out.append(shapely.LineString([(y, x + rng.normal(0, 8)) for y in ys]))
+    return np.array(out, dtype=object)
+
+
+def style_distances(m, example):
+    d = {key: float(metrics.two_sample(m.distribution(kind, name),
+                                       example.distribution(kind, name))["wasserstein_norm"])
+         for (kind, name), key in STYLE_MEASURES.items()}
+    d["orientation_entropy"] = float(abs(m.scalar("roads", "orientation_entropy")
+                                         - example.scalar("roads", "orientation_entropy")))
+    return d
+
+
+def right_angle_share(m):
+    a = m.distribution("roads", "intersection_angle")
+    return float(np.mean(np.abs(a - 90.0) <= 10.0))
+
+
+def style_transfer(hel_lines, hel, grid_lines, grid, seeds=range(5)):
+    """Rows: each synthesis of the sketch (and each example itself) -> distances to each
+    example, right-angle share and orientation entropy (means over the seeds)."""
+    sketch = sketch_cells()
+    area = shapely.union_all(blocks.block_faces(sketch)[0])
+    style = [shapely.box(-100, -100, 500, 1100), shapely.box(500, -100, 1100, 1100)]
+    examples = {"Helsinki": metrics.compute_layout_metrics(roads=hel_lines),
+                "grid": metrics.compute_layout_metrics(roads=grid_lines)}
+    configs = {"Helsinki db": dict(databases=[hel]), "grid db": dict(databases=[grid]),
+               "mixed (grid W, Helsinki E)": dict(
+                   databases=[grid, hel], style_polygons=style, style_database=[0, 1])}
+    rows = {}
+    for name, kw in configs.items():
+        ms = [clipped_metrics(sf.synthesize(sketch, n_best=3, seed=s, **kw).geometry, area)
+              for s in seeds]
+        rows[f"synthesis, {name}"] = dict(
+            to={ex: {k: float(np.mean([style_distances(m, e)[k] for m in ms]))
+                     for k in STYLE_COLUMNS} for ex, e in examples.items()},
+            right_angle_share=float(np.mean([right_angle_share(m) for m in ms])),
+            orientation_entropy=float(np.mean([m.scalar("roads", "orientation_entropy")
+                                               for m in ms])))
+    rows["arterials only"] = dict(
+        to={ex: style_distances(clipped_metrics(sketch, area), e) for ex, e in examples.items()},
+        right_angle_share=right_angle_share(clipped_metrics(sketch, area)),
+        orientation_entropy=float(clipped_metrics(sketch, area).scalar(
+            "roads", "orientation_entropy")))
+    for ex, e in examples.items():
+        rows[f"example: {ex}"] = dict(
+            to={o: style_distances(e, oe) for o, oe in examples.items()},
+            right_angle_share=right_angle_share(e),
+            orientation_entropy=float(e.scalar("roads", "orientation_entropy")))
+    return rows, float(area.area) / 1e6
+
+
+def print_style_table(rows, km2):
+    short = dict(segment_length="seg len", intersection_angle="angle", block_area="blk area",
+                 block_compactness="compact", orientation_entropy="|dH|")
+    print(f"\nStyle transfer on a noisy 4 x 4 sketch of 250 m cells ({km2:.2f} km²), N_BEST = 3, "
+          "mean of seeds 0-4: W / example spread (|dH|: entropy difference, nats) to each "
+          "example")
+    head = " ".join(f"{short[k]:>8s}" for k in STYLE_COLUMNS)
+    print(f"{'layout':37s} | {'to Helsinki':^44s} | {'to grid':^44s} | {'90±10°':>6s} "
+          f"{'H':>5s}")
+    print(f"{'':37s} | {head} | {head} |")
+    for name, r in rows.items():
+        cells = " | ".join(" ".join(f"{r['to'][ex][k]:8.3f}" for k in STYLE_COLUMNS)
+                           for ex in ("Helsinki", "grid"))
+        print(f"{name:37s} | {cells} | {r['right_angle_share']:6.2f} "
+              f"{r['orientation_entropy']:5.2f}")
+
+
 def main():
     import tempfile
 
@@ -141,6 +240,8 @@ def main():
             "1 km² sketch, Bubenec db": time_synthesis(sketch_1km2(), [bub]),
         }
         rows, spacing, km2 = reproduction(lines, levels, hel, bub)
+        grid_lines, grid = grown_grid_database(Path(tmp))
+        style_rows, style_km2 = style_transfer(lines, hel, grid_lines, grid)
     print("Fragment synthesis runtime (thesis: not reported)")
     print(f"{'input':40s} {'km²':>6s} {'s':>6s} {'s/km²':>7s} {'queries':>8s} "
           f"{'ms/query':>9s} {'inserted':>9s} {'edges':>6s}")
@@ -153,13 +254,20 @@ def main():
     for name, r in rows.items():
         print(f"{name:50s} " + " ".join(f"{r[m]['w_norm']:12.3f} ({r[m]['ks']:5.2f})   "
                                         for m in MEASURES))
+    print_style_table(style_rows, style_km2)
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     RESULTS.write_text(json.dumps({
         "machine": f"{platform.processor() or platform.machine()}, "
                    f"{__import__('os').cpu_count()} CPUs, Python {platform.python_version()}",
         "thesis_runtime": "not reported (ch. 4.1.4)",
         "timing": timing, "reproduction_area_km2": km2, "grid_spacing_m": spacing,
-        "reproduction_distances": rows}, indent=2))
+        "reproduction_distances": rows,
+        "style_transfer": {
+            "sketch": "noisy 4 x 4 grid of arterials 250 m apart", "area_km2": style_km2,
+            "grid_example": "growroads GRID/GRID, major 250 m, minor 80 m, 2 km x 2 km, seed 1",
+            "n_best": 3, "seeds": [0, 1, 2, 3, 4],
+            "distance": "wasserstein_norm (W / example std); orientation_entropy: |dH| nats",
+            "rows": style_rows}}, indent=2))
     print(f"\nwritten {RESULTS.relative_to(ROOT)}")
 
 
