@@ -63,3 +63,14 @@ def layer_features(layer):
 def layer_rows(layer):
     """A QGIS layer's attribute rows (dicts, NULL as None)."""
     return layer_features(layer)[0]
+
+
+def clipped_metrics(lines, area):
+    """Layout metrics of the part of a network inside ``area`` (the same cut for an
+    original, a synthesis and a baseline)."""
+    from urban_synthesis.plugin import metrics
+
+    with np.errstate(invalid="ignore", divide="ignore"):  # empty intersections outside
+        parts = shapely.get_parts(shapely.intersection(np.asarray(lines, object), area))
+    parts = parts[(shapely.get_type_id(parts) == 1) & (shapely.length(parts) > 0.01)]
+    return metrics.compute_layout_metrics(roads=parts)

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import shapely
 
-from helpers import assert_planar, bubenec, helsinki_roads
+from helpers import assert_planar, bubenec, clipped_metrics, helsinki_roads
 from test_fragments import levelled_grid
 from urban_synthesis.plugin import (blocks, database, fragments, growth, hierarchy, metrics,
                                     roads)
@@ -273,15 +273,6 @@ def helsinki(tmp_path_factory):
     database.write_fragment_database(str(folder / "bubenec.gpkg"), fb, "EPSG:32633")
     bub = database.load_fragment_database(folder / "bubenec.gpkg")
     return dict(lines=g.geometry, levels=levels, hel=hel, bub=bub, bub_lines=bs.geometry)
-
-
-def clipped_metrics(lines, area):
-    """Layout metrics of the part of a network inside the synthesis area (the same cut for
-    the original, the synthesis and the baseline)."""
-    with np.errstate(invalid="ignore", divide="ignore"):  # empty intersections outside
-        parts = shapely.get_parts(shapely.intersection(np.asarray(lines, object), area))
-    parts = parts[(shapely.get_type_id(parts) == 1) & (shapely.length(parts) > 0.01)]
-    return metrics.compute_layout_metrics(roads=parts)
 
 
 def distances(candidate, reference):

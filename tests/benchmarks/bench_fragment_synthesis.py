@@ -46,6 +46,7 @@ for p in (ROOT / "build" / "plugins", ROOT / "tests"):
 from urban_synthesis.plugin import (  # noqa: E402
     blocks, database, fragments, growth, hierarchy, metrics, roads)
 from urban_synthesis.plugin import synthesis_fragments as sf  # noqa: E402
+from helpers import clipped_metrics  # noqa: E402 (tests/helpers.py)
 
 RESULTS = ROOT / "tests" / "benchmarks" / "results" / "fragment_synthesis.json"
 MEASURES = ("segment_length", "node_degree", "intersection_angle", "area")
@@ -94,13 +95,6 @@ def time_synthesis(arterials, dbs, repeat: int = 3):
     return dict(seconds=best, area_km2=km2, s_per_km2=best / km2, queries=n_q,
                 ms_per_query=1000 * best / n_q, inserted=n_ins, edges=len(res.geometry),
                 levels=sorted(int(k) for k in res.stats["levels"]))
-
-
-def clipped_metrics(lines, area):
-    with np.errstate(invalid="ignore", divide="ignore"):
-        parts = shapely.get_parts(shapely.intersection(np.asarray(lines, object), area))
-    parts = parts[(shapely.get_type_id(parts) == 1) & (shapely.length(parts) > 0.01)]
-    return metrics.compute_layout_metrics(roads=parts)
 
 
 def distances(candidate, reference):
