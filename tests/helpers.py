@@ -74,3 +74,62 @@ def clipped_metrics(lines, area):
         parts = shapely.get_parts(shapely.intersection(np.asarray(lines, object), area))
     parts = parts[(shapely.get_type_id(parts) == 1) & (shapely.length(parts) > 0.01)]
     return metrics.compute_layout_metrics(roads=parts)
+
+
+def memory_layer(kind, wkts=(), crs="EPSG:3857", fields="", rows=None, name="test input"):
+    """A QGIS memory layer of ``kind`` (Point, LineString, Polygon) from WKT strings.
+
+    ``fields`` in the memory provider's syntax (e.g. '&field=h:double'); ``rows`` one
+    attribute list per geometry.
+    """
+    from qgis.core import QgsFeature, QgsGeometry, QgsVectorLayer
+
+    layer = QgsVectorLayer(f"{kind}?crs={crs}{fields}", name, "memory")
+    feats = []
+    for i, wkt in enumerate(wkts):
+        f = QgsFeature(layer.fields())
+        f.setGeometry(QgsGeometry.fromWkt(wkt))
+        if rows is not None:
+            f.setAttributes(list(rows[i]))
+        feats.append(f)
+    layer.dataProvider().addFeatures(feats)
+    return layer
+
+
+# ------------------------------------------------ evidence of the fragment synthesis (issue 3)
+
+#: distributions compared in the style-transfer evidence -> column names
+STYLE_MEASURES = {("roads", "segment_length"): "segment_length",
+                  ("roads", "intersection_angle"): "intersection_angle",
+                  ("blocks", "area"): "block_area", ("blocks", "compactness"): "block_compactness"}
+
+
+def style_distances(m, example):
+    """Normalised Wasserstein distance (W / the example's spread) per distribution of
+    :data:`STYLE_MEASURES` and |difference| (nats) of the orientation entropy."""
+    from urban_synthesis.plugin import metrics
+
+    d = {key: float(metrics.two_sample(m.distribution(kind, name),
+                                       example.distribution(kind, name))["wasserstein_norm"])
+         for (kind, name), key in STYLE_MEASURES.items()}
+    d["orientation_entropy"] = float(abs(m.scalar("roads", "orientation_entropy")
+                                         - example.scalar("roads", "orientation_entropy")))
+    return d
+
+
+def right_angle_share(m):
+    """Share of intersection angles within 90 +- 10 degrees."""
+    a = m.distribution("roads", "intersection_angle")
+    return float(np.mean(np.abs(a - 90.0) <= 10.0))
+
+
+def sketch_cells(cell=250.0, n=4, seed=0):
+    """A noisy n x n grid of arterials ``cell`` m apart (faces both example databases have
+    fragments of a similar size for)."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for x in np.arange(0, cell * n + 1, cell):
+        ys = np.linspace(-30, cell * n + 30, 6)
+        out.append(shapely.LineString([(x + rng.normal(0, 8), y) for y in ys]))
+        out.append(shapely.LineString([(y, x + rng.normal(0, 8)) for y in ys]))
+    return np.array(out, dtype=object)

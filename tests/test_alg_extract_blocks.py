@@ -4,7 +4,11 @@ import pytest
 import shapely
 
 from conftest import bubenec_layer, helsinki_layer, run_qgis_process
-from helpers import layer_features
+from helpers import layer_features, memory_layer
+
+
+def _memory_layer(kind, wkts=(), crs="EPSG:3857", **kwargs):
+    return memory_layer(kind, wkts, crs, **kwargs)
 
 
 def _utm_area(geoms, lat):
@@ -83,22 +87,6 @@ def test_bubenec_blocks_buildings_parcels(qgis_processing):
     assert {"ID", "KATUZE_KOD", "block_id", "in_block"} <= set(parcels[0])
     assert sum(r["in_block"] for r in parcels) == 143  # the rest: streets, open blocks
     assert sum(b["n_parcels"] for b in blocks) == sum(r["in_block"] for r in parcels)
-
-
-def _memory_layer(kind, wkts=(), crs="EPSG:3857", fields="", rows=None):
-    """A memory layer; ``fields`` in the memory provider's syntax, e.g. 'field=h:double'."""
-    from qgis.core import QgsFeature, QgsGeometry, QgsVectorLayer
-
-    layer = QgsVectorLayer(f"{kind}?crs={crs}{fields}", "test input", "memory")
-    feats = []
-    for i, wkt in enumerate(wkts):
-        f = QgsFeature(layer.fields())
-        f.setGeometry(QgsGeometry.fromWkt(wkt))
-        if rows is not None:
-            f.setAttributes(list(rows[i]))
-        feats.append(f)
-    layer.dataProvider().addFeatures(feats)
-    return layer
 
 
 GRID_WKT = [f"LINESTRING (0 {y}, 200 {y})" for y in (0, 100, 200)] + \

@@ -6,25 +6,13 @@ import pytest
 import shapely
 
 from conftest import run_qgis_process
-from helpers import assert_planar, layer_features
+from helpers import assert_planar, layer_features, memory_layer
 
 # a Helsinki-sized 1 km x 1 km square in ETRS-TM35FIN (EPSG:3067), central Helsinki
 X0, Y0 = 385000.0, 6671000.0
+CRS = "EPSG:3067"
 SQUARE = f"POLYGON(({X0} {Y0}, {X0 + 1000} {Y0}, {X0 + 1000} {Y0 + 1000}, {X0} {Y0 + 1000}, " \
          f"{X0} {Y0}))"
-
-
-def _layer(wkts, geometry="Polygon", crs="EPSG:3067", name="layer"):
-    from qgis.core import QgsFeature, QgsGeometry, QgsVectorLayer
-
-    layer = QgsVectorLayer(f"{geometry}?crs={crs}", name, "memory")
-    features = []
-    for wkt in wkts:
-        f = QgsFeature()
-        f.setGeometry(QgsGeometry.fromWkt(wkt))
-        features.append(f)
-    layer.dataProvider().addFeatures(features)
-    return layer
 
 
 def _write_geotiff(path, array, x0, y0, cell, epsg=3067):
@@ -45,7 +33,7 @@ def _write_geotiff(path, array, x0, y0, cell, epsg=3067):
 @pytest.mark.parametrize("pattern", [0, 1, 2])
 def test_patterns_on_a_helsinki_square(qgis_processing, pattern):
     out = qgis_processing.run("urbansynth:growroads", {
-        "BOUNDARY": _layer([SQUARE]), "MAJOR_PATTERN": pattern, "MINOR_PATTERN": pattern,
+        "BOUNDARY": memory_layer("Polygon", [SQUARE], CRS), "MAJOR_PATTERN": pattern, "MINOR_PATTERN": pattern,
         "SEED": 3, "OUTPUT": "memory:"})
     layer = out["OUTPUT"]
     assert layer.crs().authid() == "EPSG:3067"
@@ -66,14 +54,14 @@ def test_geographic_boundary_terrain_obstacles_density_sketch(qgis_processing, t
     """Every optional input at once; a WGS 84 boundary comes back in WGS 84."""
     from qgis.core import QgsCoordinateReferenceSystem, QgsCoordinateTransform, QgsProject
 
-    to_wgs = QgsCoordinateTransform(QgsCoordinateReferenceSystem("EPSG:3067"),
+    to_wgs = QgsCoordinateTransform(QgsCoordinateReferenceSystem(CRS),
                                     QgsCoordinateReferenceSystem("EPSG:4326"),
                                     QgsProject.instance())
     from qgis.core import QgsGeometry
 
     g = QgsGeometry.fromWkt(SQUARE)
     g.transform(to_wgs)
-    boundary = _layer([g.asWkt(12)], crs="EPSG:4326")
+    boundary = memory_layer("Polygon", [g.asWkt(12)], "EPSG:4326")
     # a 25 m high hill (the DEM is in EPSG:3067, the boundary in WGS 84)
     cell = 10.0
     xs = X0 - 100 + cell * (np.arange(120) + 0.5)
@@ -86,8 +74,8 @@ def test_geographic_boundary_terrain_obstacles_density_sketch(qgis_processing, t
     lake = shapely.Point(X0 + 700, Y0 + 350).buffer(150)
     sketch = f"LINESTRING({X0 - 50} {Y0 + 500}, {X0 + 1050} {Y0 + 520})"
     out = qgis_processing.run("urbansynth:growroads", {
-        "BOUNDARY": boundary, "MAJOR_ROADS": _layer([sketch], "LineString"),
-        "OBSTACLES": _layer([lake.wkt]), "DEM": dem, "MAX_SLOPE": 8.0, "DENSITY": density,
+        "BOUNDARY": boundary, "MAJOR_ROADS": memory_layer("LineString", [sketch], CRS),
+        "OBSTACLES": memory_layer("Polygon", [lake.wkt], CRS), "DEM": dem, "MAX_SLOPE": 8.0, "DENSITY": density,
         "MAJOR_PATTERN": 0, "MINOR_PATTERN": 2, "CENTER": f"{X0 + 500},{Y0 + 500} [EPSG:3067]",
         "SEED": 2, "OUTPUT": "memory:"})
     layer = out["OUTPUT"]
@@ -102,7 +90,7 @@ def test_geographic_boundary_terrain_obstacles_density_sketch(qgis_processing, t
     from urban_synthesis.plugin.shape_context import DemGrid
 
     back = QgsCoordinateTransform(QgsCoordinateReferenceSystem("EPSG:4326"),
-                                  QgsCoordinateReferenceSystem("EPSG:3067"),
+                                  QgsCoordinateReferenceSystem(CRS),
                                   QgsProject.instance())
     metric = []
     for f in layer.getFeatures():
@@ -132,13 +120,14 @@ def test_bad_input(qgis_processing, params, match):
     from qgis.core import QgsProcessingException
 
     layers = {
-        "empty": lambda: _layer([]),
-        "points": lambda: _layer([f"POINT({X0} {Y0})"], "Point"),
-        "tiny": lambda: _layer([f"POLYGON(({X0} {Y0}, {X0 + 5} {Y0}, {X0 + 5} {Y0 + 5}, "
-                                f"{X0} {Y0}))"]),
-        "cover": lambda: _layer([shapely.from_wkt(SQUARE).buffer(5).wkt]),
+        "empty": lambda: memory_layer("Polygon", [], CRS),
+        "points": lambda: memory_layer("Point", [f"POINT({X0} {Y0})"], CRS),
+        "tiny": lambda: memory_layer("Polygon", [f"POLYGON(({X0} {Y0}, {X0 + 5} {Y0}, "
+                                                 f"{X0 + 5} {Y0 + 5}, {X0} {Y0}))"], CRS),
+        "cover": lambda: memory_layer("Polygon", [shapely.from_wkt(SQUARE).buffer(5).wkt],
+                                      CRS),
     }
-    p = {"BOUNDARY": _layer([SQUARE]), "OUTPUT": "memory:"}
+    p = {"BOUNDARY": memory_layer("Polygon", [SQUARE], CRS), "OUTPUT": "memory:"}
     for k, v in params.items():
         p[k] = layers[v]() if isinstance(v, str) else v
     with pytest.raises(QgsProcessingException, match=match):
@@ -175,7 +164,7 @@ def test_obstacle_raster_keeps_roads_out_of_masked_cells(qgis_processing, tmp_pa
     mask[rows // 4: rows // 2, cols // 4: 3 * cols // 4] = 1.0  # a lake across the middle
     tif = _write_geotiff(tmp_path / "water.tif", mask, x0, y1, cell)
     out = qgis_processing.run("urbansynth:growroads", {
-        "BOUNDARY": _layer([SQUARE]), "OBSTACLE_RASTER": tif, "SEED": 2, "OUTPUT": "memory:"})
+        "BOUNDARY": memory_layer("Polygon", [SQUARE], CRS), "OBSTACLE_RASTER": tif, "SEED": 2, "OUTPUT": "memory:"})
     _, geoms = layer_features(out["OUTPUT"])
     assert len(geoms) > 50
     lake = shapely.box(x0 + cols // 4 * cell, y1 - rows // 2 * cell,

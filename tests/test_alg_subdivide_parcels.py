@@ -4,7 +4,7 @@ import pytest
 import shapely
 
 from conftest import bubenec_layer, run_qgis_process
-from helpers import layer_features
+from helpers import layer_features, memory_layer
 from urban_synthesis.plugin import parcels
 
 ALG = "urbansynth:subdivideparcels"
@@ -13,19 +13,8 @@ FIELDS = [name for name, _ in parcels.PARCEL_FIELDS]
 MERCATOR_AREA = 1.0 / np.cos(np.radians(50.1)) ** 2
 
 
-def _memory_layer(kind, wkts=(), crs="EPSG:32633", fields="", rows=None):
-    from qgis.core import QgsFeature, QgsGeometry, QgsVectorLayer
-
-    layer = QgsVectorLayer(f"{kind}?crs={crs}{fields}", "test input", "memory")
-    feats = []
-    for i, wkt in enumerate(wkts):
-        f = QgsFeature(layer.fields())
-        f.setGeometry(QgsGeometry.fromWkt(wkt))
-        if rows is not None:
-            f.setAttributes(list(rows[i]))
-        feats.append(f)
-    layer.dataProvider().addFeatures(feats)
-    return layer
+def _memory_layer(kind, wkts=(), crs="EPSG:32633", **kwargs):
+    return memory_layer(kind, wkts, crs, **kwargs)
 
 
 @pytest.fixture(scope="module")

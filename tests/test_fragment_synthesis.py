@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 import shapely
 
-from helpers import assert_planar, bubenec, clipped_metrics, helsinki_roads
+from helpers import (assert_planar, bubenec, clipped_metrics, helsinki_roads,
+                     right_angle_share, sketch_cells, style_distances, STYLE_MEASURES)
 from test_fragments import levelled_grid
 from urban_synthesis.plugin import (blocks, database, fragments, growth, hierarchy, metrics,
                                     roads)
@@ -350,38 +351,6 @@ def test_style_transfer_with_bubenec(helsinki):
 # --------------------------------------------------------------------------- a second style
 
 #: Measures of the style-transfer tests: (kind, name) of a distribution -> key.
-STYLE_MEASURES = {("roads", "segment_length"): "segment_length",
-                  ("roads", "intersection_angle"): "intersection_angle",
-                  ("blocks", "area"): "block_area", ("blocks", "compactness"): "block_compactness"}
-
-
-def style_distances(m, example):
-    """Normalised Wasserstein distance (W / the example's spread) per distribution of
-    :data:`STYLE_MEASURES` and |difference| (nats) of the orientation entropy."""
-    d = {key: metrics.two_sample(m.distribution(kind, name),
-                                 example.distribution(kind, name))["wasserstein_norm"]
-         for (kind, name), key in STYLE_MEASURES.items()}
-    d["orientation_entropy"] = abs(m.scalar("roads", "orientation_entropy")
-                                   - example.scalar("roads", "orientation_entropy"))
-    return d
-
-
-def right_angle_share(m):
-    """Share of intersection angles within 90 +- 10 degrees."""
-    a = m.distribution("roads", "intersection_angle")
-    return float(np.mean(np.abs(a - 90.0) <= 10.0))
-
-
-def sketch_cells(cell=250.0, n=4, seed=0):
-    """A noisy n x n grid of arterials ``cell`` m apart (faces both example databases have
-    fragments of a similar size for)."""
-    rng = np.random.default_rng(seed)
-    out = []
-    for x in np.arange(0, cell * n + 1, cell):
-        ys = np.linspace(-30, cell * n + 30, 6)
-        out.append(shapely.LineString([(x + rng.normal(0, 8), y) for y in ys]))
-        out.append(shapely.LineString([(y, x + rng.normal(0, 8)) for y in ys]))
-    return np.array(out, dtype=object)
 
 
 @pytest.fixture(scope="module")

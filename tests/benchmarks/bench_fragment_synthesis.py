@@ -46,7 +46,8 @@ for p in (ROOT / "build" / "plugins", ROOT / "tests"):
 from urban_synthesis.plugin import (  # noqa: E402
     blocks, database, fragments, growth, hierarchy, metrics, roads)
 from urban_synthesis.plugin import synthesis_fragments as sf  # noqa: E402
-from helpers import clipped_metrics  # noqa: E402 (tests/helpers.py)
+from helpers import (STYLE_MEASURES, clipped_metrics, right_angle_share,  # noqa: E402
+                     sketch_cells, style_distances)
 
 RESULTS = ROOT / "tests" / "benchmarks" / "results" / "fragment_synthesis.json"
 MEASURES = ("segment_length", "node_degree", "intersection_angle", "area")
@@ -132,9 +133,6 @@ def reproduction(lines, levels, hel, bub, seeds=range(5)):
     return rows, spacing, float(area.area) / 1e6
 
 
-STYLE_MEASURES = {("roads", "segment_length"): "segment_length",
-                  ("roads", "intersection_angle"): "intersection_angle",
-                  ("blocks", "area"): "block_area", ("blocks", "compactness"): "block_compactness"}
 STYLE_COLUMNS = tuple(STYLE_MEASURES.values()) + ("orientation_entropy",)
 
 
@@ -146,30 +144,6 @@ def grown_grid_database(folder: Path):
     f = fragments.extract_fragments(grown.geometry, grown.level)
     database.write_fragment_database(str(folder / "grid.gpkg"), f, "EPSG:32635")
     return grown.geometry, database.load_fragment_database(folder / "grid.gpkg")
-
-
-def sketch_cells(cell: float = 250.0, n: int = 4, seed: int = 0):
-    rng = np.random.default_rng(seed)
-    out = []
-    for x in np.arange(0, cell * n + 1, cell):
-        ys = np.linspace(-30, cell * n + 30, 6)
-        out.append(shapely.LineString([(x + rng.normal(0, 8), y) for y in ys]))
-        out.append(shapely.LineString([(y, x + rng.normal(0, 8)) for y in ys]))
-    return np.array(out, dtype=object)
-
-
-def style_distances(m, example):
-    d = {key: float(metrics.two_sample(m.distribution(kind, name),
-                                       example.distribution(kind, name))["wasserstein_norm"])
-         for (kind, name), key in STYLE_MEASURES.items()}
-    d["orientation_entropy"] = float(abs(m.scalar("roads", "orientation_entropy")
-                                         - example.scalar("roads", "orientation_entropy")))
-    return d
-
-
-def right_angle_share(m):
-    a = m.distribution("roads", "intersection_angle")
-    return float(np.mean(np.abs(a - 90.0) <= 10.0))
 
 
 def style_transfer(hel_lines, hel, grid_lines, grid, seeds=range(5)):
