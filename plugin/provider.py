@@ -1,10 +1,24 @@
 """Processing provider 'urbansynth': lists every algorithm explicitly."""
+import importlib
 from pathlib import Path
 
-from qgis.core import QgsProcessingProvider
+from qgis.core import Qgis, QgsMessageLog, QgsProcessingProvider
 from qgis.PyQt.QtGui import QIcon
 
 ICON = Path(__file__).resolve().parent.parent / "resources" / "icons" / "urbansynth.svg"
+
+#: (module in processing_algorithms, class) of every algorithm, in toolbox order.
+ALGORITHMS = (
+    ("extract_road_hierarchy", "ExtractRoadHierarchy"),
+    ("extract_blocks", "ExtractBlocks"),
+    ("build_block_database", "BuildBlockDatabase"),
+    ("build_fragment_database", "BuildFragmentDatabase"),
+    ("layout_metrics", "LayoutMetrics"),
+    ("grow_roads", "GrowRoads"),
+    ("subdivide_parcels", "SubdivideParcels"),
+    ("synthesize_roads_from_fragments", "SynthesizeRoadsFromFragments"),
+    ("synthesize_buildings", "SynthesizeBuildings"),
+)
 
 
 class UrbanSynthesisProvider(QgsProcessingProvider):
@@ -21,18 +35,14 @@ class UrbanSynthesisProvider(QgsProcessingProvider):
         return QIcon(str(ICON))
 
     def loadAlgorithms(self):  # noqa: N802
-        from ..processing_algorithms.extract_road_hierarchy import ExtractRoadHierarchy
-        from ..processing_algorithms.extract_blocks import ExtractBlocks
-        from ..processing_algorithms.build_block_database import BuildBlockDatabase
-        from ..processing_algorithms.build_fragment_database import BuildFragmentDatabase
-        from ..processing_algorithms.layout_metrics import LayoutMetrics
-        from ..processing_algorithms.grow_roads import GrowRoads
-        from ..processing_algorithms.subdivide_parcels import SubdivideParcels
-        from ..processing_algorithms.synthesize_roads_from_fragments import (
-            SynthesizeRoadsFromFragments,
-        )
-
-        for alg in (ExtractRoadHierarchy(), ExtractBlocks(), BuildBlockDatabase(),
-                    BuildFragmentDatabase(), LayoutMetrics(), GrowRoads(), SubdivideParcels(),
-                    SynthesizeRoadsFromFragments()):
-            self.addAlgorithm(alg)
+        # One algorithm that fails to import (e.g. a missing optional library) must not hide
+        # the others: it is reported in the message log and left out of the toolbox.
+        package = __package__.rpartition(".")[0] + ".processing_algorithms"
+        for module_name, class_name in ALGORITHMS:
+            try:
+                module = importlib.import_module(f"{package}.{module_name}")
+                self.addAlgorithm(getattr(module, class_name)())
+            except Exception as error:  # noqa: BLE001 (any import failure is reported)
+                QgsMessageLog.logMessage(
+                    f"Urban Synthesis: algorithm {module_name} not loaded: {error!r}",
+                    "Processing", Qgis.Critical)

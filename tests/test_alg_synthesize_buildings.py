@@ -1,0 +1,167 @@
+"""urbansynth:synthesizebuildings through real QGIS (processing.run and qgis_process.bin)."""
+import numpy as np
+import pytest
+import shapely
+
+from conftest import bubenec_layer, helsinki_layer, run_qgis_process
+from helpers import layer_features, memory_layer
+from urban_synthesis.plugin import building_attributes, building_bestfit, metrics
+
+ALG = "urbansynth:synthesizebuildings"
+ATTRIBUTE_FIELDS = ["height_m", "levels", "building_type", "roof_shape", "source_id",
+                    "similarity", "floor_area_m2"]
+
+
+@pytest.fixture(scope="module")
+def helsinki_buildings(qgis_processing):
+    """Helsinki buildings with normalised attributes (height_m, levels, building_type)."""
+    out = qgis_processing.run("urbansynth:extractblocks", {
+        "ROADS": helsinki_layer("lines"), "BUILDINGS": helsinki_layer("multipolygons"),
+        "OUTPUT": "memory:", "OUTPUT_BUILDINGS": "memory:"})
+    return out["OUTPUT"], out["OUTPUT_BUILDINGS"]
+
+
+def test_attributes_on_helsinki(qgis_processing, helsinki_buildings):
+    blocks, buildings = helsinki_buildings
+    out = qgis_processing.run(ALG, {
+        "METHOD": 0, "FOOTPRINTS": buildings, "EXAMPLE_BUILDINGS": helsinki_layer("multipolygons"),
+        "ROADS": helsinki_layer("lines"), "EXAMPLE_ROADS": helsinki_layer("lines"),
+        "MAX_HEIGHT": 40, "SEED": 2, "OUTPUT": "memory:"})
+    layer = out["OUTPUT"]
+    assert layer.crs().authid() == "EPSG:4326"  # back in the input CRS
+    names = [f.name() for f in layer.fields()]
+    assert names[-len(ATTRIBUTE_FIELDS):] == ATTRIBUTE_FIELDS
+    assert "block_id" in names  # the footprints' own fields are kept
+    rows, geoms = layer_features(layer)
+    assert len(rows) == buildings.featureCount()
+    h = np.array([r["height_m"] for r in rows], dtype=float)
+    assert np.isfinite(h).all() and h.max() <= 40 and h.min() > 0
+    assert all(r["levels"] >= 1 for r in rows)
+    assert {r["building_type"] for r in rows} <= set(building_attributes.BUILDING_TYPES)
+    # every source is an example building with a height (OSM feature ids)
+    ex_rows, _ = layer_features(buildings)
+    known = np.array([r["height_m"] for r in ex_rows], dtype=float)
+    assert np.mean([r["similarity"] for r in rows]) > 0.3
+    d = metrics.two_sample(h, np.minimum(known[np.isfinite(known)], 40))
+    assert d["wasserstein_norm"] < 0.35
+
+
+def test_far_per_block(qgis_processing, helsinki_buildings):
+    blocks, buildings = helsinki_buildings
+    out = qgis_processing.run(ALG, {
+        "METHOD": 0, "FOOTPRINTS": buildings, "EXAMPLE_BUILDINGS": buildings, "BLOCKS": blocks,
+        "TARGET_FAR": 2.0, "CHOICE": 1, "OUTPUT": "memory:"})
+    rows, geoms = layer_features(out["OUTPUT"])
+    # floor area = footprint area (metric) x levels, per block
+    brows, bgeoms = layer_features(blocks)
+    from pyproj import Transformer
+
+    tr = Transformer.from_crs(4326, 32635, always_xy=True)
+    to_m = lambda g: shapely.transform(g, lambda c: np.column_stack(tr.transform(c[:, 0], c[:, 1])))  # noqa: E731
+    fa = np.array([r["floor_area_m2"] for r in rows])
+    lv = np.array([r["levels"] for r in rows])
+    area = shapely.area(to_m(geoms))
+    assert np.allclose(fa, area * lv, rtol=1e-3)
+    pts = shapely.point_on_surface(geoms)
+    hit = 0
+    for bg in bgeoms:
+        inside = shapely.within(pts, bg)
+        if inside.sum() >= 3:
+            ground = shapely.area(to_m(bg))
+            diff = 2.0 * ground - fa[inside].sum()
+            # no single storey more or less on any footprint brings the FAR closer, unless
+            # that footprint is at one storey already
+            better = np.abs(diff - np.sign(diff) * area[inside]) < abs(diff) - 1e-6
+            assert (lv[inside][better] == 1).all() and diff < 0 or not better.any()
+            assert abs(diff) <= 0.5 * area[inside].max() + 1e-6
+            hit += 1
+    assert hit >= 10
+
+
+def test_best_fit_on_bubenec(qgis_processing):
+    out = qgis_processing.run(ALG, {
+        "METHOD": 1, "PARCELS": bubenec_layer("plots"), "ROADS": bubenec_layer("streets"),
+        "MIN_SETBACK": 1.0, "OUTPUT": "memory:"})
+    layer = out["OUTPUT"]
+    assert layer.crs().authid() == "EPSG:3857"
+    names = [f.name() for f in layer.fields()]
+    assert names[:7] == [n for n, _ in building_bestfit.PLACEMENT_FIELDS]
+    assert {"height_m", "levels", "building_type", "street_access_sides"} <= set(names)
+    rows, geoms = layer_features(layer)
+    assert 150 < len(rows) < 407
+    prow, pgeoms = layer_features(_ogr_layer(bubenec_layer("plots")))
+    for r, g in zip(rows, geoms):
+        # parcel ids are 1..n in layer order (the plots have no parcel_id)
+        assert pgeoms[r["parcel_id"] - 1].buffer(1e-3).contains(g)
+
+
+def _ogr_layer(uri):
+    from qgis.core import QgsVectorLayer
+
+    return QgsVectorLayer(uri, "plots", "ogr")
+
+
+def test_library_layer(qgis_processing):
+    crs = "EPSG:32633"
+    roads = memory_layer("LineString", ["LINESTRING (0 0, 300 0)"], crs)
+    plots = memory_layer("Polygon", ["POLYGON ((10 -5, 40 -5, 40 -40, 10 -40, 10 -5))",
+                                     "POLYGON ((50 -5, 56 -5, 56 -40, 50 -40, 50 -5))"], crs)
+    # a 12 x 10 house drawn clockwise with its door on edge 1 (north), a blind wall on
+    # edge 3 (south); the 6 m wide plot is too narrow for it
+    lib = memory_layer("Polygon", ["POLYGON ((1000 1000, 1000 1010, 1012 1010, 1012 1000, "
+                                   "1000 1000))"], crs,
+                       fields="&field=street_access_sides:string&field=blind_sides:string"
+                              "&field=height_m:double",
+                       rows=[("1", "3", 8.5)])
+    out = qgis_processing.run(ALG, {"METHOD": 1, "PARCELS": plots, "ROADS": roads,
+                                    "BUILDING_LIBRARY": lib, "MIN_SETBACK": 3,
+                                    "OUTPUT": "memory:"})
+    rows, geoms = layer_features(out["OUTPUT"])
+    assert len(rows) == 1 and rows[0]["parcel_id"] == 1 and rows[0]["height_m"] == 8.5
+    # the door side (edge 1: (1000,1010)->(1012,1010), top) faces the street at y = 0
+    assert shapely.bounds(geoms[0])[3] == pytest.approx(-8.0)
+    assert rows[0]["rotation"] == pytest.approx(0.0)
+
+
+def test_bad_input(qgis_processing):
+    from qgis.core import QgsProcessingException
+
+    def fails(params, match):
+        with pytest.raises(QgsProcessingException, match=match):
+            qgis_processing.run(ALG, dict(params, OUTPUT="memory:"))
+
+    crs = "EPSG:32633"
+    plots = memory_layer("Polygon", ["POLYGON ((0 -5, 30 -5, 30 -40, 0 -40, 0 -5))"], crs)
+    roads = memory_layer("LineString", ["LINESTRING (0 0, 300 0)"], crs)
+    fails({"METHOD": 0, "FOOTPRINTS": plots}, "needs: Example buildings")
+    fails({"METHOD": 1, "PARCELS": plots}, "needs: Roads")
+    fails({"METHOD": 0, "FOOTPRINTS": memory_layer("Polygon", [], crs),
+           "EXAMPLE_BUILDINGS": plots}, "empty")
+    fails({"METHOD": 0, "FOOTPRINTS": plots, "EXAMPLE_BUILDINGS": plots},
+          "no example building has a height")
+    fails({"METHOD": 0, "FOOTPRINTS": plots, "EXAMPLE_BUILDINGS": roads}, "lines; polygons")
+    fails({"METHOD": 0, "FOOTPRINTS": plots, "EXAMPLE_BUILDINGS": bubenec_layer("buildings"),
+           "MIN_HEIGHT": 50, "MAX_HEIGHT": 20}, "must be larger than the minimum height")
+    no_fields = memory_layer("Polygon", ["POLYGON ((0 0, 5 0, 5 5, 0 0))"], crs)
+    fails({"METHOD": 1, "PARCELS": plots, "ROADS": roads, "BUILDING_LIBRARY": no_fields},
+          "no field 'street_access_sides'")
+    bad = memory_layer("Polygon", ["POLYGON ((0 0, 5 0, 5 5, 0 5, 0 0))"], crs,
+                       fields="&field=street_access_sides:string&field=blind_sides:string",
+                       rows=[("7", "")])
+    fails({"METHOD": 1, "PARCELS": plots, "ROADS": roads, "BUILDING_LIBRARY": bad},
+          "edge 7 does not exist")
+
+
+def test_qgis_process_run(tmp_path):
+    """One real qgis_process.bin run on the example data: exit code 0."""
+    target = tmp_path / "buildings.gpkg"
+    code, out, err = run_qgis_process("synthesizebuildings", {
+        "METHOD": 1, "PARCELS": bubenec_layer("plots"), "ROADS": bubenec_layer("streets"),
+        "OUTPUT": str(target)})
+    assert code == 0, err
+    assert out is not None and target.exists()
+    import pyogrio
+
+    df = pyogrio.read_dataframe(target)
+    assert 150 < len(df) < 407 and df.geometry.is_valid.all()
+    assert (df.parcel_share > 0).all() and (df.parcel_share <= 1.0 + 1e-6).all()
