@@ -8,7 +8,7 @@ PLUGIN_NAME := urban_synthesis
 PLUGIN_LINK := build/plugins/$(PLUGIN_NAME)
 QGIS_PROCESS := scripts/qgis-process
 
-.PHONY: setup demo test test-fast bench package clean
+.PHONY: setup demo test test-fast bench package desktop-check clean
 
 setup: build/.system $(VENV)/.installed data/examples/.installed build/.plugin-enabled
 
@@ -33,7 +33,8 @@ data/examples/.installed: scripts/fetch_example_data.py $(VENV)/.installed
 build/.plugin-enabled: metadata.txt $(VENV)/.installed
 	@mkdir -p build/plugins
 	ln -sfn "$(CURDIR)" $(PLUGIN_LINK)
-	$(QGIS_PROCESS) plugins enable $(PLUGIN_NAME) > /dev/null
+	$(QGIS_PROCESS) plugins enable $(PLUGIN_NAME) > /dev/null || \
+		$(QGIS_PROCESS) plugins 2>/dev/null | grep -qx '\* $(PLUGIN_NAME)'  # already enabled
 	@touch $@
 
 demo: setup
@@ -47,11 +48,25 @@ bench: setup $(VENV)/.bench-installed
 	QT_QPA_PLATFORM=offscreen $(PY) tests/benchmarks/bench_growth.py
 	QT_QPA_PLATFORM=offscreen $(PY) tests/benchmarks/bench_parcels.py
 
+# The plugin zip (top folder urban_synthesis/) holds what QGIS needs to run the plugin, taken
+# from the committed tree (git archive HEAD): no tests, example data, dev scripts or README
+# pictures. Uncommitted changes are not packaged (a warning says so).
+PACKAGE_FILES := __init__.py metadata.txt README.md plugin processing_algorithms resources \
+	$(shell git ls-files -- 'LICENSE*' 'COPYING*' 'ATTRIBUTION*' 2>/dev/null)
+PACKAGE_ZIP := build/dist/$(PLUGIN_NAME).zip
+
 package:
 	@mkdir -p build/dist
-	rm -f build/dist/$(PLUGIN_NAME).zip
-	git archive --format=zip --prefix=$(PLUGIN_NAME)/ -o build/dist/$(PLUGIN_NAME).zip HEAD
-	@echo build/dist/$(PLUGIN_NAME).zip
+	rm -f $(PACKAGE_ZIP)
+	@test -z "$$(git status --porcelain -- $(PACKAGE_FILES))" || \
+		echo "warning: the zip is built from HEAD; uncommitted plugin changes are not in it"
+	git archive --format=zip --prefix=$(PLUGIN_NAME)/ -o $(PACKAGE_ZIP) HEAD -- $(PACKAGE_FILES)
+	@echo "$(PACKAGE_ZIP) ($$(du -k $(PACKAGE_ZIP) | cut -f1) kB)"
+
+# QGIS desktop under Xvfb with the plugin enabled in a fresh profile: provider, toolbox, dialogs,
+# styled outputs, message log; screenshot in out/desktop.png.
+desktop-check: setup
+	$(PY) scripts/run_desktop_check.py --out out
 
 clean:
 	rm -rf build out .pytest_cache
