@@ -17,6 +17,7 @@ ALGORITHMS = (
     ("grow_roads", "GrowRoads"),
     ("subdivide_parcels", "SubdivideParcels"),
     ("synthesize_roads_from_fragments", "SynthesizeRoadsFromFragments"),
+    ("tessellate_streets", "TessellateStreets"),
     ("synthesize_buildings", "SynthesizeBuildings"),
 )
 

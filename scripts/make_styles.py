@@ -97,6 +97,39 @@ def intersections():
     layer.saveNamedStyle(str(OUT / "intersections.qml"))
 
 
+def street_surfaces():
+    """Street surfaces in asphalt grey; segments over Scharl's slope limits (flags of
+    tessellatestreets) in orange."""
+    layer = QgsVectorLayer("Polygon?field=too_steep_long:boolean&field=too_steep_lat:boolean",
+                           "street surfaces", "memory")
+    root = QgsRuleBasedRenderer.Rule(None)
+    steep = QgsFillSymbol.createSimple({"color": "#fdae6b", "outline_color": "#a63603",
+                                        "outline_width": "0.15"})
+    root.appendChild(QgsRuleBasedRenderer.Rule(
+        steep, filterExp='"too_steep_long" OR "too_steep_lat"', label="steeper than the limits"))
+    normal = QgsFillSymbol.createSimple({"color": "#bdbdbd", "outline_color": "#636363",
+                                         "outline_width": "0.1"})
+    root.appendChild(QgsRuleBasedRenderer.Rule(normal, elseRule=True, label="street surface"))
+    layer.setRenderer(QgsRuleBasedRenderer(root))
+    layer.saveNamedStyle(str(OUT / "street_surfaces.qml"))
+
+
+def junctions():
+    """Junctions darker than the streets, so the connecting lines show; steep ones orange."""
+    layer = QgsVectorLayer("Polygon?field=degree:integer&field=too_steep_long:boolean"
+                           "&field=too_steep_lat:boolean", "junctions", "memory")
+    root = QgsRuleBasedRenderer.Rule(None)
+    steep = QgsFillSymbol.createSimple({"color": "#e6550d", "outline_color": "#7f2704",
+                                        "outline_width": "0.15"})
+    root.appendChild(QgsRuleBasedRenderer.Rule(
+        steep, filterExp='"too_steep_long" OR "too_steep_lat"', label="steeper than the limits"))
+    normal = QgsFillSymbol.createSimple({"color": "#737373", "outline_color": "#252525",
+                                         "outline_width": "0.1"})
+    root.appendChild(QgsRuleBasedRenderer.Rule(normal, elseRule=True, label="junction"))
+    layer.setRenderer(QgsRuleBasedRenderer(root))
+    layer.saveNamedStyle(str(OUT / "junctions.qml"))
+
+
 if __name__ == "__main__":
     app = QgsApplication([], False)
     app.initQgis()
@@ -106,5 +139,7 @@ if __name__ == "__main__":
     buildings_by_height()
     intersections()
     parcels_by_quality()
+    street_surfaces()
+    junctions()
     print("styles written to", OUT)
     sys.exit(0)

@@ -1,0 +1,237 @@
+"""urbansynth:tessellatestreets - street surfaces and junctions, draped on terrain
+(Scharl 2010, ch. 5)."""
+
+import numpy as np
+import shapely
+from qgis.core import (
+    QgsProcessing,
+    QgsProcessingParameterBoolean,
+    QgsProcessingParameterFeatureSink,
+    QgsProcessingParameterFeatureSource,
+    QgsProcessingParameterField,
+    QgsProcessingParameterNumber,
+    QgsProcessingParameterRasterLayer,
+    QgsProcessingParameterString,
+    QgsWkbTypes,
+)
+
+from ..plugin import qgis_io, roads, street_surfaces
+from .common import AlgorithmBase, drivable_lines, parse_class_list
+
+
+def _width_table():
+    return ", ".join(f"{c} {w:g}" for c, w in street_surfaces.CLASS_WIDTHS.items())
+
+
+class TessellateStreets(AlgorithmBase):
+    GROUP_ID = "synthesis"
+    ROADS = "ROADS"
+    WIDTH_FIELD = "WIDTH_FIELD"
+    CLASS_FIELD = "CLASS_FIELD"
+    CLASSES = "CLASSES"
+    DEFAULT_WIDTH = "DEFAULT_WIDTH"
+    DEM = "DEM"
+    MERGE_DISTANCE = "MERGE_DISTANCE"
+    MERGE_OVERLAPPING = "MERGE_OVERLAPPING"
+    MAX_LONGITUDINAL_SLOPE = "MAX_LONGITUDINAL_SLOPE"
+    MAX_LATERAL_SLOPE = "MAX_LATERAL_SLOPE"
+    SNAP_TOLERANCE = "SNAP_TOLERANCE"
+    OUTPUT_SURFACES = "OUTPUT_SURFACES"
+    OUTPUT_JUNCTIONS = "OUTPUT_JUNCTIONS"
+
+    def name(self):
+        return "tessellatestreets"
+
+    def displayName(self):  # noqa: N802
+        return "Tessellate streets (surfaces and junctions)"
+
+    def shortHelpString(self):  # noqa: N802
+        return (
+            "Turns road centre lines into street surface polygons (one per street segment "
+            "between junctions) and junction polygons (one per junction, any number of "
+            "streets), after Scharl (2010, ch. 5): street outlines at half the width on both "
+            "sides meet at the junction's corner points, and every street ends at a connecting "
+            "line perpendicular to it. Junction centres closer than the merge distance become "
+            "one junction.\n\n"
+            "Widths come from the width field, else from the road class (OSM highway or "
+            "road_class; halved for one-way lines), else from the hierarchy level, else the "
+            "default width. Class widths (m): " + _width_table() + "; *_link 7. Level widths: "
+            "0: 16, 1: 11, 2: 8, deeper: 6.\n\n"
+            "With a DEM the outputs are 3D (PolygonZ): each junction lies in the terrain's "
+            "tangent plane at its centre, streets follow the terrain between them, and every "
+            "feature reports its longitudinal and lateral slope (%) with flags over the limits "
+            "(Scharl: 12 % and 8 %).\n\n"
+            "Polygons are valid, do not overlap within a vertical layer (bridges and tunnels "
+            "may pass over other streets), and together cover the centre lines buffered by half "
+            "their width. Outputs are in the roads' CRS."
+        )
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        self.add(QgsProcessingParameterFeatureSource(
+            self.ROADS, "Road centre lines", [QgsProcessing.TypeVectorLine]),
+            "Any line layer (OSM lines, grown or synthesised roads, a road shapefile). Lines "
+            "are noded at crossings (not across bridges and tunnels) and joined through "
+            "nodes of degree 2.")
+        self.add(QgsProcessingParameterField(
+            self.WIDTH_FIELD, "Width field (m)", parentLayerParameterName=self.ROADS,
+            optional=True),
+            "Full street width in metres. Default: a field 'width_m' or 'width' (also OSM's "
+            "width tag in other_tags) when there is one. Missing or unreadable widths take the "
+            "class / level / default width.")
+        self.add(QgsProcessingParameterField(
+            self.CLASS_FIELD, "Road class field", defaultValue="highway",
+            parentLayerParameterName=self.ROADS, optional=True),
+            "Road class used to filter lines and to choose default widths (OSM 'highway', "
+            "also searched in 'other_tags'; else a 'road_class' field; else a 'level' field).")
+        self.add(QgsProcessingParameterString(
+            self.CLASSES, "Classes to tessellate (comma-separated, empty = all)",
+            defaultValue=",".join(roads.DRIVABLE_CLASSES), optional=True),
+            "Only lines of these classes are kept when the layer has the class field.",
+            advanced=True)
+        self.add(QgsProcessingParameterNumber(
+            self.DEFAULT_WIDTH, "Default width (m)", QgsProcessingParameterNumber.Double,
+            defaultValue=street_surfaces.DEFAULT_WIDTH, minValue=0.5, maxValue=200.0),
+            "Width of lines with neither a width nor a known class or level.")
+        self.add(QgsProcessingParameterRasterLayer(
+            self.DEM, "Elevation model (optional)", optional=True),
+            "A DEM in any CRS, resampled bilinearly to the working CRS: outputs get Z, "
+            "junctions the terrain's tangent plane, and slopes are measured.")
+        self.add(QgsProcessingParameterNumber(
+            self.MERGE_DISTANCE, "Junction merge distance (m)",
+            QgsProcessingParameterNumber.Double, defaultValue=3.0, minValue=0.0,
+            maxValue=100.0),
+            "Junction centres closer than this are merged into one junction at their "
+            "centroid; the short streets between them vanish into it.")
+        self.add(QgsProcessingParameterBoolean(
+            self.MERGE_OVERLAPPING, "Merge junctions whose geometries meet",
+            defaultValue=False),
+            "Also merge the two junctions of a street whose heads reach each other (Scharl's "
+            "rule). Off: such a street has no surface and the two junctions share their "
+            "connecting line, which keeps the streets where they are.", advanced=True)
+        self.add(QgsProcessingParameterNumber(
+            self.MAX_LONGITUDINAL_SLOPE, "Maximum longitudinal slope (%)",
+            QgsProcessingParameterNumber.Double, defaultValue=12.0, minValue=0.0,
+            maxValue=100.0),
+            "Streets and junctions steeper than this along a street are flagged "
+            "(too_steep_long), with a DEM.")
+        self.add(QgsProcessingParameterNumber(
+            self.MAX_LATERAL_SLOPE, "Maximum lateral slope (%)",
+            QgsProcessingParameterNumber.Double, defaultValue=8.0, minValue=0.0,
+            maxValue=100.0),
+            "Streets and junctions steeper than this across a street are flagged "
+            "(too_steep_lat), with a DEM.")
+        self.add(QgsProcessingParameterNumber(
+            self.SNAP_TOLERANCE, "Node snapping tolerance (m)",
+            QgsProcessingParameterNumber.Double, defaultValue=1.0, minValue=0.0,
+            maxValue=50.0),
+            "Line ends closer than this are joined when the network is noded.", advanced=True)
+        self.add(QgsProcessingParameterFeatureSink(
+            self.OUTPUT_SURFACES, "Street surfaces", QgsProcessing.TypeVectorPolygon),
+            "One polygon per street segment between junctions: segment_id, edge_id, "
+            "from_junction, to_junction, road_class, z_layer, width_m, length_m, area_m2; "
+            "with a DEM slope_long_pct, slope_lat_pct, too_steep_long, too_steep_lat.")
+        self.add(QgsProcessingParameterFeatureSink(
+            self.OUTPUT_JUNCTIONS, "Junctions", QgsProcessing.TypeVectorPolygon,
+            optional=True, createByDefault=True),
+            "One polygon per junction: junction_id (= from/to_junction of the surfaces), "
+            "degree, merged_nodes, z_layer, area_m2; with a DEM z_centre and slopes.")
+
+    def _number(self, parameters, name, context, lo, hi):
+        return qgis_io.check_number(self.parameterAsDouble(parameters, name, context), name, lo, hi)
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        width_field = self.parameterAsString(parameters, self.WIDTH_FIELD, context)
+        class_field = self.parameterAsString(parameters, self.CLASS_FIELD, context)
+        frame = qgis_io.read_source(
+            self, parameters, self.ROADS, context, feedback, kind="lines",
+            required_fields=[width_field] if width_field else (),
+            fields=[width_field, "width_m", "width", class_field or "highway", "road_class",
+                    "level", "oneway", "layer", "bridge", "tunnel", "other_tags"])
+        label = frame.name
+        classes = parse_class_list(self.parameterAsString(parameters, self.CLASSES, context))
+        default_width = self._number(parameters, self.DEFAULT_WIDTH, context, 0.5, 200.0)
+        merge = self._number(parameters, self.MERGE_DISTANCE, context, 0.0, 100.0)
+        max_long = self._number(parameters, self.MAX_LONGITUDINAL_SLOPE, context, 0.0, 100.0)
+        max_lat = self._number(parameters, self.MAX_LATERAL_SLOPE, context, 0.0, 100.0)
+        snap = self._number(parameters, self.SNAP_TOLERANCE, context, 0.0, 50.0)
+        merge_heads = self.parameterAsBoolean(parameters, self.MERGE_OVERLAPPING, context)
+
+        frame, road_class = drivable_lines(frame, class_field, classes, feedback)
+        width_values = None
+        for name in ([width_field] if width_field else ["width_m", "width"]):
+            width_values = qgis_io.osm_tag_column(frame, name)
+            if width_values is not None:
+                break
+        class_for_width = road_class if road_class is not None else \
+            qgis_io.osm_tag_column(frame, "road_class")
+        widths, source = street_surfaces.road_widths(
+            width_values, class_for_width, qgis_io.osm_tag_column(frame, "level"), n=len(frame),
+            default_width=default_width, oneway=qgis_io.osm_tag_column(frame, "oneway"))
+        counts = {k: int((source == k).sum()) for k in ("field", "class", "level", "default")}
+        feedback.pushInfo("Widths from " + ", ".join(f"{k}: {v}" for k, v in counts.items() if v)
+                          + f" lines; median {np.median(widths):.1f} m.")
+        z_layer = qgis_io.osm_vertical_layers(frame)
+        graph = qgis_io.run_engine(label, roads.clean_network, frame.geometry, class_for_width,
+                                   None, z_layer, snap_tolerance=snap, min_dangle_length=0.0,
+                                   progress=qgis_io.progress_for(feedback, 5, 25))
+        feedback.pushInfo(f"Street graph: {graph.n_edges} edges, {len(graph.nodes)} nodes.")
+
+        dem = None
+        dem_layer = self.parameterAsRasterLayer(parameters, self.DEM, context)
+        if dem_layer is not None:
+            reach = float(widths.max()) * 4
+            x0, y0, x1, y1 = shapely.total_bounds(graph.geometry)
+            bounds = (x0 - reach, y0 - reach, x1 + reach, y1 + reach)
+            cell = qgis_io.raster_cell_size(dem_layer, frame.crs, bounds, context)
+            dem = qgis_io.read_raster(dem_layer, frame.crs, bounds, cell, feedback)
+            feedback.pushInfo(f"DEM resampled to {cell:.1f} m cells.")
+
+        result = qgis_io.run_engine(
+            label, street_surfaces.tessellate_network, graph, widths[graph.source],
+            merge_distance=merge, dem=dem, max_longitudinal_slope=max_long / 100.0,
+            max_lateral_slope=max_lat / 100.0, merge_heads=merge_heads,
+            progress=qgis_io.progress_for(feedback, 25, 90))
+        st = result.stats
+        feedback.pushInfo(
+            f"{st['surfaces']} street surfaces and {st['junctions']} junctions (largest degree "
+            f"{st['max_degree']}); {st['merged_away']} junction centres merged away; "
+            f"{st['edges_without_surface']} streets lie wholly inside their junctions; "
+            f"{st['cut_surfaces'] + st['cut_junctions']} polygons trimmed where they overlapped.")
+        if dem is not None:
+            for what, table in (("street surfaces", result.surface_table),
+                                ("junctions", result.junction_table)):
+                n_long = int(table["too_steep_long"].fillna(False).astype(bool).sum())
+                n_lat = int(table["too_steep_lat"].fillna(False).astype(bool).sum())
+                if n_long or n_lat:
+                    feedback.pushWarning(f"{n_long} {what} steeper than {max_long:g} % along "
+                                         f"and {n_lat} steeper than {max_lat:g} % across.")
+
+        wkb = QgsWkbTypes.MultiPolygonZ if dem is not None else QgsWkbTypes.MultiPolygon
+        results = {}
+        for name, geoms, table, spec, qml in (
+                (self.OUTPUT_SURFACES, result.surfaces, result.surface_table,
+                 street_surfaces.SURFACE_FIELDS, "street_surfaces.qml"),
+                (self.OUTPUT_JUNCTIONS, result.junctions, result.junction_table,
+                 street_surfaces.JUNCTION_FIELDS, "junctions.qml")):
+            if parameters.get(name) is None:
+                continue
+            out = self._to_output_crs(geoms, frame, context, dem is not None)
+            dest = qgis_io.write_sink(self, parameters, name, context, out, table, spec, wkb,
+                                      frame.source_crs, frame.source_crs, feedback)
+            qgis_io.style_output(context, dest, qml)
+            results[name] = dest
+        feedback.setProgress(100)
+        return results
+
+    @staticmethod
+    def _to_output_crs(geoms, frame, context, has_z):
+        """Reproject to the input CRS keeping Z (qgis_io's transform is 2D)."""
+        geoms = np.asarray(geoms, dtype=object)
+        if not len(geoms) or frame.crs == frame.source_crs:
+            return geoms
+        if not has_z:
+            return qgis_io.reproject(geoms, frame.crs, frame.source_crs, context)
+        z = shapely.get_coordinates(geoms, include_z=True)[:, 2]
+        flat = qgis_io.reproject(shapely.force_2d(geoms), frame.crs, frame.source_crs, context)
+        xy = shapely.get_coordinates(flat)
+        return shapely.set_coordinates(shapely.force_3d(flat, 0.0), np.column_stack([xy, z]))

@@ -1,0 +1,215 @@
+"""urbansynth:tessellatestreets through real QGIS (processing.run and qgis_process.bin)."""
+from pathlib import Path
+
+import numpy as np
+import pytest
+import shapely
+
+from conftest import helsinki_layer, run_qgis_process
+from helpers import layer_features, memory_layer
+from urban_synthesis.plugin import street_surfaces as ss
+
+ALG = "urbansynth:tessellatestreets"
+SURFACE_FIELDS = [name for name, _ in ss.SURFACE_FIELDS]
+JUNCTION_FIELDS = [name for name, _ in ss.JUNCTION_FIELDS]
+X0, Y0 = 385000.0, 6671000.0      # central Helsinki in ETRS-TM35FIN (EPSG:3067)
+CRS = "EPSG:3067"
+A, B = 0.03, 0.09                 # the test terrain: z = 20 + A x' + B y'
+
+
+def _to_metric(layer, crs=CRS):
+    """A layer's geometries transformed into ``crs`` by QGIS (as shapely, with Z)."""
+    from qgis.core import QgsCoordinateReferenceSystem, QgsCoordinateTransform, QgsProject
+
+    tr = QgsCoordinateTransform(layer.crs(), QgsCoordinateReferenceSystem(crs),
+                                QgsProject.instance())
+    out = []
+    for f in layer.getFeatures():
+        g = f.geometry()
+        g.transform(tr)
+        out.append(shapely.from_wkb(bytes(g.asWkb())))
+    return np.array(out, dtype=object)
+
+
+def _pairwise_overlap(polys, layers):
+    tree = shapely.STRtree(polys)
+    i, j = tree.query(polys, predicate="intersects")
+    sel = (i < j) & (layers[i] == layers[j])
+    return shapely.area(shapely.intersection(polys[i[sel]], polys[j[sel]]))
+
+
+def _star_wkts(cx, cy, angles, length=70.0):
+    return [f"LINESTRING({cx} {cy}, {cx + length * np.cos(np.radians(a))} "
+            f"{cy + length * np.sin(np.radians(a))})" for a in angles]
+
+
+STAR5 = [0, 70, 150, 215, 290]
+STAR6 = [20, 75, 130, 200, 250, 320]
+
+
+@pytest.fixture(scope="module")
+def stars():
+    wkts = _star_wkts(X0, Y0, STAR5) + _star_wkts(X0 + 300, Y0, STAR6)
+    rows = [[w, "residential"] for w in (10.0, None, 7.0, 12.0, None, 9.0, 8.0, None, 6.0,
+                                         11.0, 7.5)]
+    return memory_layer("LineString", wkts, CRS, "&field=w:double&field=highway:string", rows,
+                        name="stars")
+
+
+def _write_plane(path, a=A, b=B, x0=X0 - 200, y0=Y0 + 200, cell=5.0, n=(140, 80)):
+    from osgeo import gdal, osr
+
+    cols, rows = n
+    xs = x0 + cell * (np.arange(cols) + 0.5)
+    ys = y0 - cell * (np.arange(rows) + 0.5)
+    x, y = np.meshgrid(xs, ys)
+    z = 20.0 + a * (x - X0) + b * (y - Y0)
+    ds = gdal.GetDriverByName("GTiff").Create(str(path), cols, rows, 1, gdal.GDT_Float32)
+    ds.SetGeoTransform((x0, cell, 0.0, y0, 0.0, -cell))
+    srs = osr.SpatialReference()
+    srs.ImportFromEPSG(3067)
+    ds.SetProjection(srs.ExportToWkt())
+    ds.GetRasterBand(1).WriteArray(z.astype(np.float32))
+    ds.FlushCache()
+    ds = None
+    return str(path)
+
+
+def test_helsinki_osm(qgis_processing):
+    out = qgis_processing.run(ALG, {"ROADS": helsinki_layer(), "OUTPUT_SURFACES": "memory:",
+                                    "OUTPUT_JUNCTIONS": "memory:"})
+    surf, junc = out["OUTPUT_SURFACES"], out["OUTPUT_JUNCTIONS"]
+    assert surf.crs().authid() == "EPSG:4326" and junc.crs().authid() == "EPSG:4326"
+    assert [f.name() for f in surf.fields()] == SURFACE_FIELDS
+    assert [f.name() for f in junc.fields()] == JUNCTION_FIELDS
+    rows, _ = layer_features(surf)
+    jrows, _ = layer_features(junc)
+    assert 150 < len(rows) < 400 and 80 < len(jrows) < 250
+    degrees = [r["degree"] for r in jrows]
+    assert min(degrees) >= 3 and {3, 4} <= set(degrees)
+    # widths from the class table (halved for one-way carriageways) and OSM width tags
+    widths = np.array([r["width_m"] for r in rows])
+    table = np.array(list(ss.CLASS_WIDTHS.values()) + [ss.LINK_WIDTH])
+    from_table = np.isin(widths, np.r_[table, np.maximum(table / 2, 3.5)])
+    assert from_table.mean() > 0.97 and (widths == 4.0).any()     # one-way residential
+    # no DEM: no slopes
+    assert all(r["slope_long_pct"] is None and r["too_steep_lat"] is None for r in rows)
+    # geometry checks in a metric CRS
+    s = _to_metric(surf)
+    j = _to_metric(junc)
+    polys = np.concatenate([s, j])
+    layers = np.r_[[r["z_layer"] for r in rows], [r["z_layer"] for r in jrows]]
+    assert shapely.is_valid(polys).all()
+    ov = _pairwise_overlap(polys, layers)
+    assert ov.sum() < 0.01
+    np.testing.assert_allclose([r["area_m2"] for r in rows], shapely.area(s), rtol=1e-3)
+    # the streets between junctions join them: every from/to id is a junction or a dead end
+    ids = {r["junction_id"] for r in jrows}
+    ends = [r["from_junction"] for r in rows] + [r["to_junction"] for r in rows]
+    assert np.mean([e in ids for e in ends]) > 0.6
+
+
+def test_degree_5_and_6_on_an_inclined_plane(qgis_processing, stars, tmp_path):
+    dem = _write_plane(tmp_path / "plane.tif")
+    out = qgis_processing.run(ALG, {"ROADS": stars, "WIDTH_FIELD": "w", "DEM": dem,
+                                    "OUTPUT_SURFACES": "memory:", "OUTPUT_JUNCTIONS": "memory:"})
+    from qgis.core import QgsWkbTypes
+
+    surf, junc = out["OUTPUT_SURFACES"], out["OUTPUT_JUNCTIONS"]
+    assert surf.wkbType() == QgsWkbTypes.MultiPolygonZ
+    assert junc.wkbType() == QgsWkbTypes.MultiPolygonZ
+    rows, sg = layer_features(surf)
+    jrows, jg = layer_features(junc)
+    assert sorted(r["degree"] for r in jrows) == [5, 6]
+    assert len(rows) == 11
+    # the width field where set, the residential class width (8 m) where it is NULL
+    assert sorted(r["width_m"] for r in rows) == sorted(
+        [10.0, 8.0, 7.0, 12.0, 8.0, 9.0, 8.0, 8.0, 6.0, 11.0, 7.5])
+    polys = np.concatenate([sg, jg])
+    assert shapely.is_valid(polys).all() and shapely.has_z(polys).all()
+    assert _pairwise_overlap(shapely.force_2d(polys), np.zeros(len(polys), int)).sum() < 1e-3
+    # coverage of the centre lines buffered by half their width
+    lines = [shapely.from_wkt(w) for w in _star_wkts(X0, Y0, STAR5) +
+             _star_wkts(X0 + 300, Y0, STAR6)]
+    width = np.array([10.0, 8.0, 7.0, 12.0, 8.0, 9.0, 8.0, 8.0, 6.0, 11.0, 7.5])
+    discs = [shapely.Point(X0, Y0).buffer(w / 2) for w in width[:5]] + \
+        [shapely.Point(X0 + 300, Y0).buffer(w / 2) for w in width[5:]]
+    ref = shapely.union_all(np.concatenate([shapely.buffer(lines, width / 2, cap_style="flat"),
+                                            discs]))
+    union = shapely.union_all(shapely.force_2d(polys))
+    assert shapely.symmetric_difference(union, ref).area / ref.area < 0.01
+    # every vertex on the plane, slopes as the plane's gradient along / across each street
+    xyz = shapely.get_coordinates(polys, include_z=True)
+    np.testing.assert_allclose(xyz[:, 2], 20 + A * (xyz[:, 0] - X0) + B * (xyz[:, 1] - Y0),
+                               atol=1e-3)
+    for r, g in zip(rows, sg):
+        c = shapely.get_coordinates(shapely.centroid(g))[0]
+        centre = np.array([X0, Y0]) if c[0] < X0 + 150 else np.array([X0 + 300, Y0])
+        d = (c - centre) / np.linalg.norm(c - centre)
+        along = 100 * abs(A * d[0] + B * d[1])
+        across = 100 * abs(-A * d[1] + B * d[0])
+        assert r["slope_long_pct"] == pytest.approx(along, abs=0.05)
+        assert r["slope_lat_pct"] == pytest.approx(across, abs=0.05)
+        assert r["too_steep_long"] == (r["slope_long_pct"] > 12.0)
+        assert r["too_steep_lat"] == (r["slope_lat_pct"] > 8.0)
+    assert any(r["too_steep_lat"] for r in rows) and not all(r["too_steep_lat"] for r in rows)
+    for r in jrows:
+        assert r["slope_pct"] == pytest.approx(100 * np.hypot(A, B), abs=0.01)
+        assert r["z_centre"] == pytest.approx(20.0 + A * (300 if r["degree"] == 6 else 0),
+                                              abs=0.01)
+
+
+@pytest.mark.parametrize("case, match", [
+    ("points", "lines are needed"),
+    ("empty", "empty"),
+    ("no_width_field", "no field 'nope'"),
+    ("default_width", "DEFAULT_WIDTH"),
+    ("far_dem", "no value over"),
+])
+def test_bad_input(qgis_processing, stars, tmp_path, case, match):
+    from qgis.core import QgsProcessingException
+
+    params = {"ROADS": stars, "OUTPUT_SURFACES": "memory:", "OUTPUT_JUNCTIONS": "memory:"}
+    if case == "points":
+        params["ROADS"] = memory_layer("Point", [f"POINT({X0} {Y0})"], CRS, name="pts")
+    elif case == "empty":
+        params["ROADS"] = memory_layer("LineString", [], CRS, name="nothing")
+    elif case == "no_width_field":
+        params["WIDTH_FIELD"] = "nope"
+    elif case == "default_width":
+        params["DEFAULT_WIDTH"] = 0.0
+    elif case == "far_dem":
+        params["DEM"] = _write_plane(tmp_path / "far.tif", x0=X0 + 50000, y0=Y0 + 50000)
+    with pytest.raises(QgsProcessingException, match=match):
+        qgis_processing.run(ALG, params)
+
+
+def test_styles_load(qgis_app):
+    from qgis.core import QgsRuleBasedRenderer, QgsVectorLayer
+
+    styles = Path(ss.__file__).resolve().parents[1] / "resources" / "styles"
+    for qml in ("street_surfaces.qml", "junctions.qml"):
+        layer = QgsVectorLayer("Polygon?field=degree:integer&field=too_steep_long:boolean"
+                               "&field=too_steep_lat:boolean", "x", "memory")
+        message, ok = layer.loadNamedStyle(str(styles / qml))
+        assert ok, message
+        assert isinstance(layer.renderer(), QgsRuleBasedRenderer)
+        assert len(layer.renderer().rootRule().children()) == 2
+
+
+def test_qgis_process_helsinki(tmp_path):
+    """The real qgis_process.bin on the OSM extract: exit 0, both outputs written."""
+    surfaces, junctions = tmp_path / "surfaces.gpkg", tmp_path / "junctions.gpkg"
+    code, out, err = run_qgis_process("tessellatestreets", {
+        "ROADS": helsinki_layer(), "MERGE_DISTANCE": 6, "OUTPUT_SURFACES": str(surfaces),
+        "OUTPUT_JUNCTIONS": str(junctions)})
+    assert code == 0, err
+    assert out is not None and surfaces.exists() and junctions.exists()
+    import pyogrio
+
+    s = pyogrio.read_dataframe(surfaces)
+    j = pyogrio.read_dataframe(junctions)
+    assert list(s.columns[:len(SURFACE_FIELDS)]) == SURFACE_FIELDS
+    assert 150 < len(s) < 400 and 60 < len(j) < 250
+    assert (j.degree >= 3).all() and j.merged_nodes.max() >= 2   # 6 m merges some centres
+    assert s.geometry.is_valid.all() and j.geometry.is_valid.all()

@@ -1,0 +1,265 @@
+"""Engine tests of plugin.street_surfaces (Scharl 2010, ch. 5): plain shapely, no QGIS."""
+import numpy as np
+import pytest
+import shapely
+
+from helpers import helsinki_roads
+from urban_synthesis.plugin import roads
+from urban_synthesis.plugin import street_surfaces as ss
+from urban_synthesis.plugin.progress import InputError
+from urban_synthesis.plugin.shape_context import DemGrid
+
+
+# --------------------------------------------------------------------------- checks
+
+def overlaps(polys, layers=None):
+    """Interior overlap area of every pair of polygons of one layer (STRtree pairs)."""
+    polys = np.asarray(polys, dtype=object)
+    layers = np.zeros(len(polys), int) if layers is None else np.asarray(layers)
+    tree = shapely.STRtree(polys)
+    i, j = tree.query(polys, predicate="intersects")
+    sel = (i < j) & (layers[i] == layers[j])
+    return shapely.area(shapely.intersection(polys[i[sel]], polys[j[sel]]))
+
+
+def coverage_error(result, graph=None, widths=None):
+    """(missing, excess) area of the tessellation against the buffered centre lines,
+    as shares of the buffered area."""
+    graph = result.graph if graph is None else graph
+    widths = result.widths if widths is None else widths
+    ref = ss.reference_area(graph, widths)
+    union = shapely.union_all(np.concatenate([result.surfaces, result.junctions]))
+    with np.errstate(divide="ignore", invalid="ignore"):  # GEOS's empty differences
+        return (shapely.area(shapely.difference(ref, union)) / ref.area,
+                shapely.area(shapely.difference(union, ref)) / ref.area)
+
+
+def assert_tessellation(result, max_error=0.01):
+    polys = np.concatenate([result.surfaces, result.junctions])
+    assert shapely.is_valid(polys).all()
+    assert (shapely.area(polys) > 0).all()
+    layers = np.r_[result.surface_table.z_layer, result.junction_table.z_layer]
+    ov = overlaps(shapely.force_2d(polys), layers)
+    assert ov.sum() < 1e-3 and (ov.max() if len(ov) else 0) < 1e-3
+    missing, excess = coverage_error(result)
+    assert missing < max_error and excess < max_error, (missing, excess)
+    return missing, excess
+
+
+def star(angles_deg, widths, length=60.0, centre=(0.0, 0.0)):
+    """Streets from one centre point at the given angles."""
+    cx, cy = centre
+    a = np.radians(angles_deg)
+    lines = [shapely.LineString([(cx, cy), (cx + length * np.cos(t), cy + length * np.sin(t))])
+             for t in a]
+    return lines, np.asarray(widths, dtype=float)
+
+
+# --------------------------------------------------------------------------- widths
+
+def test_widths_precedence_and_osm_values():
+    assert ss.parse_width("7.5 m") == 7.5 and ss.parse_width("6,5") == 6.5
+    assert ss.parse_width(8) == 8.0 and ss.parse_width("7;9") == 7.0
+    for bad in ("12'", "wide", None, "-3", "0.1", "500"):
+        assert np.isnan(ss.parse_width(bad))
+    w, src = ss.road_widths(width=["9", None, "x", None, None, None],
+                            road_class=["residential", "primary", "primary_link", None,
+                                        "primary", None],
+                            level=[None, None, None, 0, None, None],
+                            oneway=[None, None, None, None, "yes", None], default_width=5.0)
+    np.testing.assert_allclose(w, [9.0, 16.0, 7.0, 16.0, 8.0, 5.0])
+    assert list(src) == ["field", "class", "class", "level", "class", "default"]
+
+
+# --------------------------------------------------------------------------- junctions
+
+@pytest.mark.parametrize("angles, widths", [
+    ([0, 90, 180], [8, 12, 8]),                        # T: through road and a wider side road
+    ([10, 95, 170, 280], [6, 8, 10, 7]),               # skewed 4-way crossing
+    ([0, 60, 150, 200, 290], [8, 8, 14, 6, 8]),        # Scharl Fig. 5.1: five streets
+    ([0, 40, 110, 180, 230, 300], [7, 9, 8, 12, 6, 8]),  # six streets
+])
+def test_junction_of_any_degree(angles, widths):
+    lines, w = star(angles, widths)
+    res = ss.tessellate_lines(lines, w)
+    n = len(angles)
+    assert len(res.junctions) == 1 and len(res.surfaces) == n
+    assert res.junction_table.degree.tolist() == [n]
+    assert_tessellation(res)
+    # each street meets the junction along a connecting line of its full width that is
+    # perpendicular to the street (Scharl Fig. 5.4)
+    junction = res.junctions[0]
+    for geom, row in zip(res.surfaces, res.surface_table.itertuples()):
+        xy = np.unique(shapely.get_coordinates(geom), axis=0)
+        on_junction = xy[shapely.distance(shapely.points(xy), junction.boundary) < 1e-6]
+        assert len(on_junction) == 2
+        # the surface edge between them runs along the junction's boundary
+        mid = shapely.Point(on_junction.mean(0))
+        assert shapely.distance(mid, junction.boundary) < 1e-6
+        assert shapely.distance(mid, geom.boundary) < 1e-6
+        shared = shapely.LineString(on_junction)
+        street = res.graph.geometry[row.edge_id - 1]
+        d = np.diff(shapely.get_coordinates(street), axis=0)[0]
+        c = np.diff(shapely.get_coordinates(shared)[[0, -1]], axis=0)[0]
+        assert abs(np.dot(d, c)) / (np.linalg.norm(d) * np.linalg.norm(c)) < 1e-6
+
+
+def test_acute_and_wide_angles_stay_clean():
+    """A 12 degree fork (outlines meet far out) and a 250 degree gap (round fill)."""
+    lines, w = star([0, 12, 110], [10, 8, 6], length=80.0)
+    res = ss.tessellate_lines(lines, w)
+    assert res.junction_table.degree.tolist() == [3]
+    assert_tessellation(res)
+    # the fork's head is capped (3 x the widest street) instead of reaching 45 m out
+    hull = shapely.get_coordinates(res.junctions[0])
+    assert np.hypot(*hull.T).max() <= 3 * 10 + 5 + 1e-6
+
+
+def test_close_centres_merge_into_one_junction():
+    """Two T-junctions 2.5 m apart on a through road: one degree-4 junction (Scharl 5.1)."""
+    lines = [shapely.LineString([(-80, 0), (80, 0)]), shapely.LineString([(0, 0), (0, 60)]),
+             shapely.LineString([(2.5, 0), (2.5, -60)])]
+    w = np.array([10.0, 8.0, 8.0])
+    merged = ss.tessellate_lines(lines, w, merge_distance=3.0)
+    assert merged.junction_table.degree.tolist() == [4]
+    assert merged.junction_table.merged_nodes.tolist() == [2]
+    assert_tessellation(merged)
+    apart = ss.tessellate_lines(lines, w, merge_distance=0.0)
+    assert sorted(apart.junction_table.degree.tolist()) == [3, 3]
+    assert_tessellation(apart)
+
+
+def test_heads_that_meet_share_a_connecting_line_or_merge():
+    """A 9 m street between two junctions of 12 m streets: by default both junctions keep
+    their centres and meet; with Scharl's rule they merge."""
+    lines = [shapely.LineString([(-60, 0), (60, 0)]), shapely.LineString([(-60, 9), (60, 9)]),
+             shapely.LineString([(0, 0), (0, 9)])]
+    w = np.array([12.0, 12.0, 6.0])
+    res = ss.tessellate_lines(lines, w)
+    assert sorted(res.junction_table.degree.tolist()) == [3, 3]
+    assert_tessellation(res)
+    scharl = ss.tessellate_lines(lines, w, merge_heads=True)
+    assert scharl.junction_table.degree.tolist() == [4]
+    assert scharl.stats["merged_away"] == 1
+
+
+def test_bridge_may_overlap_other_layer_only():
+    lines = [shapely.LineString([(-50, 0), (50, 0)]), shapely.LineString([(0, -50), (0, 50)])]
+    res = ss.tessellate_lines(lines, np.array([8.0, 8.0]), z_layer=[0, 1])
+    assert len(res.junctions) == 0 and len(res.surfaces) == 2
+    assert shapely.intersection(*res.surfaces).area == pytest.approx(64.0, rel=1e-6)
+    assert sorted(res.surface_table.z_layer) == [0, 1]
+
+
+def test_bad_widths():
+    g = roads.clean_network([shapely.LineString([(0, 0), (10, 0)])])
+    with pytest.raises(InputError, match="width"):
+        ss.tessellate_network(g, np.array([0.0]))
+    with pytest.raises(InputError, match="width"):
+        ss.tessellate_network(g, np.array([np.nan]))
+
+
+# --------------------------------------------------------------------------- terrain
+
+def plane_dem(a, b, c=50.0, extent=(-100, -100, 400, 400), cell=5.0):
+    x0, y0, x1, y1 = extent
+    cols, rows = int((x1 - x0) / cell), int((y1 - y0) / cell)
+    xs = x0 + cell * (np.arange(cols) + 0.5)
+    ys = y1 - cell * (np.arange(rows) + 0.5)
+    x, y = np.meshgrid(xs, ys)
+    return DemGrid(c + a * x + b * y, (x0, cell, 0.0, y1, 0.0, -cell))
+
+
+def grid_lines(n=3, spacing=100.0):
+    out = []
+    for k in range(n + 1):
+        out.append(shapely.LineString([(0, k * spacing), (n * spacing, k * spacing)]))
+        out.append(shapely.LineString([(k * spacing, 0), (k * spacing, n * spacing)]))
+    return out
+
+
+def test_inclined_plane_slopes_and_planar_junctions():
+    """z = 50 + 0.05 x + 0.10 y: streets along x climb 5 % and lean 10 % sideways."""
+    a, b = 0.05, 0.10
+    dem = plane_dem(a, b)
+    res = ss.tessellate_lines(grid_lines(), np.full(8, 10.0), dem=dem)
+    assert_tessellation(res)
+    polys = np.concatenate([res.surfaces, res.junctions])
+    assert shapely.has_z(polys).all()
+    xyz = shapely.get_coordinates(polys, include_z=True)
+    np.testing.assert_allclose(xyz[:, 2], 50 + a * xyz[:, 0] + b * xyz[:, 1], atol=1e-6)
+    st = res.surface_table
+    # straight pieces only (the grid's corner bends mix both directions)
+    straight = np.array([len(shapely.get_coordinates(res.graph.geometry[e - 1])) == 2
+                         for e in st.edge_id])
+    coords = [shapely.get_coordinates(res.graph.geometry[e - 1]) for e in st.edge_id]
+    along_x = straight & np.array([abs(c[-1, 1] - c[0, 1]) < 1e-9 for c in coords])
+    along_y = straight & ~along_x
+    assert along_x.sum() >= 4 and along_y.sum() >= 4
+    np.testing.assert_allclose(st.slope_long_pct[along_x], 5.0, atol=1e-6)
+    np.testing.assert_allclose(st.slope_lat_pct[along_x], 10.0, atol=1e-6)
+    np.testing.assert_allclose(st.slope_long_pct[along_y], 10.0, atol=1e-6)
+    np.testing.assert_allclose(st.slope_lat_pct[along_y], 5.0, atol=1e-6)
+    # Scharl's limits: 12 % along, 8 % across
+    assert not st.too_steep_long[along_x | along_y].any()
+    assert st.too_steep_lat[along_x].all() and not st.too_steep_lat[along_y].any()
+    jt = res.junction_table
+    np.testing.assert_allclose(jt.slope_pct, 100 * np.hypot(a, b), atol=1e-6)
+    np.testing.assert_allclose(jt.slope_long_pct, 10.0, atol=1e-6)
+
+
+def test_hill_junctions_in_tangent_plane_and_streets_draped():
+    """On a curved hill, junctions stay planar (tangent plane at the centre), streets follow
+    the terrain away from their ends and meet the junctions without steps."""
+    cell = 2.0
+    xs = -100 + cell * (np.arange(250) + 0.5)
+    ys = 400 - cell * (np.arange(250) + 0.5)
+    x, y = np.meshgrid(xs, ys)
+    z = 30.0 * np.exp(-((x - 150) ** 2 + (y - 150) ** 2) / (2 * 90.0 ** 2))
+    dem = DemGrid(z, (-100, cell, 0.0, 400, 0.0, -cell))
+    res = ss.tessellate_lines(grid_lines(), np.full(8, 10.0), dem=dem)
+    assert_tessellation(res)
+    for j in res.junctions:
+        c = shapely.get_coordinates(j, include_z=True)
+        A = np.column_stack([c[:, 0], c[:, 1], np.ones(len(c))])
+        coef, *_ = np.linalg.lstsq(A, c[:, 2], rcond=None)
+        assert np.abs(A @ coef - c[:, 2]).max() < 1e-6      # planar
+    # the tangent plane at a centre matches the terrain's gradient there
+    centre = res.graph.nodes[res.junction_table.junction_id.to_numpy() - 1]
+    gx = -(centre[:, 0] - 150) / 90.0 ** 2 * dem(centre)
+    gy = -(centre[:, 1] - 150) / 90.0 ** 2 * dem(centre)
+    np.testing.assert_allclose(res.junction_table.slope_pct, 100 * np.hypot(gx, gy), atol=1.5)
+    # no steps: a vertex shared by a street and a junction has one height
+    jxyz = np.vstack([shapely.get_coordinates(j, include_z=True) for j in res.junctions])
+    sxyz = np.vstack([shapely.get_coordinates(s, include_z=True) for s in res.surfaces])
+    from scipy.spatial import cKDTree
+
+    d, k = cKDTree(jxyz[:, :2]).query(sxyz[:, :2])
+    shared = d < 1e-6
+    assert shared.sum() >= 2 * len(res.surfaces)
+    np.testing.assert_allclose(sxyz[shared, 2], jxyz[k[shared], 2], atol=1e-6)
+    # in the middle of a street, the surface lies on the terrain
+    mid = sxyz[(d > 30)]
+    np.testing.assert_allclose(mid[:, 2], dem(mid[:, :2]), atol=1e-6)
+
+
+# --------------------------------------------------------------------------- real data
+
+def test_helsinki_streets():
+    df = helsinki_roads()
+    tags = [roads.parse_other_tags(t) for t in df.other_tags]
+    w, src = ss.road_widths([t.get("width") for t in tags], df.highway.to_numpy(), n=len(df),
+                            oneway=[t.get("oneway") for t in tags])
+    graph = roads.clean_network(df.geometry.to_numpy(), df.highway.to_numpy(),
+                                z_layer=df.z.to_numpy(), min_dangle_length=0.0)
+    res = ss.tessellate_network(graph, w[graph.source])
+    missing, excess = assert_tessellation(res)
+    # the input graph itself (not a merged one) is what must be covered
+    assert coverage_error(res, graph, w[graph.source])[0] < 0.01
+    deg = res.junction_table.degree
+    assert (deg >= 3).all() and {3, 4} <= set(deg)
+    # every node of degree >= 3 of the cleaned graph has a junction, minus merged ones
+    n_nodes = int((graph.degree >= 3).sum())
+    assert len(res.junctions) + res.stats["merged_away"] >= n_nodes - 2
+    assert len(res.surfaces) >= 0.9 * graph.n_edges
+    np.testing.assert_allclose(res.surface_table.area_m2, shapely.area(res.surfaces))
