@@ -1331,3 +1331,7 @@ def subdivide_blocks(blocks, method: str = "recursive",
     }
     progress.step(1.0)
     return Subdivision(geometry, table, shrunk, stats)
+
+
+# methods of other modules register themselves on import (appended to the METHOD enum)
+from . import parcels_voronoi  # noqa: E402,F401  (Aliaga et al. 2008 'voronoi-obb')

@@ -19,6 +19,7 @@ ALGORITHMS = (
     ("synthesize_roads_from_fragments", "SynthesizeRoadsFromFragments"),
     ("tessellate_streets", "TessellateStreets"),
     ("synthesize_buildings", "SynthesizeBuildings"),
+    ("synthesize_roads_random_walk", "SynthesizeRoadsRandomWalk"),
 )
 
 

@@ -85,7 +85,10 @@ class SubdivideParcels(AlgorithmBase):
             options=[parcels.METHODS[k].label for k in self.method_keys], defaultValue=0),
             "Recursive: split lots across their long axis until under the maximum area "
             "(Scharl 4.2.6). Skeleton: strips along every street cut every lot width, every "
-            "parcel with street frontage (Vanegas et al. 2012).")
+            "parcel with street frontage (Vanegas et al. 2012). Voronoi along the OBB axis: one "
+            "or two rows of parcels along the block's oriented bounding box, spacing jittered "
+            "with a Gaussian, each parcel with street access; parcel size lot width² x 1.5 "
+            "(Aliaga et al. 2008, sec. 3.1.2).")
         self.add(QgsProcessingParameterNumber(
             self.MAX_AREA, "Maximum parcel area (m²)", QgsProcessingParameterNumber.Double,
             defaultValue=parcels.DEFAULT_MAX_AREA, minValue=1.0, maxValue=self.MAX_AREA_LIMIT),
@@ -94,7 +97,8 @@ class SubdivideParcels(AlgorithmBase):
         self.add(QgsProcessingParameterNumber(
             self.LOT_WIDTH, "Lot width along the street (m)", QgsProcessingParameterNumber.Double,
             defaultValue=parcels.DEFAULT_LOT_WIDTH, minValue=0.1, maxValue=self.MAX_WIDTH_LIMIT),
-            "Skeleton: target frontage of a parcel (Yang et al. 2013 aim at 18 m).")
+            "Skeleton: target frontage of a parcel (Yang et al. 2013 aim at 18 m). Voronoi along "
+            "the OBB axis: sets the mean parcel area (lot width² x 1.5).")
         self.add(QgsProcessingParameterNumber(
             self.IRREGULARITY, "Irregularity (0-1)", QgsProcessingParameterNumber.Double,
             defaultValue=parcels.DEFAULT_IRREGULARITY, minValue=0.0, maxValue=1.0),

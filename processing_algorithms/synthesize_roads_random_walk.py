@@ -1,0 +1,273 @@
+"""urbansynth:synthesizeroadsrandomwalk - join / expand / blend by attributed intersections."""
+import numpy as np
+import shapely
+from qgis.core import (
+    QgsProcessing,
+    QgsProcessingException,
+    QgsProcessingParameterEnum,
+    QgsProcessingParameterFeatureSink,
+    QgsProcessingParameterFeatureSource,
+    QgsProcessingParameterField,
+    QgsProcessingParameterNumber,
+    QgsWkbTypes,
+)
+
+from ..plugin import intersection_quadtree, qgis_io, random_walk, roads
+from .common import AlgorithmBase, drivable_lines
+
+_POINT_FIELDS = ["level_a", "level_b", "degree", "tortuosity_a", "tortuosity_b", "dist_mean_a",
+                 "dist_var_a", "dist_mean_b", "dist_var_b", "angle_mean_a", "angle_var_a",
+                 "angle_mean_b", "angle_var_b", "parcel_area", "block_area"]
+
+
+class SynthesizeRoadsRandomWalk(AlgorithmBase):
+    GROUP_ID = "synthesis"
+    EXAMPLE = "EXAMPLE"
+    TARGET = "TARGET"
+    EXISTING_ROADS = "EXISTING_ROADS"
+    EXAMPLE_B = "EXAMPLE_B"
+    BLEND = "BLEND"
+    BLEND_FIELD = "BLEND_FIELD"
+    PLACEMENT = "PLACEMENT"
+    THRESHOLD = "THRESHOLD"
+    MIN_ANGLE = "MIN_ANGLE"
+    SEED = "SEED"
+    OUTPUT = "OUTPUT"
+    OUTPUT_INTERSECTIONS = "OUTPUT_INTERSECTIONS"
+    OUTPUT_BLOCKS = "OUTPUT_BLOCKS"
+
+    PLACEMENTS = [None, True, False]
+
+    def name(self):
+        return "synthesizeroadsrandomwalk"
+
+    def displayName(self):  # noqa: N802
+        return "Synthesize roads by random walks (intersection points)"
+
+    def shortHelpString(self):  # noqa: N802
+        return (
+            "Makes a street network in the style of an example city from its attributed "
+            "intersection points (Aliaga, Vanegas and Benes 2008).\n\n"
+            "The example's intersections (the OUTPUT_INTERSECTIONS of 'Extract road hierarchy', "
+            "or roads they are computed from) carry the levels of the two streets through "
+            "them, their tortuosity and the mean and variance of the distance and turn angle "
+            "between consecutive intersections. They are organised in an adaptive quadtree and "
+            "copied into the TARGET polygons (in place where the example covers the target, "
+            "else tiled). Streets are random walks, level by level: each step goes to a point "
+            "drawn by a Gaussian on (distance, angle) from the base point's statistics, never "
+            "to a point of another level, a point with all its connections (at most 4) or "
+            "across a street. Segments are bent to the example's tortuosity.\n\n"
+            "EXISTING_ROADS: their dead ends at the target continue into the new streets "
+            "(expand). EXAMPLE_B with BLEND (0 = only the example, 1 = only B) or a blend "
+            "field on the targets mixes two styles. Output: planar roads with level (0 = "
+            "most important) in the target's CRS; optionally the points used."
+        )
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        types = [QgsProcessing.TypeVectorPoint, QgsProcessing.TypeVectorLine]
+        self.add(QgsProcessingParameterFeatureSource(self.EXAMPLE, "Example", types),
+                 "Intersection points of 'Extract road hierarchy' (with level_a, dist_mean_a, "
+                 "...) or example roads (an OSM 'lines' layer is filtered to drivable classes) "
+                 "from which the points are computed.")
+        self.add(QgsProcessingParameterFeatureSource(
+            self.TARGET, "Target area", [QgsProcessing.TypeVectorPolygon]),
+            "Polygon(s) where the new streets go; the output is in this layer's CRS.")
+        self.add(QgsProcessingParameterFeatureSource(
+            self.EXISTING_ROADS, "Existing roads (expand)", [QgsProcessing.TypeVectorLine],
+            optional=True),
+            "Roads around the target to expand from: their dead ends at the target "
+            "continue into the new streets, and no new street crosses them.")
+        self.add(QgsProcessingParameterFeatureSource(
+            self.EXAMPLE_B, "Second example (blend)", types, optional=True),
+            "Points or roads of a second city; its style is blended with the example's.")
+        self.add(QgsProcessingParameterNumber(
+            self.BLEND, "Blend weight of the second example (0-1)",
+            QgsProcessingParameterNumber.Double, defaultValue=0.5, minValue=0.0, maxValue=1.0),
+            "0 keeps only the example's points, 1 only the second example's; in between, "
+            "densities, level mixes and street statistics are interpolated. Used only with "
+            "a second example.")
+        self.add(QgsProcessingParameterField(
+            self.BLEND_FIELD, "Blend weight field (on the targets)",
+            parentLayerParameterName=self.TARGET, type=QgsProcessingParameterField.Numeric,
+            optional=True),
+            "A 0-1 weight per target polygon for a spatially varying blend; empty values use "
+            "the blend weight above.")
+        self.add(QgsProcessingParameterNumber(
+            self.SEED, "Random seed", QgsProcessingParameterNumber.Integer, defaultValue=1,
+            minValue=0),
+            "The same seed and inputs give the same network.")
+        self.add(QgsProcessingParameterEnum(
+            self.PLACEMENT, "Placement of the example's points",
+            options=["Automatic (in place where the example covers the target)", "In place",
+                     "Shifted / tiled over the target"], defaultValue=0),
+            "In place copies the points at their own coordinates (copy-and-reconnect); shifted "
+            "tiles the example over the target at the shift that fills it best.",
+            advanced=True)
+        self.add(QgsProcessingParameterNumber(
+            self.THRESHOLD, "Transition probability threshold",
+            QgsProcessingParameterNumber.Double,
+            defaultValue=random_walk.WalkSettings.threshold, minValue=0.0, maxValue=1.0),
+            "Steps less probable than this (the Gaussian's peak is 1) are never taken: higher "
+            "values keep streets closer to the example's spacing and turns, with more dead "
+            "ends.", advanced=True)
+        self.add(QgsProcessingParameterNumber(
+            self.MIN_ANGLE, "Minimum angle between streets (degrees)",
+            QgsProcessingParameterNumber.Double,
+            defaultValue=random_walk.WalkSettings.min_angle, minValue=0.0, maxValue=89.0),
+            "No two streets leave an intersection closer in direction than this.",
+            advanced=True)
+        self.add(QgsProcessingParameterFeatureSink(
+            self.OUTPUT, "Synthesized roads", QgsProcessing.TypeVectorLine),
+            "New road segments with level, length_m, tortuosity and origin ('walk'; 'seam' "
+            "joins to existing roads; 'close' extra steps closing stubs).")
+        self.add(QgsProcessingParameterFeatureSink(
+            self.OUTPUT_INTERSECTIONS, "Intersection points used", QgsProcessing.TypeVectorPoint,
+            optional=True, createByDefault=False),
+            "The attributed points placed in the target (example 0 = first, 1 = second, "
+            "-1 = existing roads) with the connections they got.")
+        self.add(QgsProcessingParameterFeatureSink(
+            self.OUTPUT_BLOCKS, "Blocks", QgsProcessing.TypeVectorPolygon, optional=True,
+            createByDefault=False),
+            "The faces the new streets close (block_id, area_m2, neighbours in the block "
+            "graph, parcel_area: the mean parcel or block area of the example points on "
+            "the outline), ready for 'Subdivide blocks into parcels'.")
+
+    # ----------------------------------------------------------------------- reading
+
+    def _read_example(self, parameters, name, context, feedback, work_crs, target_src, index):
+        frame = qgis_io.read_source(self, parameters, name, context, feedback,
+                                    fields=_POINT_FIELDS + ["highway", "other_tags"])
+        # an example elsewhere keeps its own metric CRS (it is shifted onto the target anyway);
+        # one that overlaps the target is used in the target's CRS, so it can stay in place
+        if frame.crs != work_crs:
+            box = shapely.box(*shapely.total_bounds(qgis_io.reproject(
+                target_src, work_crs, frame.crs, context)))
+            if shapely.intersects(box, shapely.box(*shapely.total_bounds(frame.geometry))):
+                frame.geometry = qgis_io.reproject(frame.geometry, frame.crs, work_crs, context)
+                frame.crs = work_crs
+        kinds = set(shapely.get_type_id(frame.geometry).tolist())
+        if kinds <= {0, 4}:
+            geoms = shapely.get_parts(frame.geometry)
+            if len(geoms) != len(frame.geometry):
+                raise QgsProcessingException(f"Layer {frame.name}: multipoint features; give "
+                                             "one point per intersection.")
+            xy = shapely.get_coordinates(geoms)
+            points = qgis_io.run_engine(frame.name, intersection_quadtree.points_from_table,
+                                        xy, frame.attributes, index)
+            feedback.pushInfo(f"{frame.name}: {len(points)} attributed intersection points.")
+        elif kinds <= {1, 5}:
+            frame, road_class = drivable_lines(frame, None, set(roads.DRIVABLE_CLASSES),
+                                               feedback)
+            points = qgis_io.run_engine(frame.name, self._points_from_roads, frame.geometry,
+                                        road_class, index)
+            feedback.pushInfo(f"{frame.name}: {len(points)} intersection points computed "
+                              "from the roads.")
+        else:
+            raise QgsProcessingException(f"Layer {frame.name} has polygons; intersection "
+                                         "points or road lines are needed.")
+        if len(points) < 3:
+            raise QgsProcessingException(f"Layer {frame.name}: {len(points)} intersection "
+                                         "points are too few to learn a street style from.")
+        return frame, points
+
+    @staticmethod
+    def _points_from_roads(lines, road_class, index):
+        return intersection_quadtree.points_from_roads(lines, road_class, example=index)[0]
+
+    def _blend(self, parameters, context, target, field):
+        beta = qgis_io.check_number(self.parameterAsDouble(parameters, self.BLEND, context),
+                                    self.BLEND, 0.0, 1.0)
+        if not field:
+            return beta
+        values = np.array([_number(v) for v in target.attributes[field]], dtype=float)
+        values = np.where(np.isfinite(values), values, beta)
+        if (values < 0).any() or (values > 1).any():
+            raise QgsProcessingException(f"Layer {target.name}: blend weights in '{field}' "
+                                         "must be between 0 and 1.")
+        polys = target.geometry
+        tree = shapely.STRtree(polys)
+
+        def weight(xy):
+            out = np.full(len(xy), beta)
+            pi, gi = tree.query(shapely.points(xy), predicate="intersects")
+            out[pi] = values[gi]
+            return out
+
+        return weight
+
+    # ----------------------------------------------------------------------- run
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        field = self.parameterAsString(parameters, self.BLEND_FIELD, context)
+        target = qgis_io.read_source(self, parameters, self.TARGET, context, feedback,
+                                     kind="polygons", fields=[field] if field else [])
+        seed = int(qgis_io.check_number(self.parameterAsInt(parameters, self.SEED, context),
+                                        self.SEED, 0))
+        settings = random_walk.WalkSettings(
+            threshold=qgis_io.check_number(self.parameterAsDouble(
+                parameters, self.THRESHOLD, context), self.THRESHOLD, 0.0, 1.0),
+            min_angle=qgis_io.check_number(self.parameterAsDouble(
+                parameters, self.MIN_ANGLE, context), self.MIN_ANGLE, 0.0, 89.0))
+        placement = self.PLACEMENTS[self.parameterAsEnum(parameters, self.PLACEMENT, context)]
+        feedback.setProgress(5)
+        _, points = self._read_example(parameters, self.EXAMPLE, context, feedback, target.crs,
+                                       target.geometry, 0)
+        points_b = None
+        blend = 0.0
+        if parameters.get(self.EXAMPLE_B) not in (None, ""):
+            _, points_b = self._read_example(parameters, self.EXAMPLE_B, context, feedback,
+                                             target.crs, target.geometry, 1)
+            blend = self._blend(parameters, context, target, field)
+        elif field:
+            feedback.pushInfo("The blend weight field is ignored: there is no second example.")
+        existing = qgis_io.read_source(self, parameters, self.EXISTING_ROADS, context, feedback,
+                                       kind="lines", target_crs=target.crs, optional=True,
+                                       fields=["highway", "other_tags"])
+        existing_lines = None
+        if existing is not None:
+            existing, _ = drivable_lines(existing, None, set(roads.DRIVABLE_CLASSES), feedback)
+            existing_lines = existing.geometry
+        feedback.setProgress(15)
+        result = qgis_io.run_engine(
+            target.name, random_walk.synthesize, points, target.geometry, existing_lines,
+            points_b, blend, seed, settings, placement,
+            progress=qgis_io.progress_for(feedback, 15, 90))
+        st = result.stats
+        feedback.pushInfo(
+            f"{st['n_points']} points placed (quadtree leaves: "
+            f"{', '.join(str(n) for n in st['quadtree_leaves'])}); {st['n_points_connected']} "
+            f"connected by {st['n_edges']} segments on {st['n_levels']} levels; "
+            f"{st['n_dead_ends']} dead ends ({100 * st['dead_end_share']:.0f} %).")
+        if "n_seam_ends" in st:
+            feedback.pushInfo(f"Existing roads: {st['n_seam_ends_connected']} of "
+                              f"{st['n_seam_ends']} dead ends at the target joined the new "
+                              "streets.")
+        results = {}
+        results[self.OUTPUT] = qgis_io.write_sink(
+            self, parameters, self.OUTPUT, context, result.geometry, result.table,
+            random_walk.ROAD_FIELDS, QgsWkbTypes.LineString, target.source_crs, target.crs,
+            feedback)
+        qgis_io.style_output(context, results[self.OUTPUT], "roads_by_level.qml")
+        if parameters.get(self.OUTPUT_INTERSECTIONS) is not None:
+            results[self.OUTPUT_INTERSECTIONS] = qgis_io.write_sink(
+                self, parameters, self.OUTPUT_INTERSECTIONS, context,
+                shapely.points(result.points.xy), result.point_table, random_walk.POINT_FIELDS,
+                QgsWkbTypes.Point, target.source_crs, target.crs, feedback)
+            qgis_io.style_output(context, results[self.OUTPUT_INTERSECTIONS], "intersections.qml")
+        if parameters.get(self.OUTPUT_BLOCKS) is not None:
+            faces, table = random_walk.block_table(result)
+            feedback.pushInfo(f"{len(faces)} blocks closed by the new streets.")
+            results[self.OUTPUT_BLOCKS] = qgis_io.write_sink(
+                self, parameters, self.OUTPUT_BLOCKS, context, faces, table,
+                random_walk.BLOCK_FIELDS, QgsWkbTypes.Polygon, target.source_crs, target.crs,
+                feedback)
+            qgis_io.style_output(context, results[self.OUTPUT_BLOCKS], "blocks.qml")
+        feedback.setProgress(100)
+        return results
+
+
+def _number(value):
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return float("nan")

@@ -1,0 +1,156 @@
+"""urbansynth:synthesizeroadsrandomwalk through real QGIS (processing.run and qgis_process.bin)."""
+import numpy as np
+import pytest
+import shapely
+
+from conftest import bubenec_layer, helsinki_layer, run_qgis_process
+from helpers import assert_planar, helsinki_roads, layer_features, memory_layer
+from urban_synthesis.plugin import random_walk, roads
+
+ALG = "urbansynth:synthesizeroadsrandomwalk"
+UTM = "EPSG:32635"
+
+
+@pytest.fixture(scope="module")
+def helsinki_graph():
+    df = helsinki_roads()
+    return roads.clean_network(df.geometry.values, df.highway.values)
+
+
+@pytest.fixture(scope="module")
+def helsinki_points(qgis_processing):
+    out = qgis_processing.run("urbansynth:extractroadhierarchy", {
+        "INPUT": helsinki_layer(), "OUTPUT": "memory:", "OUTPUT_INTERSECTIONS": "memory:"})
+    return out["OUTPUT_INTERSECTIONS"]
+
+
+def _hull_wkt(graph, buffer=5.0):
+    return shapely.convex_hull(shapely.multipoints(graph.nodes)).buffer(buffer).wkt
+
+
+def test_copy_and_reconnect_intersection_points(qgis_processing, helsinki_points, helsinki_graph):
+    """Fig. 8: the points of extractroadhierarchy, reconnected in place, give a planar network
+    of about the example's size; the output is in the target's CRS."""
+    target = memory_layer("Polygon", [_hull_wkt(helsinki_graph, 200)], UTM)
+    out = qgis_processing.run(ALG, {"EXAMPLE": helsinki_points, "TARGET": target, "SEED": 2,
+                                    "PLACEMENT": 1, "OUTPUT": "memory:",
+                                    "OUTPUT_INTERSECTIONS": "memory:", "OUTPUT_BLOCKS": "memory:"})
+    layer = out["OUTPUT"]
+    assert layer.crs().authid() == UTM
+    assert [f.name() for f in layer.fields()] == [n for n, _ in random_walk.ROAD_FIELDS]
+    rows, geoms = layer_features(layer)
+    assert 0.7 * helsinki_graph.n_edges < len(rows) < 1.3 * helsinki_graph.n_edges
+    assert_planar(geoms)
+    levels = {r["level"] for r in rows}
+    assert levels == {0, 1, 2, 3}
+    np.testing.assert_allclose([r["length_m"] for r in rows], shapely.length(geoms), rtol=1e-6)
+    assert all(r["tortuosity"] >= 1.0 - 1e-9 for r in rows)
+    # in place: every example point once, at its own place
+    p_rows, p_geoms = layer_features(out["OUTPUT_INTERSECTIONS"])
+    assert len(p_rows) == helsinki_points.featureCount()
+    assert sorted(r["source_id"] for r in p_rows) == list(range(len(p_rows)))
+    assert shapely.within(p_geoms, shapely.from_wkt(_hull_wkt(helsinki_graph, 200))).all()
+    assert all(r["connections"] <= min(4, r["degree"]) for r in p_rows)
+    # the blocks chain into the voronoi-obb parcels (sec. 3.1.2)
+    b_rows, b_geoms = layer_features(out["OUTPUT_BLOCKS"])
+    assert len(b_rows) > 10 and shapely.is_valid(b_geoms).all()
+    assert all(r["parcel_area"] > 0 for r in b_rows)  # Helsinki's block areas (no cadastre)
+    from urban_synthesis.plugin import parcels
+
+    lots = qgis_processing.run("urbansynth:subdivideparcels", {
+        "BLOCKS": out["OUTPUT_BLOCKS"], "METHOD": parcels.method_names().index("voronoi-obb"),
+        "OUTPUT": "memory:"})["OUTPUT"]
+    l_rows, l_geoms = layer_features(lots)
+    assert len(l_rows) > len(b_rows) and shapely.is_valid(l_geoms).all()
+    assert {r["block_id"] for r in l_rows} <= {r["block_id"] for r in b_rows}
+
+
+def test_expand_roads_into_a_hole(qgis_processing, helsinki_graph):
+    """Expand: EXAMPLE given as roads, existing roads with a hole; the new streets join
+    the existing dead ends at the hole."""
+    centre = np.median(helsinki_graph.nodes, axis=0)
+    hole = shapely.Point(centre).buffer(300)
+    outside = shapely.get_parts(shapely.difference(helsinki_graph.geometry, hole))
+    outside = outside[shapely.length(outside) > 1]
+    existing = memory_layer("LineString", shapely.to_wkt(outside), UTM)
+    out = qgis_processing.run(ALG, {
+        "EXAMPLE": existing, "TARGET": memory_layer("Polygon", [hole.wkt], UTM),
+        "EXISTING_ROADS": existing, "SEED": 1, "OUTPUT": "memory:",
+        "OUTPUT_INTERSECTIONS": "memory:"})
+    rows, geoms = layer_features(out["OUTPUT"])
+    assert len(rows) > 10
+    assert_planar(np.concatenate([geoms, outside]))
+    p_rows, _ = layer_features(out["OUTPUT_INTERSECTIONS"])
+    assert {r["example"] for r in p_rows} == {0, -1}
+    # seam ends: existing dead ends on the hole's outline; most got a new street
+    ends = np.concatenate([shapely.get_coordinates(shapely.get_point(outside, i)) for i in (0, -1)])
+    on_hole = shapely.distance(hole.boundary, shapely.points(ends)) < 1e-3
+    new_ends = np.concatenate([shapely.get_coordinates(shapely.get_point(geoms, i))
+                               for i in (0, -1)])
+    joined = shapely.distance(shapely.multipoints(new_ends), shapely.points(ends[on_hole])) < 0.01
+    assert on_hole.sum() >= 10
+    assert joined.mean() >= 0.5
+    # new streets stay in the hole (bends included) apart from the seam joins
+    assert shapely.within(geoms, hole.buffer(1.0)).mean() > 0.95
+
+
+def test_blend_field_by_target_polygon(qgis_processing):
+    """A blend weight per target polygon: weight 0 keeps only Helsinki's points, weight 1
+    only Bubeneč's (a spatially varying blend)."""
+    left = shapely.box(385500, 6671500, 386100, 6672300)
+    right = shapely.box(386100, 6671500, 386700, 6672300)
+    target = memory_layer("Polygon", [left.wkt, right.wkt], UTM, fields="&field=w:double",
+                          rows=[[0.0], [1.0]])
+    out = qgis_processing.run(ALG, {
+        "EXAMPLE": helsinki_layer(), "EXAMPLE_B": bubenec_layer("streets"), "TARGET": target,
+        "BLEND_FIELD": "w", "PLACEMENT": 2, "SEED": 4, "OUTPUT": "memory:",
+        "OUTPUT_INTERSECTIONS": "memory:"})
+    p_rows, p_geoms = layer_features(out["OUTPUT_INTERSECTIONS"])
+    example = np.array([r["example"] for r in p_rows])
+    in_left = shapely.within(p_geoms, left)
+    assert in_left.sum() > 20 and (~in_left).sum() > 5
+    assert (example[in_left] == 0).all()
+    assert (example[~in_left] == 1).all()
+    rows, geoms = layer_features(out["OUTPUT"])
+    assert len(rows) > 20
+    assert_planar(geoms)
+
+
+def test_bad_inputs(qgis_processing, helsinki_points):
+    target = memory_layer("Polygon", ["POLYGON((0 0, 500 0, 500 500, 0 500, 0 0))"], UTM,
+                          name="my target")
+    no_fields = memory_layer("Point", ["POINT(1 1)", "POINT(5 5)", "POINT(9 1)"], UTM,
+                             name="bare points")
+    with pytest.raises(Exception, match="bare points.*level_a"):
+        qgis_processing.run(ALG, {"EXAMPLE": no_fields, "TARGET": target, "OUTPUT": "memory:"})
+    polys = memory_layer("Polygon", ["POLYGON((0 0, 1 0, 1 1, 0 0))"], UTM, name="some polygons")
+    with pytest.raises(Exception, match="some polygons"):
+        qgis_processing.run(ALG, {"EXAMPLE": polys, "TARGET": target, "OUTPUT": "memory:"})
+    empty = memory_layer("Polygon", [], UTM, name="empty target")
+    with pytest.raises(Exception, match="empty target.*empty"):
+        qgis_processing.run(ALG, {"EXAMPLE": helsinki_points, "TARGET": empty,
+                                  "OUTPUT": "memory:"})
+    weights = memory_layer("Polygon", ["POLYGON((0 0, 500 0, 500 500, 0 500, 0 0))"], UTM,
+                           fields="&field=w:double", rows=[[3.0]], name="weighted target")
+    with pytest.raises(Exception, match="weighted target.*between 0 and 1"):
+        qgis_processing.run(ALG, {"EXAMPLE": helsinki_points, "EXAMPLE_B": helsinki_points,
+                                  "TARGET": weights, "BLEND_FIELD": "w", "OUTPUT": "memory:"})
+
+
+def test_qgis_process_run(tmp_path):
+    """The real qgis_process.bin on the real data: Helsinki roads into a square, exit 0."""
+    import geopandas as gpd
+
+    square = shapely.box(385600, 6671600, 386300, 6672300)
+    path = tmp_path / "target.gpkg"
+    gpd.GeoDataFrame({"name": ["square"]}, geometry=[square], crs=UTM).to_file(path)
+    out = tmp_path / "roads.gpkg"
+    code, result, err = run_qgis_process("synthesizeroadsrandomwalk", {
+        "EXAMPLE": helsinki_layer(), "TARGET": str(path), "SEED": 3, "OUTPUT": str(out)})
+    assert code == 0, err
+    assert result is not None and result["results"]["OUTPUT"].startswith(str(out))
+    import pyogrio
+
+    info = pyogrio.read_info(out)
+    assert info["features"] > 30
+    assert {"level", "length_m", "tortuosity", "origin"} <= set(info["fields"])
