@@ -20,6 +20,7 @@ ALGORITHMS = (
     ("tessellate_streets", "TessellateStreets"),
     ("synthesize_buildings", "SynthesizeBuildings"),
     ("synthesize_roads_random_walk", "SynthesizeRoadsRandomWalk"),
+    ("synthesize_footprints", "SynthesizeFootprints"),
 )
 
 

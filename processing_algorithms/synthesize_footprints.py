@@ -1,0 +1,304 @@
+"""urbansynth:synthesizefootprints - building footprints by example (block transfer, re-synthesis)."""
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import shapely
+from qgis.core import (
+    QgsProcessing,
+    QgsProcessingException,
+    QgsProcessingOutputNumber,
+    QgsProcessingParameterEnum,
+    QgsProcessingParameterFeatureSink,
+    QgsProcessingParameterFeatureSource,
+    QgsProcessingParameterField,
+    QgsProcessingParameterFile,
+    QgsProcessingParameterNumber,
+    QgsWkbTypes,
+)
+
+from ..plugin import blocks, database, footprints, qgis_io, roads
+from .common import AlgorithmBase, drivable_lines
+
+
+class SynthesizeFootprints(AlgorithmBase):
+    GROUP_ID = "synthesis"
+    BLOCKS = "BLOCKS"
+    ROADS = "ROADS"
+    BLOCK_DB = "BLOCK_DB"
+    BLOCK_DB_2 = "BLOCK_DB_2"
+    STYLE = "STYLE"
+    STYLE_FIELD = "STYLE_FIELD"
+    METHOD = "METHOD"
+    STREET_WIDTH = "STREET_WIDTH"
+    SETBACK = "SETBACK"
+    SEED = "SEED"
+    N_BEST = "N_BEST"
+    MIN_EXAMPLE_BUILDINGS = "MIN_EXAMPLE_BUILDINGS"
+    OUTPUT = "OUTPUT"
+    N_FOOTPRINTS = "N_FOOTPRINTS"
+
+    MAX_WIDTH = 200.0
+    MAX_N_BEST = 10
+
+    def name(self):
+        return "synthesizefootprints"
+
+    def displayName(self):  # noqa: N802
+        return "Synthesize building footprints"
+
+    def shortHelpString(self):  # noqa: N802
+        return (
+            "Fills city blocks with building footprints taken from example blocks (Hartmann, "
+            "thesis ch. 5.1 and 5.2).\n\n"
+            "For each target block the most similar block of a block database is retrieved "
+            "(prefilter by area, perimeter and aspect ratio to 10 candidates, shape context "
+            "with cyclic dynamic time warping on the boundary) and rigidly aligned with it.\n"
+            "Transfer copies its footprints: those outside the block are deleted, those "
+            "reaching into the street are moved rigidly (position-based relaxation, wall "
+            "lengths kept). Re-synthesis warps the example into the block as a guidance map "
+            "and composes each street's row anew from the undeformed example buildings "
+            "(dynamic programming on 1 m steps): corner buildings stay, buildings are "
+            "repeated or left out to fit a longer or shorter street, none is distorted.\n\n"
+            "Every footprint lies inside its block and off the road surface (half the street "
+            "width from each centreline, plus the setback); none overlaps another; what "
+            "still conflicts is trimmed or dropped. Databases come from 'Build block "
+            "database'; a second one mixes styles, chosen per area by STYLE polygons.\n\n"
+            "Output: footprints with the example building's height_m, levels and "
+            "building_type, source_block and source_building (ids in the database), "
+            "block_id, database, method and placement, in the input CRS."
+        )
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        self.add(QgsProcessingParameterFeatureSource(
+            self.BLOCKS, "Blocks", [QgsProcessing.TypeVectorPolygon], optional=True),
+            "Target block polygons outlined by street centrelines, e.g. the output of "
+            "'Extract city blocks' (its block_id is kept). Give either Blocks or Roads.")
+        self.add(QgsProcessingParameterFeatureSource(
+            self.ROADS, "Roads (instead of blocks)", [QgsProcessing.TypeVectorLine],
+            optional=True),
+            "Road centrelines: blocks are extracted from them as 'Extract city blocks' does, "
+            "and dead-end streets inside a block stay free of buildings too.")
+        self.add(QgsProcessingParameterFile(
+            self.BLOCK_DB, "Block database", extension="gpkg"),
+            "A GeoPackage written by 'Build block database' (database 1).")
+        self.add(QgsProcessingParameterFile(
+            self.BLOCK_DB_2, "Second block database (optional)", extension="gpkg",
+            optional=True),
+            "Another city's block database (database 2), to mix two styles.")
+        self.add(QgsProcessingParameterFeatureSource(
+            self.STYLE, "Style polygons (optional)", [QgsProcessing.TypeVectorPolygon],
+            optional=True),
+            "Polygons saying which database to use where (a block uses the polygon holding a "
+            "point inside it; database 1 elsewhere). Without them each block takes the best "
+            "match of all databases.")
+        self.add(QgsProcessingParameterField(
+            self.STYLE_FIELD, "Style field (database number)", defaultValue="database",
+            parentLayerParameterName=self.STYLE, type=QgsProcessingParameterField.Numeric,
+            optional=True),
+            "Integer field of the style polygons: 1 = the first database, 2 = the second.")
+        self.add(QgsProcessingParameterEnum(
+            self.METHOD, "Method", options=["Block layout transfer (ch. 5.1)",
+                                            "Guided re-synthesis (ch. 5.2)"], defaultValue=0),
+            "Transfer copies the aligned example layout; re-synthesis re-composes it along "
+            "each street from the example's buildings, so it adapts to blocks of a "
+            "different size.")
+        self.add(QgsProcessingParameterNumber(
+            self.STREET_WIDTH, "Street width (m)", QgsProcessingParameterNumber.Double,
+            defaultValue=footprints.STREET_WIDTH, minValue=0.0, maxValue=self.MAX_WIDTH),
+            "Full width of the road surface: no footprint comes closer than half of it to a "
+            "centreline (block boundary). 0 builds up to the block outline.")
+        self.add(QgsProcessingParameterNumber(
+            self.SETBACK, "Setback (m)", QgsProcessingParameterNumber.Double,
+            defaultValue=0.0, minValue=0.0, maxValue=self.MAX_WIDTH),
+            "Extra distance between the road surface and the footprints.")
+        self.add(QgsProcessingParameterNumber(
+            self.SEED, "Random seed", QgsProcessingParameterNumber.Integer, defaultValue=1,
+            minValue=0),
+            "With N best > 1 each block picks one of its best matches at random; the same "
+            "seed gives the same footprints, block by block.")
+        self.add(QgsProcessingParameterNumber(
+            self.N_BEST, "Random choice among the N best matches",
+            QgsProcessingParameterNumber.Integer, defaultValue=1, minValue=1,
+            maxValue=self.MAX_N_BEST),
+            "1 always takes the best-matching example block; larger values add variety.",
+            advanced=True)
+        self.add(QgsProcessingParameterNumber(
+            self.MIN_EXAMPLE_BUILDINGS, "Minimum footprints of an example block",
+            QgsProcessingParameterNumber.Integer, defaultValue=1, minValue=0, maxValue=10000),
+            "Example blocks with fewer footprints are never retrieved (in an OSM extract, "
+            "empty blocks are mostly artefacts of the clip). 0 lets empty blocks stay empty.",
+            advanced=True)
+        self.add(QgsProcessingParameterFeatureSink(
+            self.OUTPUT, "Footprints", QgsProcessing.TypeVectorPolygon),
+            "Footprints with block_id, height_m, levels, building_type, source_block, "
+            "source_building, database, method and placement, styled by height.")
+        self.addOutput(QgsProcessingOutputNumber(self.N_FOOTPRINTS, "Number of footprints"))
+
+    # ----------------------------------------------------------------------- checks
+
+    @staticmethod
+    def _given(parameters, name):
+        value = parameters.get(name)
+        return value is not None and value != ""
+
+    def _input_error(self, parameters):
+        blocks_given = self._given(parameters, self.BLOCKS)
+        roads_given = self._given(parameters, self.ROADS)
+        if blocks_given and roads_given:
+            return ("Give either Blocks or Roads, not both: blocks are filled as they are, "
+                    "roads are first turned into blocks.")
+        if not blocks_given and not roads_given:
+            return "Give the Blocks to fill, or Roads to extract the blocks from."
+        return None
+
+    def checkParameterValues(self, parameters, context):  # noqa: N802
+        ok, message = super().checkParameterValues(parameters, context)
+        if not ok:
+            return ok, message
+        message = self._input_error(parameters)
+        return (False, message) if message else (True, "")
+
+    # ----------------------------------------------------------------------- run
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        message = self._input_error(parameters)
+        if message:
+            raise QgsProcessingException(message)
+        method = footprints.METHODS[self.parameterAsEnum(parameters, self.METHOD, context)]
+        street_width = qgis_io.check_number(
+            self.parameterAsDouble(parameters, self.STREET_WIDTH, context), self.STREET_WIDTH,
+            0.0, self.MAX_WIDTH)
+        setback = qgis_io.check_number(
+            self.parameterAsDouble(parameters, self.SETBACK, context), self.SETBACK, 0.0,
+            self.MAX_WIDTH)
+        seed = int(qgis_io.check_number(self.parameterAsInt(parameters, self.SEED, context),
+                                        self.SEED, 0))
+        n_best = int(qgis_io.check_number(self.parameterAsInt(parameters, self.N_BEST, context),
+                                          self.N_BEST, 1, self.MAX_N_BEST))
+        min_b = int(qgis_io.check_number(
+            self.parameterAsInt(parameters, self.MIN_EXAMPLE_BUILDINGS, context),
+            self.MIN_EXAMPLE_BUILDINGS, 0))
+        examples = self._databases(parameters, context, feedback, min_b)
+        feedback.setProgress(5)
+
+        if self._given(parameters, self.BLOCKS):
+            frame, block_geoms, block_ids, road_lines = self._blocks(parameters, context,
+                                                                     feedback)
+        else:
+            frame, block_geoms, block_ids, road_lines = self._blocks_from_roads(
+                parameters, context, feedback)
+        choice = self._style(parameters, context, feedback, frame, block_geoms, len(examples))
+        feedback.setProgress(15)
+
+        result = qgis_io.run_engine(
+            frame.name, footprints.synthesize_footprints, block_geoms, examples, method,
+            street_width=street_width, setback=setback, seed=seed, roads=road_lines,
+            block_database=choice, block_ids=block_ids, n_best=n_best,
+            progress=qgis_io.progress_for(feedback, 15, 92))
+        self._log(result, method, feedback)
+        dest = qgis_io.write_sink(
+            self, parameters, self.OUTPUT, context, result.geometry, result.table,
+            footprints.OUTPUT_FIELDS, QgsWkbTypes.Polygon, frame.source_crs, frame.crs,
+            feedback)
+        qgis_io.style_output(context, dest, "buildings_by_height.qml")
+        feedback.setProgress(100)
+        return {self.OUTPUT: dest, self.N_FOOTPRINTS: len(result.geometry)}
+
+    # ----------------------------------------------------------------------- helpers
+
+    def _databases(self, parameters, context, feedback, min_buildings):
+        paths = [self.parameterAsFile(parameters, self.BLOCK_DB, context)]
+        second = self.parameterAsFile(parameters, self.BLOCK_DB_2, context)
+        if second:
+            paths.append(second)
+        if not paths[0]:
+            raise QgsProcessingException("A block database is needed (BLOCK_DB).")
+        names = [Path(p).stem for p in paths]
+        if len(names) == 2 and names[0] == names[1]:
+            names = [f"{n}_{k + 1}" for k, n in enumerate(names)]
+        examples = []
+        for k, (p, n) in enumerate(zip(paths, names)):
+            label = f"Block database {k + 1} ({p})"
+            db = qgis_io.run_engine(label, database.load_block_database, p)
+            ex = qgis_io.run_engine(label, footprints.prepare_examples, db, n, min_buildings)
+            feedback.pushInfo(f"database {k + 1} '{n}': {len(db)} blocks, "
+                              f"{len(db.buildings)} footprints, {len(ex.usable)} blocks "
+                              f"with at least {min_buildings} footprint(s) retrievable.")
+            examples.append(ex)
+        return examples
+
+    def _blocks(self, parameters, context, feedback):
+        frame = qgis_io.read_source(self, parameters, self.BLOCKS, context, feedback,
+                                    kind="polygons", fields=["block_id"])
+        ids = None
+        if "block_id" in frame.attributes:
+            numbers = pd.to_numeric(frame.attributes["block_id"], errors="coerce").to_numpy(
+                dtype=np.float64, na_value=np.nan)
+            if np.isfinite(numbers).all() and (numbers == np.round(numbers)).all() and \
+                    len(np.unique(numbers)) == len(numbers):
+                ids = numbers.astype(np.int64)
+            else:
+                feedback.pushInfo(f"{frame.name}: block_id is not a unique whole number per "
+                                  "block; blocks are numbered 1..n in layer order instead.")
+        feedback.pushInfo(f"{len(frame)} blocks read from {frame.name}; every block edge is "
+                          "taken as a street centreline.")
+        return frame, frame.geometry, ids, None
+
+    def _blocks_from_roads(self, parameters, context, feedback):
+        frame = qgis_io.read_source(self, parameters, self.ROADS, context, feedback,
+                                    kind="lines", fields=["highway", "other_tags"])
+        frame, road_class = drivable_lines(frame, None, set(roads.DRIVABLE_CLASSES), feedback)
+        graph = qgis_io.run_engine(
+            frame.name, roads.clean_network, frame.geometry, road_class, None, None,
+            merge_degree2=False, progress=qgis_io.progress_for(feedback, 5, 10))
+        extraction = qgis_io.run_engine(frame.name, blocks.extract_blocks, graph,
+                                        progress=qgis_io.progress_for(feedback, 10, 15))
+        feedback.pushInfo(f"{extraction.stats['n_blocks']} blocks from the closed faces of "
+                          f"{frame.name}.")
+        return (frame, extraction.geometry, extraction.table["block_id"].to_numpy(),
+                graph.geometry)
+
+    def _style(self, parameters, context, feedback, frame, block_geoms, n_db):
+        """Per block, the database index (-1: the best match of all)."""
+        field = self.parameterAsString(parameters, self.STYLE_FIELD, context) or "database"
+        style = qgis_io.read_source(self, parameters, self.STYLE, context, feedback,
+                                    kind="polygons", target_crs=frame.crs, optional=True,
+                                    fields=[field])
+        if style is None:
+            return None
+        if field not in style.attributes:
+            raise QgsProcessingException(f"Layer {style.name} has no field '{field}' with the "
+                                         "database number (1 or 2) per polygon.")
+        values = pd.to_numeric(style.attributes[field], errors="coerce").to_numpy(
+            dtype=np.float64, na_value=np.nan)
+        bad = ~np.isfinite(values) | (values != np.round(values)) | (values < 1) | \
+            (values > n_db)
+        if bad.any():
+            raise QgsProcessingException(
+                f"Layer {style.name}: field '{field}' must hold a database number from 1 to "
+                f"{n_db} in every polygon ({int(bad.sum())} do not).")
+        points = shapely.point_on_surface(np.asarray(block_geoms, dtype=object))
+        hit_block, hit_poly = shapely.STRtree(style.geometry).query(points, predicate="within")
+        choice = np.zeros(len(points), dtype=np.int64)        # database 1 elsewhere
+        choice[hit_block] = values[hit_poly].astype(np.int64) - 1
+        feedback.pushInfo(f"Style polygons: {int(np.bincount(choice, minlength=n_db)[-1])} of "
+                          f"{len(choice)} blocks use database {n_db}.")
+        return choice
+
+    @staticmethod
+    def _log(result, method, feedback):
+        s = result.blocks
+        filled = int((s.n_placed > 0).sum()) if len(s) else 0
+        feedback.pushInfo(
+            f"{len(result.geometry)} footprints ({method}) in {filled} of {len(s)} blocks, "
+            f"{result.seconds:.1f} s.")
+        if len(s):
+            if int(s.example.isna().sum()):
+                feedback.pushInfo(f"{int(s.example.isna().sum())} blocks got no example "
+                                  "(too small for the street width, or larger than a district).")
+            feedback.pushInfo(
+                f"{int(s.n_deleted.sum())} example footprints outside their block deleted, "
+                f"{int(s.n_conflicted.sum())} moved off the street, {int(s.n_trimmed.sum())} "
+                f"trimmed and {int(s.n_dropped.sum())} dropped to keep footprints apart and "
+                "off the road surface.")

@@ -1,0 +1,382 @@
+"""Footprints by example (plugin.footprints, footprint_transfer, footprint_resynthesis).
+
+Hand-made blocks whose answer is known (the paper's retargeting cases: stretched, shrunk,
+two extra intersections), the sequence DP against brute force, and the Helsinki block
+database (built here from data/examples) reconstructing itself and filling Bubeneč blocks
+and the blocks of a grown network.
+"""
+
+import numpy as np
+import pytest
+import shapely
+
+from helpers import bubenec, helsinki_roads
+from urban_synthesis.plugin import (blocks, building_attributes, database, footprint_resynthesis,
+                                    footprint_transfer, footprints, metrics, roads)
+from urban_synthesis.plugin.progress import InputError
+
+ALPHA = footprint_resynthesis.ALPHA
+
+
+# --------------------------------------------------------------------------- helpers
+
+def helsinki_example_db(path):
+    """Helsinki blocks + footprints with attributes, as the block database of the issue."""
+    import pyogrio
+
+    from conftest import HELSINKI
+
+    df = helsinki_roads()
+    graph = roads.clean_network(df.geometry.values, df.highway.values, z_layer=df.z.values)
+    b = pyogrio.read_dataframe(HELSINKI, layer="multipolygons", on_invalid="ignore")
+    b = b[b.building.notna() & b.geometry.notna()].to_crs(32635).reset_index(drop=True)
+    geoms = shapely.make_valid(b.geometry.values)
+    r = blocks.extract_blocks(graph, buildings=geoms)
+    inside = r.buildings.in_block.to_numpy()
+    attrs = building_attributes.building_attributes(len(b), building=b.building.values,
+                                                    other_tags=b.other_tags.values)
+    database.write_block_database(
+        str(path), r.geometry, geoms[inside], r.buildings.block_id[inside].astype(int),
+        "EPSG:32635", block_ids=r.table.block_id.to_numpy(),
+        building_attributes=attrs[inside].reset_index(drop=True), source="Helsinki (test)")
+    return database.load_block_database(path)
+
+
+@pytest.fixture(scope="module")
+def helsinki(tmp_path_factory):
+    db = helsinki_example_db(tmp_path_factory.mktemp("fp") / "helsinki_blocks.gpkg")
+    return footprints.prepare_examples(db, "helsinki")
+
+
+def assert_legal(fp, block_geoms, surface):
+    """Zero footprints outside their block, zero overlaps, zero road-surface overlap."""
+    fp = np.asarray(fp, dtype=object)
+    assert shapely.is_valid(fp).all()
+    assert (shapely.get_type_id(fp) == 3).all()
+    inside = shapely.within(fp, block_geoms)
+    assert inside.all(), f"{int((~inside).sum())} footprints outside their block"
+    tree = shapely.STRtree(fp)
+    a, b = tree.query(fp, predicate="intersects")
+    assert (a == b).all(), f"{int((a < b).sum())} pairs of footprints touch or overlap"
+    if surface is not None:
+        # touching the road edge is allowed, any interior contact is not
+        on_road = shapely.intersects(fp, surface) & ~shapely.touches(fp, surface)
+        assert not on_road.any(), f"{int(on_road.sum())} footprints on the road surface"
+
+
+def congruent(a, b, gap=0.05):
+    """Same polygon up to a rigid motion (sorted edge lengths and area), up to the
+    centimetre gaps that :func:`footprints.legalise` keeps between neighbours."""
+    def edges(p):
+        p = shapely.simplify(shapely.normalize(p), 1e-3)   # no collinear vertices
+        xy = shapely.get_coordinates(shapely.get_exterior_ring(p))
+        return np.sort(np.hypot(*np.diff(xy, axis=0).T))
+    ea, eb = edges(a), edges(b)
+    return len(ea) == len(eb) and np.allclose(ea, eb, atol=gap) and \
+        abs(a.area - b.area) <= gap * b.length
+
+
+# --------------------------------------------------------------------------- the DP
+
+def brute_force(cost, width, fixed_bit, alpha):
+    """Every sequence from slot 0 reaching slot M, enumerated."""
+    k_n, m_n = cost.shape
+    best = np.inf
+    all_costs = []
+
+    def walk(p, last, mask, total):
+        nonlocal best
+        if p >= m_n:
+            all_costs.append(total)
+            best = min(best, total)
+            return
+        for k in range(k_n):
+            if fixed_bit[k] & mask:
+                continue
+            c = cost[k, p]
+            if not np.isfinite(c):
+                continue
+            d = 0.0
+            if last == k:
+                d = alpha if k == k_n - 1 else 1.0 - alpha
+            walk(p + int(width[k]), k, mask | int(fixed_bit[k]), total + c + d)
+
+    walk(0, -1, 0, 0.0)
+    return best, all_costs
+
+
+def sequence_cost(seq, cost, width, alpha):
+    k_n = cost.shape[0]
+    total, pos, last = 0.0, 0, None
+    for k, q in seq:
+        assert q == pos
+        total += cost[k, q]
+        if last == k:
+            total += alpha if k == k_n - 1 else 1.0 - alpha
+        pos, last = q + int(width[k]), k
+    assert pos >= cost.shape[1]
+    return total
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_sequence_dp_matches_brute_force(seed):
+    rng = np.random.default_rng(seed)
+    k_n = int(rng.integers(2, 5))       # elements + the empty space
+    m_n = int(rng.integers(4, 11))
+    cost = rng.uniform(0, 3, (k_n, m_n)).round(2)
+    cost[rng.random((k_n, m_n)) < 0.15] = np.inf
+    cost[-1] = rng.uniform(0, 0.5, m_n)   # the empty space is always allowed
+    width = np.r_[rng.integers(1, 4, k_n - 1), 1]
+    bits = np.zeros(k_n, dtype=np.int64)
+    if k_n > 2:
+        bits[:2] = [1, 2]                  # two fixed (corner) elements
+    best, _ = brute_force(cost, width, bits, ALPHA)
+    total, seq = footprint_resynthesis.sequence_dp(cost, width, bits, ALPHA)
+    assert total == pytest.approx(best, abs=1e-9)
+    assert sequence_cost(seq, cost, width, ALPHA) == pytest.approx(total, abs=1e-9)
+    used = [k for k, _ in seq if bits[k]]
+    assert len(used) == len(set(used)), "a fixed element was placed twice"
+
+
+def test_sequence_dp_repetition_cost():
+    # one 2-slot element whose cost is 0 everywhere: 6 slots -> 3 repeats, 2 deltas
+    cost = np.array([[0.0] * 6, [1.0] * 6])
+    total, seq = footprint_resynthesis.sequence_dp(cost, np.array([2, 1]), np.array([0, 0]))
+    assert [k for k, _ in seq] == [0, 0, 0]
+    assert total == pytest.approx(2 * (1 - ALPHA))
+    # a fixed element may not repeat: the empty space fills the rest, and the element
+    # splits the run of empty spaces (two E-E transitions instead of three)
+    total, seq = footprint_resynthesis.sequence_dp(cost, np.array([2, 1]), np.array([1, 0]))
+    assert sorted(k for k, _ in seq) == [0, 1, 1, 1, 1]
+    assert total == pytest.approx(4 + 2 * ALPHA)
+
+
+# --------------------------------------------------------------------------- retargeting
+
+SOUTH = [(3, 17, 3, 17), (18, 30, 3, 15), (31, 41, 3, 14), (42, 56, 3, 15), (57, 68, 3, 13),
+         (69, 82, 3, 15), (83, 97, 3, 17)]
+NORTH = [(3, 17, 43, 57), (18, 44, 46, 57), (45, 60, 47, 57), (61, 81, 46, 57),
+         (83, 97, 43, 57)]
+
+
+def example_block():
+    """A 100 x 60 m block with two rows of buildings and four corner buildings."""
+    block = shapely.box(0, 0, 100, 60)
+    els = [shapely.box(x0, y0, x1, y1) for x0, x1, y0, y1 in SOUTH + NORTH]
+    # L-shaped corner buildings
+    for i in (0, 6, 7, 11):
+        x0, x1, y0, y1 = (SOUTH + NORTH)[i]
+        cut = shapely.box(x0 + 7, y0 + 7, x1, y1) if i in (0,) else \
+            shapely.box(x0, y0 + 7, x1 - 7, y1) if i == 6 else \
+            shapely.box(x0 + 7, y0, x1, y1 - 7) if i == 7 else shapely.box(x0, y0, x1 - 7, y1 - 7)
+        els[i] = shapely.difference(els[i], cut)
+    return block, np.array(els, dtype=object)
+
+
+def retarget(target, source_pts, target_pts, street_width=6.0):
+    block, els = example_block()
+    buildable = footprints.street_offset(target, street_width)
+    placed = footprint_resynthesis.retarget_layout(els, source_pts, target_pts, target,
+                                                   buildable, street_width / 2)
+    polys = np.array([p.polygon for p in placed], dtype=object)
+    order = np.lexsort((-shapely.area(polys), [p.kind == "interior" for p in placed]))
+    out, idx, status = footprints.legalise(polys, order, buildable, target)
+    kept = [placed[i] for i in idx]
+    return els, kept, out, status, buildable
+
+
+def check_retargeted(els, kept, out, status, target, buildable):
+    assert_legal(out, np.full(len(out), target), shapely.difference(target, buildable))
+    src = np.array([p.element for p in kept])
+    # not distorted: every footprint is a rigid copy of its element (trimmed ones aside)
+    for p, poly, s in zip(kept, out, status):
+        if s == "kept":
+            assert congruent(poly, els[p.element]), f"element {p.element} was distorted"
+    assert sum(s == "kept" for s in status) >= 0.8 * len(status)
+    # corner buildings are kept, each once
+    corners = [0, 6, 7, 11]
+    for c in corners:
+        assert (src == c).sum() == 1, f"corner building {c} placed {(src == c).sum()} times"
+        assert [p.kind for p in kept if p.element == c] == ["fixed"]
+    # groups and order: along the south and north streets the elements keep their order
+    for row in (range(0, 7), range(7, 12)):
+        sel = [(shapely.centroid(poly).x, p.element) for p, poly in zip(kept, out)
+               if p.element in row]
+        seq = [e for _, e in sorted(sel)]
+        assert seq == sorted(seq), f"order changed: {seq}"
+    return src
+
+
+def test_retarget_identity_reproduces_layout():
+    block, els = example_block()
+    pts = shapely.get_coordinates(block.exterior)[:-1]
+    _, kept, out, status, buildable = retarget(block, pts, pts)
+    src = check_retargeted(els, kept, out, status, block, buildable)
+    assert sorted(src.tolist()) == list(range(len(els)))
+    # each element lands where it was (within the 1 m steps)
+    for p, poly in zip(kept, out):
+        assert shapely.hausdorff_distance(poly, els[p.element]) < 1.5
+
+
+def test_retarget_stretched_block_repeats_buildings():
+    block, els = example_block()
+    target = shapely.box(0, 0, 160, 60)
+    src_pts = np.array([(0, 0), (100, 0), (100, 60), (0, 60)], float)
+    dst_pts = np.array([(0, 0), (160, 0), (160, 60), (0, 60)], float)
+    els, kept, out, status, buildable = retarget(target, src_pts, dst_pts)
+    src = check_retargeted(els, kept, out, status, target, buildable)
+    repeatable = [e for e in src if e not in (0, 6, 7, 11)]
+    assert len(repeatable) > len(els) - 4 + 2, "a 60 % longer block gets more buildings"
+    assert len(set(repeatable)) < len(repeatable), "repeatable buildings are repeated"
+    # the footprints fill the longer street rather than stretching: coverage ratio kept
+    cov_src = shapely.union_all(els).area / block.area
+    cov = sum(p.area for p in out) / target.area
+    assert 0.7 * cov_src < cov < 1.3 * cov_src
+
+
+def test_retarget_shrunk_block_drops_buildings():
+    block, els = example_block()
+    target = shapely.box(0, 0, 70, 60)
+    src_pts = np.array([(0, 0), (100, 0), (100, 60), (0, 60)], float)
+    dst_pts = np.array([(0, 0), (70, 0), (70, 60), (0, 60)], float)
+    els, kept, out, status, buildable = retarget(target, src_pts, dst_pts)
+    src = check_retargeted(els, kept, out, status, target, buildable)
+    repeatable = [e for e in src if e not in (0, 6, 7, 11)]
+    assert len(repeatable) < len(els) - 4, "a 30 % shorter block has fewer buildings"
+    assert len(set(repeatable)) == len(repeatable)
+
+
+def test_retarget_two_extra_intersections():
+    """The south street gets two new intersections: it bends 15 m to the south."""
+    block, els = example_block()
+    target = shapely.Polygon([(0, 0), (40, 0), (60, -15), (100, -15), (100, 60), (0, 60)])
+    src_pts = np.array([(0, 0), (40, 0), (60, 0), (100, 0), (100, 60), (0, 60)], float)
+    dst_pts = shapely.get_coordinates(target.exterior)[:-1]
+    els, kept, out, status, buildable = retarget(target, src_pts, dst_pts)
+    segs = footprint_resynthesis.boundary_segments(target)
+    assert len(segs) == 6
+    src = check_retargeted(els, kept, out, status, target, buildable)
+    # the buildings of the bent part follow the new street (south of the old one)
+    moved = [poly for p, poly in zip(kept, out) if p.element in (4, 5)]
+    assert moved and all(shapely.centroid(p).y < 0 for p in moved)
+    assert set(src) >= {0, 6, 7, 11}
+
+
+# --------------------------------------------------------------------------- transfer
+
+def test_relax_moves_conflicted_footprint_rigidly():
+    block = shapely.box(0, 0, 100, 60)
+    buildable = footprints.street_offset(block, 10.0)        # 5 m band
+    fixed = shapely.box(20, 6, 40, 20)
+    conflicted = shapely.Polygon([(38, 1), (58, 1), (58, 15), (38, 15)])  # street + overlap
+    fp = np.array([fixed, conflicted], dtype=object)
+    keep, conf = footprint_transfer.classify(fp, block, buildable)
+    assert keep.all() and conf.tolist() == [False, True]
+    moved, sweeps = footprint_transfer.relax(fp, conf, buildable)
+    assert moved[0].equals(fixed)
+    assert congruent(moved[1], conflicted)                     # wall lengths kept
+    assert shapely.within(moved[1], buildable)
+    assert shapely.area(shapely.intersection(moved[1], fixed)) < 1e-6
+    assert 1 <= sweeps < footprint_transfer.ITERATIONS
+
+
+def test_legalise_guarantees_and_drops():
+    block = shapely.box(0, 0, 50, 50)
+    buildable = shapely.buffer(block, -3)
+    a = shapely.box(5, 5, 25, 25)
+    b = shapely.box(20, 5, 40, 25)          # overlaps a by 25 %: trimmed
+    c = shapely.box(6, 6, 24, 24)           # inside a: dropped
+    d = shapely.box(-10, 30, 2, 40)         # in the street: dropped
+    out, idx, status = footprints.legalise([a, b, c, d], [0, 1, 2, 3], buildable, block)
+    assert idx == [0, 1] and status == ["kept", "trimmed"]
+    assert_legal(out, np.full(2, block), shapely.difference(block, buildable))
+
+
+def test_bad_inputs(helsinki):
+    with pytest.raises(InputError, match="unknown method"):
+        footprints.synthesize_footprints([shapely.box(0, 0, 50, 50)], [helsinki], "magic")
+    with pytest.raises(InputError, match="street width"):
+        footprints.synthesize_footprints([shapely.box(0, 0, 50, 50)], [helsinki],
+                                         street_width=-1)
+    with pytest.raises(InputError, match="no block with at least"):
+        footprints.prepare_examples(helsinki.db, "h", min_buildings=10_000)
+
+
+# --------------------------------------------------------------------------- real data
+
+def block_iou(ex, result, ids):
+    out = []
+    for bid in ids:
+        orig = shapely.union_all(ex.polygons[ex.rows_of_block[int(bid)]])
+        sel = result.table.block_id.to_numpy() == bid
+        new = shapely.union_all(result.geometry[sel]) if sel.any() else shapely.Polygon()
+        union = shapely.union(orig, new).area
+        out.append(shapely.intersection(orig, new).area / union)
+    return np.array(out)
+
+
+@pytest.mark.parametrize("method,median,mean", [("transfer", 0.98, 0.95),
+                                                ("resynthesis", 0.9, 0.85)])
+def test_helsinki_reconstruction(helsinki, method, median, mean):
+    """Database = Helsinki blocks, targets = the same blocks (thesis: Braunschweig)."""
+    db = helsinki.db
+    rows = helsinki.usable
+    r = footprints.synthesize_footprints(db.geometry[rows], [helsinki], method,
+                                         street_width=0.0, block_ids=db.ids[rows])
+    assert (r.blocks.example.to_numpy() == db.ids[rows]).all(), "a block retrieves itself"
+    iou = block_iou(helsinki, r, db.ids[rows])
+    assert np.median(iou) >= median and iou.mean() >= mean, (np.median(iou), iou.mean())
+    assert_legal(r.geometry, db.geometry[rows][np.searchsorted(db.ids[rows],
+                                                               r.table.block_id)], None)
+    assert set(r.table.columns) >= {n for n, _ in footprints.OUTPUT_FIELDS}
+
+
+def _transfer_checks(helsinki, target_blocks, lines, method, seed=3):
+    r = footprints.synthesize_footprints(target_blocks, [helsinki], method, street_width=6.0,
+                                         seed=seed, roads=lines)
+    assert len(r.geometry) >= len(target_blocks)
+    own = target_blocks[r.table.block_id.to_numpy() - 1]
+    assert_legal(r.geometry, own, shapely.buffer(shapely.union_all(lines), 3.0))
+    m = metrics.footprint_metrics(r.geometry, target_blocks, lines, road_half_width=3.0)
+    assert m.scalar("buildings", "outside_blocks") == 0
+    assert m.scalar("buildings", "overlapping_pairs") == 0
+    assert m.scalar("buildings", "road_overlap_count") == 0
+    # footprint sizes and coverage like the database's
+    ex_m = metrics.footprint_metrics(
+        np.concatenate([helsinki.polygons[helsinki.rows_of_block[int(i)]]
+                        for i in helsinki.db.ids[helsinki.usable]]),
+        helsinki.db.geometry[helsinki.usable])
+    cmp = metrics.compare(m, ex_m)
+    cmp = cmp[cmp.kind == "buildings"].set_index("metric")
+    return r, cmp
+
+
+def test_transfer_onto_bubenec(helsinki):
+    streets = bubenec("streets").geometry.values
+    ext = blocks.extract_blocks(streets)
+    for method in footprints.METHODS:
+        r, cmp = _transfer_checks(helsinki, ext.geometry, streets, method)
+        area = cmp.loc["area"]
+        assert area.wasserstein_norm < 1.0, area
+        cov = cmp[cmp.statistic == "value"].loc["coverage"]
+        assert 0.4 < cov.candidate / cov.example < 1.6, cov
+        # the attributes travel with the footprints
+        assert r.table.height_m.notna().any() and r.table.building_type.notna().all()
+        assert set(r.table.source_block) <= set(helsinki.db.ids.tolist())
+
+
+def test_transfer_onto_grown_network(helsinki):
+    from urban_synthesis.plugin import growth
+
+    lines = growth.grow_roads(shapely.box(0, 0, 500, 500), seed=4).geometry
+    ext = blocks.extract_blocks(lines)
+    assert len(ext.geometry) >= 10
+    r, cmp = _transfer_checks(helsinki, ext.geometry, lines, "transfer")
+    cov = cmp[cmp.statistic == "value"].loc["coverage"]
+    assert 0.3 < cov.candidate / cov.example < 1.7, cov
+    # same seed, same result (block by block: a pure function of block, seed and index)
+    some = ext.geometry[:6]
+    again = footprints.synthesize_footprints(some, [helsinki], "transfer", street_width=6.0,
+                                             seed=3, roads=lines)
+    first = r.table.block_id.to_numpy() <= 6
+    assert shapely.equals(again.geometry, r.geometry[first]).all()
