@@ -2,7 +2,8 @@
 import importlib
 from pathlib import Path
 
-from qgis.core import Qgis, QgsMessageLog, QgsProcessingProvider
+from qgis.core import (Qgis, QgsApplication, QgsMessageLog, QgsProcessingModelAlgorithm,
+                       QgsProcessingProvider)
 from qgis.PyQt.QtGui import QIcon
 
 ICON = Path(__file__).resolve().parent.parent / "resources" / "icons" / "urbansynth.svg"
@@ -21,7 +22,11 @@ ALGORITHMS = (
     ("synthesize_buildings", "SynthesizeBuildings"),
     ("synthesize_roads_random_walk", "SynthesizeRoadsRandomWalk"),
     ("synthesize_footprints", "SynthesizeFootprints"),
+    ("split_domain", "SplitDomain"),
 )
+
+#: Processing models shipped with the provider (made by scripts/make_models.py).
+MODELS = Path(__file__).resolve().parent.parent / "resources" / "models"
 
 
 class UrbanSynthesisProvider(QgsProcessingProvider):
@@ -49,3 +54,31 @@ class UrbanSynthesisProvider(QgsProcessingProvider):
                 QgsMessageLog.logMessage(
                     f"Urban Synthesis: algorithm {module_name} not loaded: {error!r}",
                     "Processing", Qgis.Critical)
+        # A model's steps are looked up in the registry, where this provider's algorithms
+        # are only once it is registered: the models are loaded by a refresh right after.
+        registry = QgsApplication.processingRegistry()
+        if registry.providerById(self.id()) is not None:
+            self._load_models()
+        elif not getattr(self, "_refresh_when_added", False):
+            self._refresh_when_added = True
+            registry.providerAdded.connect(self._provider_added)
+
+    def _provider_added(self, provider_id):
+        if provider_id == self.id():
+            QgsApplication.processingRegistry().providerAdded.disconnect(self._provider_added)
+            self.refreshAlgorithms()
+
+    def _load_models(self):
+        for path in sorted(MODELS.glob("*.model3")):
+            model = QgsProcessingModelAlgorithm()
+            if model.fromFile(str(path)):
+                model.updateDestinationParameters()
+                # parameter help is kept in the model's help content (see make_models.py)
+                help_content = model.helpContent()
+                for definition in model.parameterDefinitions():
+                    if not definition.help() and help_content.get(definition.name()):
+                        definition.setHelp(help_content[definition.name()])
+                self.addAlgorithm(model)
+            else:
+                QgsMessageLog.logMessage(f"Urban Synthesis: model {path.name} could not be read",
+                                         "Processing", Qgis.Critical)

@@ -1,0 +1,236 @@
+"""urbansynth:splitdomain - street and parcel layouts by hierarchical domain splitting."""
+import numpy as np
+import pandas as pd
+import shapely
+from qgis.core import (
+    QgsCoordinateReferenceSystem,
+    QgsProcessing,
+    QgsProcessingParameterBoolean,
+    QgsProcessingParameterEnum,
+    QgsProcessingParameterFeatureSink,
+    QgsProcessingParameterFeatureSource,
+    QgsProcessingParameterField,
+    QgsProcessingParameterNumber,
+    QgsWkbTypes,
+)
+
+from ..plugin import domain_split, qgis_io, templates
+from .common import AlgorithmBase
+
+
+class SplitDomain(AlgorithmBase):
+    GROUP_ID = "synthesis"
+    REGION = "REGION"
+    KEY_ROADS = "KEY_ROADS"
+    KEY_AREAS = "KEY_AREAS"
+    KEY_AREA_USE_FIELD = "KEY_AREA_USE_FIELD"
+    TEMPLATES = "TEMPLATES"
+    TEMPLATE_LAYER = "TEMPLATE_LAYER"
+    PARCEL_LENGTH = "PARCEL_LENGTH"
+    PARCEL_WIDTH = "PARCEL_WIDTH"
+    STREET_WIDTH = "STREET_WIDTH"
+    VARIATIONS = "VARIATIONS"
+    SEED = "SEED"
+    OPTIMISE = "OPTIMISE"
+    OUTPUT_ROADS = "OUTPUT_ROADS"
+    OUTPUT_PARCELS = "OUTPUT_PARCELS"
+    OUTPUT_METRICS = "OUTPUT_METRICS"
+
+    #: TEMPLATES enum: (library subset, label), in enum order
+    SUBSETS = [("strips", "Single-family: parcel strips and double strips (the paper's "
+                          "comparison set)"),
+               ("all", "All shipped: parcel strips, double strips, spikes (cul-de-sacs), parks"),
+               ("double_strips", "Double strips only")]
+
+    def name(self):
+        return "splitdomain"
+
+    def displayName(self):  # noqa: N802
+        return "Split domain into streets and parcels (Yang 2013)"
+
+    def shortHelpString(self):  # noqa: N802
+        return (
+            "Lays out streets and parcels inside a region by hierarchical domain splitting "
+            "(Yang et al. 2013, 'Urban Pattern'). A region is replaced by a template (parcel "
+            "strip, double strip, spike / cul-de-sac) warped onto it when one fits; otherwise "
+            "it is split along the best-scoring streamline of a smooth cross field aligned "
+            "with its boundary, recursively. The street mesh is then optimised (strip "
+            "fitting, fairness, closeness) and the templates re-warped.\n\n"
+            "Key roads are kept and split the region; key areas (parks, schools, lakes) are "
+            "left out and kept as parcels of their land use. Every region outline counts as "
+            "a street. Several variations can be made at once; each parcel has street "
+            "access, land use and Yang's quality (p_angle, p_area, undesirable). The metrics "
+            "table has one row per variation with the paper's Table 1 columns. Outputs are "
+            "in the region's CRS."
+        )
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        self.add(QgsProcessingParameterFeatureSource(
+            self.REGION, "Region", [QgsProcessing.TypeVectorPolygon]),
+            "Polygon(s) to lay out (holes allowed). Their outlines are taken as streets.")
+        self.add(QgsProcessingParameterFeatureSource(
+            self.KEY_ROADS, "Key roads (kept)", [QgsProcessing.TypeVectorLine], optional=True),
+            "Main roads the design must keep; the parts inside the region split it.")
+        self.add(QgsProcessingParameterFeatureSource(
+            self.KEY_AREAS, "Key areas (parks, school, lake)", [QgsProcessing.TypeVectorPolygon],
+            optional=True),
+            "Areas left out of the layout and kept as parcels of their own land use.")
+        self.add(QgsProcessingParameterField(
+            self.KEY_AREA_USE_FIELD, "Land-use field of the key areas",
+            parentLayerParameterName=self.KEY_AREAS, optional=True),
+            "Text field with the land use of each key area (default: park).", advanced=True)
+        self.add(QgsProcessingParameterEnum(
+            self.TEMPLATES, "Templates", options=[label for _, label in self.SUBSETS],
+            defaultValue=0),
+            "Which templates of the shipped library (resources/templates/library.json) may "
+            "be used. Ignored when a template layer is given.")
+        self.add(QgsProcessingParameterFeatureSource(
+            self.TEMPLATE_LAYER, "Template layer (drawn templates)",
+            [QgsProcessing.TypeVectorPolygon], optional=True),
+            "User templates drawn in QGIS: one polygon per parcel or area, a text field "
+            "'template' (the template each belongs to) and 'label' with the paper's labels: "
+            "R parcel, P or A park / area, S for a spike. Rows of parcels are recognised "
+            "from the drawing (one row: strip, two rows: double strip).", advanced=True)
+        self.add(QgsProcessingParameterNumber(
+            self.PARCEL_LENGTH, "Parcel length (depth, m)", QgsProcessingParameterNumber.Double,
+            defaultValue=30.0, minValue=1.0, maxValue=1000.0),
+            "Depth of a parcel from its street (the paper: 30 m).")
+        self.add(QgsProcessingParameterNumber(
+            self.PARCEL_WIDTH, "Parcel width (frontage, m)", QgsProcessingParameterNumber.Double,
+            defaultValue=18.0, minValue=1.0, maxValue=1000.0),
+            "Width of a parcel along its street (the paper: 18 m).")
+        self.add(QgsProcessingParameterNumber(
+            self.STREET_WIDTH, "Street width (m)", QgsProcessingParameterNumber.Double,
+            defaultValue=15.0, minValue=1.0, maxValue=200.0),
+            "Full width of every street (the paper: 15 m); parcels stop at its edge.")
+        self.add(QgsProcessingParameterNumber(
+            self.VARIATIONS, "Variations", QgsProcessingParameterNumber.Integer,
+            defaultValue=1, minValue=1, maxValue=100),
+            "Number of layouts to make (field 'variation' in every output).")
+        self.add(QgsProcessingParameterNumber(
+            self.SEED, "Random seed", QgsProcessingParameterNumber.Integer, defaultValue=1,
+            minValue=0),
+            "The same seed gives the same layouts; variation v draws from (seed, v).")
+        self.add(QgsProcessingParameterBoolean(
+            self.OPTIMISE, "Optimise the street mesh", defaultValue=True),
+            "Global optimisation of the streets made by splitting (strip fitting, fairness, "
+            "closeness; w = 1, 0.8, 0.2; 10 iterations), then templates re-warped.",
+            advanced=True)
+        self.add(QgsProcessingParameterFeatureSink(
+            self.OUTPUT_ROADS, "Streets", QgsProcessing.TypeVectorLine),
+            "Street centre lines with level (0 key road, 1 region outline, 2 split street, "
+            "3 cul-de-sac), kind, variation and length_m.")
+        self.add(QgsProcessingParameterFeatureSink(
+            self.OUTPUT_PARCELS, "Parcels", QgsProcessing.TypeVectorPolygon),
+            "Parcels with variation, land_use, template, area_m2, frontage_m, "
+            "has_street_access, p_angle, p_area and undesirable, styled by quality.")
+        self.add(QgsProcessingParameterFeatureSink(
+            self.OUTPUT_METRICS, "Layout metrics (Table 1)", QgsProcessing.TypeVector,
+            optional=True),
+            "One row per variation: land use (l_s, l_r, l_p, l_o %), blocks (b_n per km², "
+            "b_max, b_avg, b_min m), streets (s_l km/km², s_i, s_d per km²), parcels "
+            "(p_n per km², count, p_angle, p_area, undesirable) and the stage times.")
+
+    # ----------------------------------------------------------------------- run
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        number = {}
+        for name, lo, hi in ((self.PARCEL_LENGTH, 1.0, 1000.0), (self.PARCEL_WIDTH, 1.0, 1000.0),
+                             (self.STREET_WIDTH, 1.0, 200.0)):
+            number[name] = qgis_io.check_number(
+                self.parameterAsDouble(parameters, name, context), name, lo, hi)
+        variations = int(qgis_io.check_number(
+            self.parameterAsInt(parameters, self.VARIATIONS, context), self.VARIATIONS, 1, 100))
+        seed = int(qgis_io.check_number(self.parameterAsInt(parameters, self.SEED, context),
+                                        self.SEED, 0))
+        settings = domain_split.SplitSettings(
+            parcel_length=number[self.PARCEL_LENGTH], parcel_width=number[self.PARCEL_WIDTH],
+            street_width=number[self.STREET_WIDTH],
+            optimise=self.parameterAsBoolean(parameters, self.OPTIMISE, context))
+        qgis_io.run_engine("Parameters", settings.validate)
+
+        region = qgis_io.read_source(self, parameters, self.REGION, context, feedback,
+                                     kind="polygons", fields=[])
+        crs = region.crs
+        key_roads = qgis_io.read_source(self, parameters, self.KEY_ROADS, context, feedback,
+                                        kind="lines", fields=[], target_crs=crs, optional=True)
+        use_field = self.parameterAsString(parameters, self.KEY_AREA_USE_FIELD, context)
+        key_areas = qgis_io.read_source(
+            self, parameters, self.KEY_AREAS, context, feedback, kind="polygons",
+            fields=[use_field] if use_field else [], target_crs=crs, optional=True,
+            required_fields=[use_field] if use_field else ())
+        key_use = None
+        if key_areas is not None and use_field:
+            key_use = key_areas.attributes[use_field].to_numpy(dtype=object)
+        lib = self._templates(parameters, context, feedback, crs)
+        feedback.setProgress(5)
+
+        layouts = qgis_io.run_engine(
+            region.name, domain_split.split_variations, region.geometry, variations, seed,
+            key_roads=None if key_roads is None else key_roads.geometry,
+            key_areas=None if key_areas is None else key_areas.geometry,
+            key_area_use=key_use, templates=lib, settings=settings,
+            progress=qgis_io.progress_for(feedback, 5, 85))
+        rows = []
+        for v, lay in enumerate(layouts, start=1):
+            m = qgis_io.run_engine(region.name, domain_split.table1, lay)
+            rows.append(dict(variation=v, **m))
+            st = lay.stats
+            feedback.pushInfo(
+                f"Variation {v}: {st['n_splits']} streamline splits "
+                f"({st['n_rejected_splits']} candidates rejected), {st['n_blocks']} blocks "
+                f"(templates {st['templates']}), {st['n_parcels']} parcels, "
+                f"{st['n_backtracked']} template choices backtracked; p_angle "
+                f"{m['p_angle']:.2f}°, p_area {m['p_area']:.3f}, {m['undesirable']} "
+                f"undesirable; {st['n_no_access']} parcels without street access "
+                f"({st['n_inner_parks']} lots cut off from the street kept as inner greens); times "
+                f"split {st['time_split_s']:.1f} s, optimise {st['time_optimise_s']:.1f} s.")
+        feedback.setProgress(88)
+
+        road_geoms = np.concatenate([lay.roads for lay in layouts])
+        road_table = pd.DataFrame({
+            "road_id": np.arange(1, len(road_geoms) + 1),
+            "level": np.concatenate([lay.road_level for lay in layouts]),
+            # plain Python strings: numpy's str_ does not convert to a QVariant
+            "kind": [str(k) for lay in layouts for k in lay.road_kind],
+            "variation": np.concatenate([np.full(len(lay.roads), v)
+                                         for v, lay in enumerate(layouts, start=1)]),
+            "length_m": shapely.length(road_geoms)})
+        parcel_geoms = np.concatenate([lay.parcels for lay in layouts])
+        parcel_table = pd.concat([lay.table for lay in layouts], ignore_index=True)
+        parcel_table["parcel_id"] = np.arange(1, len(parcel_table) + 1)
+        results = {}
+        results[self.OUTPUT_ROADS] = qgis_io.write_sink(
+            self, parameters, self.OUTPUT_ROADS, context, road_geoms, road_table,
+            domain_split.ROAD_FIELDS, QgsWkbTypes.LineString, region.source_crs, crs, feedback)
+        qgis_io.style_output(context, results[self.OUTPUT_ROADS], "roads_by_level.qml")
+        results[self.OUTPUT_PARCELS] = qgis_io.write_sink(
+            self, parameters, self.OUTPUT_PARCELS, context, parcel_geoms, parcel_table,
+            domain_split.PARCEL_FIELDS, QgsWkbTypes.MultiPolygon, region.source_crs, crs,
+            feedback)
+        qgis_io.style_output(context, results[self.OUTPUT_PARCELS], "parcels_by_quality.qml")
+        metrics_table = pd.DataFrame(rows)
+        results[self.OUTPUT_METRICS] = qgis_io.write_sink(
+            self, parameters, self.OUTPUT_METRICS, context,
+            np.array([shapely.Point()] * len(metrics_table), dtype=object), metrics_table,
+            domain_split.METRIC_FIELDS, QgsWkbTypes.NoGeometry,
+            QgsCoordinateReferenceSystem(), QgsCoordinateReferenceSystem(), feedback)
+        feedback.setProgress(100)
+        return results
+
+    def _templates(self, parameters, context, feedback, crs):
+        """The shipped library subset, or the templates drawn in the template layer."""
+        given = parameters.get(self.TEMPLATE_LAYER)
+        if given is None or given == "":
+            subset = self.SUBSETS[self.parameterAsEnum(parameters, self.TEMPLATES, context)][0]
+            return qgis_io.run_engine("Template library", templates.load_library,
+                                      templates.LIBRARY_PATH, subset)
+        frame = qgis_io.read_source(self, parameters, self.TEMPLATE_LAYER, context, feedback,
+                                    kind="polygons", fields=["template", "label"],
+                                    required_fields=["template", "label"], target_crs=crs)
+        lib = qgis_io.run_engine(frame.name, templates.templates_from_drawn, frame.geometry,
+                                 frame.attributes["template"].to_numpy(dtype=object),
+                                 frame.attributes["label"].to_numpy(dtype=object))
+        feedback.pushInfo(f"{len(lib)} templates drawn in {frame.name}: "
+                          + ", ".join(f"{t.name} ({t.label})" for t in lib))
+        return lib

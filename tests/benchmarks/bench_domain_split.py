@@ -1,0 +1,176 @@
+"""Hierarchical domain splitting (Yang et al. 2013) on three real regions: Table 1 and Table 2.
+
+Regions (all from data/examples, metric CRS):
+
+- **Helsinki centre**: convex hull of the drivable OSM roads of Helsinki.osm.pbf (UTM 35N),
+  its trunk / primary / secondary roads as KEY_ROADS. Map row: the real drivable roads
+  inside the hull (blocks = faces of the road graph; OSM has no cadastre, so no parcels).
+- **Bubeneč**: convex hull of the 407 cadastre plots of bubenec.gpkg (UTM 33N). Map row:
+  the real streets and cadastre plots.
+- **Bubeneč, real streets kept**: the same hull with the 35 real streets as KEY_ROADS,
+  so that only the parcels (and streets inside large blocks) are designed: the analogue
+  of the paper's CE2 comparison (same streets, other parcels).
+
+Each is laid out with the paper's settings (30 m x 18 m parcels, 15 m streets, the
+single-family templates: parcel strips and double strips) for VARIATIONS seeds; the
+Table 1 columns of every variation are computed with :func:`domain_split.table1`
+(metrics.compute_layout_metrics on the layout) and printed next to the real map's and the
+paper's CityEngine (CE1) and "Our" rows. Times per stage are wall times of the
+pipeline on this machine; it has 2 CPU cores shared with other jobs, so the CPU time of
+the process (``time.process_time``) is printed too, with the load average.
+Writes ``tests/benchmarks/results/domain_split.json``.
+"""
+from __future__ import annotations
+
+import json
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import shapely
+
+ROOT = Path(__file__).resolve().parents[2]
+if str(ROOT / "build" / "plugins") not in sys.path:
+    sys.path.insert(0, str(ROOT / "build" / "plugins"))
+
+from urban_synthesis.plugin import domain_split, metrics, roads, templates  # noqa: E402
+
+DATA = ROOT / "data" / "examples"
+#: Yang 2013 Table 1 (l_s, l_r, l_p, l_o, b_n, b_max, b_avg, b_min, s_l, s_i, s_d, p_n,
+#: p_angle, p_area) and Table 2 (split, backtrack, optimise seconds, Xeon 2.67 GHz).
+COLS = ["l_s", "l_r", "l_p", "l_o", "b_n", "b_max", "b_avg", "b_min", "s_l", "s_i", "s_d",
+        "p_n", "p_angle", "p_area"]
+YANG = {
+    ("Salisbury", "Map"): [28.67, 59.12, 2.90, 9.31, 30.92, 1192, 721, 145, 13.46, 62.9, 1.0, 879, 5.840, 1.118],
+    ("Salisbury", "CE1"): [34.24, 54.23, 11.53, 0, 77.29, 1745, 329, 67, 15.01, 109.2, 0, 874, 5.012, 1.076],
+    ("Salisbury", "Our"): [26.37, 58.49, 3.71, 11.43, 55.65, 1454, 566, 326, 18.51, 107.2, 3.1, 1062, 3.188, 1.063],
+    ("Hempstead", "Map"): [27.69, 66.93, 3.96, 1.40, 46.38, 2191, 543, 246, 14.87, 77.7, 15.7, 1152, 7.502, 1.112],
+    ("Hempstead", "CE1"): [36.15, 63.85, 0, 0, 79.22, 1034, 366, 66, 16.56, 110.6, 3.0, 965, 4.650, 1.082],
+    ("Hempstead", "Our"): [27.66, 71.10, 1.24, 0, 61.27, 1108, 559, 308, 19.47, 115.82, 2.24, 1271, 2.136, 1.042],
+    ("Villagepark", "Map"): [29.10, 46.26, 9.22, 16.42, 22.14, 7468, 1025, 184, 12.77, 41.5, 8.8, 577, 4.932, 1.102],
+    ("Villagepark", "CE1"): [31.57, 59.83, 8.60, 0, 76.57, 1100, 349, 47, 27.37, 107.0, 1.8, 986, 4.321, 1.076],
+    ("Villagepark", "Our"): [27.78, 70.04, 2.18, 0, 62.74, 955, 550, 290, 19.64, 117.2, 6.0, 1282, 2.266, 1.045],
+}
+YANG_TIMES = {"Salisbury": (28.0, 1.7, 3.7), "Hempstead": (14.8, 1.1, 2.4),
+              "Villagepark": (28.6, 9.4, 4.7)}
+KEY_CLASSES = {"trunk", "primary", "secondary", "trunk_link", "primary_link"}
+
+
+def helsinki_region():
+    """(region, key roads, real roads) of the Helsinki example in UTM 35N."""
+    import pyogrio
+
+    df = pyogrio.read_dataframe(DATA / "Helsinki.osm.pbf", layer="lines")
+    df = df[df.highway.isin(roads.DRIVABLE_CLASSES)].to_crs(32635)
+    lines = df.geometry.to_numpy()
+    hull = shapely.convex_hull(shapely.union_all(lines))
+    key = df[df.highway.isin(KEY_CLASSES)].geometry.to_numpy()
+    return hull, key, lines
+
+
+def bubenec_region():
+    """(region, streets, plots) of the Bubeneč example in UTM 33N."""
+    import pyogrio
+
+    plots = pyogrio.read_dataframe(DATA / "bubenec.gpkg", layer="plots").to_crs(32633)
+    streets = pyogrio.read_dataframe(DATA / "bubenec.gpkg", layer="streets").to_crs(32633)
+    hull = shapely.convex_hull(shapely.union_all(plots.geometry.to_numpy()))
+    return hull, streets.geometry.to_numpy(), plots.geometry.to_numpy()
+
+
+def map_row(region, lines, parcels=None):
+    """Table 1 of the real map inside the region (blocks = faces of the real roads)."""
+    with np.errstate(invalid="ignore"):
+        parts = shapely.get_parts(shapely.intersection(lines, region))
+    parts = parts[(shapely.get_type_id(parts) == 1) & (shapely.length(parts) > 0.01)]
+    res = metrics.compute_layout_metrics(roads=parts, parcels=parcels, area=region)
+    row = {c: float("nan") for c in COLS}
+    row.update(b_n=res.scalar("blocks", "blocks_per_km2"), b_max=res.scalar("blocks", "b_max"),
+               b_avg=res.scalar("blocks", "b_avg"), b_min=res.scalar("blocks", "b_min"),
+               s_l=res.scalar("roads", "street_length_km_per_km2"),
+               s_i=res.scalar("roads", "intersections_per_km2"),
+               s_d=res.scalar("roads", "dead_ends_per_km2"))
+    if parcels is not None:
+        row.update(p_n=res.scalar("parcels", "p_n_per_km2"),
+                   p_angle=res.scalar("parcels", "p_angle"),
+                   p_area=res.scalar("parcels", "p_area"),
+                   p_count=int(res.scalar("parcels", "count")),
+                   undesirable=int(res.scalar("parcels", "undesirable_count")),
+                   undesirable_pct=res.scalar("parcels", "undesirable_share"))
+    return row
+
+
+def run(variations: int = 3):
+    lib = templates.load_library(subset="strips")
+    settings = domain_split.SplitSettings()
+    h_region, h_key, h_lines = helsinki_region()
+    b_region, b_streets, b_plots = bubenec_region()
+    cases = [("Helsinki centre (key roads)", h_region, h_key, map_row(h_region, h_lines)),
+             ("Bubeneč", b_region, None, map_row(b_region, b_streets, b_plots)),
+             ("Bubeneč, real streets kept", b_region, b_streets,
+              map_row(b_region, b_streets, b_plots))]
+    out = {"machine": platform.processor() or platform.machine(),
+           "load_average": os.getloadavg(), "settings": settings.__dict__, "regions": []}
+    for name, region, key, real in cases:
+        rows, walls = [], []
+        for v in range(1, variations + 1):
+            t0, c0 = time.perf_counter(), time.process_time()
+            lay = domain_split.split_domain(region, key_roads=key, templates=lib,
+                                            settings=settings, seed=1, variation=v)
+            wall = time.perf_counter() - t0
+            cpu = time.process_time() - c0
+            m = domain_split.table1(lay)
+            m["wall_s"] = wall
+            m["cpu_s"] = cpu
+            m["valid"] = bool(shapely.is_valid(lay.parcels).all())
+            m["templates"] = lay.stats["templates"]
+            m["inner_parks"] = lay.stats["n_inner_parks"]
+            rows.append(m)
+            walls.append(wall)
+        out["regions"].append({"region": name, "area_km2": shapely.area(region) / 1e6,
+                               "map": real, "variations": rows})
+    return out
+
+
+def _fmt(v, c):
+    if v is None or (isinstance(v, float) and not np.isfinite(v)):
+        return "-"
+    return f"{v:.3f}" if c in ("p_angle", "p_area") else f"{v:.1f}"
+
+
+def main():
+    variations = int(sys.argv[1]) if len(sys.argv) > 1 else 3
+    res = run(variations)
+    head = ["region", "row"] + COLS + ["p_count", "undes.", "undes.%", "no_access",
+                                       "split s", "backtr. s", "optim. s", "total wall s", "total CPU s"]
+    print(" | ".join(head))
+    for reg in res["regions"]:
+        print(" | ".join([reg["region"], "Map"] + [_fmt(reg["map"].get(c), c) for c in COLS]
+                         + [str(reg["map"].get("p_count", "-")),
+                            str(reg["map"].get("undesirable", "-")),
+                            _fmt(reg["map"].get("undesirable_pct"), "x"), "-", "-", "-", "-", "-", "-"]))
+        for i, m in enumerate(reg["variations"], start=1):
+            print(" | ".join([reg["region"], f"ours v{i}"] + [_fmt(m[c], c) for c in COLS]
+                             + [str(m["p_count"]), str(m["undesirable"]),
+                                _fmt(m["undesirable_pct"], "x"), str(m["no_access"]),
+                                f"{m['time_split_s']:.2f}", f"{m['time_backtrack_s']:.3f}",
+                                f"{m['time_optimise_s']:.2f}", f"{m['wall_s']:.2f}",
+                                f"{m['cpu_s']:.2f}"]))
+    for (region, row), vals in YANG.items():
+        t = YANG_TIMES[region] if row == "Our" else ("-", "-", "-")
+        print(" | ".join([f"Yang 2013 {region}", row] + [str(v) for v in vals]
+                         + ["-", "-", "-", "-"] + [str(x) for x in t] + ["-", "-"]))
+    print(f"load average: {res['load_average']}")
+    path = ROOT / "tests" / "benchmarks" / "results" / "domain_split.json"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    res["yang_table1"] = {f"{k[0]} {k[1]}": dict(zip(COLS, v)) for k, v in YANG.items()}
+    res["yang_table2_s"] = YANG_TIMES
+    path.write_text(json.dumps(res, indent=1, default=float))
+    print(f"written {path}")
+
+
+if __name__ == "__main__":
+    main()

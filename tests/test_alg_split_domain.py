@@ -1,0 +1,141 @@
+"""urbansynth:splitdomain through real QGIS (processing.run and qgis_process.bin)."""
+import numpy as np
+import pytest
+import shapely
+
+from conftest import BUBENEC, run_qgis_process
+from helpers import bubenec, layer_features, memory_layer
+from urban_synthesis.plugin import domain_split
+
+ALG = "urbansynth:splitdomain"
+
+
+@pytest.fixture(scope="module")
+def full_hull():
+    """Convex hull of Bubeneč's cadastre plots (UTM 33N)."""
+    return shapely.convex_hull(shapely.union_all(bubenec("plots").geometry.to_numpy()))
+
+
+@pytest.fixture(scope="module")
+def hull(full_hull):
+    """The hull cut to 400 m x 400 m around its centre (fast tests)."""
+    c = full_hull.centroid
+    return full_hull.intersection(shapely.box(c.x - 200, c.y - 200, c.x + 200, c.y + 200))
+
+
+@pytest.fixture(scope="module")
+def region_layer(qgis_processing, hull):
+    return memory_layer("Polygon", [hull.wkt], crs="EPSG:32633", name="bubenec hull")
+
+
+def test_two_variations(qgis_processing, region_layer, hull):
+    out = qgis_processing.run(ALG, {
+        "REGION": region_layer, "VARIATIONS": 2, "SEED": 3, "OUTPUT_ROADS": "memory:",
+        "OUTPUT_PARCELS": "memory:", "OUTPUT_METRICS": "memory:"})
+    roads, parcels, table = out["OUTPUT_ROADS"], out["OUTPUT_PARCELS"], out["OUTPUT_METRICS"]
+    assert parcels.crs().authid() == "EPSG:32633" and roads.crs().authid() == "EPSG:32633"
+    assert [f.name() for f in parcels.fields()] == [n for n, _ in domain_split.PARCEL_FIELDS]
+    assert [f.name() for f in table.fields()] == [n for n, _ in domain_split.METRIC_FIELDS]
+    rows, geoms = layer_features(parcels)
+    road_rows, road_geoms = layer_features(roads)
+    metric_rows = layer_features(table)[0]
+    assert [r["variation"] for r in metric_rows] == [1, 2]
+    assert shapely.is_valid(geoms).all()
+    for v in (1, 2):
+        sel = np.array([r["variation"] == v for r in rows])
+        res = sel & np.array([r["land_use"] == "residential" for r in rows])
+        assert res.sum() > 60
+        assert all(rows[i]["has_street_access"] for i in np.flatnonzero(res))
+        # no overlap within a variation; everything inside the region
+        assert abs(shapely.union_all(geoms[sel]).area - shapely.area(geoms[sel]).sum()) < 1.0
+        m = metric_rows[v - 1]
+        assert m["p_count"] == res.sum() and m["no_access"] == 0
+        assert m["p_angle"] < 4.0 and m["p_area"] < 1.07
+        for r in (r for r in rows if r["variation"] == v):
+            assert r["undesirable"] == (r["p_angle"] > 15 or r["p_area"] > 1.2)
+    assert shapely.within(geoms, hull.buffer(1e-3)).all()
+    # variations differ: different streets
+    streets = {v: {g.wkb for g, r in zip(road_geoms, road_rows)
+                   if r["variation"] == v and r["level"] == 2} for v in (1, 2)}
+    assert streets[1] and streets[1] != streets[2]
+    assert {r["level"] for r in road_rows} >= {1, 2}
+
+
+def test_key_roads_areas_and_land_use(qgis_processing, region_layer, hull):
+    c = hull.centroid
+    minx, _, maxx, _ = hull.bounds
+    road = memory_layer("LineString", [f"LINESTRING ({minx - 5} {c.y}, {maxx + 5} {c.y})"],
+                        crs="EPSG:32633", name="main road")
+    park = memory_layer("Polygon", [c.buffer(35).wkt], crs="EPSG:32633",
+                        fields="&field=use:string", rows=[("school",)], name="school")
+    out = qgis_processing.run(ALG, {
+        "REGION": region_layer, "KEY_ROADS": road, "KEY_AREAS": park,
+        "KEY_AREA_USE_FIELD": "use", "OUTPUT_ROADS": "memory:", "OUTPUT_PARCELS": "memory:"})
+    rows, geoms = layer_features(out["OUTPUT_PARCELS"])
+    assert sum(r["land_use"] == "school" for r in rows) == 1
+    road_rows = layer_features(out["OUTPUT_ROADS"])[0]
+    assert any(r["level"] == 0 and r["kind"] == "key" for r in road_rows)
+    key_line = shapely.LineString([(minx - 5, c.y), (maxx + 5, c.y)])
+    res = np.array([r["land_use"] == "residential" for r in rows])
+    assert not shapely.intersects(geoms[res], key_line).any()
+
+
+def test_drawn_templates(qgis_processing, region_layer):
+    cells = [shapely.box(i * 18, j * 30, (i + 1) * 18, (j + 1) * 30)
+             for i in range(3) for j in range(2)]
+    tmpl = memory_layer("Polygon", [g.wkt for g in cells], crs="EPSG:32633",
+                        fields="&field=template:string&field=label:string",
+                        rows=[("double", "R")] * 6, name="my templates")
+    out = qgis_processing.run(ALG, {"REGION": region_layer, "TEMPLATE_LAYER": tmpl,
+                                    "OUTPUT_ROADS": "memory:", "OUTPUT_PARCELS": "memory:"})
+    rows = layer_features(out["OUTPUT_PARCELS"])[0]
+    used = {r["template"] for r in rows if r["land_use"] == "residential"}
+    assert "double" in used and used <= {"double", "skeleton"}
+
+
+def test_bad_input(qgis_processing, region_layer):
+    from qgis.core import QgsProcessingException
+
+    lines = memory_layer("LineString", ["LINESTRING (0 0, 100 0)"], crs="EPSG:32633",
+                         name="not a region")
+    with pytest.raises(QgsProcessingException, match="not a region"):
+        qgis_processing.run(ALG, {"REGION": lines, "OUTPUT_ROADS": "memory:",
+                                  "OUTPUT_PARCELS": "memory:"})
+    empty = memory_layer("Polygon", [], crs="EPSG:32633", name="empty region")
+    with pytest.raises(QgsProcessingException, match="empty region"):
+        qgis_processing.run(ALG, {"REGION": empty, "OUTPUT_ROADS": "memory:",
+                                  "OUTPUT_PARCELS": "memory:"})
+    with pytest.raises(QgsProcessingException, match="absurd"):
+        qgis_processing.run(ALG, {"REGION": region_layer, "STREET_WIDTH": 199,
+                                  "PARCEL_LENGTH": 5, "OUTPUT_ROADS": "memory:",
+                                  "OUTPUT_PARCELS": "memory:"})
+    tmpl = memory_layer("Polygon", [shapely.box(0, 0, 10, 10).wkt], crs="EPSG:32633",
+                        name="no fields")
+    with pytest.raises(QgsProcessingException, match="template"):
+        qgis_processing.run(ALG, {"REGION": region_layer, "TEMPLATE_LAYER": tmpl,
+                                  "OUTPUT_ROADS": "memory:", "OUTPUT_PARCELS": "memory:"})
+
+
+def test_qgis_process_on_bubenec(tmp_path, full_hull):
+    """The real qgis_process.bin on a region file made from the Bubeneč cadastre."""
+    import pyogrio
+    import geopandas as gpd
+
+    region = tmp_path / "region.gpkg"
+    pyogrio.write_dataframe(gpd.GeoDataFrame({"name": ["bubenec"]}, geometry=[full_hull],
+                                             crs=32633).to_crs(3857), region)
+    roads, parcels_out, table = (tmp_path / n for n in ("roads.gpkg", "parcels.gpkg",
+                                                        "metrics.csv"))
+    code, out, err = run_qgis_process("splitdomain", {
+        "REGION": str(region), "KEY_ROADS": f"{BUBENEC}|layername=streets", "SEED": 2,
+        "OUTPUT_ROADS": str(roads), "OUTPUT_PARCELS": str(parcels_out),
+        "OUTPUT_METRICS": str(table)})
+    assert code == 0, err
+    assert out is not None and set(out["results"]) >= {"OUTPUT_ROADS", "OUTPUT_PARCELS"}
+    df = pyogrio.read_dataframe(parcels_out)
+    assert df.crs.to_epsg() == 3857  # back in the region's CRS
+    res = df[df.land_use == "residential"]
+    assert len(res) > 100 and res.has_street_access.all()
+    assert shapely.is_valid(df.geometry.to_numpy()).all()
+    rd = pyogrio.read_dataframe(roads)
+    assert (rd.level == 0).sum() >= 10  # Bubeneč's real streets are kept
