@@ -304,8 +304,14 @@ def transfer_attributes(footprints, examples, example_attributes: pd.DataFrame,
     ex_l = pd.to_numeric(pd.Series(col("levels", np.nan)), errors="coerce").to_numpy(float)
     ex_h = np.where(np.isfinite(ex_h), ex_h, ex_l * storey_height)
     donor = np.isfinite(ex_h) & (ex_h > 0)
-    if not donor.any():
-        raise InputError("no example building has a height or a number of levels")
+    # examples without any height (e.g. a cadastre of outlines only) still give types and
+    # roofs; heights and levels stay empty
+    no_heights = not donor.any()
+    if no_heights:
+        if target_far is not None:
+            raise InputError("no example building has a height or a number of levels, so a "
+                             "target floor-area ratio cannot be met")
+        donor = np.ones(len(ex), dtype=bool)
     ids = np.arange(1, len(ex) + 1) if example_ids is None else np.asarray(example_ids)
     progress.step(0.05)
 
@@ -338,7 +344,9 @@ def transfer_attributes(footprints, examples, example_attributes: pd.DataFrame,
     dist, idx = cKDTree(xe).query(xt, k=kk)
     dist, idx = dist.reshape(len(fp), kk), idx.reshape(len(fp), kk)
     rng = np.random.default_rng(seed)
-    if kk > 1 and choice_mode == "medoid":
+    if no_heights:
+        choice = np.zeros(len(fp), dtype=int)  # the most similar example
+    elif kk > 1 and choice_mode == "medoid":
         # the candidate whose height is the weighted median of the k: a real example's
         # height (no averaging), with the variance of a median
         hk = np.log(ex_h[donors[idx]])
@@ -394,8 +402,12 @@ def transfer_attributes(footprints, examples, example_attributes: pd.DataFrame,
     progress.step(1.0)
     btype = np.asarray(col("building_type", None), dtype=object)[pick]
     roof = np.asarray(col("roof_shape", None), dtype=object)[pick]
+    if no_heights:
+        height = np.full(len(fp), np.nan)
+        levels = np.full(len(fp), np.nan)
+        stats["n_clipped"] = 0
     table = pd.DataFrame({
-        "height_m": height, "levels": levels.astype(np.int64),
+        "height_m": height, "levels": levels if no_heights else levels.astype(np.int64),
         "building_type": [t if isinstance(t, str) and t else "unknown" for t in btype],
         "roof_shape": [r if isinstance(r, str) and r else None for r in roof],
         "source_id": ids[pick], "similarity": 1.0 / (1.0 + d),

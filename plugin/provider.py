@@ -23,6 +23,7 @@ ALGORITHMS = (
     ("synthesize_roads_random_walk", "SynthesizeRoadsRandomWalk"),
     ("synthesize_footprints", "SynthesizeFootprints"),
     ("split_domain", "SplitDomain"),
+    ("synthesize_roads", "SynthesizeRoads"),
 )
 
 #: Processing models shipped with the provider (made by scripts/make_models.py).

@@ -273,9 +273,11 @@ class SynthesizeBuildings(AlgorithmBase):
         feedback.pushInfo(f"{frame.name}: {n_h} of {len(frame)} example buildings have a "
                           "height or levels.")
         if n_h == 0:
-            raise QgsProcessingException(
+            feedback.reportError(
                 f"Layer {frame.name}: no example building has a height or a number of levels "
-                "(OSM height / building:levels, height_m / levels, or the height field).")
+                "(OSM height / building:levels, height_m / levels, or the height field): only "
+                "types and roof shapes are transferred, heights and levels stay empty.",
+                fatalError=False)
         return frame, attrs
 
     def _attributes(self, parameters, context, feedback):

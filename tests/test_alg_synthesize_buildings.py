@@ -137,7 +137,7 @@ def test_bad_input(qgis_processing):
     fails({"METHOD": 1, "PARCELS": plots}, "needs: Roads")
     fails({"METHOD": 0, "FOOTPRINTS": memory_layer("Polygon", [], crs),
            "EXAMPLE_BUILDINGS": plots}, "empty")
-    fails({"METHOD": 0, "FOOTPRINTS": plots, "EXAMPLE_BUILDINGS": plots},
+    fails({"METHOD": 0, "FOOTPRINTS": plots, "EXAMPLE_BUILDINGS": plots, "TARGET_FAR": 2.0},
           "no example building has a height")
     fails({"METHOD": 0, "FOOTPRINTS": plots, "EXAMPLE_BUILDINGS": roads}, "lines; polygons")
     fails({"METHOD": 0, "FOOTPRINTS": plots, "EXAMPLE_BUILDINGS": bubenec_layer("buildings"),

@@ -68,8 +68,13 @@ def test_copy_itself_clip_and_far():
             # within one storey of the smallest footprint of the group
             assert abs(achieved - far) <= a[g].min() / ga + 1e-9
         assert r.stats["far_min"] == pytest.approx(far, abs=0.01)
+    # examples without heights: types come across, heights and levels stay empty
+    bare = attrs.assign(height_m=np.nan, levels=np.nan)
+    r = bt.transfer_attributes(ex, ex, bare)
+    assert r.table["height_m"].isna().all() and r.table["levels"].isna().all()
+    assert (r.table["building_type"] == "residential").all()
     with pytest.raises(InputError, match="no example building has a height"):
-        bt.transfer_attributes(ex, ex, attrs.assign(height_m=np.nan, levels=np.nan))
+        bt.transfer_attributes(ex, ex, bare, target_far=2.0)
     with pytest.raises(InputError, match="height range"):
         bt.transfer_attributes(ex, ex, attrs, min_height=50, max_height=20)
 

@@ -1,0 +1,137 @@
+"""urbansynth:synthesizeroads - one entry point that runs the road synthesis method chosen by
+METHOD (the district model uses it so that the method is a model parameter)."""
+from collections import namedtuple
+
+from qgis.core import (
+    QgsProcessing,
+    QgsProcessingException,
+    QgsProcessingMultiStepFeedback,
+    QgsProcessingParameterEnum,
+    QgsProcessingParameterFeatureSink,
+    QgsProcessingParameterFeatureSource,
+    QgsProcessingParameterFile,
+    QgsProcessingParameterNumber,
+    QgsProcessingParameterRasterLayer,
+)
+
+from .common import AlgorithmBase
+
+#: One METHOD: its label and the algorithm that runs it. New methods are appended (the enum
+#: index is what models and command lines store).
+Method = namedtuple("Method", "key label algorithm")
+METHODS = (
+    Method("fragments", "Fragments of the example (Hartmann thesis ch. 4.1)",
+           "urbansynth:synthesizeroadsfromfragments"),
+    Method("growth", "Procedural growth, grid major and organic minor roads (Scharl 2010)",
+           "urbansynth:growroads"),
+)
+
+
+class SynthesizeRoads(AlgorithmBase):
+    GROUP_ID = "synthesis"
+    METHOD = "METHOD"
+    EXAMPLE_ROADS = "EXAMPLE_ROADS"
+    ARTERIALS = "ARTERIALS"
+    BOUNDARY = "BOUNDARY"
+    FRAGMENT_DB = "FRAGMENT_DB"
+    DEM = "DEM"
+    SEED = "SEED"
+    OUTPUT = "OUTPUT"
+
+    def name(self):
+        return "synthesizeroads"
+
+    def displayName(self):  # noqa: N802
+        return "Synthesize roads (choose the method)"
+
+    def shortHelpString(self):  # noqa: N802
+        return (
+            "Synthesises the streets of a district with the method chosen by METHOD, from one "
+            "set of inputs, so that a Processing model can switch methods with a parameter "
+            "(the shipped model 'Synthesise a district like an example' does).\n\n"
+            "- Fragments: the faces of the ARTERIALS are filled level by level with warped "
+            "fragments of the example (FRAGMENT_DB, or a database built here from "
+            "EXAMPLE_ROADS).\n"
+            "- Procedural growth: grid major roads and organic minor roads grow inside the "
+            "BOUNDARY from the ARTERIALS (the example is not used).\n\n"
+            "Without a BOUNDARY, the convex hull of the arterials is the district. Each method "
+            "is also a tool of its own with every option; this one uses their defaults."
+        )
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        self.add(QgsProcessingParameterEnum(
+            self.METHOD, "Method", options=[m.label for m in METHODS], defaultValue=0),
+            "Which road synthesis runs: fragments (example-based, thesis ch. 4.1) or "
+            "procedural growth (Scharl 2010).")
+        self.add(QgsProcessingParameterFeatureSource(
+            self.EXAMPLE_ROADS, "Example roads with levels", [QgsProcessing.TypeVectorLine]),
+            "The example city's roads as written by 'Extract road hierarchy' (field level). "
+            "Fragments build their database from them when no FRAGMENT_DB is given.")
+        self.add(QgsProcessingParameterFeatureSource(
+            self.ARTERIALS, "Arterial roads of the district", [QgsProcessing.TypeVectorLine]),
+            "Sketched or real arterials: they are kept and the new streets connect to them.")
+        self.add(QgsProcessingParameterFeatureSource(
+            self.BOUNDARY, "District boundary", [QgsProcessing.TypeVectorPolygon],
+            optional=True),
+            "Polygon(s) the district grows in (growth). Default: the convex hull of the "
+            "arterials.")
+        self.add(QgsProcessingParameterFile(
+            self.FRAGMENT_DB, "Fragment database", extension="gpkg", optional=True),
+            "Fragments only: a database from 'Build fragment database'. Default: built from "
+            "the example roads.")
+        self.add(QgsProcessingParameterRasterLayer(
+            self.DEM, "Terrain (DEM)", optional=True),
+            "Fragments and growth take the terrain into account (slope term, maximum slope).")
+        self.add(QgsProcessingParameterNumber(
+            self.SEED, "Random seed", QgsProcessingParameterNumber.Integer, defaultValue=1),
+            "The same seed and inputs give the same network.")
+        self.add(QgsProcessingParameterFeatureSink(
+            self.OUTPUT, "Synthesised roads", QgsProcessing.TypeVectorLine),
+            "The new road network with level (0 = arterial), styled by level.")
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        import processing  # QGIS's Processing plugin, present wherever algorithms run
+
+        method = METHODS[self.parameterAsEnum(parameters, self.METHOD, context)]
+        seed = self.parameterAsInt(parameters, self.SEED, context)
+        arterials = parameters[self.ARTERIALS]
+        example = parameters[self.EXAMPLE_ROADS]
+        dem = parameters.get(self.DEM)
+        feedback.pushInfo(f"Method: {method.label}")
+
+        boundary = parameters.get(self.BOUNDARY)
+        fragment_db = self.parameterAsFile(parameters, self.FRAGMENT_DB, context)
+        need_hull = method.key != "fragments" and not boundary
+        need_db = method.key == "fragments" and not fragment_db
+        steps = QgsProcessingMultiStepFeedback(1 + need_hull + need_db, feedback)
+
+        def run(alg_id, params):
+            child = processing.run(alg_id, params, context=context, feedback=steps,
+                                   is_child_algorithm=True)
+            if feedback.isCanceled():
+                raise QgsProcessingException("Canceled.")
+            return child
+
+        step = 0
+        if need_hull:
+            boundary = run("qgis:minimumboundinggeometry",
+                           {"INPUT": arterials, "TYPE": 3,
+                            "OUTPUT": QgsProcessing.TEMPORARY_OUTPUT})["OUTPUT"]
+            step += 1
+            steps.setCurrentStep(step)
+        if need_db:
+            fragment_db = run("urbansynth:buildfragmentdatabase",
+                              {"ROADS": example, "DEM": dem,
+                               "OUTPUT": QgsProcessing.TEMPORARY_OUTPUT})["OUTPUT"]
+            step += 1
+            steps.setCurrentStep(step)
+        if method.key == "fragments":
+            params = {"ARTERIALS": arterials, "FRAGMENT_DB": fragment_db, "DEM": dem,
+                      "SEED": seed}
+        else:
+            params = {"BOUNDARY": boundary, "MAJOR_ROADS": arterials, "DEM": dem, "SEED": seed}
+        # the destination as a path/URI (a model or a command line may leave it unset)
+        params["OUTPUT"] = self.parameterAsOutputLayer(parameters, self.OUTPUT, context) \
+            or QgsProcessing.TEMPORARY_OUTPUT
+        result = run(method.algorithm, params)
+        return {self.OUTPUT: result["OUTPUT"]}

@@ -1,0 +1,161 @@
+"""Write the Processing models shipped with the provider (resources/models/*.model3).
+
+The .model3 files are committed; this script documents how they are made and regenerates
+them (run with the venv's python: `QT_QPA_PLATFORM=offscreen .venv/bin/python
+scripts/make_models.py`). A model made here opens in the QGIS model designer like any other.
+"""
+import os
+import sys
+from pathlib import Path
+
+os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+from qgis.core import (  # noqa: E402
+    QgsApplication, QgsProcessing, QgsProcessingModelAlgorithm, QgsProcessingModelChildAlgorithm,
+    QgsProcessingModelChildParameterSource as Source, QgsProcessingModelOutput,
+    QgsProcessingModelParameter, QgsProcessingParameterEnum, QgsProcessingParameterFeatureSource,
+    QgsProcessingParameterNumber, QgsProcessingParameterRasterLayer,
+)
+from qgis.PyQt.QtCore import QPointF  # noqa: E402
+
+ROOT = Path(__file__).resolve().parent.parent
+OUT = ROOT / "resources" / "models"
+
+DISTRICT_HELP = (
+    "Synthesises a whole district in the style of an example city, in one run.\n\n"
+    "From the example's roads and buildings it extracts the road hierarchy, the blocks with "
+    "their buildings and a block database. Then, inside the ARTERIALS sketch (and BOUNDARY), "
+    "it synthesises the streets with the method chosen by ROAD_METHOD, makes the blocks, "
+    "subdivides them into parcels with street access, fills the blocks with footprints from "
+    "the example's blocks (FOOTPRINT_METHOD transfer or resynthesis), gives the footprints "
+    "heights, levels and types like the example's buildings, turns the streets into surface "
+    "and junction polygons (draped on the DEM when one is given), and writes a metrics "
+    "report that compares the new district with the example.\n\n"
+    "Every step is an Urban Synthesis tool of its own: open this model in the model designer "
+    "to change their options.")
+
+
+def _param(model, definition, help_text, x, y):
+    # QGIS 3.22 does not save a parameter's help in the .model3 file: the help goes into the
+    # model's help content under the parameter name, where the provider reads it back
+    definition.setHelp(help_text)
+    model.setHelpContent(dict(model.helpContent(), **{definition.name(): help_text}))
+    component = QgsProcessingModelParameter(definition.name())
+    component.setPosition(QPointF(x, y))
+    model.addModelParameter(definition, component)
+
+
+def _child(model, child_id, alg_id, description, sources, outputs=(), x=0.0, y=0.0):
+    """A step: sources = {parameter: Source}; outputs = ((child output, model output name,
+    description),). The model's output parameters are named '<child id>:<model output name>'
+    (e.g. roads:ROADS on the qgis_process command line)."""
+    child = QgsProcessingModelChildAlgorithm(alg_id)
+    child.setChildId(child_id)
+    child.setDescription(description)
+    child.setPosition(QPointF(x, y))
+    for name, source in sources.items():
+        child.addParameterSources(name, [source])
+    model_outputs = {}
+    for child_output, model_name, text in outputs:
+        out = QgsProcessingModelOutput(model_name)
+        out.setChildId(child_id)
+        out.setChildOutputName(child_output)
+        out.setDescription(text)
+        model_outputs[model_name] = out
+    child.setModelOutputs(model_outputs)
+    model.addChildAlgorithm(child)
+
+
+def district_model() -> QgsProcessingModelAlgorithm:
+    model = QgsProcessingModelAlgorithm("synthesizedistrict", "Synthesis", "synthesis")
+    model.setHelpContent({"ALG_DESC": DISTRICT_HELP, "ALG_CREATOR": "Urban Synthesis",
+                          "ALG_VERSION": "1"})
+    p = Source.fromModelParameter
+    out = Source.fromChildOutput
+    fixed = Source.fromStaticValue
+    _param(model, QgsProcessingParameterFeatureSource(
+        "EXAMPLE_ROADS", "Example roads", [QgsProcessing.TypeVectorLine]),
+        "The example city's road lines (OSM lines with highway, or any road layer).", 0, 0)
+    _param(model, QgsProcessingParameterFeatureSource(
+        "EXAMPLE_BUILDINGS", "Example buildings", [QgsProcessing.TypeVectorPolygon]),
+        "The example city's building footprints (OSM multipolygons with building, or a "
+        "cadastre layer).", 0, 80)
+    _param(model, QgsProcessingParameterFeatureSource(
+        "ARTERIALS", "Arterial roads of the new district", [QgsProcessing.TypeVectorLine]),
+        "A sketch of the new district's main roads (they are kept; the streets fill them).",
+        0, 160)
+    _param(model, QgsProcessingParameterFeatureSource(
+        "BOUNDARY", "District boundary", [QgsProcessing.TypeVectorPolygon], optional=True),
+        "Polygon the district grows in (procedural growth); default the arterials' hull.",
+        0, 240)
+    _param(model, QgsProcessingParameterRasterLayer("DEM", "Terrain (DEM)", optional=True),
+           "Optional terrain: steers the road synthesis and drapes the street surfaces.", 0, 320)
+    _param(model, QgsProcessingParameterEnum(
+        "ROAD_METHOD", "Road synthesis method",
+        options=["Fragments of the example (thesis ch. 4.1)",
+                 "Procedural growth (Scharl 2010)"], defaultValue=0),
+        "How the streets are made (see 'Synthesize roads (choose the method)').", 0, 400)
+    _param(model, QgsProcessingParameterEnum(
+        "FOOTPRINT_METHOD", "Footprint method",
+        options=["Transfer of the most similar example block (thesis ch. 5.1)",
+                 "Guided re-synthesis (thesis ch. 5.2)"], defaultValue=0),
+        "How the blocks are filled with building footprints.", 0, 480)
+    _param(model, QgsProcessingParameterNumber(
+        "SEED", "Random seed", QgsProcessingParameterNumber.Integer, defaultValue=1),
+        "The same seed and inputs give the same district.", 0, 560)
+
+    _child(model, "hierarchy", "urbansynth:extractroadhierarchy", "Example road hierarchy",
+           {"INPUT": p("EXAMPLE_ROADS")}, x=300, y=0)
+    _child(model, "example_blocks", "urbansynth:extractblocks", "Example blocks and buildings",
+           {"ROADS": out("hierarchy", "OUTPUT"), "BUILDINGS": p("EXAMPLE_BUILDINGS")},
+           x=300, y=100)
+    _child(model, "block_db", "urbansynth:buildblockdatabase", "Example block database",
+           {"BLOCKS": out("example_blocks", "OUTPUT"),
+            "BUILDINGS": out("example_blocks", "OUTPUT_BUILDINGS")}, x=300, y=200)
+    _child(model, "roads", "urbansynth:synthesizeroads", "Synthesise the streets",
+           {"METHOD": p("ROAD_METHOD"), "EXAMPLE_ROADS": out("hierarchy", "OUTPUT"),
+            "ARTERIALS": p("ARTERIALS"), "BOUNDARY": p("BOUNDARY"), "DEM": p("DEM"),
+            "SEED": p("SEED")},
+           outputs=(("OUTPUT", "ROADS", "Roads"),), x=600, y=0)
+    _child(model, "blocks", "urbansynth:extractblocks", "Blocks of the new district",
+           {"ROADS": out("roads", "OUTPUT")}, outputs=(("OUTPUT", "BLOCKS", "Blocks"),), x=600, y=100)
+    _child(model, "parcels", "urbansynth:subdivideparcels", "Parcels",
+           {"BLOCKS": out("blocks", "OUTPUT"), "METHOD": fixed(1), "SEED": p("SEED")},
+           outputs=(("OUTPUT", "PARCELS", "Parcels"),), x=600, y=200)
+    _child(model, "footprints", "urbansynth:synthesizefootprints", "Building footprints",
+           {"BLOCKS": out("blocks", "OUTPUT"), "BLOCK_DB": out("block_db", "OUTPUT"),
+            "METHOD": p("FOOTPRINT_METHOD"),
+            "SEED": p("SEED")}, x=600, y=300)
+    _child(model, "buildings", "urbansynth:synthesizebuildings", "Building attributes",
+           {"METHOD": fixed(0), "FOOTPRINTS": out("footprints", "OUTPUT"),
+            "EXAMPLE_BUILDINGS": out("example_blocks", "OUTPUT_BUILDINGS"),
+            "ROADS": out("roads", "OUTPUT"), "EXAMPLE_ROADS": out("hierarchy", "OUTPUT"),
+            "SEED": p("SEED")},
+           outputs=(("OUTPUT", "BUILDINGS", "Buildings"),), x=600, y=400)
+    _child(model, "streets", "urbansynth:tessellatestreets", "Street surfaces and junctions",
+           {"ROADS": out("roads", "OUTPUT"), "DEM": p("DEM")},
+           outputs=(("OUTPUT_SURFACES", "STREET_SURFACES", "Street surfaces"),
+                    ("OUTPUT_JUNCTIONS", "JUNCTIONS", "Junctions")),
+           x=900, y=0)
+    _child(model, "metrics", "urbansynth:layoutmetrics", "Metrics against the example",
+           {"ROADS": out("roads", "OUTPUT"), "BLOCKS": out("blocks", "OUTPUT"),
+            "PARCELS": out("parcels", "OUTPUT"), "BUILDINGS": out("buildings", "OUTPUT"),
+            "EXAMPLE_ROADS": out("hierarchy", "OUTPUT"),
+            "EXAMPLE_BLOCKS": out("example_blocks", "OUTPUT"),
+            "EXAMPLE_BUILDINGS": out("example_blocks", "OUTPUT_BUILDINGS")},
+           outputs=(("OUTPUT", "METRICS", "Metrics"),
+                    ("OUTPUT_HTML", "REPORT", "Metrics report")), x=900, y=200)
+    return model
+
+
+def main():
+    app = QgsApplication([], False)
+    app.initQgis()
+    OUT.mkdir(parents=True, exist_ok=True)
+    path = OUT / "synthesize_district.model3"
+    if not district_model().toFile(str(path)):
+        sys.exit(f"could not write {path}")
+    print(path)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,122 @@
+"""The shipped model 'synthesizedistrict' and the method switch 'synthesizeroads' it uses."""
+import numpy as np
+import pytest
+import shapely
+
+from conftest import bubenec_layer, helsinki_layer, run_qgis_process
+from helpers import assert_planar
+
+OUTPUTS = {"roads:ROADS": "roads", "blocks:BLOCKS": "blocks", "parcels:PARCELS": "parcels",
+           "buildings:BUILDINGS": "buildings", "streets:STREET_SURFACES": "street_surfaces",
+           "streets:JUNCTIONS": "junctions", "metrics:METRICS": "metrics"}
+
+
+def _read(path, layer):
+    import geopandas as gpd
+
+    path = str(path)
+    if "|layername=" in path:
+        path, layer = path.split("|layername=")
+    return gpd.read_file(path, layer=layer)
+
+
+def test_model_is_listed_with_documented_parameters(qgis_processing):
+    from qgis.core import QgsApplication
+
+    alg = QgsApplication.processingRegistry().algorithmById("urbansynth:synthesizedistrict")
+    assert alg is not None, "the shipped model is not registered"
+    names = {p.name() for p in alg.parameterDefinitions()}
+    assert {"EXAMPLE_ROADS", "EXAMPLE_BUILDINGS", "ARTERIALS", "BOUNDARY", "DEM", "ROAD_METHOD",
+            "FOOTPRINT_METHOD", "SEED"} <= names
+    assert set(OUTPUTS) | {"metrics:REPORT"} <= names
+    # every step of the model resolves to a registered algorithm
+    for child in alg.childAlgorithms().values():
+        assert child.algorithm() is not None, child.algorithmId()
+
+
+def test_model_runs_end_to_end_on_bubenec(tmp_path):
+    """Bubeneč's own streets as the arterial sketch, footprints by re-synthesis."""
+    gpkg = tmp_path / "district.gpkg"
+    params = {"EXAMPLE_ROADS": bubenec_layer("streets"),
+              "EXAMPLE_BUILDINGS": bubenec_layer("buildings"),
+              "ARTERIALS": bubenec_layer("streets"), "ROAD_METHOD": 0,
+              "FOOTPRINT_METHOD": 1, "SEED": 2,
+              "metrics:REPORT": str(tmp_path / "report.html")}
+    for name, table in OUTPUTS.items():
+        params[name] = f"ogr:dbname='{gpkg}' table=\"{table}\" (geom)"
+    code, result, err = run_qgis_process("synthesizedistrict", params, timeout=400)
+    assert code == 0, err
+    blocks = _read(gpkg, "blocks")
+    buildings = _read(gpkg, "buildings")
+    parcels = _read(gpkg, "parcels")
+    roads = _read(gpkg, "roads")
+    assert len(roads) > 20 and len(blocks) >= 5 and len(parcels) > len(blocks)
+    assert len(buildings) > 10
+    assert {"height_m", "levels", "building_type", "source_block"} <= set(buildings.columns)
+    # Bubeneč's buildings carry no heights: types come across, heights stay empty
+    assert buildings["building_type"].notna().all()
+    assert buildings["height_m"].isna().all()
+    # footprints inside the blocks, not overlapping each other; parcels valid with access
+    block_union = shapely.union_all(blocks.geometry.values).buffer(0.01)
+    assert shapely.within(buildings.geometry.values, block_union).all()
+    tree = shapely.STRtree(buildings.geometry.values)
+    i, j = tree.query(buildings.geometry.values, predicate="intersects")
+    pairs = i < j
+    overlap = shapely.area(shapely.intersection(buildings.geometry.values[i[pairs]],
+                                                buildings.geometry.values[j[pairs]]))
+    assert overlap.sum() < 1e-3
+    assert shapely.is_valid(parcels.geometry.values).all()
+    assert parcels["has_street_access"].astype(bool).mean() > 0.95
+    surfaces = _read(gpkg, "street_surfaces")
+    assert len(surfaces) > 0 and shapely.is_valid(surfaces.geometry.values).all()
+    metrics = _read(gpkg, "metrics")
+    compared = metrics[metrics["kind"].isin(["roads", "blocks"])
+                       & metrics["wasserstein_norm"].notna()]
+    assert len(compared) >= 5
+    report = (tmp_path / "report.html").read_text()
+    assert "<html" in report.lower()
+
+
+@pytest.fixture(scope="module")
+def helsinki_arterials(qgis_processing, tmp_path_factory):
+    folder = tmp_path_factory.mktemp("arterials")
+    hierarchy = qgis_processing.run("urbansynth:extractroadhierarchy", {
+        "INPUT": helsinki_layer(), "OUTPUT": str(folder / "roads.gpkg"),
+        "OUTPUT_INTERSECTIONS": None})["OUTPUT"]
+    arterials = qgis_processing.run("native:extractbyattribute", {
+        "INPUT": hierarchy, "FIELD": "level", "OPERATOR": 0, "VALUE": "0",
+        "OUTPUT": str(folder / "arterials.gpkg")})["OUTPUT"]
+    return hierarchy, arterials
+
+
+@pytest.mark.parametrize("method", [0, 1])
+def test_synthesize_roads_runs_each_method(qgis_processing, helsinki_arterials, tmp_path,
+                                           method):
+    """Helsinki's arterials filled by each method: planar roads with levels, near the hull."""
+    hierarchy, arterials = helsinki_arterials
+    out = str(tmp_path / "roads.gpkg")
+    qgis_processing.run("urbansynth:synthesizeroads", {
+        "METHOD": method, "EXAMPLE_ROADS": hierarchy, "ARTERIALS": arterials, "SEED": 3,
+        "OUTPUT": out})
+    roads = _read(out, None)
+    sketch = _read(arterials, None).to_crs(roads.crs)
+    # the arterials are kept and streets are added to them (Helsinki's clipped extract closes
+    # few arterial faces, so the fragment refill is sparse)
+    length = roads.to_crs(3067).length
+    assert length[roads["level"] >= 1].sum() > 0.1 * sketch.to_crs(3067).length.sum()
+    assert "level" in roads.columns and (roads["level"].dropna() >= 0).all()
+    assert roads["level"].dropna().max() >= 1
+    lines = roads.to_crs(3067).geometry.values
+    hull = shapely.convex_hull(shapely.union_all(sketch.to_crs(3067).geometry.values))
+    assert shapely.within(lines, hull.buffer(50.0)).mean() > 0.95
+    if method == 0:  # growth keeps sketched arterials as drawn (they may cross)
+        assert_planar(shapely.get_parts(lines))
+
+
+def test_synthesize_roads_rejects_points_as_arterials(qgis_processing):
+    from qgis.core import QgsProcessingException
+
+    with pytest.raises(QgsProcessingException):
+        qgis_processing.run("urbansynth:synthesizeroads", {
+            "METHOD": 0, "EXAMPLE_ROADS": helsinki_layer(),
+            "ARTERIALS": helsinki_layer("points"), "OUTPUT": "memory:"})
