@@ -48,7 +48,18 @@ run synthesizeroadsfromfragments "ARTERIALS=$GPKG|layername=arterials" \
     "FRAGMENT_DB=$OUT/helsinki_fragments.gpkg" N_BEST=3 SEED=1 "OUTPUT=$(layer synthesized_roads)"
 run layoutmetrics "ROADS=$GPKG|layername=synthesized_roads" "EXAMPLE_ROADS=$GPKG|layername=roads" \
     "OUTPUT=$(layer synthesis_metrics)" "OUTPUT_HTML=$OUT/synthesis_metrics.html"
+# the whole chain in one run of the shipped model: a district like Helsinki inside its arterials
+DISTRICT="$OUT/district.gpkg"
+rm -f "$DISTRICT" "$OUT/district_report.html" "$OUT/district.png"
+dlayer() { echo "ogr:dbname='$DISTRICT' table=\"$1\" (geom)"; }
+run synthesizedistrict "EXAMPLE_ROADS=$HEL|layername=lines" "EXAMPLE_BUILDINGS=$HEL|layername=multipolygons" \
+    "ARTERIALS=$GPKG|layername=arterials" ROAD_METHOD=0 FOOTPRINT_METHOD=0 SEED=1 \
+    "roads:ROADS=$(dlayer roads)" "blocks:BLOCKS=$(dlayer blocks)" "parcels:PARCELS=$(dlayer parcels)" \
+    "buildings:BUILDINGS=$(dlayer buildings)" "streets:STREET_SURFACES=$(dlayer street_surfaces)" \
+    "streets:JUNCTIONS=$(dlayer junctions)" "metrics:METRICS=$(dlayer metrics)" \
+    "metrics:REPORT=$OUT/district_report.html"
 QT_QPA_PLATFORM=offscreen .venv/bin/python scripts/render_preview.py "$GPKG" "$OUT/demo.png" "$OUT/demo_parcels.png" \
     "$OUT/demo_fragments.png"
+QT_QPA_PLATFORM=offscreen .venv/bin/python scripts/render_preview.py district "$DISTRICT" "$OUT/district.png"
 rm -f "$OUT/.last.log"
-echo "wrote $GPKG, $OUT/helsinki_fragments.gpkg, $OUT/helsinki_blocks.gpkg, $OUT/demo_metrics.html, $OUT/demo.png, $OUT/demo_parcels.png, $OUT/demo_fragments.png, $OUT/synthesis_metrics.html"
+echo "wrote $GPKG, $DISTRICT, $OUT/district.png, $OUT/district_report.html, $OUT/helsinki_fragments.gpkg, $OUT/helsinki_blocks.gpkg, $OUT/demo_metrics.html, $OUT/demo.png, $OUT/demo_parcels.png, $OUT/demo_fragments.png, $OUT/synthesis_metrics.html"

@@ -15,6 +15,9 @@ STYLES = Path(__file__).resolve().parent.parent / "resources" / "styles"
 LAYERS = [("blocks", "blocks.qml"), ("buildings", "buildings_by_height.qml"),
           ("roads", "roads_by_level.qml")]
 SYNTHESIS_LAYERS = [("synthesized_roads", "roads_by_level.qml")]
+DISTRICT_LAYERS = [("blocks", "blocks.qml"), ("parcels", "parcels_by_quality.qml"),
+                   ("street_surfaces", "street_surfaces.qml"), ("junctions", "junctions.qml"),
+                   ("buildings", "buildings_by_height.qml")]
 PARCEL_LAYERS = [("parcels", "parcels_by_quality.qml"), ("roads", "roads_by_level.qml")]
 
 
@@ -57,9 +60,15 @@ def render(gpkg: str, png: str, title: str = "Helsinki: road hierarchy, blocks a
     image.save(png)
 
 
-if __name__ == "__main__":
+def main():
     app = QgsApplication([], False)
     app.initQgis()
+    if sys.argv[1] == "district":  # the synthesizedistrict model's outputs
+        render(sys.argv[2], sys.argv[3], "A district synthesised like Helsinki (one model run)",
+               layer_styles=DISTRICT_LAYERS, extent_layer="street_surfaces",
+               footer="Parcels by quality, street surfaces and junctions, footprints by height.")
+        print("wrote", sys.argv[3])
+        return
     render(sys.argv[1], sys.argv[2])
     print("wrote", sys.argv[2])
     if len(sys.argv) > 3:  # subdivideparcels on the Helsinki blocks
@@ -72,3 +81,7 @@ if __name__ == "__main__":
                layer_styles=SYNTHESIS_LAYERS, extent_layer="synthesized_roads",
                footer="Synthesised streets coloured by level (red = the given arterials).")
         print("wrote", sys.argv[4])
+
+
+if __name__ == "__main__":
+    main()
