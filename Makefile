@@ -70,3 +70,23 @@ desktop-check: setup
 
 clean:
 	rm -rf build out .pytest_cache
+
+# StreetGAN training (thesis ch. 4.2), CPU by default; torch lives in build/train-venv only.
+# Rasterise the example networks, train both shipped generators, export ONNX + model cards.
+TRAIN_PY := build/train-venv/bin/python
+GAN_EPOCHS ?= 18
+$(TRAIN_PY): requirements-train.txt
+	/usr/bin/python3 -m venv build/train-venv
+	$(TRAIN_PY) -m pip install -q -r requirements-train.txt
+
+.PHONY: train-gan
+train-gan: setup $(TRAIN_PY)
+	$(PY) tools/streetgan/prepare.py build/streetgan
+	nice -n 15 $(TRAIN_PY) tools/streetgan/train.py build/streetgan/helsinki.npz \
+	  resources/models/streetgan_helsinki --epochs $(GAN_EPOCHS) --patch 161 --batch 4 --name streetgan_helsinki \
+	  --title "Helsinki (real OSM roads)"
+	nice -n 15 $(TRAIN_PY) tools/streetgan/train.py build/streetgan/grid.npz \
+	  resources/models/streetgan_grid --epochs $(GAN_EPOCHS) --patch 161 --batch 4 --name streetgan_grid \
+	  --title "Grid (growroads network)"
+	mv resources/models/streetgan_*_untrained.onnx build/streetgan/
+	QT_QPA_PLATFORM=offscreen $(PY) tests/benchmarks/bench_gan.py --cards

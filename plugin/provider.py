@@ -19,6 +19,8 @@ ALGORITHMS = (
     ("subdivide_parcels", "SubdivideParcels"),
     ("synthesize_roads_from_fragments", "SynthesizeRoadsFromFragments"),
     ("tessellate_streets", "TessellateStreets"),
+    ("synthesize_roads_gan", "SynthesizeRoadsGan"),
+    ("raster_roads_to_vector", "RasterRoadsToVector"),
     ("synthesize_buildings", "SynthesizeBuildings"),
     ("synthesize_roads_random_walk", "SynthesizeRoadsRandomWalk"),
     ("synthesize_footprints", "SynthesizeFootprints"),

@@ -2,6 +2,7 @@
 installs into a clean QGIS profile and runs there through qgis_process.bin."""
 import configparser
 import os
+import re
 import subprocess
 import zipfile
 from pathlib import PurePosixPath
@@ -125,6 +126,13 @@ def test_zip_installs_into_a_clean_profile(package, tmp_path):
     modules = {PurePosixPath(n).stem for n in names
                if n.startswith(f"{TOP}/processing_algorithms/") and n.endswith(".py")}
     expected = {f"urbansynth:{m.replace('_', '')}" for m in modules - {"__init__", "common"}}
+    # and the shipped Processing models (resources/models/*.model3), by their model_name
+    with zipfile.ZipFile(ZIP) as z:
+        for n in names:
+            if n.startswith(f"{TOP}/resources/models/") and n.endswith(".model3"):
+                found = re.search(r'name="model_name"[^>]*value="([^"]+)"', z.read(n).decode())
+                assert found, n
+                expected.add(f"urbansynth:{found.group(1)}")
     assert listed == expected
 
     # the installed copy runs on the real data (styles and resources are all in the zip)

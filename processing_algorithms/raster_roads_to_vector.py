@@ -1,0 +1,138 @@
+"""urbansynth:rasterroadstovector - road raster to a clean vector graph (thesis ch. 4.2.4)."""
+import numpy as np
+import pandas as pd
+import shapely
+from qgis.core import (
+    QgsProcessing,
+    QgsProcessingException,
+    QgsProcessingParameterBand,
+    QgsProcessingParameterBoolean,
+    QgsProcessingParameterFeatureSink,
+    QgsProcessingParameterNumber,
+    QgsProcessingParameterRasterLayer,
+    QgsWkbTypes,
+)
+
+from ..plugin import qgis_io, raster_graph
+from .common import AlgorithmBase
+
+FIELDS = [("edge_id", "int"), ("length_m", "float"), ("node_from", "int"), ("node_to", "int")]
+
+
+class RasterRoadsToVector(AlgorithmBase):
+    GROUP_ID = "analysis"
+    INPUT = "INPUT"
+    BAND = "BAND"
+    THRESHOLD = "THRESHOLD"
+    SIMPLIFY = "SIMPLIFY"
+    MIN_DEAD_END = "MIN_DEAD_END"
+    MAX_GAP = "MAX_GAP"
+    FROM_EDGE = "FROM_EDGE"
+    OUTPUT = "OUTPUT"
+
+    def name(self):
+        return "rasterroadstovector"
+
+    def displayName(self):  # noqa: N802
+        return "Road raster to vector graph"
+
+    def shortHelpString(self):  # noqa: N802
+        return (
+            "Turns a road raster (a road mask, a classified image, a StreetGAN image) into a "
+            "clean planar road network, with the post-processing of the StreetGAN thesis "
+            "(Hartmann, ch. 4.2.4): threshold, one erosion and five dilations with a 3 x 3 "
+            "cross, Zhang-Suen thinning, the skeleton's pixel graph without its 0.5 px² "
+            "artefact triangles, chains between nodes of degree other than 2, five rounds of "
+            "smoothing, Douglas-Peucker simplification and removal of short dead ends.\n\n"
+            "Roads are pixels brighter than the threshold. Lengths are in the raster's units "
+            "(use a projected raster in metres); the raster is read at its own resolution.\n\n"
+            "Output: road edges with edge_id, length_m, node_from, node_to, in the raster's CRS."
+        )
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        self.add(QgsProcessingParameterRasterLayer(self.INPUT, "Road raster"),
+                 "A north-up raster where roads are bright (above the threshold).")
+        # optional: QGIS 3.22 does not fall back to a band parameter's default by itself
+        self.add(QgsProcessingParameterBand(self.BAND, "Band", defaultValue=1,
+                                            parentLayerParameterName=self.INPUT, optional=True),
+                 "The band holding the road values (default 1).")
+        self.add(QgsProcessingParameterNumber(
+            self.THRESHOLD, "Threshold", QgsProcessingParameterNumber.Double, defaultValue=127.0),
+            "Pixels above this value are road (thesis: 127 of 0 .. 255; use 0 for a 0/1 mask).")
+        self.add(QgsProcessingParameterNumber(
+            self.SIMPLIFY, "Simplification tolerance (map units)",
+            QgsProcessingParameterNumber.Double, defaultValue=3.0, minValue=0.0, maxValue=1000.0),
+            "Douglas-Peucker tolerance (thesis: 3 m).")
+        self.add(QgsProcessingParameterNumber(
+            self.MIN_DEAD_END, "Shortest dead end kept (map units)",
+            QgsProcessingParameterNumber.Double, defaultValue=25.0, minValue=0.0,
+            maxValue=10000.0),
+            "Dead-end chains this long or shorter are removed (thesis: 25 m).")
+        self.add(QgsProcessingParameterNumber(
+            self.MAX_GAP, "Close gaps up to (map units)", QgsProcessingParameterNumber.Double,
+            defaultValue=0.0, minValue=0.0, maxValue=1000.0),
+            "Extend dead ends straight ahead by up to this to meet a road (0 = off, as in the "
+            "thesis).", advanced=True)
+        self.add(QgsProcessingParameterBoolean(
+            self.FROM_EDGE, "Measure dead ends from the road's edge", defaultValue=True),
+            "Checked: a dead end's length runs from the edge of the road it leaves to the "
+            "road's end (removes skeleton spurs of wide roads, keeps side streets). "
+            "Unchecked: the thesis's skeleton length.", advanced=True)
+        self.add(QgsProcessingParameterFeatureSink(
+            self.OUTPUT, "Road graph", QgsProcessing.TypeVectorLine),
+            "Planar road edges between junctions and dead ends.")
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        from osgeo import gdal
+
+        layer = self.parameterAsRasterLayer(parameters, self.INPUT, context)
+        if layer is None or not layer.isValid():
+            raise QgsProcessingException("The road raster could not be loaded.")
+        band = self.parameterAsInt(parameters, self.BAND, context) or 1
+        if not 1 <= band <= layer.bandCount():
+            raise QgsProcessingException(f"Raster '{layer.name()}' has no band {band} "
+                                         f"(bands 1 .. {layer.bandCount()}).")
+        if layer.crs().isValid() and layer.crs().isGeographic():
+            raise QgsProcessingException(
+                f"Raster '{layer.name()}' is in geographic coordinates (degrees): lengths and "
+                "tolerances need a projected raster in metres; reproject it first (Warp).")
+        ds = gdal.Open(layer.source().split("|")[0])
+        if ds is None:
+            raise QgsProcessingException(f"Raster '{layer.name()}' cannot be read by GDAL.")
+        array = ds.GetRasterBand(band).ReadAsArray()
+        nodata = ds.GetRasterBand(band).GetNoDataValue()
+        gt = ds.GetGeoTransform()
+        ds = None
+        if array is None or array.size == 0:
+            raise QgsProcessingException(f"Raster '{layer.name()}' band {band} is empty.")
+        array = array.astype(np.float64)
+        if nodata is not None:
+            array[array == nodata] = np.nan
+        num = lambda n, lo, hi: qgis_io.check_number(  # noqa: E731
+            self.parameterAsDouble(parameters, n, context), n, lo, hi)
+        threshold = num(self.THRESHOLD, None, None)
+        feedback.pushInfo(f"{array.shape[0]} x {array.shape[1]} px, "
+                          f"{100 * np.nanmean(array > threshold):.1f} % above the threshold.")
+        result = qgis_io.run_engine(
+            f"Raster '{layer.name()}'", raster_graph.raster_to_graph, array, gt,
+            threshold=threshold, simplify=num(self.SIMPLIFY, 0.0, 1000.0),
+            min_dead_end=num(self.MIN_DEAD_END, 0.0, 10000.0),
+            max_gap=num(self.MAX_GAP, 0.0, 1000.0),
+            from_edge=self.parameterAsBoolean(parameters, self.FROM_EDGE, context),
+            progress=qgis_io.progress_for(feedback, 0, 90))
+        g = result.graph
+        n = len(result.geometry)
+        feedback.pushInfo(f"{result.stats['skeleton_pixels']} skeleton pixels, "
+                          f"{result.stats['artefact_edges']} artefact edges removed, {n} road "
+                          f"edges in {result.stats['seconds']['total']:.2f} s.")
+        if n == 0:
+            feedback.reportError(f"No road in raster '{layer.name()}' above the threshold "
+                                 f"{threshold:g}.")
+        table = pd.DataFrame({"edge_id": np.arange(n),
+                              "length_m": shapely.length(result.geometry) if n else [],
+                              "node_from": g.u if n else [], "node_to": g.v if n else []})
+        dest = qgis_io.write_sink(self, parameters, self.OUTPUT, context, result.geometry, table,
+                                  FIELDS, QgsWkbTypes.LineString, layer.crs(), layer.crs(),
+                                  feedback)
+        feedback.setProgress(100)
+        return {self.OUTPUT: dest}

@@ -1,0 +1,200 @@
+"""urbansynth:synthesizeroadsgan - StreetGAN road networks (Hartmann thesis ch. 4.2)."""
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import shapely
+from qgis.core import (
+    QgsProcessing,
+    QgsProcessingException,
+    QgsProcessingParameterBoolean,
+    QgsProcessingParameterEnum,
+    QgsProcessingParameterExtent,
+    QgsProcessingParameterFeatureSink,
+    QgsProcessingParameterFeatureSource,
+    QgsProcessingParameterFile,
+    QgsProcessingParameterNumber,
+    QgsProcessingParameterRasterDestination,
+    QgsWkbTypes,
+)
+
+from ..plugin import qgis_io, streetgan
+from ..plugin.shape_context import DemGrid
+from .common import AlgorithmBase
+
+ROAD_FIELDS = [("edge_id", "int"), ("level", "int"), ("road_class", "str"), ("length_m", "float"),
+               ("model", "str"), ("seed", "int")]
+
+
+class SynthesizeRoadsGan(AlgorithmBase):
+    GROUP_ID = "synthesis"
+    TARGET = "TARGET"
+    EXTENT = "EXTENT"
+    MODEL = "MODEL"
+    MODEL_FILE = "MODEL_FILE"
+    SEED = "SEED"
+    CELL_SIZE = "CELL_SIZE"
+    MAX_GAP = "MAX_GAP"
+    MIN_DEAD_END = "MIN_DEAD_END"
+    FROM_EDGE = "FROM_EDGE"
+    OUTPUT = "OUTPUT"
+    OUTPUT_RASTER = "OUTPUT_RASTER"
+
+    def __init__(self):
+        super().__init__()
+        self.models = streetgan.shipped_models()
+
+    def name(self):
+        return "synthesizeroadsgan"
+
+    def displayName(self):  # noqa: N802
+        return "Synthesize roads (StreetGAN)"
+
+    def shortHelpString(self):  # noqa: N802
+        return (
+            "Generates a road network over a target polygon or extent with a trained StreetGAN "
+            "generator (Hartmann thesis ch. 4.2): a fully convolutional spatial GAN turns a "
+            "field of random noise into a road image of any size (3 m per pixel; large areas "
+            "run in tiles that stitch without seams), and the image is turned into a clean "
+            "vector graph: threshold, erosion and dilations, Zhang-Suen thinning, the "
+            "skeleton's pixel graph without its artefact triangles, chains between junctions, "
+            "smoothing, Douglas-Peucker at 3 m, removal of dead ends up to 25 m (measured from "
+            "the road's edge by default).\n\n"
+            "Models: the shipped generators (each has a model card in resources/models saying "
+            "what it was trained on), or any .onnx generator with its card (.json of the same "
+            "name) next to it, as written by tools/streetgan/train.py.\n\n"
+            "Output: planar roads clipped to the target with level (0 = longest continuous "
+            "streets), length_m, model and seed, in the target's CRS; optionally the "
+            "generator's image as a GeoTIFF in the working metric CRS. The same seed gives the "
+            "same network."
+        )
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        self.add(QgsProcessingParameterFeatureSource(
+            self.TARGET, "Target polygon(s) (optional)", [QgsProcessing.TypeVectorPolygon],
+            optional=True),
+            "Area to fill with roads; several polygons are merged. Give this or an extent.")
+        self.add(QgsProcessingParameterExtent(self.EXTENT, "Target extent (optional)",
+                                              optional=True),
+            "A rectangle to fill with roads when no target polygon is given.")
+        self.add(QgsProcessingParameterEnum(
+            self.MODEL, "Model", options=self.models or ["(no model shipped)"], defaultValue=0),
+            "A shipped generator: " + "; ".join(self._describe(m) for m in self.models) + ".")
+        self.add(QgsProcessingParameterFile(
+            self.MODEL_FILE, "Model file (.onnx, optional)", extension="onnx", optional=True),
+            "A generator exported by tools/streetgan/train.py, with its model card "
+            "(<name>.json) next to it; used instead of the shipped model when given.")
+        self.add(QgsProcessingParameterNumber(
+            self.SEED, "Random seed", QgsProcessingParameterNumber.Integer, defaultValue=1,
+            minValue=0),
+            "Seed of the noise field: the same seed and target give the same network.")
+        self.add(QgsProcessingParameterNumber(
+            self.CELL_SIZE, "Cell size (m, 0 = the model's)", QgsProcessingParameterNumber.Double,
+            defaultValue=0.0, minValue=0.0, maxValue=100.0),
+            "Metres per generated pixel. The models learnt 3 m per pixel; another value scales "
+            "the whole network (blocks get larger or smaller).", advanced=True)
+        self.add(QgsProcessingParameterNumber(
+            self.MIN_DEAD_END, "Shortest dead end kept (m)", QgsProcessingParameterNumber.Double,
+            defaultValue=25.0, minValue=0.0, maxValue=1000.0),
+            "Dead-end streets this long or shorter are removed (thesis: 25 m).", advanced=True)
+        self.add(QgsProcessingParameterNumber(
+            self.MAX_GAP, "Close gaps up to (m)", QgsProcessingParameterNumber.Double,
+            defaultValue=0.0, minValue=0.0, maxValue=500.0),
+            "A dead end that stops this close before another road is extended straight to "
+            "it (0 = off, as in the thesis).", advanced=True)
+        self.add(QgsProcessingParameterBoolean(
+            self.FROM_EDGE, "Measure dead ends from the road's edge", defaultValue=True),
+            "Checked: a dead end's length runs from the edge of the road it leaves to the "
+            "road's end (removes the skeleton spurs of wide generated roads, keeps side "
+            "streets). Unchecked: the thesis's skeleton length.", advanced=True)
+        self.add(QgsProcessingParameterFeatureSink(
+            self.OUTPUT, "StreetGAN roads", QgsProcessing.TypeVectorLine),
+            "Roads with edge_id, level, road_class, length_m, model, seed.")
+        self.add(QgsProcessingParameterRasterDestination(
+            self.OUTPUT_RASTER, "Generator image", optional=True, createByDefault=False),
+            "The generator's image (0 .. 255, roads bright) as a GeoTIFF in the working CRS.")
+
+    @staticmethod
+    def _describe(name):
+        try:
+            import json
+
+            card = json.loads((streetgan.MODELS_DIR / f"{name}.json").read_text())
+            return f"{name} ({card.get('title', '')})"
+        except (OSError, ValueError):
+            return name
+
+    def _target(self, parameters, context, feedback):
+        """(target geometries in the working CRS, working CRS, output CRS, label)."""
+        if parameters.get(self.TARGET) not in (None, ""):
+            frame = qgis_io.read_source(self, parameters, self.TARGET, context, feedback,
+                                        kind="polygons", fields=[])
+            return frame.geometry, frame.crs, frame.source_crs, frame.name
+        if parameters.get(self.EXTENT) in (None, ""):
+            raise QgsProcessingException("Give a target polygon layer (TARGET) or an extent "
+                                         "(EXTENT).")
+        rect = self.parameterAsExtent(parameters, self.EXTENT, context)
+        crs = self.parameterAsExtentCrs(parameters, self.EXTENT, context)
+        if rect.isNull() or rect.width() <= 0 or rect.height() <= 0:
+            raise QgsProcessingException("The target extent has no area.")
+        work = qgis_io.working_crs(crs, rect, context)
+        box = shapely.box(rect.xMinimum(), rect.yMinimum(), rect.xMaximum(), rect.yMaximum())
+        box = shapely.segmentize(box, max(rect.width(), rect.height()) / 50)
+        geoms = qgis_io.reproject(np.array([box], dtype=object), crs, work, context)
+        return geoms, work, crs, "target extent"
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        geoms, work, out_crs, label = self._target(parameters, context, feedback)
+        model_file = self.parameterAsFile(parameters, self.MODEL_FILE, context)
+        if model_file:
+            model = model_file
+        else:
+            if not self.models:
+                raise QgsProcessingException("No StreetGAN model is shipped: give MODEL_FILE.")
+            index = self.parameterAsEnum(parameters, self.MODEL, context)
+            if not 0 <= index < len(self.models):
+                raise QgsProcessingException(f"Parameter {self.MODEL} must be 0 .. "
+                                             f"{len(self.models) - 1}.")
+            model = self.models[index]
+        seed = self.parameterAsInt(parameters, self.SEED, context)
+        if seed < 0:
+            raise QgsProcessingException(f"Parameter {self.SEED} must not be negative.")
+        cell = qgis_io.check_number(self.parameterAsDouble(parameters, self.CELL_SIZE, context),
+                                    self.CELL_SIZE, 0.0, 100.0)
+        max_gap = qgis_io.check_number(self.parameterAsDouble(parameters, self.MAX_GAP, context),
+                                       self.MAX_GAP, 0.0, 500.0)
+        min_dead = qgis_io.check_number(
+            self.parameterAsDouble(parameters, self.MIN_DEAD_END, context), self.MIN_DEAD_END,
+            0.0, 1000.0)
+        gen = qgis_io.run_engine(f"Model '{Path(str(model)).name}'", streetgan.load_model, model)
+        feedback.pushInfo(f"Model {gen.name}: {gen.card.get('title', '')}, "
+                          f"{gen.cell_size:g} m per pixel.")
+        feedback.setProgress(5)
+        result = qgis_io.run_engine(
+            f"Target {label}", streetgan.synthesize, geoms, gen, seed=seed,
+            cell_size=cell or None, max_gap=max_gap, min_dead_end=min_dead,
+            from_edge=self.parameterAsBoolean(parameters, self.FROM_EDGE, context),
+            progress=qgis_io.progress_for(feedback, 5, 90))
+        s = result.stats
+        feedback.pushInfo(f"Generated {s['pixels'][0]} x {s['pixels'][1]} px in "
+                          f"{s['generate_s']:.2f} s; graph in {s['vectorize_s']:.2f} s; "
+                          f"{len(result.geometry)} road edges.")
+        if len(result.geometry) == 0:
+            feedback.reportError("The generator drew no road inside the target: try another "
+                                 "seed or a larger target.")
+        table = pd.DataFrame({
+            "edge_id": np.arange(len(result.geometry)), "level": result.level,
+            "road_class": np.where(result.level == 0, "arterial", "local"),
+            "length_m": shapely.length(result.geometry) if len(result.geometry) else [],
+            "model": gen.name, "seed": seed})
+        dest = qgis_io.write_sink(self, parameters, self.OUTPUT, context, result.geometry, table,
+                                  ROAD_FIELDS, QgsWkbTypes.LineString, out_crs, work, feedback)
+        qgis_io.style_output(context, dest, "roads_by_level.qml")
+        outputs = {self.OUTPUT: dest}
+        raster = self.parameterAsOutputLayer(parameters, self.OUTPUT_RASTER, context)
+        if raster:
+            qgis_io.write_geotiff(raster, DemGrid(result.image, result.geotransform),
+                                  work.toWkt())
+            outputs[self.OUTPUT_RASTER] = raster
+        feedback.setProgress(100)
+        return outputs

@@ -1,0 +1,265 @@
+"""StreetGAN evidence and performance (issue 5, thesis ch. 4.2).
+
+    QT_QPA_PLATFORM=offscreen .venv/bin/python tests/benchmarks/bench_gan.py [--cards]
+
+For each shipped model: the thesis's block measures (area, compactness, aspect ratio) and
+dead ends per km² of generated networks against the network the model was trained on,
+as two-sample distances (Wasserstein / the example's spread, KS), next to the same for
+(a) the training network itself sent through raster -> graph (what the post-processing
+alone changes), (b) the thesis's post-processing (dead ends measured along the skeleton,
+not from the road's edge), (c) the raw,
+untrained generator and (d) a random-noise image. Every network is clipped to the same
+window (the training network's extent less 30 m); dead ends on the window's edge are cut
+streets, not dead ends, and are not counted.
+
+Performance: a 769 x 769 image (z of 25 x 25 x 100) with onnxruntime, raster -> graph of
+that image, and a whole synthesis per km². Prints tables, writes
+tests/benchmarks/results/gan.json and docs/streetgan.png; ``--cards`` also stores the
+evaluation in the model cards (resources/models/*.json).
+"""
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import json
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import shapely
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "build" / "plugins"))
+
+from urban_synthesis.plugin import metrics, raster_graph, streetgan  # noqa: E402
+
+SEEDS = (1, 2, 3)
+DEFAULT = "StreetGAN (dead ends from road edge)"
+THESIS = {"generate_769_s": 0.08, "raster_to_graph_s": 5.1}
+#: where ``make train-gan`` leaves the raw generators (train.py writes <out>_untrained.onnx)
+UNTRAINED_DIRS = (ROOT / "build" / "streetgan", ROOT / "build" / "streetgan" / "models")
+
+
+def _prepare():
+    spec = importlib.util.spec_from_file_location("sg_prepare", ROOT / "tools" / "streetgan" / "prepare.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def training_lines(card: dict) -> np.ndarray:
+    prep = _prepare()
+    name = card.get("training_data", {}).get("name")
+    fn = {"helsinki": prep.helsinki_lines, "grid": prep.grid_lines}.get(name)
+    if fn is None:
+        raise SystemExit(f"unknown training data {name!r} in card {card.get('name')}")
+    return np.asarray(fn(), dtype=object)
+
+
+def window_metrics(lines, window):
+    """Metrics of the part of a network inside ``window``; cut ends are not dead ends."""
+    lines = np.asarray(lines, dtype=object)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        parts = shapely.get_parts(shapely.intersection(lines, window)) if len(lines) else lines
+    parts = parts[(shapely.get_type_id(parts) == 1) & (shapely.length(parts) > 0.01)]
+    if len(parts) == 0:
+        return None
+    return metrics.compute_layout_metrics(roads=parts, area=window.buffer(-2.0))
+
+
+MEASURES = (("blocks", "area"), ("blocks", "compactness"), ("blocks", "aspect_ratio"))
+
+
+def pooled(results):
+    """Distributions pooled over several networks; dead ends and blocks per km² averaged."""
+    results = [r for r in results if r is not None]
+    out = {"networks": len(results)}
+    for kind, name in MEASURES:
+        vals = [r.distribution(kind, name) for r in results if r.has(kind, name)]
+        out[name] = np.concatenate(vals) if vals else np.empty(0)
+    for key, (kind, name) in {"dead_ends_per_km2": ("roads", "dead_ends_per_km2"),
+                              "blocks_per_km2": ("blocks", "blocks_per_km2"),
+                              "street_km_per_km2": ("roads", "street_length_km_per_km2")}.items():
+        v = [r.scalar(kind, name) for r in results if r.has(kind, name)]
+        out[key] = float(np.mean(v)) if v else float("nan")
+    return out
+
+
+def distances(cand, real):
+    row = {"networks": cand["networks"], "blocks": int(len(cand["area"])) // max(cand["networks"], 1)}
+    for _, name in MEASURES:
+        d = metrics.two_sample(cand[name], real[name])
+        row[f"{name}_w"] = round(float(d["wasserstein_norm"]), 3)
+        row[f"{name}_ks"] = round(float(d["ks_stat"]), 3)
+    row["dead_ends_per_km2"] = round(cand["dead_ends_per_km2"], 1)
+    row["dead_end_ratio"] = round(cand["dead_ends_per_km2"] / real["dead_ends_per_km2"], 2) \
+        if real["dead_ends_per_km2"] > 0 else float("nan")
+    row["blocks_per_km2"] = round(cand["blocks_per_km2"], 1)
+    row["street_km_per_km2"] = round(cand["street_km_per_km2"], 2)
+    return row
+
+
+def untrained_generator(name: str, card: dict):
+    paths = [d / f"{name}_untrained.onnx" for d in UNTRAINED_DIRS if (d / f"{name}_untrained.onnx").exists()]
+    if not paths:
+        return None
+    path = paths[0]
+    raw_card = {k: v for k, v in card.items() if k != "onnx_sha256"}
+    return streetgan.load_model(path, card=raw_card)
+
+
+def noise_image(rows, cols, seed):
+    return np.random.default_rng(seed).uniform(0, 255, size=(rows, cols))
+
+
+def evaluate_model(name: str, figures: dict) -> dict:
+    gen = streetgan.load_model(name)
+    card = gen.card
+    real_lines = training_lines(card)
+    x0, y0, x1, y1 = shapely.total_bounds(real_lines)
+    window = shapely.box(x0 + 30, y0 + 30, x1 - 30, y1 - 30)
+    real = pooled([window_metrics(real_lines, window)])
+    # the same window at the origin for the syntheses
+    wx0, wy0, wx1, wy1 = window.bounds
+    target = shapely.box(0, 0, wx1 - wx0, wy1 - wy0)
+    real_o = pooled([window_metrics(shapely.transform(real_lines, lambda c: c - [wx0, wy0]), target)])
+    rows = {"real (training network)": distances(real_o, real_o)}
+    # (a) round trip: the training raster itself through raster -> graph
+    img, gt = raster_graph.rasterize_lines(real_lines, margin=0.0)
+    trip = raster_graph.raster_to_graph(img, gt)
+    rows["real -> raster -> graph"] = distances(pooled([window_metrics(trip.geometry, window)]), real)
+    variants = {DEFAULT: dict(model=gen, from_edge=True),
+                "StreetGAN, thesis post-processing": dict(model=gen, from_edge=False)}
+    raw = untrained_generator(name, card)
+    if raw is not None:
+        variants["untrained generator"] = dict(model=raw, from_edge=True)
+    samples = {}
+    for label, kw in variants.items():
+        res = [streetgan.synthesize(target, kw["model"], seed=s, from_edge=kw["from_edge"]) for s in SEEDS]
+        samples[label] = res[0]
+        rows[label] = distances(pooled([window_metrics(r.geometry, target) for r in res]), real_o)
+    if raw is None:
+        rows["untrained generator"] = {"note": f"missing build/streetgan/{name}_untrained.onnx "
+                                               "(make train-gan writes it)"}
+    # (d) random noise through the same pipeline
+    rr, cc = samples[DEFAULT].image.shape
+    res = []
+    for s in SEEDS:
+        rg = raster_graph.raster_to_graph(noise_image(rr, cc, s), (-96.0, 3.0, 0.0, target.bounds[3] + 96.0, 0.0, -3.0),
+                                          )
+        res.append(window_metrics(rg.geometry, target))
+    rows["random noise image"] = distances(pooled(res), real_o)
+    figures[name] = dict(real=shapely.transform(real_lines, lambda c: c - [wx0, wy0]), target=target,
+                         sample=samples[DEFAULT], title=card.get("title", name))
+    return {"model": name, "title": card.get("title"), "window_km2": round(target.area / 1e6, 3),
+            "seeds": list(SEEDS), "rows": rows}
+
+
+def performance(name: str) -> dict:
+    gen = streetgan.load_model(name)
+    z = streetgan.noise(25, 25, gen.channels, np.random.default_rng(0))
+    gen.run(z)  # warm-up (session initialisation)
+    t_gen = []
+    for _ in range(5):
+        t = time.perf_counter()
+        img = gen.run(z)
+        t_gen.append(time.perf_counter() - t)
+    gt = (0.0, 3.0, 0.0, 769 * 3.0, 0.0, -3.0)
+    t_rg, stats = [], None
+    for _ in range(3):
+        t = time.perf_counter()
+        r = raster_graph.raster_to_graph(img, gt)
+        t_rg.append(time.perf_counter() - t)
+        stats = r.stats
+    target = shapely.box(0, 0, 2000, 2000)
+    t = time.perf_counter()
+    res = streetgan.synthesize(target, gen, seed=5)
+    t_total = time.perf_counter() - t
+    return {"model": name, "image_px": list(img.shape), "image_km2": round((769 * 3.0) ** 2 / 1e6, 2),
+            "generate_769_s": round(float(np.median(t_gen)), 3),
+            "raster_to_graph_769_s": round(float(np.median(t_rg)), 3),
+            "raster_to_graph_steps_s": stats["seconds"],
+            "synthesis_4km2_s": round(t_total, 2),
+            "synthesis_s_per_km2": round(t_total / 4.0, 3),
+            "synthesis_edges": int(len(res.geometry))}
+
+
+def picture(figures: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    n = len(figures)
+    fig, axes = plt.subplots(n, 3, figsize=(12, 4.2 * n), squeeze=False)
+    for row, (name, f) in zip(axes, figures.items()):
+        x0, y0, x1, y1 = f["target"].bounds
+        for ax, lines, title in ((row[0], f["real"], f"training network: {f['title']}"),
+                                 (row[2], f["sample"].geometry, "StreetGAN graph (seed 1)")):
+            for g in shapely.get_parts(np.asarray(lines, dtype=object)):
+                c = shapely.get_coordinates(g)
+                ax.plot(c[:, 0], c[:, 1], color="k", lw=0.8)
+            ax.set_xlim(x0, x1)
+            ax.set_ylim(y0, y1)
+            ax.set_title(title, fontsize=9)
+        gt = f["sample"].geotransform
+        img = f["sample"].image
+        ext = (gt[0], gt[0] + img.shape[1] * gt[1], gt[3] + img.shape[0] * gt[5], gt[3])
+        row[1].imshow(img, cmap="gray", extent=ext)
+        row[1].set_xlim(x0, x1)
+        row[1].set_ylim(y0, y1)
+        row[1].set_title(f"generator image ({name}, seed 1)", fontsize=9)
+        for ax in row:
+            ax.set_aspect("equal")
+            ax.set_xticks([])
+            ax.set_yticks([])
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=90)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--cards", action="store_true", help="store the evaluation in the model cards")
+    args = ap.parse_args()
+    models = streetgan.shipped_models()
+    figures, evidence, perf = {}, [], []
+    for name in models:
+        evidence.append(evaluate_model(name, figures))
+        perf.append(performance(name))
+    cols = ("networks", "blocks", "area_w", "area_ks", "compactness_w", "compactness_ks",
+            "aspect_ratio_w", "aspect_ratio_ks", "dead_ends_per_km2", "dead_end_ratio")
+    for ev in evidence:
+        print(f"\n{ev['model']} ({ev['title']}), window {ev['window_km2']} km², seeds {ev['seeds']}")
+        print(f"{'network':40s} " + " ".join(f"{c[:14]:>14s}" for c in cols))
+        for label, row in ev["rows"].items():
+            print(f"{label:40s} " + " ".join(f"{row.get(c, ''):>14}" for c in cols))
+    print("\nperformance (2-core CPU, onnxruntime)     thesis (Titan X / 1 core)")
+    for p in perf:
+        print(f"{p['model']:22s} generate 769x769 {p['generate_769_s']:.3f} s  (thesis "
+              f"{THESIS['generate_769_s']} s); raster->graph {p['raster_to_graph_769_s']:.3f} s "
+              f"(thesis {THESIS['raster_to_graph_s']} s); synthesis {p['synthesis_s_per_km2']:.3f} s/km²")
+    load = os.getloadavg()
+    print(f"(load average {load[0]:.1f} on {os.cpu_count()} cores while measuring: the machine "
+          "is shared, so these are upper bounds)")
+    out = {"machine": platform.processor() or platform.machine(), "cpu_count": os.cpu_count(),
+           "load_average": [round(x, 2) for x in load], "thesis": THESIS,
+           "evidence": evidence, "performance": perf}
+    res_dir = ROOT / "tests" / "benchmarks" / "results"
+    res_dir.mkdir(parents=True, exist_ok=True)
+    (res_dir / "gan.json").write_text(json.dumps(out, indent=1))
+    picture(figures, ROOT / "docs" / "streetgan.png")
+    if args.cards:
+        for ev, p in zip(evidence, perf):
+            path = streetgan.MODELS_DIR / f"{ev['model']}.json"
+            card = json.loads(path.read_text())
+            card["evaluation"] = {"against": "the training network, same window", **ev, "performance": p}
+            path.write_text(json.dumps(card, indent=1))
+    print(f"\nwrote {res_dir / 'gan.json'} and docs/streetgan.png")
+
+
+if __name__ == "__main__":
+    main()

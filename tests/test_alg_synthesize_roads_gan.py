@@ -1,0 +1,143 @@
+"""urbansynth:synthesizeroadsgan and urbansynth:rasterroadstovector through real QGIS."""
+import shutil
+
+import numpy as np
+import pytest
+import shapely
+from qgis.core import QgsProcessingException
+
+from conftest import bubenec_layer, run_qgis_process
+from helpers import assert_planar, helsinki_roads, layer_features, memory_layer
+from urban_synthesis.plugin import raster_graph, streetgan
+
+GAN = "urbansynth:synthesizeroadsgan"
+R2V = "urbansynth:rasterroadstovector"
+# 1.2 x 0.9 km in ETRS-TM35FIN (metric): the working CRS is the input's
+X0, Y0 = 385000.0, 6671000.0
+EXTENT = f"{X0},{X0 + 1200},{Y0},{Y0 + 900} [EPSG:3067]"
+FIELDS = ["edge_id", "level", "road_class", "length_m", "model", "seed"]
+
+
+def test_extent_with_raster(qgis_processing, tmp_path):
+    tif = tmp_path / "gan.tif"
+    out = qgis_processing.run(GAN, {"EXTENT": EXTENT, "MODEL": 0, "SEED": 3, "OUTPUT": "memory:",
+                                    "OUTPUT_RASTER": str(tif)})
+    layer = out["OUTPUT"]
+    assert layer.crs().authid() == "EPSG:3067"
+    assert [f.name() for f in layer.fields()] == FIELDS
+    rows, geoms = layer_features(layer)
+    assert len(rows) > 20
+    box = shapely.box(X0, Y0, X0 + 1200, Y0 + 900)
+    assert shapely.covers(box.buffer(0.01), geoms).all()
+    assert_planar(geoms)
+    assert np.allclose([r["length_m"] for r in rows], shapely.length(geoms), rtol=1e-6)
+    assert {r["model"] for r in rows} == {streetgan.shipped_models()[0]} and {r["seed"] for r in rows} == {3}
+    assert min(r["level"] for r in rows) == 0 and max(r["level"] for r in rows) >= 1
+    from osgeo import gdal
+
+    ds = gdal.Open(str(tif))
+    gt = ds.GetGeoTransform()
+    assert gt[1] == 3.0 and gt[5] == -3.0 and "3067" in ds.GetProjection() or "TM35FIN" in ds.GetProjection()
+    assert gt[0] < X0 and gt[3] > Y0 + 900  # covers the extent (with the margin)
+    img = ds.GetRasterBand(1).ReadAsArray()
+    assert 0.1 < (img > 127).mean() < 0.9
+
+
+def test_polygon_target_geographic_seed_and_models(qgis_processing):
+    # a triangle in WGS84 near Helsinki: worked in UTM, written back in degrees
+    wkt = "POLYGON((24.93 60.165, 24.95 60.165, 24.94 60.175, 24.93 60.165))"
+    target = memory_layer("Polygon", [wkt], crs="EPSG:4326")
+    runs = {}
+    for model, seed in ((0, 1), (0, 1), (0, 2), (1, 1)):
+        layer = qgis_processing.run(GAN, {"TARGET": target, "MODEL": model, "SEED": seed,
+                                          "OUTPUT": "memory:"})["OUTPUT"]
+        assert layer.crs().authid() == "EPSG:4326"
+        _, geoms = layer_features(layer)
+        assert len(geoms) > 5
+        assert shapely.covers(shapely.from_wkt(wkt).buffer(1e-6), geoms).all()
+        runs.setdefault((model, seed), []).append(shapely.to_wkb(geoms))
+    a, b = runs[(0, 1)]
+    assert len(a) == len(b) and all(x == y for x, y in zip(a, b))  # the same seed, the same roads
+    assert len(runs[(0, 2)][0]) != len(a) or any(x != y for x, y in zip(runs[(0, 2)][0], a))
+    assert len(runs[(1, 1)][0]) != len(a) or any(x != y for x, y in zip(runs[(1, 1)][0], a))
+
+
+def test_errors(qgis_processing, tmp_path):
+    with pytest.raises(QgsProcessingException, match="TARGET.*EXTENT"):
+        qgis_processing.run(GAN, {"OUTPUT": "memory:"})
+    empty = memory_layer("Polygon", [], crs="EPSG:3067", name="empty target")
+    with pytest.raises(QgsProcessingException, match="empty target.*empty"):
+        qgis_processing.run(GAN, {"TARGET": empty, "OUTPUT": "memory:"})
+    lines = memory_layer("LineString", ["LINESTRING(0 0, 10 10)"], crs="EPSG:3067", name="lines")
+    with pytest.raises(QgsProcessingException, match="polygons are needed"):
+        qgis_processing.run(GAN, {"TARGET": lines, "OUTPUT": "memory:"})
+    # corrupt model file next to a valid card
+    src = streetgan.MODELS_DIR / f"{streetgan.shipped_models()[0]}.onnx"
+    bad = tmp_path / "bad.onnx"
+    bad.write_bytes(src.read_bytes()[:5000])
+    shutil.copy(src.with_suffix(".json"), bad.with_suffix(".json"))
+    with pytest.raises(QgsProcessingException, match="bad.onnx.*corrupt"):
+        qgis_processing.run(GAN, {"EXTENT": EXTENT, "MODEL_FILE": str(bad), "OUTPUT": "memory:"})
+    lonely = tmp_path / "lonely.onnx"
+    shutil.copy(src, lonely)
+    with pytest.raises(QgsProcessingException, match="model card lonely.json is missing"):
+        qgis_processing.run(GAN, {"EXTENT": EXTENT, "MODEL_FILE": str(lonely), "OUTPUT": "memory:"})
+    with pytest.raises(QgsProcessingException, match="SEED"):
+        qgis_processing.run(GAN, {"EXTENT": EXTENT, "SEED": -1, "OUTPUT": "memory:"})
+
+
+def _write_geotiff(path, array, gt, epsg):
+    from osgeo import gdal, osr
+
+    rows, cols = array.shape
+    ds = gdal.GetDriverByName("GTiff").Create(str(path), cols, rows, 1, gdal.GDT_Byte)
+    ds.SetGeoTransform(gt)
+    srs = osr.SpatialReference()
+    srs.ImportFromEPSG(epsg)
+    ds.SetProjection(srs.ExportToWkt())
+    ds.GetRasterBand(1).WriteArray(array)
+    ds = None
+
+
+def test_raster_roads_to_vector_helsinki(qgis_processing, tmp_path):
+    lines = np.asarray(helsinki_roads().geometry.values, dtype=object)
+    img, gt = raster_graph.rasterize_lines(lines)
+    tif = tmp_path / "helsinki_roads.tif"
+    _write_geotiff(tif, img, gt, 32635)
+    layer = qgis_processing.run(R2V, {"INPUT": str(tif), "OUTPUT": "memory:"})["OUTPUT"]
+    assert layer.crs().authid() == "EPSG:32635"
+    rows, geoms = layer_features(layer)
+    assert_planar(geoms)
+    engine = raster_graph.raster_to_graph(img, gt)
+    assert len(rows) == len(engine.geometry)
+    # the same network as the engine's (metric raster: lengths unchanged)
+    assert np.isclose(shapely.length(geoms).sum(), shapely.length(engine.geometry).sum())
+    # the network lies on the real roads
+    union = shapely.union_all(lines)
+    d = shapely.distance(shapely.points(shapely.get_coordinates(shapely.segmentize(geoms, 5.0))), union)
+    # (merged dual carriageways and junction skeletons sit up to ~15 m off the OSM lines)
+    assert np.median(d) < 4.0 and np.quantile(d, 0.9) < 15.0
+    with pytest.raises(QgsProcessingException, match="no band 2"):
+        qgis_processing.run(R2V, {"INPUT": str(tif), "BAND": 2, "OUTPUT": "memory:"})
+    geo = tmp_path / "geographic.tif"
+    _write_geotiff(geo, img, (24.9, 0.0001, 0, 60.2, 0, -0.0001), 4326)
+    with pytest.raises(QgsProcessingException, match="geographic"):
+        qgis_processing.run(R2V, {"INPUT": str(geo), "OUTPUT": "memory:"})
+
+
+def test_qgis_process_on_bubenec(tmp_path):
+    """The real qgis_process.bin: onnxruntime and OpenCV load inside QGIS and it exits 0.
+    Target: the cadastre plots of Prague-Bubeneč (EPSG:3857), output in that CRS."""
+    out = tmp_path / "gan.gpkg"
+    tif = tmp_path / "gan.tif"
+    code, result, err = run_qgis_process("synthesizeroadsgan", {
+        "TARGET": bubenec_layer("plots"), "MODEL": 1, "SEED": 2, "OUTPUT": str(out),
+        "OUTPUT_RASTER": str(tif)})
+    assert code == 0, err
+    assert result is not None and result["results"]["OUTPUT"].startswith(str(out))
+    import pyogrio
+
+    info = pyogrio.read_info(out)
+    assert info["features"] > 10 and "3857" in info["crs"]
+    assert set(FIELDS) <= set(info["fields"])
+    assert tif.exists()

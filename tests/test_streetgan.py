@@ -1,0 +1,140 @@
+"""StreetGAN engine (plugin.streetgan): shipped ONNX generators run with onnxruntime (no torch)."""
+import json
+import shutil
+
+import numpy as np
+import pytest
+import shapely
+
+from helpers import assert_planar, helsinki_roads
+from urban_synthesis.plugin import metrics, raster_graph, streetgan
+from urban_synthesis.plugin.progress import InputError
+
+
+@pytest.fixture(scope="module")
+def models():
+    names = streetgan.shipped_models()
+    return {n: streetgan.load_model(n) for n in names}
+
+
+def test_at_least_two_shipped_models_with_cards(models):
+    assert len(models) >= 2
+    sources = set()
+    for name, gen in models.items():
+        card = gen.card
+        assert gen.path.stat().st_size < 8e6  # small enough to ship
+        assert card["cell_size_m"] == 3.0 and card["line_width_px"] == 15
+        assert card["input"]["channels"] == 100 and card["scale"] == 32
+        t = card["training"]
+        assert t["patch_px"] == 32 * (t["noise_m"] - 1) + 1 and t["patch_px"] >= 161
+        assert t["epochs"] >= 1 and len(t["losses"]) == t["epochs"]
+        assert card["training_data"]["source"]
+        sources.add(card["training_data"]["name"])
+    assert len(sources) >= 2  # different styles: different training networks
+
+
+@pytest.mark.parametrize("m", [2, 11, 25])
+def test_output_size_is_32_m_minus_1_plus_1(models, m):
+    gen = next(iter(models.values()))
+    img = gen.run(streetgan.noise(m, m + 1, 100, np.random.default_rng(0)))
+    assert img.shape == (32 * (m - 1) + 1, 32 * m + 1)
+    assert img.min() >= 0 and img.max() <= 255
+
+
+def test_tiles_stitch_without_seams(models):
+    gen = next(iter(models.values()))
+    one = streetgan.generate(gen, 700, 900, seed=4, tile=None)
+    tiled = streetgan.generate(gen, 700, 900, seed=4, tile=6)
+    assert one.shape == tiled.shape == (700, 900)
+    assert np.allclose(one, tiled, atol=0.05)
+
+
+def test_seeded_and_not_constant(models):
+    for gen in models.values():
+        a = streetgan.generate(gen, 321, 321, seed=1)
+        b = streetgan.generate(gen, 321, 321, seed=1)
+        c = streetgan.generate(gen, 321, 321, seed=2)
+        assert np.array_equal(a, b) and not np.array_equal(a, c)
+        road = (a > 127).mean()
+        assert 0.1 < road < 0.9  # roads and blocks, not a blank or saturated image
+
+
+def _copy(tmp_path, name="streetgan_helsinki"):
+    src = streetgan.MODELS_DIR / f"{name}.onnx"
+    dst = tmp_path / "model.onnx"
+    shutil.copy(src, dst)
+    shutil.copy(src.with_suffix(".json"), dst.with_suffix(".json"))
+    return dst
+
+
+def test_model_errors(tmp_path, models):
+    with pytest.raises(InputError, match="does not exist"):
+        streetgan.load_model(tmp_path / "nothing.onnx")
+    with pytest.raises(InputError, match="unknown StreetGAN model"):
+        streetgan.load_model("no_such_model")
+    path = _copy(tmp_path)
+    assert streetgan.load_model(path).channels == 100
+    # corrupt file: the card's checksum no longer matches
+    data = bytearray(path.read_bytes())
+    data[len(data) // 2:len(data) // 2 + 64] = bytes(64)
+    path.write_bytes(bytes(data))
+    with pytest.raises(InputError, match="corrupt"):
+        streetgan.load_model(path)
+    # no checksum in the card: onnxruntime itself refuses the garbage
+    card = json.loads(path.with_suffix(".json").read_text())
+    card.pop("onnx_sha256")
+    path.with_suffix(".json").write_text(json.dumps(card))
+    path.write_bytes(b"not an onnx model at all")
+    with pytest.raises(InputError, match="not a valid ONNX model"):
+        streetgan.load_model(path)
+    # missing and unreadable card
+    path = _copy(tmp_path)
+    path.with_suffix(".json").write_text("{broken")
+    with pytest.raises(InputError, match="cannot be read"):
+        streetgan.load_model(path)
+    path.with_suffix(".json").unlink()
+    with pytest.raises(InputError, match="card .* is missing"):
+        streetgan.load_model(path)
+    # a card that promises another channel count than the network takes
+    path = _copy(tmp_path)
+    card = json.loads(path.with_suffix(".json").read_text())
+    card["input"]["channels"] = 3
+    path.with_suffix(".json").write_text(json.dumps(card))
+    with pytest.raises(InputError, match="takes 100 input channels, its card says 3"):
+        streetgan.load_model(path)
+    # wrong input size / channel count at run time
+    gen = next(iter(models.values()))
+    with pytest.raises(InputError, match=r"noise of shape \(1, 100"):
+        gen.run(np.zeros((1, 3, 11, 11), np.float32))
+    with pytest.raises(InputError, match="at least 2 x 2"):
+        gen.run(np.zeros((1, 100, 1, 5), np.float32))
+
+
+def _window_metrics(lines, window):
+    parts = shapely.get_parts(shapely.intersection(np.asarray(lines, dtype=object), window))
+    parts = parts[(shapely.get_type_id(parts) == 1) & (shapely.length(parts) > 0.01)]
+    return metrics.compute_layout_metrics(roads=parts, area=window.buffer(-2.0))
+
+
+def test_helsinki_model_against_helsinki(models):
+    """Generated vs training network in the same window: planar, clipped, dead ends per km²
+    within 2x of the example's, block areas closer to Helsinki's than a random-noise image's."""
+    lines = np.asarray(helsinki_roads().geometry.values, dtype=object)
+    x0, y0, x1, y1 = shapely.total_bounds(lines)
+    window = shapely.box(0, 0, x1 - x0 - 60, y1 - y0 - 60)
+    real = _window_metrics(shapely.transform(lines, lambda c: c - [x0 + 30, y0 + 30]), window)
+    res = streetgan.synthesize(window, models["streetgan_helsinki"], seed=1)
+    assert len(res.geometry) > 20
+    assert_planar(res.geometry)
+    assert shapely.covers(window.buffer(1e-6), res.geometry).all()
+    assert set(np.unique(res.level)) >= {0, 1}
+    gen = _window_metrics(res.geometry, window)
+    ratio = gen.scalar("roads", "dead_ends_per_km2") / real.scalar("roads", "dead_ends_per_km2")
+    assert 0.5 <= ratio <= 2.0
+    rr, cc = res.image.shape
+    noise = raster_graph.raster_to_graph(np.random.default_rng(1).uniform(0, 255, (rr, cc)),
+                                         res.geotransform)
+    base = _window_metrics(noise.geometry, window)
+    d_gen = metrics.two_sample(gen.distribution("blocks", "area"), real.distribution("blocks", "area"))
+    d_base = metrics.two_sample(base.distribution("blocks", "area"), real.distribution("blocks", "area"))
+    assert d_gen["wasserstein_norm"] < d_base["wasserstein_norm"]
