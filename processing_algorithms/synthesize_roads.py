@@ -24,6 +24,8 @@ METHODS = (
            "urbansynth:synthesizeroadsfromfragments"),
     Method("growth", "Procedural growth, grid major and organic minor roads (Scharl 2010)",
            "urbansynth:growroads"),
+    Method("gan", "StreetGAN generator trained on Helsinki (Hartmann thesis ch. 4.2)",
+           "urbansynth:synthesizeroadsgan"),
 )
 
 
@@ -61,8 +63,8 @@ class SynthesizeRoads(AlgorithmBase):
     def initAlgorithm(self, config=None):  # noqa: N802
         self.add(QgsProcessingParameterEnum(
             self.METHOD, "Method", options=[m.label for m in METHODS], defaultValue=0),
-            "Which road synthesis runs: fragments (example-based, thesis ch. 4.1) or "
-            "procedural growth (Scharl 2010).")
+            "Which road synthesis runs: fragments (example-based, thesis ch. 4.1), "
+            "procedural growth (Scharl 2010) or the StreetGAN generator (thesis ch. 4.2).")
         self.add(QgsProcessingParameterFeatureSource(
             self.EXAMPLE_ROADS, "Example roads with levels", [QgsProcessing.TypeVectorLine]),
             "The example city's roads as written by 'Extract road hierarchy' (field level). "
@@ -73,8 +75,8 @@ class SynthesizeRoads(AlgorithmBase):
         self.add(QgsProcessingParameterFeatureSource(
             self.BOUNDARY, "District boundary", [QgsProcessing.TypeVectorPolygon],
             optional=True),
-            "Polygon(s) the district grows in (growth). Default: the convex hull of the "
-            "arterials.")
+            "Polygon(s) the district grows in (growth, StreetGAN). Default: the convex hull "
+            "of the arterials.")
         self.add(QgsProcessingParameterFile(
             self.FRAGMENT_DB, "Fragment database", extension="gpkg", optional=True),
             "Fragments only: a database from 'Build fragment database'. Default: built from "
@@ -128,8 +130,13 @@ class SynthesizeRoads(AlgorithmBase):
         if method.key == "fragments":
             params = {"ARTERIALS": arterials, "FRAGMENT_DB": fragment_db, "DEM": dem,
                       "SEED": seed}
-        else:
+        elif method.key == "growth":
             params = {"BOUNDARY": boundary, "MAJOR_ROADS": arterials, "DEM": dem, "SEED": seed}
+        else:
+            from ..plugin import streetgan  # the MODEL enum lists the shipped models by name
+
+            params = {"TARGET": boundary, "SEED": seed,
+                      "MODEL": streetgan.shipped_models().index("streetgan_helsinki")}
         # the destination as a path/URI (a model or a command line may leave it unset)
         params["OUTPUT"] = self.parameterAsOutputLayer(parameters, self.OUTPUT, context) \
             or QgsProcessing.TEMPORARY_OUTPUT

@@ -85,14 +85,15 @@ def district_model() -> QgsProcessingModelAlgorithm:
         0, 160)
     _param(model, QgsProcessingParameterFeatureSource(
         "BOUNDARY", "District boundary", [QgsProcessing.TypeVectorPolygon], optional=True),
-        "Polygon the district grows in (procedural growth); default the arterials' hull.",
+        "Polygon the district fills (growth, StreetGAN); default the arterials' hull.",
         0, 240)
     _param(model, QgsProcessingParameterRasterLayer("DEM", "Terrain (DEM)", optional=True),
            "Optional terrain: steers the road synthesis and drapes the street surfaces.", 0, 320)
     _param(model, QgsProcessingParameterEnum(
         "ROAD_METHOD", "Road synthesis method",
         options=["Fragments of the example (thesis ch. 4.1)",
-                 "Procedural growth (Scharl 2010)"], defaultValue=0),
+                 "Procedural growth (Scharl 2010)",
+                 "StreetGAN trained on Helsinki (thesis ch. 4.2)"], defaultValue=0),
         "How the streets are made (see 'Synthesize roads (choose the method)').", 0, 400)
     _param(model, QgsProcessingParameterEnum(
         "FOOTPRINT_METHOD", "Footprint method",

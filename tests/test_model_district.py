@@ -89,7 +89,7 @@ def helsinki_arterials(qgis_processing, tmp_path_factory):
     return hierarchy, arterials
 
 
-@pytest.mark.parametrize("method", [0, 1])
+@pytest.mark.parametrize("method", [0, 1, 2])
 def test_synthesize_roads_runs_each_method(qgis_processing, helsinki_arterials, tmp_path,
                                            method):
     """Helsinki's arterials filled by each method: planar roads with levels, near the hull."""
@@ -103,13 +103,16 @@ def test_synthesize_roads_runs_each_method(qgis_processing, helsinki_arterials, 
     # the arterials are kept and streets are added to them (Helsinki's clipped extract closes
     # few arterial faces, so the fragment refill is sparse)
     length = roads.to_crs(3067).length
-    assert length[roads["level"] >= 1].sum() > 0.1 * sketch.to_crs(3067).length.sum()
+    if method < 2:  # StreetGAN makes the whole network, the arterials only bound it
+        assert length[roads["level"] >= 1].sum() > 0.1 * sketch.to_crs(3067).length.sum()
+    else:
+        assert length.sum() > sketch.to_crs(3067).length.sum()
     assert "level" in roads.columns and (roads["level"].dropna() >= 0).all()
     assert roads["level"].dropna().max() >= 1
     lines = roads.to_crs(3067).geometry.values
     hull = shapely.convex_hull(shapely.union_all(sketch.to_crs(3067).geometry.values))
     assert shapely.within(lines, hull.buffer(50.0)).mean() > 0.95
-    if method == 0:  # growth keeps sketched arterials as drawn (they may cross)
+    if method != 1:  # growth keeps sketched arterials as drawn (they may cross)
         assert_planar(shapely.get_parts(lines))
 
 
