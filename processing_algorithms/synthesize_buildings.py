@@ -1,9 +1,11 @@
 """urbansynth:synthesizebuildings - building attributes or models per footprint or parcel
 (Hartmann thesis ch. 6, Scharl 2010 ch. 6)."""
+import re
 from collections import namedtuple
 
 import numpy as np
 import pandas as pd
+import shapely
 from qgis.core import (
     QgsProcessing,
     QgsProcessingException,
@@ -12,11 +14,13 @@ from qgis.core import (
     QgsProcessingParameterFeatureSource,
     QgsProcessingParameterField,
     QgsProcessingParameterNumber,
+    QgsProcessingParameterString,
     QgsWkbTypes,
 )
 
 from ..plugin import building_attribute_transfer as transfer
-from ..plugin import building_attributes, building_bestfit, qgis_io, roads
+from ..plugin import building_attributes, building_bestfit, building_parts, qgis_io, roads
+from ..plugin.progress import InputError
 from .common import AlgorithmBase
 
 #: One METHOD: its label in the dialog, the parameters it needs and the method that runs
@@ -51,10 +55,27 @@ class SynthesizeBuildings(AlgorithmBase):
     STREET_REACH = "STREET_REACH"
     MAX_ANGLE = "MAX_ANGLE"
     SEED = "SEED"
+    SKELETON = "SKELETON"
+    PARTS_LIBRARY = "PARTS_LIBRARY"
+    BUILDING_PARTS = "BUILDING_PARTS"
+    PARTS_DEPTH = "PARTS_DEPTH"
+    PARTS_HEIGHT = "PARTS_HEIGHT"
+    PARTS_FAR_MIN = "PARTS_FAR_MIN"
+    PARTS_FAR_MAX = "PARTS_FAR_MAX"
+    PARTS_FLOOR_AREA = "PARTS_FLOOR_AREA"
+    PARTS_COUNTS = "PARTS_COUNTS"
+    K_SOLUTIONS = "K_SOLUTIONS"
+    AREA_RESOLUTION = "AREA_RESOLUTION"
+    CORNER_TOLERANCE = "CORNER_TOLERANCE"
+    SKELETON_SIMPLIFY = "SKELETON_SIMPLIFY"
     OUTPUT = "OUTPUT"
 
     CHOICES = (("medoid", "Most typical of the k (lowest error)"),
                ("random", "Random among the k (keeps the example's spread)"))
+    #: built-in parts databases (building_parts): key, label
+    PARTS_LIBRARIES = (("terrace", "Built-in terrace parts (along the skeleton)"),
+                       ("terrace_2m", "Built-in terrace parts, 2 m lengths only (fast FAR)"),
+                       ("skyscraper", "Built-in skyscraper floors (stacked on the site)"))
 
     def __init__(self):
         super().__init__()
@@ -64,6 +85,8 @@ class SynthesizeBuildings(AlgorithmBase):
                    (self.FOOTPRINTS, self.EXAMPLE_BUILDINGS), self._attributes),
             Method("bestfit", "Best-fitting library building per parcel (Scharl)",
                    (self.PARCELS, self.ROADS), self._bestfit),
+            Method("parts", "Part-based buildings along skeletons or stacked on sites (thesis)",
+                   (self.SKELETON,), self._parts),
         )
 
     def name(self):
@@ -88,6 +111,14 @@ class SynthesizeBuildings(AlgorithmBase):
             "access side facing a street and no blind side facing one (±30°), moved to the "
             "street with a minimum setback. Output: the placed footprints with source_id, "
             "rotation, offset_x/y, parcel_id and the library's attributes.\n\n"
+            "Parts (Hartmann thesis, ch. 6): per Skeleton feature one building made of the k "
+            "best sequences of building parts meeting the constraints exactly (length of the "
+            "skeleton, FAR or floor area, counts): end parts at the ends of a line, corner "
+            "parts at its vertices, parts following a polygon's ring all round (a block's "
+            "offset polygon); floor parts (the skyscraper library) are stacked to the height "
+            "on the polygon as site. Output: one PolygonZ per part (z = base_m) with "
+            "building_id, solution (1 = best), cost, kind, base_m, top_m, height_m, levels and "
+            "floor_area_m2, for QGIS 3D (extrude by height_m).\n\n"
             "Outputs are in the input layer's CRS, styled by height."
         )
 
@@ -95,7 +126,8 @@ class SynthesizeBuildings(AlgorithmBase):
         self.add(QgsProcessingParameterEnum(
             self.METHOD, "Method", options=[m.label for m in self.METHODS], defaultValue=0),
             "Attributes: needs Footprints and Example buildings. Best fit: needs Parcels and "
-            "Roads (and optionally a Building library).")
+            "Roads (and optionally a Building library). Parts: needs a Skeleton (and "
+            "optionally Building parts).")
         poly = [QgsProcessing.TypeVectorPolygon]
         line = [QgsProcessing.TypeVectorLine]
         self.add(QgsProcessingParameterFeatureSource(
@@ -124,10 +156,12 @@ class SynthesizeBuildings(AlgorithmBase):
             self.EXAMPLE_ROADS, "Example roads (attributes)", line, optional=True),
             "Street centrelines around the example buildings (with Roads).")
         self.add(QgsProcessingParameterFeatureSource(
-            self.BLOCKS, "Blocks for the floor-area ratio (attributes)", poly, optional=True),
+            self.BLOCKS, "Blocks for the floor-area ratio (attributes, parts)", poly,
+            optional=True),
             "With a target FAR: the FAR is met per block (a footprint belongs to the block "
             "holding it). Without blocks it is met for the whole district (the convex hull "
-            "of the footprints).")
+            "of the footprints). Parts: a building's site is the block holding most of its "
+            "skeleton (without blocks: the skeleton polygon itself).")
         self.add(QgsProcessingParameterNumber(
             self.K_NEIGHBOURS, "Candidates per footprint (k)", QgsProcessingParameterNumber.Integer,
             defaultValue=9, minValue=1, maxValue=100),
@@ -149,7 +183,8 @@ class SynthesizeBuildings(AlgorithmBase):
             self.TARGET_FAR, "Target floor-area ratio (0 = none)",
             QgsProcessingParameterNumber.Double, defaultValue=0.0, minValue=0.0, maxValue=100.0),
             "Floor area (footprint x levels) / ground area, met by scaling levels per block "
-            "(with Blocks) or for the district.")
+            "(with Blocks) or for the district. Parts: every building's exact FAR on its site "
+            "(the block from Blocks holding it, else the skeleton polygon).")
         self.add(QgsProcessingParameterNumber(
             self.STOREY_HEIGHT, "Storey height (m)", QgsProcessingParameterNumber.Double,
             defaultValue=building_attributes.STOREY_HEIGHT, minValue=0.5, maxValue=20.0),
@@ -181,10 +216,89 @@ class SynthesizeBuildings(AlgorithmBase):
             self.SEED, "Random seed", QgsProcessingParameterNumber.Integer, defaultValue=1,
             minValue=0),
             "The same seed gives the same result (random choice among the candidates).")
+        self._init_parts(poly, line)
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT, "Buildings", QgsProcessing.TypeVectorPolygon),
             "Footprints with height_m, levels, building_type, roof_shape, source_id and "
-            "similarity (attributes) or placed library buildings (best fit).")
+            "similarity (attributes), placed library buildings (best fit) or building parts "
+            "with building_id, solution, base_m, top_m and height_m (parts).")
+
+    def _init_parts(self, poly, line):
+        self.add(QgsProcessingParameterFeatureSource(
+            self.SKELETON, "Skeleton (parts)", line + poly, optional=True),
+            "One building per feature. A line is the street-side facade line: parts extend "
+            "away from the street, on the side opposite to a 'front' field (left / right of "
+            "the line's direction; default right), with end parts at its ends and corner parts "
+            "at its vertices. A polygon is filled all round its ring (e.g. a block buffered "
+            "inward by half a street), or is the site a tower of floor parts stands on.")
+        self.add(QgsProcessingParameterEnum(
+            self.PARTS_LIBRARY, "Built-in parts library (parts)",
+            options=[p[1] for p in self.PARTS_LIBRARIES], defaultValue=0),
+            "Used without a Building parts layer. Terrace: 36 straight, corner and end parts, "
+            "3-5 levels of 3 m (the 2 m variant leaves out the 4.2-5 m infill parts so that "
+            "FAR constraints stay fast, but fills only skeletons with sides on a 2 m grid). "
+            "Skyscraper: 18 square floor parts of 20-40 m (thesis Fig. 6.5).")
+        self.add(QgsProcessingParameterFeatureSource(
+            self.BUILDING_PARTS, "Building parts (parts)", poly, optional=True),
+            "A parts database: footprint polygons (any position) with fields 'kind' (floor, "
+            "straight, corner, end_left, end_right), 'length_m' (along the skeleton; a floor's "
+            "height) and 'height_m'; optional part_id, depth_m, levels, floor_area_m2, "
+            "area_left_m2 / area_right_m2 (cross-sections), angle_deg (a corner's turn) and "
+            "numeric fields to count. Floor parts only: towers; otherwise parts along the "
+            "skeleton.")
+        self.add(QgsProcessingParameterNumber(
+            self.PARTS_DEPTH, "Depth of the built-in terrace parts (m)",
+            QgsProcessingParameterNumber.Double, defaultValue=12.0, minValue=3.0,
+            maxValue=50.0),
+            "How far the built-in terrace parts reach away from the street.", advanced=True)
+        self.add(QgsProcessingParameterNumber(
+            self.PARTS_HEIGHT, "Tower height (m, floor parts)", QgsProcessingParameterNumber.Double,
+            defaultValue=120.0, minValue=0.2, maxValue=1000.0),
+            "Floor parts are stacked to exactly this height (on the 0.2 m grid).")
+        self.add(QgsProcessingParameterNumber(
+            self.PARTS_FAR_MIN, "Minimum FAR (parts, 0 = none)", 
+            QgsProcessingParameterNumber.Double,
+            defaultValue=0.0, minValue=0.0, maxValue=100.0),
+            "Lower bound of each building's floor-area ratio on its site (see Target FAR; "
+            "a wide interval with the full terrace library is slow: use a coarser floor-area "
+            "grid or the 2 m library).")
+        self.add(QgsProcessingParameterNumber(
+            self.PARTS_FAR_MAX, "Maximum FAR (parts, 0 = none)", 
+            QgsProcessingParameterNumber.Double,
+            defaultValue=0.0, minValue=0.0, maxValue=100.0),
+            "Upper bound of each building's floor-area ratio on its site.")
+        self.add(QgsProcessingParameterNumber(
+            self.PARTS_FLOOR_AREA, "Exact floor area per building (m², 0 = none)",
+            QgsProcessingParameterNumber.Double, defaultValue=0.0, minValue=0.0,
+            maxValue=1e7),
+            "Each building's total floor area (sum of its parts' floor_area_m2).")
+        self.add(QgsProcessingParameterString(
+            self.PARTS_COUNTS, "Count constraints (parts)", optional=True),
+            "Bounds on counts per building, 'name=lo..hi' or 'name=n' separated by ';', where "
+            "name is a part kind or a numeric field of the parts, e.g. 'corner=4; doors=2..6' "
+            "(the built-in terrace parts have doors and balconies).", advanced=True)
+        self.add(QgsProcessingParameterNumber(
+            self.K_SOLUTIONS, "Solutions per building (k best)",
+            QgsProcessingParameterNumber.Integer, defaultValue=1, minValue=1, maxValue=50),
+            "The k cheapest distinct part sequences (cost: cross-section disagreement between "
+            "neighbours), all written with solution = 1..k in order of cost.")
+        self.add(QgsProcessingParameterNumber(
+            self.AREA_RESOLUTION, "Floor-area grid (m²)", QgsProcessingParameterNumber.Double,
+            defaultValue=1.0, minValue=0.01, maxValue=1000.0),
+            "Grid of the floor-area sums (thesis: 1 m²). A coarser grid makes wide FAR "
+            "intervals much faster, meeting the bounds to half a grid step per part.",
+            advanced=True)
+        self.add(QgsProcessingParameterNumber(
+            self.CORNER_TOLERANCE, "Corner angle tolerance (°)", 
+            QgsProcessingParameterNumber.Double,
+            defaultValue=building_parts.CORNER_TOLERANCE, minValue=0.0, maxValue=90.0),
+            "A corner part fits a skeleton vertex whose turn is this close to its angle.",
+            advanced=True)
+        self.add(QgsProcessingParameterNumber(
+            self.SKELETON_SIMPLIFY, "Skeleton simplification (m)",
+            QgsProcessingParameterNumber.Double, defaultValue=0.5, minValue=0.0, maxValue=50.0),
+            "Vertices closer than this to a straight line are dropped first, so that digitising "
+            "noise makes no corners.", advanced=True)
 
     # ----------------------------------------------------------------------- run
 
@@ -396,3 +510,194 @@ class SynthesizeBuildings(AlgorithmBase):
         qgis_io.style_output(context, dest, "buildings_by_height.qml")
         feedback.setProgress(100)
         return {self.OUTPUT: dest}
+
+    # ----------------------------------------------------------------------- parts
+
+    def _parts_library(self, parameters, context, feedback, crs):
+        if self._given(parameters, self.BUILDING_PARTS):
+            frame = qgis_io.read_source(self, parameters, self.BUILDING_PARTS, context,
+                                        feedback, kind="polygons", target_crs=crs)
+            table = frame.attributes.drop(columns=[c for c in frame.attributes
+                                                   if c.lower() == "fid"])
+            try:
+                library = building_parts.library_from_table(table, frame.geometry,
+                                                            name=f"Layer {frame.name}")
+            except InputError as err:
+                raise QgsProcessingException(str(err)) from err
+            return library, frame.name
+        key = self.PARTS_LIBRARIES[self.parameterAsEnum(parameters, self.PARTS_LIBRARY,
+                                                        context)][0]
+        if key == "skyscraper":
+            return building_parts.skyscraper_library(), "the built-in skyscraper floors"
+        depth = self._number(parameters, self.PARTS_DEPTH, context, 3.0, 50.0)
+        return (building_parts.terrace_library(depth=depth, infill=key == "terrace"),
+                "the built-in terrace parts")
+
+    def _parts_counts(self, parameters, context, library, label):
+        """'corner=4; doors=2..6' -> {'corner': (4, 4), 'doors': (2, 6)}, checked."""
+        text = self.parameterAsString(parameters, self.PARTS_COUNTS, context) or ""
+        counts = {}
+        for item in filter(None, (s.strip() for s in re.split(r"[;,]", text))):
+            m = re.fullmatch(r"([^=\s]+)\s*=\s*(\d+(?:\.\d*)?)\s*(?:\.\.\s*(\d+(?:\.\d*)?))?",
+                             item)
+            if not m:
+                raise QgsProcessingException(
+                    f"Count constraint '{item}' is not 'name=n' or 'name=lo..hi'.")
+            name, lo = m.group(1), float(m.group(2))
+            hi = float(m.group(3)) if m.group(3) else lo
+            if hi < lo:
+                raise QgsProcessingException(f"Count constraint '{item}': {hi:g} < {lo:g}.")
+            if name not in building_parts.PART_KINDS and name not in library.table:
+                raise QgsProcessingException(
+                    f"Count constraint on '{name}': neither a part kind "
+                    f"({', '.join(building_parts.PART_KINDS)}) nor a field of {label}.")
+            counts[name] = (lo, hi)
+        return counts
+
+    def _skeletons(self, parameters, context, feedback):
+        """Skeleton parts (multi-part features split, lines merged) with their feature ids."""
+        source = self.parameterAsSource(parameters, self.SKELETON, context)
+        gtype = QgsWkbTypes.geometryType(source.wkbType()) if source is not None else None
+        kind = "polygons" if gtype == QgsWkbTypes.PolygonGeometry else "lines"
+        frame = qgis_io.read_source(self, parameters, self.SKELETON, context, feedback,
+                                    kind=kind, fields=["front"])
+        geoms = frame.geometry
+        if kind == "lines":
+            geoms = shapely.line_merge(geoms)
+        tol = self._number(parameters, self.SKELETON_SIMPLIFY, context, 0.0, 50.0)
+        if tol > 0:
+            geoms = shapely.simplify(geoms, tol, preserve_topology=True)
+        parts, index = shapely.get_parts(geoms, return_index=True)
+        if len(parts) > len(geoms):
+            feedback.pushInfo(f"{frame.name}: {len(parts) - len(geoms)} extra parts of "
+                              "multi-part features are built as buildings of their own "
+                              "(same building_id).")
+        front = qgis_io.field_values(frame, "front", "right")
+        fronts = []
+        for i in index:
+            value = front[i]
+            value = "right" if value is None or str(value).strip() == "" else \
+                str(value).strip().lower()
+            if value not in ("left", "right"):
+                raise QgsProcessingException(
+                    f"Layer {frame.name}, feature {frame.fids[i]}: front must be 'left' or "
+                    f"'right' (the street side of the line), not '{front[i]}'.")
+            fronts.append(value)
+        return frame, kind, parts, frame.fids[index], fronts
+
+    def _sites(self, parameters, context, feedback, crs, parts):
+        """Site area per skeleton part: the block holding most of it, else its own polygon."""
+        area = np.where(shapely.get_type_id(parts) == 3, shapely.area(parts), np.nan)
+        if not self._given(parameters, self.BLOCKS):
+            return area
+        blocks = qgis_io.read_source(self, parameters, self.BLOCKS, context, feedback,
+                                     kind="polygons", target_crs=crs).geometry
+        probe = shapely.buffer(parts, 1.0)
+        tree = shapely.STRtree(blocks)
+        i, j = tree.query(probe, predicate="intersects")
+        if len(i):
+            share = shapely.area(shapely.intersection(probe[i], blocks[j]))
+            best = pd.DataFrame({"i": i, "j": j, "s": share}).sort_values("s").groupby("i").last()
+            area[best.index.to_numpy()] = shapely.area(blocks[best["j"].to_numpy()])
+        return area
+
+    def _parts(self, parameters, context, feedback):
+        frame, kind, parts, fids, fronts = self._skeletons(parameters, context, feedback)
+        crs = frame.crs
+        library, label = self._parts_library(parameters, context, feedback, crs)
+        kinds = set(library.table["kind"])
+        towers = kinds == {"floor"}
+        if towers and kind != "polygons":
+            raise QgsProcessingException(
+                f"Layer {frame.name} has lines: floor parts ({label}) are stacked on sites, "
+                "so the Skeleton must hold polygons.")
+        far = self._number(parameters, self.TARGET_FAR, context, 0.0, 100.0)
+        lo = self._number(parameters, self.PARTS_FAR_MIN, context, 0.0, 100.0)
+        hi = self._number(parameters, self.PARTS_FAR_MAX, context, 0.0, 100.0)
+        if far > 0 and (lo > 0 or hi > 0):
+            raise QgsProcessingException("Give either a Target FAR (exact) or a minimum / "
+                                         "maximum FAR, not both.")
+        if hi > 0 and hi < lo:
+            raise QgsProcessingException(f"The maximum FAR ({hi:g}) is below the minimum "
+                                         f"({lo:g}).")
+        far_bounds = far if far > 0 else ((lo, hi if hi > 0 else np.inf) if lo > 0 or hi > 0
+                                          else None)
+        floor_area = self._number(parameters, self.PARTS_FLOOR_AREA, context, 0.0, 1e7)
+        options = dict(
+            floor_area=floor_area if floor_area > 0 else None,
+            counts=self._parts_counts(parameters, context, library, label),
+            k=int(self._number(parameters, self.K_SOLUTIONS, context, 1, 50)),
+            area_resolution=self._number(parameters, self.AREA_RESOLUTION, context, 0.01,
+                                         1000.0))
+        site_area = self._sites(parameters, context, feedback, crs, parts)
+        if far_bounds is not None and not np.isfinite(site_area).all():
+            raise QgsProcessingException(
+                f"Layer {frame.name}: a FAR needs a site for every building: give Blocks "
+                "(the block holding each skeleton line is its site) or polygon skeletons.")
+        height = self._number(parameters, self.PARTS_HEIGHT, context, 0.2, 1000.0)
+        tolerance = self._number(parameters, self.CORNER_TOLERANCE, context, 0.0, 90.0)
+        feedback.pushInfo(f"{len(parts)} buildings from {label} ({len(library)} parts, "
+                          f"{library.n_transitions} transitions)"
+                          + (f", towers of {height:g} m." if towers else "."))
+        progress = qgis_io.progress_for(feedback, 10, 90)
+        geoms, tables, failed = [], [], []
+        for n, (skeleton, fid, front) in enumerate(zip(parts, fids, fronts)):
+            sub = progress.sub(n / len(parts), (n + 1) / len(parts))
+            if feedback.isCanceled():
+                raise QgsProcessingException("Canceled by the user.")
+            site = float(site_area[n]) if np.isfinite(site_area[n]) else None
+            try:
+                if towers:
+                    result = qgis_io.run_engine(
+                        frame.name, building_parts.stack_floors, library, height,
+                        far=far_bounds, site=skeleton, site_area=site, progress=sub, **options)
+                else:
+                    result = qgis_io.run_engine(
+                        frame.name, building_parts.build_along_skeleton, skeleton, library,
+                        front=front, far=far_bounds, site_area=site,
+                        corner_tolerance=tolerance, progress=sub, **options)
+            except QgsProcessingException as err:
+                if "Canceled" in str(err):
+                    raise
+                failed.append(f"feature {fid}: {str(err).split(': ', 1)[-1]}")
+                continue
+            table = result.table.copy()
+            summary = result.summary.set_index("solution")
+            table.insert(0, "building_id", int(fid))
+            per_solution = summary.loc[table["solution"]]
+            table["building_floor_area_m2"] = per_solution["floor_area_m2"].to_numpy()
+            table["building_far"] = per_solution["far"].to_numpy()
+            geoms.append(result.geometry)
+            tables.append(table)
+        if failed:
+            for message in failed[:10]:
+                feedback.reportError(f"Layer {frame.name}, {message}", fatalError=False)
+            if not tables:
+                raise QgsProcessingException(
+                    f"Layer {frame.name}: no building could be made from {label}. "
+                    f"{failed[0][0].upper()}{failed[0][1:]}")
+        table = pd.concat(tables, ignore_index=True)
+        geometry = np.concatenate(geoms)
+        feedback.pushInfo(f"{len(tables)} of {len(parts)} buildings made ({len(failed)} "
+                          f"infeasible), {len(table)} parts; floor area "
+                          f"{table.loc[table.solution == 1, 'floor_area_m2'].sum():,.0f} m² "
+                          "in the best solutions.")
+        # PolygonZ at the part's base (QGIS 3D: extrude by height_m); back in the input CRS
+        # first, since write_sink's reprojection is 2D
+        geometry = qgis_io.reproject(geometry, crs, frame.source_crs, context)
+        geometry = np.array([shapely.force_3d(g, z) for g, z in
+                             zip(geometry, table["base_m"].to_numpy(float))], dtype=object)
+        dest = qgis_io.write_sink(self, parameters, self.OUTPUT, context, geometry, table,
+                                  PARTS_FIELDS, QgsWkbTypes.MultiPolygonZ, frame.source_crs,
+                                  frame.source_crs, feedback)
+        qgis_io.style_output(context, dest, "buildings_by_height.qml")
+        feedback.setProgress(100)
+        return {self.OUTPUT: dest}
+
+
+#: the parts output: building_parts.PartsResult.table with the building it belongs to
+PARTS_FIELDS = [("building_id", "int"), ("solution", "int"), ("cost", "float"),
+                ("seq_index", "int"), ("part_id", "str"), ("kind", "str"), ("start_m", "float"),
+                ("length_m", "float"), ("base_m", "float"), ("top_m", "float"),
+                ("height_m", "float"), ("levels", "int"), ("floor_area_m2", "float"),
+                ("building_floor_area_m2", "float"), ("building_far", "float")]
