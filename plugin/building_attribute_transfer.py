@@ -54,7 +54,8 @@ from .building_attributes import STOREY_HEIGHT
 from .progress import InputError, Progress, ensure
 
 __all__ = ["FEATURE_NAMES", "OUTPUT_FIELDS", "AttributeTransfer", "footprint_features",
-           "transfer_attributes", "meet_far", "neighbour_height", "block_median_baseline"]
+           "transfer_attributes", "meet_far", "neighbour_height", "block_median_baseline",
+           "CONTEXT_RADIUS", "DonorModel", "donor_model", "target_features", "match_attributes"]
 
 #: Radii (m) of the context features.
 COVERAGE_RADII = (50.0, 150.0)
@@ -281,107 +282,46 @@ def transfer_attributes(footprints, examples, example_attributes: pd.DataFrame,
     """
     progress = ensure(progress)
     fp = _polygons(footprints, "footprints")
-    ex = _polygons(examples, "example buildings")
-    if len(example_attributes) != len(ex):
-        raise InputError("example attributes and geometries differ in length")
     if not (k >= 1):
         raise InputError("k must be at least 1")
     if not (0 <= min_height < max_height):
         raise InputError(f"the height range {min_height:g}..{max_height:g} m is empty")
     if target_far is not None and not (target_far > 0 and math.isfinite(target_far)):
         raise InputError("the target floor-area ratio must be a positive number")
-    if not (storey_height > 0):
-        raise InputError("the storey height must be positive")
     if choice_mode not in ("medoid", "random"):
         raise InputError(f"unknown choice mode '{choice_mode}' (medoid, random)")
-
-    def col(name, default):
-        if name in example_attributes:
-            return example_attributes[name].to_numpy()
-        return np.full(len(ex), default, dtype=object)
-
-    ex_h = pd.to_numeric(pd.Series(col("height_m", np.nan)), errors="coerce").to_numpy(float)
-    ex_l = pd.to_numeric(pd.Series(col("levels", np.nan)), errors="coerce").to_numpy(float)
-    ex_h = np.where(np.isfinite(ex_h), ex_h, ex_l * storey_height)
-    donor = np.isfinite(ex_h) & (ex_h > 0)
+    use_roads = bool(roads is not None and example_roads is not None and len(roads)
+                     and len(example_roads))
+    use_art = bool(arterials is not None and example_arterials is not None and len(arterials)
+                   and len(example_arterials))
     # examples without any height (e.g. a cadastre of outlines only) still give types and
     # roofs; heights and levels stay empty
-    no_heights = not donor.any()
-    if no_heights:
-        if target_far is not None:
-            raise InputError("no example building has a height or a number of levels, so a "
-                             "target floor-area ratio cannot be met")
-        donor = np.ones(len(ex), dtype=bool)
-    ids = np.arange(1, len(ex) + 1) if example_ids is None else np.asarray(example_ids)
+    model = donor_model(examples, example_attributes, example_ids, example_roads,
+                        example_arterials, use_roads, use_art, storey_height)
+    if model.no_heights and target_far is not None:
+        raise InputError("no example building has a height or a number of levels, so a "
+                         "target floor-area ratio cannot be met")
     progress.step(0.05)
-
-    use_roads = roads is not None and example_roads is not None and len(roads) and len(example_roads)
-    use_art = (arterials is not None and example_arterials is not None and len(arterials)
-               and len(example_arterials))
-    f_t = footprint_features(fp, footprint_context, roads if use_roads else None,
-                             arterials if use_art else None)
-    progress.step(0.3)
-    f_e = footprint_features(ex, None, example_roads if use_roads else None,
-                             example_arterials if use_art else None)
+    f_t = target_features(fp, footprint_context, roads, arterials, model)
     progress.step(0.55)
-    # heights of the example buildings around each one (leave-one-out for the donors)
-    c_ex = shapely.get_coordinates(shapely.centroid(ex[donor]))
-    f_e.loc[donor, "neighbour_height"] = neighbour_height(c_ex, ex_h[donor], c_ex)
-    f_t["neighbour_height"] = neighbour_height(
-        shapely.get_coordinates(shapely.centroid(fp)), ex_h[donor], c_ex)
-    cols = [c for c in FEATURE_NAMES + ("neighbour_height",)
-            if np.isfinite(f_e.loc[donor, c]).mean() > 0.5 and np.isfinite(f_t[c]).any()]
-    mu = f_e.loc[donor, cols].mean().to_numpy()  # NaN-skipping
-    sd = f_e.loc[donor, cols].std().to_numpy()
-    sd = np.where(np.isfinite(sd) & (sd > 1e-9), sd, 1.0)
-    w = np.array([FEATURE_WEIGHTS[c] for c in cols])
-    xe = np.nan_to_num((f_e.loc[donor, cols].to_numpy() - mu) / sd * w, nan=0.0)
-    # a feature missing for some targets (no example building near them) counts as the
-    # donors' mean there (0 after standardisation): neutral, not a match to anyone
-    xt = np.nan_to_num((f_t[cols].to_numpy() - mu) / sd * w, nan=0.0)
-    donors = np.flatnonzero(donor)
-    kk = int(min(k, len(donors)))
-    dist, idx = cKDTree(xe).query(xt, k=kk)
-    dist, idx = dist.reshape(len(fp), kk), idx.reshape(len(fp), kk)
-    rng = np.random.default_rng(seed)
-    if no_heights:
-        choice = np.zeros(len(fp), dtype=int)  # the most similar example
-    elif kk > 1 and choice_mode == "medoid":
-        # the candidate whose height is the weighted median of the k: a real example's
-        # height (no averaging), with the variance of a median
-        hk = np.log(ex_h[donors[idx]])
-        wk = 1.0 / (dist + 1e-6)
-        order = np.argsort(hk, axis=1)
-        cw = np.cumsum(np.take_along_axis(wk, order, 1), axis=1)
-        mid = (cw < 0.5 * cw[:, -1:]).sum(axis=1)
-        choice = order[np.arange(len(fp)), np.minimum(mid, kk - 1)]
-    elif kk > 1:
-        # kernel weights with a per-footprint bandwidth: near-ties are drawn evenly,
-        # far candidates rarely
-        h = np.maximum(np.median(dist, axis=1, keepdims=True), 1e-6)
-        p = np.exp(-0.5 * (dist / h) ** 2)
-        p /= p.sum(axis=1, keepdims=True)
-        choice = (rng.random((len(fp), 1)) > np.cumsum(p, axis=1)).sum(axis=1)
-        choice = np.minimum(choice, kk - 1)
-    else:
-        choice = np.zeros(len(fp), dtype=int)
-    pick = donors[idx[np.arange(len(fp)), choice]]
-    d = dist[np.arange(len(fp)), choice]
+    model = model.standardise({c: bool(np.isfinite(f_t[c]).any())
+                               for c in FEATURE_NAMES + ("neighbour_height",)})
+    uniforms = np.random.default_rng(seed).random((len(fp), 1)) \
+        if choice_mode == "random" else None
+    table, pick = _match(f_t, shapely.area(fp), model, k, choice_mode, uniforms,
+                         min_height, max_height)
     progress.step(0.8)
-
-    storey = _storey(ex_h, ex_l, storey_height)[pick]
-    height = np.clip(ex_h[pick], min_height, max_height)
-    levels = np.where(np.isfinite(ex_l[pick]) & (ex_h[pick] == height), ex_l[pick],
-                      np.round(height / storey))
-    min_lv = np.maximum(np.ceil(min_height / storey - 1e-9), 1.0)
-    max_lv = np.maximum(np.floor(max_height / storey + 1e-9), min_lv)
-    # whole storeys (OSM has half storeys: 2.5 -> 3), at least one
-    levels = np.clip(np.maximum(np.floor(levels + 0.5), 1.0), min_lv, max_lv)
-    area = shapely.area(fp)
-    stats: Dict[str, float] = {"n_footprints": len(fp), "n_examples": len(ex),
-                               "n_donors": int(donor.sum()), "features": ",".join(cols),
-                               "n_clipped": int((height != ex_h[pick]).sum())}
+    ex_h = model.ex_h
+    stats: Dict[str, float] = {
+        "n_footprints": len(fp), "n_examples": len(model.ex_h),
+        "n_donors": int(model.donor.sum()), "features": ",".join(model.cols),
+        "n_clipped": 0 if model.no_heights else
+        int((np.clip(ex_h[pick], min_height, max_height) != ex_h[pick]).sum())}
     if target_far is not None:
+        area = shapely.area(fp)
+        storey = _storey(ex_h, model.ex_l, storey_height)[pick]
+        min_lv = np.maximum(np.ceil(min_height / storey - 1e-9), 1.0)
+        max_lv = np.maximum(np.floor(max_height / storey + 1e-9), min_lv)
         if blocks is not None and len(blocks):
             blocks = np.asarray(blocks, dtype=object)
             pts = shapely.point_on_surface(fp)
@@ -393,25 +333,16 @@ def transfer_attributes(footprints, examples, example_attributes: pd.DataFrame,
         else:
             group = np.zeros(len(fp), dtype=int)
             ground = {0: float(shapely.area(shapely.convex_hull(shapely.union_all(fp))))}
-        levels = meet_far(area, levels, group, ground, target_far, min_lv, max_lv)
-        height = np.round(levels * storey, 2)
+        levels = meet_far(area, table["levels"].to_numpy(dtype=float), group, ground,
+                          target_far, min_lv, max_lv)
+        table["height_m"] = np.round(levels * storey, 2)
+        table["levels"] = levels.astype(np.int64)
+        table["floor_area_m2"] = area * levels
         far = [float((area[group == g] * levels[group == g]).sum() / a)
                for g, a in ground.items() if a > 0]
         stats["far_min"], stats["far_max"] = (min(far), max(far)) if far else (np.nan, np.nan)
         stats["far_mean"] = float(np.mean(far)) if far else np.nan
     progress.step(1.0)
-    btype = np.asarray(col("building_type", None), dtype=object)[pick]
-    roof = np.asarray(col("roof_shape", None), dtype=object)[pick]
-    if no_heights:
-        height = np.full(len(fp), np.nan)
-        levels = np.full(len(fp), np.nan)
-        stats["n_clipped"] = 0
-    table = pd.DataFrame({
-        "height_m": height, "levels": levels if no_heights else levels.astype(np.int64),
-        "building_type": [t if isinstance(t, str) and t else "unknown" for t in btype],
-        "roof_shape": [r if isinstance(r, str) and r else None for r in roof],
-        "source_id": ids[pick], "similarity": 1.0 / (1.0 + d),
-        "floor_area_m2": area * levels})
     return AttributeTransfer(table, stats)
 
 
@@ -432,3 +363,161 @@ def block_median_baseline(footprints, known_height: np.ndarray, blocks) -> np.nd
     out[has] = med.reindex(group[has]).to_numpy()
     return np.where(np.isfinite(out), out, overall)
 
+
+
+# --------------------------------------------------------------------------- partitioned runs
+# The steps of transfer_attributes, also run separately for targets in partitions
+# (plugin.distributed): the example side once (donor_model), the target features per
+# partition with a halo of CONTEXT_RADIUS around it (target_features), the feature columns
+# and their standardisation once from all targets (DonorModel.standardise), matching per
+# partition (match_attributes). A target FAR is a district-wide step of transfer_attributes.
+
+#: How far (m) the context features of a footprint reach (coverage and grain radii; the
+#: neighbour heights come from the examples, which every partition has).
+CONTEXT_RADIUS = max(max(COVERAGE_RADII), GRAIN_RADIUS)
+
+
+@dataclass
+class DonorModel:
+    """The example side of :func:`transfer_attributes`, computed once."""
+
+    features: pd.DataFrame        # example features incl. neighbour_height
+    donor: np.ndarray             # examples with a height (all when none has one)
+    donor_centres: np.ndarray
+    ex_h: np.ndarray
+    ex_l: np.ndarray
+    ids: np.ndarray
+    btype: np.ndarray
+    roof: np.ndarray
+    no_heights: bool
+    use_roads: bool
+    use_art: bool
+    storey_height: float
+    cols: Optional[list] = None   # set by standardise
+    mu: Optional[np.ndarray] = None
+    sd: Optional[np.ndarray] = None
+    w: Optional[np.ndarray] = None
+
+    def standardise(self, target_finite: Dict[str, bool]) -> "DonorModel":
+        """Choose the feature columns (``target_finite[c]``: some target has a finite
+        value of c) and the donors' mean and spread, as :func:`transfer_attributes`."""
+        f_e, donor = self.features, self.donor
+        cols = [c for c in FEATURE_NAMES + ("neighbour_height",)
+                if np.isfinite(f_e.loc[donor, c]).mean() > 0.5 and target_finite[c]]
+        mu = f_e.loc[donor, cols].mean().to_numpy()
+        sd = f_e.loc[donor, cols].std().to_numpy()
+        sd = np.where(np.isfinite(sd) & (sd > 1e-9), sd, 1.0)
+        w = np.array([FEATURE_WEIGHTS[c] for c in cols])
+        return DonorModel(**{**self.__dict__, "cols": cols, "mu": mu, "sd": sd, "w": w})
+
+
+def donor_model(examples, example_attributes: pd.DataFrame,
+                example_ids: Optional[Sequence[int]] = None, example_roads=None,
+                example_arterials=None, use_roads: bool = False, use_art: bool = False,
+                storey_height: float = STOREY_HEIGHT) -> DonorModel:
+    """Example features, donors and their heights (the first half of
+    :func:`transfer_attributes`); ``use_roads`` / ``use_art``: both sides have roads /
+    arterials."""
+    ex = _polygons(examples, "example buildings")
+    if len(example_attributes) != len(ex):
+        raise InputError("example attributes and geometries differ in length")
+    if not (storey_height > 0):
+        raise InputError("the storey height must be positive")
+
+    def col(name, default):
+        if name in example_attributes:
+            return example_attributes[name].to_numpy()
+        return np.full(len(ex), default, dtype=object)
+
+    ex_h = pd.to_numeric(pd.Series(col("height_m", np.nan)), errors="coerce").to_numpy(float)
+    ex_l = pd.to_numeric(pd.Series(col("levels", np.nan)), errors="coerce").to_numpy(float)
+    ex_h = np.where(np.isfinite(ex_h), ex_h, ex_l * storey_height)
+    donor = np.isfinite(ex_h) & (ex_h > 0)
+    no_heights = not donor.any()
+    if no_heights:
+        donor = np.ones(len(ex), dtype=bool)
+    ids = np.arange(1, len(ex) + 1) if example_ids is None else np.asarray(example_ids)
+    f_e = footprint_features(ex, None, example_roads if use_roads else None,
+                             example_arterials if use_art else None)
+    c_ex = shapely.get_coordinates(shapely.centroid(ex[donor]))
+    f_e.loc[donor, "neighbour_height"] = neighbour_height(c_ex, ex_h[donor], c_ex)
+    return DonorModel(f_e, donor, c_ex, ex_h, ex_l, ids,
+                      np.asarray(col("building_type", None), dtype=object),
+                      np.asarray(col("roof_shape", None), dtype=object), bool(no_heights),
+                      bool(use_roads), bool(use_art), float(storey_height))
+
+
+def target_features(footprints, context, roads, arterials, model: DonorModel) -> pd.DataFrame:
+    """Features of target footprints (``context``: all buildings within
+    :data:`CONTEXT_RADIUS` of them, in one fixed order), with their neighbour heights."""
+    fp = np.asarray(footprints, dtype=object)
+    f_t = footprint_features(fp, context, roads if model.use_roads else None,
+                             arterials if model.use_art else None)
+    f_t["neighbour_height"] = neighbour_height(
+        shapely.get_coordinates(shapely.centroid(fp)), model.ex_h[model.donor],
+        model.donor_centres)
+    return f_t
+
+
+def match_attributes(f_t: pd.DataFrame, area: np.ndarray, model: DonorModel, k: int = 9,
+                     choice_mode: str = "medoid", uniforms: Optional[np.ndarray] = None,
+                     min_height: float = 0.0, max_height: float = 1000.0) -> pd.DataFrame:
+    """Donor and attributes of each target (rows of :func:`transfer_attributes` without a
+    target FAR) from its features and a standardised model. ``uniforms``: for 'random',
+    each target's draw, shape (n, 1) (transfer_attributes draws them from one stream)."""
+    return _match(f_t, area, model, k, choice_mode, uniforms, min_height, max_height)[0]
+
+
+def _match(f_t, area, model: DonorModel, k, choice_mode, uniforms, min_height, max_height):
+    """:func:`match_attributes` and the index of each target's donor among the examples."""
+    if model.cols is None:
+        raise InputError("the donor model is not standardised")
+    n = len(f_t)
+    if n == 0:
+        return pd.DataFrame({f: [] for f, _ in OUTPUT_FIELDS}), np.zeros(0, dtype=np.int64)
+    donor, ex_h, ex_l = model.donor, model.ex_h, model.ex_l
+    cols, mu, sd, w = model.cols, model.mu, model.sd, model.w
+    xe = np.nan_to_num((model.features.loc[donor, cols].to_numpy() - mu) / sd * w, nan=0.0)
+    xt = np.nan_to_num((f_t[cols].to_numpy() - mu) / sd * w, nan=0.0)
+    donors = np.flatnonzero(donor)
+    kk = int(min(k, len(donors)))
+    dist, idx = cKDTree(xe).query(xt, k=kk)
+    dist, idx = dist.reshape(n, kk), idx.reshape(n, kk)
+    if model.no_heights:
+        choice = np.zeros(n, dtype=int)
+    elif kk > 1 and choice_mode == "medoid":
+        hk = np.log(ex_h[donors[idx]])
+        wk = 1.0 / (dist + 1e-6)
+        order = np.argsort(hk, axis=1)
+        cw = np.cumsum(np.take_along_axis(wk, order, 1), axis=1)
+        mid = (cw < 0.5 * cw[:, -1:]).sum(axis=1)
+        choice = order[np.arange(n), np.minimum(mid, kk - 1)]
+    elif kk > 1:
+        if uniforms is None or len(uniforms) != n:
+            raise InputError("the random choice needs one uniform draw per footprint")
+        h = np.maximum(np.median(dist, axis=1, keepdims=True), 1e-6)
+        p = np.exp(-0.5 * (dist / h) ** 2)
+        p /= p.sum(axis=1, keepdims=True)
+        choice = (np.asarray(uniforms).reshape(n, 1) > np.cumsum(p, axis=1)).sum(axis=1)
+        choice = np.minimum(choice, kk - 1)
+    else:
+        choice = np.zeros(n, dtype=int)
+    pick = donors[idx[np.arange(n), choice]]
+    d = dist[np.arange(n), choice]
+    storey = _storey(ex_h, ex_l, model.storey_height)[pick]
+    height = np.clip(ex_h[pick], min_height, max_height)
+    levels = np.where(np.isfinite(ex_l[pick]) & (ex_h[pick] == height), ex_l[pick],
+                      np.round(height / storey))
+    min_lv = np.maximum(np.ceil(min_height / storey - 1e-9), 1.0)
+    max_lv = np.maximum(np.floor(max_height / storey + 1e-9), min_lv)
+    levels = np.clip(np.maximum(np.floor(levels + 0.5), 1.0), min_lv, max_lv)
+    if model.no_heights:
+        height = np.full(n, np.nan)
+        levels = np.full(n, np.nan)
+    return pd.DataFrame({
+        "height_m": height, "levels": levels if model.no_heights else levels.astype(np.int64),
+        "building_type": [t if isinstance(t, str) and t else "unknown"
+                          for t in model.btype[pick]],
+        "roof_shape": [r if isinstance(r, str) and r else None for r in model.roof[pick]],
+        "source_id": model.ids[pick], "similarity": 1.0 / (1.0 + d),
+        "floor_area_m2": np.asarray(area) * levels}), pick

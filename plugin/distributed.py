@@ -1,9 +1,9 @@
-"""Per-block work beyond one machine: footprints by example on Dask, partition by partition.
+"""Per-block and per-tile work beyond one machine, on Dask (dask.distributed).
 
-The footprints of a block (thesis ch. 5.1 transfer, ch. 5.2 guided re-synthesis) depend
-only on the block, the road centrelines touching it, the block databases and
-``(seed, block index)`` (:func:`footprints.synthesize_block` is a pure function), so a
-district splits into independent partitions of blocks:
+**Footprints by example** (thesis ch. 5.1 transfer, ch. 5.2 guided re-synthesis). The
+footprints of a block depend only on the block, the road centrelines touching it, the
+block databases and ``(seed, block index)`` (:func:`footprints.synthesize_block` is a pure
+function), so a district splits into independent partitions of blocks:
 
 1. the driver reads the block layer once (a GeoPackage, or PostGIS through a GDAL
    ``PG:`` connection string) and cuts it into spatially compact partitions: blocks in
@@ -20,12 +20,24 @@ Result: the same footprints, attributes and order as :func:`footprints.synthesiz
 on the whole layer, for any number of workers and partitions (tested WKB-equal). Tasks
 are pure, so a lost worker's partition is simply run again (``retries``).
 
-Not distributed here (and why): building attributes (:mod:`building_attribute_transfer`)
-draw the ``random`` donor choice from one stream over all footprints, pick the feature
-columns from the whole target set, and measure a district FAR on the convex hull of all
-footprints, so a partition cannot reproduce the serial result without a change there
-(a per-footprint generator and the column choice passed in); street tessellation is a
-whole-network computation (:mod:`street_surfaces`) that was left serial.
+**StreetGAN tiles** (thesis ch. 4.2, :mod:`streetgan`). The driver draws the noise field
+once from the seed; every tile of :func:`streetgan.tile_plan` (the serial run's tiles)
+is a task that gets its noise window and the model's path and runs the generator,
+opened once per worker process; the driver stitches the cores (``np.array_equal`` to
+:func:`streetgan.generate`) and extracts the road graph once.
+
+**Building attributes** (:mod:`building_attribute_transfer`). Footprints are cut into
+Z-order partitions; each task reads its partition plus a halo of every footprint whose
+centroid lies within ``CONTEXT_RADIUS`` (150 m) + 10 m of it, in layer order, so the
+coverage and grain features see exactly the serial run's neighbours in the same order.
+The example side (features, donors) and the standardisation (feature columns chosen from
+all targets, mean and spread) are computed once on the driver; the random donor choice
+takes each footprint's draw from the serial run's single stream. The table equals
+:func:`building_attribute_transfer.transfer_attributes` (``medoid`` and ``random``);
+a target floor-area ratio (a whole-district adjustment) is not offered on Dask.
+
+Not distributed (and why): street tessellation is a whole-network computation
+(:mod:`street_surfaces`) that was left serial.
 
 Nothing here imports QGIS; pyogrio/geopandas/dask are imported where used.
 
@@ -52,7 +64,9 @@ from .progress import InputError, Progress, ensure
 __all__ = ["Source", "parse_source", "metric_crs", "read_layer", "BlockTable", "read_blocks",
            "read_lines", "morton_keys", "spatial_partitions", "RoadIndex", "FootprintJob",
            "footprints_serial", "footprints_distributed", "write_footprints",
-           "same_footprints"]
+           "same_footprints", "gan_generate_distributed", "gan_synthesize_distributed",
+           "read_area", "write_lines", "AttributeJob", "read_footprints", "halo_partitions",
+           "attributes_serial", "attributes_distributed"]
 
 WEB_MERCATOR = {3857, 900913, 3785, 102100, 102113}
 
@@ -427,3 +441,318 @@ def same_footprints(a: footprints.FootprintResult, b: footprints.FootprintResult
     except AssertionError as exc:
         return f"attributes differ: {exc}"
     return None
+
+
+# --------------------------------------------------------------------------- StreetGAN tiles
+
+#: generators loaded in this process, by (path, threads): a worker opens each model once
+_GENERATORS: dict = {}
+
+
+def _generator(path: str, threads: int = 0):
+    from . import streetgan
+
+    key = (str(path), int(threads))
+    if key not in _GENERATORS:
+        _GENERATORS[key] = streetgan.load_model(path, threads=threads)
+    return _GENERATORS[key]
+
+
+def _gan_tile(path: str, threads: int, z: np.ndarray, window) -> np.ndarray:
+    """A Dask task: the generator on one noise window, cropped to the window's core."""
+    img = _generator(path, threads).run(z)
+    return img[window.crop_r:window.crop_r + window.h, window.crop_c:window.crop_c + window.w]
+
+
+def gan_generate_distributed(client, model, rows_px: int, cols_px: int, seed: int = 0,
+                             tile: Optional[int] = 24, progress: Optional[Progress] = None,
+                             threads: int = 0, retries: int = 2) -> np.ndarray:
+    """:func:`streetgan.generate` with its tiles run on a Dask cluster: the same image
+    (``np.array_equal``) for the same seed.
+
+    The driver draws the noise field once from ``seed`` (as ``generate`` does) and sends
+    each task its noise window; the task runs the generator opened from ``model.path``
+    (the workers must reach the file), once per worker process. Tiles are as large as in
+    the serial run, so each window is the same computation on the same input.
+    """
+    from distributed import as_completed
+
+    from . import streetgan
+
+    progress = ensure(progress)
+    gen = model if isinstance(model, streetgan.Generator) else streetgan.load_model(model)
+    if rows_px < 2 or cols_px < 2:
+        raise InputError(f"the image must be at least 2 x 2 pixels, not {rows_px} x {cols_px}")
+    s = gen.scale
+    mr, mc = streetgan.noise_size(rows_px, s), streetgan.noise_size(cols_px, s)
+    z = streetgan.noise(mr, mc, gen.channels, np.random.default_rng(seed))
+    plan = streetgan.tile_plan(mr, mc, tile, s)
+    out = np.empty((s * (mr - 1) + 1, s * (mc - 1) + 1), np.float32)
+    path = str(Path(gen.path).resolve())
+    futures = {}
+    for w in plan:
+        r0, r1, c0, c1 = w.noise
+        fut = client.submit(_gan_tile, path, threads, np.ascontiguousarray(z[:, :, r0:r1, c0:c1]),
+                            w, pure=False, retries=retries)
+        futures[fut] = w
+    try:
+        for done, fut in enumerate(as_completed(list(futures)), 1):
+            w = futures[fut]
+            out[w.dest_r:w.dest_r + w.h, w.dest_c:w.dest_c + w.w] = fut.result()
+            progress.step(done / len(plan))
+    finally:
+        for f in futures:
+            f.cancel()
+    return out[:rows_px, :cols_px]
+
+
+def gan_synthesize_distributed(client, target, model, seed: int = 0, threads: int = 0,
+                               progress: Optional[Progress] = None, **kwargs):
+    """:func:`streetgan.synthesize` with the generator tiles on Dask; the raster-to-graph
+    step runs once on the driver. Same result as the serial call for the same seed."""
+    from . import streetgan
+
+    gen = model if isinstance(model, streetgan.Generator) else streetgan.load_model(model)
+
+    def generate_fn(g, rows, cols, seed_, tile, prog):
+        return gan_generate_distributed(client, g, rows, cols, seed_, tile, prog, threads)
+
+    return streetgan.synthesize(target, gen, seed, progress=progress,
+                                generate_fn=generate_fn, **kwargs)
+
+
+def read_area(source: Source, work_crs: Optional[str] = None):
+    """A target polygon layer as (union of its polygons in the metric CRS, source CRS,
+    working CRS)."""
+    df = read_layer(source)
+    df = df[df.geometry.notna()]
+    if len(df) == 0:
+        raise InputError(f"{source}: the layer holds no polygon")
+    if not set(shapely.get_type_id(df.geometry.values).tolist()) <= {3, 6}:
+        raise InputError(f"{source}: the target must be polygons")
+    crs = df.crs.to_wkt() if df.crs is not None else None
+    if work_crs is None:
+        lonlat = df.geometry.to_crs(4326).total_bounds if df.crs is not None \
+            else df.geometry.total_bounds
+        work_crs = metric_crs(df.crs, lonlat)
+    return _to_metric(df, work_crs), crs, work_crs
+
+
+def write_lines(path: str, geometry, table: pd.DataFrame, work_crs: str, crs: Optional[str],
+                layer: str = "roads") -> int:
+    """Write lines with a table (in the source CRS) to a GeoPackage layer."""
+    import geopandas as gpd
+
+    gdf = gpd.GeoDataFrame(table.reset_index(drop=True), geometry=list(geometry), crs=work_crs)
+    if crs is not None and _pyproj_crs(crs) != _pyproj_crs(work_crs):
+        gdf = gdf.to_crs(crs)
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    gdf.to_file(path, layer=layer, driver="GPKG", engine="pyogrio")
+    return len(gdf)
+
+
+# --------------------------------------------------------------------------- building attributes
+
+#: metres added to the context radius around a partition (centroids on the boundary)
+HALO_MARGIN = 10.0
+
+
+@dataclass
+class AttributeJob:
+    """Examples and parameters of a building-attribute run (:func:`attributes_serial`,
+    :func:`attributes_distributed`)."""
+
+    examples: np.ndarray
+    example_attributes: pd.DataFrame
+    example_ids: Optional[np.ndarray] = None
+    roads: Optional[np.ndarray] = None
+    arterials: Optional[np.ndarray] = None
+    example_roads: Optional[np.ndarray] = None
+    example_arterials: Optional[np.ndarray] = None
+    k: int = 9
+    seed: int = 0
+    min_height: float = 0.0
+    max_height: float = 1000.0
+    storey_height: float = 0.0       # 0: the engine's default
+    choice_mode: str = "medoid"
+
+    def engine_kwargs(self) -> dict:
+        kw = dict(example_ids=self.example_ids, roads=self.roads, arterials=self.arterials,
+                  example_roads=self.example_roads, example_arterials=self.example_arterials,
+                  k=self.k, seed=self.seed, min_height=self.min_height,
+                  max_height=self.max_height, choice_mode=self.choice_mode)
+        if self.storey_height:
+            kw["storey_height"] = self.storey_height
+        return kw
+
+
+@dataclass
+class _AttributeShared:
+    """Broadcast to every worker once: the target roads and the (later standardised)
+    donor model."""
+
+    roads: Optional[np.ndarray]
+    arterials: Optional[np.ndarray]
+    model: object
+
+
+def read_footprints(source: Source, work_crs: Optional[str] = None) -> BlockTable:
+    """Read a polygon layer of target footprints (in layer order) into the working CRS
+    (a :class:`BlockTable`; its ``block_ids`` are 1..n)."""
+    df = read_layer(source, columns=[])
+    if len(df) == 0:
+        raise InputError(f"{source}: the layer holds no footprint")
+    if df.geometry.isna().any() or not set(
+            shapely.get_type_id(df.geometry.values).tolist()) <= {3, 6}:
+        raise InputError(f"{source}: footprints must be polygons (found "
+                         f"{', '.join(sorted(set(df.geometry.geom_type.fillna('none'))))})")
+    crs = df.crs.to_wkt() if df.crs is not None else None
+    if work_crs is None:
+        lonlat = df.geometry.to_crs(4326).total_bounds if df.crs is not None \
+            else df.geometry.total_bounds
+        work_crs = metric_crs(df.crs, lonlat)
+    return BlockTable(source, df.index.to_numpy(dtype=np.int64), _to_metric(df, work_crs),
+                      np.arange(1, len(df) + 1, dtype=np.int64), crs, work_crs)
+
+
+def halo_partitions(geoms: np.ndarray, n_partitions: int, radius: float):
+    """Spatial partitions of footprints, each with its halo: ``(core, halo)`` index arrays,
+    ``halo`` (sorted, the core included) holding every footprint whose centroid lies
+    within ``radius`` of the core's centroid bounding box."""
+    c = shapely.get_coordinates(shapely.centroid(np.asarray(geoms, dtype=object)))
+    out = []
+    for core in spatial_partitions(geoms, n_partitions):
+        lo, hi = c[core].min(axis=0) - radius, c[core].max(axis=0) + radius
+        halo = np.flatnonzero(((c >= lo) & (c <= hi)).all(axis=1))
+        out.append((core, halo))
+    return out
+
+
+def _check_attributes(job: AttributeJob):
+    if job.choice_mode not in ("medoid", "random"):
+        raise InputError(f"unknown choice mode '{job.choice_mode}' (medoid, random)")
+    if not (job.k >= 1):
+        raise InputError("k must be at least 1")
+    if not (0 <= job.min_height < job.max_height):
+        raise InputError(f"the height range {job.min_height:g}..{job.max_height:g} m is empty")
+
+
+def attributes_serial(footprints_: BlockTable, job: AttributeJob):
+    """The single-process reference: :func:`building_attribute_transfer.transfer_attributes`
+    on the whole layer (no target FAR)."""
+    from . import building_attribute_transfer as bt
+
+    _check_attributes(job)
+    return bt.transfer_attributes(footprints_.geometry, job.examples, job.example_attributes,
+                                  **job.engine_kwargs())
+
+
+def _attr_features(source: Source, work_crs: str, fids, core_pos, shared: _AttributeShared):
+    """A Dask task: read a partition and its halo, compute the core's features."""
+    from . import building_attribute_transfer as bt
+
+    g = _to_metric(read_layer(source, fids=fids, columns=[]), work_crs)
+    fp = g[core_pos]
+    f_t = bt.target_features(fp, g, shared.roads, shared.arterials, shared.model)
+    return f_t, shapely.area(fp)
+
+
+def _finite_columns(features) -> dict:
+    f_t = features[0]
+    return {c: bool(np.isfinite(f_t[c].to_numpy(dtype=float)).any()) for c in f_t.columns}
+
+
+def _attr_match(features, model, k, choice_mode, uniforms, min_height, max_height):
+    """A Dask task: donors and attributes of a partition's core footprints."""
+    from . import building_attribute_transfer as bt
+
+    f_t, area = features
+    return bt.match_attributes(f_t, area, model, k, choice_mode, uniforms, min_height,
+                               max_height)
+
+
+def attributes_distributed(client, footprints_: BlockTable, job: AttributeJob,
+                           n_partitions: Optional[int] = None, retries: int = 2,
+                           progress: Optional[Progress] = None):
+    """Building attributes of every footprint on a Dask cluster, equal to
+    :func:`attributes_serial` (same values, same order).
+
+    1. the driver builds the donor model from the examples once
+       (:func:`building_attribute_transfer.donor_model`) and broadcasts it with the roads;
+    2. each task reads a spatial partition of footprints plus a halo of
+       ``CONTEXT_RADIUS + HALO_MARGIN`` m (by feature id, in layer order) and computes
+       the core's features, which stay on the worker;
+    3. the driver chooses the feature columns from all targets (some finite value) and
+       standardises once (:meth:`DonorModel.standardise`), broadcasts the model again;
+    4. each task matches its core; for ``choice_mode='random'`` the driver draws the
+       serial run's one stream (``default_rng(seed).random((n, 1))``) and gives every
+       task its footprints' draws, so the random choice is the serial one too.
+
+    A target floor-area ratio is a whole-district step and is not offered here.
+    """
+    from distributed import as_completed
+
+    from . import building_attribute_transfer as bt
+
+    _check_attributes(job)
+    progress = ensure(progress)
+    t0 = time.perf_counter()
+    n = len(footprints_)
+    roads, art = job.roads, job.arterials
+    use_roads = bool(roads is not None and job.example_roads is not None and len(roads)
+                     and len(job.example_roads))
+    use_art = bool(art is not None and job.example_arterials is not None and len(art)
+                   and len(job.example_arterials))
+    kw = {"storey_height": job.storey_height} if job.storey_height else {}
+    model = bt.donor_model(job.examples, job.example_attributes, job.example_ids,
+                           job.example_roads, job.example_arterials, use_roads, use_art, **kw)
+    if n_partitions is None:
+        workers = max(1, len(client.scheduler_info().get("workers", {})))
+        n_partitions = 4 * workers
+    parts = halo_partitions(footprints_.geometry, n_partitions,
+                            bt.CONTEXT_RADIUS + HALO_MARGIN)
+    shared = client.scatter(_AttributeShared(roads if use_roads else None,
+                                             art if use_art else None, model),
+                            broadcast=True, hash=False)
+    feats, model_f, matches = [], None, []
+    try:
+        for core, halo in parts:
+            feats.append(client.submit(_attr_features, footprints_.source,
+                                       footprints_.work_crs, footprints_.fids[halo],
+                                       np.searchsorted(halo, core), shared, pure=False,
+                                       retries=retries))
+        finite = client.gather([client.submit(_finite_columns, f, pure=False) for f in feats])
+        progress.step(0.5)
+        target_finite = {c: any(f[c] for f in finite) for c in finite[0]}
+        std = model.standardise(target_finite)
+        model_f = client.scatter(std, broadcast=True, hash=False)
+        draws = np.random.default_rng(job.seed).random((n, 1)) \
+            if job.choice_mode == "random" else None
+        index = {}
+        for (core, _), f in zip(parts, feats):
+            fut = client.submit(_attr_match, f, model_f, job.k, job.choice_mode,
+                                None if draws is None else draws[core], job.min_height,
+                                job.max_height, pure=False, retries=retries)
+            index[fut] = core
+            matches.append(fut)
+        order, tables, done = [], [], 0
+        for fut in as_completed(matches):
+            order.append(index[fut])
+            tables.append(fut.result())
+            done += len(order[-1])
+            progress.step(0.5 + 0.5 * done / max(n, 1))
+    finally:
+        for f in feats + matches:
+            f.cancel()
+        shared.release()
+        if model_f is not None:
+            model_f.release()
+    pos = np.concatenate(order)
+    table = pd.concat(tables, ignore_index=True).iloc[np.argsort(pos, kind="stable")] \
+        .reset_index(drop=True)
+    stats = {"n_footprints": n, "n_examples": len(job.examples),
+             "n_donors": int(model.donor.sum()), "features": ",".join(std.cols),
+             "partitions": len(parts), "halo_footprints": int(sum(len(h) - len(c)
+                                                                  for c, h in parts)),
+             "seconds": time.perf_counter() - t0}
+    return bt.AttributeTransfer(table, stats)

@@ -33,7 +33,8 @@ from .progress import InputError, Progress, ensure
 from . import raster_graph
 
 __all__ = ["MODELS_DIR", "Generator", "shipped_models", "load_model", "noise", "noise_size",
-           "generate", "synthesize", "StreetGanResult", "SCALE", "TILE_MARGIN"]
+           "generate", "synthesize", "StreetGanResult", "SCALE", "TILE_MARGIN", "tile_plan",
+           "TileWindow"]
 
 MODELS_DIR = Path(__file__).resolve().parent.parent / "resources" / "models"
 #: pixels per noise cell (five stride-2 layers)
@@ -211,6 +212,41 @@ def generate(model: Generator, rows_px: int, cols_px: int, seed: int = 0,
     return out[:rows_px, :cols_px]
 
 
+@dataclass(frozen=True)
+class TileWindow:
+    """One tile of :func:`generate`: the noise window it runs on and where its core goes.
+
+    ``noise`` = (row0, row1, col0, col1) cells of z; the generator's output on that window,
+    cropped to ``[crop_r:crop_r + h, crop_c:crop_c + w]``, fills ``out[dest_r:dest_r + h,
+    dest_c:dest_c + w]`` of the full image."""
+
+    noise: tuple
+    crop_r: int
+    crop_c: int
+    dest_r: int
+    dest_c: int
+    h: int
+    w: int
+
+
+def tile_plan(mr: int, mc: int, tile: Optional[int], scale: int = SCALE) -> list:
+    """The tiles :func:`generate` runs for an mr x mc noise field, in its order (for
+    running them elsewhere, e.g. on Dask workers: the stitched image is the same)."""
+    full = (scale * (mr - 1) + 1, scale * (mc - 1) + 1)
+    if tile is None or (mr <= tile + 2 * TILE_MARGIN and mc <= tile + 2 * TILE_MARGIN):
+        return [TileWindow((0, mr, 0, mc), 0, 0, 0, 0, full[0], full[1])]
+    s, out = scale, []
+    for r0, r1 in _spans(mr, tile):
+        for c0, c1 in _spans(mc, tile):
+            pr0, pr1 = max(0, r0 - TILE_MARGIN), min(mr, r1 + TILE_MARGIN)
+            pc0, pc1 = max(0, c0 - TILE_MARGIN), min(mc, c1 + TILE_MARGIN)
+            gr1 = s * r1 if r1 < mr else full[0]
+            gc1 = s * c1 if c1 < mc else full[1]
+            out.append(TileWindow((pr0, pr1, pc0, pc1), s * (r0 - pr0), s * (c0 - pc0),
+                                  s * r0, s * c0, gr1 - s * r0, gc1 - s * c0))
+    return out
+
+
 @dataclass
 class StreetGanResult:
     """Result of :func:`synthesize`.
@@ -235,7 +271,7 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
                margin: float = 96.0, max_gap: float = 0.0, min_dead_end: float = 25.0,
                from_edge: bool = True,
                tile: Optional[int] = 24, levels: bool = True,
-               progress: Optional[Progress] = None) -> StreetGanResult:
+               progress: Optional[Progress] = None, generate_fn=None) -> StreetGanResult:
     """Generate a road network over a target polygon (thesis ch. 4.2).
 
     Parameters
@@ -249,6 +285,8 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
     max_gap, min_dead_end, from_edge : see :func:`plugin.raster_graph.raster_to_graph`
     tile : noise cells per tile (None: one pass)
     levels : derive a ``level`` per edge from street continuity (plugin.hierarchy)
+    generate_fn : replaces :func:`generate` (same signature and result), e.g. to run the
+        tiles on a Dask cluster (plugin.distributed)
     """
     progress = ensure(progress)
     gen = model if isinstance(model, Generator) else load_model(model)
@@ -267,7 +305,7 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
         raise InputError(f"the target needs {rows} x {cols} pixels at {cell:g} m: more than "
                          "60 million; use a larger cell size or a smaller target")
     t = time.perf_counter()
-    image = generate(gen, rows, cols, seed, tile, progress.sub(0.0, 0.5))
+    image = (generate_fn or generate)(gen, rows, cols, seed, tile, progress.sub(0.0, 0.5))
     t_gen = time.perf_counter() - t
     gt = (x0, cell, 0.0, y1, 0.0, -cell)
     t = time.perf_counter()
