@@ -18,6 +18,25 @@ programming over positions (eq. 5.2; the thesis pops a priority queue over the s
 graph, both give the optimum of eq. 5.3). Groups go in descending number of elements;
 a later group may not put an element into the convex hull of the earlier groups' sequences.
 
+**Continuous rows** (terraced houses, closed perimeter rows): where a group's example
+elements form one row whose neighbours touch or stand less than ``ROW_GAP`` = 1 m apart
+(measured on the undeformed example, so the warp cannot open or close a gap) and whose
+guidance reaches both ends of the free frontage (within ``SPAN_TOL``), the new row must
+fill that frontage *exactly*: no gap, no overhang. The frontage [a, b] is the stretch of
+the row's front line inside the buildable area and outside the earlier groups' hulls.
+The sequence is then the optimum of the same energy (overlap data term on 1 m steps,
+repetition cost 1 - alpha) under the equality constraint sum of widths = round(b - a)
+on the 1 m grid, solved by the resource-constrained shortest-path engine
+(:func:`sequences.solve`); the corner (fixed) elements at the row's ends are pinned there
+(``first`` / ``last`` and the data term), other fixed elements get a 0/1 resource each
+(at most once). There is no empty-space element. The footprints are then laid side by
+side at their true widths, ``GAP`` apart, from ``a``; the residual of the grid rounding
+(the true widths and ``b - a`` are not whole metres) is absorbed by stretching or
+shrinking the *last repeatable* element of the row along the street, by less than 1 m
+(when the rounding errors of many elements add up to 1 m or more, the residual is shared
+equally by all repeatable elements instead). When no sequence meets the length exactly
+the group falls back to the unconstrained DP.
+
 References
 ----------
 Hartmann, S., Weinmann, M., Wessel, R., Klein, R. (2015), "Layout retargeting" (the
@@ -32,6 +51,7 @@ import numpy as np
 import shapely
 from shapely.geometry.polygon import orient
 
+from .sequences import Constraint, InfeasibleError, solve
 from .warp import warp_geometries
 
 __all__ = ["TAU", "ALPHA", "STEP", "GUIDE_SCALE", "EMPTY_WIDTH", "Segment",
@@ -58,6 +78,19 @@ WARP_SEGMENT = 10.0
 GAP = 0.01
 #: How far (m) a placed footprint may reach out of the buildable area (it is cut there).
 OUT_TOL = 0.5
+#: The exact frontage is kept this far (m) inside its ends (floating-point safety).
+EDGE = 1e-6
+#: Example neighbours closer than this (m) belong to one continuous row (terraced houses).
+ROW_GAP = 1.0
+#: A continuous row spans its street when its guidance reaches within this (m) of both
+#: ends of the free frontage.
+SPAN_TOL = 3.0
+#: Consecutive guides of a row may overlap along the street by at most this share of the
+#: narrower one (the warp bulges guides); more is a building behind another (a backyard).
+ROW_OVERLAP = 0.5
+#: Fixed elements inside a row beyond this many keep the unconstrained DP (each costs a
+#: resource dimension of the intermediate graph).
+ROW_MAX_FIXED = 4
 
 
 @dataclass
@@ -79,6 +112,7 @@ class Placement:
     polygon: shapely.Geometry
     group: int
     kind: str            # 'fixed', 'repeatable' or 'interior'
+    row: bool = False    # part of a continuous row filled to its exact frontage
 
 
 def boundary_segments(block, corner_angle: float = CORNER_ANGLE,
@@ -301,13 +335,201 @@ def _scale_along(geoms: np.ndarray, u: np.ndarray, factor: float) -> np.ndarray:
                                    coords + (factor - 1.0) * along[:, None] * u[None, :])
 
 
+def _overlap_term(el: np.ndarray, base_off: np.ndarray, seg: Segment, slots: np.ndarray,
+                  areas: np.ndarray, width_m: np.ndarray, g2: np.ndarray, g2b: np.ndarray,
+                  buildable, blocked, out_tol: float = OUT_TOL):
+    """Data term O of eq. 5.1 for each element starting at each slot (m along the chord).
+
+    O = A(P) - A(P at the slot ∩ its modified guide); inf where a corner of the footprint
+    leaves the buildable area by more than ``out_tol`` (it would only be cut there) or where
+    it meets ``blocked``. Returns (cost (k, slots), candidate polygons per element).
+    """
+    k_n, m_n = len(el), len(slots)
+    cost = np.empty((k_n, m_n))
+    shapes = []
+    allowed = shapely.buffer(buildable, out_tol, quad_segs=2)
+    shapely.prepare(allowed)
+    for k in range(k_n):
+        offs = base_off[k] + slots[:, None] * seg.u
+        cand = _translate(el[k], offs)
+        shapes.append(cand)
+        xy, idx = shapely.get_coordinates(cand, return_index=True)
+        inside = shapely.contains_xy(allowed, xy[:, 0], xy[:, 1])
+        out_slot = np.bincount(idx, weights=~inside, minlength=m_n) > 0
+        row = np.full(m_n, areas[k])
+        lo, hi = g2b[k, 0], g2b[k, 1]
+        if np.isfinite(lo):
+            near = (slots + width_m[k] > lo) & (slots < hi)
+            if near.any():
+                row[near] = areas[k] - shapely.area(shapely.intersection(cand[near], g2[k]))
+        row[out_slot] = np.inf
+        if blocked is not None:
+            row[shapely.intersects(cand, blocked)] = np.inf
+        cost[k] = row
+    return cost, shapes
+
+
+def _intervals(geom, seg: Segment) -> List[Tuple[float, float]]:
+    """Chord-coordinate intervals [u0, u1] of the line pieces of ``geom``."""
+    parts = shapely.get_parts(geom)
+    out = []
+    for part in parts[(shapely.get_type_id(parts) == 1) & ~shapely.is_empty(parts)]:
+        u = (shapely.get_coordinates(part) - seg.a) @ seg.u
+        out.append((float(u.min()), float(u.max())))
+    return out
+
+
+def _subtract(free: List[Tuple[float, float]], cut: List[Tuple[float, float]],
+              gap: float) -> List[Tuple[float, float]]:
+    """Intervals ``free`` less ``cut`` (each widened by ``gap``: a new wall never touches)."""
+    for c0, c1 in cut:
+        nxt = []
+        for a, b in free:
+            if c1 + gap <= a or c0 - gap >= b:
+                nxt.append((a, b))
+                continue
+            if c0 - gap > a:
+                nxt.append((a, c0 - gap))
+            if c1 + gap < b:
+                nxt.append((c1 + gap, b))
+        free = nxt
+    return free
+
+
+def _row_frontage(seg: Segment, el_rest: np.ndarray, gb: np.ndarray, fixed: np.ndarray,
+                  v_front: float, buildable, blocked):
+    """(order, a, b) when the group is a continuous row spanning its street, else None.
+
+    Continuous: ordered along the street by their guides, neighbouring example elements
+    are less than ``ROW_GAP`` apart (in the example, where the warp cannot change it) and
+    their guides do not stand behind one another. ``[a, b]``: the piece of the row's front
+    line (depth ``v_front``) inside the buildable area and outside the earlier groups'
+    hulls that the guides cover most; the row spans it when its guides reach both ends
+    within ``SPAN_TOL``.
+    """
+    k_n = len(el_rest)
+    if k_n < 2 or not np.isfinite(gb[:, :2]).all():
+        return None
+    order = np.argsort(0.5 * (gb[:, 0] + gb[:, 1]), kind="stable")
+    if (fixed[order[1:-1]].sum() > ROW_MAX_FIXED or
+            (gb[order[:-1], 1] - gb[order[1:], 0] >
+             ROW_OVERLAP * np.minimum(np.diff(gb[order[:-1], :2], axis=1)[:, 0],
+                                      np.diff(gb[order[1:], :2], axis=1)[:, 0])).any() or
+            not (shapely.distance(el_rest[order[:-1]], el_rest[order[1:]]) < ROW_GAP).all()):
+        return None
+    line = shapely.LineString([seg.a - seg.length * seg.u + v_front * seg.n,
+                               seg.a + 2.0 * seg.length * seg.u + v_front * seg.n])
+    free = _intervals(shapely.intersection(line, buildable), seg)
+    if blocked is not None and free:
+        free = _subtract(free, _intervals(shapely.intersection(line, blocked), seg), GAP)
+    if not free:
+        return None
+    g_lo, g_hi = gb[order[0], 0], gb[order[-1], 1]
+    a, b = max(free, key=lambda ab: min(ab[1], g_hi) - max(ab[0], g_lo))
+    if min(b, g_hi) - max(a, g_lo) <= 0 or g_lo > a + SPAN_TOL or g_hi < b - SPAN_TOL:
+        return None
+    # a micrometre inside: the walls summed along the row must not round out of the area
+    return order, a + EDGE, b - EDGE
+
+
+def _scale_from(poly, seg: Segment, start: float, factor: float):
+    """Scale ``poly`` along the chord by ``factor``, keeping its wall at ``start``."""
+    xy = shapely.get_coordinates(poly)
+    along = (xy - seg.a) @ seg.u - start
+    return shapely.set_coordinates(poly, xy + (factor - 1.0) * along[:, None] * seg.u[None, :])
+
+
+def _fill_row(seg: Segment, members: np.ndarray, order: np.ndarray, a: float, b: float,
+              el: np.ndarray, width_m: np.ndarray, base_off: np.ndarray, areas: np.ndarray,
+              fixed: np.ndarray, g2: np.ndarray, g2b: np.ndarray, buildable, blocked,
+              step: float, alpha: float):
+    """A continuous row filling the frontage [a, b] exactly; None when no sequence can.
+
+    The optimum of eq. 5.1 over the sequences whose grid widths sum to exactly
+    round((b - a) / step), by :func:`sequences.solve`; see the module docstring for the
+    corner pinning and the sub-metre residual.
+    """
+    k_n = len(members)
+    m_n = int(round((b - a) / step))
+    d = np.maximum(1, np.round(width_m / step)).astype(np.int64)
+    if m_n < d.min():
+        return None
+    slots = a + np.arange(m_n + 1) * step
+    # the grid start of an element is up to about a metre off its final place: test the
+    # street and the earlier hulls with that much slack (legalise is the hard guarantee)
+    shrunk = None
+    if blocked is not None:
+        shrunk = shapely.buffer(blocked, -step, quad_segs=2)
+        shrunk = None if shrunk.is_empty else shrunk
+    cost, _ = _overlap_term(el, base_off, seg, slots, areas, width_m, g2, g2b, buildable,
+                            shrunk, OUT_TOL + step)
+    np.maximum(cost, 0.0, out=cost)     # an overlay may round the overlap above the area
+    first, last = ~fixed, ~fixed
+    pinned = []
+    head, tail = order[0], order[-1]
+    # a corner building at an end of the row stays there: only that start is allowed (its
+    # cost there is a constant of every feasible sequence, so it is set to 0)
+    if fixed[head]:
+        first = np.arange(k_n) == head
+        cost[head] = np.inf
+        cost[head, 0] = 0.0
+        pinned.append(head)
+    if fixed[tail]:
+        at = m_n - d[tail]
+        if at < 0:
+            return None
+        last = np.arange(k_n) == tail
+        cost[tail] = np.inf
+        cost[tail, at] = 0.0
+        pinned.append(tail)
+    transition = np.zeros((k_n, k_n))
+    transition[np.diag_indices(k_n)] = np.where(fixed, np.inf, 1.0 - alpha)
+    # any other fixed element at most once: a 0/1 resource of its own (the graph method)
+    loose = [k for k in np.flatnonzero(fixed) if k not in pinned]
+    res = np.zeros((k_n, 1 + len(loose)))
+    res[:, 0] = d * step
+    constraints = [Constraint.equal(0, m_n * step)]
+    for j, k in enumerate(loose, start=1):
+        res[k, j] = 1.0
+        constraints.append(Constraint(j, 0.0, 1.0))
+    try:
+        best = solve(res, transition, constraints, resolution=np.r_[step, np.ones(len(loose))],
+                     position_cost=cost, first=first, last=last)[0]
+    except InfeasibleError:
+        return None
+    seq = np.asarray(best.sequence, dtype=np.int64)
+    w = width_m[seq].astype(np.float64)
+    # true widths side by side, GAP apart; the grid rounding residual goes to the last
+    # repeatable element (< 1 m), or is shared by all repeatable ones when it is larger
+    eps = (b - a) - (w.sum() + GAP * (len(seq) - 1))
+    rep = np.flatnonzero(~fixed[seq])
+    adj = np.zeros(len(seq))
+    if len(rep) == 0:
+        adj[:] = eps / len(seq)
+    elif abs(eps) < step:
+        adj[rep[-1]] = eps
+    else:
+        adj[rep] = eps / len(rep)
+    w2 = w + adj
+    if (w2 < 0.5 * w).any():
+        return None
+    starts = a + np.r_[0.0, np.cumsum(w2 + GAP)[:-1]]
+    out = []
+    for i, k in enumerate(seq):
+        poly = _translate(el[k], (base_off[k] + starts[i] * seg.u)[None, :])[0]
+        if adj[i] != 0.0:
+            poly = _scale_from(poly, seg, starts[i], w2[i] / w[i])
+        out.append((int(members[k]), poly))
+    return out
+
+
 def _synthesize_group(seg: Segment, members: np.ndarray, kinds: np.ndarray,
                       rest: np.ndarray, guides: np.ndarray, scaled_guides: np.ndarray,
                       buildable, blocked, inset: float, step: float, alpha: float):
-    """Place one group's sequence; returns [(element, polygon)] in order."""
+    """Place one group's sequence; returns ([(element, polygon)] in order, is_row)."""
     m_n = int(round(seg.length / step))
     if m_n < 1 or len(members) == 0:
-        return []
+        return [], False
     # square each footprint to its street when it nearly is (it keeps its shape)
     theta = np.arctan2(seg.u[1], seg.u[0])
     el = rest[members]
@@ -327,31 +549,29 @@ def _synthesize_group(seg: Segment, members: np.ndarray, kinds: np.ndarray,
         g2 = shapely.difference(g2, blocked)
     g2b = _bounds_local(g2, seg)
     k_n = len(members)
-    cost = np.empty((k_n + 1, m_n))
-    slots = np.arange(m_n) * step
     base_off = (-eb[:, 0])[:, None] * seg.u + (v0 - eb[:, 2])[:, None] * seg.n
-    shapes = []
-    # a slot that puts a corner of the footprint more than OUT_TOL outside the buildable
-    # area is forbidden: the footprint would only be cut there
-    allowed = shapely.buffer(buildable, OUT_TOL, quad_segs=2)
-    shapely.prepare(allowed)
-    for k in range(k_n):
-        offs = base_off[k] + slots[:, None] * seg.u
-        cand = _translate(el[k], offs)
-        shapes.append(cand)
-        xy, idx = shapely.get_coordinates(cand, return_index=True)
-        inside = shapely.contains_xy(allowed, xy[:, 0], xy[:, 1])
-        out_slot = np.bincount(idx, weights=~inside, minlength=m_n) > 0
-        row = np.full(m_n, areas[k])
-        lo, hi = g2b[k, 0], g2b[k, 1]
-        if np.isfinite(lo):
-            near = (slots + width_m[k] > lo) & (slots < hi)
-            if near.any():
-                row[near] = areas[k] - shapely.area(shapely.intersection(cand[near], g2[k]))
-        row[out_slot] = np.inf
-        if blocked is not None:
-            row[shapely.intersects(cand, blocked)] = np.inf
-        cost[k] = row
+    is_fixed = kinds[members] == "fixed"
+    # a continuous row (terraced houses) fills its frontage exactly; members whose guide
+    # lies mostly in an earlier group's hull (a warp pulled the house next to a corner
+    # within tau of this street too) belong to that group's row, not to this one
+    sub = np.arange(k_n)
+    if k_n >= 2 and blocked is not None:
+        gm = guides[members]
+        sub = np.flatnonzero(shapely.area(shapely.intersection(gm, blocked))
+                             <= 0.5 * shapely.area(gm))
+    if len(sub) >= 2:
+        found = _row_frontage(seg, rest[members[sub]], gb[sub], is_fixed[sub],
+                              float(np.median(v0[sub])) + 0.5, buildable, blocked)
+        if found is not None:
+            row = _fill_row(seg, members[sub], *found, el[sub], width_m[sub], base_off[sub],
+                            areas[sub], is_fixed[sub], g2[sub], g2b[sub], buildable, blocked,
+                            step, alpha)
+            if row is not None:
+                return row, True
+    slots = np.arange(m_n) * step
+    cost = np.empty((k_n + 1, m_n))
+    cost[:k_n], shapes = _overlap_term(el, base_off, seg, slots, areas, width_m, g2, g2b,
+                                       buildable, blocked)
     # empty space: the guidance area it would leave empty
     depth = float(np.mean(eb[:, 3] - eb[:, 2]))
     v_e = float(np.median(v0))
@@ -371,7 +591,7 @@ def _synthesize_group(seg: Segment, members: np.ndarray, kinds: np.ndarray,
             row[near] = shapely.area(shapely.intersection(boxes, union))
         cost[k_n] = row
     width = np.r_[d, max(1, int(round(EMPTY_WIDTH / step)))]
-    fixed = np.flatnonzero(kinds[members] == "fixed")[:12]
+    fixed = np.flatnonzero(is_fixed)[:12]
     # the paper's energy lets a sequence omit any element for free; a corner building
     # left out of a shrunk street must cost its area, else tight streets lose their corners
     cost[fixed] -= areas[fixed, None]
@@ -390,7 +610,7 @@ def _synthesize_group(seg: Segment, members: np.ndarray, kinds: np.ndarray,
             _translate(el[k], (base_off[k] + start_u * seg.u)[None, :])[0]
         end = start_u + width_m[k]
         out.append((int(members[k]), poly))
-    return out
+    return out, False
 
 
 def retarget_layout(elements: Sequence, source: np.ndarray, target: np.ndarray,
@@ -447,12 +667,12 @@ def retarget_layout(elements: Sequence, source: np.ndarray, target: np.ndarray,
         scaled[members] = _valid(warp_geometries(
             _scale_along(elements[members], seg.u, guide_scale), source, target,
             max_segment=WARP_SEGMENT))
-        seq = _synthesize_group(seg, members, kinds, elements, guides, scaled,
-                                buildable, blocked, inset, step, alpha)
+        seq, is_row = _synthesize_group(seg, members, kinds, elements, guides, scaled,
+                                        buildable, blocked, inset, step, alpha)
         if not seq:
             continue
         for i, poly in seq:
-            placed.append(Placement(i, poly, j, str(kinds[i])))
+            placed.append(Placement(i, poly, j, str(kinds[i]), is_row))
             if kinds[i] == "fixed":
                 used_fixed[i] = True
         hull = shapely.convex_hull(shapely.union_all([p for _, p in seq]))
