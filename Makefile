@@ -87,6 +87,6 @@ train-gan: setup $(TRAIN_PY)
 	  --title "Helsinki (real OSM roads)"
 	nice -n 15 $(TRAIN_PY) tools/streetgan/train.py build/streetgan/grid.npz \
 	  resources/models/streetgan_grid --epochs $(GAN_EPOCHS) --patch 161 --batch 4 --name streetgan_grid \
-	  --title "Grid (growroads network)"
+	  --title "Grid (growroads network)" --min-dead-end 120
 	mv resources/models/streetgan_*_untrained.onnx build/streetgan/
 	QT_QPA_PLATFORM=offscreen $(PY) tests/benchmarks/bench_gan.py --cards

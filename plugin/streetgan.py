@@ -39,6 +39,8 @@ __all__ = ["MODELS_DIR", "Generator", "shipped_models", "load_model", "noise", "
 MODELS_DIR = Path(__file__).resolve().parent.parent / "resources" / "models"
 #: pixels per noise cell (five stride-2 layers)
 SCALE = 32
+#: Dead ends this short (m) are removed unless a model card says otherwise (thesis).
+DEFAULT_MIN_DEAD_END = 25.0
 #: noise cells of context added around each tile; the generator's reach is < 2 cells
 TILE_MARGIN = 3
 
@@ -268,7 +270,7 @@ class StreetGanResult:
 
 
 def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
-               margin: float = 96.0, max_gap: float = 0.0, min_dead_end: float = 25.0,
+               margin: float = 96.0, max_gap: float = 0.0, min_dead_end: Optional[float] = None,
                from_edge: bool = True,
                tile: Optional[int] = 24, levels: bool = True,
                progress: Optional[Progress] = None, generate_fn=None) -> StreetGanResult:
@@ -282,7 +284,9 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
     cell_size : metres per pixel; default the model's (3 m: the scale it learnt)
     margin : metres generated around the target's bounds and cut away after vectorising,
         so that the image border does not leave stubs inside the target
-    max_gap, min_dead_end, from_edge : see :func:`plugin.raster_graph.raster_to_graph`
+    max_gap, min_dead_end, from_edge : see :func:`plugin.raster_graph.raster_to_graph`;
+        ``min_dead_end`` None takes the model card's ``postprocess.min_dead_end_m``
+        (chosen on validation seeds when the model was made), else the thesis's 25 m
     tile : noise cells per tile (None: one pass)
     levels : derive a ``level`` per edge from street continuity (plugin.hierarchy)
     generate_fn : replaces :func:`generate` (same signature and result), e.g. to run the
@@ -310,6 +314,9 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
     gt = (x0, cell, 0.0, y1, 0.0, -cell)
     t = time.perf_counter()
     scale = cell / gen.cell_size  # lengths in the model's pixels stay the thesis's
+    if min_dead_end is None:
+        min_dead_end = float(gen.card.get("postprocess", {}).get("min_dead_end_m",
+                                                                 DEFAULT_MIN_DEAD_END))
     rg = raster_graph.raster_to_graph(image, gt, simplify=3.0 * scale,
                                       min_dead_end=min_dead_end * scale, max_gap=max_gap * scale,
                                       from_edge=from_edge,

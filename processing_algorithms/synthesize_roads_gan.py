@@ -95,8 +95,10 @@ class SynthesizeRoadsGan(AlgorithmBase):
             "the whole network (blocks get larger or smaller).", advanced=True)
         self.add(QgsProcessingParameterNumber(
             self.MIN_DEAD_END, "Shortest dead end kept (m)", QgsProcessingParameterNumber.Double,
-            defaultValue=25.0, minValue=0.0, maxValue=1000.0),
-            "Dead-end streets this long or shorter are removed (thesis: 25 m).", advanced=True)
+            optional=True, minValue=0.0, maxValue=1000.0),
+            "Dead-end streets this long or shorter are removed. Empty: the model's value from "
+            "its card (the thesis's 25 m; 120 m for the grid model, whose example has no dead "
+            "ends).", advanced=True)
         self.add(QgsProcessingParameterNumber(
             self.MAX_GAP, "Close gaps up to (m)", QgsProcessingParameterNumber.Double,
             defaultValue=0.0, minValue=0.0, maxValue=500.0),
@@ -163,9 +165,11 @@ class SynthesizeRoadsGan(AlgorithmBase):
                                     self.CELL_SIZE, 0.0, 100.0)
         max_gap = qgis_io.check_number(self.parameterAsDouble(parameters, self.MAX_GAP, context),
                                        self.MAX_GAP, 0.0, 500.0)
-        min_dead = qgis_io.check_number(
-            self.parameterAsDouble(parameters, self.MIN_DEAD_END, context), self.MIN_DEAD_END,
-            0.0, 1000.0)
+        min_dead = None  # the model card's value
+        if parameters.get(self.MIN_DEAD_END) not in (None, ""):
+            min_dead = qgis_io.check_number(
+                self.parameterAsDouble(parameters, self.MIN_DEAD_END, context),
+                self.MIN_DEAD_END, 0.0, 1000.0)
         gen = qgis_io.run_engine(f"Model '{Path(str(model)).name}'", streetgan.load_model, model)
         feedback.pushInfo(f"Model {gen.name}: {gen.card.get('title', '')}, "
                           f"{gen.cell_size:g} m per pixel.")

@@ -148,6 +148,8 @@ def save(g, args, meta, m, history, t0) -> Path:
                      "device": "cpu", "seconds": round(time.time() - t0, 1),
                      "torch": torch.__version__, "losses": history},
         "onnx_sha256": sha,
+        # the plugin's default dead-end pruning for this model (streetgan.synthesize)
+        "postprocess": {"min_dead_end_m": args.min_dead_end},
     }
     onnx_path.with_suffix(".json").write_text(json.dumps(card, indent=1))
     return onnx_path
@@ -168,6 +170,9 @@ def main() -> None:
     ap.add_argument("--name", default=None)
     ap.add_argument("--title", default="")
     ap.add_argument("--no-untrained", action="store_true")
+    ap.add_argument("--min-dead-end", type=float, default=25.0,
+                    help="dead ends this short (m) are pruned by default for this model "
+                         "(thesis 25; choose on validation seeds)")
     args = ap.parse_args()
     if (args.patch - 1) % 32:
         ap.error("--patch must be 32 (m - 1) + 1, e.g. 161, 321")
