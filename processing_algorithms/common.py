@@ -37,6 +37,35 @@ class AlgorithmBase(QgsProcessingAlgorithm):
     def helpUrl(self):  # noqa: N802
         return "https://example.org/urbansynth/urban_synthesis#toolbox-reference"
 
+    @staticmethod
+    def given(parameters, name: str) -> bool:
+        """Whether an optional parameter was given a value."""
+        value = parameters.get(name)
+        return value is not None and value != ""
+
+    def input_error(self, parameters, context):
+        """A message when the inputs do not go together (checked before the run, in the
+        dialog and on the command line), else None. Overridden by algorithms that need it."""
+        return None
+
+    def checkParameterValues(self, parameters, context):  # noqa: N802 (QGIS API)
+        ok, message = super().checkParameterValues(parameters, context)
+        if not ok:
+            return ok, message
+        message = self.input_error(parameters, context)
+        return (False, message) if message else (True, "")
+
+    def blocks_or_roads_error(self, parameters, done: str, to_do: str):
+        """The message when not exactly one of BLOCKS and ROADS is given (``done``: what
+        happens to blocks, e.g. 'filled'; ``to_do``: e.g. 'fill')."""
+        blocks_given, roads_given = self.given(parameters, "BLOCKS"), self.given(parameters, "ROADS")
+        if blocks_given and roads_given:
+            return (f"Give either Blocks or Roads, not both: blocks are {done} as they are, "
+                    "roads are first turned into blocks.")
+        if not blocks_given and not roads_given:
+            return f"Give the Blocks to {to_do}, or Roads to extract the blocks from."
+        return None
+
     def add(self, parameter, help_text: str, advanced: bool = False):
         """Add a parameter with its help text (shown in the dialog and in qgis_process help)."""
         parameter.setHelp(help_text)

@@ -125,15 +125,11 @@ class LayoutMetrics(AlgorithmBase):
 
     # ------------------------------------------------------------------ helpers
 
-    def _given(self, parameters, name):
-        value = parameters.get(name)
-        return value is not None and value != ""
-
     def _read_set(self, parameters, context, feedback, layers, area_name, landuse_field):
         """Read one layer set (candidate or example) into engine arguments, one metric CRS."""
         kwargs, names, crs = {}, [], None
         for name, arg, kind in layers:
-            if not self._given(parameters, name):
+            if not self.given(parameters, name):
                 continue
             frame = qgis_io.read_source(self, parameters, name, context, feedback, kind=kind,
                                         target_crs=crs)
@@ -148,7 +144,7 @@ class LayoutMetrics(AlgorithmBase):
                 else:
                     feedback.pushInfo(f"{frame.name} has no field '{landuse_field}': no land-use "
                                       "shares for it.")
-        if kwargs and self._given(parameters, area_name):
+        if kwargs and self.given(parameters, area_name):
             area = qgis_io.read_source(self, parameters, area_name, context, feedback,
                                        kind="polygons", target_crs=crs)
             kwargs["area"] = area.geometry
@@ -158,7 +154,7 @@ class LayoutMetrics(AlgorithmBase):
     # ------------------------------------------------------------------ run
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
-        if not any(self._given(parameters, name) for name, _, _ in self.CANDIDATE):
+        if not any(self.given(parameters, name) for name, _, _ in self.CANDIDATE):
             raise QgsProcessingException(
                 "No layer to measure: give at least one of Roads, Blocks, Parcels or Buildings.")
         half_width = qgis_io.check_number(
@@ -188,7 +184,7 @@ class LayoutMetrics(AlgorithmBase):
                 progress=qgis_io.progress_for(feedback, 50, 80), **ex_args)
             for note in example.notes:
                 feedback.pushInfo(f"Example: {note}")
-        elif self._given(parameters, self.EXAMPLE_STUDY_AREA):
+        elif self.given(parameters, self.EXAMPLE_STUDY_AREA):
             feedback.reportError("An example study area was given without example layers; "
                                  "it is ignored.")
         table = metrics.compare(candidate, example)

@@ -140,34 +140,17 @@ class SubdivideParcels(AlgorithmBase):
 
     # ----------------------------------------------------------------------- checks
 
-    def _given(self, parameters, name):
-        value = parameters.get(name)
-        return value is not None and value != ""
-
-    def _input_error(self, parameters):
-        """A sentence for a wrong choice of inputs, or None."""
-        blocks_given = self._given(parameters, self.BLOCKS)
-        roads_given = self._given(parameters, self.ROADS)
-        if blocks_given and roads_given:
-            return ("Give either Blocks or Roads, not both: blocks are subdivided as they are, "
-                    "roads are first turned into blocks.")
-        if not blocks_given and not roads_given:
-            return "Give the Blocks to subdivide, or Roads to extract the blocks from."
-        if blocks_given and self._given(parameters, self.STREET_WIDTH_FIELD):
-            return "The street width field belongs to Roads; with Blocks use Street width."
-        return None
-
-    def checkParameterValues(self, parameters, context):  # noqa: N802
-        ok, message = super().checkParameterValues(parameters, context)
-        if not ok:
-            return ok, message
-        message = self._input_error(parameters)
-        return (False, message) if message else (True, "")
+    def input_error(self, parameters, context):
+        message = self.blocks_or_roads_error(parameters, "subdivided", "subdivide")
+        if message is None and self.given(parameters, self.BLOCKS) \
+                and self.given(parameters, self.STREET_WIDTH_FIELD):
+            message = "The street width field belongs to Roads; with Blocks use Street width."
+        return message
 
     # ----------------------------------------------------------------------- run
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
-        message = self._input_error(parameters)
+        message = self.input_error(parameters, context)
         if message:
             raise QgsProcessingException(message)
         method = self.method_keys[self.parameterAsEnum(parameters, self.METHOD, context)]
@@ -195,7 +178,7 @@ class SubdivideParcels(AlgorithmBase):
                                         self.SEED, 0))
         street_width = number[self.STREET_WIDTH]
 
-        if self._given(parameters, self.BLOCKS):
+        if self.given(parameters, self.BLOCKS):
             frame, block_geoms, block_ids, road_lines, road_widths = \
                 self._blocks(parameters, context, feedback)
         else:

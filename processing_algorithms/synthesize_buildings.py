@@ -302,24 +302,16 @@ class SynthesizeBuildings(AlgorithmBase):
 
     # ----------------------------------------------------------------------- run
 
-    def _given(self, parameters, name):
-        value = parameters.get(name)
-        return value is not None and value != ""
-
     def _method(self, parameters, context):
         method = self.METHODS[self.parameterAsEnum(parameters, self.METHOD, context)]
-        missing = [n for n in method.needs if not self._given(parameters, n)]
+        missing = [n for n in method.needs if not self.given(parameters, n)]
         if missing:
             names = ", ".join(self.parameterDefinition(n).description() for n in missing)
             return method, f"Method '{method.label}' needs: {names}."
         return method, None
 
-    def checkParameterValues(self, parameters, context):  # noqa: N802
-        ok, message = super().checkParameterValues(parameters, context)
-        if not ok:
-            return ok, message
-        _, message = self._method(parameters, context)
-        return (False, message) if message else (True, "")
+    def input_error(self, parameters, context):
+        return self._method(parameters, context)[1]
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         method, message = self._method(parameters, context)
@@ -413,7 +405,7 @@ class SynthesizeBuildings(AlgorithmBase):
         if (road_lines is None) != (ex_lines is None):
             feedback.pushInfo("Road distances are used only with both Roads and Example roads.")
         blocks = None
-        if self._given(parameters, self.BLOCKS):
+        if self.given(parameters, self.BLOCKS):
             blocks = qgis_io.read_source(self, parameters, self.BLOCKS, context, feedback,
                                          kind="polygons", target_crs=crs).geometry
         result = qgis_io.run_engine(
@@ -462,7 +454,7 @@ class SynthesizeBuildings(AlgorithmBase):
     # ----------------------------------------------------------------------- best fit
 
     def _library(self, parameters, context, feedback, crs):
-        if not self._given(parameters, self.BUILDING_LIBRARY):
+        if not self.given(parameters, self.BUILDING_LIBRARY):
             feedback.pushInfo("Building library: the built-in library of twelve buildings.")
             return building_bestfit.default_library()
         frame = qgis_io.read_source(
@@ -514,7 +506,7 @@ class SynthesizeBuildings(AlgorithmBase):
     # ----------------------------------------------------------------------- parts
 
     def _parts_library(self, parameters, context, feedback, crs):
-        if self._given(parameters, self.BUILDING_PARTS):
+        if self.given(parameters, self.BUILDING_PARTS):
             frame = qgis_io.read_source(self, parameters, self.BUILDING_PARTS, context,
                                         feedback, kind="polygons", target_crs=crs)
             table = frame.attributes.drop(columns=[c for c in frame.attributes
@@ -588,7 +580,7 @@ class SynthesizeBuildings(AlgorithmBase):
     def _sites(self, parameters, context, feedback, crs, parts):
         """Site area per skeleton part: the block holding most of it, else its own polygon."""
         area = np.where(shapely.get_type_id(parts) == 3, shapely.area(parts), np.nan)
-        if not self._given(parameters, self.BLOCKS):
+        if not self.given(parameters, self.BLOCKS):
             return area
         blocks = qgis_io.read_source(self, parameters, self.BLOCKS, context, feedback,
                                      kind="polygons", target_crs=crs).geometry

@@ -137,32 +137,13 @@ class SynthesizeFootprints(AlgorithmBase):
 
     # ----------------------------------------------------------------------- checks
 
-    @staticmethod
-    def _given(parameters, name):
-        value = parameters.get(name)
-        return value is not None and value != ""
-
-    def _input_error(self, parameters):
-        blocks_given = self._given(parameters, self.BLOCKS)
-        roads_given = self._given(parameters, self.ROADS)
-        if blocks_given and roads_given:
-            return ("Give either Blocks or Roads, not both: blocks are filled as they are, "
-                    "roads are first turned into blocks.")
-        if not blocks_given and not roads_given:
-            return "Give the Blocks to fill, or Roads to extract the blocks from."
-        return None
-
-    def checkParameterValues(self, parameters, context):  # noqa: N802
-        ok, message = super().checkParameterValues(parameters, context)
-        if not ok:
-            return ok, message
-        message = self._input_error(parameters)
-        return (False, message) if message else (True, "")
+    def input_error(self, parameters, context):
+        return self.blocks_or_roads_error(parameters, "filled", "fill")
 
     # ----------------------------------------------------------------------- run
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
-        message = self._input_error(parameters)
+        message = self.input_error(parameters, context)
         if message:
             raise QgsProcessingException(message)
         method = footprints.METHODS[self.parameterAsEnum(parameters, self.METHOD, context)]
@@ -182,7 +163,7 @@ class SynthesizeFootprints(AlgorithmBase):
         examples = self._databases(parameters, context, feedback, min_b)
         feedback.setProgress(5)
 
-        if self._given(parameters, self.BLOCKS):
+        if self.given(parameters, self.BLOCKS):
             frame, block_geoms, block_ids, road_lines = self._blocks(parameters, context,
                                                                      feedback)
         else:
