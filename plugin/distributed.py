@@ -187,6 +187,18 @@ def _block_ids(df) -> np.ndarray:
     return np.arange(1, len(df) + 1, dtype=np.int64)
 
 
+def _polygon_table(source: str, df, ids: np.ndarray, work_crs) -> "BlockTable":
+    """Polygons of a read layer in the metric working CRS (chosen from the data when
+    ``work_crs`` is None), with their feature ids and output ids."""
+    crs = df.crs.to_wkt() if df.crs is not None else None
+    if work_crs is None:
+        lonlat = df.geometry.to_crs(4326).total_bounds if df.crs is not None \
+            else df.geometry.total_bounds
+        work_crs = metric_crs(df.crs, lonlat)
+    return BlockTable(source, df.index.to_numpy(dtype=np.int64), _to_metric(df, work_crs),
+                      ids, crs, work_crs)
+
+
 def read_blocks(source: Source, work_crs: Optional[str] = None) -> BlockTable:
     """Read a polygon layer of target blocks (in layer order) into the working CRS."""
     df = read_layer(source)
@@ -197,13 +209,7 @@ def read_blocks(source: Source, work_crs: Optional[str] = None) -> BlockTable:
     if not types or not types <= {3, 6}:
         raise InputError(f"{name}: blocks must be polygons (found "
                          f"{', '.join(sorted(set(df.geometry.geom_type.dropna())))})")
-    crs = df.crs.to_wkt() if df.crs is not None else None
-    if work_crs is None:
-        lonlat = df.geometry.to_crs(4326).total_bounds if df.crs is not None \
-            else df.geometry.total_bounds
-        work_crs = metric_crs(df.crs, lonlat)
-    return BlockTable(source, df.index.to_numpy(dtype=np.int64), _to_metric(df, work_crs),
-                      _block_ids(df), crs, work_crs)
+    return _polygon_table(source, df, _block_ids(df), work_crs)
 
 
 def read_lines(source: Source, work_crs: str) -> np.ndarray:
@@ -606,13 +612,7 @@ def read_footprints(source: Source, work_crs: Optional[str] = None) -> BlockTabl
             shapely.get_type_id(df.geometry.values).tolist()) <= {3, 6}:
         raise InputError(f"{source}: footprints must be polygons (found "
                          f"{', '.join(sorted(set(df.geometry.geom_type.fillna('none'))))})")
-    crs = df.crs.to_wkt() if df.crs is not None else None
-    if work_crs is None:
-        lonlat = df.geometry.to_crs(4326).total_bounds if df.crs is not None \
-            else df.geometry.total_bounds
-        work_crs = metric_crs(df.crs, lonlat)
-    return BlockTable(source, df.index.to_numpy(dtype=np.int64), _to_metric(df, work_crs),
-                      np.arange(1, len(df) + 1, dtype=np.int64), crs, work_crs)
+    return _polygon_table(source, df, np.arange(1, len(df) + 1, dtype=np.int64), work_crs)
 
 
 def halo_partitions(geoms: np.ndarray, n_partitions: int, radius: float):
