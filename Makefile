@@ -44,9 +44,8 @@ test: setup
 	QT_QPA_PLATFORM=offscreen $(PY) -m pytest -q tests
 
 bench: setup $(VENV)/.bench-installed
-	QT_QPA_PLATFORM=offscreen $(PY) tests/benchmarks/bench_foundation.py
-	QT_QPA_PLATFORM=offscreen $(PY) tests/benchmarks/bench_growth.py
-	QT_QPA_PLATFORM=offscreen $(PY) tests/benchmarks/bench_parcels.py
+	set -e; for b in tests/benchmarks/bench_*.py; do \
+		echo "== $$b"; QT_QPA_PLATFORM=offscreen $(PY) $$b; done
 
 # The plugin zip (top folder urban_synthesis/) holds what QGIS needs to run the plugin, taken
 # from the committed tree (git archive HEAD): no tests, example data, dev scripts or README
