@@ -32,6 +32,18 @@ ALGORITHMS = (
 MODELS = Path(__file__).resolve().parent.parent / "resources" / "models"
 
 
+class ShippedModel(QgsProcessingModelAlgorithm):
+    """A model of resources/models: shown under its display name (help content key
+    DISPLAY_NAME) in the provider's own group of that name (a .model3 file keeps the group
+    name only)."""
+
+    def displayName(self):  # noqa: N802
+        return self.helpContent().get("DISPLAY_NAME") or self.name()
+
+    def groupId(self):  # noqa: N802
+        return self.group().lower()
+
+
 class UrbanSynthesisProvider(QgsProcessingProvider):
     def id(self):
         return "urbansynth"
@@ -73,7 +85,7 @@ class UrbanSynthesisProvider(QgsProcessingProvider):
 
     def _load_models(self):
         for path in sorted(MODELS.glob("*.model3")):
-            model = QgsProcessingModelAlgorithm()
+            model = ShippedModel()
             if model.fromFile(str(path)):
                 model.updateDestinationParameters()
                 # parameter help is kept in the model's help content (see make_models.py)

@@ -68,7 +68,9 @@ def _child(model, child_id, alg_id, description, sources, outputs=(), x=0.0, y=0
 def district_model() -> QgsProcessingModelAlgorithm:
     model = QgsProcessingModelAlgorithm("synthesizedistrict", "Synthesis", "synthesis")
     model.setHelpContent({"ALG_DESC": DISTRICT_HELP, "ALG_CREATOR": "Urban Synthesis",
-                          "ALG_VERSION": "1"})
+                          "ALG_VERSION": "1",
+                          # the toolbox name (plugin/provider.py ShippedModel)
+                          "DISPLAY_NAME": "Synthesise a district like an example"})
     p = Source.fromModelParameter
     out = Source.fromChildOutput
     fixed = Source.fromStaticValue
