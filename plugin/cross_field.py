@@ -26,6 +26,7 @@ Palacios, J., Zhang, E. (2007). Rotational symmetry field design on surfaces. AC
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Optional
 
 import numpy as np
 import scipy.sparse as sp
@@ -74,6 +75,21 @@ class CrossField:
     h: float
     u: np.ndarray
     singularities: np.ndarray
+    #: (ny, nx) nodes inside the region and farther than 1.5 h from its boundary: a point
+    #: whose nearest node is deep is inside for sure (tracing skips the exact test there)
+    deep: Optional[np.ndarray] = None
+
+    def surely_inside(self, xy: np.ndarray) -> np.ndarray:
+        """True where a point (n, 2) is certainly inside the region (False = unknown)."""
+        if self.deep is None:
+            return np.zeros(len(xy), dtype=bool)
+        ny, nx = self.deep.shape
+        ix = np.rint((xy[:, 0] - self.x0) / self.h).astype(int)
+        iy = np.rint((xy[:, 1] - self.y0) / self.h).astype(int)
+        ok = (ix >= 0) & (ix < nx) & (iy >= 0) & (iy < ny)
+        out = np.zeros(len(xy), dtype=bool)
+        out[ok] = self.deep[iy[ok], ix[ok]]
+        return out
 
     def sample(self, xy: np.ndarray) -> np.ndarray:
         """Bilinear interpolation of u at points (n, 2) -> (n, 2)."""
@@ -82,9 +98,10 @@ class CrossField:
         fy = np.clip((xy[:, 1] - self.y0) / self.h, 0, ny - 1.000001)
         ix, iy = fx.astype(int), fy.astype(int)
         tx, ty = (fx - ix)[:, None], (fy - iy)[:, None]
-        u = self.u
-        return ((1 - tx) * (1 - ty) * u[iy, ix] + tx * (1 - ty) * u[iy, ix + 1]
-                + (1 - tx) * ty * u[iy + 1, ix] + tx * ty * u[iy + 1, ix + 1])
+        # one gather of the four corners on the flat grid (this runs twice per RK step)
+        k = iy * nx + ix
+        c = self.u.reshape(-1, 2)[np.stack([k, k + 1, k + nx, k + nx + 1])]  # (4, n, 2)
+        return ((1 - ty) * ((1 - tx) * c[0] + tx * c[1]) + ty * ((1 - tx) * c[2] + tx * c[3]))
 
     def angle(self, xy: np.ndarray):
         """Cross angle theta in [-pi/4, pi/4) and the field's strength |u| at points."""
@@ -128,6 +145,7 @@ def cross_field(region, h: float) -> CrossField:
     ny = int(np.ceil((ymax - y0) / h)) + 3
     gx, gy = np.meshgrid(x0 + h * np.arange(nx), y0 + h * np.arange(ny))
     pts = np.stack([gx.ravel(), gy.ravel()], axis=1)
+    shapely.prepare(region)  # a prepared polygon answers the grid's point queries fast
     inside = shapely.contains_xy(region, pts[:, 0], pts[:, 1])
     # boundary samples every h / 4 with their tangent angle; a KD-tree gives each node its
     # distance to the boundary (to h / 8) and the tangent of the nearest boundary point
@@ -170,7 +188,10 @@ def cross_field(region, h: float) -> CrossField:
     u = np.zeros((len(pts), 2))
     u[act] = sol
     u = u.reshape(ny, nx, 2)
-    return CrossField(x0, y0, h, u, _singular_cells(u, inside.reshape(ny, nx), x0, y0, h))
+    # the boundary samples are h / 4 apart: a node over 1.5 h from them is over 1.25 h
+    # from the boundary, and every point within h * sqrt(2) / 2 of it is inside
+    deep = (inside & (dist > 1.5 * h)).reshape(ny, nx)
+    return CrossField(x0, y0, h, u, _singular_cells(u, inside.reshape(ny, nx), x0, y0, h), deep)
 
 
 def _singular_cells(u: np.ndarray, inside: np.ndarray, x0, y0, h) -> np.ndarray:

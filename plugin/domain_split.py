@@ -19,7 +19,13 @@ Pipeline of :func:`split_domain` (one layout) and :func:`split_variations` (k la
 4. **Global optimisation of the road mesh** (sec. 6, :mod:`mesh_optimisation`), then the
    templates are warped again onto the optimised blocks (:func:`templates.warp_rows`).
 5. Parcels get their land use, street access and Yang's quality; :func:`table1` gives the
-   paper's Table 1 metrics through :mod:`metrics`.
+   paper's Table 1 metrics through :mod:`metrics`. Undesirable lots (Yang's Fig. 12 test)
+   are repaired where a strip meets a slanted street or streets meet at an acute angle:
+   a lot of at least 0.6 of a template parcel keeps the largest rectangle standing on its
+   street edge (:func:`_front_rectangle`) and its wedges become pocket parks; a misshapen
+   lot smaller than a template parcel becomes a pocket park (the paper's fallback "places
+   a park" for what no template fills). Splits leaving a child that is a band thinner than
+   any template anywhere along it are rejected (morphological opening test).
 
 Nothing here imports QGIS. Geometry is metric; each variation draws from
 ``numpy.random.default_rng([seed, variation])``.
@@ -206,8 +212,13 @@ class _Splitter:
         self.s = settings
         self.rng = rng
         L, S = settings.parcel_length, settings.street_width
-        widths = [t.gross_depth(L, S) for t in lib if t.kind in ("rows", "spike")]
-        self.opt = width_fit(widths, 4 * max(widths + [L + S]), 0.12 * L)
+        parts = [t for t in lib if t.kind in ("rows", "spike")]
+        widths = [t.gross_depth(L, S) for t in parts]
+        # the templates' user probabilities weight the widths: with the shipped library a
+        # double strip (one street per two rows) is preferred to two single strips
+        top = max(t.probability for t in parts) or 1.0
+        self.opt = width_fit(widths, 4 * max(widths + [L + S]), 0.12 * L,
+                             weights=[max(t.probability / top, 0.05) for t in parts])
         # a sub-region thinner than this holds no template: its split is rejected
         self.min_depth = S + min([t.rows * L * t.depth_scale[0] for t in lib if t.kind == "rows"]
                                  + [2.6 * L])
@@ -273,9 +284,14 @@ class _Splitter:
         _, short, _ = _blocks_rect(faces)
         if (short < self.min_depth).any():
             return None
-        inner = shapely.buffer(faces, -(self.s.street_width / 2 + 0.3 * self.s.parcel_length),
-                               join_style="mitre")
+        r = self.s.street_width / 2 + 0.3 * self.s.parcel_length
+        inner = shapely.buffer(faces, -r, join_style="mitre")
         if shapely.is_empty(inner).any():
+            return None
+        # morphological opening: a child that is thick somewhere but a thin band elsewhere
+        # (a streamline running close to the boundary) leaves a sliver no template fills
+        opened = shapely.area(shapely.buffer(inner, r, join_style="mitre"))
+        if (opened < 0.85 * shapely.area(faces)).any():
             return None
         return faces
 
@@ -444,7 +460,7 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
     settings_sk = _parcels.SubdivisionSettings(
         max_area=1.6 * L * W, min_area=0.3 * L * W, min_width=0.4 * W, lot_width=W,
         irregularity=0.0)
-    n_inner = 0
+    n_inner = n_pocket = 0
     for k, (reg, name, _) in enumerate(leaves):
         progress.step(0.7 + 0.25 * k / max(len(leaves), 1))
         shrunk = shapely.buffer(reg, -S / 2, join_style="mitre")
@@ -470,9 +486,20 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
                 lots = _parcels._polygon_parts(_parcels.merge_into_neighbours(lots, bad)[0])
                 front = _parcels.street_frontage(lots, zone_poly)
             # a lot still without frontage (all its neighbours were merged away) is kept as
-            # a green inside the block, as the paper's template with a private park
-            inner = front < _parcels.MIN_FRONTAGE
-            n_inner += int(inner.sum())
+            # a green inside the block, as the paper's template with a private park; an
+            # undesirable remnant no larger than a parcel (the wedge left where a strip
+            # meets a slanted or curved street, a block corner) becomes a pocket park: the
+            # paper's fallback "places a park" for what no template fills
+            area = shapely.area(lots)
+            bad = _parcels.lot_quality(lots)[2]
+            remnant = bad & (area < 1.0 * L * W)
+            fixable = bad & (area >= 0.6 * L * W) & (front >= _parcels.MIN_FRONTAGE)
+            if fixable.any():
+                lots, front, remnant = _rectify(lots, front, remnant, fixable, part, L, W)
+            cut_off = front < _parcels.MIN_FRONTAGE
+            inner = cut_off | remnant
+            n_inner += int(cut_off.sum())
+            n_pocket += int((remnant & ~cut_off).sum())
             lots_all.append(lots)
             use_all += ["park" if i else "residential" for i in inner]
             tmpl_all += [kind] * len(lots)
@@ -505,7 +532,8 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
         "area_m2": shapely.area(geoms), "frontage_m": front,
         "has_street_access": np.where(residential, np.nan_to_num(front) >= _parcels.MIN_FRONTAGE,
                                       False),
-        "p_angle": p_angle, "p_area": p_area, "undesirable": bad & residential})
+        # Yang's shape flag on every parcel (a green wedge is flagged too: honest styling)
+        "p_angle": p_angle, "p_area": p_area, "undesirable": bad})
 
     # roads
     roads = list(fixed) + list(split_lines) + template_roads
@@ -519,7 +547,7 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
         "templates": dict(Counter(leaf[1] for leaf in leaves)),
         "n_parcels": int(residential.sum()),
         "n_no_access": int((residential & ~table.has_street_access.to_numpy(bool)).sum()),
-        "n_inner_parks": n_inner,
+        "n_inner_parks": n_inner, "n_pocket_parks": n_pocket,
         "time_split_s": t_split, "time_backtrack_s": t_back, "time_optimise_s": t_opt,
         "optimisation": opt_stats,
     }
@@ -527,6 +555,78 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
     return Layout(np.asarray(roads, dtype=object), np.asarray(level), np.asarray(kind, dtype=object),
                   np.array([leaf[0] for leaf in leaves], dtype=object),
                   np.array([leaf[1] for leaf in leaves], dtype=object), geoms, table, domain, stats)
+
+
+def _front_rectangle(lot, street, L: float, W: float):
+    """The largest rectangle of a lot standing on one of its (four longest) street edges,
+    depth 0.4-1.2 L, width >= 0.6 W, or None."""
+    xy = shapely.get_coordinates(shapely.geometry.polygon.orient(lot).exterior)
+    seg = np.diff(xy, axis=0)
+    length = np.hypot(*seg.T)
+    mids = shapely.points(xy[:-1] + seg / 2)
+    on_street = shapely.dwithin(mids, shapely.boundary(street), 0.05) & (length > 0.3 * W)
+    best, best_area = None, 0.0
+    for k in np.argsort(-np.where(on_street, length, -1))[:4]:
+        if not on_street[k]:
+            break
+        u = seg[k] / length[k]
+        nrm = np.array([-u[1], u[0]])  # counter-clockwise ring: the lot lies to the left
+        local = np.c_[(xy - xy[k]) @ u, (xy - xy[k]) @ nrm]
+        lot_l = shapely.Polygon(local)
+        lo, hi = local[:, 0].min() - 1, local[:, 0].max() + 1
+        mid = 0.5 * length[k]
+        for d in np.linspace(0.4 * L, 1.2 * L, 9):
+            if d > local[:, 1].max():
+                break
+            x0, x1 = 0.0, length[k]  # the base: the street edge itself
+            with np.errstate(invalid="ignore"):
+                cut = shapely.get_parts(shapely.intersection(
+                    lot_l, shapely.LineString([(lo, d), (hi, d)])))
+            cut = [c for c in cut if c.geom_type == "LineString"]
+            span = [shapely.get_coordinates(c)[:, 0] for c in cut]
+            span = [(c.min(), c.max()) for c in span if c.min() <= mid <= c.max()]
+            if not span:
+                continue
+            x0, x1 = max(x0, span[0][0]), min(x1, span[0][1])
+            if x1 - x0 >= 0.6 * W and (x1 - x0) * d > best_area:
+                best, best_area = (xy[k], u, nrm, (x0, 0.0, x1, d)), (x1 - x0) * d
+    if best is None:
+        return None
+    origin, u, nrm, box = best
+    corners = shapely.get_coordinates(shapely.box(*box))
+    rect = shapely.Polygon(origin + corners[:, :1] * u + corners[:, 1:] * nrm)
+    rect = shapely.intersection(rect, lot)  # exact shared outline, no slivers outside
+    # the sides must not cross the lot's outline (a non-convex lot between base and top)
+    ok = rect.geom_type == "Polygon" and rect.area > 0.99 * best_area
+    return rect if ok else None
+
+
+def _rectify(lots, front, remnant, which, street, L: float, W: float):
+    """Undesirable lots (triangles and wedges where streets meet at acute angles or a strip
+    ends on a slanted street) keep the rectangle standing on their street edge when it is
+    at least 0.45 of a template parcel; the rest becomes green unless it is itself a good
+    parcel with frontage."""
+    out, out_green = [], []
+    for i, lot in enumerate(lots):
+        rect = _front_rectangle(lot, street, L, W) if which[i] else None
+        if rect is None or rect.area < 0.45 * L * W:
+            out.append(lot)
+            out_green.append(remnant[i])
+            continue
+        # the wedges are shrunk by 2 cm: that drops the zero-width float-noise slivers
+        # along the rectangle's sides and parts them where they only touch at the
+        # rectangle's corners (a pinched ring turns invalid once reprojected)
+        rest = shapely.buffer(shapely.difference(lot, rect), -0.02, join_style="mitre")
+        rest = _parcels._polygon_parts([rest], 1.0)
+        rest = rest[~shapely.is_empty(shapely.buffer(rest, -0.25, join_style="mitre"))]
+        ok = np.zeros(len(rest), dtype=bool)
+        if len(rest):
+            good = ~_parcels.lot_quality(rest)[2] & (shapely.area(rest) >= 0.5 * L * W)
+            ok = good & (_parcels.street_frontage(rest, street) >= _parcels.MIN_FRONTAGE)
+        out += [rect] + list(rest)
+        out_green += [False] + list(~ok)
+    out = np.asarray(out, dtype=object)
+    return out, _parcels.street_frontage(out, street), np.asarray(out_green, dtype=bool)
 
 
 def _fallback(region, energies, by_name, s: SplitSettings) -> str:

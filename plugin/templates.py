@@ -277,7 +277,7 @@ def region_frame(poly):
     ring = np.asarray(poly.exterior.coords)[:-1]
     if len(ring) < 4:
         return None
-    mrr = shapely.get_coordinates(shapely.minimum_rotated_rectangle(poly))[:-1]
+    mrr = _mrr_corners(ring)
     corner_idx = []
     for c in mrr:
         d = np.hypot(ring[:, 0] - c[0], ring[:, 1] - c[1])
@@ -297,6 +297,26 @@ def region_frame(poly):
     e0 = sides[(k + 3) % 4][::-1]  # from c1's start to c2's start
     e1 = sides[(k + 1) % 4]        # from c1's end to c2's end
     return c1, c2, e0, e1
+
+
+def _mrr_corners(xy: np.ndarray) -> np.ndarray:
+    """Corners (4, 2) of the minimum-area rectangle of points: every convex-hull edge
+    direction tried at once in numpy (shapely's oriented_envelope loops in Python, and
+    this runs for every block and on every optimisation iteration)."""
+    hull = shapely.get_coordinates(shapely.convex_hull(shapely.multipoints(xy)))
+    if len(hull) < 4:
+        hull = np.asarray(xy, dtype=float)
+        hull = np.vstack([hull, hull[:1]])
+    e = np.diff(hull, axis=0)
+    ln = np.hypot(e[:, 0], e[:, 1])
+    e, ln = e[ln > 1e-9], ln[ln > 1e-9]
+    u = e / ln[:, None]
+    v = np.stack([-u[:, 1], u[:, 0]], axis=1)
+    pu, pv = u @ hull.T, v @ hull.T                   # (edges, points)
+    a0, a1, b0, b1 = pu.min(1), pu.max(1), pv.min(1), pv.max(1)
+    k = int(np.argmin((a1 - a0) * (b1 - b0)))
+    return np.array([a * u[k] + b * v[k] for a, b in
+                     ((a0[k], b0[k]), (a1[k], b0[k]), (a1[k], b1[k]), (a0[k], b1[k]))])
 
 
 @dataclass

@@ -59,7 +59,12 @@ class SplitDomain(AlgorithmBase):
             "Key roads are kept and split the region; key areas (parks, schools, lakes) are "
             "left out and kept as parcels of their land use. Every region outline counts as "
             "a street. Several variations can be made at once; each parcel has street "
-            "access, land use and Yang's quality (p_angle, p_area, undesirable). The metrics "
+            "access, land use and Yang's quality (p_angle, p_area, undesirable). Where a "
+            "strip ends on a slanted street or streets meet at an acute angle, the lot keeps "
+            "the rectangle standing on its street and the leftover wedge (or a misshapen lot "
+            "smaller than a template parcel) becomes a pocket park (land_use 'park'), the "
+            "paper's park fallback; the undesirable flag is Yang's shape test on every "
+            "parcel, parks included. The metrics "
             "table has one row per variation with the paper's Table 1 columns. Outputs are "
             "in the region's CRS."
         )
@@ -183,7 +188,8 @@ class SplitDomain(AlgorithmBase):
                 f"{st['n_backtracked']} template choices backtracked; p_angle "
                 f"{m['p_angle']:.2f}°, p_area {m['p_area']:.3f}, {m['undesirable']} "
                 f"undesirable; {st['n_no_access']} parcels without street access "
-                f"({st['n_inner_parks']} lots cut off from the street kept as inner greens); times "
+                f"({st['n_inner_parks']} lots cut off from the street kept as inner greens, "
+                f"{st['n_pocket_parks']} misshapen remnants and wedges made pocket parks); times "
                 f"split {st['time_split_s']:.1f} s, optimise {st['time_optimise_s']:.1f} s.")
         feedback.setProgress(88)
 

@@ -279,3 +279,88 @@ def test_spike_template_makes_a_cul_de_sac_with_street_access():
     assert on_road.sum() < 1e-6
     # every lot fronts the block's streets or the cul-de-sac
     assert (parcels.street_frontage(lots, shapely.union_all(lots)) >= parcels.MIN_FRONTAGE).all()
+
+
+# --------------------------------------------------------------------------- bad parcels
+
+def test_children_reject_a_band_too_thin_for_any_template():
+    """A split whose child is thick at one end but a band thinner than any template
+    elsewhere is rejected (the long sliver lots of curved streamlines near a boundary)."""
+    splitter = domain_split._Splitter(LIB, domain_split.SplitSettings(),
+                                      np.random.default_rng(0))
+    region = shapely.box(0, 0, 300, 200)
+    # an L-shaped child: 100 m wide on the right, a 25 m band along the bottom
+    hook = shapely.LineString([(0, 25), (200, 25), (200, 200)])
+    assert splitter._children(region, hook) is None
+    faces = splitter._children(region, shapely.LineString([(0, 100), (300, 100)]))
+    assert faces is not None and len(faces) == 2
+
+
+def test_acute_lot_keeps_the_rectangle_on_its_street_and_the_wedge_turns_green():
+    """An undesirable lot larger than a parcel (a triangle where streets meet at an acute
+    angle) is cut to the rectangle standing on its street edge; the wedge becomes green."""
+    from urban_synthesis.plugin import parcels
+
+    # the shrunk block (its outline is street) and its corner lot on the x axis
+    block = shapely.Polygon([(0, 0), (200, 0), (200, 100), (0, 45)])
+    lot = shapely.Polygon([(0, 0), (60, 0), (0, 45)])          # 1350 m², p_angle 30°
+    assert parcels.lot_quality([lot])[2][0]
+    lots, front, green = domain_split._rectify(
+        np.array([lot], dtype=object), parcels.street_frontage([lot], block),
+        np.array([False]), np.array([True]), block, L, W)
+    keep = lots[~green]
+    assert len(keep) == 1 and len(lots) >= 2
+    p_angle, p_area, bad = parcels.lot_quality(keep)
+    assert p_angle[0] < 1e-6 and p_area[0] < 1.0 + 1e-6 and not bad[0]
+    assert 0.5 * L * W <= keep[0].area <= lot.area
+    # it stands on the street edge (y = 0); the pieces do not overlap and cover the lot
+    # but for the 2 cm seam the green wedges are shrunk by
+    assert front[~green][0] >= 0.6 * W
+    assert abs(keep[0].bounds[1]) < 1e-6
+    assert abs(shapely.union_all(lots).area - shapely.area(lots).sum()) < 1e-6
+    assert shapely.within(lots, lot.buffer(1e-6)).all()
+    assert 0 <= lot.area - shapely.area(lots).sum() < 0.02 * (lot.length + keep[0].length)
+
+
+def test_minimum_rectangle_and_deep_nodes_are_exact():
+    rng = np.random.default_rng(3)
+    for _ in range(50):
+        pts = rng.normal(size=(10, 2)) * [40, 12]
+        ours = shapely.Polygon(templates._mrr_corners(pts)).area
+        ref = shapely.minimum_rotated_rectangle(shapely.multipoints(pts)).area
+        assert abs(ours - ref) < 1e-6 * ref
+    disc = shapely.Point(0, 0).buffer(100)
+    field = cross_field.cross_field(disc, 5.0)
+    xy = rng.uniform(-110, 110, (4000, 2))
+    sure = field.surely_inside(xy)
+    assert sure.sum() > 1000
+    assert shapely.contains_xy(disc, xy[sure, 0], xy[sure, 1]).all()
+
+
+@pytest.fixture(scope="module")
+def bubenec_with_streets():
+    """The whole hull of Bubeneč's plots with its 35 real streets kept (the bench's
+    hardest region: acute junctions, curved streets, region corners)."""
+    plots = bubenec("plots").geometry.to_numpy()
+    streets = bubenec("streets").geometry.to_numpy()
+    hull = shapely.convex_hull(shapely.union_all(plots))
+    return hull, streets, domain_split.split_domain(hull, key_roads=streets, templates=LIB,
+                                                    seed=1, variation=1)
+
+
+def test_bubenec_with_real_streets_reaches_the_papers_quality(bubenec_with_streets):
+    hull, streets, lay = bubenec_with_streets
+    t = lay.table
+    res = (t.land_use == "residential").to_numpy()
+    assert res.sum() > 400
+    assert shapely.is_valid(lay.parcels).all()
+    assert t.has_street_access[res].all()
+    m = domain_split.table1(lay)
+    # Yang 2013 Table 1 "Our": p_angle 2.1-3.2°, p_area 1.04-1.06
+    assert m["p_angle"] <= 3.2 and m["p_area"] <= 1.06
+    assert m["undesirable_pct"] < 6
+    # the pocket parks stay few: the paper's "Our" rows have 1-4 % parks
+    assert m["l_p"] < 6
+    # no sliver lots: the residential parcels stay within the template's size range
+    area = t.area_m2[res]
+    assert area.max() < 4 * L * W and np.median(area) > 0.6 * L * W

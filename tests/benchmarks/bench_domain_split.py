@@ -128,6 +128,7 @@ def run(variations: int = 3):
             m["valid"] = bool(shapely.is_valid(lay.parcels).all())
             m["templates"] = lay.stats["templates"]
             m["inner_parks"] = lay.stats["n_inner_parks"]
+            m["pocket_parks"] = lay.stats["n_pocket_parks"]
             rows.append(m)
             walls.append(wall)
         out["regions"].append({"region": name, "area_km2": shapely.area(region) / 1e6,
