@@ -27,6 +27,8 @@ METHODS = (
     Method("gan", "StreetGAN generator trained on Helsinki (Hartmann thesis ch. 4.2)",
            "urbansynth:synthesizeroadsgan"),
 )
+#: The shipped StreetGAN generator the 'gan' method uses.
+GAN_MODEL = "streetgan_helsinki"
 
 
 class SynthesizeRoads(AlgorithmBase):
@@ -114,19 +116,16 @@ class SynthesizeRoads(AlgorithmBase):
                 raise QgsProcessingException("Canceled.")
             return child
 
-        step = 0
         if need_hull:
             boundary = run("qgis:minimumboundinggeometry",
                            {"INPUT": arterials, "TYPE": 3,
                             "OUTPUT": QgsProcessing.TEMPORARY_OUTPUT})["OUTPUT"]
-            step += 1
-            steps.setCurrentStep(step)
+            steps.setCurrentStep(1)
         if need_db:
             fragment_db = run("urbansynth:buildfragmentdatabase",
                               {"ROADS": example, "DEM": dem,
                                "OUTPUT": QgsProcessing.TEMPORARY_OUTPUT})["OUTPUT"]
-            step += 1
-            steps.setCurrentStep(step)
+            steps.setCurrentStep(1)
         if method.key == "fragments":
             params = {"ARTERIALS": arterials, "FRAGMENT_DB": fragment_db, "DEM": dem,
                       "SEED": seed}
@@ -135,8 +134,12 @@ class SynthesizeRoads(AlgorithmBase):
         else:
             from ..plugin import streetgan  # the MODEL enum lists the shipped models by name
 
-            params = {"TARGET": boundary, "SEED": seed,
-                      "MODEL": streetgan.shipped_models().index("streetgan_helsinki")}
+            models = streetgan.shipped_models()
+            if GAN_MODEL not in models:
+                raise QgsProcessingException(
+                    f"The StreetGAN model '{GAN_MODEL}' is missing from resources/models "
+                    "(reinstall the plugin).")
+            params = {"TARGET": boundary, "SEED": seed, "MODEL": models.index(GAN_MODEL)}
         # the destination as a path/URI (a model or a command line may leave it unset)
         params["OUTPUT"] = self.parameterAsOutputLayer(parameters, self.OUTPUT, context) \
             or QgsProcessing.TEMPORARY_OUTPUT
