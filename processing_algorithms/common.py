@@ -35,7 +35,7 @@ class AlgorithmBase(QgsProcessingAlgorithm):
         return QIcon(str(ICON))
 
     def helpUrl(self):  # noqa: N802
-        return "https://example.org/urbansynth/urban_synthesis#toolbox-reference"
+        return "https://github.com/urbansynth/urban_synthesis#toolbox-reference-provider-urbansynth"
 
     @staticmethod
     def given(parameters, name: str) -> bool:
