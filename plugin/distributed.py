@@ -179,12 +179,8 @@ class BlockTable:
 def _block_ids(df) -> np.ndarray:
     """The layer's block_id when it is a unique whole number per block, else 1..n (the
     rule of urbansynth:synthesizefootprints)."""
-    if "block_id" in df.columns:
-        v = pd.to_numeric(df["block_id"], errors="coerce").to_numpy(dtype=float,
-                                                                    na_value=np.nan)
-        if np.isfinite(v).all() and (v == np.round(v)).all() and len(np.unique(v)) == len(v):
-            return v.astype(np.int64)
-    return np.arange(1, len(df) + 1, dtype=np.int64)
+    ids = footprints.output_block_ids(df["block_id"]) if "block_id" in df.columns else None
+    return np.arange(1, len(df) + 1, dtype=np.int64) if ids is None else ids
 
 
 def _polygon_table(source: str, df, ids: np.ndarray, work_crs) -> "BlockTable":

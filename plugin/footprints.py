@@ -241,6 +241,17 @@ def _retrieve(block, examples: Sequence[ExampleSet], db_choice: int, n_best: int
     return found[pick][1], found[pick][2]
 
 
+def output_block_ids(values) -> Optional[np.ndarray]:
+    """A target layer's block ids as written to the output when they are a unique whole
+    number per block; None otherwise (blocks are then numbered 1..n)."""
+    numbers = pd.to_numeric(pd.Series(np.asarray(values, dtype=object)),
+                            errors="coerce").to_numpy(dtype=np.float64, na_value=np.nan)
+    if np.isfinite(numbers).all() and (numbers == np.round(numbers)).all() and \
+            len(np.unique(numbers)) == len(numbers):
+        return numbers.astype(np.int64)
+    return None
+
+
 def synthesize_block(block, examples: Sequence[ExampleSet], method: str = "transfer",
                      seed: int = 0, block_index: int = 0, street_width: float = STREET_WIDTH,
                      setback: float = 0.0, roads: Optional[Sequence] = None,

@@ -2,6 +2,7 @@
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 from qgis.core import QgsProcessingAlgorithm, QgsProcessingException, QgsProcessingParameterDefinition
 from qgis.PyQt.QtGui import QIcon
 
@@ -65,6 +66,42 @@ class AlgorithmBase(QgsProcessingAlgorithm):
         if not blocks_given and not roads_given:
             return f"Give the Blocks to {to_do}, or Roads to extract the blocks from."
         return None
+
+    def database_paths(self, parameters, context, first: str, second: str, what: str):
+        """The files of one or two example databases (parameters ``first`` and optional
+        ``second``) and their names: the file stems, numbered when both are the same."""
+        paths = [self.parameterAsFile(parameters, first, context)]
+        extra = self.parameterAsFile(parameters, second, context)
+        if extra:
+            paths.append(extra)
+        if not paths[0]:
+            raise QgsProcessingException(f"A {what} database is needed ({first}).")
+        names = [Path(p).stem for p in paths]
+        if len(names) == 2 and names[0] == names[1]:
+            names = [f"{n}_{k + 1}" for k, n in enumerate(names)]
+        return paths, names
+
+    def style_databases(self, parameters, context, feedback, target_crs, n_databases: int):
+        """The STYLE polygons and the 0-based database each one chooses (its STYLE_FIELD
+        holds 1..n_databases), or None without style polygons."""
+        field = self.parameterAsString(parameters, "STYLE_FIELD", context) or "database"
+        style = qgis_io.read_source(self, parameters, "STYLE", context, feedback,
+                                    kind="polygons", target_crs=target_crs, optional=True,
+                                    fields=[field])
+        if style is None:
+            return None
+        if field not in style.attributes:
+            raise QgsProcessingException(f"Layer {style.name} has no field '{field}' with the "
+                                         "database number (1 or 2) per polygon.")
+        values = pd.to_numeric(style.attributes[field], errors="coerce").to_numpy(
+            dtype=np.float64, na_value=np.nan)
+        bad = ~np.isfinite(values) | (values != np.round(values)) | (values < 1) | \
+            (values > n_databases)
+        if bad.any():
+            raise QgsProcessingException(
+                f"Layer {style.name}: field '{field}' must hold a database number from 1 to "
+                f"{n_databases} in every polygon ({int(bad.sum())} do not).")
+        return style.geometry, values.astype(np.int64) - 1
 
     def add(self, parameter, help_text: str, advanced: bool = False):
         """Add a parameter with its help text (shown in the dialog and in qgis_process help)."""

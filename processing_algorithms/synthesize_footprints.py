@@ -1,8 +1,6 @@
 """urbansynth:synthesizefootprints - building footprints by example (block transfer, re-synthesis)."""
-from pathlib import Path
 
 import numpy as np
-import pandas as pd
 import shapely
 from qgis.core import (
     QgsProcessing,
@@ -189,15 +187,8 @@ class SynthesizeFootprints(AlgorithmBase):
     # ----------------------------------------------------------------------- helpers
 
     def _databases(self, parameters, context, feedback, min_buildings):
-        paths = [self.parameterAsFile(parameters, self.BLOCK_DB, context)]
-        second = self.parameterAsFile(parameters, self.BLOCK_DB_2, context)
-        if second:
-            paths.append(second)
-        if not paths[0]:
-            raise QgsProcessingException("A block database is needed (BLOCK_DB).")
-        names = [Path(p).stem for p in paths]
-        if len(names) == 2 and names[0] == names[1]:
-            names = [f"{n}_{k + 1}" for k, n in enumerate(names)]
+        paths, names = self.database_paths(parameters, context, self.BLOCK_DB, self.BLOCK_DB_2,
+                                           "block")
         examples = []
         for k, (p, n) in enumerate(zip(paths, names)):
             label = f"Block database {k + 1} ({p})"
@@ -214,12 +205,8 @@ class SynthesizeFootprints(AlgorithmBase):
                                     kind="polygons", fields=["block_id"])
         ids = None
         if "block_id" in frame.attributes:
-            numbers = pd.to_numeric(frame.attributes["block_id"], errors="coerce").to_numpy(
-                dtype=np.float64, na_value=np.nan)
-            if np.isfinite(numbers).all() and (numbers == np.round(numbers)).all() and \
-                    len(np.unique(numbers)) == len(numbers):
-                ids = numbers.astype(np.int64)
-            else:
+            ids = footprints.output_block_ids(frame.attributes["block_id"])
+            if ids is None:
                 feedback.pushInfo(f"{frame.name}: block_id is not a unique whole number per "
                                   "block; blocks are numbered 1..n in layer order instead.")
         feedback.pushInfo(f"{len(frame)} blocks read from {frame.name}; every block edge is "
@@ -242,27 +229,14 @@ class SynthesizeFootprints(AlgorithmBase):
 
     def _style(self, parameters, context, feedback, frame, block_geoms, n_db):
         """Per block, the database index (-1: the best match of all)."""
-        field = self.parameterAsString(parameters, self.STYLE_FIELD, context) or "database"
-        style = qgis_io.read_source(self, parameters, self.STYLE, context, feedback,
-                                    kind="polygons", target_crs=frame.crs, optional=True,
-                                    fields=[field])
+        style = self.style_databases(parameters, context, feedback, frame.crs, n_db)
         if style is None:
             return None
-        if field not in style.attributes:
-            raise QgsProcessingException(f"Layer {style.name} has no field '{field}' with the "
-                                         "database number (1 or 2) per polygon.")
-        values = pd.to_numeric(style.attributes[field], errors="coerce").to_numpy(
-            dtype=np.float64, na_value=np.nan)
-        bad = ~np.isfinite(values) | (values != np.round(values)) | (values < 1) | \
-            (values > n_db)
-        if bad.any():
-            raise QgsProcessingException(
-                f"Layer {style.name}: field '{field}' must hold a database number from 1 to "
-                f"{n_db} in every polygon ({int(bad.sum())} do not).")
+        style_polygons, style_database = style
         points = shapely.point_on_surface(np.asarray(block_geoms, dtype=object))
-        hit_block, hit_poly = shapely.STRtree(style.geometry).query(points, predicate="within")
+        hit_block, hit_poly = shapely.STRtree(style_polygons).query(points, predicate="within")
         choice = np.zeros(len(points), dtype=np.int64)        # database 1 elsewhere
-        choice[hit_block] = values[hit_poly].astype(np.int64) - 1
+        choice[hit_block] = style_database[hit_poly]
         feedback.pushInfo(f"Style polygons: {int(np.bincount(choice, minlength=n_db)[-1])} of "
                           f"{len(choice)} blocks use database {n_db}.")
         return choice

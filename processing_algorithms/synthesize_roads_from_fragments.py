@@ -1,8 +1,6 @@
 """urbansynth:synthesizeroadsfromfragments - hierarchical road synthesis from fragment databases."""
-from pathlib import Path
 
 import numpy as np
-import pandas as pd
 import shapely
 from qgis.core import (
     QgsProcessing,
@@ -127,21 +125,14 @@ class SynthesizeRoadsFromFragments(AlgorithmBase):
         self.addOutput(QgsProcessingOutputNumber(self.N_INSERTED, "Fragments inserted"))
 
     def _databases(self, parameters, context):
-        paths = [self.parameterAsFile(parameters, self.FRAGMENT_DB, context)]
-        second = self.parameterAsFile(parameters, self.FRAGMENT_DB_2, context)
-        if second:
-            paths.append(second)
-        if not paths[0]:
-            raise QgsProcessingException("A fragment database is needed (FRAGMENT_DB).")
+        paths, names = self.database_paths(parameters, context, self.FRAGMENT_DB,
+                                           self.FRAGMENT_DB_2, "fragment")
         dbs = [qgis_io.run_engine(f"Fragment database {k + 1}", database.load_fragment_database,
                                   p) for k, p in enumerate(paths)]
         for k, d in enumerate(dbs):
             if len(d) == 0:
                 raise QgsProcessingException(f"Fragment database {k + 1} ({paths[k]}) holds no "
                                              "fragment.")
-        names = [Path(p).stem for p in paths]
-        if len(names) == 2 and names[0] == names[1]:
-            names = [f"{n}_{k + 1}" for k, n in enumerate(names)]
         return dbs, names
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
@@ -169,24 +160,9 @@ class SynthesizeRoadsFromFragments(AlgorithmBase):
         feedback.setProgress(5)
 
         style_polys = style_db = None
-        style = qgis_io.read_source(self, parameters, self.STYLE, context, feedback,
-                                    kind="polygons", target_crs=frame.crs, optional=True,
-                                    fields=[self.parameterAsString(parameters, self.STYLE_FIELD,
-                                                                   context) or "database"])
+        style = self.style_databases(parameters, context, feedback, frame.crs, len(dbs))
         if style is not None:
-            field = self.parameterAsString(parameters, self.STYLE_FIELD, context) or "database"
-            if field not in style.attributes:
-                raise QgsProcessingException(f"Layer {style.name} has no field '{field}' with the "
-                                             "database number (1 or 2) per polygon.")
-            values = pd.to_numeric(style.attributes[field], errors="coerce").to_numpy(
-                dtype=np.float64, na_value=np.nan)
-            bad = ~np.isfinite(values) | (values != np.round(values)) | (values < 1) | \
-                (values > len(dbs))
-            if bad.any():
-                raise QgsProcessingException(
-                    f"Layer {style.name}: field '{field}' must hold a database number from 1 to "
-                    f"{len(dbs)} in every polygon ({int(bad.sum())} do not).")
-            style_polys, style_db = style.geometry, values.astype(np.int64) - 1
+            style_polys, style_db = style
         feedback.setProgress(8)
 
         dem = None
