@@ -134,6 +134,15 @@ def _mode(client) -> str:
         f"dask ({len(client.scheduler_info()['workers'])} workers)"
 
 
+def _run(args, serial, on_dask):
+    """``serial()``, or ``on_dask(client)`` with --workers / --scheduler; returns
+    (result, seconds, mode)."""
+    with _client(args) as client:
+        t0 = time.perf_counter()
+        result = serial() if client is None else on_dask(client)
+        return result, time.perf_counter() - t0, _mode(client)
+
+
 def _footprints(args) -> dict:
     if args.n_best < 1:
         raise InputError("--n-best must be at least 1")
@@ -149,15 +158,10 @@ def _footprints(args) -> dict:
                                                     args.min_example_buildings))
     job = distributed.FootprintJob(examples, roads, args.method, args.seed,
                                    args.street_width, args.setback, args.n_best)
-    with _client(args) as client:
-        t0 = time.perf_counter()
-        if client is not None:
-            result = distributed.footprints_distributed(client, blocks, job,
-                                                        n_partitions=args.partitions)
-        else:
-            result = distributed.footprints_serial(blocks, job)
-        seconds = time.perf_counter() - t0
-        mode = _mode(client)
+    result, seconds, mode = _run(
+        args, lambda: distributed.footprints_serial(blocks, job),
+        lambda client: distributed.footprints_distributed(client, blocks, job,
+                                                          n_partitions=args.partitions))
     n = distributed.write_footprints(args.out, result, blocks.work_crs, blocks.crs)
     return {"mode": mode, "blocks": len(blocks), "footprints": n,
             "seconds": round(seconds, 3), "out": str(args.out)}
@@ -170,16 +174,11 @@ def _gan(args) -> dict:
         raise InputError("--tile must be at least 1 noise cell")
     area, crs, work_crs = distributed.read_area(distributed.parse_source(args.target))
     gen = streetgan.load_model(args.model)
-    with _client(args) as client:
-        t0 = time.perf_counter()
-        if client is not None:
-            result = distributed.gan_synthesize_distributed(
-                client, area, gen, args.seed, tile=args.tile, cell_size=args.cell_size)
-        else:
-            result = streetgan.synthesize(area, gen, args.seed, tile=args.tile,
-                                          cell_size=args.cell_size)
-        seconds = time.perf_counter() - t0
-        mode = _mode(client)
+    result, seconds, mode = _run(
+        args, lambda: streetgan.synthesize(area, gen, args.seed, tile=args.tile,
+                                           cell_size=args.cell_size),
+        lambda client: distributed.gan_synthesize_distributed(
+            client, area, gen, args.seed, tile=args.tile, cell_size=args.cell_size))
     n = distributed.write_lines(args.out, result.geometry,
                                 pd.DataFrame({"level": result.level.astype(np.int64)}),
                                 work_crs, crs, layer="roads")
@@ -256,15 +255,10 @@ def _attributes(args) -> dict:
     job = distributed.AttributeJob(ex, attrs, ex_ids, rl, art, erl, eart, k=args.k,
                                    seed=args.seed, min_height=args.min_height,
                                    max_height=args.max_height, choice_mode=args.choice_mode)
-    with _client(args) as client:
-        t0 = time.perf_counter()
-        if client is not None:
-            result = distributed.attributes_distributed(client, fp, job,
-                                                        n_partitions=args.partitions)
-        else:
-            result = distributed.attributes_serial(fp, job)
-        seconds = time.perf_counter() - t0
-        mode = _mode(client)
+    result, seconds, mode = _run(
+        args, lambda: distributed.attributes_serial(fp, job),
+        lambda client: distributed.attributes_distributed(client, fp, job,
+                                                          n_partitions=args.partitions))
     table = result.table.copy()
     for name, kind in bt.OUTPUT_FIELDS:
         if kind == "str":
