@@ -315,6 +315,7 @@ def transfer_attributes(footprints, examples, example_attributes: pd.DataFrame,
     stats: Dict[str, float] = {
         "n_footprints": len(fp), "n_examples": len(model.ex_h),
         "n_donors": int(model.donor.sum()), "features": ",".join(model.cols),
+        "no_heights": bool(model.no_heights),
         "n_clipped": 0 if model.no_heights else
         int((np.clip(ex_h[pick], min_height, max_height) != ex_h[pick]).sum())}
     if target_far is not None:
@@ -342,6 +343,7 @@ def transfer_attributes(footprints, examples, example_attributes: pd.DataFrame,
                for g, a in ground.items() if a > 0]
         stats["far_min"], stats["far_max"] = (min(far), max(far)) if far else (np.nan, np.nan)
         stats["far_mean"] = float(np.mean(far)) if far else np.nan
+    stats["n_with_height"] = int(pd.notna(table["height_m"]).sum())
     progress.step(1.0)
     return AttributeTransfer(table, stats)
 

@@ -40,9 +40,9 @@ from typing import Dict, List, Optional, Sequence, Tuple
 import numpy as np
 import pandas as pd
 import shapely
-import shapely.affinity
 import shapely.ops
 
+from . import coordinates
 from .progress import InputError, Progress, ensure
 
 __all__ = ["LibraryBuilding", "BestFit", "PLACEMENT_FIELDS", "MAX_ANGLE", "parse_sides",
@@ -254,10 +254,11 @@ def _placements(allowed, street_sides, building: LibraryBuilding,
     centroid = building.footprint.centroid
     hull = np.asarray(building.footprint.convex_hull.exterior.coords)[:-1]
     for rot, side in rotations:
-        rotated_hull = shapely.affinity.rotate(shapely.MultiPoint(hull), rot, origin=centroid)
-        verts = shapely.get_coordinates(rotated_hull) - np.array([centroid.x, centroid.y])
+        origin = np.array([centroid.x, centroid.y])
+        rotated_hull = coordinates.rotate([shapely.MultiPoint(hull)], np.radians(rot), origin)[0]
+        verts = shapely.get_coordinates(rotated_hull) - origin
         # reference-point positions keeping every hull vertex inside the allowed region
-        shifted = [shapely.affinity.translate(allowed, -vx, -vy) for vx, vy in verts]
+        shifted = coordinates.translate(np.full(len(verts), allowed, dtype=object), -verts)
         with np.errstate(invalid="ignore"):  # empty pieces are expected here
             region = shapely.intersection_all(shifted)
         if region.is_empty:
@@ -273,10 +274,10 @@ def _placements(allowed, street_sides, building: LibraryBuilding,
              front - normal * 0.05 - tangent * span, front - normal * 0.05 + tangent * span]))
         target = band if not band.is_empty else region
         p = shapely.ops.nearest_points(target, shapely.Point(mid))[0]
-        placed = shapely.affinity.translate(
-            shapely.affinity.rotate(building.footprint, rot, origin=centroid),
-            p.x - centroid.x, p.y - centroid.y)
-        yield rot, placed, (p.x - centroid.x, p.y - centroid.y)
+        offset = (p.x - centroid.x, p.y - centroid.y)
+        placed = coordinates.translate(
+            coordinates.rotate([building.footprint], np.radians(rot), origin), offset)[0]
+        yield rot, placed, offset
 
 
 def _rotations(building: LibraryBuilding, street_sides, parcel_lengths) -> List[Tuple[float, int]]:

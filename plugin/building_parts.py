@@ -45,10 +45,9 @@ from typing import List, Mapping, Optional, Sequence, Tuple
 import numpy as np
 import pandas as pd
 import shapely
-import shapely.affinity
 from shapely.geometry.polygon import orient
 
-from . import sequences
+from . import coordinates, sequences
 from .progress import InputError, Progress, ensure
 from .sequences import Constraint, InfeasibleError, KeyPoint
 
@@ -458,7 +457,7 @@ def stack_floors(library: PartsLibrary, height_m: float, *, far=None, site_area=
         fp = (sub.footprints[e] if sub.footprints is not None else
               shapely.box(-depth[e] / 2, -depth[e] / 2, depth[e] / 2, depth[e] / 2))
         c = shapely.centroid(fp).coords[0]
-        geoms.append(shapely.affinity.translate(fp, centre[0] - c[0], centre[1] - c[1]))
+        geoms.append(coordinates.translate([fp], (centre[0] - c[0], centre[1] - c[1]))[0])
     return PartsResult(np.array(geoms, dtype=object), _parts_table(sols, t, E, start, start),
                        _summary(sols, R, names, site_area), sols)
 

@@ -51,6 +51,7 @@ import numpy as np
 import shapely
 from shapely.geometry.polygon import orient
 
+from . import coordinates
 from .sequences import Constraint, InfeasibleError, solve
 from .warp import warp_geometries
 
@@ -289,19 +290,9 @@ def _longest_edge_angle(polys: np.ndarray) -> np.ndarray:
     return out
 
 
-def _rotate(geoms: np.ndarray, angles: np.ndarray, centres: np.ndarray) -> np.ndarray:
-    coords, idx = shapely.get_coordinates(geoms, return_index=True)
-    c, s = np.cos(angles)[idx], np.sin(angles)[idx]
-    rel = coords - centres[idx]
-    out = np.column_stack([c * rel[:, 0] - s * rel[:, 1], s * rel[:, 0] + c * rel[:, 1]])
-    return shapely.set_coordinates(geoms.copy(), out + centres[idx])
-
-
 def _translate(geom, offsets: np.ndarray) -> np.ndarray:
     """Copies of one geometry moved by each of ``offsets`` (m, 2), vectorised."""
-    geoms = np.full(len(offsets), geom, dtype=object)
-    coords, idx = shapely.get_coordinates(geoms, return_index=True)
-    return shapely.set_coordinates(geoms, coords + offsets[idx])
+    return coordinates.translate(np.full(len(offsets), geom, dtype=object), offsets)
 
 
 def _local(coords: np.ndarray, seg: Segment) -> np.ndarray:
@@ -328,11 +319,11 @@ def _bounds_local(geoms: np.ndarray, seg: Segment) -> np.ndarray:
 def _scale_along(geoms: np.ndarray, u: np.ndarray, factor: float) -> np.ndarray:
     """Anisotropic scaling of each geometry about its centroid along direction ``u``."""
     cen = shapely.get_coordinates(shapely.centroid(geoms))
-    coords, idx = shapely.get_coordinates(geoms, return_index=True)
-    rel = coords - cen[idx]
-    along = rel @ u
-    return shapely.set_coordinates(geoms.copy(),
-                                   coords + (factor - 1.0) * along[:, None] * u[None, :])
+
+    def fn(xy, i):
+        along = ((xy - cen[i]) * u).sum(1)
+        return xy + (factor - 1.0) * along[:, None] * u[None, :]
+    return coordinates.transform(geoms, fn)
 
 
 def _overlap_term(el: np.ndarray, base_off: np.ndarray, seg: Segment, slots: np.ndarray,
@@ -434,9 +425,10 @@ def _row_frontage(seg: Segment, el_rest: np.ndarray, gb: np.ndarray, fixed: np.n
 
 def _scale_from(poly, seg: Segment, start: float, factor: float):
     """Scale ``poly`` along the chord by ``factor``, keeping its wall at ``start``."""
-    xy = shapely.get_coordinates(poly)
-    along = (xy - seg.a) @ seg.u - start
-    return shapely.set_coordinates(poly, xy + (factor - 1.0) * along[:, None] * seg.u[None, :])
+    def fn(xy, _):
+        along = ((xy - seg.a) * seg.u).sum(1) - start
+        return xy + (factor - 1.0) * along[:, None] * seg.u[None, :]
+    return coordinates.transform([poly], fn)[0]
 
 
 def _fill_row(seg: Segment, members: np.ndarray, order: np.ndarray, a: float, b: float,
@@ -536,7 +528,7 @@ def _synthesize_group(seg: Segment, members: np.ndarray, kinds: np.ndarray,
     cen = shapely.get_coordinates(shapely.centroid(el))
     diff = (theta - _longest_edge_angle(el) + np.pi / 4) % (np.pi / 2) - np.pi / 4
     diff = np.where(np.abs(diff) <= np.radians(SQUARE_ANGLE), diff, 0.0)
-    el = _rotate(el, diff, cen)
+    el = coordinates.rotate(el, diff, cen)
     eb = _bounds_local(el, seg)
     gb = _bounds_local(guides[members], seg)
     width_m = eb[:, 1] - eb[:, 0]

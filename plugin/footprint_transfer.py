@@ -25,6 +25,7 @@ from typing import Sequence, Tuple
 import numpy as np
 import shapely
 
+from . import coordinates
 from .shape_context import rigid_align
 
 __all__ = ["classify", "relax"]
@@ -92,7 +93,6 @@ def relax(footprints: Sequence, conflicted: np.ndarray, buildable,
     outline = shapely.boundary(buildable)
     shapely.prepare(buildable)
     rest = {i: shapely.get_coordinates(shapely.get_exterior_ring(fp[i]))[:-1] for i in movers}
-    rest_holes = {i: [shapely.get_coordinates(h) for h in fp[i].interiors] for i in movers}
     sweeps = 0
     for sweeps in range(1, iterations + 1):
         tree = shapely.STRtree(fp)
@@ -138,10 +138,7 @@ def relax(footprints: Sequence, conflicted: np.ndarray, buildable,
             # projected vertices weigh most (the constraint), the free ones anchor the turn
             moved_w = np.where(np.hypot(*(target - xy).T) > 1e-12, 1.0, FREE_WEIGHT)
             r, t, _ = rigid_align(rest[i], target, moved_w)
-            moved = rest[i] @ r.T + t
-            ring = np.vstack([moved, moved[:1]])
-            holes = [h @ r.T + t for h in rest_holes[i]]
-            fp[i] = shapely.Polygon(ring, holes) if holes else shapely.Polygon(ring)
+            fp[i] = coordinates.rigid([original[i]], r, t)[0]
         if not violated:
             break
     # a footprint the relaxation could not free goes back to where the example had it:

@@ -35,6 +35,7 @@ from qgis.core import (
 )
 from qgis.PyQt.QtCore import QVariant
 
+from . import coordinates
 from .progress import Canceled, InputError, Progress
 
 _GEOM_NAMES = {QgsWkbTypes.PointGeometry: "points", QgsWkbTypes.LineGeometry: "lines",
@@ -139,6 +140,12 @@ def read_source(alg, parameters, name: str, context, feedback,
             f"Layer {label} has no field {', '.join(repr(m) for m in missing)} "
             f"(fields: {', '.join(all_names) or 'none'}).")
     src_crs = source.sourceCrs()
+    if not src_crs.isValid():
+        # metres, feet and degrees differ by 10^5: a guess would give silently wrong sizes
+        raise QgsProcessingException(
+            f"Layer {label} has no coordinate reference system (CRS), so its units are "
+            "unknown. Assign its CRS (Layer Properties > Source, or Processing 'Assign "
+            "projection') and run again.")
     if target_crs is None:
         extent = source.sourceExtent()
         if extent.isNull() or extent.isEmpty() and extent.width() == 0 and extent.height() == 0:
@@ -261,24 +268,27 @@ def _transform(geoms: np.ndarray, src, dst, context) -> np.ndarray:
     Uses Debian's pyproj (built on the same PROJ as QGIS, see DESIGN.md) when available,
     else QGIS's own transform point by point.
     """
-    coords = shapely.get_coordinates(geoms)
-    if len(coords) == 0:
+    if shapely.get_num_coordinates(geoms).sum() == 0:
         return geoms
     try:
         from pyproj import Transformer
 
         tr = Transformer.from_crs(crs_text(src), crs_text(dst), always_xy=True)
-        x, y = tr.transform(coords[:, 0], coords[:, 1])
-        out = np.column_stack([x, y])
+
+        def project(coords, _):
+            return np.column_stack(tr.transform(coords[:, 0], coords[:, 1]))
     except ImportError:  # pragma: no cover - QGIS without pyproj
         ctx = context.transformContext() if context else QgsProject.instance().transformContext()
         qtr = QgsCoordinateTransform(src, dst, ctx)
-        out = np.array([[p.x(), p.y()] for p in
-                        (qtr.transform(QgsPointXY(x, y)) for x, y in coords)])
-    if not np.isfinite(out).all():
+
+        def project(coords, _):
+            return np.array([[p.x(), p.y()] for p in
+                             (qtr.transform(QgsPointXY(x, y)) for x, y in coords)])
+    out = coordinates.transform(shapely.force_2d(geoms), project)
+    if not np.isfinite(shapely.get_coordinates(out)).all():
         raise QgsProcessingException(
             f"Some coordinates cannot be transformed from {src.authid()} to {dst.authid()}.")
-    return shapely.set_coordinates(shapely.force_2d(geoms).copy(), out)
+    return out
 
 
 def reproject(geoms: np.ndarray, src, dst, context) -> np.ndarray:
@@ -488,6 +498,10 @@ def read_raster(layer, work_crs: QgsCoordinateReferenceSystem, bounds, cell_size
 
     from .shape_context import DemGrid
 
+    if not layer.crs().isValid():
+        raise QgsProcessingException(
+            f"{what} '{layer.name()}' has no coordinate reference system (CRS). Assign its "
+            "CRS (Layer Properties > Source, or GDAL 'Assign projection') and run again.")
     source = layer.source().split("|")[0]
     margin = 4 * cell_size
     x0, y0, x1, y1 = bounds

@@ -45,6 +45,7 @@ from typing import Callable, Optional, Sequence, Tuple
 import numpy as np
 import shapely
 
+from . import coordinates
 from .progress import InputError
 
 __all__ = [
@@ -826,4 +827,4 @@ def transform_geometries(geoms: Sequence, rotation: np.ndarray,
                          translation: np.ndarray) -> np.ndarray:
     """Apply a rigid transform to an array of shapely geometries (vectorised)."""
     geoms = np.asarray(geoms, dtype=object)
-    return shapely.transform(geoms, lambda xy: apply_rigid(xy, rotation, translation))
+    return coordinates.rigid(geoms, rotation, translation)

@@ -36,6 +36,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from . import coordinates
 from .progress import InputError, Progress, ensure
 from .roads import RoadGraph, clean_network
 
@@ -684,10 +685,10 @@ def _drape(dem, graph, widths, h, junction_nodes, jpolys, surfaces, centre, surf
     # junctions: every vertex on its plane
     jz = []
     if len(jpolys):
-        j3 = shapely.force_3d(jpolys, 0.0)
-        c, idx = shapely.get_coordinates(j3, include_z=True, return_index=True)
-        c[:, 2] = plane(junction_nodes[idx], c[:, :2])
-        jpolys = shapely.set_coordinates(j3, c)
+        jpolys = coordinates.transform(
+            shapely.force_3d(jpolys, 0.0),
+            lambda c, i: np.column_stack([c[:, :2], plane(junction_nodes[i], c[:, :2])]),
+            include_z=True)
         g = grad[junction_nodes]
         j_table["z_centre"] = z0[junction_nodes]
         j_table["slope_pct"] = 100 * np.hypot(g[:, 0], g[:, 1])
@@ -726,10 +727,9 @@ def _drape(dem, graph, widths, h, junction_nodes, jpolys, surfaces, centre, surf
         return zt + wu * (plane(u[k], xy) - zt) + wv * (plane(v[k], xy) - zt)
 
     dense = shapely.segmentize(surfaces, spacing)
-    s3 = shapely.force_3d(dense, 0.0)
-    c, idx = shapely.get_coordinates(s3, include_z=True, return_index=True)
-    c[:, 2] = height(idx, c[:, :2])
-    surfaces = shapely.set_coordinates(s3, c)
+    surfaces = coordinates.transform(
+        shapely.force_3d(dense, 0.0),
+        lambda c, i: np.column_stack([c[:, :2], height(i, c[:, :2])]), include_z=True)
     progress.step(0.7)
 
     # slopes along the centre line (between samples at most ``spacing`` apart) and across

@@ -41,6 +41,7 @@ from scipy import sparse
 from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import spsolve
 
+from . import coordinates
 from .progress import InputError
 
 __all__ = ["mean_value_coordinates", "warp_points", "warp_geometries", "sample_grid_warped",
@@ -184,7 +185,7 @@ def warp_geometries(geoms: Sequence, source: np.ndarray, target: np.ndarray,
     if max_segment is not None and max_segment > 0:
         geoms = shapely.segmentize(geoms, max_segment)
     src, dst = _polygon_array(source), _polygon_array(target)
-    return shapely.transform(geoms, lambda xy: warp_points(xy, src, dst))
+    return coordinates.transform(geoms, lambda xy, _: warp_points(xy, src, dst))
 
 
 def grid_cell_centres(geotransform, shape) -> Tuple[np.ndarray, np.ndarray]:

@@ -418,8 +418,16 @@ class SynthesizeBuildings(AlgorithmBase):
             choice_mode=self.CHOICES[self.parameterAsEnum(parameters, self.CHOICE, context)][0],
             progress=qgis_io.progress_for(feedback, 15, 85))
         s = result.stats
-        feedback.pushInfo(f"{s['n_footprints']} footprints attributed from {s['n_donors']} "
-                          f"example buildings with a height (features: {s['features']}).")
+        if s["no_heights"]:
+            feedback.reportError(
+                f"No example building has a height or a number of levels: the "
+                f"{s['n_footprints']} footprints get types and roofs from "
+                f"{s['n_donors']} example buildings, and their heights stay empty.",
+                fatalError=False)
+        else:
+            feedback.pushInfo(f"{s['n_footprints']} footprints attributed, "
+                              f"{s['n_with_height']} with a height, from {s['n_donors']} "
+                              f"example buildings with a height (features: {s['features']}).")
         if s["n_clipped"]:
             feedback.pushInfo(f"{s['n_clipped']} heights clipped into {lo:g}..{hi:g} m.")
         if far > 0:

@@ -13,7 +13,8 @@ from qgis.core import (  # noqa: E402
     QgsApplication, QgsProcessing, QgsProcessingModelAlgorithm, QgsProcessingModelChildAlgorithm,
     QgsProcessingModelChildParameterSource as Source, QgsProcessingModelOutput,
     QgsProcessingModelParameter, QgsProcessingParameterEnum, QgsProcessingParameterFeatureSource,
-    QgsProcessingParameterNumber, QgsProcessingParameterRasterLayer,
+    QgsProcessingParameterDefinition, QgsProcessingParameterNumber,
+    QgsProcessingParameterRasterLayer,
 )
 from qgis.PyQt.QtCore import QPointF  # noqa: E402
 
@@ -52,6 +53,16 @@ def _child(model, child_id, alg_id, description, sources, outputs=(), x=0.0, y=0
     child.setChildId(child_id)
     child.setDescription(description)
     child.setPosition(QPointF(x, y))
+    # QGIS's model check (QgsProcessingModelAlgorithm.validate) wants a source for every
+    # mandatory parameter, defaults included: a parameter left out gets its default, stated
+    definition = QgsApplication.processingRegistry().algorithmById(alg_id)
+    if definition is None:
+        sys.exit(f"{alg_id} is not registered: is the provider loaded?")
+    for param in definition.parameterDefinitions():
+        if param.name() in sources or param.isDestination():
+            continue
+        if not (param.flags() & QgsProcessingParameterDefinition.FlagOptional):
+            sources[param.name()] = Source.fromStaticValue(param.defaultValue())
     for name, source in sources.items():
         child.addParameterSources(name, [source])
     model_outputs = {}
@@ -153,9 +164,18 @@ def district_model() -> QgsProcessingModelAlgorithm:
 def main():
     app = QgsApplication([], False)
     app.initQgis()
+    sys.path.insert(0, str(ROOT / "build" / "plugins"))
+    from urban_synthesis.plugin.provider import UrbanSynthesisProvider
+
+    provider = UrbanSynthesisProvider()
+    QgsApplication.processingRegistry().addProvider(provider)
     OUT.mkdir(parents=True, exist_ok=True)
     path = OUT / "synthesize_district.model3"
-    if not district_model().toFile(str(path)):
+    model = district_model()
+    ok, problems = model.validate()
+    if not ok:
+        sys.exit("the model does not validate:\n" + "\n".join(problems))
+    if not model.toFile(str(path)):
         sys.exit(f"could not write {path}")
     print(path)
 

@@ -96,6 +96,28 @@ def memory_layer(kind, wkts=(), crs="EPSG:3857", fields="", rows=None, name="tes
     return layer
 
 
+def log_feedback():
+    """A QgsProcessingFeedback that keeps what the algorithm says: ``messages`` (info),
+    ``warnings`` (reportError / pushWarning)."""
+    from qgis.core import QgsProcessingFeedback
+
+    class Log(QgsProcessingFeedback):
+        def __init__(self):
+            super().__init__()
+            self.messages, self.warnings = [], []
+
+        def pushInfo(self, info):  # noqa: N802
+            self.messages.append(info)
+
+        def pushWarning(self, warning):  # noqa: N802
+            self.warnings.append(warning)
+
+        def reportError(self, error, fatalError=False):  # noqa: N802,N803
+            self.warnings.append(error)
+
+    return Log()
+
+
 # ------------------------------------------------ evidence of the fragment synthesis (issue 3)
 
 #: distributions compared in the style-transfer evidence -> column names

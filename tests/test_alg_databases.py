@@ -1,27 +1,10 @@
 """urbansynth:buildfragmentdatabase and :buildblockdatabase through real QGIS."""
-import time
 
 import numpy as np
 import pytest
 
 from conftest import bubenec_layer, helsinki_layer, run_qgis_process
-
-
-class Log:
-    """Collects the algorithm's log lines (a QgsProcessingFeedback subclass is made lazily)."""
-
-    def __new__(cls):
-        from qgis.core import QgsProcessingFeedback
-
-        class _Log(QgsProcessingFeedback):
-            def __init__(self):
-                super().__init__()
-                self.messages = []
-
-            def pushInfo(self, info):  # noqa: N802
-                self.messages.append(info)
-
-        return _Log()
+from helpers import log_feedback
 
 
 @pytest.fixture(scope="module")
@@ -35,11 +18,10 @@ def helsinki_roads(qgis_processing):
 @pytest.fixture(scope="module")
 def helsinki_blocks(qgis_processing):
     """Helsinki blocks with buildings (block_id, height_m ...), from the real algorithm."""
-    t = time.perf_counter()
     out = qgis_processing.run("urbansynth:extractblocks", {
         "ROADS": helsinki_layer("lines"), "BUILDINGS": helsinki_layer("multipolygons"),
         "OUTPUT": "memory:", "OUTPUT_BUILDINGS": "memory:"})
-    return out["OUTPUT"], out["OUTPUT_BUILDINGS"], time.perf_counter() - t
+    return out["OUTPUT"], out["OUTPUT_BUILDINGS"]
 
 
 # --------------------------------------------------------------------------- fragments
@@ -49,11 +31,9 @@ def test_helsinki_fragment_database(qgis_processing, helsinki_roads, tmp_path):
 
     roads = helsinki_roads
     out = tmp_path / "helsinki_fragments.gpkg"
-    log = Log()
-    t = time.perf_counter()
+    log = log_feedback()
     res = qgis_processing.run("urbansynth:buildfragmentdatabase", {
         "ROADS": roads, "OUTPUT": str(out)}, feedback=log)
-    elapsed = time.perf_counter() - t
     assert res["OUTPUT"] == str(out)
     d = database.load_fragment_database(out)
     assert len(d) == res["N_FRAGMENTS"] >= 50
@@ -72,7 +52,6 @@ def test_helsinki_fragment_database(qgis_processing, helsinki_roads, tmp_path):
     q = sc.transform_geometries([d.geometry[k]], np.array([[0.0, -1.0], [1.0, 0.0]]),
                                 np.array([100.0, 50.0]))[0]
     assert d.query_best(q, level=1).index == k
-    assert elapsed < 3.0
 
 
 def test_fragment_database_with_dem(qgis_processing, tmp_path):
@@ -162,14 +141,12 @@ def test_fragment_cancel(qgis_processing, helsinki_roads, tmp_path):
 def test_helsinki_block_database(qgis_processing, helsinki_blocks, tmp_path):
     from urban_synthesis.plugin import database
 
-    blocks, buildings, blocks_time = helsinki_blocks
+    blocks, buildings = helsinki_blocks
     out = tmp_path / "helsinki_blocks.gpkg"
     out.write_bytes(b"an older file is replaced")
-    log = Log()
-    t = time.perf_counter()
+    log = log_feedback()
     res = qgis_processing.run("urbansynth:buildblockdatabase", {
         "BLOCKS": blocks, "BUILDINGS": buildings, "OUTPUT": str(out)}, feedback=log)
-    elapsed = time.perf_counter() - t
     d = database.load_block_database(out)
     assert len(d) == res["N_BLOCKS"] == blocks.featureCount()
     in_block = sum(1 for f in buildings.getFeatures() if f["in_block"])
@@ -191,8 +168,6 @@ def test_helsinki_block_database(qgis_processing, helsinki_blocks, tmp_path):
         hits += d.query_best(d.geometry[k]).index == k
     assert hits == len(range(0, len(d), 5))
     # performance budget of the foundation issue: the whole chain well under 5 s
-    assert elapsed < 1.0
-    assert blocks_time + elapsed < 5.0  # the benchmark measures the whole chain properly
 
 
 def test_bubenec_block_database_assigns_by_location(qgis_processing, tmp_path):
@@ -202,7 +177,7 @@ def test_bubenec_block_database_assigns_by_location(qgis_processing, tmp_path):
     blocks = qgis_processing.run("urbansynth:extractblocks", {
         "ROADS": bubenec_layer("streets"), "OUTPUT": "memory:"})["OUTPUT"]
     out = tmp_path / "bubenec_blocks.gpkg"
-    log = Log()
+    log = log_feedback()
     res = qgis_processing.run("urbansynth:buildblockdatabase", {
         "BLOCKS": blocks, "BUILDINGS": bubenec_layer("buildings"), "OUTPUT": str(out)},
         feedback=log)

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 import shapely
 
-from conftest import bubenec_layer, helsinki_layer, run_qgis_process
+from conftest import BUBENEC, bubenec_layer, helsinki_layer, run_qgis_process
 from helpers import layer_features, memory_layer
 
 
@@ -150,6 +150,19 @@ def test_empty_layer_is_rejected(qgis_processing):
     with pytest.raises(QgsProcessingException, match="empty"):
         qgis_processing.run("urbansynth:extractblocks", {
             "ROADS": _memory_layer("LineString"), "OUTPUT": "memory:"})
+
+
+def test_layer_without_crs_is_rejected(qgis_processing, tmp_path):
+    """A shapefile without .prj: its units are unknown, so no silent guess of metres."""
+    import geopandas as gpd
+    from qgis.core import QgsProcessingException
+
+    streets = gpd.read_file(BUBENEC, layer="streets")
+    path = tmp_path / "no_prj.shp"
+    streets.set_crs(None, allow_override=True).to_file(path)
+    assert not path.with_suffix(".prj").exists()
+    with pytest.raises(QgsProcessingException, match="no_prj.*no coordinate reference system"):
+        qgis_processing.run("urbansynth:extractblocks", {"ROADS": str(path), "OUTPUT": "memory:"})
 
 
 def test_roads_without_closed_face_are_rejected(qgis_processing):

@@ -4,7 +4,7 @@ import pytest
 import shapely
 
 from conftest import BUBENEC, bubenec_layer, helsinki_layer, run_qgis_process
-from helpers import assert_planar, layer_features
+from helpers import assert_planar, layer_features, log_feedback
 
 
 def test_helsinki_hierarchy(qgis_processing, tmp_path):
@@ -107,15 +107,7 @@ def test_null_and_invalid_geometries_are_skipped_or_repaired(qgis_processing):
         f.setAttributes([cls])
         feats.append(f)
     layer.dataProvider().addFeatures(feats)
-    from qgis.core import QgsProcessingFeedback
-
-    class Log(QgsProcessingFeedback):
-        messages = []
-
-        def pushInfo(self, info):  # noqa: N802
-            self.messages.append(info)
-
-    fb = Log()
+    fb = log_feedback()
     out = qgis_processing.run("urbansynth:extractroadhierarchy", {"INPUT": layer, "OUTPUT": "memory:"},
                               feedback=fb)
     assert out["OUTPUT"].featureCount() == 4

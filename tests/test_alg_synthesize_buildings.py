@@ -4,7 +4,7 @@ import pytest
 import shapely
 
 from conftest import bubenec_layer, helsinki_layer, run_qgis_process
-from helpers import layer_features, memory_layer
+from helpers import layer_features, log_feedback, memory_layer
 from urban_synthesis.plugin import building_attributes, building_bestfit, metrics
 
 ALG = "urbansynth:synthesizebuildings"
@@ -44,6 +44,20 @@ def test_attributes_on_helsinki(qgis_processing, helsinki_buildings):
     assert np.mean([r["similarity"] for r in rows]) > 0.3
     d = metrics.two_sample(h, np.minimum(known[np.isfinite(known)], 40))
     assert d["wasserstein_norm"] < 0.35
+
+
+def test_example_without_heights_says_so(qgis_processing):
+    """Bubeneč's buildings have no heights: types come across, heights stay empty, and
+    the log says so instead of claiming heights were attributed."""
+    log = log_feedback()
+    out = qgis_processing.run(ALG, {
+        "METHOD": 0, "FOOTPRINTS": bubenec_layer("buildings"),
+        "EXAMPLE_BUILDINGS": bubenec_layer("buildings"), "OUTPUT": "memory:"}, feedback=log)
+    rows, _ = layer_features(out["OUTPUT"])
+    assert all(r["height_m"] is None for r in rows)
+    assert all(r["building_type"] for r in rows)
+    assert any("No example building has a height" in w for w in log.warnings), log.warnings
+    assert not any("with a height (features" in m for m in log.messages)
 
 
 def test_far_per_block(qgis_processing, helsinki_buildings):

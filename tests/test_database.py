@@ -245,14 +245,9 @@ def test_fragment_retrieval_by_level_and_slope(fragment_db):
     assert (d.levels[d.prefilter(5, level=7, area=1e4, aspect=1.0)] == 2).all()
 
 
-def test_retrieval_time_per_query(block_db):
-    import time
-
+def test_retrieval_is_repeatable(block_db):
+    """The same query gives the same best block every time (speed: bench_foundation)."""
     d = db.load_block_database(block_db)
     q = sc.transform_geometries([d.geometry[2]], rotation(1.0), np.array([10.0, 10.0]))[0]
-    d.query_best(q)
-    t = time.perf_counter()
-    for _ in range(10):
-        d.query_best(q)
-    per_query = (time.perf_counter() - t) / 10
-    assert per_query < 0.1  # measured ~15-25 ms on 2 cores with 7-10 candidates
+    first = d.query_best(q)
+    assert all(d.query_best(q).index == first.index == 2 for _ in range(3))

@@ -34,6 +34,15 @@ def test_model_is_listed_with_documented_parameters(qgis_processing):
         assert child.algorithm() is not None, child.algorithmId()
 
 
+def test_model_passes_qgis_validation(qgis_processing):
+    """QGIS's own check (the Model Designer's 'Model is Invalid') finds no problem."""
+    from qgis.core import QgsApplication
+
+    alg = QgsApplication.processingRegistry().algorithmById("urbansynth:synthesizedistrict")
+    ok, problems = alg.validate()
+    assert ok and not problems, problems
+
+
 def test_model_runs_end_to_end_on_bubenec(tmp_path):
     """Bubeneč's own streets as the arterial sketch, footprints by re-synthesis."""
     gpkg = tmp_path / "district.gpkg"

@@ -83,16 +83,12 @@ def test_bad_polygons_are_input_errors():
         warp.warp_points(np.zeros((1, 2)), SQUARE, ELL)
 
 
-def test_vectorised_speed():
-    """10,000 points x 200 vertices in well under a second (no per-point Python loop)."""
-    import time
-
+def test_many_points_reproduce_linear_precision():
+    """10,000 points x 200 vertices in one vectorised call (speed: bench_foundation)."""
     poly = np.column_stack([np.cos(np.linspace(0, 2 * np.pi, 200, endpoint=False)),
                             np.sin(np.linspace(0, 2 * np.pi, 200, endpoint=False))]) * 100
     pts = np.random.default_rng(1).uniform(-60, 60, (10_000, 2))
-    t = time.perf_counter()
     lam = warp.mean_value_coordinates(pts, poly)
-    assert time.perf_counter() - t < 1.0
     assert np.allclose(lam @ poly, pts)
 
 
