@@ -2,6 +2,6 @@
 
 
 def classFactory(iface):  # noqa: N802 (QGIS API name)
-    from .plugin.plugin import UrbanSynthesisPlugin
+    from .plugin.qgis_glue.plugin import UrbanSynthesisPlugin
 
     return UrbanSynthesisPlugin(iface)

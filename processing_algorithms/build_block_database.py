@@ -10,7 +10,9 @@ from qgis.core import (
     QgsProcessingParameterString,
 )
 
-from ..plugin import blocks, database, qgis_io
+from ..plugin.network import blocks
+from ..plugin.qgis_glue import qgis_io
+from ..plugin.retrieval import database
 from .common import AlgorithmBase
 
 

@@ -13,7 +13,9 @@ from qgis.core import (
     QgsProcessingParameterRasterLayer,
 )
 
-from ..plugin import blocks, database, fragments, qgis_io
+from ..plugin.network import blocks, fragments
+from ..plugin.qgis_glue import qgis_io
+from ..plugin.retrieval import database
 from .common import AlgorithmBase
 
 

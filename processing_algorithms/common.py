@@ -3,10 +3,14 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from qgis.core import QgsProcessingAlgorithm, QgsProcessingException, QgsProcessingParameterDefinition
+from qgis.core import (
+    QgsProcessingAlgorithm,
+    QgsProcessingException,
+    QgsProcessingParameterDefinition,
+)
 from qgis.PyQt.QtGui import QIcon
 
-from ..plugin import qgis_io
+from ..plugin.qgis_glue import qgis_io
 
 ICON = Path(__file__).resolve().parent.parent / "resources" / "icons" / "urbansynth.svg"
 

@@ -12,7 +12,10 @@ from qgis.core import (
 )
 from qgis.PyQt.QtCore import QVariant
 
-from ..plugin import blocks, building_attributes, qgis_io, roads
+from ..plugin.buildings import attributes as building_attributes
+from ..plugin.network import blocks
+from ..plugin.network import street_graph as roads
+from ..plugin.qgis_glue import qgis_io
 from .common import AlgorithmBase, drivable_lines, parse_class_list
 
 MEMBERSHIP_FIELDS = [("source_fid", "int"), ("block_id", "int"), ("block_share", "float"),

@@ -12,7 +12,9 @@ from qgis.core import (
     QgsWkbTypes,
 )
 
-from ..plugin import hierarchy, qgis_io, roads
+from ..plugin.network import hierarchy
+from ..plugin.network import street_graph as roads
+from ..plugin.qgis_glue import qgis_io
 from .common import AlgorithmBase, drivable_lines, parse_class_list
 
 ROAD_FIELDS = [

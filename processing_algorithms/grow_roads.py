@@ -15,8 +15,9 @@ from qgis.core import (
     QgsWkbTypes,
 )
 
-from ..plugin import growth, qgis_io
-from ..plugin.progress import InputError
+from ..plugin.core.progress import InputError
+from ..plugin.qgis_glue import qgis_io
+from ..plugin.roads import growth
 from .common import AlgorithmBase
 
 ROAD_FIELDS = [("edge_id", "int"), ("level", "int"), ("road_class", "str"), ("pattern", "str"),

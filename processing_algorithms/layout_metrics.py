@@ -13,7 +13,8 @@ from qgis.core import (
     QgsWkbTypes,
 )
 
-from ..plugin import metrics, qgis_io, report
+from ..plugin.measure import metrics, report
+from ..plugin.qgis_glue import qgis_io
 from .common import AlgorithmBase
 
 

@@ -13,7 +13,8 @@ from qgis.core import (
     QgsWkbTypes,
 )
 
-from ..plugin import qgis_io, raster_graph
+from ..plugin.qgis_glue import qgis_io
+from ..plugin.roads import raster_graph
 from .common import AlgorithmBase
 
 FIELDS = [("edge_id", "int"), ("length_m", "float"), ("node_from", "int"), ("node_to", "int")]

@@ -14,7 +14,8 @@ from qgis.core import (
     QgsWkbTypes,
 )
 
-from ..plugin import domain_split, qgis_io, templates
+from ..plugin.planned import domain_split, templates
+from ..plugin.qgis_glue import qgis_io
 from .common import AlgorithmBase
 
 

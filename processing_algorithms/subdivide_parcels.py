@@ -12,7 +12,10 @@ from qgis.core import (
     QgsWkbTypes,
 )
 
-from ..plugin import blocks, parcels, qgis_io, roads
+from ..plugin.network import blocks
+from ..plugin.network import street_graph as roads
+from ..plugin.parcels import subdivision as parcels
+from ..plugin.qgis_glue import qgis_io
 from .common import AlgorithmBase, drivable_lines
 
 

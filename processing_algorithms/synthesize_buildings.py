@@ -18,9 +18,13 @@ from qgis.core import (
     QgsWkbTypes,
 )
 
-from ..plugin import building_attribute_transfer as transfer
-from ..plugin import building_attributes, building_bestfit, building_parts, qgis_io, roads
-from ..plugin.progress import InputError
+from ..plugin.buildings import attribute_transfer as transfer
+from ..plugin.buildings import attributes as building_attributes
+from ..plugin.buildings import bestfit as building_bestfit
+from ..plugin.buildings import parts as building_parts
+from ..plugin.core.progress import InputError
+from ..plugin.network import street_graph as roads
+from ..plugin.qgis_glue import qgis_io
 from .common import AlgorithmBase
 
 #: One METHOD: its label in the dialog, the parameters it needs and the method that runs

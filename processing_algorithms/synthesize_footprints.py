@@ -15,7 +15,11 @@ from qgis.core import (
     QgsWkbTypes,
 )
 
-from ..plugin import blocks, database, footprints, qgis_io, roads
+from ..plugin.buildings import footprints
+from ..plugin.network import blocks
+from ..plugin.network import street_graph as roads
+from ..plugin.qgis_glue import qgis_io
+from ..plugin.retrieval import database
 from .common import AlgorithmBase, drivable_lines
 
 

@@ -132,7 +132,7 @@ class SynthesizeRoads(AlgorithmBase):
         elif method.key == "growth":
             params = {"BOUNDARY": boundary, "MAJOR_ROADS": arterials, "DEM": dem, "SEED": seed}
         else:
-            from ..plugin import streetgan  # the MODEL enum lists the shipped models by name
+            from ..plugin.roads import streetgan  # the MODEL enum lists the shipped models by name
 
             models = streetgan.shipped_models()
             if GAN_MODEL not in models:

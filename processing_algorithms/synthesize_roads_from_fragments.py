@@ -16,7 +16,9 @@ from qgis.core import (
     QgsWkbTypes,
 )
 
-from ..plugin import database, qgis_io, synthesis_fragments
+from ..plugin.qgis_glue import qgis_io
+from ..plugin.retrieval import database
+from ..plugin.roads import from_fragments as synthesis_fragments
 from .common import AlgorithmBase
 
 

@@ -18,8 +18,9 @@ from qgis.core import (
     QgsWkbTypes,
 )
 
-from ..plugin import qgis_io, streetgan
-from ..plugin.shape_context import DemGrid
+from ..plugin.qgis_glue import qgis_io
+from ..plugin.retrieval.shape_context import DemGrid
+from ..plugin.roads import streetgan
 from .common import AlgorithmBase
 
 ROAD_FIELDS = [("edge_id", "int"), ("level", "int"), ("road_class", "str"), ("length_m", "float"),

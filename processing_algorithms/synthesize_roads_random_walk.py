@@ -12,7 +12,9 @@ from qgis.core import (
     QgsWkbTypes,
 )
 
-from ..plugin import intersection_quadtree, qgis_io, random_walk, roads
+from ..plugin.network import street_graph as roads
+from ..plugin.qgis_glue import qgis_io
+from ..plugin.roads import intersection_quadtree, random_walk
 from .common import AlgorithmBase, drivable_lines
 
 _POINT_FIELDS = ["level_a", "level_b", "degree", "tortuosity_a", "tortuosity_b", "dist_mean_a",

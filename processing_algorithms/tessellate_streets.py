@@ -15,7 +15,9 @@ from qgis.core import (
     QgsWkbTypes,
 )
 
-from ..plugin import qgis_io, roads, street_surfaces
+from ..plugin.network import street_graph as roads
+from ..plugin.network import street_surfaces
+from ..plugin.qgis_glue import qgis_io
 from .common import AlgorithmBase, drivable_lines, parse_class_list
 
 

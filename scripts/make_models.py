@@ -80,7 +80,7 @@ def district_model() -> QgsProcessingModelAlgorithm:
     model = QgsProcessingModelAlgorithm("synthesizedistrict", "Synthesis", "synthesis")
     model.setHelpContent({"ALG_DESC": DISTRICT_HELP, "ALG_CREATOR": "Urban Synthesis",
                           "ALG_VERSION": "1",
-                          # the toolbox name (plugin/provider.py ShippedModel)
+                          # the toolbox name (plugin/qgis_glue/provider.py ShippedModel)
                           "DISPLAY_NAME": "Synthesise a district like an example"})
     p = Source.fromModelParameter
     out = Source.fromChildOutput
@@ -165,7 +165,7 @@ def main():
     app = QgsApplication([], False)
     app.initQgis()
     sys.path.insert(0, str(ROOT / "build" / "plugins"))
-    from urban_synthesis.plugin.provider import UrbanSynthesisProvider
+    from urban_synthesis.plugin.qgis_glue.provider import UrbanSynthesisProvider
 
     provider = UrbanSynthesisProvider()
     QgsApplication.processingRegistry().addProvider(provider)

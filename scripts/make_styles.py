@@ -8,8 +8,7 @@ from pathlib import Path
 
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 from qgis.core import (  # noqa: E402
-    QgsApplication, QgsCategorizedSymbolRenderer, QgsFillSymbol, QgsGraduatedSymbolRenderer,
-    QgsLineSymbol, QgsMarkerSymbol, QgsRendererCategory, QgsRendererRange, QgsRuleBasedRenderer, QgsSingleSymbolRenderer,
+    QgsApplication, QgsCategorizedSymbolRenderer, QgsFillSymbol, QgsLineSymbol, QgsMarkerSymbol, QgsRendererCategory, QgsRuleBasedRenderer, QgsSingleSymbolRenderer,
     QgsVectorLayer,
 )
 

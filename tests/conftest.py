@@ -49,7 +49,7 @@ def qgis_processing(qgis_app):
     from qgis.core import QgsApplication
 
     Processing.initialize()
-    from urban_synthesis.plugin.provider import UrbanSynthesisProvider
+    from urban_synthesis.plugin.qgis_glue.provider import UrbanSynthesisProvider
 
     provider = UrbanSynthesisProvider()
     QgsApplication.processingRegistry().addProvider(provider)

@@ -16,7 +16,7 @@ def _helsinki_lines():
 
 def helsinki_roads(crs=32635):
     """Drivable Helsinki roads in UTM 35N with a vertical layer column ``z``."""
-    from urban_synthesis.plugin import roads
+    from urban_synthesis.plugin.network import street_graph as roads
 
     df = _helsinki_lines()
     df = df[df.highway.isin(roads.DRIVABLE_CLASSES)].to_crs(crs).reset_index(drop=True)
@@ -68,7 +68,7 @@ def layer_rows(layer):
 def clipped_metrics(lines, area):
     """Layout metrics of the part of a network inside ``area`` (the same cut for an
     original, a synthesis and a baseline)."""
-    from urban_synthesis.plugin import metrics
+    from urban_synthesis.plugin.measure import metrics
 
     with np.errstate(invalid="ignore", divide="ignore"):  # empty intersections outside
         parts = shapely.get_parts(shapely.intersection(np.asarray(lines, object), area))
@@ -129,7 +129,7 @@ STYLE_MEASURES = {("roads", "segment_length"): "segment_length",
 def style_distances(m, example):
     """Normalised Wasserstein distance (W / the example's spread) per distribution of
     :data:`STYLE_MEASURES` and |difference| (nats) of the orientation entropy."""
-    from urban_synthesis.plugin import metrics
+    from urban_synthesis.plugin.measure import metrics
 
     d = {key: float(metrics.two_sample(m.distribution(kind, name),
                                        example.distribution(kind, name))["wasserstein_norm"])

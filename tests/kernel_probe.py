@@ -17,8 +17,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from conftest import PLUGINS  # noqa: E402,F401  (puts the plugin package on sys.path)
 from helpers import bubenec, helsinki_roads  # noqa: E402
 from test_footprints import helsinki_example_db  # noqa: E402
-from urban_synthesis.plugin import (blocks, database, footprints, fragments, hierarchy,  # noqa: E402
-                                    roads, synthesis_fragments)
+from urban_synthesis.plugin.network import blocks  # noqa: E402
+from urban_synthesis.plugin.retrieval import database
+from urban_synthesis.plugin.buildings import footprints
+from urban_synthesis.plugin.network import fragments
+from urban_synthesis.plugin.network import hierarchy
+from urban_synthesis.plugin.network import street_graph as roads
+from urban_synthesis.plugin.roads import from_fragments as synthesis_fragments
 
 
 def main(out: str) -> None:

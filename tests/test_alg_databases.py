@@ -27,7 +27,7 @@ def helsinki_blocks(qgis_processing):
 # --------------------------------------------------------------------------- fragments
 
 def test_helsinki_fragment_database(qgis_processing, helsinki_roads, tmp_path):
-    from urban_synthesis.plugin import database
+    from urban_synthesis.plugin.retrieval import database
 
     roads = helsinki_roads
     out = tmp_path / "helsinki_fragments.gpkg"
@@ -46,7 +46,7 @@ def test_helsinki_fragment_database(qgis_processing, helsinki_roads, tmp_path):
         d.streets.fragment_id].to_numpy() + 1).all()
     assert d.relief is None and d.descriptors.slopes is None
     # a database fragment, moved, is retrieved as itself
-    from urban_synthesis.plugin import shape_context as sc
+    from urban_synthesis.plugin.retrieval import shape_context as sc
 
     k = int(np.argmax(d.table.area_m2.to_numpy() * (d.levels == 1)))
     q = sc.transform_geometries([d.geometry[k]], np.array([[0.0, -1.0], [1.0, 0.0]]),
@@ -58,7 +58,7 @@ def test_fragment_database_with_dem(qgis_processing, tmp_path):
     """A synthetic DEM (GeoTIFF in EPSG:3857, a hill) under Bubeneč's streets."""
     from osgeo import gdal, osr
 
-    from urban_synthesis.plugin import database
+    from urban_synthesis.plugin.retrieval import database
 
     roads = qgis_processing.run("urbansynth:extractroadhierarchy", {
         "INPUT": bubenec_layer("streets"), "OUTPUT": "memory:", "OUTPUT_INTERSECTIONS": None})
@@ -139,7 +139,7 @@ def test_fragment_cancel(qgis_processing, helsinki_roads, tmp_path):
 # --------------------------------------------------------------------------- blocks
 
 def test_helsinki_block_database(qgis_processing, helsinki_blocks, tmp_path):
-    from urban_synthesis.plugin import database
+    from urban_synthesis.plugin.retrieval import database
 
     blocks, buildings = helsinki_blocks
     out = tmp_path / "helsinki_blocks.gpkg"
@@ -172,7 +172,7 @@ def test_helsinki_block_database(qgis_processing, helsinki_blocks, tmp_path):
 
 def test_bubenec_block_database_assigns_by_location(qgis_processing, tmp_path):
     """Raw Bubeneč buildings have no block_id: they are assigned to blocks by location."""
-    from urban_synthesis.plugin import database
+    from urban_synthesis.plugin.retrieval import database
 
     blocks = qgis_processing.run("urbansynth:extractblocks", {
         "ROADS": bubenec_layer("streets"), "OUTPUT": "memory:"})["OUTPUT"]
@@ -216,7 +216,7 @@ def test_block_errors(qgis_processing, tmp_path):
 # --------------------------------------------------------------------------- qgis_process
 
 def test_qgis_process_fragment_database_exits_zero(tmp_path):
-    from urban_synthesis.plugin import database
+    from urban_synthesis.plugin.retrieval import database
 
     roads = tmp_path / "roads.gpkg"
     code, _, err = run_qgis_process("extractroadhierarchy", {
@@ -231,7 +231,7 @@ def test_qgis_process_fragment_database_exits_zero(tmp_path):
 
 
 def test_qgis_process_block_database_exits_zero(tmp_path):
-    from urban_synthesis.plugin import database
+    from urban_synthesis.plugin.retrieval import database
 
     blocks, buildings = tmp_path / "blocks.gpkg", tmp_path / "buildings.gpkg"
     code, _, err = run_qgis_process("extractblocks", {

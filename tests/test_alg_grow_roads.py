@@ -86,8 +86,8 @@ def test_geographic_boundary_terrain_obstacles_density_sketch(qgis_processing, t
     # lengths are metres, not degrees
     assert 20 < np.median([r["length_m"] for r in rows]) < 250
     # check the constraints in the metric CRS
-    from urban_synthesis.plugin.growth import segment_slopes
-    from urban_synthesis.plugin.shape_context import DemGrid
+    from urban_synthesis.plugin.roads.growth import segment_slopes
+    from urban_synthesis.plugin.retrieval.shape_context import DemGrid
 
     back = QgsCoordinateTransform(QgsCoordinateReferenceSystem("EPSG:4326"),
                                   QgsCoordinateReferenceSystem(CRS),

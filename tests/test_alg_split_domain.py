@@ -5,7 +5,7 @@ import shapely
 
 from conftest import BUBENEC, run_qgis_process
 from helpers import bubenec, layer_features, memory_layer
-from urban_synthesis.plugin import domain_split
+from urban_synthesis.plugin.planned import domain_split
 
 ALG = "urbansynth:splitdomain"
 

@@ -5,7 +5,8 @@ import shapely
 
 from conftest import bubenec_layer, run_qgis_process
 from helpers import layer_features, memory_layer
-from urban_synthesis.plugin import parcels
+from urban_synthesis.plugin.parcels import subdivision as parcels
+from urban_synthesis.plugin.core.paths import RESOURCES
 
 ALG = "urbansynth:subdivideparcels"
 FIELDS = [name for name, _ in parcels.PARCEL_FIELDS]
@@ -133,12 +134,9 @@ def test_qgis_process_run(tmp_path):
 
 def test_quality_style(qgis_app):
     """The shipped style colours parcels by Yang's criteria (Fig. 12: good / undesirable)."""
-    from pathlib import Path
-
     from qgis.core import QgsRuleBasedRenderer, QgsVectorLayer
 
-    qml = Path(parcels.__file__).resolve().parents[1] / "resources" / "styles" / \
-        "parcels_by_quality.qml"
+    qml = RESOURCES / "styles" / "parcels_by_quality.qml"
     layer = QgsVectorLayer("Polygon?field=undesirable:boolean&field=has_street_access:boolean",
                            "parcels", "memory")
     message, ok = layer.loadNamedStyle(str(qml))

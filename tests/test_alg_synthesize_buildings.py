@@ -5,7 +5,9 @@ import shapely
 
 from conftest import bubenec_layer, helsinki_layer, run_qgis_process
 from helpers import layer_features, log_feedback, memory_layer
-from urban_synthesis.plugin import building_attributes, building_bestfit, metrics
+from urban_synthesis.plugin.buildings import attributes as building_attributes
+from urban_synthesis.plugin.buildings import bestfit as building_bestfit
+from urban_synthesis.plugin.measure import metrics
 
 ALG = "urbansynth:synthesizebuildings"
 ATTRIBUTE_FIELDS = ["height_m", "levels", "building_type", "roof_shape", "source_id",

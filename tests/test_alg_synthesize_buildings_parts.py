@@ -13,7 +13,7 @@ import shapely.affinity
 
 from conftest import run_qgis_process
 from helpers import bubenec, layer_features, memory_layer
-from urban_synthesis.plugin import blocks
+from urban_synthesis.plugin.network import blocks
 
 ALG = "urbansynth:synthesizebuildings"
 PARTS = 2                     # METHOD index of parts (attributes 0, bestfit 1)

@@ -9,7 +9,7 @@ import shapely
 
 from conftest import bubenec_layer, helsinki_layer, run_qgis_process
 from helpers import bubenec, layer_features, memory_layer
-from urban_synthesis.plugin import footprints
+from urban_synthesis.plugin.buildings import footprints
 
 ALG = "urbansynth:synthesizefootprints"
 FIELDS = [name for name, _ in footprints.OUTPUT_FIELDS]

@@ -83,7 +83,7 @@ def test_helsinki_synthesis_through_processing(qgis_processing, helsinki):
     assert any(m.startswith("Level 0:") for m in log.messages)
     assert log.progress and max(log.progress) == pytest.approx(100)
     # planar in a metric CRS
-    from urban_synthesis.plugin import qgis_io
+    from urban_synthesis.plugin.qgis_glue import qgis_io
 
     utm = QgsCoordinateReferenceSystem("EPSG:32635")
     metric = qgis_io.reproject(geoms, layer.crs(), utm, None)

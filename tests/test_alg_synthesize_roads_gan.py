@@ -8,7 +8,8 @@ from qgis.core import QgsProcessingException
 
 from conftest import bubenec_layer, run_qgis_process
 from helpers import assert_planar, helsinki_roads, layer_features, memory_layer
-from urban_synthesis.plugin import raster_graph, streetgan
+from urban_synthesis.plugin.roads import raster_graph
+from urban_synthesis.plugin.roads import streetgan
 
 GAN = "urbansynth:synthesizeroadsgan"
 R2V = "urbansynth:rasterroadstovector"

@@ -5,7 +5,8 @@ import shapely
 
 from conftest import bubenec_layer, helsinki_layer, run_qgis_process
 from helpers import assert_planar, helsinki_roads, layer_features, memory_layer
-from urban_synthesis.plugin import random_walk, roads
+from urban_synthesis.plugin.roads import random_walk
+from urban_synthesis.plugin.network import street_graph as roads
 
 ALG = "urbansynth:synthesizeroadsrandomwalk"
 UTM = "EPSG:32635"
@@ -55,7 +56,7 @@ def test_copy_and_reconnect_intersection_points(qgis_processing, helsinki_points
     b_rows, b_geoms = layer_features(out["OUTPUT_BLOCKS"])
     assert len(b_rows) > 10 and shapely.is_valid(b_geoms).all()
     assert all(r["parcel_area"] > 0 for r in b_rows)  # Helsinki's block areas (no cadastre)
-    from urban_synthesis.plugin import parcels
+    from urban_synthesis.plugin.parcels import subdivision as parcels
 
     lots = qgis_processing.run("urbansynth:subdivideparcels", {
         "BLOCKS": out["OUTPUT_BLOCKS"], "METHOD": parcels.method_names().index("voronoi-obb"),

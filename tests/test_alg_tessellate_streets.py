@@ -1,5 +1,4 @@
 """urbansynth:tessellatestreets through real QGIS (processing.run and qgis_process.bin)."""
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -7,7 +6,8 @@ import shapely
 
 from conftest import helsinki_layer, run_qgis_process
 from helpers import layer_features, memory_layer
-from urban_synthesis.plugin import street_surfaces as ss
+from urban_synthesis.plugin.network import street_surfaces as ss
+from urban_synthesis.plugin.core.paths import RESOURCES
 
 ALG = "urbansynth:tessellatestreets"
 SURFACE_FIELDS = [name for name, _ in ss.SURFACE_FIELDS]
@@ -187,7 +187,7 @@ def test_bad_input(qgis_processing, stars, tmp_path, case, match):
 def test_styles_load(qgis_app):
     from qgis.core import QgsRuleBasedRenderer, QgsVectorLayer
 
-    styles = Path(ss.__file__).resolve().parents[1] / "resources" / "styles"
+    styles = RESOURCES / "styles"
     for qml in ("street_surfaces.qml", "junctions.qml"):
         layer = QgsVectorLayer("Polygon?field=degree:integer&field=too_steep_long:boolean"
                                "&field=too_steep_lat:boolean", "x", "memory")

@@ -4,8 +4,9 @@ import pytest
 import shapely
 from shapely.geometry import LineString, Polygon, box
 
-from urban_synthesis.plugin import blocks, roads
-from urban_synthesis.plugin.progress import InputError
+from urban_synthesis.plugin.network import blocks
+from urban_synthesis.plugin.network import street_graph as roads
+from urban_synthesis.plugin.core.progress import InputError
 
 from helpers import bubenec, helsinki_roads
 

@@ -4,8 +4,8 @@ import math
 import numpy as np
 import pytest
 
-from urban_synthesis.plugin import building_attributes as ba
-from urban_synthesis.plugin.progress import InputError
+from urban_synthesis.plugin.buildings import attributes as ba
+from urban_synthesis.plugin.core.progress import InputError
 
 
 @pytest.mark.parametrize("text, metres", [

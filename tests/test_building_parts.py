@@ -1,4 +1,4 @@
-"""Engine tests of plugin/building_parts.py (thesis ch. 6: part-based buildings).
+"""Engine tests of plugin/buildings/parts.py (thesis ch. 6: part-based buildings).
 
 The thesis's skyscraper case (120 m, FAR 10 / 15 / 20 from 18 floor parts) must be met
 exactly; buildings along skeletons must have valid, non-overlapping parts with end parts
@@ -11,10 +11,10 @@ import pytest
 import shapely
 
 from helpers import bubenec
-from urban_synthesis.plugin import blocks
-from urban_synthesis.plugin import building_parts as bp
-from urban_synthesis.plugin.progress import InputError
-from urban_synthesis.plugin.sequences import InfeasibleError
+from urban_synthesis.plugin.network import blocks
+from urban_synthesis.plugin.buildings import parts as bp
+from urban_synthesis.plugin.core.progress import InputError
+from urban_synthesis.plugin.buildings.sequences import InfeasibleError
 
 SITE = shapely.box(0, 0, 40, 40)          # 1,600 m² plot
 

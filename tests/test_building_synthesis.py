@@ -10,10 +10,14 @@ import shapely.affinity
 
 from conftest import HELSINKI
 from helpers import bubenec
-from urban_synthesis.plugin import blocks, building_attributes, metrics, parcels, roads
-from urban_synthesis.plugin import building_attribute_transfer as bt
-from urban_synthesis.plugin import building_bestfit as bf
-from urban_synthesis.plugin.progress import InputError
+from urban_synthesis.plugin.network import blocks
+from urban_synthesis.plugin.buildings import attributes as building_attributes
+from urban_synthesis.plugin.measure import metrics
+from urban_synthesis.plugin.parcels import subdivision as parcels
+from urban_synthesis.plugin.network import street_graph as roads
+from urban_synthesis.plugin.buildings import attribute_transfer as bt
+from urban_synthesis.plugin.buildings import bestfit as bf
+from urban_synthesis.plugin.core.progress import InputError
 
 
 # --------------------------------------------------------------------------- attributes

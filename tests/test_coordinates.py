@@ -10,7 +10,10 @@ import shapely
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from urban_synthesis.plugin import coordinates, footprint_resynthesis, shape_context, warp
+from urban_synthesis.plugin.core import coordinates
+from urban_synthesis.plugin.buildings import footprint_resynthesis
+from urban_synthesis.plugin.retrieval import shape_context
+from urban_synthesis.plugin.retrieval import warp
 
 
 @st.composite

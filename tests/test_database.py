@@ -1,4 +1,4 @@
-"""Example databases: GeoPackage round trip, validation, retrieval (plugin/database.py)."""
+"""Example databases: GeoPackage round trip, validation, retrieval (plugin/retrieval/database.py)."""
 import os
 import sqlite3
 
@@ -8,10 +8,10 @@ import pytest
 import shapely
 
 from test_fragments import levelled_grid
-from urban_synthesis.plugin import database as db
-from urban_synthesis.plugin import fragments as fr
-from urban_synthesis.plugin import shape_context as sc
-from urban_synthesis.plugin.progress import InputError
+from urban_synthesis.plugin.retrieval import database as db
+from urban_synthesis.plugin.network import fragments as fr
+from urban_synthesis.plugin.retrieval import shape_context as sc
+from urban_synthesis.plugin.core.progress import InputError
 
 CRS = "EPSG:32635"
 

@@ -1,4 +1,4 @@
-"""Work on Dask (plugin.distributed, plugin.cli): on a local cluster of 2 worker processes,
+"""Work on Dask (plugin.scale.distributed, plugin.scale.cli): on a local cluster of 2 worker processes,
 footprints (both methods) and building attributes (medoid and random) from partitions of
 a GeoPackage source, and StreetGAN tiles, give exactly the serial result.
 
@@ -21,8 +21,11 @@ import shapely
 
 from conftest import ROOT
 from helpers import helsinki_roads
-from urban_synthesis.plugin import blocks, distributed, footprints, roads
-from urban_synthesis.plugin.progress import InputError
+from urban_synthesis.plugin.network import blocks
+from urban_synthesis.plugin.scale import distributed
+from urban_synthesis.plugin.buildings import footprints
+from urban_synthesis.plugin.network import street_graph as roads
+from urban_synthesis.plugin.core.progress import InputError
 
 
 @pytest.fixture(scope="module")
@@ -68,7 +71,7 @@ def _job(district, method, with_roads=True, n_best=2):
     b = distributed.read_blocks(distributed.Source(str(src), "blocks"))
     rd = distributed.RoadIndex(distributed.read_lines(distributed.Source(str(src), "roads"),
                                                       b.work_crs)) if with_roads else None
-    from urban_synthesis.plugin import database
+    from urban_synthesis.plugin.retrieval import database
 
     ex = footprints.prepare_examples(database.load_block_database(district["db"]), "helsinki")
     return b, distributed.FootprintJob([ex], rd, method, seed=7, n_best=n_best)
@@ -133,7 +136,7 @@ def test_roads_and_seed_matter(district):
 
 def test_cli_end_to_end(district, tmp_path):
     out = tmp_path / "fp.gpkg"
-    cmd = [sys.executable, "-m", "urban_synthesis.plugin.cli", "footprints",
+    cmd = [sys.executable, "-m", "urban_synthesis.plugin.scale.cli", "footprints",
            "--blocks", f"{district['src']}:small", "--roads", f"{district['src']}:roads",
            "--db", str(district["db"]), "--method", "resynthesis", "--seed", "3",
            "--out", str(out), "--workers", "2", "--partitions", "3"]
@@ -166,7 +169,7 @@ def test_cli_end_to_end(district, tmp_path):
 
 def test_cli_bad_input(district, tmp_path):
     env = {"PYTHONPATH": str(ROOT / "build" / "plugins"), "PATH": "/usr/bin:/bin"}
-    base = [sys.executable, "-m", "urban_synthesis.plugin.cli", "footprints",
+    base = [sys.executable, "-m", "urban_synthesis.plugin.scale.cli", "footprints",
             "--out", str(tmp_path / "x.gpkg")]
     res = subprocess.run(base + ["--blocks", f"{district['src']}:nosuch", "--db",
                                  str(district["db"])], cwd=ROOT, capture_output=True,
@@ -193,7 +196,7 @@ def test_engine_errors(district, tmp_path):
 # --------------------------------------------------------------------------- StreetGAN tiles
 
 def test_gan_tiles_equal_serial_image_and_network(client):
-    from urban_synthesis.plugin import streetgan
+    from urban_synthesis.plugin.roads import streetgan
 
     gen = streetgan.load_model("streetgan_helsinki")
     # 23 x 29 noise cells in tiles of 6: 20 tasks, each with its margin of context
@@ -281,7 +284,7 @@ def test_attributes_distributed_equals_serial(buildings, client, mode):
 def test_attribute_halo_is_needed(buildings, client, monkeypatch):
     """Without the halo the context features of footprints near a partition edge change,
     so the equality above is not vacuous; without roads the feature set changes."""
-    from urban_synthesis.plugin import building_attribute_transfer as bt
+    from urban_synthesis.plugin.buildings import attribute_transfer as bt
 
     b = buildings
     job = _attr_job(b)
@@ -303,7 +306,7 @@ def test_attribute_halo_is_needed(buildings, client, monkeypatch):
 
 def _cli(args, timeout=120):
     env = {"PYTHONPATH": str(ROOT / "build" / "plugins"), "PATH": "/usr/bin:/bin"}
-    return subprocess.run([sys.executable, "-m", "urban_synthesis.plugin.cli", *args],
+    return subprocess.run([sys.executable, "-m", "urban_synthesis.plugin.scale.cli", *args],
                           cwd=ROOT, capture_output=True, text=True, env=env, timeout=timeout)
 
 

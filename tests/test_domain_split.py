@@ -7,9 +7,13 @@ import pytest
 import shapely
 
 from helpers import bubenec
-from urban_synthesis.plugin import (cross_field, domain_split, mesh_optimisation, metrics,
-                                    streamlines, templates)
-from urban_synthesis.plugin.progress import InputError
+from urban_synthesis.plugin.planned import cross_field
+from urban_synthesis.plugin.planned import domain_split
+from urban_synthesis.plugin.planned import mesh_optimisation
+from urban_synthesis.plugin.measure import metrics
+from urban_synthesis.plugin.planned import streamlines
+from urban_synthesis.plugin.planned import templates
+from urban_synthesis.plugin.core.progress import InputError
 
 L, W, S = 30.0, 18.0, 15.0
 LIB = templates.load_library(subset="strips")
@@ -119,7 +123,7 @@ def test_warp_tiles_a_curved_block_and_reduces_distortion():
         assert len(res.lots) == 2 * res.columns
         assert abs(shapely.area(res.lots).sum() - block.area) < 1e-6 * block.area
         assert abs(shapely.union_all(res.lots).area - block.area) < 1e-6 * block.area
-    from urban_synthesis.plugin import parcels
+    from urban_synthesis.plugin.parcels import subdivision as parcels
     assert (parcels.street_frontage(after.lots, block) >= parcels.MIN_FRONTAGE).all()
     # the alternating registration / regression makes the parcels more rectangular
     assert parcels.lot_quality(after.lots)[0].mean() < parcels.lot_quality(before.lots)[0].mean()
@@ -261,7 +265,7 @@ def test_bad_input():
 
 
 def test_spike_template_makes_a_cul_de_sac_with_street_access():
-    from urban_synthesis.plugin import parcels
+    from urban_synthesis.plugin.parcels import subdivision as parcels
 
     centre = shapely.box(0, 0, 160, 3.4 * L + S)  # a block too deep for a double strip
     block = centre.buffer(-S / 2, join_style="mitre")
@@ -299,7 +303,7 @@ def test_children_reject_a_band_too_thin_for_any_template():
 def test_acute_lot_keeps_the_rectangle_on_its_street_and_the_wedge_turns_green():
     """An undesirable lot larger than a parcel (a triangle where streets meet at an acute
     angle) is cut to the rectangle standing on its street edge; the wedge becomes green."""
-    from urban_synthesis.plugin import parcels
+    from urban_synthesis.plugin.parcels import subdivision as parcels
 
     # the shrunk block (its outline is street) and its corner lot on the x axis
     block = shapely.Polygon([(0, 0), (200, 0), (200, 100), (0, 45)])

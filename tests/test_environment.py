@@ -33,7 +33,7 @@ def test_pyogrio_uses_system_gdal():
 def test_engine_modules_do_not_import_qgis():
     """The engine stays free of QGIS: importing it must not load qgis."""
     code = ("import sys; sys.path.insert(0, 'build/plugins');"
-            "import urban_synthesis.plugin.roads, urban_synthesis.plugin.hierarchy;"
+            "import urban_synthesis.plugin.network.street_graph, urban_synthesis.plugin.network.hierarchy;"
             "import pkgutil, importlib, urban_synthesis.plugin as p;"
             "glue = {'qgis_io', 'provider', 'plugin'};"
             "[importlib.import_module('urban_synthesis.plugin.' + m.name) for m in pkgutil.iter_modules(p.__path__) if m.name not in glue];"

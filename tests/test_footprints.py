@@ -1,4 +1,4 @@
-"""Footprints by example (plugin.footprints, footprint_transfer, footprint_resynthesis).
+"""Footprints by example (plugin.buildings.footprints, footprint_transfer, footprint_resynthesis).
 
 Hand-made blocks whose answer is known (the paper's retargeting cases: stretched, shrunk,
 two extra intersections), the sequence DP against brute force, and the Helsinki block
@@ -11,9 +11,15 @@ import pytest
 import shapely
 
 from helpers import bubenec, helsinki_roads
-from urban_synthesis.plugin import (blocks, building_attributes, database, footprint_resynthesis,
-                                    footprint_transfer, footprints, metrics, roads)
-from urban_synthesis.plugin.progress import InputError
+from urban_synthesis.plugin.network import blocks
+from urban_synthesis.plugin.buildings import attributes as building_attributes
+from urban_synthesis.plugin.retrieval import database
+from urban_synthesis.plugin.buildings import footprint_resynthesis
+from urban_synthesis.plugin.buildings import footprint_transfer
+from urban_synthesis.plugin.buildings import footprints
+from urban_synthesis.plugin.measure import metrics
+from urban_synthesis.plugin.network import street_graph as roads
+from urban_synthesis.plugin.core.progress import InputError
 
 ALPHA = footprint_resynthesis.ALPHA
 
@@ -521,7 +527,7 @@ def test_transfer_onto_bubenec(helsinki):
 
 
 def test_transfer_onto_grown_network(helsinki):
-    from urban_synthesis.plugin import growth
+    from urban_synthesis.plugin.roads import growth
 
     lines = growth.grow_roads(shapely.box(0, 0, 500, 500), seed=4).geometry
     ext = blocks.extract_blocks(lines)

@@ -1,4 +1,4 @@
-"""Hierarchical road synthesis from fragments (plugin/synthesis_fragments.py).
+"""Hierarchical road synthesis from fragments (plugin/roads/from_fragments.py).
 
 Small hand-made databases whose answer is known, then the evidence of issue 3 on real data:
 reproduction of Helsinki from its own arterials and database (against a plain grid), style
@@ -13,11 +13,16 @@ import shapely
 from helpers import (assert_planar, bubenec, clipped_metrics, helsinki_roads,
                      right_angle_share, sketch_cells, style_distances, STYLE_MEASURES)
 from test_fragments import levelled_grid
-from urban_synthesis.plugin import (blocks, database, fragments, growth, hierarchy, metrics,
-                                    roads)
-from urban_synthesis.plugin import synthesis_fragments as sf
-from urban_synthesis.plugin.progress import Canceled, InputError, Progress
-from urban_synthesis.plugin.shape_context import DemGrid
+from urban_synthesis.plugin.network import blocks
+from urban_synthesis.plugin.retrieval import database
+from urban_synthesis.plugin.network import fragments
+from urban_synthesis.plugin.roads import growth
+from urban_synthesis.plugin.network import hierarchy
+from urban_synthesis.plugin.measure import metrics
+from urban_synthesis.plugin.network import street_graph as roads
+from urban_synthesis.plugin.roads import from_fragments as sf
+from urban_synthesis.plugin.core.progress import Canceled, InputError, Progress
+from urban_synthesis.plugin.retrieval.shape_context import DemGrid
 
 CRS = "EPSG:32635"
 

@@ -1,11 +1,11 @@
-"""Hierarchical fragments (plugin/fragments.py)."""
+"""Hierarchical fragments (plugin/network/fragments.py)."""
 import numpy as np
 import pytest
 import shapely
 
-from urban_synthesis.plugin import fragments as fr
-from urban_synthesis.plugin.progress import Canceled, InputError, Progress
-from urban_synthesis.plugin.shape_context import DemGrid
+from urban_synthesis.plugin.network import fragments as fr
+from urban_synthesis.plugin.core.progress import Canceled, InputError, Progress
+from urban_synthesis.plugin.retrieval.shape_context import DemGrid
 
 
 def levelled_grid():
@@ -131,7 +131,8 @@ def test_helsinki_fragments_invariants():
     """Real data: levels from the road hierarchy engine on Helsinki's drivable roads."""
     from helpers import helsinki_roads
 
-    from urban_synthesis.plugin import hierarchy, roads
+    from urban_synthesis.plugin.network import hierarchy
+    from urban_synthesis.plugin.network import street_graph as roads
 
     df = helsinki_roads()
     g = roads.clean_network(df.geometry.values, df.highway.values, None, df.z.values)

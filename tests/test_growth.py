@@ -1,4 +1,4 @@
-"""Procedural road growth (plugin.growth): patterns, local constraints, invariants."""
+"""Procedural road growth (plugin.roads.growth): patterns, local constraints, invariants."""
 from functools import lru_cache
 
 import numpy as np
@@ -6,9 +6,9 @@ import pytest
 import shapely
 
 from helpers import assert_planar
-from urban_synthesis.plugin import growth
-from urban_synthesis.plugin.progress import Canceled, InputError, Progress
-from urban_synthesis.plugin.shape_context import DemGrid
+from urban_synthesis.plugin.roads import growth
+from urban_synthesis.plugin.core.progress import Canceled, InputError, Progress
+from urban_synthesis.plugin.retrieval.shape_context import DemGrid
 
 BOX = shapely.box(0, 0, 1000, 1000)
 
@@ -80,7 +80,7 @@ def test_levels_patterns_and_attributes():
 def test_grid_axis_follows_a_rotated_boundary():
     box = shapely.affinity.rotate(shapely.box(0, 0, 800, 800), 30, origin=(0, 0))
     r = growth.grow_roads(box, settings=growth.GrowthSettings(), seed=2)
-    from urban_synthesis.plugin.metrics import street_bearings
+    from urban_synthesis.plugin.measure.metrics import street_bearings
 
     b, w = street_bearings(r.geometry)
     axial = np.degrees(np.arctan2((w * np.sin(np.radians(4 * b))).sum(),

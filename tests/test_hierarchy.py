@@ -3,8 +3,9 @@ import numpy as np
 import pytest
 from shapely.geometry import LineString
 
-from urban_synthesis.plugin import hierarchy, roads
-from urban_synthesis.plugin.progress import InputError
+from urban_synthesis.plugin.network import hierarchy
+from urban_synthesis.plugin.network import street_graph as roads
+from urban_synthesis.plugin.core.progress import InputError
 
 from helpers import helsinki_roads
 

@@ -1,13 +1,13 @@
-"""Engine tests of plugin.metrics and plugin.report (no QGIS)."""
+"""Engine tests of plugin.measure.metrics and plugin.measure.report (no QGIS)."""
 import math
 
 import numpy as np
 import pytest
 import shapely
 
-from urban_synthesis.plugin import metrics as M
-from urban_synthesis.plugin import report as R
-from urban_synthesis.plugin.progress import Canceled, InputError, Progress
+from urban_synthesis.plugin.measure import metrics as M
+from urban_synthesis.plugin.measure import report as R
+from urban_synthesis.plugin.core.progress import Canceled, InputError, Progress
 
 
 def grid(n=4, spacing=100.0, overhang=0.0):

@@ -1,5 +1,4 @@
 """The shipped model 'synthesizedistrict' and the method switch 'synthesizeroads' it uses."""
-import numpy as np
 import pytest
 import shapely
 

@@ -45,7 +45,7 @@ def test_zip_holds_the_plugin_and_nothing_else(package):
     assert all(n.startswith(f"{TOP}/") for n in names)
     inner = {n[len(TOP) + 1:] for n in names}
     for required in ("__init__.py", "metadata.txt", "README.md", "plugin/__init__.py",
-                     "plugin/plugin.py", "plugin/provider.py", "plugin/qgis_io.py",
+                     "plugin/qgis_glue/plugin.py", "plugin/qgis_glue/provider.py", "plugin/qgis_glue/qgis_io.py",
                      "processing_algorithms/__init__.py", "processing_algorithms/common.py",
                      "resources/icons/urbansynth.svg", "resources/styles/roads_by_level.qml",
                      "resources/styles/buildings_by_height.qml",

@@ -1,4 +1,4 @@
-"""Engine tests of plugin/parcels.py: shrinking, recursive and skeleton subdivision.
+"""Engine tests of plugin/parcels/subdivision.py: shrinking, recursive and skeleton subdivision.
 
 Small hand-made blocks whose answer is known, then the Bubeneč blocks (extracted from the
 real streets) against Bubeneč's real cadastre parcels with Yang 2013's parcel metrics.
@@ -10,8 +10,10 @@ import pytest
 import shapely
 
 from helpers import bubenec
-from urban_synthesis.plugin import blocks, metrics, parcels
-from urban_synthesis.plugin.progress import Canceled, InputError, Progress
+from urban_synthesis.plugin.network import blocks
+from urban_synthesis.plugin.measure import metrics
+from urban_synthesis.plugin.parcels import subdivision as parcels
+from urban_synthesis.plugin.core.progress import Canceled, InputError, Progress
 
 RECT = shapely.box(0, 0, 100, 40)
 L_SHAPE = shapely.Polygon([(0, 0), (120, 0), (120, 50), (50, 50), (50, 110), (0, 110)])

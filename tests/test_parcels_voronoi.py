@@ -5,8 +5,11 @@ import shapely
 
 from conftest import bubenec_layer
 from helpers import bubenec, layer_features
-from urban_synthesis.plugin import blocks, metrics, parcels, parcels_voronoi
-from urban_synthesis.plugin.progress import InputError
+from urban_synthesis.plugin.network import blocks
+from urban_synthesis.plugin.measure import metrics
+from urban_synthesis.plugin.parcels import subdivision as parcels
+from urban_synthesis.plugin.parcels import voronoi as parcels_voronoi
+from urban_synthesis.plugin.core.progress import InputError
 
 S = parcels.SubdivisionSettings
 

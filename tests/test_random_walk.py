@@ -6,9 +6,10 @@ import pytest
 import shapely
 
 from helpers import assert_planar, bubenec, helsinki_roads
-from urban_synthesis.plugin import intersection_quadtree as iq
-from urban_synthesis.plugin import metrics, random_walk as rw
-from urban_synthesis.plugin.progress import InputError
+from urban_synthesis.plugin.roads import intersection_quadtree as iq
+from urban_synthesis.plugin.measure import metrics
+from urban_synthesis.plugin.roads import random_walk as rw
+from urban_synthesis.plugin.core.progress import InputError
 
 
 def _grid_points(n=5, spacing=100.0, levels=(0, 1), jitter=0.0, seed=0):

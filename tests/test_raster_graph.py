@@ -1,11 +1,12 @@
-"""Raster -> road graph (plugin.raster_graph, thesis ch. 4.2.4) on hand-made and real rasters."""
+"""Raster -> road graph (plugin.roads.raster_graph, thesis ch. 4.2.4) on hand-made and real rasters."""
 import numpy as np
 import pytest
 import shapely
 
 from helpers import assert_planar, helsinki_roads
-from urban_synthesis.plugin import metrics, raster_graph as rg
-from urban_synthesis.plugin.progress import InputError
+from urban_synthesis.plugin.measure import metrics
+from urban_synthesis.plugin.roads import raster_graph as rg
+from urban_synthesis.plugin.core.progress import InputError
 
 
 def _grid(spacing=300.0, n=3):

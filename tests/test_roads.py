@@ -4,8 +4,8 @@ import pytest
 import shapely
 from shapely.geometry import LineString
 
-from urban_synthesis.plugin import roads
-from urban_synthesis.plugin.progress import Canceled, InputError, Progress
+from urban_synthesis.plugin.network import street_graph as roads
+from urban_synthesis.plugin.core.progress import Canceled, InputError, Progress
 
 from helpers import helsinki_roads, assert_planar
 

@@ -1,4 +1,4 @@
-"""Engine tests of plugin/sequences.py (thesis ch. 3: resource-constrained k shortest paths).
+"""Engine tests of plugin/buildings/sequences.py (thesis ch. 3: resource-constrained k shortest paths).
 
 The solver is checked against an independent brute-force enumeration of every sequence on
 many small random instances (fixed seeds): same optimal cost, same k-best costs, the same
@@ -12,9 +12,9 @@ import math
 import numpy as np
 import pytest
 
-from urban_synthesis.plugin import sequences
-from urban_synthesis.plugin.progress import Canceled, InputError, Progress
-from urban_synthesis.plugin.sequences import Constraint, InfeasibleError, KeyPoint, solve
+from urban_synthesis.plugin.buildings import sequences
+from urban_synthesis.plugin.core.progress import Canceled, InputError, Progress
+from urban_synthesis.plugin.buildings.sequences import Constraint, InfeasibleError, KeyPoint, solve
 
 INF = math.inf
 

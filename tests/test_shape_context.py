@@ -1,12 +1,12 @@
-"""Shape context, cyclic DTW and rigid alignment (plugin/shape_context.py)."""
+"""Shape context, cyclic DTW and rigid alignment (plugin/retrieval/shape_context.py)."""
 from functools import lru_cache
 
 import numpy as np
 import pytest
 import shapely
 
-from urban_synthesis.plugin import shape_context as sc
-from urban_synthesis.plugin.progress import InputError
+from urban_synthesis.plugin.retrieval import shape_context as sc
+from urban_synthesis.plugin.core.progress import InputError
 
 POLY = shapely.Polygon([(0, 0), (60, 0), (80, 30), (40, 70), (0, 50), (10, 20)])
 

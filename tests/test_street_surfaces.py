@@ -1,13 +1,13 @@
-"""Engine tests of plugin.street_surfaces (Scharl 2010, ch. 5): plain shapely, no QGIS."""
+"""Engine tests of plugin.network.street_surfaces (Scharl 2010, ch. 5): plain shapely, no QGIS."""
 import numpy as np
 import pytest
 import shapely
 
 from helpers import helsinki_roads
-from urban_synthesis.plugin import roads
-from urban_synthesis.plugin import street_surfaces as ss
-from urban_synthesis.plugin.progress import InputError
-from urban_synthesis.plugin.shape_context import DemGrid
+from urban_synthesis.plugin.network import street_graph as roads
+from urban_synthesis.plugin.network import street_surfaces as ss
+from urban_synthesis.plugin.core.progress import InputError
+from urban_synthesis.plugin.retrieval.shape_context import DemGrid
 
 
 # --------------------------------------------------------------------------- checks

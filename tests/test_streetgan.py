@@ -1,4 +1,4 @@
-"""StreetGAN engine (plugin.streetgan): shipped ONNX generators run with onnxruntime (no torch)."""
+"""StreetGAN engine (plugin.roads.streetgan): shipped ONNX generators run with onnxruntime (no torch)."""
 import json
 import shutil
 
@@ -7,8 +7,10 @@ import pytest
 import shapely
 
 from helpers import assert_planar, helsinki_roads
-from urban_synthesis.plugin import metrics, raster_graph, streetgan
-from urban_synthesis.plugin.progress import InputError
+from urban_synthesis.plugin.measure import metrics
+from urban_synthesis.plugin.roads import raster_graph
+from urban_synthesis.plugin.roads import streetgan
+from urban_synthesis.plugin.core.progress import InputError
 
 
 @pytest.fixture(scope="module")

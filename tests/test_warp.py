@@ -1,10 +1,10 @@
-"""Mean value coordinates, warping and Poisson merging (plugin/warp.py)."""
+"""Mean value coordinates, warping and Poisson merging (plugin/retrieval/warp.py)."""
 import numpy as np
 import pytest
 import shapely
 
-from urban_synthesis.plugin import warp
-from urban_synthesis.plugin.progress import InputError
+from urban_synthesis.plugin.retrieval import warp
+from urban_synthesis.plugin.core.progress import InputError
 
 SQUARE = np.array([[0, 0], [10, 0], [10, 10], [0, 10]], dtype=float)
 # an L shape: concave at (4, 4)

@@ -33,7 +33,8 @@ ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT / "build" / "plugins") not in sys.path:
     sys.path.insert(0, str(ROOT / "build" / "plugins"))
 
-from urban_synthesis.plugin import blocks, roads  # noqa: E402
+from urban_synthesis.plugin.network import blocks  # noqa: E402
+from urban_synthesis.plugin.network import street_graph as roads  # noqa: E402
 
 __all__ = ["bench_block_extraction", "tile_lines", "helsinki_drivable_lines"]
 

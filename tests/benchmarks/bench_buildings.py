@@ -35,9 +35,12 @@ for p in (ROOT / "build" / "plugins", ROOT / "tests"):
 
 from helpers import bubenec  # noqa: E402
 from test_building_synthesis import helsinki_buildings, hidden_height_experiment  # noqa: E402
-from urban_synthesis.plugin import blocks, metrics, parcels, roads  # noqa: E402
-from urban_synthesis.plugin import building_attribute_transfer as bt  # noqa: E402
-from urban_synthesis.plugin import building_bestfit as bf  # noqa: E402
+from urban_synthesis.plugin.network import blocks  # noqa: E402
+from urban_synthesis.plugin.measure import metrics  # noqa: E402
+from urban_synthesis.plugin.parcels import subdivision as parcels  # noqa: E402
+from urban_synthesis.plugin.network import street_graph as roads  # noqa: E402
+from urban_synthesis.plugin.buildings import attribute_transfer as bt  # noqa: E402
+from urban_synthesis.plugin.buildings import bestfit as bf  # noqa: E402
 
 
 def _tv(a, b) -> float:

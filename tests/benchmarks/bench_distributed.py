@@ -46,8 +46,11 @@ for p in (ROOT / "build" / "plugins", ROOT / "tests"):
     if str(p) not in sys.path:
         sys.path.insert(0, str(p))
 
-from urban_synthesis.plugin import (blocks, database, distributed,  # noqa: E402
-                                    footprints, roads)
+from urban_synthesis.plugin.network import blocks  # noqa: E402
+from urban_synthesis.plugin.retrieval import database  # noqa: E402
+from urban_synthesis.plugin.scale import distributed  # noqa: E402
+from urban_synthesis.plugin.buildings import footprints  # noqa: E402
+from urban_synthesis.plugin.network import street_graph as roads  # noqa: E402
 
 TILES = 10
 GAN_SIDES_KM = (3, 12)
@@ -113,7 +116,7 @@ def main():
                                        processes=True, dashboard_address=None)
                 client = Client(cluster)
                 # imports done before the clock starts (a long-lived cluster has them)
-                client.run(lambda: __import__("urban_synthesis.plugin.distributed"))
+                client.run(lambda: __import__("urban_synthesis.plugin.scale.distributed"))
                 try:
                     t0 = time.perf_counter()
                     res = distributed.footprints_distributed(client, b, job)
@@ -161,12 +164,12 @@ def _cluster(workers):
     cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                            dashboard_address=None)
     client = Client(cluster)
-    client.run(lambda: __import__("urban_synthesis.plugin.distributed"))
+    client.run(lambda: __import__("urban_synthesis.plugin.scale.distributed"))
     return cluster, client
 
 
 def bench_gan():
-    from urban_synthesis.plugin import streetgan
+    from urban_synthesis.plugin.roads import streetgan
 
     gen = streetgan.load_model("streetgan_helsinki")
     rows = {}

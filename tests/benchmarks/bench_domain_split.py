@@ -36,7 +36,10 @@ ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT / "build" / "plugins") not in sys.path:
     sys.path.insert(0, str(ROOT / "build" / "plugins"))
 
-from urban_synthesis.plugin import domain_split, metrics, roads, templates  # noqa: E402
+from urban_synthesis.plugin.planned import domain_split  # noqa: E402
+from urban_synthesis.plugin.measure import metrics  # noqa: E402
+from urban_synthesis.plugin.network import street_graph as roads  # noqa: E402
+from urban_synthesis.plugin.planned import templates  # noqa: E402
 
 DATA = ROOT / "data" / "examples"
 #: Yang 2013 Table 1 (l_s, l_r, l_p, l_o, b_n, b_max, b_avg, b_min, s_l, s_i, s_d, p_n,

@@ -40,8 +40,11 @@ for p in (ROOT / "build" / "plugins", ROOT / "tests"):
     if str(p) not in sys.path:
         sys.path.insert(0, str(p))
 
-from urban_synthesis.plugin import (blocks, footprint_resynthesis, footprints,  # noqa: E402
-                                    growth, metrics)
+from urban_synthesis.plugin.network import blocks  # noqa: E402
+from urban_synthesis.plugin.buildings import footprint_resynthesis  # noqa: E402
+from urban_synthesis.plugin.buildings import footprints  # noqa: E402
+from urban_synthesis.plugin.roads import growth  # noqa: E402
+from urban_synthesis.plugin.measure import metrics  # noqa: E402
 
 PAPER_SECONDS_PER_RESULT = 0.15
 TARGET_MEDIAN_MS = 20.0

@@ -36,7 +36,7 @@ def start_qgis():
     from processing.core.Processing import Processing
 
     Processing.initialize()
-    from urban_synthesis.plugin.provider import UrbanSynthesisProvider
+    from urban_synthesis.plugin.qgis_glue.provider import UrbanSynthesisProvider
 
     provider = UrbanSynthesisProvider()
     QgsApplication.processingRegistry().addProvider(provider)
@@ -83,7 +83,7 @@ def tiled_inputs(workdir, n):
     import pyogrio
     import shapely
 
-    from urban_synthesis.plugin import roads as roads_mod
+    from urban_synthesis.plugin.network import street_graph as roads_mod
 
     lines = pyogrio.read_dataframe(HELSINKI, layer="lines")
     lines = lines[lines.highway.isin(roads_mod.DRIVABLE_CLASSES)].to_crs(32635)

@@ -43,9 +43,14 @@ for p in (ROOT / "build" / "plugins", ROOT / "tests"):
     if str(p) not in sys.path:
         sys.path.insert(0, str(p))
 
-from urban_synthesis.plugin import (  # noqa: E402
-    blocks, database, fragments, growth, hierarchy, metrics, roads)
-from urban_synthesis.plugin import synthesis_fragments as sf  # noqa: E402
+from urban_synthesis.plugin.network import blocks  # noqa: E402
+from urban_synthesis.plugin.retrieval import database  # noqa: E402
+from urban_synthesis.plugin.network import fragments  # noqa: E402
+from urban_synthesis.plugin.roads import growth  # noqa: E402
+from urban_synthesis.plugin.network import hierarchy  # noqa: E402
+from urban_synthesis.plugin.measure import metrics  # noqa: E402
+from urban_synthesis.plugin.network import street_graph as roads  # noqa: E402
+from urban_synthesis.plugin.roads import from_fragments as sf  # noqa: E402
 from helpers import (STYLE_MEASURES, clipped_metrics, right_angle_share,  # noqa: E402
                      sketch_cells, style_distances)
 

@@ -34,7 +34,9 @@ import shapely
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "build" / "plugins"))
 
-from urban_synthesis.plugin import metrics, raster_graph, streetgan  # noqa: E402
+from urban_synthesis.plugin.measure import metrics  # noqa: E402
+from urban_synthesis.plugin.roads import raster_graph  # noqa: E402
+from urban_synthesis.plugin.roads import streetgan  # noqa: E402
 
 SEEDS = (1, 2, 3)
 DEFAULT = "StreetGAN (dead ends from road edge)"

@@ -31,8 +31,8 @@ if str(ROOT / "build" / "plugins") not in sys.path:
     sys.path.insert(0, str(ROOT / "build" / "plugins"))
 RESULTS = Path(__file__).resolve().parent / "results"
 
-from urban_synthesis.plugin import growth  # noqa: E402
-from urban_synthesis.plugin.shape_context import DemGrid  # noqa: E402
+from urban_synthesis.plugin.roads import growth  # noqa: E402
+from urban_synthesis.plugin.retrieval.shape_context import DemGrid  # noqa: E402
 
 #: Scharl 2010: street network creation times reported in the thesis.
 SCHARL = [{"segments": 155, "seconds": 4.21}, {"segments": 239, "seconds": 1.21}]

@@ -34,7 +34,10 @@ ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT / "build" / "plugins") not in sys.path:
     sys.path.insert(0, str(ROOT / "build" / "plugins"))
 
-from urban_synthesis.plugin import blocks, metrics, parcels, roads  # noqa: E402
+from urban_synthesis.plugin.network import blocks  # noqa: E402
+from urban_synthesis.plugin.measure import metrics  # noqa: E402
+from urban_synthesis.plugin.parcels import subdivision as parcels  # noqa: E402
+from urban_synthesis.plugin.network import street_graph as roads  # noqa: E402
 
 __all__ = ["YANG_TABLE1", "YANG_FIG12_UNDESIRABLE", "bubenec_inputs", "yang_metrics",
            "bench_parcels"]

@@ -34,9 +34,12 @@ ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT / "build" / "plugins") not in sys.path:
     sys.path.insert(0, str(ROOT / "build" / "plugins"))
 
-from urban_synthesis.plugin import blocks, metrics, parcels, roads  # noqa: E402
-from urban_synthesis.plugin import intersection_quadtree as iq  # noqa: E402
-from urban_synthesis.plugin import random_walk as rw  # noqa: E402
+from urban_synthesis.plugin.network import blocks  # noqa: E402
+from urban_synthesis.plugin.measure import metrics  # noqa: E402
+from urban_synthesis.plugin.parcels import subdivision as parcels  # noqa: E402
+from urban_synthesis.plugin.network import street_graph as roads  # noqa: E402
+from urban_synthesis.plugin.roads import intersection_quadtree as iq  # noqa: E402
+from urban_synthesis.plugin.roads import random_walk as rw  # noqa: E402
 
 SEEDS = range(5)
 DISTS = ("segment_length", "node_degree", "intersection_angle", "street_bearing")

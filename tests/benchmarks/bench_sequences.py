@@ -39,8 +39,8 @@ ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT / "build" / "plugins") not in sys.path:
     sys.path.insert(0, str(ROOT / "build" / "plugins"))
 
-from urban_synthesis.plugin import building_parts as bp  # noqa: E402
-from urban_synthesis.plugin import sequences as sq  # noqa: E402
+from urban_synthesis.plugin.buildings import parts as bp  # noqa: E402
+from urban_synthesis.plugin.buildings import sequences as sq  # noqa: E402
 
 #: Thesis Fig. 6.12: street length R (m) -> (graph nodes, runtime s), 74 elements, 5,402
 #: transitions, machine not stated.

@@ -32,9 +32,9 @@ ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT / "build" / "plugins") not in sys.path:
     sys.path.insert(0, str(ROOT / "build" / "plugins"))
 
-from urban_synthesis.plugin import roads  # noqa: E402
-from urban_synthesis.plugin import street_surfaces as ss  # noqa: E402
-from urban_synthesis.plugin.shape_context import DemGrid  # noqa: E402
+from urban_synthesis.plugin.network import street_graph as roads  # noqa: E402
+from urban_synthesis.plugin.network import street_surfaces as ss  # noqa: E402
+from urban_synthesis.plugin.retrieval.shape_context import DemGrid  # noqa: E402
 
 SCHARL = {"segments": 282, "seconds": 4.47}
 TARGET = {"segments": 10000, "seconds": 5.0}

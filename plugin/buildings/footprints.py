@@ -1,0 +1,417 @@
+"""Building footprints by example: block-layout transfer and guided re-synthesis.
+
+For each target block the most similar example block of a block database is retrieved
+(prefilter by area, perimeter and aspect ratio to c = 10, shape context + cyclic DTW on
+100 boundary samples, :meth:`database.BlockDatabase.query`) and rigidly aligned with it
+(Procrustes on the DTW correspondences). Then either
+
+``transfer`` (thesis ch. 5.1)
+    the aligned example footprints are copied: those not inside the block are deleted,
+    those reaching into the street offset are relaxed rigidly (position-based dynamics
+    with shape matching, :mod:`footprint_transfer`);
+``resynthesis`` (thesis ch. 5.2, the re-targeting paper)
+    the example footprints are the discrete elements, the mean value coordinate warp from
+    the aligned example boundary onto the target boundary gives the guidance map, and a
+    new layout is composed per street segment by dynamic programming
+    (:mod:`footprint_resynthesis`).
+
+Both end with :func:`legalise`, the hard guarantee of DESIGN.md: every output footprint
+lies inside its block and outside the road surface + setback, and no two footprints
+overlap (they keep at least 1 cm apart); what still conflicts is trimmed to the free
+space (kept when at least half of it remains) or dropped.
+
+The per-block work :func:`synthesize_block` is a pure function of (block, databases,
+method, seed, block index, parameters), so blocks can be distributed over workers with
+identical results; :func:`synthesize_footprints` loops over blocks with progress.
+
+References
+----------
+Hartmann, S., thesis ch. 5.1 (block layout transfer) and 5.2 (guided re-synthesis);
+Hartmann et al. (2015), Layout retargeting.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Dict, List, Optional, Sequence
+
+import numpy as np
+import pandas as pd
+import shapely
+
+from ..core.progress import InputError, Progress, ensure
+from ..network.blocks import shape_metrics
+from ..retrieval import shape_context as sc
+from ..retrieval.database import N_CANDIDATES, BlockDatabase
+from .footprint_resynthesis import retarget_layout
+from .footprint_transfer import classify, relax
+
+__all__ = ["METHODS", "OUTPUT_FIELDS", "ExampleSet", "BlockLayout", "FootprintResult",
+           "prepare_examples", "street_offset", "legalise", "synthesize_block",
+           "synthesize_footprints"]
+
+METHODS = ("transfer", "resynthesis")
+#: Output fields (name, type) of the synthesised footprints.
+OUTPUT_FIELDS = [("block_id", "int"), ("height_m", "float"), ("levels", "float"),
+                 ("building_type", "str"), ("source_block", "int"), ("source_building", "int"),
+                 ("database", "str"), ("method", "str"), ("placement", "str")]
+#: Default street width (m): the road surface is half of it on each side of a centreline.
+STREET_WIDTH = 6.0
+#: A trimmed footprint is kept when at least this share of its area remains.
+MIN_KEEP = 0.5
+#: Footprints smaller than this (m²) after trimming are dropped.
+MIN_AREA = 4.0
+#: Distance kept between footprints and from the street offset (m).
+GAP = 0.01
+#: Boundary correspondences (at most) of the re-synthesis warp.
+WARP_VERTICES = 50
+#: Blocks larger than this (m²) are not filled (a district-sized face is no city block).
+MAX_BLOCK_AREA = 2.0e6
+
+
+def _largest_polygon(geoms: np.ndarray) -> np.ndarray:
+    """Valid single polygons: the largest part of each (repaired) geometry."""
+    geoms = shapely.make_valid(np.asarray(geoms, dtype=object))
+    parts, idx = shapely.get_parts(geoms, return_index=True)
+    poly = shapely.get_type_id(parts) == 3
+    parts, idx = parts[poly], idx[poly]
+    out = np.full(len(geoms), None, dtype=object)
+    if len(parts):
+        area = shapely.area(parts)
+        order = np.lexsort((-area, idx))
+        first = order[np.r_[True, idx[order][1:] != idx[order][:-1]]]
+        out[idx[first]] = parts[first]
+    return out
+
+
+@dataclass
+class ExampleSet:
+    """A block database prepared for synthesis: footprints as clean polygons per block."""
+
+    db: BlockDatabase
+    name: str
+    polygons: np.ndarray                 # per database building, a Polygon (or None)
+    attributes: pd.DataFrame             # height_m, levels, building_type, building_id
+    rows_of_block: Dict[int, np.ndarray]  # block_id -> building rows
+    usable: np.ndarray                   # database rows with enough footprints
+
+
+def prepare_examples(db: BlockDatabase, name: str = "", min_buildings: int = 1) -> ExampleSet:
+    """Index a loaded block database for :func:`synthesize_block`.
+
+    ``min_buildings``: example blocks with fewer footprints are not retrieved (an empty
+    example block in a clipped OSM extract is usually an artefact of the clip).
+    """
+    if len(db) == 0:
+        raise InputError(f"the block database {name or db.path} holds no block")
+    b = db.buildings if db.buildings is not None else pd.DataFrame()
+    polys = _largest_polygon(db.building_geometry) if len(b) else np.zeros(0, object)
+    attrs = pd.DataFrame({
+        "height_m": pd.to_numeric(b.get("height_m", pd.Series(np.nan, index=b.index)),
+                                  errors="coerce").to_numpy(dtype=float),
+        "levels": pd.to_numeric(b.get("levels", pd.Series(np.nan, index=b.index)),
+                                errors="coerce").to_numpy(dtype=float),
+        "building_type": b.get("building_type", pd.Series(None, index=b.index)).to_numpy(
+            dtype=object),
+        "building_id": b.get("building_id", pd.Series(np.arange(1, len(b) + 1))).to_numpy(),
+    })
+    ok = np.array([p is not None for p in polys], dtype=bool)
+    block_of = b["block_id"].to_numpy() if len(b) else np.zeros(0, np.int64)
+    rows = {int(k): np.flatnonzero((block_of == k) & ok) for k in np.unique(block_of)}
+    counts = np.array([len(rows.get(int(k), ())) for k in db.ids])
+    usable = np.flatnonzero(counts >= max(int(min_buildings), 0))
+    if len(usable) == 0:
+        raise InputError(f"the block database {name or db.path} has no block with at least "
+                         f"{min_buildings} footprint(s)")
+    return ExampleSet(db, name or str(db.path), polys, attrs, rows, usable)
+
+
+def street_offset(block, street_width: float = STREET_WIDTH, setback: float = 0.0,
+                  roads: Optional[Sequence] = None):
+    """The part of a block where footprints may stand.
+
+    The block less the road surface (``street_width / 2`` from every road centreline on
+    its boundary, and from dead-end streets inside it when ``roads`` are given) and the
+    ``setback`` behind it.
+    """
+    inset = street_width / 2.0 + setback
+    if roads is not None and len(roads):
+        surface = shapely.buffer(shapely.union_all(np.asarray(roads, dtype=object)), inset)
+        area = shapely.difference(block, surface)
+        # a block boundary that is no road centreline (clipped extract) keeps the inset too
+        area = shapely.intersection(area, shapely.buffer(block, -inset)) if inset > 0 else area
+    else:
+        area = shapely.buffer(block, -inset) if inset > 0 else block
+    return shapely.make_valid(area) if not shapely.is_valid(area) else area
+
+
+def legalise(polygons: Sequence, order: Sequence[int], buildable, block):
+    """Hard guarantee: footprints inside ``buildable`` (and the block), none overlapping.
+
+    Footprints are accepted in ``order``; each is clipped to the buildable area less the
+    footprints accepted before it (with a 1 cm gap) and kept when one polygon of at least
+    :data:`MIN_KEEP` of its area remains.
+
+    Returns
+    -------
+    (polygons, their indices into ``polygons``, status per kept one: 'kept' | 'trimmed')
+    """
+    polygons = np.asarray(polygons, dtype=object)
+    out, index, status = [], [], []
+    if len(polygons) == 0 or buildable is None or buildable.is_empty:
+        return out, index, status
+    shapely.prepare(buildable)
+    shapely.prepare(block)
+    grown = []       # accepted footprints grown by the gap
+    clip = None
+    for i in order:
+        poly = polygons[i]
+        if poly is None or poly.is_empty:
+            continue
+        a0 = poly.area
+        g = poly
+        near = np.zeros(0, dtype=object)
+        if out:
+            arr = np.array(grown, dtype=object)
+            near = arr[shapely.intersects(arr, g)]
+        clean = len(near) == 0 and shapely.within(g, buildable)
+        if not clean:
+            if clip is None:
+                # 1 mm inside: an overlay's vertices can land a rounding error outside
+                clip = shapely.buffer(buildable, -1e-3, quad_segs=2, join_style="mitre")
+            g = shapely.intersection(g, clip)
+            if len(near):
+                g = shapely.difference(g, shapely.union_all(near))
+            g = _largest_polygon(np.array([g], dtype=object))[0]
+            if g is None or g.area < max(MIN_KEEP * a0, MIN_AREA):
+                continue
+            taken = np.array(out, dtype=object)
+
+            def legal(x):
+                return (x.geom_type == "Polygon" and x.is_valid and shapely.within(x, buildable)
+                        and shapely.within(x, block) and not shapely.intersects(x, taken).any())
+
+            # without the collinear vertices of the cut, when that changes nothing else
+            simple = shapely.simplify(shapely.normalize(g), 1e-3)
+            if legal(simple):
+                g = simple
+            elif not legal(g):
+                continue
+        grown.append(shapely.buffer(g, GAP, quad_segs=2, join_style="mitre"))
+        out.append(g)
+        index.append(int(i))
+        # the 1 cm gap cut off a shared wall is no trim worth reporting
+        status.append("kept" if clean or a0 - g.area <= 2 * GAP * poly.length else "trimmed")
+    return out, index, status
+
+
+@dataclass
+class BlockLayout:
+    """Footprints of one block and what happened."""
+
+    geometry: List
+    table: pd.DataFrame
+    stats: Dict = field(default_factory=dict)
+
+
+def _empty_layout(stats: Dict) -> BlockLayout:
+    return BlockLayout([], pd.DataFrame(columns=[n for n, _ in OUTPUT_FIELDS]), stats)
+
+
+def _retrieve(block, examples: Sequence[ExampleSet], db_choice: int, n_best: int, rng):
+    """The best matches (db index, Match) for a block, among one or all databases."""
+    m = shape_metrics([block])
+    area, aspect, per = (float(m["area_m2"][0]), float(m["aspect_ratio"][0]),
+                         float(m["perimeter_m"][0]))
+    which = range(len(examples)) if db_choice < 0 else [db_choice]
+    found = []
+    for e in which:
+        ex = examples[e]
+        rows = ex.db.prefilter(len(ex.db), area=area, aspect=aspect, perimeter=per)
+        rows = rows[np.isin(rows, ex.usable)][:N_CANDIDATES]
+        if len(rows) == 0:
+            continue
+        for match in ex.db.query(block, candidates=rows, n_best=n_best):
+            found.append((match.cost, e, match))
+    if not found:
+        return None
+    found.sort(key=lambda f: f[0])
+    found = found[:max(1, n_best)]
+    pick = int(rng.integers(len(found))) if len(found) > 1 else 0
+    return found[pick][1], found[pick][2]
+
+
+def output_block_ids(values) -> Optional[np.ndarray]:
+    """A target layer's block ids as written to the output when they are a unique whole
+    number per block; None otherwise (blocks are then numbered 1..n)."""
+    numbers = pd.to_numeric(pd.Series(np.asarray(values, dtype=object)),
+                            errors="coerce").to_numpy(dtype=np.float64, na_value=np.nan)
+    if np.isfinite(numbers).all() and (numbers == np.round(numbers)).all() and \
+            len(np.unique(numbers)) == len(numbers):
+        return numbers.astype(np.int64)
+    return None
+
+
+def synthesize_block(block, examples: Sequence[ExampleSet], method: str = "transfer",
+                     seed: int = 0, block_index: int = 0, street_width: float = STREET_WIDTH,
+                     setback: float = 0.0, roads: Optional[Sequence] = None,
+                     db_choice: int = -1, n_best: int = 1, block_id: Optional[int] = None
+                     ) -> BlockLayout:
+    """Footprints for one target block (a pure function of its arguments).
+
+    Parameters
+    ----------
+    block : Polygon (metric CRS, the frame of the databases is irrelevant: retrieval is
+        invariant to rotation and translation)
+    examples : prepared databases (:func:`prepare_examples`)
+    method : 'transfer' (ch. 5.1) or 'resynthesis' (ch. 5.2)
+    seed, block_index : the random choice among the ``n_best`` matches uses
+        ``default_rng([seed, block_index])``
+    street_width, setback : the street offset (:func:`street_offset`)
+    roads : optional road centrelines near the block (dead ends inside it)
+    db_choice : database index to use, -1 = the best match over all
+    n_best : random choice among this many best matches (1 = always the best)
+    block_id : the id written to the output (default block_index + 1)
+
+    Returns
+    -------
+    BlockLayout with :data:`OUTPUT_FIELDS` rows.
+    """
+    if method not in METHODS:
+        raise InputError(f"unknown method '{method}' (use one of {', '.join(METHODS)})")
+    t0 = time.perf_counter()
+    bid = block_index + 1 if block_id is None else block_id
+    stats = dict(block_id=bid, method=method, example=None, database=None, cost=np.nan,
+                 n_example=0, n_deleted=0, n_conflicted=0, n_placed=0, n_trimmed=0,
+                 n_dropped=0, seconds=0.0)
+    block = _largest_polygon(np.array([block], dtype=object))[0]
+    if block is None or block.area <= 0 or block.area > MAX_BLOCK_AREA:
+        stats["seconds"] = time.perf_counter() - t0
+        return _empty_layout(stats)
+    buildable = street_offset(block, street_width, setback, roads)
+    if buildable.is_empty or buildable.area < MIN_AREA:
+        stats["seconds"] = time.perf_counter() - t0
+        return _empty_layout(stats)
+    rng = np.random.default_rng([int(seed), int(block_index)])
+    found = _retrieve(block, examples, db_choice, n_best, rng)
+    if found is None:
+        stats["seconds"] = time.perf_counter() - t0
+        return _empty_layout(stats)
+    e, match = found
+    ex = examples[e]
+    rows = ex.rows_of_block.get(int(match.id), np.zeros(0, np.int64))
+    stats.update(example=int(match.id), database=ex.name, cost=match.cost, n_example=len(rows))
+    aligned = match.transform(ex.polygons[rows]) if len(rows) else np.zeros(0, object)
+    if method == "transfer":
+        keep, conflicted = classify(aligned, block, buildable)
+        stats["n_deleted"] = int((~keep).sum())
+        stats["n_conflicted"] = int(conflicted.sum())
+        cand, src = aligned[keep], rows[keep]
+        cand, _ = relax(cand, conflicted[keep], buildable)
+        # fixed footprints first (they never move), then the relaxed ones; large first
+        order = np.lexsort((-shapely.area(cand), conflicted[keep])) if len(cand) else []
+        kinds = np.where(conflicted[keep], "moved", "copied")
+    else:
+        inset = street_width / 2.0 + setback
+        samples = sc.sample_boundaries([block], ex.db.descriptors.samples.shape[1])[0]
+        path = match.path
+        first = np.r_[True, path[1:, 0] != path[:-1, 0]]
+        pairs = path[first]
+        # every other correspondence: 50 warp vertices follow a block outline closely and
+        # halve the cost of the mean value coordinates
+        pairs = pairs[::max(1, len(pairs) // WARP_VERTICES)]
+        target = samples[pairs[:, 0]]
+        source = sc.apply_rigid(ex.db.descriptors.samples[match.index][pairs[:, 1]],
+                                match.rotation, match.translation)
+        placements = retarget_layout(aligned, source, target, block, buildable, inset)
+        cand = np.array([p.polygon for p in placements], dtype=object)
+        src = rows[np.array([p.element for p in placements], dtype=np.int64)] \
+            if placements else np.zeros(0, np.int64)
+        kinds = np.array([p.kind for p in placements], dtype=object)
+        # placement order: the DP's groups first, interior elements last, large first
+        order = np.lexsort((-shapely.area(cand), kinds == "interior")) if len(cand) else []
+    geoms, idx, status = legalise(cand, order, buildable, block)
+    stats["n_placed"] = len(geoms)
+    stats["n_trimmed"] = int(sum(s == "trimmed" for s in status))
+    stats["n_dropped"] = len(cand) - len(geoms)
+    idx = np.asarray(idx, dtype=np.int64)
+    a = ex.attributes.iloc[src[idx]] if len(idx) else ex.attributes.iloc[[]]
+    placement = [f"{kinds[i]}, trimmed" if s == "trimmed" else str(kinds[i])
+                 for i, s in zip(idx, status)]
+    table = pd.DataFrame({
+        "block_id": np.full(len(idx), bid, dtype=np.int64),
+        "height_m": a["height_m"].to_numpy(), "levels": a["levels"].to_numpy(),
+        "building_type": a["building_type"].to_numpy(),
+        "source_block": np.full(len(idx), int(match.id), dtype=np.int64),
+        "source_building": a["building_id"].to_numpy(),
+        "database": [ex.name] * len(idx), "method": [method] * len(idx),
+        "placement": placement,
+    })
+    stats["seconds"] = time.perf_counter() - t0
+    return BlockLayout(list(geoms), table, stats)
+
+
+@dataclass
+class FootprintResult:
+    """Footprints of all blocks: geometry, attribute table, per-block statistics."""
+
+    geometry: np.ndarray
+    table: pd.DataFrame
+    blocks: pd.DataFrame
+    seconds: float = 0.0
+
+
+def synthesize_footprints(blocks: Sequence, examples: Sequence[ExampleSet],
+                          method: str = "transfer", street_width: float = STREET_WIDTH,
+                          setback: float = 0.0, seed: int = 0,
+                          roads: Optional[Sequence] = None,
+                          block_database: Optional[Sequence[int]] = None,
+                          block_ids: Optional[Sequence[int]] = None, n_best: int = 1,
+                          progress: Optional[Progress] = None) -> FootprintResult:
+    """Footprints for every target block (loops :func:`synthesize_block` with progress).
+
+    Parameters
+    ----------
+    blocks : array of Polygon (metric CRS)
+    examples : prepared databases
+    method, street_width, setback, seed, n_best : see :func:`synthesize_block`
+    roads : optional road centrelines (their surface, dead ends included, stays free)
+    block_database : per block, the database index to use (-1 = best over all)
+    block_ids : per block, the id written to the output (default 1..n)
+
+    Returns
+    -------
+    FootprintResult
+    """
+    progress = ensure(progress)
+    if method not in METHODS:
+        raise InputError(f"unknown method '{method}' (use one of {', '.join(METHODS)})")
+    if not (np.isfinite(street_width) and street_width >= 0):
+        raise InputError("the street width must be a non-negative number of metres")
+    if not (np.isfinite(setback) and setback >= 0):
+        raise InputError("the setback must be a non-negative number of metres")
+    if not examples:
+        raise InputError("at least one block database is needed")
+    t0 = time.perf_counter()
+    blocks = np.asarray(blocks, dtype=object)
+    n = len(blocks)
+    ids = np.arange(1, n + 1) if block_ids is None else np.asarray(block_ids, dtype=np.int64)
+    choice = np.full(n, -1) if block_database is None else np.asarray(block_database)
+    road_arr = None if roads is None else np.asarray(roads, dtype=object)
+    tree = shapely.STRtree(road_arr) if road_arr is not None and len(road_arr) else None
+    geoms, tables, stats = [], [], []
+    for i in range(n):
+        near = None
+        if tree is not None and blocks[i] is not None:
+            near = road_arr[tree.query(blocks[i], predicate="intersects")]
+        layout = synthesize_block(blocks[i], examples, method, seed, i, street_width, setback,
+                                  near, int(choice[i]), n_best, int(ids[i]))
+        geoms.extend(layout.geometry)
+        if len(layout.table):
+            tables.append(layout.table)
+        stats.append(layout.stats)
+        progress.step((i + 1) / max(n, 1))
+    table = pd.concat(tables, ignore_index=True) if tables else \
+        pd.DataFrame(columns=[f for f, _ in OUTPUT_FIELDS])
+    return FootprintResult(np.array(geoms, dtype=object), table, pd.DataFrame(stats),
+                           time.perf_counter() - t0)

@@ -1,0 +1,1 @@
+"""What every stage uses: progress and cancellation, exact coordinate transforms, paths."""

@@ -1,0 +1,1 @@
+"""Real road layers as data: planar street graph, hierarchy, blocks, fragments, surfaces."""

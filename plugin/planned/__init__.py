@@ -1,0 +1,1 @@
+"""Planned layouts by hierarchical domain splitting (Yang et al. 2013)."""

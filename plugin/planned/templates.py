@@ -1,0 +1,482 @@
+"""Hierarchical parcel templates and their warping (Yang et al. 2013, sec. 4).
+
+A template is a small designed layout that a region can be replaced by. The shipped
+library (:func:`default_library`, written to ``resources/templates/library.json`` by
+:func:`write_library`) holds the four patterns of the paper's Fig. 2 and an area template:
+
+=============  =====  ===============================================================
+name           label  pattern
+=============  =====  ===============================================================
+parcel_strip   L      one row of parcels (R) between two streets
+double_strip   D      two rows of parcels (R) back to back, each facing its street
+spike          S      a cul-de-sac street into the block, parcels (R) around it
+park           A      an area template kept as a park (the fallback of the paper)
+=============  =====  ===============================================================
+
+Labels R (parcel), S (spike) and A (area) are the paper's (Fig. 4); L and D name the two
+level-two row templates, which the paper draws but does not label in its text.
+
+Template-based splitting (:func:`fit_energy`, :func:`warp_rows`):
+
+* **Selection**: a region matches a template when its corners and widths agree: the
+  region's minimum rectangle gives its depth across the streets; the energy is the
+  log-distortion of the parcel depth plus the region's distortion from a rectangle
+  (p_area - 1) and its corner deviation (p_angle / 45). Templates with energy under a
+  threshold are drawn with probability template probability x exp(-energy / 0.1).
+* **Hierarchical warping** of the row templates: level one chooses the number of parcels
+  per row (Fig. 5) from the length of the region's street sides; level two warps the grid
+  of parcel corners by the paper's alternating optimisation: *registration* of each
+  parcel to its template rectangle by a similarity followed by a non-uniform scaling in
+  its principal directions with bounded factors (the constrained affine class), then
+  *regression*: every shared corner moves to the mean of its registered copies and corners
+  on the street sides are projected back onto them (alignment constraints); 30 iterations.
+  The arc-length initialisation is the paper's; the final cut lines split the exact
+  (curved) block outline, so the parcels tile the block.
+
+Nothing here imports QGIS.
+
+References
+----------
+Yang et al. (2013), sec. 4 (templates, warping algorithm, hierarchical matching), Fig. 2,
+Fig. 4, Fig. 5.
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import List, Optional, Sequence, Tuple
+
+import numpy as np
+import shapely
+
+from ..core.paths import RESOURCES
+from ..core.progress import InputError
+from ..network import blocks as _blocks
+from ..parcels import subdivision as _parcels
+
+__all__ = ["Template", "LIBRARY_PATH", "LIBRARY_SUBSETS", "default_library", "write_library",
+           "load_library", "templates_from_drawn", "fit_energy", "region_shape", "region_frame",
+           "warp_rows", "spike_lots", "WarpResult", "WARP_ITERATIONS"]
+
+LIBRARY_PATH = RESOURCES / "templates" / "library.json"
+#: Iterations of registration / regression (the paper: about 30 per match).
+WARP_ITERATIONS = 30
+#: Named subsets of the shipped library (the toolbox's TEMPLATES enum, in this order).
+LIBRARY_SUBSETS = {
+    "all": ("parcel_strip", "double_strip", "spike", "park"),
+    "strips": ("parcel_strip", "double_strip", "park"),
+    "double_strips": ("double_strip", "park"),
+}
+
+
+@dataclass(frozen=True)
+class Template:
+    """One template of the library.
+
+    Attributes
+    ----------
+    name : str
+    label : str
+        Region label (see the module table).
+    kind : str
+        'rows' (parcel rows facing the streets), 'spike' or 'park'.
+    rows : int
+        Parcel rows across the block (rows templates).
+    probability : float
+        User-defined probability (how common the pattern is).
+    width_scale, depth_scale : (float, float)
+        Allowed scaling of a parcel's width (along the street) and depth.
+    depth_range : (float, float)
+        For spikes: the block depth in parcel lengths that the pattern fits.
+    max_count : int or None
+        At most this many per layout (met by backtracking).
+    land_use : str
+    parcels : list of polygons (unit coordinates: x in parcel widths, y in parcel lengths)
+        The drawn layout, for display and user templates.
+    """
+
+    name: str
+    label: str
+    kind: str
+    rows: int = 1
+    probability: float = 1.0
+    width_scale: Tuple[float, float] = (0.75, 1.35)
+    depth_scale: Tuple[float, float] = (0.8, 1.25)
+    depth_range: Tuple[float, float] = (0.0, 0.0)
+    max_count: Optional[int] = None
+    land_use: str = "residential"
+    parcels: tuple = field(default=(), compare=False)
+
+    def gross_depth(self, length: float, street: float) -> float:
+        """Ideal centre-line width of a block of this template (m)."""
+        if self.kind == "rows":
+            return self.rows * length + street
+        if self.kind == "spike":
+            return 0.5 * sum(self.depth_range) * length + street
+        return 0.0
+
+
+def _rect(x0, y0, x1, y1):
+    return [[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]]
+
+
+def default_library() -> List[Template]:
+    """The shipped templates (see the module table)."""
+    return [
+        Template("parcel_strip", "L", "rows", rows=1, probability=0.6, depth_scale=(0.8, 1.45),
+                 parcels=tuple(_rect(i, 0, i + 1, 1) for i in range(4))),
+        Template("double_strip", "D", "rows", rows=2, probability=1.0, depth_scale=(0.7, 1.25),
+                 parcels=tuple(_rect(i, j, i + 1, j + 1) for i in range(4) for j in range(2))),
+        Template("spike", "S", "spike", probability=0.4, depth_range=(2.6, 4.6), max_count=4,
+                 parcels=tuple([_rect(0, 0, 1, 1), _rect(2, 0, 3, 1), _rect(0, 1, 1, 2),
+                                _rect(2, 1, 3, 2), _rect(0.5, 2, 2.5, 3)])),
+        Template("park", "A", "park", probability=0.05, land_use="park",
+                 parcels=(_rect(0, 0, 2, 2),)),
+    ]
+
+
+def write_library(path: Path = LIBRARY_PATH) -> Path:
+    """Write the shipped library as JSON (resources/templates/library.json)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    doc = {"format": "urbansynth-templates/1",
+           "reference": "Yang et al. 2013, Urban Pattern, sec. 4, Fig. 2 and Fig. 4",
+           "units": "x in parcel widths, y in parcel lengths",
+           "templates": [asdict(t) for t in default_library()]}
+    path.write_text(json.dumps(doc, indent=1))
+    return path
+
+
+def load_library(path=LIBRARY_PATH, subset: Optional[str] = None) -> List[Template]:
+    """Templates from a library JSON file, optionally one of :data:`LIBRARY_SUBSETS`.
+
+    Raises
+    ------
+    InputError
+        Unreadable file, wrong format or unknown subset.
+    """
+    try:
+        doc = json.loads(Path(path).read_text())
+        items = doc["templates"]
+        out = [Template(**{**t, "width_scale": tuple(t.get("width_scale", (0.75, 1.35))),
+                           "depth_scale": tuple(t.get("depth_scale", (0.8, 1.25))),
+                           "depth_range": tuple(t.get("depth_range", (0.0, 0.0))),
+                           "parcels": tuple(t.get("parcels", ()))}) for t in items]
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise InputError(f"the template library {path} cannot be read ({exc})") from exc
+    for t in out:
+        if t.kind not in ("rows", "spike", "park") or t.rows < 1 or t.probability < 0:
+            raise InputError(f"template {t.name!r} in {path} is not a valid template")
+    if subset is not None:
+        if subset not in LIBRARY_SUBSETS:
+            raise InputError(f"unknown template subset {subset!r}")
+        out = [t for t in out if t.name in LIBRARY_SUBSETS[subset]]
+    if not out:
+        raise InputError(f"the template library {path} holds no template")
+    return out
+
+
+def templates_from_drawn(geoms: Sequence, names: Sequence, labels: Sequence) -> List[Template]:
+    """Templates drawn as polygons (e.g. in QGIS), one feature per parcel or area.
+
+    Each template is the group of features sharing a ``names`` value; ``labels`` are the
+    paper's: R (residential parcel), P or A (park / area), S marks a spike (a cul-de-sac
+    template). Row templates are recognised from the geometry: the parcels' centres are
+    clustered across the template's long axis into rows (1 or 2 make a strip or a double
+    strip). A group of only park polygons is an area template.
+
+    Raises
+    ------
+    InputError
+        No group with parcels, or a group that is neither rows, spike nor area.
+    """
+    geoms = np.asarray(geoms, dtype=object)
+    names = np.asarray([str(n) for n in names], dtype=object)
+    labels = np.asarray([str(v).strip().upper()[:1] if v is not None else "R" for v in labels])
+    out = []
+    for name in dict.fromkeys(names):
+        sel = names == name
+        g, lab = geoms[sel], labels[sel]
+        parcels_ = tuple(shapely.get_coordinates(shapely.get_exterior_ring(p)).tolist()
+                         for p in g if p is not None)
+        if set(lab) <= {"P", "A"}:
+            out.append(Template(name, "A", "park", land_use="park", parcels=parcels_))
+            continue
+        if "S" in lab:
+            out.append(Template(name, "S", "spike", depth_range=(2.6, 4.6), parcels=parcels_))
+            continue
+        res = g[lab == "R"]
+        # a parcel is deeper than wide: its long axis runs across the street, and rows
+        # are the clusters of parcel centres along that axis
+        depth, _, angle = _blocks.minimum_rectangles(res)
+        a = np.radians(float(np.median(angle)))
+        across = shapely.get_coordinates(shapely.centroid(res)) @ np.array([np.cos(a), np.sin(a)])
+        gap = max(0.5 * float(np.median(depth)), 1e-6)
+        rows = 1 + int((np.diff(np.sort(across)) > gap).sum())
+        if rows > 2:
+            raise InputError(f"template {name!r} has {rows} parcel rows; row templates have "
+                             "one (strip) or two (double strip)")
+        out.append(Template(name, "L" if rows == 1 else "D", "rows", rows=rows,
+                            parcels=parcels_))
+    if not any(t.kind != "park" for t in out):
+        raise InputError("the template layer has no parcel template (label R or S)")
+    return out
+
+
+# --------------------------------------------------------------------------- selection
+
+def region_shape(region):
+    """(long side, short side of the minimum rectangle, shape distortion) of a region:
+    the template-independent part of :func:`fit_energy`, computed once per region."""
+    long_side, short_side, _ = _blocks.minimum_rectangles([region])
+    p_angle, p_area, _ = _parcels.lot_quality([region])
+    shape = (float(np.nan_to_num(p_area[0], nan=10.0)) - 1.0) + \
+        0.5 * float(np.nan_to_num(p_angle[0], nan=45.0)) / 45.0
+    return float(long_side[0]), float(short_side[0]), shape
+
+
+def fit_energy(region, template: Template, length: float, width: float,
+               street: float, shape_of=None) -> float:
+    """Energy of matching ``template`` to a region bounded by street centre lines.
+
+    ``shape_of`` is :func:`region_shape` of the region when already known. Returns
+    ``inf`` when the template cannot fit (wrong depth or too short).
+    """
+    long_side, short_side, shape = shape_of if shape_of is not None else region_shape(region)
+    if shapely.area(region) <= 0 or short_side <= street:
+        return math.inf
+    net_depth = short_side - street
+    net_long = long_side - street
+    if template.kind == "rows":
+        scale = net_depth / (template.rows * length)
+        lo, hi = template.depth_scale
+        if not lo <= scale <= hi or net_long < template.width_scale[0] * width:
+            return math.inf
+        return abs(math.log(scale)) + shape
+    if template.kind == "spike":
+        lo, hi = template.depth_range
+        depth = net_depth / length
+        if not lo <= depth <= hi or net_long < 2.5 * length:
+            return math.inf
+        return 0.15 + shape
+    # an area template fits anything, at a price: it is the fallback
+    return 0.9
+
+
+def region_frame(poly):
+    """Four corners of a quad-like polygon and its sides.
+
+    Returns (c1, c2, e0, e1) as coordinate arrays: the two long (street) sides running the
+    same way and the two end sides from c1's start to c2's start and from c1's end to c2's
+    end; or None when the polygon has no four distinct corners.
+    """
+    poly = shapely.simplify(shapely.geometry.polygon.orient(poly), 0.05)
+    if poly.geom_type != "Polygon":
+        return None
+    ring = np.asarray(poly.exterior.coords)[:-1]
+    if len(ring) < 4:
+        return None
+    mrr = _mrr_corners(ring)
+    corner_idx = []
+    for c in mrr:
+        d = np.hypot(ring[:, 0] - c[0], ring[:, 1] - c[1])
+        corner_idx.append(int(np.argmin(d)))
+    if len(set(corner_idx)) < 4:
+        return None
+    corner_idx = sorted(corner_idx)
+    n = len(ring)
+    sides = []
+    for a, b in zip(corner_idx, corner_idx[1:] + corner_idx[:1]):
+        idx = np.arange(a, b + 1) if b > a else np.r_[np.arange(a, n), np.arange(0, b + 1)]
+        sides.append(ring[idx % n])
+    lengths = [np.hypot(*np.diff(s, axis=0).T).sum() for s in sides]
+    k = 0 if lengths[0] + lengths[2] >= lengths[1] + lengths[3] else 1
+    c1 = sides[k]
+    c2 = sides[(k + 2) % 4][::-1]
+    e0 = sides[(k + 3) % 4][::-1]  # from c1's start to c2's start
+    e1 = sides[(k + 1) % 4]        # from c1's end to c2's end
+    return c1, c2, e0, e1
+
+
+def _mrr_corners(xy: np.ndarray) -> np.ndarray:
+    """Corners (4, 2) of the minimum-area rectangle of points: every convex-hull edge
+    direction tried at once in numpy (shapely's oriented_envelope loops in Python, and
+    this runs for every block and on every optimisation iteration)."""
+    hull = shapely.get_coordinates(shapely.convex_hull(shapely.multipoints(xy)))
+    if len(hull) < 4:
+        hull = np.asarray(xy, dtype=float)
+        hull = np.vstack([hull, hull[:1]])
+    e = np.diff(hull, axis=0)
+    ln = np.hypot(e[:, 0], e[:, 1])
+    e, ln = e[ln > 1e-9], ln[ln > 1e-9]
+    u = e / ln[:, None]
+    v = np.stack([-u[:, 1], u[:, 0]], axis=1)
+    pu, pv = u @ hull.T, v @ hull.T                   # (edges, points)
+    a0, a1, b0, b1 = pu.min(1), pu.max(1), pv.min(1), pv.max(1)
+    k = int(np.argmin((a1 - a0) * (b1 - b0)))
+    return np.array([a * u[k] + b * v[k] for a, b in
+                     ((a0[k], b0[k]), (a1[k], b0[k]), (a1[k], b1[k]), (a0[k], b1[k]))])
+
+
+@dataclass
+class WarpResult:
+    """Parcels of one warped row template and its registration residual (m)."""
+
+    lots: np.ndarray
+    residual: float
+    columns: int
+
+
+def _project(line, pts: np.ndarray) -> np.ndarray:
+    s = shapely.line_locate_point(line, shapely.points(pts))
+    return shapely.get_coordinates(shapely.line_interpolate_point(line, s))
+
+
+def _along(line, t: np.ndarray) -> np.ndarray:
+    return shapely.get_coordinates(shapely.line_interpolate_point(line, t, normalized=True))
+
+
+def warp_rows(block, template: Template, length: float, width: float,
+              rng: np.random.Generator, iterations: int = WARP_ITERATIONS) -> Optional[WarpResult]:
+    """Warp a row template (strip or double strip) onto a shrunk block (see module doc).
+
+    Parameters
+    ----------
+    block : Polygon
+        The block shrunk by half the street width (its whole outline is street).
+    template : Template (kind 'rows')
+    length, width : float
+        Template parcel depth and width (m).
+    rng : numpy Generator
+        Draws the number of parcels per row (level one) among the near-best counts.
+
+    Returns
+    -------
+    WarpResult or None when the block has no four corners.
+    """
+    frame = region_frame(block)
+    if frame is None:
+        return None
+    c1, c2, e0, e1 = (shapely.LineString(s) for s in frame)
+    rows = template.rows
+    # level one: parcels per row, drawn among the counts whose width distortion is small
+    mean_len = 0.5 * (c1.length + c2.length)
+    base = max(1, int(round(mean_len / width)))
+    counts = np.array([c for c in (base - 1, base, base + 1) if c >= 1])
+    dev = np.log(mean_len / (counts * width))
+    lo, hi = template.width_scale
+    w = np.exp(-0.5 * (dev / 0.08) ** 2) * ((mean_len / counts >= lo * width) &
+                                              (mean_len / counts <= hi * width) | (counts == base))
+    m = int(rng.choice(counts, p=w / w.sum()))
+    t = np.linspace(0.0, 1.0, m + 1)
+    top, bottom = _along(c1, t), _along(c2, t)
+    grid = np.stack([top + (bottom - top) * r / rows for r in range(rows + 1)])  # (rows+1, m+1, 2)
+    depth = length
+    tmpl = np.array([[0, 0], [width, 0], [width, depth], [0, depth]], dtype=float)
+    tmpl -= tmpl.mean(axis=0)
+    r_idx, j_idx = np.meshgrid(np.arange(rows), np.arange(m), indexing="ij")
+    r_idx, j_idx = r_idx.ravel(), j_idx.ravel()
+    quad_r = np.stack([r_idx, r_idx, r_idx + 1, r_idx + 1], axis=1)
+    quad_j = np.stack([j_idx, j_idx + 1, j_idx + 1, j_idx], axis=1)
+    wlo, whi = template.width_scale
+    dlo, dhi = template.depth_scale
+    residual = 0.0
+    for _ in range(iterations):
+        q = grid[quad_r, quad_j]                       # (nq, 4, 2)
+        cq = q.mean(axis=1, keepdims=True)
+        qc = q - cq
+        # registration: rotation (Kabsch), then bounded scaling along the template axes
+        h = np.einsum("ki,nkj->nij", tmpl, qc)
+        ang = np.arctan2(h[:, 0, 1] - h[:, 1, 0], h[:, 0, 0] + h[:, 1, 1])
+        cos, sin = np.cos(ang), np.sin(ang)
+        rot = np.stack([np.stack([cos, -sin], -1), np.stack([sin, cos], -1)], 1)  # (nq,2,2)
+        local = np.einsum("nji,nkj->nki", rot, qc)     # R^T q
+        sx = np.clip((local[:, :, 0] * tmpl[:, 0]).sum(1) / (tmpl[:, 0] ** 2).sum(), wlo, whi)
+        sy = np.clip((local[:, :, 1] * tmpl[:, 1]).sum(1) / (tmpl[:, 1] ** 2).sum(), dlo, dhi)
+        reg = np.einsum("nij,nkj->nki", rot, tmpl[None] * np.stack([sx, sy], -1)[:, None]) + cq
+        # regression: shared corners to the mean of their registered copies
+        acc = np.zeros_like(grid)
+        cnt = np.zeros(grid.shape[:2])
+        np.add.at(acc, (quad_r, quad_j), reg)
+        np.add.at(cnt, (quad_r, quad_j), 1.0)
+        new = acc / cnt[..., None]
+        residual = float(np.mean(np.hypot(*(reg - new[quad_r, quad_j]).reshape(-1, 2).T)))
+        # alignment constraints: street sides stay on the street sides, corners fixed
+        new[0] = _project(c1, new[0])
+        new[rows] = _project(c2, new[rows])
+        new[1:rows, 0] = _project(e0, new[1:rows, 0]) if rows > 1 else new[1:rows, 0]
+        new[1:rows, m] = _project(e1, new[1:rows, m]) if rows > 1 else new[1:rows, m]
+        new[0, 0], new[0, m] = top[0], top[-1]
+        new[rows, 0], new[rows, m] = bottom[0], bottom[-1]
+        grid = new
+    cuts = []
+    ext = 2.0
+    for j in range(1, m):
+        cuts.append(_extend(grid[:, j], ext))
+    for r in range(1, rows):
+        cuts.append(_extend(grid[r, :], ext))
+    lots = _cut(block, cuts)
+    return WarpResult(lots, residual, m)
+
+
+def _extend(xy: np.ndarray, ext: float) -> shapely.LineString:
+    xy = np.asarray(xy, dtype=float)
+    d0 = xy[0] - xy[1]
+    d1 = xy[-1] - xy[-2]
+    d0 /= max(np.hypot(*d0), 1e-12)
+    d1 /= max(np.hypot(*d1), 1e-12)
+    return shapely.LineString(np.vstack([xy[0] + ext * d0, xy, xy[-1] + ext * d1]))
+
+
+def _cut(block, cuts) -> np.ndarray:
+    """Faces of the block cut by the lines (the block's exact outline is kept)."""
+    if not cuts:
+        return _parcels._polygon_parts([block])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        # the cut lines cross the outline (they are extended beyond it), so that noding
+        # splits the outline at proper crossings; their outer ends are dangles
+        noded = shapely.union_all(np.concatenate([[shapely.boundary(block)],
+                                                  np.asarray(cuts, dtype=object)]))
+        faces = shapely.get_parts(shapely.polygonize(shapely.get_parts(noded)))
+    if len(faces) == 0:
+        return _parcels._polygon_parts([block])
+    inside = shapely.within(shapely.point_on_surface(faces), block)
+    return _parcels._polygon_parts(faces[inside])
+
+
+def spike_lots(block_centre, block, length: float, width: float, street: float,
+               settings, rng: np.random.Generator):
+    """Spike (cul-de-sac) template: a dead-end street from the middle of the longest
+    street side into the block, parcels around it (Yang 2013, Fig. 2 "spikes").
+
+    The cul-de-sac runs across the block and stops one parcel length (plus a turning
+    circle of the street width's radius) short of the far side; the remaining block, whose
+    whole outline is street, is cut into lots facing the streets by the skeleton method
+    (every lot with frontage).
+
+    Returns (lots, cul_de_sac LineString) or None when the block has no four corners.
+    """
+    frame = region_frame(block_centre)
+    if frame is None:
+        return None
+    c1, c2, _, _ = (shapely.LineString(s) for s in frame)
+    start = np.asarray(c1.interpolate(0.5, normalized=True).coords[0])
+    end_far = _project(c2, start[None])[0]
+    depth = float(np.hypot(*(end_far - start)))
+    run = depth - (street / 2 + length + street)
+    if run < length:
+        return None
+    direction = (end_far - start) / depth
+    road = shapely.LineString([start, start + run * direction])
+    # a square turning head (hammerhead) keeps the lots around it rectangular
+    head = shapely.buffer(shapely.LineString([start + (run - street) * direction,
+                                              start + run * direction]), street, cap_style="flat")
+    cut = shapely.union(shapely.buffer(road, street / 2, cap_style="flat"), head)
+    rest = _parcels._polygon_parts([shapely.difference(block, cut)])
+    lots = []
+    for part in rest:
+        lots.append(_parcels.split_skeleton(part, settings, rng))
+    lots = _parcels._polygon_parts(np.concatenate(lots)) if lots else np.empty(0, dtype=object)
+    return lots, road

@@ -1,0 +1,570 @@
+"""The only module that converts between QGIS objects and engine data.
+
+Data flows one way: QGIS layer -> :func:`read_source` (features reprojected into a local
+metric CRS, geometries as shapely arrays, attributes as a pandas DataFrame) -> engine ->
+:func:`write_sink` (back to the input CRS). Engine errors (:class:`InputError`) become
+:class:`QgsProcessingException` with the layer's name; cancellation stops the algorithm.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import List, Optional, Sequence
+
+import numpy as np
+import pandas as pd
+import shapely
+from qgis.core import (
+    QgsCoordinateReferenceSystem,
+    QgsCoordinateTransform,
+    QgsFeature,
+    QgsFeatureRequest,
+    QgsFeatureSink,
+    QgsField,
+    QgsFields,
+    QgsGeometry,
+    QgsPointXY,
+    QgsProcessingException,
+    QgsProcessingFeatureSource,
+    QgsProcessingFeedback,
+    QgsProject,
+    QgsRectangle,
+    QgsUnitTypes,
+    QgsWkbTypes,
+)
+from qgis.PyQt.QtCore import QVariant
+
+from ..core import coordinates
+from ..core.paths import RESOURCES
+from ..core.progress import Canceled, InputError, Progress
+
+_GEOM_NAMES = {QgsWkbTypes.PointGeometry: "points", QgsWkbTypes.LineGeometry: "lines",
+               QgsWkbTypes.PolygonGeometry: "polygons"}
+_KIND_TO_GEOMTYPE = {"points": QgsWkbTypes.PointGeometry, "lines": QgsWkbTypes.LineGeometry,
+                     "polygons": QgsWkbTypes.PolygonGeometry}
+_WEB_MERCATOR = {"EPSG:3857", "EPSG:900913", "EPSG:3785", "EPSG:102100", "EPSG:102113"}
+
+
+# --------------------------------------------------------------------------- CRS
+
+def working_crs(crs: QgsCoordinateReferenceSystem, extent_in_crs: QgsRectangle,
+                context) -> QgsCoordinateReferenceSystem:
+    """The metric CRS the engine works in.
+
+    A projected CRS in metres is used as is, except Web Mercator (its scale error is 1.5x at
+    50 degrees latitude, so lengths and areas would be wrong); anything else is replaced by
+    the UTM zone of the data's centre.
+    """
+    if (crs.isValid() and not crs.isGeographic()
+            and crs.mapUnits() == QgsUnitTypes.DistanceMeters
+            and crs.authid() not in _WEB_MERCATOR):
+        return crs
+    wgs84 = QgsCoordinateReferenceSystem("EPSG:4326")
+    centre = extent_in_crs.center()
+    if crs.isValid() and crs != wgs84:
+        tr = QgsCoordinateTransform(crs, wgs84, context.transformContext())
+        centre = tr.transform(centre)
+    lon, lat = centre.x(), centre.y()
+    if not (math.isfinite(lon) and math.isfinite(lat)):
+        raise QgsProcessingException("Cannot find a metric CRS for the data: its extent is not finite.")
+    zone = int((lon + 180.0) // 6.0) % 60 + 1
+    return QgsCoordinateReferenceSystem(f"EPSG:{32600 + zone if lat >= 0 else 32700 + zone}")
+
+
+@dataclass
+class Frame:
+    """Features of one layer in the working CRS."""
+
+    geometry: np.ndarray          # shapely geometries
+    attributes: pd.DataFrame      # one row per geometry, original field names
+    fids: np.ndarray              # feature ids in the source
+    source_crs: QgsCoordinateReferenceSystem
+    crs: QgsCoordinateReferenceSystem  # the working CRS
+    name: str
+
+    def __len__(self):
+        return len(self.geometry)
+
+
+def layer_name(alg, parameters, name, context) -> str:
+    """A name for messages: the layer's name, else the parameter's description."""
+    layer = None
+    try:
+        layer = alg.parameterAsVectorLayer(parameters, name, context)
+    except Exception:  # noqa: BLE001 - sources that are not layers (e.g. feature iterators)
+        layer = None
+    if layer is not None and layer.name():
+        # 'Helsinki' is both the lines and the multipolygons of one .osm.pbf: say which
+        sub = layer.source().split("|layername=")
+        if len(sub) > 1 and sub[1].split("|")[0] and sub[1].split("|")[0] != layer.name():
+            return f"'{layer.name()} ({sub[1].split('|')[0]})'"
+        return f"'{layer.name()}'"
+    definition = alg.parameterDefinition(name)
+    return f"'{definition.description()}'" if definition is not None else f"'{name}'"
+
+
+def read_source(alg, parameters, name: str, context, feedback,
+                kind: Optional[str] = None, required_fields: Sequence[str] = (),
+                target_crs: Optional[QgsCoordinateReferenceSystem] = None,
+                repair: bool = True, optional: bool = False,
+                progress_range: tuple = (0.0, 5.0),
+                expression: Optional[str] = None,
+                fields: Optional[Sequence[str]] = None) -> Optional[Frame]:
+    """Read a feature source parameter into a :class:`Frame` in a metric working CRS.
+
+    Raises a QgsProcessingException naming the layer for: a missing layer, the wrong geometry
+    type, missing fields, no features with geometry. ``fields`` limits the attributes read
+    to those named (the ones that exist): reading every attribute of a wide OSM layer costs
+    more than the algorithms themselves. Null geometries are skipped and invalid
+    ones repaired (``make_valid``), both with a count in the log. The source is never modified.
+    """
+    source = alg.parameterAsSource(parameters, name, context)
+    label = layer_name(alg, parameters, name, context)
+    if source is None:
+        if optional:
+            return None
+        raise QgsProcessingException(f"Layer {label} could not be loaded.")
+    if kind is not None:
+        gtype = QgsWkbTypes.geometryType(source.wkbType())
+        if gtype != _KIND_TO_GEOMTYPE[kind]:
+            got = _GEOM_NAMES.get(gtype, "no geometry")
+            raise QgsProcessingException(
+                f"Layer {label} has {got}; {kind} are needed.")
+    all_names = [f.name() for f in source.fields()]
+    field_names = all_names if fields is None else \
+        [f for f in dict.fromkeys(fields) if f and f in all_names]
+    field_idx = [all_names.index(f) for f in field_names]
+    missing = [f for f in required_fields if f not in all_names]
+    if missing:
+        raise QgsProcessingException(
+            f"Layer {label} has no field {', '.join(repr(m) for m in missing)} "
+            f"(fields: {', '.join(all_names) or 'none'}).")
+    src_crs = source.sourceCrs()
+    if not src_crs.isValid():
+        # metres, feet and degrees differ by 10^5: a guess would give silently wrong sizes
+        raise QgsProcessingException(
+            f"Layer {label} has no coordinate reference system (CRS), so its units are "
+            "unknown. Assign its CRS (Layer Properties > Source, or Processing 'Assign "
+            "projection') and run again.")
+    if target_crs is None:
+        extent = source.sourceExtent()
+        if extent.isNull() or extent.isEmpty() and extent.width() == 0 and extent.height() == 0:
+            extent = None
+        if extent is None:
+            # streaming providers (the OSM driver) may not know their extent: read first
+            target_crs = None
+        else:
+            target_crs = working_crs(src_crs, extent, context)
+    request = QgsFeatureRequest()
+    if expression:
+        # filtering in the provider saves converting features the caller drops anyway
+        request.setFilterExpression(expression)
+    if fields is not None:
+        request.setSubsetOfAttributes(field_idx)
+    wkbs: List[bytes] = []
+    rows: List[list] = []
+    fids: List[int] = []
+    n_null = 0
+    total = source.featureCount()
+    p0, p1 = progress_range
+    step = (p1 - p0) / total if total and total > 0 else 0
+    # invalid geometries are repaired below (and counted), not rejected by the context's check
+    features = source.getFeatures(request, QgsProcessingFeatureSource.FlagSkipGeometryValidityChecks)
+    for i, feature in enumerate(features):
+        if feedback is not None and feedback.isCanceled():
+            raise QgsProcessingException("Canceled by the user.")
+        geom = feature.geometry()
+        if geom is None or geom.isNull() or geom.isEmpty():
+            n_null += 1
+            continue
+        wkbs.append(bytes(geom.asWkb()))
+        rows.append(feature.attributes() if fields is None else
+                    [feature.attribute(i) for i in field_idx])
+        fids.append(feature.id())
+        if step and feedback is not None and i % 1000 == 0:
+            feedback.setProgress(p0 + i * step)
+    if not wkbs:
+        raise QgsProcessingException(
+            f"Layer {label} is empty: it has no features with a geometry"
+            + (f" ({n_null} null geometries skipped)." if n_null else "."))
+    geoms = shapely.from_wkb(np.array(wkbs, dtype=object), on_invalid="ignore")
+    unreadable = np.flatnonzero(shapely.is_missing(geoms))
+    if len(unreadable):
+        # GEOS refuses some OSM geometries outright (rings of < 4 points): let QGIS repair them
+        for i in unreadable:
+            g = QgsGeometry()
+            g.fromWkb(wkbs[i])
+            fixed = g.makeValid()
+            if fixed is not None and not fixed.isEmpty():
+                geoms[i] = shapely.from_wkb(bytes(fixed.asWkb()), on_invalid="ignore")
+        bad = shapely.is_missing(geoms)
+        if feedback is not None:
+            feedback.pushInfo(f"{label}: {len(unreadable)} unreadable geometries repaired by QGIS"
+                              + (f", {int(bad.sum())} skipped." if bad.any() else "."))
+        if bad.any():
+            keep = ~bad
+            geoms = geoms[keep]
+            rows = [r for r, k in zip(rows, keep) if k]
+            fids = [f for f, k in zip(fids, keep) if k]
+            if len(geoms) == 0:
+                raise QgsProcessingException(f"Layer {label} has no readable geometry.")
+    if target_crs is None:
+        b = shapely.total_bounds(geoms)
+        target_crs = working_crs(src_crs, QgsRectangle(*b), context)
+    if src_crs.isValid() and target_crs != src_crs:
+        geoms = _transform(geoms, src_crs, target_crs, context)
+    if n_null and feedback is not None:
+        feedback.pushInfo(f"{label}: {n_null} features with a null or empty geometry skipped.")
+    if repair and kind in ("polygons", "lines"):
+        invalid = ~shapely.is_valid(geoms)
+        if invalid.any():
+            fixed = shapely.make_valid(geoms[invalid])
+            fixed = np.array([_keep_dimension(g, kind) for g in fixed], dtype=object)
+            geoms[invalid] = fixed
+            if feedback is not None:
+                feedback.pushInfo(f"{label}: {int(invalid.sum())} invalid geometries repaired.")
+        empty = shapely.is_empty(geoms) | shapely.is_missing(geoms)
+        if empty.any():
+            keep = ~empty
+            geoms = geoms[keep]
+            rows = [r for r, k in zip(rows, keep) if k]
+            fids = [f for f, k in zip(fids, keep) if k]
+            if feedback is not None:
+                feedback.pushInfo(f"{label}: {int(empty.sum())} geometries could not be repaired and were skipped.")
+            if len(geoms) == 0:
+                raise QgsProcessingException(f"Layer {label} has no valid geometry.")
+    attrs = pd.DataFrame([[_py(v) for v in r] for r in rows], columns=field_names)
+    return Frame(geoms, attrs, np.asarray(fids), src_crs, target_crs, label)
+
+
+def _keep_dimension(geom, kind):
+    """make_valid may return a collection: keep only the parts of the wanted dimension."""
+    if geom is None:
+        return None
+    dim = 2 if kind == "polygons" else 1
+    parts = [p for p in shapely.get_parts(geom) if shapely.get_dimensions(p) == dim]
+    if not parts:
+        return shapely.from_wkt("GEOMETRYCOLLECTION EMPTY")
+    if dim == 2:
+        return shapely.union_all(parts) if len(parts) > 1 else parts[0]
+    return shapely.multilinestrings(parts) if len(parts) > 1 else parts[0]
+
+
+def _py(value):
+    """QVariant nulls -> None; other values unchanged (the hot path of reading attributes)."""
+    if isinstance(value, QVariant):
+        return None if value.isNull() else value.value()
+    return value
+
+
+def crs_text(crs: QgsCoordinateReferenceSystem) -> str:
+    """A CRS as text for PROJ/GDAL and for databases: the authority id, else the WKT."""
+    return crs.authid() or crs.toWkt(QgsCoordinateReferenceSystem.WKT_PREFERRED)
+
+
+def _transform(geoms: np.ndarray, src, dst, context) -> np.ndarray:
+    """Reproject shapely geometries, vectorised over all coordinates.
+
+    Uses Debian's pyproj (built on the same PROJ as QGIS, see DESIGN.md) when available,
+    else QGIS's own transform point by point.
+    """
+    if shapely.get_num_coordinates(geoms).sum() == 0:
+        return geoms
+    try:
+        from pyproj import Transformer
+
+        tr = Transformer.from_crs(crs_text(src), crs_text(dst), always_xy=True)
+
+        def project(coords, _):
+            return np.column_stack(tr.transform(coords[:, 0], coords[:, 1]))
+    except ImportError:  # pragma: no cover - QGIS without pyproj
+        ctx = context.transformContext() if context else QgsProject.instance().transformContext()
+        qtr = QgsCoordinateTransform(src, dst, ctx)
+
+        def project(coords, _):
+            return np.array([[p.x(), p.y()] for p in
+                             (qtr.transform(QgsPointXY(x, y)) for x, y in coords)])
+    out = coordinates.transform(shapely.force_2d(geoms), project)
+    if not np.isfinite(shapely.get_coordinates(out)).all():
+        raise QgsProcessingException(
+            f"Some coordinates cannot be transformed from {src.authid()} to {dst.authid()}.")
+    return out
+
+
+def reproject(geoms: np.ndarray, src, dst, context) -> np.ndarray:
+    if src == dst or not src.isValid() or not dst.isValid():
+        return geoms
+    return _transform(np.asarray(geoms, dtype=object), src, dst, context)
+
+
+# --------------------------------------------------------------------------- sinks
+
+_QVARIANT = {"int": QVariant.LongLong, "float": QVariant.Double, "str": QVariant.String,
+             "bool": QVariant.Bool}
+
+
+def make_fields(spec: Sequence[tuple]) -> QgsFields:
+    """``spec`` is a sequence of (name, type) with type in int / float / str / bool."""
+    fields = QgsFields()
+    for name, typ in spec:
+        fields.append(QgsField(name, _QVARIANT[typ]))
+    return fields
+
+
+def write_sink(alg, parameters, name: str, context, geoms: np.ndarray, table: pd.DataFrame,
+               spec: Sequence[tuple], wkb_type, out_crs: QgsCoordinateReferenceSystem,
+               work_crs: QgsCoordinateReferenceSystem, feedback=None) -> Optional[str]:
+    """Write engine results to a feature sink parameter, back in ``out_crs``.
+
+    ``spec`` lists the output fields (name, type); ``table`` holds their values per row.
+    Returns the destination id (None when the output was not requested).
+    """
+    fields = make_fields(spec)
+    sink, dest_id = alg.parameterAsSink(parameters, name, context, fields, wkb_type, out_crs)
+    if sink is None:
+        return None
+    geoms = np.asarray(geoms, dtype=object)
+    if len(geoms):
+        geoms = reproject(geoms, work_crs, out_crs, context)
+    wkbs = shapely.to_wkb(geoms) if len(geoms) else []
+    n = len(geoms)
+    columns = [_column_values(table[f] if f in table else None, typ, n) for f, typ in spec]
+    rows = list(zip(*columns)) if columns else [()] * n
+    features = []
+    multi = QgsWkbTypes.isMultiType(wkb_type)
+    for i, wkb in enumerate(wkbs):
+        if feedback is not None and i % 1000 == 0 and feedback.isCanceled():
+            raise QgsProcessingException("Canceled by the user.")
+        f = QgsFeature(fields)
+        g = QgsGeometry()
+        g.fromWkb(wkb)
+        if multi and not g.isMultipart():
+            g.convertToMultiType()
+        f.setGeometry(g)
+        f.setAttributes(list(rows[i]))
+        features.append(f)
+    if not sink.addFeatures(features, QgsFeatureSink.FastInsert):
+        raise QgsProcessingException(f"Could not write the output {name}: {sink.lastError()}")
+    return dest_id
+
+
+def _column_values(column, typ: str, n: int) -> list:
+    """A column as a list of plain Python values of the field type, None for missing.
+
+    Vectorised per column (pandas / numpy), not per value: writing is a hot path.
+    """
+    if column is None:
+        return [None] * n
+    series = pd.Series(np.asarray(column, dtype=object))
+    missing = series.isna().to_numpy()
+    if typ in ("int", "float", "bool"):
+        numbers = pd.to_numeric(series.where(~missing), errors="coerce").to_numpy(dtype=float)
+        missing |= ~np.isfinite(numbers)
+        numbers = np.where(missing, 0.0, numbers)
+        if typ == "int":
+            values = numbers.astype(np.int64).tolist()
+        elif typ == "bool":
+            values = (numbers != 0).tolist()
+        else:
+            values = numbers.tolist()
+    else:
+        values = [v if isinstance(v, str) else str(v) for v in series.tolist()]
+    if missing.any():
+        for i in np.flatnonzero(missing):
+            values[i] = None
+    return values
+
+
+# --------------------------------------------------------------------------- engine calls
+
+def progress_for(feedback: Optional[QgsProcessingFeedback], start: float = 0.0,
+                 end: float = 100.0) -> Progress:
+    if feedback is None:
+        return Progress(start=start, end=end)
+    return Progress(feedback.setProgress, feedback.isCanceled, feedback.pushInfo, start, end)
+
+
+def run_engine(label: str, fn, *args, **kwargs):
+    """Call an engine function; its InputError becomes a QgsProcessingException naming ``label``."""
+    try:
+        return fn(*args, **kwargs)
+    except Canceled as exc:
+        raise QgsProcessingException(str(exc)) from exc
+    except InputError as exc:
+        raise QgsProcessingException(f"{label}: {exc}") from exc
+
+
+def field_values(frame: Frame, field: Optional[str], default=None) -> np.ndarray:
+    if field and field in frame.attributes:
+        return frame.attributes[field].to_numpy(dtype=object)
+    return np.full(len(frame), default, dtype=object)
+
+
+def check_number(value, name: str, lo: float = None, hi: float = None):
+    """Raise a clear error for absurd numeric parameters (QGIS checks min/max only in the GUI)."""
+    if value is None or not math.isfinite(value):
+        raise QgsProcessingException(f"Parameter {name} must be a finite number.")
+    if lo is not None and value < lo:
+        raise QgsProcessingException(f"Parameter {name} = {value} is too small (minimum {lo}).")
+    if hi is not None and value > hi:
+        raise QgsProcessingException(f"Parameter {name} = {value} is too large (maximum {hi}).")
+    return value
+
+
+# --------------------------------------------------------------------------- OSM attributes
+
+def subset(frame: Frame, keep) -> Frame:
+    keep = np.asarray(keep, dtype=bool)
+    return Frame(frame.geometry[keep], frame.attributes[keep].reset_index(drop=True),
+                 frame.fids[keep], frame.source_crs, frame.crs, frame.name)
+
+
+def osm_tag_column(frame: Frame, key: str) -> Optional[np.ndarray]:
+    """Values of an attribute that may be a field or a key inside OSM's ``other_tags``.
+
+    Returns None when neither holds it.
+    """
+    from ..network.street_graph import parse_other_tags
+
+    if key in frame.attributes:
+        return frame.attributes[key].to_numpy(dtype=object)
+    if "other_tags" in frame.attributes:
+        values = np.array([parse_other_tags(t).get(key) for t in frame.attributes["other_tags"]],
+                          dtype=object)
+        if any(v is not None for v in values):
+            return values
+    return None
+
+
+def osm_vertical_layers(frame: Frame) -> np.ndarray:
+    """OSM vertical layer per feature from layer / bridge / tunnel fields or other_tags."""
+    from ..network.street_graph import parse_other_tags, vertical_layer
+
+    keys = ("layer", "bridge", "tunnel")
+    n = len(frame)
+    cols = {k: frame.attributes[k].to_numpy(dtype=object) for k in keys if k in frame.attributes}
+    tags = frame.attributes["other_tags"].to_numpy(dtype=object) \
+        if "other_tags" in frame.attributes else np.full(n, None, dtype=object)
+    out = np.zeros(n, dtype=np.int64)
+    for i in range(n):
+        values = {k: c[i] for k, c in cols.items()}
+        text = tags[i]
+        # parse other_tags once per feature, and only when it can hold one of the keys
+        if text and len(values) < 3 and any(k in text for k in keys):
+            parsed = parse_other_tags(text)
+            for k in keys:
+                values.setdefault(k, parsed.get(k))
+        if values:
+            out[i] = vertical_layer(values.get("layer"), values.get("bridge"), values.get("tunnel"))
+    return out
+
+
+# --------------------------------------------------------------------------- styles
+
+STYLES = RESOURCES / "styles"
+_POST_PROCESSORS = []  # QGIS does not own Python post-processors: keep them alive
+
+
+def style_output(context, dest_id: Optional[str], qml_name: str) -> None:
+    """Load an output with a shipped QML style when QGIS loads it on completion."""
+    from qgis.core import QgsProcessingLayerPostProcessorInterface
+
+    qml = STYLES / qml_name
+    if not dest_id or not qml.exists() or not context.willLoadLayerOnCompletion(dest_id):
+        return
+
+    class _Styler(QgsProcessingLayerPostProcessorInterface):
+        def postProcessLayer(self, layer, ctx, feedback):  # noqa: N802
+            if layer is not None and layer.isValid():
+                layer.loadNamedStyle(str(qml))
+                layer.triggerRepaint()
+
+    styler = _Styler()
+    _POST_PROCESSORS.append(styler)
+    context.layerToLoadOnCompletionDetails(dest_id).setPostProcessor(styler)
+
+
+# --------------------------------------------------------------------------- rasters
+
+def read_raster(layer, work_crs: QgsCoordinateReferenceSystem, bounds, cell_size: float,
+                feedback=None, what: str = "DEM"):
+    """Warp a raster layer into the working CRS over ``bounds`` (+ a margin) with GDAL.
+
+    The engine works on a numpy grid with a geotransform (a :class:`DemGrid`); GDAL (the
+    same library QGIS uses) reprojects and resamples the raster bilinearly into an
+    in-memory dataset first. ``what`` names the raster in messages (DEM, density ...).
+    """
+    from osgeo import gdal
+
+    from ..retrieval.shape_context import DemGrid
+
+    if not layer.crs().isValid():
+        raise QgsProcessingException(
+            f"{what} '{layer.name()}' has no coordinate reference system (CRS). Assign its "
+            "CRS (Layer Properties > Source, or GDAL 'Assign projection') and run again.")
+    source = layer.source().split("|")[0]
+    margin = 4 * cell_size
+    x0, y0, x1, y1 = bounds
+    options = gdal.WarpOptions(
+        format="MEM", dstSRS=crs_text(work_crs), srcSRS=crs_text(layer.crs()) or None,
+        outputBounds=(x0 - margin, y0 - margin, x1 + margin, y1 + margin),
+        xRes=cell_size, yRes=cell_size, resampleAlg="bilinear", dstNodata=float("nan"),
+        outputType=gdal.GDT_Float32, multithread=False)
+    # no gdal.UseExceptions(): it would switch the bindings' error mode for all of QGIS
+    try:
+        ds = gdal.Warp("", source, options=options)
+    except RuntimeError as exc:  # exceptions already enabled by someone else
+        raise QgsProcessingException(
+            f"{what} '{layer.name()}' cannot be read or reprojected: {exc}") from exc
+    if ds is None:
+        raise QgsProcessingException(f"{what} '{layer.name()}' cannot be read or reprojected: "
+                                     f"{gdal.GetLastErrorMsg() or 'unknown GDAL error'}.")
+    band = ds.GetRasterBand(1)
+    grid = band.ReadAsArray().astype(np.float64)
+    nodata = band.GetNoDataValue()
+    dem = DemGrid(grid, ds.GetGeoTransform(), nodata)
+    valid = np.isfinite(dem.array)
+    if not valid.any():
+        raise QgsProcessingException(
+            f"{what} '{layer.name()}' has no value over the input's extent: check that they "
+            "overlap.")
+    if feedback is not None and not valid.all():
+        feedback.pushInfo(f"{what}: {100 * (1 - valid.mean()):.0f} % of the input's extent has "
+                          "no value there.")
+    return dem
+
+
+def raster_cell_size(layer, work_crs, bounds, context, max_cells: int = 2048) -> float:
+    """Cell size (m) for a raster in the working CRS: its own resolution, at least 1 m, and
+    coarse enough that the input's extent spans at most ``max_cells`` cells."""
+    ext = layer.extent()
+    native = max(layer.rasterUnitsPerPixelX(), layer.rasterUnitsPerPixelY())
+    try:  # the resolution in metres: the length of one pixel's diagonal, transformed
+        tr = QgsCoordinateTransform(layer.crs(), work_crs, context.transformContext())
+        c = ext.center()
+        box = tr.transformBoundingBox(QgsRectangle(c.x(), c.y(), c.x() + native, c.y() + native))
+        native_m = max(box.width(), box.height())
+    except Exception:  # noqa: BLE001 - an unknown CRS: trust the number as metres
+        native_m = native
+    span = max(bounds[2] - bounds[0], bounds[3] - bounds[1])
+    cell = max(native_m if math.isfinite(native_m) and native_m > 0 else 1.0, 1.0)
+    return max(cell, span / max_cells)
+
+
+def write_geotiff(path: str, dem, crs_wkt: str) -> None:
+    """Write a DemGrid as a single-band float32 GeoTIFF (NaN = no data) with GDAL."""
+    from osgeo import gdal
+
+    rows, cols = dem.array.shape
+    driver = gdal.GetDriverByName("GTiff")
+    ds = driver.Create(str(path), cols, rows, 1, gdal.GDT_Float32, options=["COMPRESS=DEFLATE"])
+    if ds is None:
+        raise QgsProcessingException(f"The relief cannot be written to {path}: "
+                                     f"{gdal.GetLastErrorMsg() or 'unknown GDAL error'}.")
+    ds.SetGeoTransform(tuple(dem.geotransform))
+    ds.SetProjection(crs_wkt)
+    band = ds.GetRasterBand(1)
+    band.SetNoDataValue(float("nan"))
+    band.WriteArray(np.asarray(dem.array, dtype=np.float32))
+    band.FlushCache()
+    ds = None

@@ -1,0 +1,1 @@
+"""Finding and fitting examples: shape context and DTW, MVC warps, example databases."""

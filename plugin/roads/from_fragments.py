@@ -1,0 +1,802 @@
+"""Hierarchical example-based road synthesis by recursive fragment insertion (thesis ch. 4.1.3).
+
+Hartmann's Function 2: the sketched arterials are street level 0; for l = 0, 1, ... the
+query fragments are the minimal cycles (bounded faces) of the streets of level <= l; for
+each query a fragment of the same level is retrieved from an example database (prefilter by
+area, aspect ratio and relief change to c = 10 candidates, then scale-aware,
+rotation-invariant shape context plus the slope term C^E with cyclic DTW), rigidly aligned
+from the DTW correspondences, and its interior streets (level l + 1) are warped into the
+query with mean value coordinates defined on the match's boundary samples and evaluated
+with the corresponding query samples; its relief is warped the same way and merged into
+the height field with a Poisson solve. The loop stops when no database holds fragments of
+the next level (or ``max_level`` is reached).
+
+Choices the thesis leaves open, made here:
+
+- **Which match**: a random choice among the ``n_best`` lowest-cost candidates (seeded
+  ``numpy.random.Generator``). The candidates are tried in that random order; a candidate
+  whose warp is not acceptable (below) is skipped, and when none is acceptable the query
+  gets a **procedural split** (one street along the midline across the long axis of its
+  minimum rotated rectangle) if both halves are blocks, else it stays a block.
+- **Acceptable warp**: every warped street node that is not on the fragment boundary (dead
+  ends, junctions) lies inside the query, at most 20 % of the warped street length is lost
+  to clipping, and the inserted streets cut the query into no more sliver faces (under the
+  block area / width thresholds of :mod:`blocks`) than the example fragment had. Very
+  concave targets fail these tests instead of producing streets outside the query.
+- **Insertion**: street ends that lay on the example's boundary are snapped onto the query
+  boundary (onto an existing node when one is within ``snap_distance``); streets are
+  clipped to the query; the level is then re-noded as one planar network (the boundary
+  edges split where new streets meet them), new dead ends shorter than ``min_dangle`` m
+  are pruned and chains through degree-2 nodes of one source are merged.
+- **Levels of a database**: a database's hierarchy starts at its own lowest fragment level
+  (an example whose arterials close no face, like Bubenec, starts at level 1): query level
+  l uses database level ``min_level + l``.
+- **Several databases**: with style polygons each query uses the database of the style
+  polygon holding its representative point (the first database elsewhere); without them
+  the candidates of all databases compete by cost.
+- **Terrain**: the query's slope descriptors are taken from the current height field, which
+  already holds the relief merged at the previous levels.
+
+References
+----------
+Hartmann, S. Example-based generation of virtual urban environments, thesis, ch. 4.1.3
+(Function 2, fragment retrieval with eqs. 4.1-4.3, fragment insertion by generalised
+barycentric coordinates, Poisson merge of the relief) and ch. 4.1.4 (reproduction of Bonn,
+style mixing, terrain-dependent choice).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Dict, List, Optional, Sequence
+
+import numpy as np
+import pandas as pd
+import shapely
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from ..core.progress import InputError, Progress, ensure
+from ..network import street_graph as _roads
+from ..network.blocks import (
+    MIN_BLOCK_AREA,
+    MIN_BLOCK_WIDTH,
+    block_faces,
+    planar_faces,
+    shape_metrics,
+)
+from ..retrieval import shape_context as sc
+from ..retrieval.database import N_CANDIDATES, FragmentDatabase
+from ..retrieval.shape_context import DemGrid
+from ..retrieval.warp import poisson_blend, warp_geometries, warp_points
+
+__all__ = [
+    "MAX_N_BEST", "MAX_LEVELS", "EDGE_FIELDS", "Retrieval", "SynthesisResult",
+    "retrieve", "synthesize", "procedural_split", "grid_streets",
+]
+
+#: Upper bound of N_BEST: beyond it the "random choice among the best" is just random.
+MAX_N_BEST = 50
+#: Safety bound on the number of synthesised levels.
+MAX_LEVELS = 12
+#: Output attributes per edge.
+EDGE_FIELDS = [("level", "int"), ("source_fragment", "str"), ("database", "str"),
+               ("fragment_id", "int"), ("length_m", "float")]
+#: Share of the warped street length that may be clipped away before a warp is rejected.
+MAX_CLIPPED_SHARE = 0.2
+#: Largest linear scale factor between a query and an inserted fragment (area ratio 4).
+MAX_SCALE = 2.0
+#: Street ends closer than this (m) to the example fragment's boundary end on it.
+_ON_BOUNDARY = 0.5
+
+
+@dataclass
+class Retrieval:
+    """Candidates of a batch of queries against one database level.
+
+    Attributes
+    ----------
+    rows : (F, c) int array of database rows (-1 where fewer candidates exist)
+    costs : (F, c) float array of cyclic DTW costs (inf for missing candidates)
+    offsets : (F, c) int array of DTW start offsets
+    cost_matrices : (F, c, n, n) float32 point-pair costs (for the correspondences)
+    samples : (F, n, 2) query boundary samples
+    """
+
+    rows: np.ndarray
+    costs: np.ndarray
+    offsets: np.ndarray
+    cost_matrices: np.ndarray
+    samples: np.ndarray
+
+    def ranked(self, f: int, n_best: int) -> np.ndarray:
+        """Indices (into the candidate axis) of query f's ``n_best`` cheapest candidates."""
+        order = np.argsort(self.costs[f], kind="stable")
+        order = order[np.isfinite(self.costs[f][order])]
+        return order[:n_best]
+
+
+@dataclass
+class SynthesisResult:
+    """Result of :func:`synthesize`.
+
+    Attributes
+    ----------
+    geometry : ndarray of LineString, the planar street network (metric CRS)
+    table : DataFrame, per edge the columns of :data:`EDGE_FIELDS`: ``level`` (0 =
+        arterial), ``source_fragment`` ('arterial', 'procedural' or '<database>:<id>'),
+        ``database`` (its name, empty for arterials and procedural streets),
+        ``fragment_id`` (-1 when none), ``length_m``
+    dem : DemGrid or None, the height field with the inserted relief merged
+    queries : DataFrame, one row per query fragment: level, database, fragment_id, cost,
+        outcome ('fragment', 'block', 'procedural', 'unsplit', 'no_candidate'), area_m2,
+        n_rejected (candidates whose warp was not acceptable)
+    area : Polygon / MultiPolygon, the union of the arterials' faces (the synthesis area)
+    stats : dict, counts and timings per level
+    """
+
+    geometry: np.ndarray
+    table: pd.DataFrame
+    dem: Optional[DemGrid]
+    queries: pd.DataFrame
+    area: object
+    stats: Dict = field(default_factory=dict)
+
+
+# --------------------------------------------------------------------------- retrieval
+
+def _db_levels(db: FragmentDatabase) -> np.ndarray:
+    return np.unique(db.levels)
+
+
+def _query_relief(faces: np.ndarray, dem: Optional[DemGrid]) -> Optional[np.ndarray]:
+    if dem is None:
+        return None
+    from ..network.fragments import relief_patches
+
+    return relief_patches(faces, dem, cell_size=max(dem.cell_size, 1.0))[0]
+
+
+def retrieve(db: FragmentDatabase, faces: Sequence, level: int, dem: Optional[DemGrid] = None,
+             gamma: float = 0.5, c: int = N_CANDIDATES, relief: Optional[np.ndarray] = None,
+             chunk: int = 8) -> Retrieval:
+    """Retrieve candidates for many query faces of one level at once (vectorised).
+
+    The batch version of :meth:`FragmentDatabase.query`: the prefilter (standardised log
+    area, aspect ratio and relief change, nearest ``c``) is one (faces x fragments)
+    distance matrix; shape contexts and slope descriptors of all queries are computed in
+    one call; the point-pair costs and the cyclic DTW of all (query, candidate) pairs are
+    evaluated in blocks of ``chunk`` queries.
+
+    Parameters
+    ----------
+    db : FragmentDatabase
+    faces : array of Polygon (the database's metric units)
+    level : int, the *database* level to retrieve from (exact; no fallback)
+    dem : DemGrid, optional, terrain of the queries (adds the slope term when the database
+        has slope descriptors and ``gamma < 1``)
+    gamma : float, weight of the shape term in eq. 4.2
+    c : int, prefilter size (thesis: 10)
+    relief : per face relief change (m) for the prefilter, optional
+
+    Returns
+    -------
+    Retrieval
+
+    References
+    ----------
+    Hartmann, thesis ch. 4.1.3, "Fragment Retrieval" (eqs. 4.1-4.3, c = 10).
+    """
+    faces = np.asarray(faces, dtype=object)
+    desc = db.descriptors
+    n = desc.samples.shape[1]
+    k = len(faces)
+    rows_all = np.flatnonzero(db.levels == level)
+    samples = sc.sample_boundaries(faces, n) if k else np.zeros((0, n, 2))
+    c_eff = int(min(c, len(rows_all)))
+    if k == 0 or c_eff == 0:
+        return Retrieval(np.full((k, 0), -1), np.zeros((k, 0)), np.zeros((k, 0), np.int64),
+                         np.zeros((k, 0, n, n), np.float32), samples)
+    # prefilter: the database's features standardised over its fragments of this level
+    feats = db._features(rows_all)
+    m = shape_metrics(faces)
+    q = [np.log(np.maximum(m["area_m2"].to_numpy(), 1e-9)), m["aspect_ratio"].to_numpy()]
+    if feats.shape[1] == 3:
+        q.append(np.full(k, np.nan) if relief is None else np.asarray(relief, np.float64))
+    q = np.column_stack(q)
+    mu, sd = np.nanmean(feats, axis=0), np.nanstd(feats, axis=0)
+    sd = np.where(sd > 1e-12, sd, 1.0)
+    z, zq = (feats - mu) / sd, (q - mu) / sd
+    d = np.nansum((zq[:, None, :] - z[None, :, :]) ** 2, axis=2)          # (k, R)
+    keep = np.argsort(d, axis=1, kind="stable")[:, :c_eff]
+    rows = rows_all[keep]                                                # (k, c)
+    edges = desc.edges
+    qh = sc.normalised_histograms(sc.shape_contexts(samples, edges, desc.n_angular))
+    qsl = None
+    if dem is not None and desc.slopes is not None and gamma < 1:
+        qsl = sc.slope_descriptors(samples, dem, edges, desc.n_angular)
+    hist = db.histograms
+    costs = np.empty((k, c_eff))
+    offsets = np.empty((k, c_eff), dtype=np.int64)
+    mats = np.empty((k, c_eff, n, n), dtype=np.float32)
+    for a in range(0, k, chunk):
+        b = min(a + chunk, k)
+        cm = sc.combined_cost(qh[a:b, None], hist[rows[a:b]],
+                              None if qsl is None else qsl[a:b, None],
+                              None if qsl is None else desc.slopes[rows[a:b]], gamma)
+        mats[a:b] = cm
+        costs[a:b], offsets[a:b] = sc.cyclic_dtw_costs(cm)
+    return Retrieval(rows, costs, offsets, mats, samples)
+
+
+# --------------------------------------------------------------------------- geometry helpers
+
+def _line_ends(lines: np.ndarray):
+    coords, idx = shapely.get_coordinates(lines, return_index=True)
+    first = np.r_[True, idx[1:] != idx[:-1]]
+    last = np.r_[idx[1:] != idx[:-1], True]
+    return coords, idx, np.flatnonzero(first), np.flatnonzero(last)
+
+
+def _sliver_count(faces: np.ndarray, area: np.ndarray, perimeter: np.ndarray,
+                  min_area: float, min_width: float) -> int:
+    return int(((area < min_area) | (2 * area < min_width * perimeter)).sum())
+
+
+def _sub_faces(polygon, streets: np.ndarray):
+    lines = np.concatenate([[shapely.get_exterior_ring(polygon)],
+                            np.asarray(streets, dtype=object)])
+    return planar_faces(lines)
+
+
+def procedural_split(face, min_area: float = MIN_BLOCK_AREA,
+                     min_width: float = MIN_BLOCK_WIDTH) -> np.ndarray:
+    """One street across a face: the midline across the long axis of its minimum rectangle.
+
+    The line through the centre of the minimum rotated rectangle, perpendicular to its long
+    side, clipped to the face (a concave face may give several pieces, each from boundary
+    to boundary). Returns no street when a resulting face would be a sliver.
+
+    Parameters
+    ----------
+    face : Polygon
+    min_area, min_width : float, the block thresholds of :mod:`blocks`
+
+    Returns
+    -------
+    ndarray of LineString (possibly empty)
+    """
+    m = shape_metrics([face]).iloc[0]
+    if not np.isfinite(m.mbr_length_m) or m.mbr_length_m <= 0:
+        return np.empty(0, dtype=object)
+    rect = shapely.oriented_envelope(face)
+    centre = np.asarray(rect.centroid.coords[0])
+    a = np.radians(m.mbr_angle_deg)
+    across = np.array([-np.sin(a), np.cos(a)])        # perpendicular to the long side
+    half = m.mbr_length_m + m.mbr_width_m
+    line = shapely.LineString([centre - half * across, centre + half * across])
+    parts = shapely.get_parts(shapely.intersection(line, face))
+    parts = parts[(shapely.get_type_id(parts) == 1) & (shapely.length(parts) > 1e-6)]
+    if len(parts) == 0:
+        return parts
+    _, area, perimeter = _sub_faces(face, parts)
+    if len(area) < 2 or _sliver_count(None, area, perimeter, min_area, min_width):
+        return np.empty(0, dtype=object)
+    return parts
+
+
+def grid_streets(faces: Sequence, spacing: float) -> np.ndarray:
+    """A plain grid of streets inside each face, aligned with its minimum rectangle.
+
+    The procedural baseline of the evaluation: parallel streets ``spacing`` m apart in the
+    two directions of each face's minimum rotated rectangle, centred on it and clipped to
+    the face.
+
+    Parameters
+    ----------
+    faces : array of Polygon
+    spacing : float, metres between parallel streets
+
+    Returns
+    -------
+    ndarray of LineString
+    """
+    if not spacing > 0:
+        raise InputError("the grid spacing must be positive")
+    faces = np.asarray(faces, dtype=object)
+    if len(faces) == 0:
+        return np.empty(0, dtype=object)
+    m = shape_metrics(faces)
+    out = []
+    for face, (_, row) in zip(faces, m.iterrows()):
+        c = np.asarray(shapely.oriented_envelope(face).centroid.coords[0])
+        a = np.radians(row.mbr_angle_deg)
+        u = np.array([np.cos(a), np.sin(a)])
+        w = np.array([-u[1], u[0]])
+        half_l, half_w = row.mbr_length_m / 2, row.mbr_width_m / 2
+        lines = []
+        for axis, other, half_a, half_o in ((u, w, half_l, half_w), (w, u, half_w, half_l)):
+            n_lines = int(np.floor(2 * half_a / spacing))
+            offs = (np.arange(1, n_lines + 1) - (n_lines + 1) / 2) * spacing
+            for o in offs:
+                p = c + o * axis
+                lines.append([p - (half_o + 1) * other, p + (half_o + 1) * other])
+        if not lines:
+            continue
+        with np.errstate(invalid="ignore"):  # lines that miss a concave face
+            cut = shapely.intersection(shapely.linestrings(np.asarray(lines)), face)
+        parts = shapely.get_parts(cut)
+        out.append(parts[(shapely.get_type_id(parts) == 1) & (shapely.length(parts) > 1e-6)])
+    return np.concatenate(out) if out else np.empty(0, dtype=object)
+
+
+# --------------------------------------------------------------------------- insertion
+
+class _Inserter:
+    """Warps the interior streets of one candidate into one query face."""
+
+    def __init__(self, min_area: float, min_width: float, snap_distance: float):
+        self.min_area = min_area
+        self.min_width = min_width
+        self.snap_distance = snap_distance
+        self._example_slivers: Dict = {}
+        self._example_ends: Dict = {}
+
+    def example(self, db: FragmentDatabase, row: int):
+        """Streets of a fragment, which of their ends lie on its boundary, its sliver count."""
+        key = (id(db), row)
+        if key not in self._example_ends:
+            fid = int(db.ids[row])
+            streets = db.streets_of(fid)
+            streets = shapely.get_parts(streets) if len(streets) else streets
+            streets = streets[shapely.get_type_id(streets) == 1] if len(streets) else streets
+            if len(streets):
+                coords, _, first, last = _line_ends(streets)
+                ring = shapely.get_exterior_ring(db.geometry[row])
+                d0 = shapely.distance(ring, shapely.points(coords[first]))
+                d1 = shapely.distance(ring, shapely.points(coords[last]))
+                on = (d0 < _ON_BOUNDARY, d1 < _ON_BOUNDARY)
+                _, area, perimeter = _sub_faces(db.geometry[row], streets)
+                slivers = _sliver_count(None, area, perimeter, self.min_area, self.min_width)
+            else:
+                on, slivers = (np.zeros(0, bool), np.zeros(0, bool)), 0
+            self._example_ends[key] = (streets, on)
+            self._example_slivers[key] = slivers
+        return self._example_ends[key][0], self._example_ends[key][1], \
+            self._example_slivers[key]
+
+    def insert(self, face, q_samples: np.ndarray, ex_samples: np.ndarray, path: np.ndarray,
+               streets: np.ndarray, on_boundary, example_slivers: int):
+        """Warp, snap and clip; returns (pieces, None) or (None, reason)."""
+        src = ex_samples[path[:, 1]]
+        dst = q_samples[path[:, 0]]
+        r, t, _ = sc.rigid_align(src, dst)
+        src_aligned = sc.apply_rigid(src, r, t)
+        aligned = sc.transform_geometries(streets, r, t)
+        seg = max(2.0, np.sqrt(face.area) / 25.0)
+        warped = warp_geometries(aligned, src_aligned, dst, max_segment=seg)
+        coords, idx, first, last = _line_ends(warped)
+        if not np.isfinite(coords).all():
+            return None, "warp"
+        on0, on1 = on_boundary
+        interior_ends = np.concatenate([coords[first][~on0], coords[last][~on1]])
+        if len(interior_ends):
+            pts = shapely.points(interior_ends)
+            if (shapely.distance(face, pts) > 0.5).any() or \
+                    not shapely.contains_xy(face, *interior_ends.T).all():
+                return None, "outside"
+        # boundary ends onto the query boundary, onto an existing corner when one is near
+        ring = shapely.get_exterior_ring(face)
+        corners = shapely.get_coordinates(ring)[:-1]
+        for ends, on in ((first, on0), (last, on1)):
+            sel = ends[on]
+            if not len(sel):
+                continue
+            p = coords[sel]
+            d = np.hypot(*(p[:, None, :] - corners[None, :, :]).transpose(2, 0, 1))
+            near = d.min(axis=1) <= self.snap_distance
+            snapped = np.empty_like(p)
+            snapped[near] = corners[d[near].argmin(axis=1)]
+            far = ~near
+            if far.any():
+                pos = shapely.line_locate_point(ring, shapely.points(p[far]))
+                snapped[far] = shapely.get_coordinates(shapely.line_interpolate_point(ring, pos))
+            coords[sel] = snapped
+        warped = shapely.linestrings(coords, indices=idx)
+        warped = warped[shapely.length(warped) > 1e-6]
+        total = float(shapely.length(warped).sum())
+        pieces = shapely.get_parts(shapely.intersection(warped, face))
+        pieces = pieces[(shapely.get_type_id(pieces) == 1) & (shapely.length(pieces) > 1e-3)]
+        if len(pieces):
+            # nothing that runs along the query boundary (it is a street already)
+            along = shapely.within(pieces, shapely.buffer(shapely.boundary(face), 1e-3))
+            pieces = pieces[~along]
+        kept = float(shapely.length(pieces).sum()) if len(pieces) else 0.0
+        if total > 0 and kept < (1 - MAX_CLIPPED_SHARE) * total:
+            return None, "clipped"
+        if not len(pieces):
+            return None, "empty"
+        _, area, perimeter = _sub_faces(face, pieces)
+        if _sliver_count(None, area, perimeter, self.min_area, self.min_width) > example_slivers:
+            return None, "slivers"
+        return pieces, None
+
+
+# --------------------------------------------------------------------------- network
+
+def _snap_onto(geometry: np.ndarray, new: np.ndarray, tolerance: float = 1e-5) -> np.ndarray:
+    """Insert the end points of the new lines into the existing lines they lie on.
+
+    An end point put onto a boundary by interpolation lies on it only up to round-off
+    (1e-9 m); noding would then leave it dangling next to the edge. GEOS snapping inserts
+    the point as a vertex of the edge, so that both share it exactly.
+    """
+    geometry = np.asarray(geometry, dtype=object).copy()
+    old_idx = np.flatnonzero(~new)
+    new_idx = np.flatnonzero(new)
+    if not len(old_idx) or not len(new_idx):
+        return geometry
+    ends = np.concatenate([shapely.get_point(geometry[new_idx], 0),
+                           shapely.get_point(geometry[new_idx], -1)])
+    e_i, o_i = shapely.STRtree(geometry[old_idx]).query(ends, predicate="dwithin",
+                                                        distance=tolerance)
+    for o in np.unique(o_i):
+        pts = shapely.multipoints(ends[e_i[o_i == o]])
+        geometry[old_idx[o]] = shapely.snap(geometry[old_idx[o]], pts, tolerance)
+    return geometry
+
+
+def _renode(geometry: np.ndarray, level: np.ndarray, attrs: Dict[str, np.ndarray],
+            new_level: int, min_dangle: float):
+    """One planar network from existing edges and new streets, attributes carried over.
+
+    Nodes everything (``shapely.node``), gives each piece the attributes of its parent line
+    (the lowest level wins where lines overlap), prunes new dead ends shorter than
+    ``min_dangle`` and merges chains through degree-2 nodes whose two edges share level and
+    source.
+    """
+    geometry = _snap_onto(geometry, level == new_level)
+    pieces = shapely.get_parts(shapely.node(shapely.multilinestrings(geometry)))
+    pieces = pieces[shapely.length(pieces) > 1e-6]
+    parent = _roads._attach_attributes(pieces, geometry, np.arange(len(geometry)),
+                                       level.astype(np.int64))
+    g = _roads.graph_from_lines(pieces, np.full(len(pieces), None, object),
+                                np.full(len(pieces), None, object), np.zeros(len(pieces), int),
+                                parent, snap_tolerance=0.0)
+    geom, u, v, src = g.geometry, g.u, g.v, g.source
+    lvl = level[src]
+    for _ in range(3):  # prune short new dead ends (chains of them in a few rounds)
+        deg = np.bincount(np.r_[u, v], minlength=len(g.nodes))
+        short = (lvl == new_level) & ((deg[u] == 1) | (deg[v] == 1)) & \
+            (shapely.length(geom) < min_dangle)
+        if not short.any():
+            break
+        keep = ~short
+        geom, u, v, src, lvl = geom[keep], u[keep], v[keep], src[keep], lvl[keep]
+    # merge degree-2 chains of one source
+    key = np.array([f"{lvl[i]}|{attrs['source_fragment'][s]}|{attrs['query'][s]}"
+                    for i, s in enumerate(src)], dtype=object)
+    m = len(geom)
+    inc_node = np.r_[u, v]
+    inc_edge = np.r_[np.arange(m), np.arange(m)]
+    deg = np.bincount(inc_node, minlength=len(g.nodes))
+    sel = deg[inc_node] == 2
+    order = np.argsort(inc_node[sel], kind="stable")
+    pairs = inc_edge[sel][order].reshape(-1, 2) if sel.any() else np.zeros((0, 2), int)
+    ok = (pairs[:, 0] != pairs[:, 1]) & (key[pairs[:, 0]] == key[pairs[:, 1]]) \
+        if len(pairs) else np.zeros(0, bool)
+    if ok.any():
+        adj = coo_matrix((np.ones(ok.sum()), (pairs[ok, 0], pairs[ok, 1])), shape=(m, m))
+        n_comp, comp = connected_components(adj, directed=False)
+        if n_comp < m:
+            by = np.argsort(comp, kind="stable")
+            merged = shapely.line_merge(shapely.multilinestrings(geom[by], indices=comp[by]))
+            single = shapely.get_type_id(merged) == 1
+            rep = by[np.r_[True, comp[by][1:] != comp[by][:-1]]]
+            # a chain that does not merge into one line (a ring) keeps its pieces
+            multi_members = np.isin(comp, np.flatnonzero(~single))
+            geom = np.concatenate([merged[single], geom[multi_members]])
+            src = np.concatenate([src[rep][single], src[multi_members]])
+    return geom, src
+
+
+# --------------------------------------------------------------------------- relief
+
+def _relief_for_face(face, dem: DemGrid, db: FragmentDatabase, row: int, path: np.ndarray,
+                     q_samples: np.ndarray):
+    """Cells of ``dem`` inside the face and the warped example relief there (or None)."""
+    if db.relief is None:
+        return None
+    patch = db.relief.get(int(db.ids[row]))
+    if patch is None:
+        return None
+    heights, gt = patch
+    x0, dx, _, y0, _, dy = dem.geotransform
+    rows, cols = dem.array.shape
+    b = face.bounds
+    c0 = max(int(np.floor((b[0] - x0) / dx)), 0)
+    c1 = min(int(np.ceil((b[2] - x0) / dx)), cols)
+    r0 = max(int(np.floor((b[3] - y0) / dy)), 0)
+    r1 = min(int(np.ceil((b[1] - y0) / dy)), rows)
+    if c1 <= c0 or r1 <= r0:
+        return None
+    cc, rr = np.meshgrid(np.arange(c0, c1), np.arange(r0, r1))
+    x = x0 + dx * (cc.ravel() + 0.5)
+    y = y0 + dy * (rr.ravel() + 0.5)
+    inside = shapely.contains_xy(face, x, y)
+    if not inside.any():
+        return None
+    cells = np.column_stack([x[inside], y[inside]])
+    ex = db.descriptors.samples[row][path[:, 1]]
+    src = warp_points(cells, q_samples[path[:, 0]], ex)
+    values = DemGrid(np.asarray(heights, dtype=np.float64), gt)(src)
+    flat = rr.ravel()[inside] * cols + cc.ravel()[inside]
+    return flat, values
+
+
+# --------------------------------------------------------------------------- main
+
+def _style_index(faces: np.ndarray, style_polygons, style_database, n_db: int) -> np.ndarray:
+    """Database index per face: the style polygon holding the face's representative point."""
+    out = np.zeros(len(faces), dtype=np.int64)
+    if style_polygons is None or len(faces) == 0:
+        return out
+    polys = np.asarray(style_polygons, dtype=object)
+    pts = shapely.point_on_surface(faces)
+    f_idx, p_idx = shapely.STRtree(polys).query(pts, predicate="within")
+    # the first style polygon (lowest index) wins where several overlap
+    order = np.lexsort((p_idx, f_idx))
+    f_idx, p_idx = f_idx[order], p_idx[order]
+    first = np.r_[True, f_idx[1:] != f_idx[:-1]]
+    out[f_idx[first]] = np.asarray(style_database)[p_idx[first]]
+    return out
+
+
+def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
+               dem: Optional[DemGrid] = None, style_polygons: Optional[Sequence] = None,
+               style_database: Optional[Sequence[int]] = None, n_best: int = 3,
+               seed: Optional[int] = None, max_level: Optional[int] = None,
+               gamma: float = 0.5, names: Optional[Sequence[str]] = None,
+               min_area: float = MIN_BLOCK_AREA, min_width: float = MIN_BLOCK_WIDTH,
+               snap_tolerance: float = 1.0, snap_distance: float = 3.0,
+               min_dangle: float = 5.0, c: int = N_CANDIDATES, max_scale: float = MAX_SCALE,
+               progress: Optional[Progress] = None) -> SynthesisResult:
+    """Synthesise a street network inside sketched arterials from fragment databases.
+
+    Parameters
+    ----------
+    arterials : array of LineString / MultiLineString, metric CRS (the sketch, level 0)
+    databases : list of FragmentDatabase (:func:`database.load_fragment_database`); their
+        geometries may be in any metric CRS (fragments are aligned and warped, never placed
+        at their own coordinates)
+    dem : DemGrid, optional, the desired terrain in the arterials' CRS: adds the slope term
+        to the retrieval and returns the height field with the fragments' relief merged
+    style_polygons : array of Polygon, optional; ``style_database`` gives per polygon the
+        index (0-based) of the database to use inside it
+    n_best : int, random choice among this many best matches (1 = always the best)
+    seed : int, optional, seed of the random generator (same seed, same network)
+    max_level : int, optional, deepest street level to synthesise (default: as deep as
+        the databases go)
+    gamma : float in [0, 1], weight of the shape term against the slope term (eq. 4.2)
+    names : database names for the output (default: the file names without extension)
+    min_area, min_width : float, faces under these (m², m) are slivers, not queries
+    snap_tolerance : float, node snapping of the arterials (m, :func:`roads.clean_network`)
+    snap_distance : float, a warped street end snaps onto a query corner this close (m)
+    min_dangle : float, new dead-end edges shorter than this (m) are removed
+    max_scale : float, a fragment is inserted only when the query's linear size (square
+        root of the area) is within this factor of the fragment's
+    c : int, prefilter size (thesis: 10)
+    progress : Progress, optional (per query fragment; raises Canceled)
+
+    Returns
+    -------
+    SynthesisResult
+
+    Raises
+    ------
+    InputError
+        No database, absurd parameters, arterials that enclose no face.
+
+    References
+    ----------
+    Hartmann, thesis ch. 4.1.3 (Function 2).
+    """
+    progress = ensure(progress)
+    databases = list(databases)
+    if not databases:
+        raise InputError("at least one fragment database is needed")
+    if not (1 <= int(n_best) <= MAX_N_BEST) or int(n_best) != n_best:
+        raise InputError(f"N_BEST must be a whole number from 1 to {MAX_N_BEST}, got {n_best}")
+    n_best = int(n_best)
+    if not 0 <= gamma <= 1:
+        raise InputError(f"gamma must lie in [0, 1], got {gamma}")
+    if not max_scale >= 1:
+        raise InputError(f"the maximum scale factor must be at least 1, got {max_scale}")
+    if max_level is not None and (int(max_level) != max_level or max_level < 0):
+        raise InputError(f"the maximum level must be a whole number >= 0, got {max_level}")
+    if style_polygons is not None:
+        style_database = np.asarray(style_database, dtype=np.int64)
+        if len(style_database) != len(style_polygons):
+            raise InputError("one database index per style polygon is needed")
+        bad = (style_database < 0) | (style_database >= len(databases))
+        if bad.any():
+            raise InputError(f"style polygons name database {int(style_database[bad][0]) + 1}, "
+                             f"but only {len(databases)} database(s) are given")
+    names = [Path(d.path).stem for d in databases] if names is None else list(names)
+    rng = np.random.default_rng(seed)
+    t_start = time.perf_counter()
+
+    graph = _roads.clean_network(arterials, snap_tolerance=snap_tolerance,
+                                 min_dangle_length=0.0)
+    geometry = np.asarray(graph.geometry, dtype=object)
+    level = np.zeros(len(geometry), dtype=np.int64)
+    attrs = {"source_fragment": np.full(len(geometry), "arterial", dtype=object),
+             "database": np.full(len(geometry), "", dtype=object),
+             "fragment_id": np.full(len(geometry), -1, dtype=np.int64),
+             "query": np.full(len(geometry), -1, dtype=np.int64)}
+    try:
+        faces0, _ = block_faces(geometry, min_area, min_width)
+    except InputError:
+        faces0 = np.empty(0, dtype=object)
+    if len(faces0) == 0:
+        raise InputError("the arterials enclose no face: draw closed loops of streets "
+                         f"(each at least {min_area:g} m² and {min_width:g} m wide) to "
+                         "fill with fragments")
+    area = shapely.union_all(faces0)
+    base_level = [int(_db_levels(d).min()) if len(d) else 0 for d in databases]
+    levels_of = [set(int(x) for x in _db_levels(d)) for d in databases]
+    inserter = _Inserter(min_area, min_width, snap_distance)
+    heights = None if dem is None else np.array(dem.array, dtype=np.float64)
+    query_rows: List[dict] = []
+    stats: Dict = {"levels": {}}
+    query_id = 0
+    deepest = MAX_LEVELS if max_level is None else min(int(max_level), MAX_LEVELS)
+
+    for lvl in range(deepest):
+        usable = [lvl + base_level[i] in levels_of[i] for i in range(len(databases))]
+        if not any(usable):
+            break
+        t_level = time.perf_counter()
+        if lvl == 0:
+            faces = faces0
+        else:
+            try:
+                faces, _ = block_faces(geometry[level <= lvl], min_area, min_width)
+            except InputError:
+                break
+        if len(faces) == 0:
+            break
+        cur_dem = None if dem is None else DemGrid(heights, dem.geotransform)
+        relief = _query_relief(faces, cur_dem)
+        style = _style_index(faces, style_polygons, style_database, len(databases))
+        # candidates per face: (cost, db index, Retrieval, face index in it, candidate k)
+        options: List[list] = [[] for _ in range(len(faces))]
+        pooled = style_polygons is None and len(databases) > 1
+        for i, db in enumerate(databases):
+            if not usable[i]:
+                continue
+            sel = np.arange(len(faces)) if pooled else np.flatnonzero(style == i)
+            if not len(sel):
+                continue
+            ret = retrieve(db, faces[sel], lvl + base_level[i], cur_dem, gamma, c,
+                           None if relief is None else relief[sel])
+            for j, f in enumerate(sel):
+                for k in ret.ranked(j, n_best):
+                    options[f].append((float(ret.costs[j, k]), i, ret, j, int(k)))
+        new_geoms, new_attrs = [], []
+        relief_cells, relief_values, relief_labels = [], [], []
+        counts = dict(queries=len(faces), fragment=0, block=0, procedural=0, unsplit=0,
+                      too_small=0, no_candidate=0, rejected=0)
+        n_faces = len(faces)
+        for f, face in enumerate(faces):
+            progress.step((lvl + f / n_faces) / max(deepest, 1) * 0.95)
+            opts = sorted(options[f], key=lambda o: o[0])[:n_best]
+            row = dict(query=query_id, level=lvl, database="", fragment_id=-1, cost=np.nan,
+                       outcome="no_candidate", area_m2=float(face.area), n_rejected=0)
+            chosen = None
+            pieces = None
+            too_small = 0
+            for o in (opts[int(p)] for p in rng.permutation(len(opts))):
+                cost, i, ret, j, k = o
+                db = databases[i]
+                db_row = int(ret.rows[j, k])
+                ratio = face.area / max(float(db.table["area_m2"].iat[db_row]), 1e-9)
+                if not 1 / max_scale ** 2 <= ratio <= max_scale ** 2:
+                    row["n_rejected"] += 1
+                    too_small += ratio < 1
+                    continue
+                _, dtw = sc.dtw_path(ret.cost_matrices[j, k], int(ret.offsets[j, k]))
+                streets, on, ex_slivers = inserter.example(db, db_row)
+                if len(streets) == 0:
+                    chosen = (o, dtw)
+                    row.update(outcome="block")
+                    break
+                pieces, reason = inserter.insert(face, ret.samples[j],
+                                                 db.descriptors.samples[db_row], dtw,
+                                                 streets, on, ex_slivers)
+                if pieces is not None:
+                    chosen = (o, dtw)
+                    row.update(outcome="fragment")
+                    break
+                row["n_rejected"] += 1
+            if chosen is not None:
+                (cost, i, ret, j, k), dtw = chosen
+                db = databases[i]
+                db_row = int(ret.rows[j, k])
+                row.update(database=names[i], fragment_id=int(db.ids[db_row]), cost=cost)
+                if pieces is not None and row["outcome"] == "fragment":
+                    new_geoms.append(pieces)
+                    new_attrs.append((f"{names[i]}:{int(db.ids[db_row])}", names[i],
+                                      int(db.ids[db_row]), len(pieces), query_id))
+                if heights is not None:
+                    got = _relief_for_face(face, cur_dem, db, db_row, dtw, ret.samples[j])
+                    if got is not None:
+                        relief_cells.append(got[0])
+                        relief_values.append(got[1])
+                        relief_labels.append(np.full(len(got[0]), query_id))
+            elif opts and too_small == len(opts):
+                row.update(outcome="too_small")
+            elif opts:
+                split = procedural_split(face, min_area, min_width)
+                if len(split):
+                    row.update(outcome="procedural")
+                    new_geoms.append(split)
+                    new_attrs.append(("procedural", "", -1, len(split), query_id))
+                else:
+                    row.update(outcome="unsplit")
+            counts[row["outcome"]] += 1
+            counts["rejected"] += row["n_rejected"]
+            query_rows.append(row)
+            query_id += 1
+        if relief_cells:
+            cells = np.concatenate(relief_cells)
+            guidance = np.full(heights.size, np.nan)
+            guidance[cells] = np.concatenate(relief_values)
+            mask = np.zeros(heights.size, dtype=bool)
+            mask[cells] = True
+            labels = np.zeros(heights.size, dtype=np.int64)
+            labels[cells] = np.concatenate(relief_labels)
+            base = np.where(np.isfinite(heights), heights, np.nanmean(heights))
+            heights = poisson_blend(base, guidance.reshape(heights.shape),
+                                    mask.reshape(heights.shape), labels.reshape(heights.shape))
+        if new_geoms:
+            sizes = [a[3] for a in new_attrs]
+            add = np.concatenate(new_geoms)
+            geometry_all = np.concatenate([geometry, add])
+            level_all = np.concatenate([level, np.full(len(add), lvl + 1)])
+            attrs_all = {
+                "source_fragment": np.concatenate([attrs["source_fragment"], np.repeat(
+                    np.array([a[0] for a in new_attrs], dtype=object), sizes)]),
+                "database": np.concatenate([attrs["database"], np.repeat(
+                    np.array([a[1] for a in new_attrs], dtype=object), sizes)]),
+                "fragment_id": np.concatenate([attrs["fragment_id"], np.repeat(
+                    np.array([a[2] for a in new_attrs], dtype=np.int64), sizes)]),
+                "query": np.concatenate([attrs["query"], np.repeat(
+                    np.array([a[4] for a in new_attrs], dtype=np.int64), sizes)]),
+            }
+            geometry, src = _renode(geometry_all, level_all, attrs_all, lvl + 1, min_dangle)
+            level = level_all[src]
+            attrs = {k: v[src] for k, v in attrs_all.items()}
+        counts["seconds"] = time.perf_counter() - t_level
+        stats["levels"][lvl] = counts
+        progress.info(f"Level {lvl}: {counts['queries']} query fragments, "
+                      f"{counts['fragment']} filled from examples, {counts['block']} kept as "
+                      f"blocks, {counts['procedural']} split procedurally"
+                      + (f" ({counts['rejected']} warps rejected)" if counts["rejected"] else "")
+                      + ".")
+    keep = shapely.length(geometry) > 1e-6
+    geometry = geometry[keep]
+    table = pd.DataFrame({"level": level[keep],
+                          "source_fragment": attrs["source_fragment"][keep],
+                          "database": attrs["database"][keep],
+                          "fragment_id": attrs["fragment_id"][keep],
+                          "length_m": shapely.length(geometry)})
+    out_dem = None if dem is None else DemGrid(heights, dem.geotransform)
+    stats["seconds"] = time.perf_counter() - t_start
+    stats["n_queries"] = len(query_rows)
+    stats["area_km2"] = float(area.area) / 1e6
+    progress.step(1.0)
+    queries = pd.DataFrame(query_rows, columns=["query", "level", "database", "fragment_id",
+                                                "cost", "outcome", "area_m2", "n_rejected"])
+    return SynthesisResult(geometry, table.reset_index(drop=True), out_dem, queries, area, stats)

@@ -1,0 +1,1 @@
+"""Beyond one process: Dask partitions and the QGIS-free command line."""

@@ -1,0 +1,291 @@
+"""Command line without QGIS: district-scale batch runs, serial or on Dask.
+
+    PYTHONPATH=build/plugins .venv/bin/python -m urban_synthesis.plugin.scale.cli footprints \\
+        --blocks blocks.gpkg:blocks --db helsinki_blocks.gpkg --method transfer --seed 1 \\
+        --out footprints.gpkg --workers 2            # or --scheduler tcp://host:8786
+    ... cli gan --target area.gpkg:target --model streetgan_helsinki --seed 1 \\
+        --out roads.gpkg --workers 2
+    ... cli attributes --footprints fp.gpkg:footprints --examples Helsinki.osm.pbf:multipolygons \\
+        --roads fp.gpkg:roads --example-roads Helsinki.osm.pbf:lines --out buildings.gpkg \\
+        --workers 2
+
+Subcommands: ``footprints`` (footprints by example per block, :mod:`footprints`), ``gan``
+(StreetGAN road network: generator tiles on the workers, raster-to-graph once here,
+:mod:`streetgan`), ``attributes`` (height, levels, type, roof by example,
+:mod:`building_attribute_transfer`, partitions with a halo).
+``--workers 0`` runs in this process (the engine's own function); ``--workers N`` starts
+a local Dask cluster of N single-threaded worker processes; ``--scheduler`` connects to a
+running cluster instead. The result is the same in every case (:mod:`distributed`).
+Sources are read with pyogrio: a GeoPackage ``file:layer`` or ``file|layername=layer``, or
+PostGIS ``PG:dbname=... |layername=schema.table``.
+Exit status: 0 done, 2 bad input (the message names the layer or file), 1 other errors.
+"""
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import shapely
+
+from ..buildings import footprints
+from ..core.progress import InputError
+from ..retrieval import database
+from . import distributed
+
+__all__ = ["main", "build_parser"]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="urbansynth-batch",
+        description="Urban Synthesis batch runs without QGIS (serial or on Dask).")
+    sub = p.add_subparsers(dest="command", required=True)
+    f = sub.add_parser("footprints", help="fill city blocks with footprints by example "
+                       "(thesis ch. 5.1 transfer / 5.2 re-synthesis)")
+    f.add_argument("--blocks", required=True,
+                   help="target block polygons: file.gpkg:layer, file|layername=layer or "
+                        "'PG:... |layername=table' (a block_id field is kept when unique)")
+    f.add_argument("--roads", help="optional road centrelines near the blocks (their "
+                   "surface, dead ends included, stays free of buildings)")
+    f.add_argument("--db", action="append", required=True,
+                   help="block database GeoPackage from 'Build block database' (repeat for "
+                        "several: each block takes the best match of all)")
+    f.add_argument("--method", choices=footprints.METHODS, default="transfer")
+    f.add_argument("--seed", type=int, default=1)
+    f.add_argument("--street-width", type=float, default=footprints.STREET_WIDTH,
+                   help="full road width in m (default %(default)s)")
+    f.add_argument("--setback", type=float, default=0.0)
+    f.add_argument("--n-best", type=int, default=1,
+                   help="random choice among the n best example blocks")
+    f.add_argument("--min-example-buildings", type=int, default=1)
+    f.add_argument("--out", required=True, help="output GeoPackage (layer 'footprints')")
+    _cluster_args(f)
+
+    g = sub.add_parser("gan", help="StreetGAN road network over a target area (thesis ch. "
+                       "4.2): generator tiles on the workers, graph extraction here")
+    g.add_argument("--target", required=True, help="target area polygons (their union)")
+    g.add_argument("--model", default="streetgan_helsinki",
+                   help="shipped model name or .onnx file with its .json card")
+    g.add_argument("--seed", type=int, default=1)
+    g.add_argument("--tile", type=int, default=24, help="noise cells per tile")
+    g.add_argument("--cell-size", type=float, help="metres per pixel (default: the "
+                   "model's)")
+    g.add_argument("--out", required=True, help="output GeoPackage (layer 'roads')")
+    _cluster_args(g)
+
+    a = sub.add_parser("attributes", help="height, levels, type and roof of footprints "
+                       "from the most similar example buildings")
+    a.add_argument("--footprints", required=True, help="target footprint polygons")
+    a.add_argument("--examples", required=True,
+                   help="example buildings with heights or levels (OSM multipolygons, or "
+                        "height_m / levels / building_type / roof_shape fields)")
+    a.add_argument("--roads", help="roads around the footprints (with --example-roads)")
+    a.add_argument("--example-roads", help="roads around the examples")
+    a.add_argument("--k", type=int, default=9, help="candidates per footprint")
+    a.add_argument("--seed", type=int, default=1)
+    a.add_argument("--choice-mode", choices=("medoid", "random"), default="medoid")
+    a.add_argument("--min-height", type=float, default=0.0)
+    a.add_argument("--max-height", type=float, default=1000.0)
+    a.add_argument("--out", required=True, help="output GeoPackage (layer 'buildings')")
+    _cluster_args(a)
+    return p
+
+
+def _cluster_args(p):
+    p.add_argument("--workers", type=int, default=0,
+                   help="0 = in this process; N = local Dask cluster of N processes")
+    p.add_argument("--scheduler", help="address of a running Dask scheduler "
+                   "(tcp://host:8786); overrides --workers")
+    p.add_argument("--partitions", type=int, help="number of partitions (default 4 per "
+                   "worker; gan: one per tile)")
+    p.add_argument("--quiet", action="store_true")
+
+
+@contextlib.contextmanager
+def _client(args):
+    """A Dask client for --scheduler / --workers N (None for a serial run)."""
+    if args.workers < 0:
+        raise InputError("--workers must be 0 or more")
+    if not (args.scheduler or args.workers > 0):
+        yield None
+        return
+    from distributed import Client, LocalCluster
+
+    if args.scheduler:
+        client, cluster = Client(args.scheduler), None
+    else:
+        cluster = LocalCluster(n_workers=args.workers, threads_per_worker=1,
+                               processes=True, dashboard_address=None)
+        client = Client(cluster)
+    try:
+        yield client
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def _mode(client) -> str:
+    return "serial" if client is None else \
+        f"dask ({len(client.scheduler_info()['workers'])} workers)"
+
+
+def _run(args, serial, on_dask):
+    """``serial()``, or ``on_dask(client)`` with --workers / --scheduler; returns
+    (result, seconds, mode)."""
+    with _client(args) as client:
+        t0 = time.perf_counter()
+        result = serial() if client is None else on_dask(client)
+        return result, time.perf_counter() - t0, _mode(client)
+
+
+def _footprints(args) -> dict:
+    if args.n_best < 1:
+        raise InputError("--n-best must be at least 1")
+    blocks = distributed.read_blocks(distributed.parse_source(args.blocks))
+    roads = None
+    if args.roads:
+        roads = distributed.RoadIndex(distributed.read_lines(
+            distributed.parse_source(args.roads), blocks.work_crs))
+    examples = []
+    for k, path in enumerate(args.db):
+        name = Path(path).stem if len(args.db) == 1 else f"{Path(path).stem}_{k + 1}"
+        examples.append(footprints.prepare_examples(database.load_block_database(path), name,
+                                                    args.min_example_buildings))
+    job = distributed.FootprintJob(examples, roads, args.method, args.seed,
+                                   args.street_width, args.setback, args.n_best)
+    result, seconds, mode = _run(
+        args, lambda: distributed.footprints_serial(blocks, job),
+        lambda client: distributed.footprints_distributed(client, blocks, job,
+                                                          n_partitions=args.partitions))
+    n = distributed.write_footprints(args.out, result, blocks.work_crs, blocks.crs)
+    return {"mode": mode, "blocks": len(blocks), "footprints": n,
+            "seconds": round(seconds, 3), "out": str(args.out)}
+
+
+def _gan(args) -> dict:
+    from ..roads import streetgan
+
+    if args.tile is not None and args.tile < 1:
+        raise InputError("--tile must be at least 1 noise cell")
+    area, crs, work_crs = distributed.read_area(distributed.parse_source(args.target))
+    gen = streetgan.load_model(args.model)
+    result, seconds, mode = _run(
+        args, lambda: streetgan.synthesize(area, gen, args.seed, tile=args.tile,
+                                           cell_size=args.cell_size),
+        lambda client: distributed.gan_synthesize_distributed(
+            client, area, gen, args.seed, tile=args.tile, cell_size=args.cell_size))
+    n = distributed.write_lines(args.out, result.geometry,
+                                pd.DataFrame({"level": result.level.astype(np.int64)}),
+                                work_crs, crs, layer="roads")
+    return {"mode": mode, "pixels": result.stats["pixels"], "edges": n,
+            "generate_s": result.stats["generate_s"], "seconds": round(seconds, 3),
+            "out": str(args.out)}
+
+
+def _read_buildings(spec: str, work_crs: str):
+    """Example buildings (polygonal parts of valid geometry; OSM rows without a building
+    tag left out) and their attributes (:func:`building_attributes.building_attributes`)."""
+    from ..buildings import attributes as building_attributes
+
+    src = distributed.parse_source(spec)
+    df = distributed.read_layer(src)
+    if "building" in df.columns:
+        df = df[df.building.notna()]
+    df = df[df.geometry.notna()]
+    g = distributed._to_metric(df, work_crs)
+    g = shapely.make_valid(g)
+    g = np.array([shapely.union_all([p for p in shapely.get_parts(x)
+                                     if shapely.get_type_id(p) == 3]) for x in g], dtype=object)
+    ok = np.isin(shapely.get_type_id(g), (3, 6)) & ~shapely.is_empty(g)
+    df, g = df[ok], g[ok]
+    if len(df) == 0:
+        raise InputError(f"{src}: the layer holds no building polygon")
+    cols = set(df.columns)
+    attrs = building_attributes.building_attributes(
+        len(df), building=df["building"].to_numpy(dtype=object) if "building" in cols else None,
+        other_tags=df["other_tags"].to_numpy(dtype=object) if "other_tags" in cols else None,
+        tags={k: df[k].to_numpy(dtype=object) for k in ("amenity", "shop", "office",
+                                                        "roof_shape") if k in cols},
+        height=df["height_m"].to_numpy(dtype=object) if "height_m" in cols else None,
+        levels=df["levels"].to_numpy(dtype=object) if "levels" in cols else None)
+    if "building_type" in cols and "building" not in cols:
+        attrs["building_type"] = df["building_type"].to_numpy(dtype=object)
+    if "roof_shape" in cols:
+        attrs["roof_shape"] = df["roof_shape"].to_numpy(dtype=object)
+    return g, attrs, df.index.to_numpy(dtype=np.int64)
+
+
+def _read_roads(spec: str, work_crs: str):
+    """Road lines (drivable classes when OSM) and the arterials among them (the rule of
+    urbansynth:synthesizebuildings: level 0, else the arterial OSM classes)."""
+    from ..network import street_graph as roads
+
+    src = distributed.parse_source(spec)
+    df = distributed.read_layer(src)
+    df = df[df.geometry.notna()]
+    if len(df) == 0 or not set(shapely.get_type_id(df.geometry.values).tolist()) <= {1, 5}:
+        raise InputError(f"{src}: roads must be a non-empty line layer")
+    if "highway" in df.columns and df.highway.isin(roads.DRIVABLE_CLASSES).any():
+        df = df[df.highway.isin(roads.DRIVABLE_CLASSES)]
+    if "level" in df.columns:
+        art = (pd.to_numeric(df["level"], errors="coerce") == 0).to_numpy()
+    elif "highway" in df.columns:
+        art = df.highway.isin(roads.ARTERIAL_CLASSES).to_numpy()
+    else:
+        art = np.zeros(len(df), dtype=bool)
+    g = distributed._to_metric(df, work_crs)
+    return g, g[art]
+
+
+def _attributes(args) -> dict:
+    from ..buildings import attribute_transfer as bt
+
+    fp = distributed.read_footprints(distributed.parse_source(args.footprints))
+    ex, attrs, ex_ids = _read_buildings(args.examples, fp.work_crs)
+    rl = art = erl = eart = None
+    if args.roads:
+        rl, art = _read_roads(args.roads, fp.work_crs)
+    if args.example_roads:
+        erl, eart = _read_roads(args.example_roads, fp.work_crs)
+    job = distributed.AttributeJob(ex, attrs, ex_ids, rl, art, erl, eart, k=args.k,
+                                   seed=args.seed, min_height=args.min_height,
+                                   max_height=args.max_height, choice_mode=args.choice_mode)
+    result, seconds, mode = _run(
+        args, lambda: distributed.attributes_serial(fp, job),
+        lambda client: distributed.attributes_distributed(client, fp, job,
+                                                          n_partitions=args.partitions))
+    table = result.table.copy()
+    for name, kind in bt.OUTPUT_FIELDS:
+        if kind == "str":
+            table[name] = table[name].astype(object)
+    n = distributed.write_lines(args.out, fp.geometry, table, fp.work_crs, fp.crs,
+                                layer="buildings")
+    return {"mode": mode, "footprints": n, "donors": int(result.stats["n_donors"]),
+            "features": result.stats["features"], "seconds": round(seconds, 3),
+            "out": str(args.out)}
+
+
+COMMANDS = {"footprints": _footprints, "gan": _gan, "attributes": _attributes}
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        summary = COMMANDS[args.command](args)
+    except InputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    if not args.quiet:
+        print(json.dumps(summary))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
