@@ -158,9 +158,7 @@ class LayoutMetrics(AlgorithmBase):
         if not any(self.given(parameters, name) for name, _, _ in self.CANDIDATE):
             raise QgsProcessingException(
                 "No layer to measure: give at least one of Roads, Blocks, Parcels or Buildings.")
-        half_width = qgis_io.check_number(
-            self.parameterAsDouble(parameters, self.ROAD_HALF_WIDTH, context),
-            self.ROAD_HALF_WIDTH, 0.0, 100.0)
+        half_width = self.number(parameters, self.ROAD_HALF_WIDTH, context)
         landuse_field = self.parameterAsString(parameters, self.LANDUSE_FIELD, context)
         html_path = self.parameterAsFileOutput(parameters, self.OUTPUT_HTML, context)
 

@@ -12,11 +12,10 @@ from qgis.core import (
     QgsWkbTypes,
 )
 
-from ..plugin.network import blocks
-from ..plugin.network import street_graph as roads
 from ..plugin.parcels import subdivision as parcels
+from ..plugin.core.ids import as_numbers
 from ..plugin.qgis_glue import qgis_io
-from .common import AlgorithmBase, drivable_lines
+from .common import AlgorithmBase
 
 
 class SubdivideParcels(AlgorithmBase):
@@ -120,9 +119,7 @@ class SubdivideParcels(AlgorithmBase):
             "Recursive: a cut that would leave a lot without street frontage is not made "
             "(the lot stays larger). Any method: lots left without frontage are merged into "
             "a neighbour. Off: recursive makes inner lots (Scharl's deleteInnerLots off).")
-        self.add(QgsProcessingParameterNumber(
-            self.SEED, "Random seed", QgsProcessingParameterNumber.Integer, defaultValue=1,
-            minValue=0),
+        self.add_seed(
             "The same seed gives the same parcels; each block draws its own random numbers, "
             "so a block's parcels do not change when other blocks are added.")
         self.add(QgsProcessingParameterNumber(
@@ -164,8 +161,7 @@ class SubdivideParcels(AlgorithmBase):
                              (self.LOT_WIDTH, 0.0, self.MAX_WIDTH_LIMIT),
                              (self.IRREGULARITY, 0.0, 1.0),
                              (self.STREET_WIDTH, 0.0, self.MAX_WIDTH_LIMIT)):
-            number[name] = qgis_io.check_number(
-                self.parameterAsDouble(parameters, name, context), name, lo, hi)
+            number[name] = self.number(parameters, name, context)
         if number[self.MAX_AREA] <= number[self.MIN_AREA]:
             raise QgsProcessingException(
                 f"The maximum parcel area ({number[self.MAX_AREA]:g} m²) must be larger than "
@@ -177,8 +173,7 @@ class SubdivideParcels(AlgorithmBase):
             force_street_access=self.parameterAsBoolean(parameters, self.FORCE_STREET_ACCESS,
                                                         context))
         qgis_io.run_engine("Parameters", settings.validate)
-        seed = int(qgis_io.check_number(self.parameterAsInt(parameters, self.SEED, context),
-                                        self.SEED, 0))
+        seed = self.seed(parameters, context)
         street_width = number[self.STREET_WIDTH]
 
         if self.given(parameters, self.BLOCKS):
@@ -209,18 +204,7 @@ class SubdivideParcels(AlgorithmBase):
     def _blocks(self, parameters, context, feedback):
         frame = qgis_io.read_source(self, parameters, self.BLOCKS, context, feedback,
                                     kind="polygons", fields=["block_id"])
-        ids = None
-        if "block_id" in frame.attributes:
-            values = frame.attributes["block_id"].to_numpy(dtype=object)
-            try:
-                numbers = np.array([int(v) for v in values], dtype=np.int64)
-            except (TypeError, ValueError):
-                numbers = None
-            if numbers is not None and len(np.unique(numbers)) == len(numbers):
-                ids = numbers
-            else:
-                feedback.pushInfo(f"{frame.name}: block_id is not a unique whole number per "
-                                  "block; blocks are numbered 1..n in layer order instead.")
+        ids = self.block_ids(frame, feedback)
         feedback.pushInfo(f"{len(frame)} blocks read from {frame.name}; every block edge is "
                           "taken as a street.")
         feedback.setProgress(30)
@@ -228,14 +212,12 @@ class SubdivideParcels(AlgorithmBase):
 
     def _blocks_from_roads(self, parameters, context, feedback):
         width_field = self.parameterAsString(parameters, self.STREET_WIDTH_FIELD, context)
-        frame = qgis_io.read_source(
-            self, parameters, self.ROADS, context, feedback, kind="lines",
-            fields=[width_field, "highway", "other_tags"],
+        frame, road_class = self.drivable_roads(
+            parameters, self.ROADS, context, feedback, fields=[width_field],
             required_fields=[width_field] if width_field else ())
-        frame, road_class = drivable_lines(frame, None, set(roads.DRIVABLE_CLASSES), feedback)
         widths = None
         if width_field:
-            widths = np.array([_number(v) for v in frame.attributes[width_field]], dtype=float)
+            widths = as_numbers(frame.attributes[width_field])
             if (widths < 0).any():
                 raise QgsProcessingException(
                     f"Layer {frame.name}: {int((widths < 0).sum())} roads have a negative "
@@ -244,17 +226,7 @@ class SubdivideParcels(AlgorithmBase):
             if n_missing:
                 feedback.pushInfo(f"{frame.name}: {n_missing} roads have no width in "
                                   f"'{width_field}' and use the street width.")
-        graph = qgis_io.run_engine(
-            frame.name, roads.clean_network, frame.geometry, road_class, None, None,
-            merge_degree2=False, progress=qgis_io.progress_for(feedback, 5, 20))
-        extraction = qgis_io.run_engine(
-            frame.name, blocks.extract_blocks, graph,
-            progress=qgis_io.progress_for(feedback, 20, 30))
-        stats = extraction.stats
-        feedback.pushInfo(
-            f"{stats['n_blocks']} blocks from {stats['n_faces']} closed faces of the roads "
-            f"({stats['n_small']} too small and {stats['n_thin']} too thin dropped, as in "
-            "'Extract city blocks').")
+        graph, extraction = self.blocks_from_roads(frame, road_class, feedback, (5, 30))
         road_widths = None if widths is None else widths[graph.source]
         return (frame, extraction.geometry, extraction.table["block_id"].to_numpy(),
                 graph.geometry, road_widths)
@@ -278,11 +250,3 @@ class SubdivideParcels(AlgorithmBase):
         feedback.pushInfo(f"{stats['n_undesirable']} parcels are undesirable by Yang's "
                           "criteria (p_angle > 15° or p_area > 1.2).")
 
-
-def _number(value):
-    """A width value as a float; empty or non-numeric values are NaN (use the default)."""
-    try:
-        out = float(value)
-    except (TypeError, ValueError):
-        return float("nan")
-    return out

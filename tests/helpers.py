@@ -155,3 +155,24 @@ def sketch_cells(cell=250.0, n=4, seed=0):
         out.append(shapely.LineString([(x + rng.normal(0, 8), y) for y in ys]))
         out.append(shapely.LineString([(y, x + rng.normal(0, 8)) for y in ys]))
     return np.array(out, dtype=object)
+
+
+def same_footprints(a, b, tol: float = 0.0):
+    """None when two results hold the same footprints in the same order (WKB-equal, or
+    coordinates within ``tol``) with the same attributes; else what differs (two
+    ``footprints.FootprintResult``: the serial and the Dask run of tests/test_distributed.py)."""
+    import pandas as pd
+
+    if len(a.geometry) != len(b.geometry):
+        return f"{len(a.geometry)} vs {len(b.geometry)} footprints"
+    ga, gb = np.asarray(a.geometry, dtype=object), np.asarray(b.geometry, dtype=object)
+    same = shapely.to_wkb(ga) == shapely.to_wkb(gb) if tol == 0 else \
+        shapely.equals_exact(ga, gb, tolerance=tol)
+    if not np.all(same):
+        return f"{int((~np.asarray(same)).sum())} footprints differ in geometry"
+    ta, tb = a.table.reset_index(drop=True), b.table.reset_index(drop=True)
+    try:
+        pd.testing.assert_frame_equal(ta, tb, check_dtype=False)
+    except AssertionError as exc:
+        return f"attributes differ: {exc}"
+    return None

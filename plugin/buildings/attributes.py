@@ -37,7 +37,7 @@ from ..core.progress import InputError
 from ..network.street_graph import parse_other_tags
 
 __all__ = [
-    "STOREY_HEIGHT", "BUILDING_TYPES", "TYPE_OF_BUILDING_VALUE", "ATTRIBUTE_FIELDS",
+    "STOREY_HEIGHT", "BUILDING_TYPES", "TYPE_OF_BUILDING_VALUE", "ATTRIBUTE_FIELDS", "TAG_FIELDS",
     "parse_height", "parse_levels", "building_type", "building_attributes",
 ]
 
@@ -91,6 +91,10 @@ _GENERIC = {"yes", "true", "1", "building", "y", "unknown", "undefined", ""}
 #: Tags consulted, in order, when the ``building`` value is generic.
 _HINT_TAGS = ("building:use", "amenity", "shop", "office", "tourism", "craft", "industrial",
               "religion", "healthcare", "leisure")
+#: Every tag :func:`building_attributes` reads: the columns an OSM 'multipolygons' layer (or
+#: a cadastre) is read with when present.
+TAG_FIELDS = ("height", "building:height", "building:levels", "levels", "roof:shape") + \
+    _HINT_TAGS
 _HINT_DEFAULT = {"shop": "commercial", "office": "commercial", "craft": "industrial",
                  "industrial": "industrial", "religion": "religious",
                  "healthcare": "public"}

@@ -38,6 +38,7 @@ import pandas as pd
 import shapely
 from scipy import stats
 
+from ..core.geometry import minimum_rectangles
 from ..core.progress import InputError, Progress, ensure
 from ..network import blocks as _blocks
 from ..network.street_graph import RoadGraph, clean_network
@@ -572,7 +573,7 @@ def parcel_metrics(parcels, area=None, landuse=None,
     n = len(parcels)
     area_geom, area_m2, _ = _area(area, parcels)
     a = shapely.area(parcels)
-    long, short, _ = _blocks.minimum_rectangles(parcels)
+    long, short, _ = minimum_rectangles(parcels)
     with np.errstate(divide="ignore", invalid="ignore"):
         p_area = np.where(a > 0, long * short / a, np.nan)
     angles, owner = corner_angles(parcels, straight)

@@ -57,9 +57,9 @@ import shapely
 from scipy.spatial import cKDTree
 from shapely.geometry.polygon import orient
 
+from ..core.geometry import group_starts, minimum_rectangles
 from ..core.progress import InputError, Progress, ensure
 from ..measure import metrics as _metrics
-from ..network import blocks as _blocks
 
 __all__ = [
     "PARCEL_FIELDS", "DEFAULT_STREET_WIDTH", "DEFAULT_MAX_AREA", "DEFAULT_MIN_AREA",
@@ -255,12 +255,6 @@ def _snap(geoms):
     return shapely.set_precision(shapely.set_precision(geoms, _GRID), 0.0)
 
 
-def _group_starts(keys: np.ndarray) -> np.ndarray:
-    out = np.ones(len(keys), dtype=bool)
-    np.not_equal(keys[1:], keys[:-1], out=out[1:])
-    return out
-
-
 def _polygon_parts(geoms, min_area: float = _CRUMB) -> np.ndarray:
     """The Polygon parts (area > ``min_area``) of any geometries, as a flat array."""
     geoms = np.asarray(geoms, dtype=object).ravel()
@@ -370,7 +364,7 @@ def lot_quality(lots) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     if n == 0:
         return np.zeros(0), np.zeros(0), np.zeros(0, dtype=bool)
     area = shapely.area(lots)
-    length, width, _ = _blocks.minimum_rectangles(lots)
+    length, width, _ = minimum_rectangles(lots)
     with np.errstate(divide="ignore", invalid="ignore"):
         p_area = np.where(area > 0, length * width / area, np.nan)
         angles, owner = _metrics.corner_angles(lots)
@@ -451,7 +445,7 @@ def merge_into_neighbours(geoms, bad, max_rounds: int = 50):
         if len(i) == 0:
             break
         order = np.lexsort((-shared, i))
-        first = order[_group_starts(i[order])]
+        first = order[group_starts(i[order])]
         src, dst = i[first], j[first]
         for target in np.unique(dst):
             members = src[dst == target]
@@ -538,7 +532,7 @@ def shrink_blocks(blocks, half_width=DEFAULT_STREET_WIDTH / 2, roads=None,
         if len(bands):
             b_idx, r_idx = shapely.STRtree(bands).query(blocks, predicate="intersects")
             if len(b_idx):
-                starts = np.flatnonzero(_group_starts(b_idx))
+                starts = np.flatnonzero(group_starts(b_idx))
                 ends = np.append(starts[1:], len(b_idx))
                 for s, e in zip(starts, ends):  # one union per block: its own streets only
                     i = b_idx[s]
@@ -579,7 +573,7 @@ def _cut(lots: np.ndarray, angle: np.ndarray, t: np.ndarray, turn: np.ndarray):
     """
     k = len(lots)
     coords, idx = shapely.get_coordinates(lots, return_index=True)
-    starts = np.flatnonzero(_group_starts(idx))
+    starts = np.flatnonzero(group_starts(idx))
     u = np.column_stack([np.cos(angle), np.sin(angle)])
     nrm = np.column_stack([-u[:, 1], u[:, 0]])
     umin, umax = _projections(coords, idx, starts, u)
@@ -618,7 +612,7 @@ def _accept(parts, owner, side, k, settings: SubdivisionSettings, zone) -> np.nd
     """Which of ``k`` cuts are acceptable: both sides non-empty, every piece big, wide
     and (with forced street access) on the street."""
     area = shapely.area(parts)
-    _, width, _ = _blocks.minimum_rectangles(parts)
+    _, width, _ = minimum_rectangles(parts)
     good = (area >= settings.min_area) & (width >= settings.min_width)
     if settings.force_street_access and len(parts):
         good &= _frontage(parts, zone) >= settings.min_frontage
@@ -687,7 +681,7 @@ def split_recursive(block, settings: SubdivisionSettings,
         k = len(lots)
         if k == 0:
             break
-        _, _, axis = _blocks.minimum_rectangles(lots)
+        _, _, axis = minimum_rectangles(lots)
         axis = np.radians(axis)
         # one draw per lot and level, also when a later attempt wins: deterministic order
         shift = rng.uniform(-1.0, 1.0, k)
@@ -1143,7 +1137,7 @@ def split_skeleton(block, settings: SubdivisionSettings,
     if len(lots) == 0:
         return _polygon_parts([block])
     zone = _street_zone(block)
-    _, width, _ = _blocks.minimum_rectangles(lots)
+    _, width, _ = minimum_rectangles(lots)
     bad = (shapely.area(lots) < settings.min_area) | (width < settings.min_width) | \
           (_frontage(lots, zone) < settings.min_frontage)
     if bad.all():

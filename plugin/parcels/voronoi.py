@@ -33,6 +33,7 @@ import math
 import numpy as np
 import shapely
 
+from ..core.geometry import minimum_rectangle_corners
 from ..core.progress import InputError
 from . import subdivision as _parcels
 
@@ -71,8 +72,7 @@ def parcel_size(settings) -> tuple:
 
 def _obb(block):
     """Centre, unit main axis, its length and the width of the block's OBB."""
-    rect = shapely.oriented_envelope(block)
-    c = np.asarray(rect.exterior.coords)[:4]
+    c = minimum_rectangle_corners([block])[0]
     e1, e2 = c[1] - c[0], c[2] - c[1]
     l1, l2 = np.linalg.norm(e1), np.linalg.norm(e2)
     axis, length, width = (e1 / l1, l1, l2) if l1 >= l2 else (e2 / l2, l2, l1)

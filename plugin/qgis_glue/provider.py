@@ -27,7 +27,10 @@ ALGORITHMS = (
     ("tessellate_streets", "TessellateStreets"),
     ("synthesize_roads_gan", "SynthesizeRoadsGan"),
     ("raster_roads_to_vector", "RasterRoadsToVector"),
-    ("synthesize_buildings", "SynthesizeBuildings"),
+    ("synthesize_building_attributes", "SynthesizeBuildingAttributes"),
+    ("place_library_buildings", "PlaceLibraryBuildings"),
+    ("synthesize_part_buildings", "SynthesizePartBuildings"),
+    ("synthesize_buildings", "SynthesizeBuildings"),   # deprecated: the three above
     ("synthesize_roads_random_walk", "SynthesizeRoadsRandomWalk"),
     ("synthesize_footprints", "SynthesizeFootprints"),
     ("split_domain", "SplitDomain"),
