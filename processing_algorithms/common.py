@@ -11,12 +11,9 @@ from qgis.core import (
 from qgis.PyQt.QtGui import QIcon
 
 from ..plugin.qgis_glue import qgis_io
+from ..plugin.qgis_glue.toolbox import GROUPS
 
 ICON = Path(__file__).resolve().parent.parent / "resources" / "icons" / "urbansynth.svg"
-
-
-#: Toolbox groups: id -> name.
-GROUPS = {"analysis": "Analysis", "databases": "Example databases", "synthesis": "Synthesis"}
 
 
 class AlgorithmBase(QgsProcessingAlgorithm):
