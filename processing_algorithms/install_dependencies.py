@@ -38,9 +38,6 @@ class InstallDependencies(QgsProcessingAlgorithm):
     def createInstance(self):  # noqa: N802
         return type(self)()
 
-    def flags(self):
-        return super().flags() | QgsProcessingAlgorithm.FlagHideFromModeler
-
     def shortHelpString(self):  # noqa: N802
         return (
             "Installs the Python packages the Urban Synthesis tools need (shapely 2, pandas, "
