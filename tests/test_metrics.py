@@ -232,7 +232,7 @@ def test_compare_rows():
     dist = self_table[self_table.statistic != "value"]
     assert (dist.wasserstein == 0).all() and (dist.ks_stat == 0).all()
     # kinds come in a fixed order, distributions before scalars
-    assert list(dict.fromkeys(table.kind)) == ["layout", "roads", "blocks"]
+    assert list(dict.fromkeys(table.kind)) == ["layout", "invariants", "roads", "blocks"]
     alone = M.compare(cand)
     assert alone.example.isna().all() and (alone.n_example == 0).all()
     # bearings are axial: 175 and 5 degrees average to 0, not 90
@@ -240,6 +240,78 @@ def test_compare_rows():
     assert bearing.statistic == "axial_mean"
     assert M._axial_mean(np.array([175.0, 5.0])) == pytest.approx(0.0, abs=1e-9) or \
         M._axial_mean(np.array([175.0, 5.0])) == pytest.approx(180.0)
+
+
+def test_counts_agree_with_plain_noding_and_polygonising():
+    """With snapping and the sliver filter off, the counts are those of shapely.node and
+    shapely.polygonize on real, dirty OSM lines (footways, bridges and all)."""
+    from helpers import _helsinki_lines
+
+    lines = _helsinki_lines().to_crs(32635).geometry.values
+    lines = shapely.get_parts(lines[shapely.get_type_id(lines) == 1])
+    r = M.compute_layout_metrics(roads=lines, snap_tolerance=0.0, min_block_area=0.0,
+                                 min_block_width=0.0)
+    pieces = shapely.get_parts(shapely.node(shapely.multilinestrings(lines)))
+    pieces = pieces[shapely.length(pieces) > 0]          # one zero-length OSM way
+    ends = np.concatenate([shapely.get_coordinates(shapely.get_point(pieces, i))
+                           for i in (0, -1)])
+    _, degree = np.unique(ends[:, 0] + 1j * ends[:, 1], return_counts=True)
+    faces = shapely.get_parts(shapely.polygonize(pieces))
+    km2 = r.scalar("layout", "area_km2")
+    assert r.scalar("roads", "dead_ends_per_km2") * km2 == pytest.approx((degree == 1).sum())
+    assert r.scalar("roads", "intersections_per_km2") * km2 == pytest.approx((degree >= 3).sum())
+    assert r.scalar("blocks", "count") == len(faces) > 1000
+    assert r.scalar("roads", "street_length_km_per_km2") * km2 == pytest.approx(
+        shapely.length(pieces).sum() / 1000)
+    # the defaults drop the faces under 400 m² and thinner than 8 m, and say so
+    d = M.compute_layout_metrics(roads=lines)
+    assert d.scalar("blocks", "count") < 0.7 * len(faces)
+    assert any("faces under 400 m²" in n and "dropped as slivers" in n for n in d.notes)
+
+
+def test_drivable_only_and_edge_dead_ends():
+    from helpers import _helsinki_lines
+
+    df = _helsinki_lines().to_crs(32635)
+    df = df[shapely.get_type_id(df.geometry.values) == 1]
+    every = M.compute_layout_metrics(roads=df.geometry.values, road_class=df.highway.values)
+    assert any("non-drivable" in n and "counted" in n for n in every.notes)
+    cars = M.compute_layout_metrics(roads=df.geometry.values, road_class=df.highway.values,
+                                    drivable_only=True)
+    assert cars.scalar("roads", "street_length_km_per_km2") < \
+        0.5 * every.scalar("roads", "street_length_km_per_km2")
+    with pytest.raises(InputError, match="road class"):
+        M.compute_layout_metrics(roads=df.geometry.values, drivable_only=True)
+    # a grid clipped to a box: its 8 cut ends lie on the box's edge
+    box = shapely.box(-30, -30, 330, 330)
+    clipped = shapely.intersection(grid(4, 100.0, overhang=80.0), box)
+    plain = M.compute_layout_metrics(roads=clipped, area=box)
+    assert plain.scalar("roads", "dead_ends_per_km2") * 0.36 ** 2 == pytest.approx(16)
+    assert plain.scalar("roads", "dead_end_share") == pytest.approx(16 / 32)
+    edge = M.compute_layout_metrics(roads=clipped, area=box, edge_distance=1.0)
+    assert edge.scalar("roads", "dead_ends_per_km2") == 0
+    assert edge.scalar("roads", "degree4_share") == 1.0     # the 16 crosses
+    assert edge.scalar("invariants", "dead_end_share") == 0
+
+
+def test_invariants_are_reported():
+    arterials = grid(2, 300.0)                      # a 300 m square
+    streets = np.array([shapely.LineString([(150, -20), (150, 320)]),     # crosses twice
+                        shapely.LineString([(0, 100), (300, 100)])], dtype=object)
+    r = M.compute_layout_metrics(roads=np.concatenate([arterials, streets]),
+                                 given_roads=arterials)
+    assert r.scalar("invariants", "crossings_given") == 2
+    assert r.scalar("invariants", "crossings_synthesised") == 1
+    assert r.scalar("invariants", "violations") >= 3
+    assert any("2 of 6 road lines are not on the 4 given roads" in n for n in r.notes)
+    # a grid of long lines drawn over each other: 4 crossings inside; noded, it is planar
+    assert M.compute_layout_metrics(roads=grid(4)).scalar("invariants", "violations") == 4
+    noded = shapely.get_parts(shapely.node(shapely.multilinestrings(grid(4))))
+    ok = M.compute_layout_metrics(roads=noded)
+    assert ok.scalar("invariants", "violations") == 0
+    table = M.compare(r, ok)
+    row = table[(table.kind == "invariants") & (table.metric == "dead_end_share")].iloc[0]
+    assert row.example == 0 and row.candidate > 0
 
 
 def test_study_area_counts_only_what_is_inside():

@@ -40,13 +40,14 @@ from scipy import stats
 
 from ..core.progress import InputError, Progress, ensure
 from ..network import blocks as _blocks
-from ..network.street_graph import RoadGraph, clean_network
+from ..network import invariants as _invariants
+from ..network.street_graph import DRIVABLE_CLASSES, RoadGraph, clean_network
 
 __all__ = [
     "Scalar", "Distribution", "MetricsResult", "COMPARISON_COLUMNS",
     "road_graph", "road_metrics", "block_faces", "block_metrics", "parcel_metrics",
     "footprint_metrics", "compute_layout_metrics", "compare", "two_sample",
-    "corner_angles", "street_bearings", "intersection_angles",
+    "corner_angles", "street_bearings", "intersection_angles", "network_invariants",
     "orientation_entropy", "landuse_category",
 ]
 
@@ -60,6 +61,9 @@ STRAIGHT_ANGLE = 170.0
 INSIDE_TOLERANCE = 1e-3
 #: Overlaps smaller than this (m²) are numerical noise of shared edges, not overlaps.
 OVERLAP_EPS = 1e-2
+#: A node this close (m) to the study-area boundary is on it (the cut end of a clipped street);
+#: graph nodes are rounded to the millimetre, which can put an extreme node just outside.
+ON_EDGE = 1e-3
 
 #: Columns of :func:`compare`, in order, with the type of each.
 COMPARISON_COLUMNS = (
@@ -70,7 +74,7 @@ COMPARISON_COLUMNS = (
     ("n_candidate", "int"), ("n_example", "int"),
 )
 
-_KIND_ORDER = ("layout", "roads", "blocks", "parcels", "buildings")
+_KIND_ORDER = ("layout", "invariants", "roads", "blocks", "parcels", "buildings")
 
 
 # --------------------------------------------------------------------------- results
@@ -267,7 +271,8 @@ def road_graph(lines, snap_tolerance: float = 0.5, z_layer=None,
             raise InputError(f"{len(z_layer)} vertical layers for {len(kept)} road lines")
         z_layer = z_layer[kept]
     return clean_network(lines, z_layer=z_layer, snap_tolerance=snap_tolerance,
-                         min_dangle_length=0.0, merge_degree2=True, progress=progress)
+                         min_dangle_length=0.0, merge_degree2=True,
+                         duplicate_tolerance=snap_tolerance, progress=progress)
 
 
 def street_bearings(lines, step: float = 10.0) -> Tuple[np.ndarray, np.ndarray]:
@@ -354,6 +359,7 @@ def intersection_angles(graph: RoadGraph, bearing_length: float = 10.0) -> np.nd
 
 
 def road_metrics(roads, area=None, snap_tolerance: float = 0.5, bearing_length: float = 10.0,
+                 edge_distance: float = 0.0,
                  progress: Optional[Progress] = None) -> MetricsResult:
     """Street network measures of DESIGN.md and Yang 2013's street metrics.
 
@@ -367,6 +373,12 @@ def road_metrics(roads, area=None, snap_tolerance: float = 0.5, bearing_length: 
     bearing_length : float
         Length (m) of the start of each street that gives its direction at a node, and of
         the pieces whose bearings sample the streets (:func:`street_bearings`).
+    edge_distance : float
+        Nodes closer than this (m) to the boundary of the study area do not count in the
+        densities and shares: where a network was clipped to the area, its streets end on
+        the boundary without being dead ends. 0 (default) counts every node inside the area
+        or on its boundary (within a micrometre), as a plain count of the clipped network
+        does. Needs a study polygon (or the default hull).
 
     Returns
     -------
@@ -375,7 +387,9 @@ def road_metrics(roads, area=None, snap_tolerance: float = 0.5, bearing_length: 
         degree != 2), ``node_degree``, ``intersection_angle`` (degrees), ``street_bearing``
         (degrees, folded into [0, 180), one per piece of ``bearing_length`` m, so weighted by
         length); scalars ``edges``, ``nodes``, ``dead_ends_per_km2`` (s_d, degree 1),
-        ``intersections_per_km2`` (s_i, degree >= 3), ``street_length_km_per_km2`` (s_l),
+        ``intersections_per_km2`` (s_i, degree >= 3), ``dead_end_share``,
+        ``degree3_share``, ``degree4_share`` (degree 1, 3 and >= 4 among the counted nodes
+        of degree != 2), ``street_length_km_per_km2`` (s_l),
         ``orientation_entropy`` (nats, Boeing 2019, length-weighted), ``orientation_order``
         (phi = 1 - ((H - ln 4) / (ln 36 - ln 4))^2: 1 for a grid, 0 for uniform bearings).
 
@@ -402,9 +416,16 @@ def road_metrics(roads, area=None, snap_tolerance: float = 0.5, bearing_length: 
     km2 = area_m2 / M2_PER_KM2
     deg = graph.degree
     length = graph.length
-    # densities count the network inside the area (all of it for the default hull)
-    node_in = (np.ones(len(graph.nodes), dtype=bool) if area_geom is None else
-               shapely.intersects_xy(area_geom, graph.nodes[:, 0], graph.nodes[:, 1]))
+    if not (np.isfinite(edge_distance) and edge_distance >= 0):
+        raise InputError("the edge distance must be a non-negative number")
+    # densities count the network inside the area (all of it for the default hull); nodes on
+    # the boundary count unless edge_distance says they are clip ends
+    node_in = np.ones(len(graph.nodes), dtype=bool)
+    if area_geom is not None:
+        pts = shapely.points(graph.nodes)
+        node_in = shapely.dwithin(area_geom, pts, ON_EDGE)
+        if edge_distance > 0:
+            node_in &= ~shapely.dwithin(shapely.boundary(area_geom), pts, edge_distance)
     length_in = length.copy()
     if area_geom is not None:
         cut = ~shapely.within(graph.geometry, area_geom)
@@ -428,6 +449,14 @@ def road_metrics(roads, area=None, snap_tolerance: float = 0.5, bearing_length: 
                    "Intersections per km² (s_i)")
     res.add_scalar("roads", "dead_ends_per_km2", ((deg == 1) & node_in).sum() / km2, "1/km²",
                    "Dead ends per km² (s_d)")
+    ends = node_in & (deg != 2)
+    n_ends = max(int(ends.sum()), 1)
+    res.add_scalar("roads", "dead_end_share", ((deg == 1) & ends).sum() / n_ends, "",
+                   "Share of dead ends (degree 1)")
+    res.add_scalar("roads", "degree3_share", ((deg == 3) & ends).sum() / n_ends, "",
+                   "Share of 3-way junctions")
+    res.add_scalar("roads", "degree4_share", ((deg >= 4) & ends).sum() / n_ends, "",
+                   "Share of 4-way (and more) junctions")
     res.add_scalar("roads", "orientation_entropy", h, "nats", "Orientation entropy")
     res.add_scalar("roads", "orientation_order", 1.0 - ((h - h_grid) / (h_max - h_grid)) ** 2, "",
                    "Orientation order φ")
@@ -441,21 +470,22 @@ def road_metrics(roads, area=None, snap_tolerance: float = 0.5, bearing_length: 
 
 def block_faces(roads, min_area: float = _blocks.MIN_BLOCK_AREA,
                 min_width: float = _blocks.MIN_BLOCK_WIDTH,
-                snap_tolerance: float = 0.5) -> np.ndarray:
+                snap_tolerance: float = 0.5, return_counts: bool = False):
     """City blocks as the faces of the road graph, as ``extractblocks`` makes them.
 
     Delegates to :func:`plugin.network.blocks.block_faces` (dead ends stay inside their block;
     faces under ``min_area`` m² or thinner than ``min_width`` m are slivers between dual
     carriageways and are dropped), so that a layout is measured on the same blocks the
     toolbox extracts. ``roads`` is an array of lines or a :class:`RoadGraph`; returns an
-    empty array when no street closes a face.
+    empty array when no street closes a face. With ``return_counts``, also the counts of
+    :func:`plugin.network.blocks.block_faces` (``n_faces``, ``n_small``, ``n_thin``).
     """
     graph = roads if isinstance(roads, RoadGraph) else road_graph(roads, snap_tolerance)
     try:
-        faces, _ = _blocks.block_faces(graph.geometry, min_area, min_width)
+        faces, counts = _blocks.block_faces(graph.geometry, min_area, min_width)
     except InputError:  # the roads close no face: no blocks, not an error here
-        return np.zeros(0, dtype=object)
-    return faces
+        faces, counts = np.zeros(0, dtype=object), dict(n_faces=0, n_small=0, n_thin=0)
+    return (faces, counts) if return_counts else faces
 
 
 def block_metrics(blocks, area=None) -> MetricsResult:
@@ -706,6 +736,45 @@ def footprint_metrics(footprints, blocks=None, roads=None, road_half_width: floa
     return res
 
 
+# --------------------------------------------------------------------------- invariants
+
+def network_invariants(roads, z_layer=None, given_roads=None, given_class=None,
+                       given_z_layer=None, area=None, edge_distance: float = 0.0,
+                       progress: Optional[Progress] = None) -> MetricsResult:
+    """The network invariants of a layout's roads as scalars of kind ``invariants``.
+
+    Runs :func:`plugin.network.invariants.check_network` on the roads that are not copies of
+    ``given_roads`` (:func:`plugin.network.invariants.new_streets`), against the given
+    roads; one scalar per check of :data:`plugin.network.invariants.CHECKS` (a count, or the
+    dead-end share) plus ``violations``, the total of the violation counts without the
+    dead-end share, which needs an example (:func:`compare` gives its relative difference).
+    """
+    res = MetricsResult()
+    roads = np.asarray(roads, dtype=object)
+    layer = None if z_layer is None else np.asarray(z_layer)
+    given = None
+    if given_roads is not None:
+        given = _as_array(given_roads, "given roads", 1)
+        new = _invariants.new_streets(roads, given)
+        res.notes.append(f"Invariants: {int(new.sum())} of {len(roads)} road lines are not on "
+                         f"the {len(given)} given roads and are checked against them.")
+        roads = roads[new]
+        layer = None if layer is None else layer[new]
+    area_geom = area if isinstance(area, shapely.Geometry) else None
+    check = _invariants.check_network(roads, given, given_class, area_geom,
+                                      given_layer=given_z_layer, synthesised_layer=layer,
+                                      edge_distance=edge_distance, progress=progress)
+    counts = check.counts()
+    for name, label, _ in _invariants.CHECKS:
+        res.add_scalar("invariants", name, counts[name], "", label)
+    v = check.violations()
+    v.pop("dead_end_share")
+    res.add_scalar("invariants", "violations", sum(v.values()), "",
+                   "Violations (all checks but the dead-end share)")
+    res.notes.append(f"Invariants: {check.summary()}")
+    return res
+
+
 # --------------------------------------------------------------------------- top level
 
 def compute_layout_metrics(roads=None, blocks=None, parcels=None, buildings=None, area=None,
@@ -713,6 +782,9 @@ def compute_layout_metrics(roads=None, blocks=None, parcels=None, buildings=None
                            snap_tolerance: float = 0.5, bearing_length: float = 10.0,
                            min_block_area: float = _blocks.MIN_BLOCK_AREA,
                            min_block_width: float = _blocks.MIN_BLOCK_WIDTH,
+                           road_class=None, drivable_only: bool = False,
+                           edge_distance: float = 0.0, given_roads=None, given_class=None,
+                           given_z_layer=None,
                            progress: Optional[Progress] = None) -> MetricsResult:
     """All measures of one layout, from whichever layers are given.
 
@@ -737,14 +809,33 @@ def compute_layout_metrics(roads=None, blocks=None, parcels=None, buildings=None
         See :func:`road_metrics`.
     min_block_area, min_block_width : float
         Road-graph faces smaller (m²) or thinner (m) than this are slivers, not blocks
-        (:func:`block_faces`).
+        (:func:`block_faces`); the notes count them. 0 and 0 keep every face, as a plain
+        ``shapely.polygonize`` of the noded roads does; the defaults (400 m², 8 m) drop the
+        traffic islands and dual-carriageway strips that ``extractblocks`` drops.
+    road_class : OSM ``highway`` value per road line, optional
+    drivable_only : bool
+        Keep only roads whose class is in :data:`street_graph.DRIVABLE_CLASSES` (no
+        footways, paths, service roads, tracks); needs ``road_class``. Default: every line
+        counts (a synthesis has no class); the notes say how many non-drivable lines count.
+    edge_distance : float
+        Nodes this close (m) to the study-area boundary are clip ends, not dead ends (see
+        :func:`road_metrics`); default 0 counts them like any node.
+    given_roads : array of lines, optional
+        The roads the layout was given (arterials, existing roads): the network invariants
+        (:func:`plugin.network.invariants.check_network`) check the layout's roads that are
+        not copies of them against them. Without given roads, the layout's roads are checked
+        on their own (crossings without junctions, connected components).
+    given_class, given_z_layer : OSM class and vertical layer per given road, optional
     progress : Progress, optional
 
     Returns
     -------
     MetricsResult
         kind ``layout`` scalar ``area_km2`` plus the results of :func:`road_metrics`,
-        :func:`block_metrics`, :func:`parcel_metrics` and :func:`footprint_metrics`.
+        :func:`block_metrics`, :func:`parcel_metrics` and :func:`footprint_metrics`, and with
+        roads the scalars of kind ``invariants``: one per check of
+        :data:`plugin.network.invariants.CHECKS` plus ``violations`` (their total; the
+        dead-end share is compared with an example by :func:`compare`).
 
     Raises
     ------
@@ -762,12 +853,31 @@ def compute_layout_metrics(roads=None, blocks=None, parcels=None, buildings=None
         raise InputError("land-use values need a parcel layer")
     res = MetricsResult()
     if roads is not None:
+        n_lines = len(np.asarray(roads, dtype=object).ravel()) \
+            if not isinstance(roads, shapely.Geometry) else 1
+        for name, values in (("vertical layers", road_z_layer), ("road classes", road_class)):
+            if values is not None and len(values) != n_lines:
+                raise InputError(f"{len(values)} {name} for {n_lines} road lines")
         roads, kept = _as_array(roads, "roads", 1, res.notes, return_mask=True)
         if road_z_layer is not None:
-            road_z_layer = np.asarray(road_z_layer)
-            if len(road_z_layer) != len(kept):
-                raise InputError(f"{len(road_z_layer)} vertical layers for {len(kept)} road lines")
-            road_z_layer = road_z_layer[kept]
+            road_z_layer = np.asarray(road_z_layer)[kept]
+        if road_class is not None:
+            road_class = np.asarray(road_class, dtype=object)[kept]
+            drivable = np.isin(np.asarray([str(c) for c in road_class], dtype=object),
+                               DRIVABLE_CLASSES)
+            if drivable_only:
+                if not drivable.any():
+                    raise InputError("no road line has a drivable highway class")
+                roads = roads[drivable]
+                road_z_layer = None if road_z_layer is None else road_z_layer[drivable]
+                res.notes.append(f"Roads: {int((~drivable).sum())} lines of non-drivable "
+                                 "classes (footways, paths, service roads ...) left out.")
+            elif not drivable.all():
+                res.notes.append(f"Roads: {int((~drivable).sum())} lines of non-drivable "
+                                 "classes (footways, paths, service roads ...) are counted "
+                                 "as streets.")
+        elif drivable_only:
+            raise InputError("drivable streets only needs a road class (highway) per line")
     blocks = None if blocks is None else _as_array(blocks, "blocks", 2, res.notes)
     if parcels is not None:
         parcels, kept = _as_array(parcels, "parcels", 2, res.notes, return_mask=True)
@@ -787,19 +897,27 @@ def compute_layout_metrics(roads=None, blocks=None, parcels=None, buildings=None
     if roads is not None:
         graph = road_graph(roads, snap_tolerance, road_z_layer, progress.sub(0.02, 0.5))
         res.extend(road_metrics(graph, area, bearing_length=bearing_length,
-                                progress=progress.sub(0.5, 0.6)))
+                                edge_distance=edge_distance, progress=progress.sub(0.5, 0.55)))
         res.notes.append(f"Road graph: {len(roads)} lines -> {graph.n_edges} street segments "
-                         f"between {len(graph.nodes)} nodes.")
+                         f"between {len(graph.nodes)} nodes"
+                         + (f"; nodes within {edge_distance:g} m of the study-area boundary "
+                            "are not counted" if edge_distance > 0 else "") + ".")
+        res.extend(network_invariants(roads, road_z_layer, given_roads, given_class,
+                                      given_z_layer, area_geom, edge_distance,
+                                      progress.sub(0.55, 0.6)))
     progress.step(0.6)
     if blocks is None and graph is not None:
-        faces = block_faces(graph, min_block_area, min_block_width)
+        faces, counts = block_faces(graph, min_block_area, min_block_width, return_counts=True)
+        dropped = (f" ({counts['n_small']} faces under {min_block_area:g} m² and "
+                   f"{counts['n_thin']} thinner than {min_block_width:g} m dropped as "
+                   "slivers)" if counts["n_faces"] > len(faces) else "")
         if len(faces):
             blocks = faces
-            res.notes.append(f"Blocks: {len(faces)} faces of the road graph (faces under "
-                             f"{min_block_area:g} m² or thinner than {min_block_width:g} m "
-                             "dropped as slivers).")
+            res.notes.append(f"Blocks: {len(faces)} of the {counts['n_faces']} faces of the "
+                             f"road graph{dropped}.")
         else:
-            res.notes.append("Blocks: the roads close no face, so there are no block metrics.")
+            res.notes.append(f"Blocks: the roads close no block{dropped}, so there are no "
+                             "block metrics.")
     if blocks is not None:
         res.extend(block_metrics(blocks, area))
     progress.step(0.7)

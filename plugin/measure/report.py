@@ -25,6 +25,7 @@ import numpy as np
 import pandas as pd
 
 from ..core.progress import Progress, ensure
+from ..network.invariants import CHECKS, DEAD_END_TOLERANCE
 from .metrics import Distribution, MetricsResult, compare
 
 __all__ = ["render_report", "write_report", "histogram_png", "rose_png"]
@@ -34,9 +35,13 @@ CANDIDATE_COLOR = "#e07b39"
 #: Scalars that DESIGN.md requires to be 0 in a synthesis: flagged when they are not.
 MUST_BE_ZERO = {("buildings", "overlap_area"), ("buildings", "overlapping_pairs"),
                 ("buildings", "outside_blocks"), ("buildings", "road_overlap_area"),
-                ("buildings", "road_overlap_count")}
-_KIND_TITLES = {"layout": "Layout", "roads": "Roads", "blocks": "Blocks",
-                "parcels": "Parcels", "buildings": "Building footprints"}
+                ("buildings", "road_overlap_count"), ("invariants", "violations")} | {
+    ("invariants", name) for name, _, is_violation in CHECKS
+    if is_violation and name != "dead_end_share"}
+#: Scalars flagged when they differ from the example's by more than this share.
+NEAR_EXAMPLE = {("invariants", "dead_end_share"): DEAD_END_TOLERANCE}
+_KIND_TITLES = {"layout": "Layout", "invariants": "Network invariants", "roads": "Roads",
+                "blocks": "Blocks", "parcels": "Parcels", "buildings": "Building footprints"}
 
 _CSS = """
 body { font-family: "Segoe UI", Helvetica, Arial, sans-serif; color: #222; margin: 2em auto;
@@ -212,6 +217,8 @@ def _scalar_table(rows: pd.DataFrame, has_example: bool, labels: Dict) -> str:
     for r in rows.itertuples(index=False):
         key = (r.kind, r.metric)
         warn = key in MUST_BE_ZERO and np.isfinite(r.candidate) and r.candidate > 0
+        warn |= bool(key in NEAR_EXAMPLE and np.isfinite(r.rel_diff)
+                     and abs(r.rel_diff) > NEAR_EXAMPLE[key])
         cells = [f"<td class='name'>{html.escape(labels.get(key, r.metric))}"
                  f" <small>({html.escape(r.metric)})</small></td>",
                  f"<td>{html.escape(r.unit or '')}</td>",
@@ -343,7 +350,9 @@ def render_report(candidate: MetricsResult, example: Optional[MetricsResult] = N
                 done += 1
                 progress.step(done / n_plots)
         out.append("<div class='grid'>" + "".join(figures) + "</div>")
-    out.append("<footer>Measures: DESIGN.md “Quality measures”; Yang et al. 2013, Table 1 "
+    out.append("<footer>Measures: DESIGN.md “Quality measures” (network invariants: every "
+               "crossing a junction, connected to the given roads, no street in a given "
+               "road's corridor, motorways met only at their junctions); Yang et al. 2013, Table 1 "
                "(p_angle, p_area, b_n, b_max/b_avg/b_min, s_l, s_i, s_d); Hartmann thesis ch. 4.2 "
                "(block area, compactness, aspect ratio); Boeing 2019 (orientation entropy)."
                "</footer></body></html>")
