@@ -292,9 +292,13 @@ class LayoutMetrics(AlgorithmBase):
                             f"{counting['edge_distance']:g} m of the study-area edge not "
                             f"counted; nodes snapped within {counting['snap_tolerance']:g} m")
         if html_path:
+            drawn = ("roads", "blocks", "parcels", "buildings")
+            maps = {"Layout": {k: cand_args[k] for k in drawn if k in cand_args}}
+            if example is not None:
+                maps["Example"] = {k: ex_args[k] for k in drawn if k in ex_args}
             qgis_io.run_engine("Report", report.write_report, html_path, candidate, example,
                                table, "Layout metrics", meta,
-                               progress=qgis_io.progress_for(feedback, 85, 100))
+                               progress=qgis_io.progress_for(feedback, 85, 100), maps=maps)
             results[self.OUTPUT_HTML] = html_path
         feedback.setProgress(100)
         return results
