@@ -59,7 +59,7 @@ bench: setup $(VENV)/.bench-installed
 # The plugin zip (top folder urban_synthesis/) holds what QGIS needs to run the plugin, taken
 # from the committed tree (git archive HEAD): no tests, example data, dev scripts or README
 # pictures. Uncommitted changes are not packaged (a warning says so).
-PACKAGE_FILES := __init__.py metadata.txt README.md plugin processing_algorithms resources \
+PACKAGE_FILES := __init__.py metadata.txt README.md requirements.txt plugin processing_algorithms resources \
 	$(shell git ls-files -- 'LICENSE*' 'COPYING*' 'ATTRIBUTION*' 2>/dev/null)
 PACKAGE_ZIP := build/dist/$(PLUGIN_NAME).zip
 

@@ -16,17 +16,15 @@ from qgis.core import (
 )
 from qgis.PyQt.QtGui import QIcon
 
-from ..plugin.network import blocks as block_rules
-from ..plugin.network import street_graph
 from ..plugin.core.ids import whole_ids
 from ..plugin.core.progress import Canceled, InputError
+from ..plugin.network import blocks as block_rules
+from ..plugin.network import street_graph
 from ..plugin.qgis_glue import outputs, qgis_io
+from ..plugin.qgis_glue.toolbox import GROUPS
 
 ICON = Path(__file__).resolve().parent.parent / "resources" / "icons" / "urbansynth.svg"
 
-
-#: Toolbox groups: id -> name.
-GROUPS = {"analysis": "Analysis", "databases": "Example databases", "synthesis": "Synthesis"}
 
 #: Seeds are 32-bit integers in QGIS (parameterAsInt): larger values would wrap silently.
 MAX_SEED = 2 ** 31 - 1
