@@ -63,7 +63,8 @@ def run_qgis_process(alg_id, params, timeout=300):
     """Run ``qgis_process.bin --json run urbansynth:<alg_id> -- K=V ...``.
 
     Returns (exit code, parsed JSON or None, stderr). The exit code must be 0: the
-    native-library crash of DESIGN.md shows up as 134/139 after the results were printed.
+    native-library crash (docs/ARCHITECTURE.md, "Native libraries") shows up as 134/139
+    after the results were printed.
     """
     args = [str(ROOT / "scripts" / "qgis-process"), "--json", "run", f"urbansynth:{alg_id}", "--"]
     for key, value in params.items():

@@ -122,7 +122,7 @@ def test_zip_installs_into_a_clean_profile(package, tmp_path):
     assert listing.returncode == 0, listing.stderr
     listed = {line.split()[0] for line in listing.stdout.splitlines()
               if line.strip().startswith("urbansynth:")}
-    # one algorithm per module of processing_algorithms/ (DESIGN.md's toolbox contract)
+    # one algorithm per module of processing_algorithms/ (docs/ARCHITECTURE.md's toolbox contract)
     modules = {PurePosixPath(n).stem for n in names
                if n.startswith(f"{TOP}/processing_algorithms/") and n.endswith(".py")}
     # deprecated algorithms (flagged so) run but are not listed: 'synthesizebuildings'

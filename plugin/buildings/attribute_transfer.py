@@ -35,7 +35,7 @@ References
 ----------
 Hartmann, S. (2017). Example-based urban modeling (thesis), ch. 4.1.2 (block database with
     building semantics), ch. 6 (building synthesis; FAR = floor area / ground area).
-DESIGN.md, "Real example data": OSM heights are sparse (165 of ~490 Helsinki buildings).
+docs/ARCHITECTURE.md, "Real example data": OSM heights are sparse (165 of ~490 Helsinki buildings).
 """
 from __future__ import annotations
 

@@ -4,7 +4,7 @@ The block database of Hartmann's thesis stores each block with its footprints an
 semantics (ch. 4.1.2: "optional semantics (... building density, building heights,
 footprints)"; ch. 5.1 places 3D buildings by an architectural style map, ch. 6
 synthesises buildings per footprint). Real attribute data is sparse and messy
-(DESIGN.md, "Real example data": 165 of Helsinki's ~490 buildings have
+(docs/ARCHITECTURE.md, "Real example data": 165 of Helsinki's ~490 buildings have
 ``building:levels``, 17 a ``height``; values such as ``"12.13 m"`` occur), so every
 building gets:
 
@@ -293,7 +293,7 @@ def building_attributes(n: int, building: Optional[Sequence] = None,
     References
     ----------
     Hartmann, thesis ch. 4.1.2 and 5.1 (block database with footprint semantics);
-    DESIGN.md, "Real example data" (165 of ~490 Helsinki buildings have levels).
+    docs/ARCHITECTURE.md, "Real example data" (165 of ~490 Helsinki buildings have levels).
 
     Examples
     --------

@@ -15,10 +15,10 @@ For each target block the most similar example block of a block database is retr
     new layout is composed per street segment by dynamic programming
     (:mod:`footprint_resynthesis`).
 
-Both end with :func:`legalise`, the hard guarantee of DESIGN.md: every output footprint
-lies inside its block and outside the road surface + setback, and no two footprints
-overlap (they keep at least 1 cm apart); what still conflicts is trimmed to the free
-space (kept when at least half of it remains) or dropped.
+Both end with :func:`legalise`, the hard guarantee of docs/ARCHITECTURE.md ("Quality
+measures"): every output footprint lies inside its block and outside the road surface +
+setback, and no two footprints overlap (they keep at least 1 cm apart); what still
+conflicts is trimmed to the free space (kept when at least half of it remains) or dropped.
 
 The per-block work :func:`synthesize_block` is a pure function of (block, databases,
 method, seed, block index, parameters), so blocks can be distributed over workers with

@@ -1,7 +1,7 @@
 """Layout quality and similarity metrics: roads, blocks, parcels and building footprints.
 
-Implements the "Quality measures" of DESIGN.md, which every synthesis uses to show that its
-result resembles its example:
+Implements the "Quality measures" of docs/ARCHITECTURE.md, which every synthesis uses to show
+that its result resembles its example:
 
 - roads: segment length, node degree, intersection angle and edge bearing distributions;
   dead ends, intersections and street length per km² (Yang et al. 2013, sec. 7, "street
@@ -11,7 +11,8 @@ result resembles its example:
 - parcels: p_n per km², p_angle, p_area, undesirable parcels, land-use shares l_s / l_r /
   l_p / l_o (Yang 2013, sec. 7 and Table 1);
 - footprints: coverage, overlap with each other and with the road surface, footprints not
-  inside one block, setback (DESIGN.md: overlaps and footprints outside blocks must be 0);
+  inside one block, setback (docs/ARCHITECTURE.md, "Quality measures": overlaps and
+  footprints outside blocks must be 0);
 - two-sample comparison of a candidate layout with its example: Wasserstein distance and
   Kolmogorov-Smirnov statistic per distribution, relative difference per scalar.
 
@@ -362,7 +363,7 @@ def intersection_angles(graph: RoadGraph, bearing_length: float = 10.0) -> np.nd
 def road_metrics(roads, area=None, snap_tolerance: float = 0.5, bearing_length: float = 10.0,
                  edge_distance: float = 0.0,
                  progress: Optional[Progress] = None) -> MetricsResult:
-    """Street network measures of DESIGN.md and Yang 2013's street metrics.
+    """Street network measures of docs/ARCHITECTURE.md and Yang 2013's street metrics.
 
     Parameters
     ----------
@@ -679,7 +680,7 @@ def footprint_metrics(footprints, blocks=None, roads=None, road_half_width: floa
         pairs of footprints), ``overlapping_pairs``, ``coverage`` (total footprint area in
         blocks / total block area), ``outside_blocks`` (footprints not inside one block, up
         to 0.1 % of their area), ``road_overlap_area`` (m²), ``road_overlap_count``.
-        DESIGN.md: overlaps and footprints outside blocks must be 0 in a synthesis.
+        docs/ARCHITECTURE.md: overlaps and footprints outside blocks must be 0 in a synthesis.
     """
     res = MetricsResult()
     fp = _as_array(footprints, "buildings", 2, res.notes)

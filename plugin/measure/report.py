@@ -34,7 +34,7 @@ __all__ = ["render_report", "write_report", "histogram_png", "rose_png", "map_pn
 
 EXAMPLE_COLOR = "#3b6fb6"
 CANDIDATE_COLOR = "#e07b39"
-#: Scalars that DESIGN.md requires to be 0 in a synthesis: flagged when they are not.
+#: Scalars that docs/ARCHITECTURE.md requires to be 0 in a synthesis: flagged when they are not.
 MUST_BE_ZERO = {("buildings", "overlap_area"), ("buildings", "overlapping_pairs"),
                 ("buildings", "outside_blocks"), ("buildings", "road_overlap_area"),
                 ("buildings", "road_overlap_count"), ("invariants", "violations")} | {
@@ -541,8 +541,8 @@ def render_report(candidate: MetricsResult, example: Optional[MetricsResult] = N
                 progress.step(done / n_plots)
         out.append("<div class='grid'>" + "".join(figures) + "</div>")
     out.append(GLOSSARY)
-    out.append("<footer>Measures: docs/ARCHITECTURE.md “Quality measures” (network invariants: every "
-               "crossing a junction, connected to the given roads, no street in a given "
+    out.append("<footer>Measures: docs/ARCHITECTURE.md “Quality measures” (network "
+               "invariants: every crossing a junction, connected to the given roads, no street in a given "
                "road's corridor, motorways met only at their junctions); Yang et al. 2013, Table 1 "
                "(p_angle, p_area, b_n, b_max/b_avg/b_min, s_l, s_i, s_d); Hartmann thesis ch. 4.2 "
                "(block area, compactness, aspect ratio); Boeing 2019 (orientation entropy)."

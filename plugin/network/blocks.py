@@ -11,7 +11,7 @@ bridges of the graph between two loops) lie inside a block and do not split it, 
 thesis. Every drivable edge bounds blocks whatever its vertical layer (the thesis's street
 graph is planar; bridges and tunnels of city streets are short).
 
-Real OSM makes artefact faces (DESIGN.md, "Real example data"): dual carriageways, slip
+Real OSM makes artefact faces (docs/ARCHITECTURE.md, "Real example data"): dual carriageways, slip
 roads and traffic islands close small or thin faces that are road surface, not blocks.
 A face is dropped when its area is under ``min_area`` or its mean width ``2 * area /
 perimeter`` (the width of a long strip) is under ``min_width``; the thesis does the same
@@ -21,7 +21,7 @@ Buildings and parcels are assigned to at most one block each: the block that hol
 largest share of their area, if that share is at least ``min_share`` (a half by default).
 Features outside every closed block (the extract is clipped, so many lie beyond the
 outermost street loop: only 62 % of Helsinki's buildings are inside a face closed by
-drivable roads, DESIGN.md) keep no block: ``block_id`` is missing and ``in_block`` False.
+drivable roads, docs/ARCHITECTURE.md) keep no block: ``block_id`` is missing and ``in_block`` False.
 They are kept, not deleted, so the caller decides what to do with them.
 
 Shape measures follow the thesis (ch. 4.2 evaluation): compactness = block area / area of
@@ -356,7 +356,7 @@ def block_faces(lines: Sequence, min_area: float = MIN_BLOCK_AREA,
     References
     ----------
     Hartmann, thesis ch. 4.1.2 and 5.1 (blocks are the minimal cycles of the street graph);
-    DESIGN.md, "Real example data" (slivers of dual carriageways and service roads).
+    docs/ARCHITECTURE.md, "Real example data" (slivers of dual carriageways and service roads).
 
     Examples
     --------
@@ -559,7 +559,7 @@ def extract_blocks(roads, buildings: Optional[Sequence] = None,
     References
     ----------
     Hartmann, thesis ch. 4.1.2 (blocks keep their dead-end streets) and ch. 5.1 (a block
-    is its boundary polygon and its footprints); DESIGN.md, "Real example data".
+    is its boundary polygon and its footprints); docs/ARCHITECTURE.md, "Real example data".
 
     Examples
     --------

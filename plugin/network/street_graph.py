@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
-from typing import Iterable, Optional, Sequence
+from typing import Optional, Sequence
 
 import numpy as np
 import pandas as pd
@@ -33,7 +33,8 @@ from ..core.progress import InputError, Progress, ensure
 
 __all__ = [
     "DRIVABLE_CLASSES", "ARTERIAL_CLASSES", "CLASS_RANK", "RoadGraph",
-    "drivable_and_arterial", "parse_other_tags", "vertical_layer", "class_rank", "clean_network", "graph_from_lines",
+    "drivable_and_arterial", "parse_other_tags", "vertical_layer", "class_rank",
+    "clean_network", "graph_from_lines",
 ]
 
 #: OSM highway classes kept by default: what cars drive on and what forms city blocks.
@@ -474,7 +475,3 @@ def _loops_start_at_their_node(merged: np.ndarray, g: RoadGraph, comp: np.ndarra
             ring = np.roll(xy, -at[0], axis=0)
             merged[c] = shapely.linestrings(np.vstack([ring, ring[:1]]))
     return merged
-
-
-def edges_to_lines(graph: RoadGraph) -> Iterable:
-    return graph.geometry

@@ -45,5 +45,6 @@ ALGORITHMS = (
 
 
 def algorithm_id(module: str) -> str:
-    """The algorithm id of a module: its name without underscores (DESIGN's contract)."""
+    """The algorithm id of a module: its name without underscores (docs/ARCHITECTURE.md,
+    "The toolbox contract")."""
     return module.replace("_", "")
