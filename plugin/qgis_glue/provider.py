@@ -32,6 +32,7 @@ ALGORITHMS = (
     ("synthesize_footprints", "SynthesizeFootprints"),
     ("split_domain", "SplitDomain"),
     ("synthesize_roads", "SynthesizeRoads"),
+    ("synthesize_aerial_image", "SynthesizeAerialImage"),
 )
 
 #: Processing models shipped with the provider (made by scripts/make_models.py).
