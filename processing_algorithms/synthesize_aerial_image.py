@@ -86,9 +86,7 @@ class SynthesizeAerialImage(AlgorithmBase):
             self.EXAMPLE_ROAD_WIDTH, "Example road width (m)", QgsProcessingParameterNumber.Double,
             defaultValue=8.0, minValue=0.1, maxValue=200.0),
             "Full width of the example's roads on the image.")
-        self.add(QgsProcessingParameterNumber(
-            self.SEED, "Random seed", QgsProcessingParameterNumber.Integer, defaultValue=1,
-            minValue=0),
+        self.add_seed(
             "Among the nearly best example parcels one is drawn per parcel (against "
             "repetition), and an example road per new road: the same seed, the same image.")
         self.add(QgsProcessingParameterNumber(
@@ -110,18 +108,12 @@ class SynthesizeAerialImage(AlgorithmBase):
         if image_layer is None:
             raise QgsProcessingException("The example image could not be loaded.")
         settings = aerial_image.ImageSettings(
-            pixel_size=qgis_io.check_number(self.parameterAsDouble(
-                parameters, self.PIXEL_SIZE, context), self.PIXEL_SIZE, 0.01, 100.0),
-            road_width=qgis_io.check_number(self.parameterAsDouble(
-                parameters, self.ROAD_WIDTH, context), self.ROAD_WIDTH, 0.0, 200.0),
-            example_road_width=qgis_io.check_number(self.parameterAsDouble(
-                parameters, self.EXAMPLE_ROAD_WIDTH, context), self.EXAMPLE_ROAD_WIDTH, 0.1, 200.0),
-            max_stretch=qgis_io.check_number(self.parameterAsDouble(
-                parameters, self.MAX_STRETCH, context), self.MAX_STRETCH, 1.0, 100.0),
-            scanlines=int(qgis_io.check_number(self.parameterAsInt(
-                parameters, self.SCANLINES, context), self.SCANLINES, 2, 1000)))
-        seed = int(qgis_io.check_number(self.parameterAsInt(parameters, self.SEED, context),
-                                        self.SEED, 0))
+            pixel_size=self.number(parameters, self.PIXEL_SIZE, context),
+            road_width=self.number(parameters, self.ROAD_WIDTH, context),
+            example_road_width=self.number(parameters, self.EXAMPLE_ROAD_WIDTH, context),
+            max_stretch=self.number(parameters, self.MAX_STRETCH, context),
+            scanlines=self.number(parameters, self.SCANLINES, context))
+        seed = self.seed(parameters, context)
         target = qgis_io.read_source(self, parameters, self.PARCELS, context, feedback,
                                      kind="polygons", fields=[], progress_range=(0, 5))
         roads = qgis_io.read_source(self, parameters, self.ROADS, context, feedback,
