@@ -18,7 +18,9 @@ Streamline-based splitting cuts a region along one streamline of its cross field
    - DIV: ``length^-p * sum |div f| ds`` with p = 0.9 (for a unit field the divergence is
      the derivative of its angle across the streamline);
    - DB: mean over the streamline of opt(distance to the boundary), opt(y) telling how well
-     y is a sum of template widths (exhaustive sums up to a threshold);
+     y is a sum of template widths (exhaustive sums up to a threshold); the distance is
+     taken along the streamline's normal on both sides (geometric mean of the two opt
+     values), so that the strips fit on either side of the new street;
    - DS: distance to the nearest singularity (a streamline near a singularity is
      preferred: it removes singularities from the sub-regions);
    - CT: continuity with existing street ends (4 m, 20 degrees): 1, 0.5 or 0.
@@ -40,13 +42,17 @@ import shapely
 from .cross_field import SINGULAR_NORM, CrossField
 
 __all__ = ["DIVERGENCE_P", "CONTINUITY_DIST", "CONTINUITY_ANGLE", "Candidates",
-           "seed_points", "trace_streamlines", "width_fit", "score_streamlines"]
+           "QUALITY_WEIGHTS", "seed_points", "trace_streamlines", "width_fit", "score_streamlines"]
 
 #: Exponent of the length normalisation of the divergence score (eq. 2).
 DIVERGENCE_P = 0.9
 #: Continuity thresholds: distance (m) and angle (degrees) to an existing street end.
 CONTINUITY_DIST = 4.0
 CONTINUITY_ANGLE = 20.0
+#: Weights lambda_1..4 of the normalised DIV, DB, DS and CT scores. The paper sets all to
+#: one and lets the user change them; here DB counts twice: the regions must be filled by
+#: strips of the template widths (see the README's notes on the Table 1 runs).
+QUALITY_WEIGHTS = (1.0, 2.0, 1.0, 1.0)
 
 
 @dataclass
@@ -244,7 +250,7 @@ def _resample(lines: np.ndarray, step: float):
 
 
 def score_streamlines(cands: Candidates, field: CrossField, region, opt, ends=None,
-                      step: float = 4.0):
+                      step: float = 4.0, weights=QUALITY_WEIGHTS):
     """Quality of each candidate (higher is better) and its four raw components.
 
     Parameters
@@ -286,10 +292,21 @@ def score_streamlines(cands: Candidates, field: CrossField, region, opt, ends=No
                       (da * db_).sum(axis=1)) / (2 * eps)
     div = np.bincount(owner, np.abs(dphi) * step, minlength=n) / \
         np.maximum(length, 1e-9) ** DIVERGENCE_P
-    # distance to the boundary explained by template widths
+    # distance to the boundary explained by template widths, on both sides: the
+    # boundary is found along the streamline's normal (a ray each way), so that the
+    # strips between the streamline and the boundary fit on the left and on the right
     boundary = shapely.boundary(region)
-    dist = shapely.distance(boundary, shapely.points(xy))
-    pointwise = opt(dist)
+    reach = float(np.hypot(*(np.subtract(*np.reshape(shapely.bounds(region), (2, 2)))))) + 1.0
+    pts = shapely.points(xy)
+    side = []
+    for sign in (1.0, -1.0):
+        rays = shapely.linestrings(np.stack([xy + sign * 0.01 * normal,
+                                             xy + sign * reach * normal], axis=1))
+        with np.errstate(invalid="ignore"):
+            hit = shapely.intersection(rays, boundary)
+        d = shapely.distance(pts, hit)
+        side.append(np.where(np.isfinite(d), d, shapely.distance(boundary, pts)))
+    pointwise = np.sqrt(opt(side[0]) * opt(side[1]))
     count = np.bincount(owner, minlength=n)
     dbs = np.bincount(owner, pointwise, minlength=n) / np.maximum(count, 1)
     # distance to singularities (smaller preferred)
@@ -314,7 +331,8 @@ def score_streamlines(cands: Candidates, field: CrossField, region, opt, ends=No
             ok = (d <= CONTINUITY_DIST) & (cosang >= np.cos(np.radians(CONTINUITY_ANGLE)))
             cont += ok.any(axis=1)
         ct = 1.0 - 0.5 * np.minimum(cont, 2)
-    qual = (1 - _norm(div)) + _norm(dbs) + (1 - _norm(ds)) + (1 - ct)
+    l1, l2, l3, l4 = weights
+    qual = l1 * (1 - _norm(div)) + l2 * _norm(dbs) + l3 * (1 - _norm(ds)) + l4 * (1 - ct)
     return qual, {"div": div, "db": dbs, "ds": ds, "ct": ct}
 
 
