@@ -107,6 +107,11 @@ class SplitSettings:
         always the best (the paper's comparison runs), larger T = more variety.
     repair_lots : bool
         Run the optional lot repair (:func:`repair_lots`, not in the paper); off by default.
+    outline_streets : bool
+        The region's outline is a street (a development bounded by roads, the paper's
+        boundary condition). False labels it "no street" (Yang Fig. 4 edge labels): no
+        street land is reserved along it and parcels back onto it (a town's edge against
+        fields or forest).
     """
 
     parcel_length: float = 30.0
@@ -117,6 +122,7 @@ class SplitSettings:
     max_regions: int = 2000
     choice_temperature: float = 0.3
     repair_lots: bool = False
+    outline_streets: bool = True
 
     def validate(self) -> "SplitSettings":
         for name in ("parcel_length", "parcel_width", "street_width"):
@@ -177,7 +183,8 @@ LIMITED_ACCESS = frozenset({"motorway", "motorway_link"})
 
 
 def prepare_domain(region, key_roads=None, key_areas=None, street_width: float = 15.0,
-                   key_road_classes=None, max_extension: float = 200.0):
+                   key_road_classes=None, max_extension: float = 200.0,
+                   outline_streets: bool = True):
     """Work regions, the fixed street lines and the key-area polygons.
 
     A key road that ends inside the region (a dangling street of a real network) is
@@ -201,7 +208,7 @@ def prepare_domain(region, key_roads=None, key_areas=None, street_width: float =
         work = shapely.difference(domain, keys)
     outline = shapely.get_parts(shapely.line_merge(shapely.boundary(work)))
     lines = list(outline)
-    kinds = ["outline"] * len(lines)
+    kinds = ["outline" if outline_streets else "edge"] * len(lines)
     no_access = None
     if key_roads is not None and len(key_roads):
         raw = np.asarray(key_roads, dtype=object).ravel()
@@ -306,7 +313,9 @@ class _Splitter:
         self.n_split = 0
         self.n_rejected = 0
         self.n_no_access = 0
-        self.no_access = None
+        self.no_access = None      # motorways: no junction
+        self.no_street = None      # no-street edges: no street land
+        self.no_frontage = None    # both: no parcel fronts on them
 
     def energies(self, region) -> Dict[str, float]:
         """Warp energy of every template on a region (Yang sec. 4.1): row templates are
@@ -317,8 +326,8 @@ class _Splitter:
         out = {t.name: _templates.fit_energy(region, t, s.parcel_length, s.parcel_width,
                                              s.street_width, shape)
                for t in self.lib if t.kind != "rows"}
-        parts = _parcels._polygon_parts([shapely.buffer(region, -s.street_width / 2,
-                                                        join_style="mitre")], 1.0)
+        parts = _parcels._polygon_parts([net_block(region, s.street_width, self.no_street)],
+                                        1.0)
         for t in self.lib:
             if t.kind != "rows":
                 continue
@@ -326,7 +335,15 @@ class _Splitter:
             if len(parts) == 1:
                 warp = _templates.warp_rows(parts[0], t, s.parcel_length, s.parcel_width,
                                             None, cut=False)
-            out[t.name] = warp.energy if warp is not None else math.inf
+            ok = warp is not None
+            if ok and self.no_frontage is not None:
+                # edge labels (Yang Fig. 4): a double strip needs a street on both long
+                # sides, a strip on one; a side mostly along a no-street edge or a
+                # motorway is no street
+                streets = [_street_share(side, self.no_frontage, s.street_width) > 0.5
+                           for side in warp.long_sides]
+                ok = sum(streets) >= t.rows
+            out[t.name] = warp.energy if ok else math.inf
         return out
 
     def pick_template(self, energies, exclude=()):
@@ -531,6 +548,41 @@ def road_network(roads, level, kind, stub: float = 1.0):
     return pieces[keep], level[src][keep], kind[src][keep], int(stubs.sum())
 
 
+def net_block(region, street_width: float, no_street=None):
+    """The land of a centre-line region left for parcels: the region less half a street
+    along every side that is a street. Sides on ``no_street`` lines (a region outline
+    labelled "no street") keep their land; the street bands end flat there.
+    """
+    edge = shapely.boundary(region)
+    if no_street is not None:
+        with np.errstate(invalid="ignore"):
+            edge = shapely.difference(edge, shapely.buffer(no_street, 0.01))
+    if shapely.is_empty(edge):
+        return region
+    zone = shapely.buffer(edge, street_width / 2, cap_style="flat", join_style="mitre")
+    with np.errstate(invalid="ignore"):
+        return shapely.difference(region, zone)
+
+
+def access_frontage(lots, region, street_width: float, no_access=None) -> np.ndarray:
+    """Length (m) of each lot's outline along a street of its centre-line region that
+    gives access: every side but the ``no_access`` lines (no-street edges, motorways)."""
+    lots = np.asarray(lots, dtype=object)
+    if len(lots) == 0:
+        return np.zeros(0)
+    edge = shapely.boundary(region)
+    if no_access is not None:
+        with np.errstate(invalid="ignore"):
+            edge = shapely.difference(edge, shapely.buffer(no_access, 0.01))
+    if shapely.is_empty(edge):
+        return np.zeros(len(lots))
+    band = shapely.buffer(edge, street_width / 2 + 0.05, cap_style="flat", join_style="mitre")
+    with np.errstate(invalid="ignore"):
+        inside = shapely.intersection(shapely.boundary(lots), band)
+    # a side leaving the street crosses the 5 cm band: to the decimetre, the rest is frontage
+    return np.round(np.maximum(shapely.length(inside) - 0.2, 0.0), 2)
+
+
 def _warp_distortion(regions, leaves, by_name, s: SplitSettings) -> float:
     """Sum of the warp energies of the row templates of ``leaves`` on ``regions``."""
     total = 0.0
@@ -544,6 +596,16 @@ def _warp_distortion(regions, leaves, by_name, s: SplitSettings) -> float:
                                     cut=False) if len(parts) == 1 else None
         total += warp.energy if warp is not None else 1.0
     return total
+
+
+def _street_share(side, no_frontage, street_width: float) -> float:
+    """Share of a block side (of the net block) that lies along an access street."""
+    line = shapely.LineString(side)
+    if line.length <= 0:
+        return 0.0
+    near = shapely.buffer(no_frontage, street_width / 2 + 1.0)
+    with np.errstate(invalid="ignore"):
+        return 1.0 - shapely.length(shapely.intersection(line, near)) / line.length
 
 
 def _blocks_rect(polys):
@@ -612,7 +674,8 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
         raise InputError("the templates hold no parcel template")
     rng = np.random.default_rng([int(seed), int(variation)])
     faces, fixed, fixed_kinds, key_polys, domain, no_access = prepare_domain(
-        region, key_roads, key_areas, s.street_width, key_road_classes)
+        region, key_roads, key_areas, s.street_width, key_road_classes,
+        outline_streets=s.outline_streets)
     work_area = float(shapely.area(domain))
     L, W, S = s.parcel_length, s.parcel_width, s.street_width
     splitter = _Splitter(lib, s, rng)
@@ -621,6 +684,10 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
     # ---- hierarchical splitting with backtracking
     t0 = time.perf_counter()
     splitter.no_access = no_access
+    edges = fixed[fixed_kinds == "edge"]
+    splitter.no_street = shapely.union_all(edges) if len(edges) else None
+    blocked = [g for g in (no_access, splitter.no_street) if g is not None]
+    splitter.no_frontage = shapely.union_all(blocked) if blocked else None
     search = _Search(splitter, by_name, s, work_area, progress)
     leaves: List[list] = []  # [region, template name or 'skeleton' / 'park', energies]
     split_lines: List[shapely.LineString] = []
@@ -698,7 +765,7 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
     n_inner = n_pocket = 0
     for k, (reg, name, _) in enumerate(leaves):
         progress.step(0.7 + 0.25 * k / max(len(leaves), 1))
-        shrunk = shapely.buffer(reg, -S / 2, join_style="mitre")
+        shrunk = net_block(reg, S, splitter.no_street)
         if key_road_zone is not None:
             shrunk = shapely.difference(shrunk, key_road_zone)
         for part in _parcels._polygon_parts([shrunk], 1.0):
@@ -710,8 +777,10 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
                 tmpl_all += [name] * len(lots)
                 front_all.append(np.full(len(lots), np.nan))
                 continue
-            zone_poly = street_area
-            front = _parcels.street_frontage(lots, zone_poly)
+            def frontage(lots_, reg=reg):
+                return access_frontage(lots_, reg, S, splitter.no_frontage)
+
+            front = frontage(lots)
             # lots without frontage, crumbs, and small misshapen end lots (the triangle
             # left where a strip meets a slanted street) join their neighbour
             # lots without frontage and crumbs join their neighbour (parcelling: every lot
@@ -722,7 +791,7 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
                 bad |= _parcels.lot_quality(lots)[2] & (area < 0.6 * L * W)
             if bad.any() and len(lots) > 1:
                 lots = _parcels._polygon_parts(_parcels.merge_into_neighbours(lots, bad)[0])
-                front = _parcels.street_frontage(lots, zone_poly)
+                front = frontage(lots)
             remnant = np.zeros(len(lots), dtype=bool)
             if s.repair_lots:
                 lots, front, remnant = repair_lots(lots, front, part, L, W)
@@ -768,10 +837,12 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
         "p_angle": p_angle, "p_area": p_area, "undesirable": bad})
 
     # roads
-    roads = list(fixed) + list(split_lines) + [g for g, _ in template_roads]
-    level = [LEVEL_KEY if k in ("key", "limited") else LEVEL_OUTLINE for k in fixed_kinds] + \
+    is_road = fixed_kinds != "edge"  # a no-street edge is no road
+    roads = list(fixed[is_road]) + list(split_lines) + [g for g, _ in template_roads]
+    level = [LEVEL_KEY if k in ("key", "limited") else LEVEL_OUTLINE
+             for k in fixed_kinds[is_road]] + \
         [LEVEL_SPLIT] * len(split_lines) + [LEVEL_TEMPLATE] * len(template_roads)
-    kind = [str(k) for k in fixed_kinds] + ["split"] * len(split_lines) + \
+    kind = [str(k) for k in fixed_kinds[is_road]] + ["split"] * len(split_lines) + \
         [k for _, k in template_roads]
     roads, level, kind, n_stubs = road_network(roads, level, kind)
     stats = {

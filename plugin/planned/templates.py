@@ -372,6 +372,8 @@ class WarpResult:
         template's four corners could not take: the selection energy (sec. 4.1).
     depth_scale : float
         Block depth / template depth.
+    long_sides : (ndarray, ndarray)
+        The two street sides the rows run along (for the edge labels).
     """
 
     lots: np.ndarray
@@ -379,6 +381,7 @@ class WarpResult:
     columns: int
     energy: float = 0.0
     depth_scale: float = 1.0
+    long_sides: tuple = ()
 
 
 def _project(line, pts: np.ndarray) -> np.ndarray:
@@ -500,7 +503,7 @@ def warp_rows(block, template: Template, length: float, width: float,
         cuts = [_extend(grid[:, j], 2.0) for j in range(1, m)]
         cuts += [_extend(grid[r, :], 2.0) for r in range(1, rows)]
         lots = _cut(block, cuts)
-    return WarpResult(lots, residual, m, energy, depth_scale)
+    return WarpResult(lots, residual, m, energy, depth_scale, (sides[0], sides[1]))
 
 
 #: A street side that turns by more than this (degrees) at a vertex bends there.
