@@ -14,6 +14,7 @@ from qgis.core import (
     QgsProcessingParameterFeatureSource,
     QgsProcessingParameterField,
     QgsProcessingParameterNumber,
+    QgsProcessingParameterRasterLayer,
     QgsProcessingParameterString,
     QgsWkbTypes,
 )
@@ -58,6 +59,8 @@ class SynthesizeBuildings(AlgorithmBase):
     MIN_SETBACK = "MIN_SETBACK"
     STREET_REACH = "STREET_REACH"
     MAX_ANGLE = "MAX_ANGLE"
+    DEM = "DEM"
+    MAX_PARCEL_SLOPE = "MAX_PARCEL_SLOPE"
     SEED = "SEED"
     SKELETON = "SKELETON"
     PARTS_LIBRARY = "PARTS_LIBRARY"
@@ -216,6 +219,17 @@ class SynthesizeBuildings(AlgorithmBase):
             defaultValue=building_bestfit.MAX_ANGLE, minValue=0.0, maxValue=90.0),
             "A facing side is at most this far from parallel to the street (Scharl: 30°).",
             advanced=True)
+        self.add(QgsProcessingParameterRasterLayer(
+            self.DEM, "Elevation model (best fit, optional)", optional=True),
+            "Best fit on terrain (Scharl ch. 6.2): each building goes down to the ground of its "
+            "lowest corner (base_z, sunk_m; footprints get Z) and parcels steeper than the "
+            "maximum parcel slope stay empty.")
+        self.add(QgsProcessingParameterNumber(
+            self.MAX_PARCEL_SLOPE, "Maximum parcel slope (%)", QgsProcessingParameterNumber.Double,
+            defaultValue=100 * building_bestfit.DEFAULT_MAX_PARCEL_SLOPE, minValue=0.0,
+            maxValue=1000.0),
+            "With a DEM: parcels whose fitted terrain plane is steeper than this get no "
+            "building (Scharl's maxParcelSlope).")
         self.add(QgsProcessingParameterNumber(
             self.SEED, "Random seed", QgsProcessingParameterNumber.Integer, defaultValue=1,
             minValue=0),
@@ -496,6 +510,9 @@ class SynthesizeBuildings(AlgorithmBase):
             min_setback=self._number(parameters, self.MIN_SETBACK, context, 0.0, 100.0),
             reach=self._number(parameters, self.STREET_REACH, context, 0.1, 1000.0),
             max_angle=self._number(parameters, self.MAX_ANGLE, context, 0.0, 90.0),
+            dem=self._dem(parameters, context, feedback, parcels),
+            max_parcel_slope=self._number(parameters, self.MAX_PARCEL_SLOPE, context,
+                                          0.0, 1000.0) / 100.0,
             progress=qgis_io.progress_for(feedback, 10, 90))
         s = result.stats
         feedback.pushInfo(f"{s['n_placed']} of {s['n_parcels']} parcels got a building; "
@@ -508,12 +525,27 @@ class SynthesizeBuildings(AlgorithmBase):
             values = pd.to_numeric(result.table[col], errors="coerce")
             numeric = values.notna().sum() == result.table[col].notna().sum()
             extra.append((col, "float" if numeric else "str"))
+        if s.get("too_steep"):
+            feedback.pushInfo(f"{s['too_steep']} parcels are steeper than the maximum parcel "
+                              "slope and stay empty.")
+        has_z = len(result.geometry) and bool(shapely.has_z(result.geometry).any())
         dest = qgis_io.write_sink(self, parameters, self.OUTPUT, context, result.geometry,
                                   result.table, building_bestfit.PLACEMENT_FIELDS + extra,
-                                  QgsWkbTypes.Polygon, parcels.source_crs, crs, feedback)
+                                  QgsWkbTypes.PolygonZ if has_z else QgsWkbTypes.Polygon,
+                                  parcels.source_crs, crs, feedback)
         qgis_io.style_output(context, dest, "buildings_by_height.qml")
         feedback.setProgress(100)
         return {self.OUTPUT: dest}
+
+    def _dem(self, parameters, context, feedback, frame):
+        """The DEM resampled to the parcels' working CRS, or None."""
+        layer = self.parameterAsRasterLayer(parameters, self.DEM, context)
+        if layer is None:
+            return None
+        x0, y0, x1, y1 = shapely.total_bounds(frame.geometry)
+        bounds = (x0 - 10, y0 - 10, x1 + 10, y1 + 10)
+        cell = qgis_io.raster_cell_size(layer, frame.crs, bounds, context)
+        return qgis_io.read_raster(layer, frame.crs, bounds, cell, feedback)
 
     # ----------------------------------------------------------------------- parts
 
