@@ -3,29 +3,35 @@
 Pipeline of :func:`split_domain` (one layout) and :func:`split_variations` (k layouts):
 
 1. **Constraints** (sec. 3): the region minus the key areas (parks, school, lake: kept
-   as parcels of their own land use) is cut by the key roads into sub-regions. Every
-   region outline (outer ring, holes, key areas, key roads) is taken as a street centre
-   line: the region is a development bounded by streets.
-2. **Hierarchical splitting** (sec. 3-5): a queue of regions; each region is replaced by
-   a template when one fits with energy under the threshold (:mod:`templates`,
-   template-based splitting preferred); otherwise it is split along a streamline of its
-   boundary-aligned cross field (:mod:`cross_field`, :mod:`streamlines`), drawn at
-   random by quality. A streamline whose sub-regions could hold no template (too thin) is
-   rejected and the next one drawn (backtracking of the split); a region that can be
-   neither matched nor split falls back to skeleton parcels (Vanegas et al. 2012, via
-   :func:`parcels.split_skeleton`) or, when too small for parcels, a park.
-3. **Backtracking for template counts**: templates over their ``max_count`` are
-   reassigned, at random, to the next best template of their region.
-4. **Global optimisation of the road mesh** (sec. 6, :mod:`mesh_optimisation`), then the
-   templates are warped again onto the optimised blocks (:func:`templates.warp_rows`).
-5. Parcels get their land use, street access and Yang's quality; :func:`table1` gives the
-   paper's Table 1 metrics through :mod:`metrics`. Undesirable lots (Yang's Fig. 12 test)
-   are repaired where a strip meets a slanted street or streets meet at an acute angle:
-   a lot of at least 0.6 of a template parcel keeps the largest rectangle standing on its
-   street edge (:func:`_front_rectangle`) and its wedges become pocket parks; a misshapen
-   lot smaller than a template parcel becomes a pocket park (the paper's fallback "places
-   a park" for what no template fills). Splits leaving a child that is a band thinner than
-   any template anywhere along it are rejected (morphological opening test).
+   as parcels of their own land use) is cut by the key roads into sub-regions. A key road
+   ending inside the region is continued straight to the next street (a dangle leaves a
+   slit no template fills). Region outlines count as streets (a development bounded by
+   roads) unless ``outline_streets`` is off: then they are "no street" edges (Fig. 4 edge
+   labels). Key roads of a motorway class take no junction and give no frontage.
+2. **Hierarchical splitting with backtracking** (sec. 3-5, :class:`_Search`): a region is
+   replaced by a template when one matches: row templates are warped onto it
+   (:func:`templates.warp_rows`, registration / regression) and their **warp energy**
+   (registration residual per corner / parcel width, plus the turn of region corners the
+   template cannot take) is under ``energy_threshold``; edge labels must agree (a double
+   strip needs a street on both long sides); drawn by probability x exp(-energy / 0.1).
+   Otherwise the region is split along a streamline of its cross field (:mod:`cross_field`
+   with a divergence term, :mod:`streamlines`: Delaunay seeds, RK2, the four quality
+   terms), drawn by quality; a split whose children could hold no template is rejected,
+   and when a child can be neither matched nor split the split is undone and another
+   streamline drawn (``MAX_TRIES`` per region, ``MAX_BACKTRACKS`` per layout; template
+   ``max_count`` limits are kept during the search). A region that fails everything
+   falls back to skeleton parcels (Vanegas et al. 2012) or, when small, a park.
+3. **Global optimisation of the road mesh** (sec. 6, :mod:`mesh_optimisation`): strip
+   fitting, fairness and closeness on the noded street mesh, junctions sliding along the
+   fixed roads, until converged; kept when it lowers the summed warp distortion of the
+   row templates (what the paper optimises for), then the templates are warped again.
+4. Parcels: lots without frontage and crumbs join their neighbours; a lot still without
+   frontage is an inner green (the paper's template with a private park). The optional
+   :func:`repair_lots` (off by default; not in the paper) cuts misshapen lots to the
+   rectangle on their street and makes the wedges pocket parks. :func:`table1` gives the
+   paper's Table 1 through :mod:`metrics`, counting every designed parcel, parks too.
+5. Streets: :func:`road_network` nodes every line at its junctions (snap-rounded) and
+   drops dangling pieces under 1 m (overshoot stubs).
 
 Nothing here imports QGIS. Geometry is metric; each variation draws from
 ``numpy.random.default_rng([seed, variation])``.

@@ -18,18 +18,25 @@ level-two row templates, which the paper draws but does not label in its text.
 
 Template-based splitting (:func:`fit_energy`, :func:`warp_rows`):
 
-* **Selection**: a region matches a template when its corners and widths agree: the
-  region's minimum rectangle gives its depth across the streets; the energy is the
-  log-distortion of the parcel depth plus the region's distortion from a rectangle
-  (p_area - 1) and its corner deviation (p_angle / 45). Templates with energy under a
-  threshold are drawn with probability template probability x exp(-energy / 0.1).
+* **Selection** (sec. 4.1, "the warping energy that is necessary to deform the template
+  region to the region"): a row template is warped onto the region (below) and scored by
+  its registration residual, the root mean square distance between the warped parcel
+  corners and each parcel's best registration in its allowed deformation class, divided
+  by the parcel width, plus the turn (radians) of the region's corners that the
+  template's four corners cannot take (:func:`region_frame`). A template whose depth
+  range or row length (``max_columns``) the region exceeds does not match. Spikes and
+  area templates keep the rectangle heuristic of :func:`fit_energy` (simplification).
+  Templates with energy under a threshold are drawn with probability template
+  probability x exp(-energy / 0.1).
 * **Hierarchical warping** of the row templates: level one chooses the number of parcels
   per row (Fig. 5) from the length of the region's street sides; level two warps the grid
   of parcel corners by the paper's alternating optimisation: *registration* of each
   parcel to its template rectangle by a similarity followed by a non-uniform scaling in
   its principal directions with bounded factors (the constrained affine class), then
   *regression*: every shared corner moves to the mean of its registered copies and corners
-  on the street sides are projected back onto them (alignment constraints); 30 iterations.
+  on the street sides are projected back onto them (alignment constraints), the four
+  corners stay on the region's corners and a corner nearest a bend of a street side
+  (> 8°) is pinned to the bend, so no parcel straddles one; 30 iterations.
   The arc-length initialisation is the paper's; the final cut lines split the exact
   (curved) block outline, so the parcels tile the block.
 
