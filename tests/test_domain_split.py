@@ -128,7 +128,8 @@ def test_library_file_matches_the_generator(tmp_path):
     path = templates.write_library(tmp_path / "lib.json")
     assert json.loads(path.read_text()) == shipped
     labels = {t.name: t.label for t in templates.load_library()}
-    assert labels == {"parcel_strip": "L", "double_strip": "D", "spike": "S", "park": "A"}
+    assert labels == {"parcel_strip": "L", "double_strip": "D", "spike": "S", "loop": "O",
+                      "park": "A"}
     bad = tmp_path / "bad.json"
     bad.write_text("{not json")
     with pytest.raises(InputError, match="cannot be read"):
@@ -350,6 +351,35 @@ def test_spike_template_makes_a_cul_de_sac_with_street_access():
     assert on_road.sum() < 1e-6
     # every lot fronts the block's streets or the cul-de-sac
     assert (parcels.street_frontage(lots, shapely.union_all(lots)) >= parcels.MIN_FRONTAGE).all()
+
+
+def test_loop_template_makes_a_loop_street_with_lots_on_both_sides():
+    from urban_synthesis.plugin.parcels import subdivision as parcels
+
+    centre = shapely.box(0, 0, 260, 5.5 * L + S)      # deep enough for a loop
+    block = centre.buffer(-S / 2, join_style="mitre")
+    lib = {t.name: t for t in templates.load_library()}
+    assert templates.fit_energy(centre, lib["loop"], L, W, S) < 0.45
+    settings = parcels.SubdivisionSettings(max_area=1.6 * L * W, min_area=0.3 * L * W,
+                                           min_width=0.4 * W, lot_width=W, irregularity=0)
+    lots, (loop, connector) = templates.loop_lots(centre, block, L, W, S, settings,
+                                                  np.random.default_rng(0))
+    assert loop.is_ring and shapely.within(loop, block)
+    assert shapely.distance(connector, centre.boundary) < 1e-6 < connector.length
+    assert shapely.is_valid(lots).all() and len(lots) >= 20
+    streets = shapely.union_all([loop, connector])
+    with np.errstate(invalid="ignore"):
+        on_road = shapely.area(shapely.intersection(
+            lots, streets.buffer(S / 2 - 0.01, cap_style="flat")))
+    assert on_road.sum() < 1e-3
+    # lots inside the loop and outside it, every one with frontage on a street
+    inside = shapely.within(shapely.point_on_surface(lots), shapely.Polygon(loop))
+    assert inside.any() and (~inside).any()
+    band = shapely.union_all([shapely.boundary(block),
+                              streets.buffer(S / 2 + 0.05, cap_style="flat").boundary])
+    front = shapely.length(shapely.intersection(shapely.boundary(lots),
+                                                shapely.buffer(band, 0.06)))
+    assert (front >= parcels.MIN_FRONTAGE).all()
 
 
 # --------------------------------------------------------------------------- bad parcels

@@ -306,7 +306,7 @@ class _Splitter:
         self.s = settings
         self.rng = rng
         L, S = settings.parcel_length, settings.street_width
-        parts = [t for t in lib if t.kind in ("rows", "spike")]
+        parts = [t for t in lib if t.kind in ("rows", "spike", "loop")]
         widths = [t.gross_depth(L, S) for t in parts]
         # the templates' user probabilities weight the widths: with the shipped library a
         # double strip (one street per two rows) is preferred to two single strips
@@ -676,7 +676,7 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
     if seed is None or int(seed) != seed or seed < 0:
         raise InputError(f"the seed must be a whole number >= 0 (got {seed})")
     lib = list(templates) if templates is not None else _templates.load_library()
-    if not any(t.kind in ("rows", "spike") for t in lib):
+    if not any(t.kind in ("rows", "spike", "loop") for t in lib):
         raise InputError("the templates hold no parcel template")
     rng = np.random.default_rng([int(seed), int(variation)])
     faces, fixed, fixed_kinds, key_polys, domain, no_access = prepare_domain(
@@ -775,16 +775,25 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
         if key_road_zone is not None:
             shrunk = shapely.difference(shrunk, key_road_zone)
         for part in _parcels._polygon_parts([shrunk], 1.0):
-            lots, kind, street_area = _lots_for(part, reg, name, by_name, s, settings_sk, rng,
-                                                template_roads)
+            lots, kind, own_roads = _lots_for(part, reg, name, by_name, s, settings_sk, rng,
+                                              template_roads)
             if kind == "park":
                 lots_all.append(lots)
                 use_all += ["park"] * len(lots)
                 tmpl_all += [name] * len(lots)
                 front_all.append(np.full(len(lots), np.nan))
                 continue
-            def frontage(lots_, reg=reg):
-                return access_frontage(lots_, reg, S, splitter.no_frontage)
+            def frontage(lots_, reg=reg, own=own_roads):
+                """Frontage on the region's streets and on the template's own streets."""
+                front_ = access_frontage(lots_, reg, S, splitter.no_frontage)
+                if len(own):
+                    band = shapely.buffer(shapely.union_all(own), S / 2 + 0.05,
+                                          cap_style="flat", join_style="mitre")
+                    with np.errstate(invalid="ignore"):
+                        inner_ = shapely.length(shapely.intersection(
+                            shapely.boundary(lots_), band))
+                    front_ = front_ + np.round(np.maximum(inner_ - 0.2, 0.0), 2)
+                return front_
 
             front = frontage(lots)
             # lots without frontage, crumbs, and small misshapen end lots (the triangle
@@ -975,23 +984,27 @@ def _fallback(region, energies, by_name, s: SplitSettings) -> str:
 
 
 def _lots_for(part, reg, name, by_name, s: SplitSettings, settings_sk, rng, template_roads):
-    """Lots of one shrunk block part: (lots, template name, street polygon for frontage)."""
+    """Lots of one shrunk block part: (lots, template name, the template's own streets)."""
     L, W, S = s.parcel_length, s.parcel_width, s.street_width
+    none = np.empty(0, dtype=object)
     if name == "park" or shapely.area(part) < 0.5 * L * W:
-        return np.array([part], dtype=object), "park", part
+        return np.array([part], dtype=object), "park", none
     t = by_name.get(name)
     if t is not None and t.kind == "rows":
         warped = _templates.warp_rows(part, t, L, W, rng)
         if warped is not None and len(warped.lots):
-            return warped.lots, t.name, part
-    if t is not None and t.kind == "spike":
-        got = _templates.spike_lots(reg, part, L, W, S, settings_sk, rng)
+            return warped.lots, t.name, none
+    if t is not None and t.kind in ("spike", "loop"):
+        make = _templates.spike_lots if t.kind == "spike" else _templates.loop_lots
+        got = make(reg, part, L, W, S, settings_sk, rng)
         if got is not None and len(got[0]):
-            lots, road = got
-            template_roads.append((road, "cul_de_sac"))
-            return lots, t.name, shapely.union_all(lots)
+            lots, roads = got
+            roads = list(roads) if isinstance(roads, (list, tuple)) else [roads]
+            kind = "cul_de_sac" if t.kind == "spike" else "loop"
+            template_roads += [(r, kind) for r in roads]
+            return lots, t.name, np.asarray(roads, dtype=object)
     lots = _parcels._polygon_parts(_parcels.split_skeleton(part, settings_sk, rng))
-    return (lots if len(lots) else np.array([part], dtype=object)), "skeleton", part
+    return (lots if len(lots) else np.array([part], dtype=object)), "skeleton", none
 
 
 def split_variations(region, variations: int = 1, seed: int = 0, progress=None,

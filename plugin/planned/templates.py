@@ -10,6 +10,8 @@ name           label  pattern
 parcel_strip   L      one row of parcels (R) between two streets
 double_strip   D      two rows of parcels (R) back to back, each facing its street
 spike          S      a cul-de-sac street into the block, parcels (R) around it
+loop           O      a loop street inside a deep block, joined to the block's longest
+                      street at its middle, parcels on both sides of the loop
 park           A      an area template kept as a park (the fallback of the paper)
 =============  =====  ===============================================================
 
@@ -57,6 +59,7 @@ from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 import shapely
+import shapely.ops
 from scipy.spatial import cKDTree
 
 from ..core.paths import RESOURCES
@@ -66,14 +69,14 @@ from ..parcels import subdivision as _parcels
 
 __all__ = ["Template", "LIBRARY_PATH", "LIBRARY_SUBSETS", "default_library", "write_library",
            "load_library", "templates_from_drawn", "fit_energy", "region_shape", "region_frame",
-           "warp_rows", "spike_lots", "WarpResult", "WARP_ITERATIONS"]
+           "warp_rows", "spike_lots", "loop_lots", "WarpResult", "WARP_ITERATIONS"]
 
 LIBRARY_PATH = RESOURCES / "templates" / "library.json"
 #: Iterations of registration / regression (the paper: about 30 per match).
 WARP_ITERATIONS = 30
 #: Named subsets of the shipped library (the toolbox's TEMPLATES enum, in this order).
 LIBRARY_SUBSETS = {
-    "all": ("parcel_strip", "double_strip", "spike", "park"),
+    "all": ("parcel_strip", "double_strip", "spike", "loop", "park"),
     "strips": ("parcel_strip", "double_strip", "park"),
     "double_strips": ("double_strip", "park"),
 }
@@ -125,7 +128,7 @@ class Template:
         """Ideal centre-line width of a block of this template (m)."""
         if self.kind == "rows":
             return self.rows * length + street
-        if self.kind == "spike":
+        if self.kind in ("spike", "loop"):
             return 0.5 * sum(self.depth_range) * length + street
         return 0.0
 
@@ -144,6 +147,10 @@ def default_library() -> List[Template]:
         Template("spike", "S", "spike", probability=0.4, depth_range=(2.6, 4.6), max_count=4,
                  parcels=tuple([_rect(0, 0, 1, 1), _rect(2, 0, 3, 1), _rect(0, 1, 1, 2),
                                 _rect(2, 1, 3, 2), _rect(0.5, 2, 2.5, 3)])),
+        Template("loop", "O", "loop", probability=0.3, depth_range=(4.6, 7.0), max_count=3,
+                 parcels=tuple([_rect(i, 0, i + 1, 1) for i in range(5)]
+                               + [_rect(i, 5, i + 1, 6) for i in range(5)]
+                               + [_rect(1.5, 2, 3.5, 4)])),
         Template("park", "A", "park", probability=0.05, land_use="park",
                  parcels=(_rect(0, 0, 2, 2),)),
     ]
@@ -179,7 +186,7 @@ def load_library(path=LIBRARY_PATH, subset: Optional[str] = None) -> List[Templa
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise InputError(f"the template library {path} cannot be read ({exc})") from exc
     for t in out:
-        if t.kind not in ("rows", "spike", "park") or t.rows < 1 or t.probability < 0:
+        if t.kind not in ("rows", "spike", "loop", "park") or t.rows < 1 or t.probability < 0:
             raise InputError(f"template {t.name!r} in {path} is not a valid template")
     if subset is not None:
         if subset not in LIBRARY_SUBSETS:
@@ -271,6 +278,12 @@ def fit_energy(region, template: Template, length: float, width: float,
         lo, hi = template.depth_range
         depth = net_depth / length
         if not lo <= depth <= hi or net_long < 2.5 * length:
+            return math.inf
+        return 0.15 + shape
+    if template.kind == "loop":
+        lo, hi = template.depth_range
+        depth = net_depth / length
+        if not lo <= depth <= hi or net_long < 1.2 * net_depth:
             return math.inf
         return 0.15 + shape
     # an area template fits anything, at a price: it is the fallback
@@ -587,3 +600,37 @@ def spike_lots(block_centre, block, length: float, width: float, street: float,
         lots.append(_parcels.split_skeleton(part, settings, rng))
     lots = _parcels._polygon_parts(np.concatenate(lots)) if lots else np.empty(0, dtype=object)
     return lots, road
+
+
+def loop_lots(block_centre, block, length: float, width: float, street: float,
+              settings, rng: np.random.Generator):
+    """Loop template: a street loop one parcel depth inside a deep block, joined by a
+    short street to the middle of the block's longest side, lots between the block's
+    streets and the loop and inside the loop (the loop pattern of Yang 2013, Fig. 2/4;
+    simplified: the loop follows the block's outline offset inwards, its lots are made by
+    the skeleton method, every lot with frontage).
+
+    Returns (lots, [loop, connector]) or None when the block is too shallow for a loop
+    with lots inside it.
+    """
+    ring_poly = shapely.buffer(block, -(length + street / 2), join_style="mitre")
+    if ring_poly.is_empty or shapely.get_type_id(ring_poly) != 3:
+        return None
+    inner = shapely.buffer(ring_poly, -street / 2, join_style="mitre")
+    if inner.is_empty or shapely.get_type_id(inner) != 3 or \
+            _blocks.minimum_rectangles([inner])[1][0] < 1.2 * length:
+        return None
+    loop = shapely.LineString(shapely.get_coordinates(ring_poly.exterior))
+    frame = region_frame(block_centre)
+    if frame is None:
+        return None
+    c1 = shapely.LineString(frame[0])
+    start = np.asarray(c1.interpolate(0.5, normalized=True).coords[0])
+    foot = np.asarray(shapely.ops.nearest_points(loop, shapely.Point(start))[0].coords[0])
+    connector = shapely.LineString([start, foot])
+    roads = shapely.union_all([loop, connector])
+    cut = shapely.buffer(roads, street / 2, cap_style="flat", join_style="mitre")
+    rest = _parcels._polygon_parts([shapely.difference(block, cut)])
+    lots = [_parcels.split_skeleton(part, settings, rng) for part in rest]
+    lots = _parcels._polygon_parts(np.concatenate(lots)) if lots else np.empty(0, dtype=object)
+    return lots, [loop, connector]
