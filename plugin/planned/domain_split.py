@@ -483,6 +483,7 @@ class _Search:
         tries = 0
         for street, children in self.sp.candidates(region, ends):
             t0 = time.perf_counter()
+            inner0 = self.time_abandoned
             saved = self.counts.copy()
             leaves, lines, bad = [], [street], 0.0
             sub_ends = np.vstack([ends, _end_dirs([street])])
@@ -492,12 +493,15 @@ class _Search:
                 lines += got[1]
                 bad += got[2]
                 sub_ends = np.vstack([sub_ends, _end_dirs(got[1])])
+            # the time of this attempt less what its own sub-searches already counted as
+            # abandoned (so nested backtracking is not counted twice)
+            own = time.perf_counter() - t0 - (self.time_abandoned - inner0)
             if best is None or bad < best[2]:
                 if best is not None:
                     self.time_abandoned += best[4]
-                best = (leaves, lines, bad, self.counts.copy(), time.perf_counter() - t0)
+                best = (leaves, lines, bad, self.counts.copy(), own)
             else:
-                self.time_abandoned += time.perf_counter() - t0
+                self.time_abandoned += own
             tries += 1
             if bad <= 0 or tries >= MAX_TRIES or self.n_backtracks >= MAX_BACKTRACKS:
                 break

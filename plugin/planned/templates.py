@@ -105,7 +105,8 @@ class Template:
         At most this many per layout (met by backtracking).
     max_columns : int
         Most parcels in one row: the repeating element's limit, i.e. the longest block
-        (14 x 18 m = 252 m with the paper's parcels).
+        (22 x 18 m = 396 m with the paper's parcels; Yang's longest blocks have perimeters of
+        1,000-1,450 m, Table 1).
     land_use : str
     parcels : list of polygons (unit coordinates: x in parcel widths, y in parcel lengths)
         The drawn layout, for display and user templates.
@@ -120,7 +121,7 @@ class Template:
     depth_scale: Tuple[float, float] = (0.8, 1.25)
     depth_range: Tuple[float, float] = (0.0, 0.0)
     max_count: Optional[int] = None
-    max_columns: int = 14
+    max_columns: int = 22
     land_use: str = "residential"
     parcels: tuple = field(default=(), compare=False)
 
