@@ -227,7 +227,7 @@ class SynthesizeBuildings(AlgorithmBase):
         self.add(QgsProcessingParameterNumber(
             self.MAX_PARCEL_SLOPE, "Maximum parcel slope (%)", QgsProcessingParameterNumber.Double,
             defaultValue=100 * building_bestfit.DEFAULT_MAX_PARCEL_SLOPE, minValue=0.0,
-            maxValue=1000.0),
+            maxValue=1000.0, optional=True),
             "With a DEM: parcels whose fitted terrain plane is steeper than this get no "
             "building (Scharl's maxParcelSlope).")
         self.add(QgsProcessingParameterNumber(

@@ -140,12 +140,12 @@ class TessellateStreets(AlgorithmBase):
             "Line ends closer than this are joined when the network is noded.", advanced=True)
         self.add(QgsProcessingParameterNumber(
             self.MESH_SPACING, "Mesh station spacing (m)", QgsProcessingParameterNumber.Double,
-            defaultValue=5.0, minValue=0.5, maxValue=100.0),
+            defaultValue=5.0, minValue=0.5, maxValue=100.0, optional=True),
             "Distance between the cross-sections of a street in the 3D mesh.", advanced=True)
         self.add(QgsProcessingParameterNumber(
             self.Z_OFFSET, "Mesh lift above the terrain (m)",
             QgsProcessingParameterNumber.Double, defaultValue=0.1, minValue=0.0,
-            maxValue=10.0),
+            maxValue=10.0, optional=True),
             "The mesh is lifted this much above the draped height (Scharl: against "
             "z-fighting with the terrain); side faces close the gap.", advanced=True)
         self.add(QgsProcessingParameterFeatureSink(
