@@ -27,6 +27,7 @@ class GrowRoads(AlgorithmBase):
     BOUNDARY = "BOUNDARY"
     MAJOR_ROADS = "MAJOR_ROADS"
     GROW_MAJOR = "GROW_MAJOR"
+    REMOVE_DEAD_ENDS = "REMOVE_DEAD_ENDS"
     MAJOR_PATTERN = "MAJOR_PATTERN"
     MINOR_PATTERN = "MINOR_PATTERN"
     CENTER = "CENTER"
@@ -84,14 +85,20 @@ class GrowRoads(AlgorithmBase):
         d = growth.GrowthSettings()
         patterns = ["Organic", "Grid", "Radial"]
         self.add(QgsProcessingParameterFeatureSource(
-            self.BOUNDARY, "Boundary", [QgsProcessing.TypeVectorPolygon]),
+            self.BOUNDARY, "Boundary", [QgsProcessing.TypeVectorPolygon], optional=True),
             "Polygon(s) of the city region: every road is grown inside them (Scharl's mask). "
-            "Several features are merged.")
+            "Several features are merged. Without a boundary, roads grow around the sketched "
+            "major roads (one major segment length beyond their extent) and the outskirts are "
+            "closed by Scharl's bulged convex hull of the major nodes (sec. 4.2.5).")
         self.add(QgsProcessingParameterFeatureSource(
             self.MAJOR_ROADS, "Sketched major roads (optional)", [QgsProcessing.TypeVectorLine],
             optional=True),
             "Major roads drawn by hand: clipped to the boundary and kept as they are (level 0, "
             "pattern 'sketch'); growth continues from their dead ends and branches off them.")
+        self.add(QgsProcessingParameterBoolean(
+            self.REMOVE_DEAD_ENDS, "Remove dead-end roads at the end", defaultValue=True),
+            "Scharl Fig. 4.12: grown streets with a free end are pruned until every grown "
+            "street ends at a junction (sketched roads stay).", advanced=True)
         self.add(QgsProcessingParameterBoolean(
             self.GROW_MAJOR, "Grow more major roads", defaultValue=True),
             "Unchecked with sketched major roads: keep only the sketch as the major network and "
@@ -193,7 +200,15 @@ class GrowRoads(AlgorithmBase):
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         frame = qgis_io.read_source(self, parameters, self.BOUNDARY, context, feedback,
-                                    kind="polygons", fields=[])
+                                    kind="polygons", fields=[], optional=True)
+        if frame is None:  # no boundary: the sketch bounds the growth (bulged hull)
+            frame = qgis_io.read_source(self, parameters, self.MAJOR_ROADS, context, feedback,
+                                        kind="lines", fields=[], optional=True)
+            if frame is None:
+                raise QgsProcessingException(
+                    "Give a boundary polygon or sketched major roads: without either there "
+                    "is no place to grow roads.")
+        boundary = frame.geometry if shapely.get_dimensions(frame.geometry).max() == 2 else None
         label = frame.name
         crs = frame.crs
         settings = growth.GrowthSettings(
@@ -213,6 +228,7 @@ class GrowRoads(AlgorithmBase):
             max_segments=self.number(parameters, self.MAX_SEGMENTS, context),
             max_slope=self.number(parameters, self.MAX_SLOPE, context) / 100.0,
             grow_major=self.parameterAsBoolean(parameters, self.GROW_MAJOR, context),
+            remove_dead_ends=self.parameterAsBoolean(parameters, self.REMOVE_DEAD_ENDS, context),
         )
         seed = self.seed(parameters, context)
         try:
@@ -234,6 +250,9 @@ class GrowRoads(AlgorithmBase):
         feedback.setProgress(5)
 
         bounds = shapely.total_bounds(frame.geometry)
+        if boundary is None:  # around the sketch, as the engine grows there
+            reach = settings.major_length
+            bounds = (bounds[0] - reach, bounds[1] - reach, bounds[2] + reach, bounds[3] + reach)
         dem = None
         dem_layer = self.parameterAsRasterLayer(parameters, self.DEM, context)
         if dem_layer is not None:
@@ -274,7 +293,7 @@ class GrowRoads(AlgorithmBase):
         feedback.setProgress(10)
 
         result = qgis_io.run_engine(
-            label, growth.grow_roads, frame.geometry, settings=settings,
+            label, growth.grow_roads, boundary, settings=settings,
             major_roads=None if sketch is None else sketch.geometry, center=center, dem=dem,
             obstacles=obstacles_geoms, density=density,
             seed=seed, progress=qgis_io.progress_for(feedback, 10, 90))
@@ -284,6 +303,11 @@ class GrowRoads(AlgorithmBase):
             f"{st['minor_segments']} minor) in {st['quarters']} quarters from "
             f"{st['proposals']} proposals in {st['seconds']:.1f} s; output: "
             f"{len(result.geometry)} planar edges.")
+        if st.get("dead_ends_removed"):
+            feedback.pushInfo(f"{st['dead_ends_removed']} dead-end edges removed at the end.")
+        if st.get("bulged_hull"):
+            feedback.pushInfo("No boundary: the quarters were closed by the bulged convex hull "
+                              "of the major nodes.")
         if st["rejected"]:
             feedback.pushInfo("Proposals dropped by the local constraints: " + ", ".join(
                 f"{k} {v}" for k, v in st["rejected"].items()) + ".")

@@ -1,11 +1,13 @@
 """urbansynth:placelibrarybuildings - the best-fitting library building per parcel
 (Scharl 2010, ch. 6)."""
 import pandas as pd
+import shapely
 from qgis.core import (
     QgsProcessing,
     QgsProcessingParameterFeatureSink,
     QgsProcessingParameterFeatureSource,
     QgsProcessingParameterNumber,
+    QgsProcessingParameterRasterLayer,
     QgsWkbTypes,
 )
 
@@ -26,6 +28,8 @@ class PlaceLibraryBuildings(AlgorithmBase):
     MIN_SETBACK = "MIN_SETBACK"
     STREET_REACH = "STREET_REACH"
     MAX_ANGLE = "MAX_ANGLE"
+    DEM = "DEM"
+    MAX_PARCEL_SLOPE = "MAX_PARCEL_SLOPE"
     OUTPUT = "OUTPUT"
 
     def name(self):
@@ -72,6 +76,16 @@ class PlaceLibraryBuildings(AlgorithmBase):
             defaultValue=bestfit.MAX_ANGLE, minValue=0.0, maxValue=90.0),
             "A facing side is at most this far from parallel to the street (Scharl: 30°).",
             advanced=True)
+        self.add(QgsProcessingParameterRasterLayer(
+            self.DEM, "Elevation model", optional=True),
+            "Best fit on terrain (Scharl ch. 6.2): each building goes down to the ground of its "
+            "lowest corner (base_z, sunk_m; footprints get Z) and parcels steeper than the "
+            "maximum parcel slope stay empty.")
+        self.add(QgsProcessingParameterNumber(
+            self.MAX_PARCEL_SLOPE, "Maximum parcel slope (%)", QgsProcessingParameterNumber.Double,
+            defaultValue=100 * bestfit.DEFAULT_MAX_PARCEL_SLOPE, minValue=0.0, maxValue=1000.0),
+            "With an elevation model: parcels whose fitted terrain plane is steeper than this "
+            "get no building (Scharl's maxParcelSlope).")
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT, "Placed buildings", QgsProcessing.TypeVectorPolygon),
             "Placed library buildings with source_id, rotation, offset_x/y, parcel_id and the "
@@ -90,6 +104,8 @@ class PlaceLibraryBuildings(AlgorithmBase):
             parcel_ids=ids, min_setback=self.number(parameters, self.MIN_SETBACK, context),
             reach=self.number(parameters, self.STREET_REACH, context),
             max_angle=self.number(parameters, self.MAX_ANGLE, context),
+            dem=self._dem(parameters, context, feedback, parcels),
+            max_parcel_slope=self.number(parameters, self.MAX_PARCEL_SLOPE, context) / 100.0,
             progress=qgis_io.progress_for(feedback, 10, 90))
         s = result.stats
         feedback.pushInfo(f"{s['n_placed']} of {s['n_parcels']} parcels got a building; "
@@ -102,12 +118,27 @@ class PlaceLibraryBuildings(AlgorithmBase):
             values = pd.to_numeric(result.table[col], errors="coerce")
             numeric = values.notna().sum() == result.table[col].notna().sum()
             extra.append((col, "float" if numeric else "str"))
+        if s.get("too_steep"):
+            feedback.pushInfo(f"{s['too_steep']} parcels are steeper than the maximum parcel "
+                              "slope and stay empty.")
+        has_z = len(result.geometry) and bool(shapely.has_z(result.geometry).any())
         dest = qgis_io.write_sink(self, parameters, self.OUTPUT, context, result.geometry,
                                   result.table, bestfit.PLACEMENT_FIELDS + extra,
-                                  QgsWkbTypes.Polygon, parcels.source_crs, crs, feedback)
+                                  QgsWkbTypes.PolygonZ if has_z else QgsWkbTypes.Polygon,
+                                  parcels.source_crs, crs, feedback)
         qgis_io.style_output(context, dest, "buildings_by_height.qml")
         feedback.setProgress(100)
         return {self.OUTPUT: dest}
+
+    def _dem(self, parameters, context, feedback, frame):
+        """The elevation model resampled to the parcels' working CRS, or None."""
+        layer = self.parameterAsRasterLayer(parameters, self.DEM, context)
+        if layer is None:
+            return None
+        x0, y0, x1, y1 = shapely.total_bounds(frame.geometry)
+        bounds = (x0 - 10, y0 - 10, x1 + 10, y1 + 10)
+        cell = qgis_io.raster_cell_size(layer, frame.crs, bounds, context)
+        return qgis_io.read_raster(layer, frame.crs, bounds, cell, feedback)
 
     def _library(self, parameters, context, feedback, crs):
         if not self.given(parameters, self.BUILDING_LIBRARY):

@@ -104,7 +104,8 @@ def test_best_fit_on_bubenec(qgis_processing):
     layer = out["OUTPUT"]
     assert layer.crs().authid() == "EPSG:3857"
     names = [f.name() for f in layer.fields()]
-    assert names[:7] == [n for n, _ in building_bestfit.PLACEMENT_FIELDS]
+    assert names[:len(building_bestfit.PLACEMENT_FIELDS)] == [
+        n for n, _ in building_bestfit.PLACEMENT_FIELDS]
     assert {"height_m", "levels", "building_type", "street_access_sides"} <= set(names)
     rows, geoms = layer_features(layer)
     assert 150 < len(rows) < 407
@@ -112,6 +113,46 @@ def test_best_fit_on_bubenec(qgis_processing):
     for r, g in zip(rows, geoms):
         # parcel ids are 1..n in layer order (the plots have no parcel_id)
         assert pgeoms[r["parcel_id"] - 1].buffer(1e-3).contains(g)
+
+
+def test_best_fit_on_a_slope(qgis_processing, tmp_path):
+    """Scharl ch. 6.2 through QGIS: a synthetic DEM (no real DEM ships with the plugin),
+    the steep parcel stays empty, the building on the gentle one sits at the ground of
+    its lowest corner."""
+    from osgeo import gdal, osr
+    from qgis.core import QgsWkbTypes
+
+    crs = "EPSG:32633"
+    x0, y0 = 500000.0, 5550000.0
+    cell, cols, rows = 2.0, 150, 40
+    x, y = np.meshgrid(x0 - 60 + cell * (np.arange(cols) + 0.5),
+                       y0 + 20 - cell * (np.arange(rows) + 0.5))
+    z = 300 + np.where(x - x0 < 100, -0.10, -0.40) * (y - y0)   # 10 % / 40 % up to the south
+    path = tmp_path / "slope.tif"
+    ds = gdal.GetDriverByName("GTiff").Create(str(path), cols, rows, 1, gdal.GDT_Float32)
+    ds.SetGeoTransform((x0 - 60, cell, 0.0, y0 + 20, 0.0, -cell))
+    srs = osr.SpatialReference()
+    srs.ImportFromEPSG(32633)
+    ds.SetProjection(srs.ExportToWkt())
+    ds.GetRasterBand(1).WriteArray(z.astype(np.float32))
+    ds = None
+    roads = memory_layer("LineString", [f"LINESTRING ({x0 - 50} {y0}, {x0 + 200} {y0})"], crs)
+    plots = memory_layer("Polygon", [shapely.box(x0 + 20, y0 - 40, x0 + 70, y0 - 5).wkt,
+                                     shapely.box(x0 + 120, y0 - 40, x0 + 170, y0 - 5).wkt], crs)
+    out = qgis_processing.run(BESTFIT, {"PARCELS": plots, "ROADS": roads,
+                                        "DEM": str(path), "MAX_PARCEL_SLOPE": 25,
+                                        "OUTPUT": "memory:"})
+    layer = out["OUTPUT"]
+    assert layer.wkbType() == QgsWkbTypes.PolygonZ
+    rows_, geoms = layer_features(layer)
+    assert len(rows_) == 1 and rows_[0]["parcel_id"] == 1
+    r = rows_[0]
+    assert r["parcel_slope_pct"] == pytest.approx(10.0, abs=0.2)
+    xyz = shapely.get_coordinates(geoms[0], include_z=True)
+    ground = 300 - 0.10 * (xyz[:, 1] - y0)
+    assert np.allclose(xyz[:, 2], r["base_z"]) and r["base_z"] == pytest.approx(ground.min(),
+                                                                                  abs=0.01)
+    assert r["sunk_m"] == pytest.approx(np.ptp(ground), abs=0.01)
 
 
 def _ogr_layer(uri):

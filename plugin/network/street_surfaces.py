@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
-from typing import Optional, Sequence
+from typing import Callable, Optional, Sequence
 
 import numpy as np
 import pandas as pd
@@ -151,6 +151,16 @@ class Tessellation:
     graph: RoadGraph
     widths: np.ndarray
     stats: dict = field(default_factory=dict)
+    #: centre line, edge index and width of every surface (kept rows), for the mesh
+    centres: Optional[np.ndarray] = None
+    surface_edge: Optional[np.ndarray] = None
+    #: graph node of every junction (kept rows)
+    junction_node: Optional[np.ndarray] = None
+    #: with a DEM: z of points on surface k (terrain blended into the junction planes),
+    #: z of points in the plane of junction node n, and the terrain itself
+    surface_z: Optional[Callable] = None
+    junction_z: Optional[Callable] = None
+    terrain_z: Optional[Callable] = None
 
 
 # --------------------------------------------------------------------------- merging
@@ -614,14 +624,15 @@ def tessellate_network(graph: RoadGraph, widths: Sequence[float],
         j_table[col] = np.nan
     j_table["slope_pct"] = np.nan
     if dem is not None:
-        surfaces, jpolys = _drape(dem, graph, widths, h, junction_nodes, jpolys, surfaces,
-                                  centre, surf_edge, s_table, j_table, sample_spacing,
-                                  progress.sub(0.7, 0.98))
+        surfaces, jpolys, heights = _drape(dem, graph, widths, h, junction_nodes, jpolys,
+                                           surfaces, centre, surf_edge, s_table, j_table,
+                                           sample_spacing, progress.sub(0.7, 0.98))
         s_table["too_steep_long"] = s_table["slope_long_pct"] > 100 * max_longitudinal_slope
         s_table["too_steep_lat"] = s_table["slope_lat_pct"] > 100 * max_lateral_slope
         j_table["too_steep_long"] = j_table["slope_long_pct"] > 100 * max_longitudinal_slope
         j_table["too_steep_lat"] = j_table["slope_lat_pct"] > 100 * max_lateral_slope
     else:
+        heights = None
         for t in (s_table, j_table):
             t["too_steep_long"] = None
             t["too_steep_lat"] = None
@@ -637,7 +648,16 @@ def tessellate_network(graph: RoadGraph, widths: Sequence[float],
              "cut_surfaces": len(np.union1d(n_scut, n_sscut)),
              "max_degree": int(j_deg.max()) if len(j_deg) else 0}
     progress.step(1.0)
-    return Tessellation(surfaces, s_table, jpolys, j_table, graph, widths, stats)
+    out = Tessellation(surfaces, s_table, jpolys, j_table, graph, widths, stats,
+                       centres=centre[keep_s], surface_edge=surf_edge[keep_s],
+                       junction_node=junction_nodes[keep_j])
+    if dem is not None:
+        kept = np.flatnonzero(keep_s)
+        height, plane, terrain = heights
+        out.surface_z = lambda k, xy: height(kept[k], xy)
+        out.junction_z = plane
+        out.terrain_z = terrain
+    return out
 
 
 def _drape(dem, graph, widths, h, junction_nodes, jpolys, surfaces, centre, surf_edge,
@@ -733,7 +753,7 @@ def _drape(dem, graph, widths, h, junction_nodes, jpolys, surfaces, centre, surf
     s_table["slope_long_pct"] = 100 * lon
     s_table["slope_lat_pct"] = 100 * lat
     progress.step(1.0)
-    return surfaces, jpolys
+    return surfaces, jpolys, (height, plane, lambda xy: _dem_z(dem, xy))
 
 
 def tessellate_lines(lines: Sequence, widths: Sequence[float], road_class=None, z_layer=None,
