@@ -244,12 +244,12 @@ class TessellateStreets(AlgorithmBase):
         if parameters.get(self.OUTPUT_MESH) is not None or tin_path:
             mesh = qgis_io.run_engine(
                 label, street_mesh.street_mesh, result,
-                spacing=self._number(parameters, self.MESH_SPACING, context, 0.5, 100.0),
-                z_offset=self._number(parameters, self.Z_OFFSET, context, 0.0, 10.0))
+                spacing=self.number(parameters, self.MESH_SPACING, context),
+                z_offset=self.number(parameters, self.Z_OFFSET, context))
             t = mesh.table
             feedback.pushInfo(f"3D mesh: {len(mesh.triangles)} triangles "
                               f"({int(mesh.side.sum())} in side faces) in {len(t)} features.")
-            geoms = self._to_output_crs(mesh.geometries(), frame, context, True)
+            geoms = qgis_io.reproject(mesh.geometries(), frame.crs, frame.source_crs, context)
             if parameters.get(self.OUTPUT_MESH) is not None:
                 results[self.OUTPUT_MESH] = qgis_io.write_sink(
                     self, parameters, self.OUTPUT_MESH, context, geoms, t,
