@@ -40,6 +40,8 @@ from qgis.core import (
     QgsProviderRegistry,
 )
 
+from . import qgis_io
+
 __all__ = ["STAGING_PREFIX", "OutputStaging", "same_file_error"]
 
 #: Name prefix of the staging folders (hidden: a file manager does not show them).
@@ -250,11 +252,33 @@ class OutputStaging:
         renames = {item.temp: item.final for item in self.staged}
         renames.update({str(item.temp_path): str(item.final_path) for item in self.staged})
         out = {k: self._renamed(v, renames) for k, v in results.items()}
-        layers = self.context.layersToLoadOnCompletion()
-        if any(self._renamed(k, renames) != k for k in layers):
-            self.context.setLayersToLoadOnCompletion(
-                {self._renamed(k, renames): v for k, v in layers.items()})
+        self._rename_layers_to_load(renames)
         return out
+
+    def _rename_layers_to_load(self, renames):
+        """The layers QGIS loads on completion keyed by their final destinations, each with
+        the style the run gave it. setLayersToLoadOnCompletion deletes the old entries'
+        post-processors, so the details are rebuilt and the styles attached afresh."""
+        from qgis.core import QgsProcessingContext
+
+        layers = self.context.layersToLoadOnCompletion()
+        if all(self._renamed(k, renames) == k for k in layers):
+            return
+        rebuilt, styles = {}, {}
+        # a staged layer comes after any entry QGIS already holds for its final path: its
+        # details and style win
+        for key, details in sorted(layers.items(),
+                                   key=lambda kv: self._renamed(kv[0], renames) != kv[0]):
+            final = self._renamed(key, renames)
+            fresh = QgsProcessingContext.LayerDetails(
+                details.name, details.project, details.outputName, details.layerTypeHint)
+            fresh.forceName = details.forceName
+            rebuilt[final] = fresh
+            styles[final] = qgis_io.attached_style(details) or styles.get(final)
+        self.context.setLayersToLoadOnCompletion(rebuilt)
+        for final, qml in styles.items():
+            if qml:
+                qgis_io.attach_style(self.context, final, qml)
 
     @staticmethod
     def _renamed(value, renames):

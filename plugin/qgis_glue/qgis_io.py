@@ -529,21 +529,31 @@ _POST_PROCESSORS = []  # QGIS does not own Python post-processors: keep them ali
 
 def style_output(context, dest_id: Optional[str], qml_name: str) -> None:
     """Load an output with a shipped QML style when QGIS loads it on completion."""
-    from qgis.core import QgsProcessingLayerPostProcessorInterface
-
     qml = STYLES / qml_name
     if not dest_id or not qml.exists() or not context.willLoadLayerOnCompletion(dest_id):
         return
+    attach_style(context, dest_id, str(qml))
+
+
+def attach_style(context, dest_id: str, qml: str) -> None:
+    """Give the layer QGIS loads on completion for ``dest_id`` the style file ``qml``."""
+    from qgis.core import QgsProcessingLayerPostProcessorInterface
 
     class _Styler(QgsProcessingLayerPostProcessorInterface):
         def postProcessLayer(self, layer, ctx, feedback):  # noqa: N802
             if layer is not None and layer.isValid():
-                layer.loadNamedStyle(str(qml))
+                layer.loadNamedStyle(qml)
                 layer.triggerRepaint()
 
     styler = _Styler()
+    styler.qml = qml
     _POST_PROCESSORS.append(styler)
     context.layerToLoadOnCompletionDetails(dest_id).setPostProcessor(styler)
+
+
+def attached_style(details) -> Optional[str]:
+    """The style file :func:`attach_style` gave these layer details, if any."""
+    return getattr(details.postProcessor(), "qml", None)
 
 
 # --------------------------------------------------------------------------- rasters
