@@ -18,6 +18,9 @@ from ..plugin.core.ids import as_numbers
 from ..plugin.qgis_glue import qgis_io
 from .common import AlgorithmBase
 
+#: Block fields that size the Voronoi parcels (Aliaga's a(v) and sigma_b), when present.
+PARCEL_SIZE_FIELDS = ("parcel_area", "parcel_area_sd")
+
 
 class SubdivideParcels(AlgorithmBase):
     GROUP_ID = "synthesis"
@@ -92,8 +95,9 @@ class SubdivideParcels(AlgorithmBase):
             "(Scharl 4.2.6). Skeleton: strips along every street cut every lot width, every "
             "parcel with street frontage (Vanegas et al. 2012). Voronoi along the OBB axis: one "
             "or two rows of parcels along the block's oriented bounding box, spacing jittered "
-            "with a Gaussian, each parcel with street access; parcel size lot width² x 1.5 "
-            "(Aliaga et al. 2008, sec. 3.1.2).")
+            "with a Gaussian, each parcel with street access and at least the minimum width; "
+            "parcel size from the blocks' parcel_area field (e.g. the blocks of 'Synthesize "
+            "roads (random walk)'), else lot width² x 1.5 (Aliaga et al. 2008, sec. 3.1.2).")
         self.add(QgsProcessingParameterNumber(
             self.MAX_AREA, "Maximum parcel area (m²)", QgsProcessingParameterNumber.Double,
             defaultValue=parcels.DEFAULT_MAX_AREA, minValue=1.0, maxValue=self.MAX_AREA_LIMIT),
@@ -103,7 +107,8 @@ class SubdivideParcels(AlgorithmBase):
             self.LOT_WIDTH, "Lot width along the street (m)", QgsProcessingParameterNumber.Double,
             defaultValue=parcels.DEFAULT_LOT_WIDTH, minValue=0.1, maxValue=self.MAX_WIDTH_LIMIT),
             "Skeleton: target frontage of a parcel (Yang et al. 2013 aim at 18 m). Voronoi along "
-            "the OBB axis: sets the mean parcel area (lot width² x 1.5).")
+            "the OBB axis: sets the mean parcel area (lot width² x 1.5) of blocks without a "
+            "parcel_area.")
         self.add(QgsProcessingParameterNumber(
             self.IRREGULARITY, "Irregularity (0-1)", QgsProcessingParameterNumber.Double,
             defaultValue=parcels.DEFAULT_IRREGULARITY, minValue=0.0, maxValue=1.0),
@@ -174,9 +179,11 @@ class SubdivideParcels(AlgorithmBase):
         seed = self.seed(parameters, context)
         street_width = number[self.STREET_WIDTH]
 
+        size = {}
         if self.given(parameters, self.BLOCKS):
             frame, block_geoms, block_ids, road_lines, road_widths = \
                 self._blocks(parameters, context, feedback)
+            size = self._parcel_sizes(frame, method, feedback)
         else:
             frame, block_geoms, block_ids, road_lines, road_widths = \
                 self._blocks_from_roads(parameters, context, feedback)
@@ -189,7 +196,7 @@ class SubdivideParcels(AlgorithmBase):
         result = qgis_io.run_engine(
             frame.name, parcels.subdivide_blocks, block_geoms, method, settings, seed=seed,
             block_ids=block_ids, street_width=street_width, roads=road_lines,
-            road_widths=road_widths, progress=qgis_io.progress_for(feedback, 30, 90))
+            road_widths=road_widths, progress=qgis_io.progress_for(feedback, 30, 90), **size)
         self._log(result.stats, method, feedback)
         if len(result.geometry) == 0:
             raise QgsProcessingException(
@@ -206,12 +213,37 @@ class SubdivideParcels(AlgorithmBase):
 
     def _blocks(self, parameters, context, feedback):
         frame = qgis_io.read_source(self, parameters, self.BLOCKS, context, feedback,
-                                    kind="polygons", fields=["block_id"])
+                                    kind="polygons", fields=["block_id", *PARCEL_SIZE_FIELDS])
         ids = self.block_ids(frame, feedback)
         feedback.pushInfo(f"{len(frame)} blocks read from {frame.name}; every block edge is "
                           "taken as a street.")
         feedback.setProgress(30)
         return frame, frame.geometry, ids, None, None
+
+    @staticmethod
+    def _parcel_sizes(frame, method, feedback) -> dict:
+        """The blocks' own parcel_area (and parcel_area_sd) for the engine, when present."""
+        if "parcel_area" not in frame.attributes:
+            return {}
+        size = {field: as_numbers(frame.attributes[field])
+                for field in PARCEL_SIZE_FIELDS if field in frame.attributes}
+        area = size["parcel_area"]
+        bad = np.isfinite(area) & (area <= 0)
+        if bad.any():
+            raise QgsProcessingException(
+                f"Layer {frame.name}: {int(bad.sum())} blocks have a parcel_area that is not "
+                "positive.")
+        if (size.get("parcel_area_sd", np.zeros(1)) < 0).any():
+            raise QgsProcessingException(
+                f"Layer {frame.name}: parcel_area_sd must not be negative.")
+        n = int(np.isfinite(area).sum())
+        if method == "voronoi-obb":
+            feedback.pushInfo(f"{n} of {len(area)} blocks have their own parcel_area (the "
+                              "others use lot width² x 1.5).")
+        else:
+            feedback.pushInfo(f"{frame.name} has parcel_area; only the Voronoi method sizes "
+                              f"parcels by it ({method} uses the maximum area and lot width).")
+        return size
 
     def _blocks_from_roads(self, parameters, context, feedback):
         width_field = self.parameterAsString(parameters, self.STREET_WIDTH_FIELD, context)
@@ -247,6 +279,9 @@ class SubdivideParcels(AlgorithmBase):
                               "without street access.")
         if stats["n_without_access"]:
             feedback.pushInfo(f"{stats['n_without_access']} parcels have no street frontage.")
+        if stats.get("n_under_min_width"):
+            feedback.pushInfo(f"{stats['n_under_min_width']} parcels are narrower than the "
+                              "minimum width: their block part is too thin for a wider lot.")
         if stats["n_merged_for_access"]:
             feedback.pushInfo(f"{stats['n_merged_for_access']} lots without street frontage "
                               "were merged into a neighbour.")

@@ -17,6 +17,10 @@ PLUGINS = ROOT / "build" / "plugins"
 DATA = ROOT / "data" / "examples"
 HELSINKI = DATA / "Helsinki.osm.pbf"
 BUBENEC = DATA / "bubenec.gpkg"
+#: The whole of Liechtenstein from OSM (tests/data, ODbL: see its ATTRIBUTION.txt), for
+#: leave-one-town-out evaluation; URBANSYNTH_LIECHTENSTEIN overrides where it is.
+LIECHTENSTEIN = Path(os.environ.get(
+    "URBANSYNTH_LIECHTENSTEIN", ROOT / "tests" / "data" / "liechtenstein-2013-08-03.osm.pbf"))
 
 # the plugin is imported as the package QGIS gives it: its folder name under build/plugins
 if str(PLUGINS) not in sys.path:

@@ -4,7 +4,7 @@ from functools import lru_cache
 import numpy as np
 import shapely
 
-from conftest import BUBENEC, HELSINKI
+from conftest import BUBENEC, HELSINKI, LIECHTENSTEIN
 
 
 @lru_cache(maxsize=1)
@@ -29,6 +29,41 @@ def bubenec(layer, crs=32633):
     import pyogrio
 
     return pyogrio.read_dataframe(BUBENEC, layer=layer).to_crs(crs)
+
+
+@lru_cache(maxsize=1)
+def _liechtenstein(crs=32632):
+    """Municipalities (admin_level 8), drivable street graph and its blocks (UTM 32N)."""
+    import pyogrio
+    import pytest
+
+    from urban_synthesis.plugin.network import blocks
+    from urban_synthesis.plugin.network import street_graph as roads
+
+    if not LIECHTENSTEIN.exists():
+        pytest.skip(f"{LIECHTENSTEIN} is not there (see DESIGN.md, real example data)")
+    towns = pyogrio.read_dataframe(LIECHTENSTEIN, layer="multipolygons",
+                                   columns=["name", "admin_level"])
+    towns = towns[towns.admin_level == "8"].to_crs(crs)
+    lines = pyogrio.read_dataframe(LIECHTENSTEIN, layer="lines", columns=["highway"])
+    lines = lines[lines.highway.isin(roads.DRIVABLE_CLASSES)].to_crs(crs)
+    graph = roads.clean_network(lines.geometry.values, lines.highway.values,
+                                merge_degree2=False)
+    extraction = blocks.extract_blocks(graph)
+    return dict(zip(towns.name, towns.geometry.values)), graph.geometry, extraction.geometry
+
+
+def liechtenstein_towns():
+    """Names of Liechtenstein's eleven municipalities (OSM admin_level 8), sorted."""
+    return sorted(_liechtenstein()[0])
+
+
+def liechtenstein_town_blocks(name):
+    """(streets, blocks) of one municipality: the blocks of the whole country's drivable
+    OSM streets (network engine) whose inner point lies in it, and all the streets."""
+    towns, streets, faces = _liechtenstein()
+    inside = shapely.within(shapely.point_on_surface(faces), towns[name])
+    return streets, faces[inside]
 
 
 def assert_planar(lines, z_layer=None, tol=1e-6):

@@ -600,9 +600,11 @@ def read_raster(layer, work_crs: QgsCoordinateReferenceSystem, bounds, cell_size
     return dem
 
 
-def raster_cell_size(layer, work_crs, bounds, context, max_cells: int = 2048) -> float:
-    """Cell size (m) for a raster in the working CRS: its own resolution, at least 1 m, and
-    coarse enough that the input's extent spans at most ``max_cells`` cells."""
+def raster_cell_size(layer, work_crs, bounds, context, max_cells: int = 2048,
+                     min_cell: float = 1.0) -> float:
+    """Cell size (m) for a raster in the working CRS: its own resolution, at least
+    ``min_cell`` m, and coarse enough that the input's extent spans at most ``max_cells``
+    cells."""
     ext = layer.extent()
     native = max(layer.rasterUnitsPerPixelX(), layer.rasterUnitsPerPixelY())
     try:  # the resolution in metres: the length of one pixel's diagonal, transformed
@@ -613,8 +615,88 @@ def raster_cell_size(layer, work_crs, bounds, context, max_cells: int = 2048) ->
     except Exception:  # noqa: BLE001 - an unknown CRS: trust the number as metres
         native_m = native
     span = max(bounds[2] - bounds[0], bounds[3] - bounds[1])
-    cell = max(native_m if math.isfinite(native_m) and native_m > 0 else 1.0, 1.0)
+    cell = max(native_m if math.isfinite(native_m) and native_m > 0 else 1.0, min_cell)
     return max(cell, span / max_cells)
+
+
+def read_image(layer, work_crs: QgsCoordinateReferenceSystem, bounds, cell_size: float,
+               what: str = "Image"):
+    """All bands of an image layer warped into the working CRS over ``bounds`` with GDAL
+    (bilinear, its own data type), as an engine GeoImage whose ``valid`` mask is GDAL's
+    alpha (no data, outside the source, or the source's own alpha)."""
+    from osgeo import gdal
+
+    from ..imagery.aerial_image import GeoImage
+
+    if not layer.crs().isValid():
+        raise QgsProcessingException(
+            f"{what} '{layer.name()}' has no coordinate reference system (CRS). Assign its "
+            "CRS (Layer Properties > Source, or GDAL 'Assign projection') and run again.")
+    source = layer.source().split("|")[0]
+    x0, y0, x1, y1 = bounds
+    options = gdal.WarpOptions(
+        format="MEM", dstSRS=crs_text(work_crs), srcSRS=crs_text(layer.crs()) or None,
+        outputBounds=(x0, y0, x1, y1), xRes=cell_size, yRes=cell_size,
+        resampleAlg="bilinear", dstAlpha=True, multithread=False)
+    try:
+        ds = gdal.Warp("", source, options=options)
+    except RuntimeError as exc:
+        raise QgsProcessingException(f"{what} '{layer.name()}' cannot be read or reprojected: "
+                                     f"{exc}") from exc
+    if ds is None:
+        raise QgsProcessingException(f"{what} '{layer.name()}' cannot be read or reprojected: "
+                                     f"{gdal.GetLastErrorMsg() or 'unknown GDAL error'}.")
+    data = ds.ReadAsArray()
+    data = data[None] if data.ndim == 2 else data
+    valid = data[-1] > 0
+    if not valid.any():
+        raise QgsProcessingException(
+            f"{what} '{layer.name()}' has no value over the example's extent: check that "
+            "they overlap.")
+    return GeoImage(np.moveaxis(data[:-1], 0, -1), ds.GetGeoTransform(), valid)
+
+
+def write_image(path: str, image, alpha: np.ndarray, work_crs: QgsCoordinateReferenceSystem,
+                target_crs: QgsCoordinateReferenceSystem) -> None:
+    """An engine GeoImage as a tiled, compressed GeoTIFF in ``target_crs`` (warped there
+    with GDAL when it is not the working CRS) with an alpha band and averaged overviews
+    (halving until under 128 pixels, at least one level)."""
+    from osgeo import gdal, gdal_array
+
+    rows, cols, bands = image.array.shape
+    gdal_type = gdal_array.NumericTypeCodeToGDALTypeCode(image.array.dtype)
+    if gdal_type is None:
+        raise QgsProcessingException(f"Images of type {image.array.dtype} cannot be written.")
+    top = 255 if image.array.dtype == np.uint8 else \
+        np.iinfo(image.array.dtype).max if np.issubdtype(image.array.dtype, np.integer) else 1
+    mem = gdal.GetDriverByName("MEM").Create("", cols, rows, bands + 1, gdal_type)
+    mem.SetGeoTransform(tuple(image.geotransform))
+    mem.SetProjection(work_crs.toWkt())
+    for b in range(bands):
+        mem.GetRasterBand(b + 1).WriteArray(image.array[:, :, b])
+    mem.GetRasterBand(bands + 1).WriteArray(np.where(alpha > 0, top, 0).astype(image.array.dtype))
+    mem.GetRasterBand(bands + 1).SetColorInterpretation(gdal.GCI_AlphaBand)
+    if bands >= 3:
+        for b, ci in enumerate((gdal.GCI_RedBand, gdal.GCI_GreenBand, gdal.GCI_BlueBand)):
+            mem.GetRasterBand(b + 1).SetColorInterpretation(ci)
+    if target_crs.isValid() and target_crs != work_crs:
+        mem = gdal.Warp("", mem, options=gdal.WarpOptions(
+            format="MEM", dstSRS=crs_text(target_crs), srcAlpha=True, dstAlpha=True,
+            resampleAlg="bilinear", multithread=False))
+    creation = ["TILED=YES", "COMPRESS=DEFLATE", "ALPHA=YES", "BIGTIFF=IF_SAFER"]
+    if bands >= 3:
+        creation.append("PHOTOMETRIC=RGB")
+    out = gdal.Translate(str(path), mem, options=gdal.TranslateOptions(
+        format="GTiff", creationOptions=creation))
+    if out is None:
+        raise QgsProcessingException(f"The image cannot be written to {path}: "
+                                     f"{gdal.GetLastErrorMsg() or 'unknown GDAL error'}.")
+    levels, size = [2], max(out.RasterXSize, out.RasterYSize)
+    while size / (2 * levels[-1]) >= 128:
+        levels.append(2 * levels[-1])
+    out.BuildOverviews("AVERAGE", levels)
+    out.FlushCache()
+    out = None
 
 
 def write_geotiff(path: str, dem, crs_wkt: str, what: str = "The raster") -> None:

@@ -40,6 +40,8 @@ ALGORITHMS = (
     ("split_domain", "SplitDomain", "Split domain into streets and parcels (Yang 2013)",
      "synthesis"),
     ("synthesize_roads", "SynthesizeRoads", "Synthesize roads (choose the method)", "synthesis"),
+    ("synthesize_aerial_image", "SynthesizeAerialImage",
+     "Synthesize aerial image of parcels (Aliaga et al. 2008)", "synthesis"),
     ("install_dependencies", "InstallDependencies", "Install Python dependencies", "setup"),
 )
 
