@@ -180,6 +180,13 @@ def make_inputs(folder: Path) -> Dict[str, str]:
         ro.chmod(stat.S_IRUSR | stat.S_IXUSR)
     out["read_only"] = str(ro)
     out["helsinki_lines"] = f"{HELSINKI}|layername=lines"
+    # the example image of the aerial-image synthesis and polygons on it
+    examples = Path(str(BUBENEC)).parent
+    shutil.copy(examples / "atlanta_pan_0.5m.tif", folder / "atlanta.tif")
+    _translate(str(examples / "atlanta_buildings.geojson"), folder / "atlanta.gpkg",
+               name="lots")
+    out["atlanta_image"] = str(folder / "atlanta.tif")
+    out["atlanta_lots"] = f"{folder / 'atlanta.gpkg'}|layername=lots"
     return out
 
 
@@ -362,6 +369,10 @@ BASE = {
                      "OUTPUT_PARCELS": "{out}/p.gpkg"}, {"REGION": "polygons"}),
     "synthesizeroads": ({"METHOD": 1, "ARTERIALS": "{streets}", "OUTPUT": "{out}/roads.gpkg"},
                         {"ARTERIALS": "lines"}),
+    "synthesizeaerialimage": ({"PARCELS": "{plots}", "EXAMPLE_IMAGE": "{atlanta_image}",
+                               "EXAMPLE_PARCELS": "{atlanta_lots}",
+                               "OUTPUT_IMAGE": "{out}/image.tif"},
+                              {"PARCELS": "polygons", "EXAMPLE_PARCELS": "polygons"}),
 }
 
 #: Replacements of a vector input: (input name per kind, expected message, core).

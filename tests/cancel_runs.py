@@ -137,6 +137,12 @@ RUNS = {
                     "OUTPUT_PARCELS": "{out}/sp.gpkg"},
     "synthesizeroads": {"METHOD": 1, "ARTERIALS": "{arterials}", "BOUNDARY": "{city}",
                         "OUTPUT": "{out}/sr.gpkg"},
+    "synthesizeaerialimage": {"PARCELS": "{plots}",
+                              "EXAMPLE_IMAGE": str(Path(str(BUBENEC)).parent
+                                                   / "atlanta_pan_0.5m.tif"),
+                              "EXAMPLE_PARCELS": str(Path(str(BUBENEC)).parent
+                                                     / "atlanta_buildings.geojson"),
+                              "PIXEL_SIZE": 0.25, "OUTPUT_IMAGE": "{out}/image.tif"},
     "synthesizedistrict": {"EXAMPLE_ROADS": "{streets}",
                            "EXAMPLE_BUILDINGS": f"{BUBENEC}|layername=buildings",
                            "ARTERIALS": "{streets}", "ROAD_METHOD": 0, "FOOTPRINT_METHOD": 1,
