@@ -85,6 +85,15 @@ def clear_error(alg, exc: BaseException, feedback) -> BaseException:
     return exc
 
 
+def at_qgis_boundary(error: BaseException) -> BaseException:
+    """The exception as QGIS wants it: exactly a QgsProcessingException. QGIS reports one
+    with its message only, and any other type -- a subclass such as ProcessingCanceled
+    included -- with the whole Python traceback (its sip handler compares type names)."""
+    if isinstance(error, QgsProcessingException) and type(error) is not QgsProcessingException:
+        return QgsProcessingException(str(error))
+    return error
+
+
 def _guarded(run):
     """``processAlgorithm`` with the rules of every run: the declarations checked (models do
     not call checkParameterValues), an output that is an input refused before anything is
@@ -103,7 +112,7 @@ def _guarded(run):
             return staging.commit(results)
         except BaseException as exc:
             staging.discard()
-            error = clear_error(self, exc, feedback)
+            error = at_qgis_boundary(clear_error(self, exc, feedback))
             if error is exc:
                 raise
             raise error from exc
@@ -242,6 +251,14 @@ class AlgorithmBase(QgsProcessingAlgorithm):
         if definition.dataType() == QgsProcessingParameterNumber.Integer:
             return int(round(value))
         return float(value)
+
+    def bound_work(self, what: str, amount: float, limit: float, unit: str, advice: str):
+        """Refuse a run larger than ``limit`` (in ``unit``) before it starts: ``what`` says
+        what is measured ('Region 'x' at 30 x 18 m parcels'), ``advice`` what to do."""
+        if amount > limit:
+            raise QgsProcessingException(
+                f"{what} makes about {amount:,.0f} {unit}, more than the {limit:,.0f} one run "
+                f"makes: {advice}.")
 
     def add_seed(self, help_text: str, name: str = "SEED", advanced: bool = False):
         """The random seed parameter: a whole number 0 .. 2^31 - 1, default 1."""

@@ -197,6 +197,14 @@ class LayoutMetrics(AlgorithmBase):
         if kwargs and self.given(parameters, area_name):
             area = qgis_io.read_source(self, parameters, area_name, context, feedback,
                                        kind="polygons", target_crs=crs)
+            layers = np.concatenate([np.asarray(v, dtype=object) for k, v in kwargs.items()
+                                     if k in ("roads", "blocks", "parcels", "buildings")])
+            if not shapely.intersects(shapely.union_all(area.geometry),
+                                      shapely.box(*shapely.total_bounds(layers))):
+                raise QgsProcessingException(
+                    f"The study area {area.name} does not overlap the layers it should "
+                    "measure: every density would be 0. Give the study area of these layers "
+                    "(or none: their convex hull is used).")
             kwargs["area"] = area.geometry
             names.append(f"study area: {area.name}")
         return kwargs, names, crs

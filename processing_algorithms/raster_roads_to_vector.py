@@ -31,6 +31,9 @@ class RasterRoadsToVector(AlgorithmBase):
     FROM_EDGE = "FROM_EDGE"
     OUTPUT = "OUTPUT"
 
+    #: The largest raster one run vectorises (thinning and the pixel graph hold it whole).
+    MAX_PIXELS = 100_000_000
+
     def name(self):
         return "rasterroadstovector"
 
@@ -93,7 +96,16 @@ class RasterRoadsToVector(AlgorithmBase):
         if not 1 <= band <= layer.bandCount():
             raise QgsProcessingException(f"Raster '{layer.name()}' has no band {band} "
                                          f"(bands 1 .. {layer.bandCount()}).")
-        if layer.crs().isValid() and layer.crs().isGeographic():
+        if not qgis_io.usable_crs(layer.crs()):
+            raise QgsProcessingException(
+                f"Raster '{layer.name()}' has no coordinate reference system (CRS), so its "
+                "units are unknown. Assign its CRS (Layer Properties > Source) and run again.")
+        if layer.width() * layer.height() > self.MAX_PIXELS:
+            raise QgsProcessingException(
+                f"Raster '{layer.name()}' has {layer.width()} x {layer.height()} pixels, more "
+                f"than the {self.MAX_PIXELS / 1e6:.0f} million one run turns into roads: clip "
+                "it to the area you need (Clip raster by extent) and run the parts.")
+        if layer.crs().isGeographic():
             raise QgsProcessingException(
                 f"Raster '{layer.name()}' is in geographic coordinates (degrees): lengths and "
                 "tolerances need a projected raster in metres; reproject it first (Warp).")
@@ -110,8 +122,23 @@ class RasterRoadsToVector(AlgorithmBase):
         if nodata is not None:
             array[array == nodata] = np.nan
         threshold = self.number(parameters, self.THRESHOLD, context)
-        feedback.pushInfo(f"{array.shape[0]} x {array.shape[1]} px, "
-                          f"{100 * np.nanmean(array > threshold):.1f} % above the threshold.")
+        valid = np.isfinite(array)
+        if not valid.any():
+            raise QgsProcessingException(f"Raster '{layer.name()}' band {band} holds no value "
+                                         "(every pixel is no-data).")
+        above = float((array[valid] > threshold).mean())
+        low, high = float(np.nanmin(array)), float(np.nanmax(array))
+        if above == 0.0:
+            raise QgsProcessingException(
+                f"Raster '{layer.name()}': no pixel is above the threshold {threshold:g} (values "
+                f"{low:g} .. {high:g}): lower THRESHOLD below the road values.")
+        if above == 1.0:
+            raise QgsProcessingException(
+                f"Raster '{layer.name()}': every pixel is above the threshold {threshold:g} "
+                f"(values {low:g} .. {high:g}), so roads cannot be told from the background: "
+                "set THRESHOLD between the background and the road values.")
+        feedback.pushInfo(f"{array.shape[0]} x {array.shape[1]} px, {100 * above:.1f} % "
+                          f"above the threshold (values {low:g} .. {high:g}).")
         result = qgis_io.run_engine(
             f"Raster '{layer.name()}'", raster_graph.raster_to_graph, array, gt,
             threshold=threshold, simplify=self.number(parameters, self.SIMPLIFY, context),
@@ -125,8 +152,11 @@ class RasterRoadsToVector(AlgorithmBase):
                           f"{result.stats['artefact_edges']} artefact edges removed, {n} road "
                           f"edges in {result.stats['seconds']['total']:.2f} s.")
         if n == 0:
-            feedback.reportError(f"No road in raster '{layer.name()}' above the threshold "
-                                 f"{threshold:g}.")
+            raise QgsProcessingException(
+                f"Raster '{layer.name()}': the pixels above the threshold {threshold:g} thin "
+                "to no road edge (only pieces shorter than the shortest dead end kept, "
+                f"{self.number(parameters, self.MIN_DEAD_END, context):g}): lower "
+                "MIN_DEAD_END or check the threshold.")
         table = pd.DataFrame({"edge_id": np.arange(n),
                               "length_m": shapely.length(result.geometry) if n else [],
                               "node_from": g.u if n else [], "node_to": g.v if n else []})

@@ -1,5 +1,6 @@
 """urbansynth:subdivideparcels - blocks shrunk by their streets and subdivided into parcels."""
 import numpy as np
+import shapely
 from qgis.core import (
     QgsProcessing,
     QgsProcessingException,
@@ -38,6 +39,8 @@ class SubdivideParcels(AlgorithmBase):
     OUTPUT = "OUTPUT"
 
     MAX_AREA_LIMIT = 1e7
+    #: The most parcels one run makes (about 1 ms each).
+    MAX_PARCELS = 200_000
     MAX_WIDTH_LIMIT = 1000.0
 
     def name(self):
@@ -159,14 +162,9 @@ class SubdivideParcels(AlgorithmBase):
         if message:
             raise QgsProcessingException(message)
         method = self.method_keys[self.parameterAsEnum(parameters, self.METHOD, context)]
-        number = {}
-        for name, lo, hi in ((self.MAX_AREA, 0.0, self.MAX_AREA_LIMIT),
-                             (self.MIN_AREA, 0.0, self.MAX_AREA_LIMIT),
-                             (self.MIN_WIDTH, 0.0, self.MAX_WIDTH_LIMIT),
-                             (self.LOT_WIDTH, 0.0, self.MAX_WIDTH_LIMIT),
-                             (self.IRREGULARITY, 0.0, 1.0),
-                             (self.STREET_WIDTH, 0.0, self.MAX_WIDTH_LIMIT)):
-            number[name] = self.number(parameters, name, context)
+        number = {name: self.number(parameters, name, context)
+                  for name in (self.MAX_AREA, self.MIN_AREA, self.MIN_WIDTH, self.LOT_WIDTH,
+                               self.IRREGULARITY, self.STREET_WIDTH)}
         if number[self.MAX_AREA] <= number[self.MIN_AREA]:
             raise QgsProcessingException(
                 f"The maximum parcel area ({number[self.MAX_AREA]:g} m²) must be larger than "
@@ -190,6 +188,11 @@ class SubdivideParcels(AlgorithmBase):
             frame, block_geoms, block_ids, road_lines, road_widths = \
                 self._blocks_from_roads(parameters, context, feedback)
 
+        area = float(shapely.area(np.asarray(block_geoms, dtype=object)).sum())
+        self.bound_work(f"Blocks {frame.name} ({area / 1e6:,.1f} km²) at a maximum parcel area "
+                        f"of {number[self.MAX_AREA]:g} m²", 2 * area / number[self.MAX_AREA],
+                        self.MAX_PARCELS, "parcels",
+                        "subdivide the blocks in parts, or raise the maximum parcel area")
         result = qgis_io.run_engine(
             frame.name, parcels.subdivide_blocks, block_geoms, method, settings, seed=seed,
             block_ids=block_ids, street_width=street_width, roads=road_lines,

@@ -37,6 +37,9 @@ class SynthesizePartBuildings(AlgorithmBase):
     SKELETON_SIMPLIFY = "SKELETON_SIMPLIFY"
     OUTPUT = "OUTPUT"
 
+    #: The longest skeleton of one building (the part sequences grow with its length / 0.2 m).
+    MAX_SKELETON_M = 5_000.0
+
     #: built-in parts databases (parts.py): key, label
     PARTS_LIBRARIES = (("terrace", "Built-in terrace parts (along the skeleton)"),
                        ("terrace_2m", "Built-in terrace parts, 2 m lengths only (fast FAR)"),
@@ -140,6 +143,10 @@ class SynthesizePartBuildings(AlgorithmBase):
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         frame, kind, skeletons, building_ids, fronts = self._skeletons(parameters, context,
                                                                        feedback)
+        longest = float(shapely.length(skeletons).max()) if len(skeletons) else 0.0
+        self.bound_work(f"Layer {frame.name} (its longest skeleton {longest:,.0f} m)",
+                        longest, self.MAX_SKELETON_M, "m of building along one skeleton",
+                        "split long skeletons into the buildings they stand for")
         library, label = self._library(parameters, context, feedback, frame.crs)
         towers = set(library.table["kind"]) == {"floor"}
         if towers and kind != "polygons":

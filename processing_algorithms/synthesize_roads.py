@@ -2,7 +2,12 @@
 METHOD (the district model uses it so that the method is a model parameter)."""
 from collections import namedtuple
 
+import numpy as np
+import pandas as pd
+import shapely
 from qgis.core import (
+    QgsFeature,
+    QgsGeometry,
     QgsProcessing,
     QgsProcessingException,
     QgsProcessingMultiStepFeedback,
@@ -11,23 +16,28 @@ from qgis.core import (
     QgsProcessingParameterFeatureSource,
     QgsProcessingParameterFile,
     QgsProcessingParameterRasterLayer,
+    QgsVectorLayer,
+    QgsWkbTypes,
 )
 
+from ..plugin.qgis_glue import qgis_io
+from ..plugin.roads import given_roads, streetgan
 from .common import AlgorithmBase
 
-#: One METHOD: its label and the algorithm that runs it. New methods are appended (the enum
-#: index is what models and command lines store).
+#: One METHOD: its label and the algorithm that runs it (None: run here). New methods are
+#: appended (the enum index is what models and command lines store).
 Method = namedtuple("Method", "key label algorithm")
 METHODS = (
     Method("fragments", "Fragments of the example (Hartmann thesis ch. 4.1)",
            "urbansynth:synthesizeroadsfromfragments"),
     Method("growth", "Procedural growth, grid major and organic minor roads (Scharl 2010)",
            "urbansynth:growroads"),
-    Method("gan", "StreetGAN generator trained on Helsinki (Hartmann thesis ch. 4.2)",
-           "urbansynth:synthesizeroadsgan"),
+    Method("gan", "StreetGAN generator trained on Helsinki (Hartmann thesis ch. 4.2)", None),
 )
 #: The shipped StreetGAN generator the 'gan' method uses.
 GAN_MODEL = "streetgan_helsinki"
+ROAD_FIELDS = [("edge_id", "int"), ("level", "int"), ("road_class", "str"),
+               ("length_m", "float")]
 
 
 class SynthesizeRoads(AlgorithmBase):
@@ -51,12 +61,16 @@ class SynthesizeRoads(AlgorithmBase):
         return (
             "Synthesises the streets of a district with the method chosen by METHOD, from one "
             "set of inputs, so that a Processing model can switch methods with a parameter "
-            "(the shipped model 'Synthesise a district like an example' does).\n\n"
+            "(the shipped model 'Synthesise a district like an example' does). Every method "
+            "keeps the ARTERIALS and connects the new streets to them.\n\n"
             "- Fragments: the faces of the ARTERIALS are filled level by level with warped "
             "fragments of the example (FRAGMENT_DB, or a database built here from "
             "EXAMPLE_ROADS).\n"
-            "- Procedural growth: grid major roads and organic minor roads grow inside the "
-            "BOUNDARY from the ARTERIALS (the example is not used).\n\n"
+            "- Procedural growth: grid major and organic minor roads grow inside the BOUNDARY "
+            "from the ARTERIALS (the example is not used).\n"
+            "- StreetGAN: the Helsinki generator paints the BOUNDARY; its streets are cut back "
+            "from a 15 m corridor around the arterials, carried on to them and noded with "
+            "them (the example is not used).\n\n"
             "Without a BOUNDARY, the convex hull of the arterials is the district. Each method "
             "is also a tool of its own with every option; this one uses their defaults."
         )
@@ -67,9 +81,11 @@ class SynthesizeRoads(AlgorithmBase):
             "Which road synthesis runs: fragments (example-based, thesis ch. 4.1), "
             "procedural growth (Scharl 2010) or the StreetGAN generator (thesis ch. 4.2).")
         self.add(QgsProcessingParameterFeatureSource(
-            self.EXAMPLE_ROADS, "Example roads with levels", [QgsProcessing.TypeVectorLine]),
-            "The example city's roads as written by 'Extract road hierarchy' (field level). "
-            "Fragments build their database from them when no FRAGMENT_DB is given.")
+            self.EXAMPLE_ROADS, "Example roads with levels", [QgsProcessing.TypeVectorLine],
+            optional=True),
+            "Fragments only: the example city's roads as written by 'Extract road hierarchy' "
+            "(field level), from which the fragment database is built when no FRAGMENT_DB "
+            "is given.")
         self.add(QgsProcessingParameterFeatureSource(
             self.ARTERIALS, "Arterial roads of the district", [QgsProcessing.TypeVectorLine]),
             "Sketched or real arterials: they are kept and the new streets connect to them.")
@@ -85,61 +101,117 @@ class SynthesizeRoads(AlgorithmBase):
         self.add(QgsProcessingParameterRasterLayer(
             self.DEM, "Terrain (DEM)", optional=True),
             "Fragments and growth take the terrain into account (slope term, maximum slope).")
-        self.add_seed(
-            "The same seed and inputs give the same network.")
+        self.add_seed("The same seed and inputs give the same network.")
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT, "Synthesised roads", QgsProcessing.TypeVectorLine),
             "The new road network with level (0 = arterial), styled by level.")
 
-    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
-        import processing  # QGIS's Processing plugin, present wherever algorithms run
+    def input_error(self, parameters, context):
+        method = METHODS[self.parameterAsEnum(parameters, self.METHOD, context)]
+        if method.key == "fragments" and not self.given(parameters, self.FRAGMENT_DB) \
+                and not self.given(parameters, self.EXAMPLE_ROADS):
+            return ("Method 'fragments' needs a Fragment database (FRAGMENT_DB) or Example "
+                    "roads with levels (EXAMPLE_ROADS) to build one from.")
+        return None
 
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        message = self.input_error(parameters, context)
+        if message:
+            raise QgsProcessingException(message)
         method = METHODS[self.parameterAsEnum(parameters, self.METHOD, context)]
         seed = self.seed(parameters, context)
-        arterials = parameters[self.ARTERIALS]
-        example = parameters[self.EXAMPLE_ROADS]
-        dem = parameters.get(self.DEM)
         feedback.pushInfo(f"Method: {method.label}")
+        # read here first: wrong geometry types, empty layers and missing CRSs are reported
+        # with the user's layer names, before any step runs
+        arterials = qgis_io.read_source(self, parameters, self.ARTERIALS, context, feedback,
+                                        kind="lines", fields=[])
+        boundary = qgis_io.read_source(self, parameters, self.BOUNDARY, context, feedback,
+                                       kind="polygons", target_crs=arterials.crs,
+                                       optional=True, fields=[])
+        if boundary is not None:
+            area = shapely.union_all(boundary.geometry)
+        else:
+            area = shapely.convex_hull(shapely.union_all(arterials.geometry))
+            if shapely.area(area) <= 0:
+                raise QgsProcessingException(
+                    f"The arterials {arterials.name} lie on one line: their convex hull has no "
+                    "area. Give a District boundary (BOUNDARY).")
+        if method.key == "gan":
+            return self._gan(parameters, context, feedback, arterials, area, seed)
+        return self._child_method(parameters, context, feedback, method, arterials, area, seed)
 
-        boundary = parameters.get(self.BOUNDARY)
+    def _child_method(self, parameters, context, feedback, method, arterials, area, seed):
+        import processing  # QGIS's Processing plugin, present wherever algorithms run
+
         fragment_db = self.parameterAsFile(parameters, self.FRAGMENT_DB, context)
-        need_hull = method.key != "fragments" and not boundary
         need_db = method.key == "fragments" and not fragment_db
-        steps = QgsProcessingMultiStepFeedback(1 + need_hull + need_db, feedback)
+        steps = QgsProcessingMultiStepFeedback(1 + need_db, feedback)
 
         def run(alg_id, params):
             child = processing.run(alg_id, params, context=context, feedback=steps,
                                    is_child_algorithm=True)
-            if feedback.isCanceled():
-                raise QgsProcessingException("Canceled.")
+            qgis_io.stop_if_canceled(feedback)
             return child
 
-        if need_hull:
-            boundary = run("qgis:minimumboundinggeometry",
-                           {"INPUT": arterials, "TYPE": 3,
-                            "OUTPUT": QgsProcessing.TEMPORARY_OUTPUT})["OUTPUT"]
-            steps.setCurrentStep(1)
+        dem = parameters.get(self.DEM)
         if need_db:
             fragment_db = run("urbansynth:buildfragmentdatabase",
-                              {"ROADS": example, "DEM": dem,
+                              {"ROADS": parameters[self.EXAMPLE_ROADS], "DEM": dem,
                                "OUTPUT": QgsProcessing.TEMPORARY_OUTPUT})["OUTPUT"]
             steps.setCurrentStep(1)
         if method.key == "fragments":
-            params = {"ARTERIALS": arterials, "FRAGMENT_DB": fragment_db, "DEM": dem,
-                      "SEED": seed}
-        elif method.key == "growth":
-            params = {"BOUNDARY": boundary, "MAJOR_ROADS": arterials, "DEM": dem, "SEED": seed}
+            params = {"ARTERIALS": parameters[self.ARTERIALS], "FRAGMENT_DB": fragment_db,
+                      "DEM": dem, "SEED": seed}
         else:
-            from ..plugin.roads import streetgan  # the MODEL enum lists the shipped models by name
-
-            models = streetgan.shipped_models()
-            if GAN_MODEL not in models:
-                raise QgsProcessingException(
-                    f"The StreetGAN model '{GAN_MODEL}' is missing from resources/models "
-                    "(reinstall the plugin).")
-            params = {"TARGET": boundary, "SEED": seed, "MODEL": models.index(GAN_MODEL)}
+            boundary = parameters.get(self.BOUNDARY)
+            if not self.given(parameters, self.BOUNDARY):
+                boundary = self._hull_layer(area, arterials, context)
+            params = {"BOUNDARY": boundary, "MAJOR_ROADS": parameters[self.ARTERIALS],
+                      "DEM": dem, "SEED": seed}
         # the destination as a path/URI (a model or a command line may leave it unset)
         params["OUTPUT"] = self.parameterAsOutputLayer(parameters, self.OUTPUT, context) \
             or QgsProcessing.TEMPORARY_OUTPUT
         result = run(method.algorithm, params)
         return {self.OUTPUT: result["OUTPUT"]}
+
+    @staticmethod
+    def _hull_layer(area, arterials, context):
+        """The convex hull of the arterials as a layer, named so that messages say what it
+        is, in the arterials' CRS."""
+        hull = qgis_io.reproject(np.array([area], dtype=object), arterials.crs,
+                                 arterials.source_crs, context)[0]
+        layer = QgsVectorLayer(f"Polygon?crs={arterials.source_crs.authid()}",
+                               f"convex hull of the arterials {arterials.name}", "memory")
+        if not layer.crs().isValid():
+            layer.setCrs(arterials.source_crs)
+        feature = QgsFeature()
+        feature.setGeometry(QgsGeometry.fromWkt(hull.wkt))
+        layer.dataProvider().addFeatures([feature])
+        context.temporaryLayerStore().addMapLayer(layer)
+        return layer.id()
+
+    def _gan(self, parameters, context, feedback, arterials, area, seed):
+        """StreetGAN over the district, joined to the arterials (thesis ch. 4.2)."""
+        models = streetgan.shipped_models()
+        if GAN_MODEL not in models:
+            raise QgsProcessingException(
+                f"The StreetGAN model '{GAN_MODEL}' is missing from resources/models "
+                "(reinstall the plugin).")
+        gen = qgis_io.run_engine(f"Model '{GAN_MODEL}'", streetgan.load_model, GAN_MODEL)
+        result = qgis_io.run_engine(
+            "The district", streetgan.synthesize, [area], gen, seed=seed,
+            progress=qgis_io.progress_for(feedback, 5, 85))
+        lines, level = qgis_io.run_engine(
+            arterials.name, given_roads.join_given_roads, result.geometry, result.level,
+            arterials.geometry)
+        feedback.pushInfo(f"{len(result.geometry)} generated streets; joined to "
+                          f"{len(arterials)} arterials: {len(lines)} road edges.")
+        table = pd.DataFrame({"edge_id": np.arange(1, len(lines) + 1), "level": level,
+                              "road_class": np.where(level == 0, "arterial", "local"),
+                              "length_m": shapely.length(lines) if len(lines) else []})
+        dest = qgis_io.write_sink(self, parameters, self.OUTPUT, context, lines, table,
+                                  ROAD_FIELDS, QgsWkbTypes.LineString, arterials.source_crs,
+                                  arterials.crs, feedback)
+        qgis_io.style_output(context, dest, "roads_by_level.qml")
+        feedback.setProgress(100)
+        return {self.OUTPUT: dest}

@@ -40,6 +40,9 @@ class SynthesizeRoadsFromFragments(AlgorithmBase):
     N_EDGES = "N_EDGES"
     N_INSERTED = "N_INSERTED"
 
+    #: The largest district one run fills (the fragment search takes about 2-3 s per km²).
+    MAX_AREA_KM2 = 50.0
+
     def name(self):
         return "synthesizeroadsfromfragments"
 
@@ -139,6 +142,10 @@ class SynthesizeRoadsFromFragments(AlgorithmBase):
         frame = qgis_io.read_source(self, parameters, self.ARTERIALS, context, feedback,
                                     kind="lines", fields=[])
         label = frame.name
+        hull = shapely.area(shapely.convex_hull(shapely.union_all(frame.geometry))) / 1e6
+        self.bound_work(f"Arterials {label} (convex hull {hull:,.1f} km²)", hull,
+                        self.MAX_AREA_KM2, "km² of district",
+                        "split the arterials into districts and run them one by one")
         n_best = self.number(parameters, self.N_BEST, context)
         max_level = self.number(parameters, self.MAX_LEVEL, context)
         seed = self.seed(parameters, context)
@@ -192,7 +199,7 @@ class SynthesizeRoadsFromFragments(AlgorithmBase):
         if dem_out:
             if not any(d.relief is not None for d in dbs):
                 feedback.pushInfo("No database has relief: OUTPUT_DEM is the input DEM resampled.")
-            qgis_io.write_geotiff(dem_out, result.dem, frame.crs.toWkt())
+            qgis_io.write_geotiff(dem_out, result.dem, frame.crs.toWkt(), "The merged relief")
             outputs[self.OUTPUT_DEM] = dem_out
         feedback.setProgress(100)
         return outputs

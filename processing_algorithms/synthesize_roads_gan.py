@@ -191,7 +191,7 @@ class SynthesizeRoadsGan(AlgorithmBase):
         raster = self.parameterAsOutputLayer(parameters, self.OUTPUT_RASTER, context)
         if raster:
             qgis_io.write_geotiff(raster, DemGrid(result.image, result.geotransform),
-                                  work.toWkt())
+                                  work.toWkt(), "The generator image")
             outputs[self.OUTPUT_RASTER] = raster
         feedback.setProgress(100)
         return outputs

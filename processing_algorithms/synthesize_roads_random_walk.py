@@ -39,6 +39,8 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
     OUTPUT_BLOCKS = "OUTPUT_BLOCKS"
 
     PLACEMENTS = [None, True, False]
+    #: The most intersection points one run connects (about 250 km² at Helsinki's density).
+    MAX_POINTS = 20_000
 
     def name(self):
         return "synthesizeroadsrandomwalk"
@@ -170,6 +172,17 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
                                          "points are too few to learn a street style from.")
         return frame, points
 
+    def _bound(self, target, *examples):
+        """The points the target receives (its area at the densest example's intersections
+        per km²) within what one run connects."""
+        area = shapely.area(shapely.union_all(target.geometry))
+        density = max(len(p) / max(shapely.area(shapely.convex_hull(shapely.multipoints(p.xy))),
+                                   1.0) for p in examples if p is not None)
+        self.bound_work(f"Target {target.name} ({area / 1e6:,.1f} km² at the example's "
+                        f"{density * 1e6:,.0f} intersections per km²)", area * density,
+                        self.MAX_POINTS, "intersection points",
+                        "split the target into districts and run them one by one")
+
     @staticmethod
     def _points_from_roads(lines, road_class, index):
         return intersection_quadtree.points_from_roads(lines, road_class, example=index)[0]
@@ -199,7 +212,8 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         field = self.parameterAsString(parameters, self.BLEND_FIELD, context)
         target = qgis_io.read_source(self, parameters, self.TARGET, context, feedback,
-                                     kind="polygons", fields=[field] if field else [])
+                                     kind="polygons", fields=[field] if field else [],
+                                     required_fields=[field] if field else ())
         seed = self.seed(parameters, context)
         settings = random_walk.WalkSettings(
             threshold=self.number(parameters, self.THRESHOLD, context),
@@ -216,6 +230,7 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
             blend = self._blend(parameters, context, target, field)
         elif field:
             feedback.pushInfo("The blend weight field is ignored: there is no second example.")
+        self._bound(target, points, points_b)
         existing = qgis_io.read_source(self, parameters, self.EXISTING_ROADS, context, feedback,
                                        kind="lines", target_crs=target.crs, optional=True,
                                        fields=["highway", "other_tags"])

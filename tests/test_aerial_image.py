@@ -58,7 +58,6 @@ def test_exact_warp_onto_a_rotated_scaled_moved_parcel():
     every pixel takes the value of the example point the affine map sends it to."""
     example = _gradient_image()
     ex_parcel = shapely.box(1020, 1890, 1060, 1910)
-    ex_street = shapely.LineString([(1000, 1885), (1100, 1885)])
     centre = (1040, 1900)
     new, inverse = _affine(ex_parcel, 30, 1.5, 0.75, centre, (6000, 7000))
     street, _ = _affine(shapely.box(1000, 1884, 1100, 1886), 30, 1.5, 0.75, centre, (6000, 7000))

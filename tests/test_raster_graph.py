@@ -153,3 +153,29 @@ def test_dead_ends_measured_from_the_road_edge():
     assert (ours.degree == 3).sum() == 1 and (ours.degree == 1).sum() == 3
     junction = ours.nodes[ours.degree == 3][0]
     assert abs(junction[0] - 700) < 6
+
+
+def test_strips_equal_the_whole_image_and_can_be_canceled(monkeypatch):
+    """The mask and skeleton are made in strips of rows (so that a cancel stops between
+    them): on a generated StreetGAN image and on Helsinki's roads, cut into strips of about
+    100 rows, exactly the whole-image result; a cancel stops after the first strip."""
+    from urban_synthesis.plugin.core.progress import Canceled, Progress
+    from urban_synthesis.plugin.roads import streetgan
+
+    monkeypatch.setattr(rg, "STRIP_PIXELS", 90_000)
+    gen = streetgan.load_model(streetgan.shipped_models()[0])
+    image = streetgan.generate(gen, 1400, 900, seed=4)
+    helsinki = rg.rasterize_lines(helsinki_roads().geometry.values)[0]
+    for img in (image, helsinki):
+        mask, skel = rg.mask_and_skeleton(img)
+        assert (mask == rg.road_mask(img)).all()
+        assert (skel == rg.skeleton(img)).all()
+    calls = []
+
+    def canceled():
+        calls.append(1)
+        return len(calls) > 1
+
+    with pytest.raises(Canceled):
+        rg.mask_and_skeleton(np.tile(image, (4, 1)), progress=Progress(is_canceled=canceled))
+    assert len(calls) == 2

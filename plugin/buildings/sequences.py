@@ -105,6 +105,44 @@ class InfeasibleError(InputError):
     """No sequence of the database satisfies the constraints."""
 
 
+#: Candidate transitions expanded per slice of the forward sweep (a cancel is seen between
+#: slices: about 0.1 s each).
+_CHUNK = 1_000_000
+
+
+def _unique(keys: np.ndarray, between=None):
+    """``np.unique(keys, return_index=True, return_inverse=True)``, in slices of
+    :data:`_CHUNK` keys with ``between()`` called between them (the cancel check of a large
+    sweep). The same result: the first occurrence of each key is the first in slice order.
+
+    >>> k = np.array([5, 3, 5, 9, 3, 1])
+    >>> [a.tolist() for a in _unique(k)] == [a.tolist() for a in np.unique(
+    ...     k, return_index=True, return_inverse=True)]
+    True
+    """
+    between = between or (lambda: None)
+    if len(keys) <= 4 * _CHUNK:
+        return np.unique(keys, return_index=True, return_inverse=True)
+    starts = range(0, len(keys), _CHUNK)
+    parts = []
+    for a in starts:
+        between()
+        u, first = np.unique(keys[a:a + _CHUNK], return_index=True)
+        parts.append((u, first + a))
+    between()
+    u = np.concatenate([p[0] for p in parts])
+    first = np.concatenate([p[1] for p in parts])
+    order = np.argsort(u, kind="stable")        # equal keys stay in slice (index) order
+    between()
+    u, first = u[order], first[order]
+    head = np.r_[True, u[1:] != u[:-1]]
+    uk, first_idx = u[head], first[head]
+    inv = np.empty(len(keys), dtype=np.int64)
+    for a in starts:
+        between()
+        inv[a:a + _CHUNK] = np.searchsorted(uk, keys[a:a + _CHUNK])
+    return uk, first_idx, inv
+
 @dataclass(frozen=True)
 class Constraint:
     """``lo <= sum of resource over the sequence <= hi`` (real units); ``lo == hi``: equality."""
@@ -443,7 +481,7 @@ def _graph(n, H0, U, U0, UC, lo_c, hi_c, max_rate, min_rate, allowed, last_key, 
     def intern(e: np.ndarray, c: np.ndarray):
         nonlocal keys_sorted, ids_sorted
         keys = e + n * (c @ stride)
-        uk, first_idx, inv = np.unique(keys, return_index=True, return_inverse=True)
+        uk, first_idx, inv = _unique(keys, lambda: progress.step(done))
         pos = np.searchsorted(keys_sorted, uk)
         found = pos < len(keys_sorted)
         found[found] = keys_sorted[pos[found]] == uk[found]
@@ -460,6 +498,7 @@ def _graph(n, H0, U, U0, UC, lo_c, hi_c, max_rate, min_rate, allowed, last_key, 
                              "the resolution or tighten the constraints")
         return ids[inv], new_ids
 
+    done = 0.0     # progress so far (the smallest level on the frontier)
     # initialisation: elements allowed at the front start at level 0
     e0 = np.flatnonzero(allowed[:, 0])
     c0 = UC[e0]
@@ -473,24 +512,40 @@ def _graph(n, H0, U, U0, UC, lo_c, hi_c, max_rate, min_rate, allowed, last_key, 
         total = int(deg.sum())
         if total == 0:
             break
-        src = np.repeat(frontier, deg)
-        offset = np.arange(total) - np.repeat(np.cumsum(deg) - deg, deg)
-        dst_e = indices[np.repeat(indptr[fe], deg) + offset]
-        # cheap one-dimensional tests first (key points, data term, primary overflow)
-        lvl = store.c[src, 0]
-        ok = allowed[dst_e, lvl] & (lvl + U0[dst_e] <= H0)
-        src, dst_e = src[ok], dst_e[ok]
-        c_new = store.c[src] + UC[dst_e]
-        if len(order) > 1:
-            ok = feasible(c_new)
-            src, dst_e, c_new = src[ok], dst_e[ok], c_new[ok]
+        # the frontier's successors, expanded and tested in slices of about _CHUNK
+        # candidates in frontier order (the same candidates in the same order as at once),
+        # so that a cancel is seen between slices of a large sweep
+        cut = np.searchsorted(np.cumsum(deg), np.arange(_CHUNK, total, _CHUNK), "right")
+        kept = []
+        for a, b in zip(np.r_[0, cut], np.r_[cut, len(frontier)]):
+            progress.step(done)
+            f, d = frontier[a:b], deg[a:b]
+            src = np.repeat(f, d)
+            offset = np.arange(len(src)) - np.repeat(np.cumsum(d) - d, d)
+            dst_e = indices[np.repeat(indptr[store.e[f]], d) + offset]
+            # cheap one-dimensional tests first (key points, data term, primary overflow)
+            lvl = store.c[src, 0]
+            ok = allowed[dst_e, lvl] & (lvl + U0[dst_e] <= H0)
+            src, dst_e = src[ok], dst_e[ok]
+            c_new = store.c[src] + UC[dst_e]
+            if len(order) > 1:
+                ok = feasible(c_new)
+                src, dst_e, c_new = src[ok], dst_e[ok], c_new[ok]
+            kept.append((src, dst_e, c_new))
+        progress.step(done)
+        src = np.concatenate([k[0] for k in kept])
+        dst_e = np.concatenate([k[1] for k in kept])
+        progress.step(done)
+        c_new = np.concatenate([k[2] for k in kept])
         if not len(src):
             break
+        progress.step(done)
         dst, frontier = intern(dst_e, c_new)
         src_parts.append(src)
         dst_parts.append(dst)
         if len(frontier):
-            progress.step(0.9 * store.c[frontier, 0].min() / max(H0, 1))
+            done = 0.9 * store.c[frontier, 0].min() / max(H0, 1)
+            progress.step(done)
     N = store.n
     node_e, node_c = store.e[:N], store.c[:N]
     esrc = np.concatenate(src_parts) if src_parts else np.empty(0, dtype=np.int64)

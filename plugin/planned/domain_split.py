@@ -250,7 +250,8 @@ def prepare_domain(region, key_roads=None, key_areas=None, street_width: float =
             kinds += [kind] * len(merged)
     faces = _faces(lines, work)
     if len(faces) == 0:
-        raise InputError("the region is empty once the key areas are removed")
+        raise InputError("the region is empty once the key areas are removed" if len(key_polys)
+                         else "the region encloses no area to lay out")
     return faces, np.asarray(lines, dtype=object), np.asarray(kinds), key_polys, domain, no_access
 
 

@@ -6,13 +6,15 @@ from qgis.core import (
     QgsApplication,
     QgsMessageLog,
     QgsProcessingAlgorithm,
+    QgsProcessingException,
     QgsProcessingModelAlgorithm,
+    QgsProcessingMultiStepFeedback,
     QgsProcessingProvider,
 )
 from qgis.PyQt.QtGui import QIcon
 
 from ..core.paths import RESOURCES
-from . import dependencies
+from . import dependencies, outputs
 from .toolbox import ALGORITHMS, GROUPS, algorithm_id
 
 ICON = RESOURCES / "icons" / "urbansynth.svg"
@@ -24,13 +26,56 @@ MODELS = RESOURCES / "models"
 class ShippedModel(QgsProcessingModelAlgorithm):
     """A model of resources/models: shown under its display name (help content key
     DISPLAY_NAME) in the provider's own group of that name (a .model3 file keeps the group
-    name only)."""
+    name only), and run with the plugin's output rule (:mod:`outputs`): its outputs appear
+    only when every step succeeded, and a cancel is reported as one."""
 
     def displayName(self):  # noqa: N802
         return self.helpContent().get("DISPLAY_NAME") or self.name()
 
     def groupId(self):  # noqa: N802
         return self.group().lower()
+
+    def createInstance(self):  # noqa: N802 - QGIS runs a copy: it must be a ShippedModel too
+        clone = ShippedModel()
+        clone.loadVariant(self.toVariant())
+        clone.setSourceFilePath(self.sourceFilePath())
+        return clone
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        from . import qgis_io  # the engine's packages: not needed to list the provider
+
+        staging = outputs.OutputStaging(self, parameters, context)
+        staged = staging.prepare()
+        recorder = _StepErrors(feedback)
+        try:
+            results = super().processAlgorithm(staged, context, recorder)
+            # QGIS ends a canceled model between steps without an error: nothing is kept
+            qgis_io.stop_if_canceled(feedback)
+            return staging.commit(results)
+        except BaseException as exc:
+            staging.discard()
+            # exactly a QgsProcessingException: QGIS prints any other type with a traceback
+            if feedback is not None and feedback.isCanceled():
+                raise QgsProcessingException(
+                    "Canceled by the user: the model stopped and wrote no output.") from exc
+            if isinstance(exc, QgsProcessingException):
+                # QGIS says only which step failed: add the step's own message
+                step = recorder.errors[-1] if recorder.errors else ""
+                raise QgsProcessingException(f"{exc}: {step}" if step else str(exc)) from exc
+            raise
+
+
+class _StepErrors(QgsProcessingMultiStepFeedback):
+    """The model's feedback, keeping the errors its steps report (QGIS's model throws
+    'Error encountered while running <step>' without the step's message)."""
+
+    def __init__(self, feedback):
+        super().__init__(1, feedback)
+        self.errors = []
+
+    def reportError(self, error, fatalError=False):  # noqa: N802,N803 (QGIS API)
+        self.errors.append(error)
+        super().reportError(error, fatalError)
 
 
 class UnavailableAlgorithm(QgsProcessingAlgorithm):

@@ -100,10 +100,14 @@ def crs_label(crs: QgsCoordinateReferenceSystem) -> str:
 
 
 def usable_crs(crs: QgsCoordinateReferenceSystem) -> bool:
-    """Whether a CRS is defined well enough to transform coordinates: valid and known to
-    PROJ (a GeoPackage layer with srs_id 0 'Undefined' is valid in QGIS but has neither an
-    authority id nor a PROJ definition)."""
-    return crs.isValid() and bool(crs.authid() or crs.toProj())
+    """Whether a CRS says what the coordinates are: valid, and not one of GeoPackage's
+    placeholders for 'no CRS' (srs_id 0 'Undefined geographic SRS', -1 'Undefined Cartesian
+    SRS'), which QGIS reads as valid CRSs without an authority id."""
+    if not crs.isValid():
+        return False
+    if crs.authid():
+        return True
+    return bool(crs.toProj()) and not crs.description().lower().startswith("undefined")
 
 
 @dataclass

@@ -1,0 +1,78 @@
+"""Outputs are written under a temporary name and moved into place only when the run
+succeeded (plugin/qgis_glue/outputs.py): file, shapefile and GeoPackage-layer outputs, the
+results QGIS loads, an existing destination after a failed run, and the command line."""
+import hashlib
+
+import pytest
+
+from conftest import bubenec_layer, run_qgis_process
+from helpers import memory_layer
+
+ALG = "urbansynth:extractroadhierarchy"
+
+
+def _sha(path):
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def test_a_failed_run_leaves_an_existing_output_untouched(qgis_processing, tmp_path):
+    from qgis.core import QgsProcessingException
+
+    out = tmp_path / "roads.gpkg"
+    qgis_processing.run(ALG, {"INPUT": bubenec_layer("streets"), "OUTPUT": str(out)})
+    before = _sha(out)
+    empty = memory_layer("LineString", [], "EPSG:3857", name="no roads")
+    with pytest.raises(QgsProcessingException, match="'no roads' is empty"):
+        qgis_processing.run(ALG, {"INPUT": empty, "OUTPUT": str(out)})
+    assert _sha(out) == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["roads.gpkg"]   # no staging left
+
+
+def test_shapefile_and_layer_outputs_land_in_place(qgis_processing, tmp_path):
+    from qgis.core import QgsProcessingContext, QgsVectorLayer
+
+    shp = tmp_path / "roads.shp"
+    gpkg = tmp_path / "both.gpkg"
+    context = QgsProcessingContext()
+    results = qgis_processing.run(ALG, {
+        "INPUT": bubenec_layer("streets"), "OUTPUT": str(shp),
+        "OUTPUT_INTERSECTIONS": f"ogr:dbname='{gpkg}' table=\"points\" (geom)"},
+        context=context)
+    assert results["OUTPUT"] == str(shp)
+    assert {p.suffix for p in tmp_path.glob("roads.*")} >= {".shp", ".shx", ".dbf", ".prj"}
+    assert results["OUTPUT_INTERSECTIONS"] == f"{gpkg}|layername=points"
+    assert QgsVectorLayer(results["OUTPUT_INTERSECTIONS"], "p", "ogr").featureCount() > 10
+    # a second layer into the same GeoPackage keeps the first
+    qgis_processing.run(ALG, {
+        "INPUT": bubenec_layer("streets"), "OUTPUT_INTERSECTIONS": None,
+        "OUTPUT": f"ogr:dbname='{gpkg}' table=\"ranked\" (geom)"})
+    for layer in ("points", "ranked"):
+        assert QgsVectorLayer(f"{gpkg}|layername={layer}", layer, "ogr").featureCount() > 10
+    assert not list(tmp_path.glob(".urbansynth-run-*"))
+
+
+def test_layers_to_load_name_the_final_files(qgis_processing, tmp_path):
+    from qgis.core import QgsProcessingContext, QgsProcessingOutputLayerDefinition, QgsProject
+
+    context = QgsProcessingContext()
+    context.setProject(QgsProject.instance())
+    out = tmp_path / "roads.gpkg"
+    definition = QgsProcessingOutputLayerDefinition(str(out), QgsProject.instance())
+    definition.destinationName = "My roads"
+    qgis_processing.run(ALG, {"INPUT": bubenec_layer("streets"), "OUTPUT": definition,
+                              "OUTPUT_INTERSECTIONS": None}, context=context)
+    loads = context.layersToLoadOnCompletion()
+    assert str(out) in loads and loads[str(out)].name == "My roads"
+    assert not any(".urbansynth-run-" in key for key in loads)
+
+
+def test_command_line_refuses_output_onto_input(tmp_path):
+    import shutil
+
+    src = tmp_path / "streets.gpkg"
+    shutil.copy(bubenec_layer("streets").split("|")[0], src)
+    before = _sha(src)
+    code, _, err = run_qgis_process("extractroadhierarchy", {
+        "INPUT": f"{src}|layername=streets", "OUTPUT": str(src)})
+    assert code != 0 and "would overwrite" in err and "Traceback" not in err, err
+    assert _sha(src) == before
