@@ -77,7 +77,8 @@ class SynthesizeRoads(AlgorithmBase):
         self.add(QgsProcessingParameterFeatureSource(
             self.BOUNDARY, "District boundary", [QgsProcessing.TypeVectorPolygon],
             optional=True),
-            "Polygon(s) the district grows in (growth, StreetGAN). Default: the convex hull "
+            "Polygon(s) the district fills (all methods; fragments close the faces the "
+            "arterials leave open with it). Default: the convex hull "
             "of the arterials.")
         self.add(QgsProcessingParameterFile(
             self.FRAGMENT_DB, "Fragment database", extension="gpkg", optional=True),
@@ -105,7 +106,7 @@ class SynthesizeRoads(AlgorithmBase):
 
         boundary = parameters.get(self.BOUNDARY)
         fragment_db = self.parameterAsFile(parameters, self.FRAGMENT_DB, context)
-        need_hull = method.key != "fragments" and not boundary
+        need_hull = not boundary
         need_db = method.key == "fragments" and not fragment_db
         steps = QgsProcessingMultiStepFeedback(1 + need_hull + need_db, feedback)
 
@@ -127,8 +128,8 @@ class SynthesizeRoads(AlgorithmBase):
                                "OUTPUT": QgsProcessing.TEMPORARY_OUTPUT})["OUTPUT"]
             steps.setCurrentStep(1)
         if method.key == "fragments":
-            params = {"ARTERIALS": arterials, "FRAGMENT_DB": fragment_db, "DEM": dem,
-                      "SEED": seed}
+            params = {"ARTERIALS": arterials, "BOUNDARY": boundary, "FRAGMENT_DB": fragment_db,
+                      "DEM": dem, "SEED": seed}
         elif method.key == "growth":
             params = {"BOUNDARY": boundary, "MAJOR_ROADS": arterials, "DEM": dem, "SEED": seed}
         else:

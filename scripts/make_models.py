@@ -98,7 +98,8 @@ def district_model() -> QgsProcessingModelAlgorithm:
         0, 160)
     _param(model, QgsProcessingParameterFeatureSource(
         "BOUNDARY", "District boundary", [QgsProcessing.TypeVectorPolygon], optional=True),
-        "Polygon the district fills (growth, StreetGAN); default the arterials' hull.",
+        "Polygon the district fills (every road method; fragments close the faces the "
+        "arterials leave open with it); default the arterials' hull.",
         0, 240)
     _param(model, QgsProcessingParameterRasterLayer("DEM", "Terrain (DEM)", optional=True),
            "Optional terrain: steers the road synthesis and drapes the street surfaces.", 0, 320)
