@@ -141,6 +141,13 @@ def _area(area) -> shapely.Geometry:
     return geom
 
 
+def _head(line, length: float):
+    """The first ``length`` metres of a line."""
+    from shapely.ops import substring
+
+    return substring(line, 0.0, max(float(length), 0.0))
+
+
 def _given_length(given, area) -> float:
     return float(shapely.length(clip_to_area(given, area)).sum()) if given is not None else 0.0
 
@@ -180,7 +187,8 @@ def chord_baseline(area, km_per_km2: float, rng: np.random.Generator,
     out, total = [], 0.0
     x0, y0, x1, y1 = geom.bounds
     reach = float(np.hypot(x1 - x0, y1 - y0))
-    while total < need:
+    done = need <= 0
+    while not done:
         n = 64
         pts = shapely.points(rng.uniform([x0, y0], [x1, y1], (n, 2)))
         inside = shapely.contains(geom, pts)
@@ -196,7 +204,9 @@ def chord_baseline(area, km_per_km2: float, rng: np.random.Generator,
         # keep the piece through the drawn point
         through = shapely.dwithin(parts, pts[owner], 1e-6)
         for piece in parts[through]:
-            if total >= need:
+            if total + piece.length >= need:    # the last chord is cut to the density
+                out.append(_head(piece, need - total))
+                done = True
                 break
             out.append(piece)
             total += piece.length
@@ -228,8 +238,15 @@ def delaunay_baseline(area, km_per_km2: float, spacing: float, rng: np.random.Ge
     e = np.unique(e, axis=0)
     e = e[rng.permutation(len(e))]
     edges = clip_to_area(shapely.linestrings(np.stack([xy[e[:, 0]], xy[e[:, 1]]], axis=1)), geom)
+    if need <= 0:
+        return edges[:0]
     cum = np.cumsum(shapely.length(edges))
-    return edges[:int(np.searchsorted(cum, need)) + 1] if need > 0 else edges[:0]
+    k = int(np.searchsorted(cum, need))
+    if k >= len(edges):
+        return edges
+    out = edges[:k + 1].copy()
+    out[k] = _head(out[k], need - (cum[k - 1] if k else 0.0))   # the last one cut to the density
+    return out
 
 
 # --------------------------------------------------------------------------- scoring

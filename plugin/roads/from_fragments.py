@@ -91,6 +91,9 @@ MAX_CLIPPED_SHARE = 0.2
 MAX_SCALE = 2.0
 #: Street ends closer than this (m) to the example fragment's boundary end on it.
 _ON_BOUNDARY = 0.5
+#: New dead-end edges shorter than this (m) are pruned (stubs of clipped warps: tuned on the
+#: fidelity benchmark's tuning towns, where 5 m left a dead-end share 30 % over the example's).
+MIN_DANGLE = 25.0
 #: Rounds of the fill stage: each fills the faces the previous round left too large.
 MAX_FILL_ROUNDS = 16
 #: Candidates tried per face and way (at scale, scaled) in the fill stage.
@@ -256,9 +259,15 @@ def _sliver_count(faces: np.ndarray, area: np.ndarray, perimeter: np.ndarray,
 
 
 def _sub_faces(polygon, streets: np.ndarray):
-    lines = np.concatenate([[shapely.get_exterior_ring(polygon)],
-                            np.asarray(streets, dtype=object)])
-    return planar_faces(lines)
+    """Faces of a polygon's outline cut by streets (street ends made vertices of the outline:
+    an end clipped onto it lies on it only up to round-off)."""
+    ring = shapely.get_exterior_ring(polygon)
+    streets = np.asarray(streets, dtype=object)
+    if len(streets):
+        ends = np.concatenate([shapely.get_coordinates(shapely.get_point(streets, 0)),
+                               shapely.get_coordinates(shapely.get_point(streets, -1))])
+        ring = shapely.snap(ring, shapely.multipoints(ends), 1e-6)
+    return planar_faces(np.concatenate([[ring], streets]))
 
 
 def procedural_split(face, min_area: float = MIN_BLOCK_AREA,
@@ -399,16 +408,18 @@ def close_sketch(arterials: Sequence, boundary) -> tuple:
 
 
 def statistical_split(face, sides: np.ndarray, rng: np.random.Generator,
-                      min_area: float = MIN_BLOCK_AREA,
-                      min_width: float = MIN_BLOCK_WIDTH) -> np.ndarray:
+                      min_area: float = MIN_BLOCK_AREA, min_width: float = MIN_BLOCK_WIDTH,
+                      tries: int = 8) -> np.ndarray:
     """One street across a face, cutting off a block-sized piece (the fill's fallback).
 
     The street runs across the long axis of the face's minimum rotated rectangle, at a
     distance from one end drawn from the example's block sides (``sides``: the sides of
     the rectangles of its blocks), so that recursion leaves blocks of the example's
-    dimensions; a face shorter than twice the drawn side is cut near its middle. A cut
-    that would leave a sliver is tried from the other end, then at the middle; no street
-    when all make slivers.
+    dimensions; a face shorter than twice the drawn side is cut near its middle. Only the
+    piece of the cut through the chosen point is kept (in a concave face a straight line
+    meets the outline many times). A cut that would leave a sliver is tried elsewhere
+    (``tries`` positions: from the drawn side at both ends, then uniformly along the
+    axis); no street when every cut makes slivers.
     """
     m = shape_metrics([face]).iloc[0]
     length = float(m.mbr_length_m)
@@ -424,15 +435,24 @@ def statistical_split(face, sides: np.ndarray, rng: np.random.Generator,
         d = length * float(rng.uniform(0.4, 0.6))
     sign = float(rng.choice([-1.0, 1.0]))
     half = length + float(m.mbr_width_m)
-    for t in (sign * (d - length / 2), -sign * (d - length / 2), 0.0):
+    positions = [sign * (d - length / 2), -sign * (d - length / 2)] + \
+        list(rng.uniform(-0.4, 0.4, max(tries - 2, 0)) * length)
+    # slivers the outline makes on its own (a spur of the boundary) are not the cut's
+    _, area0, perimeter0 = _sub_faces(face, np.empty(0, dtype=object))
+    base = _sliver_count(None, area0, perimeter0, min_area, min_width)
+    for t in positions:
         p = centre + t * along
         line = shapely.LineString([p - half * across, p + half * across])
         parts = shapely.get_parts(shapely.intersection(line, face))
         parts = parts[(shapely.get_type_id(parts) == 1) & (shapely.length(parts) > 1e-6)]
         if not len(parts):
             continue
+        # the piece through the cut's centre (the longest where the centre is outside)
+        dist = shapely.distance(parts, shapely.Point(p))
+        parts = parts[[int(np.argmin(dist)) if dist.min() < 1e-6 else
+                       int(np.argmax(shapely.length(parts)))]]
         _, area, perimeter = _sub_faces(face, parts)
-        if len(area) >= 2 and not _sliver_count(None, area, perimeter, min_area, min_width):
+        if len(area) >= 2 and _sliver_count(None, area, perimeter, min_area, min_width) <= base:
             return parts
     return np.empty(0, dtype=object)
 
@@ -666,6 +686,16 @@ def _faces_in(lines, min_area: float, min_width: float, target=None) -> np.ndarr
     return faces
 
 
+def _empty(faces: np.ndarray, lines: np.ndarray) -> np.ndarray:
+    """Which faces hold no street (a dead end inside a face makes it not empty)."""
+    inner = np.zeros(len(faces), bool)
+    if len(faces) and len(lines):
+        # half a metre inside the outline: the streets that bound the face do not count
+        hit = shapely.STRtree(lines).query(shapely.buffer(faces, -0.5), predicate="intersects")[0]
+        inner[hit] = True
+    return ~inner
+
+
 def _face_key(face) -> tuple:
     c = face.centroid
     return (round(c.x, 1), round(c.y, 1), round(face.area))
@@ -678,7 +708,8 @@ def _fill_stage(geometry, level, attrs, databases, names, inserter, rng, max_blo
     counts = dict(rounds=0, fill_fragment=0, fill_scaled=0, fill_statistics=0, left_empty=0)
     sides = np.concatenate([blocks_ex["long_m"].to_numpy(), blocks_ex["short_m"].to_numpy()])
     sides = sides[np.isfinite(sides) & (sides > 0)]
-    # the fragments whose streets split them (not blocks), per database
+    # the fragments whose streets split them (not blocks), per database: a fill that left
+    # only dead ends would leave the face as large as it was
     with_streets = []
     for db in databases:
         t = db.table
@@ -691,8 +722,10 @@ def _fill_stage(geometry, level, attrs, databases, names, inserter, rng, max_blo
     next_level = int(level.max()) + 1 if len(level) else 1
     for rnd in range(MAX_FILL_ROUNDS):
         faces = _faces_in(geometry, min_area, min_width, target)
-        big = list({_face_key(f): f for f in faces
-                    if f.area > max_block and _face_key(f) not in exhausted}.values())
+        # filled down to the example's block sizes: a face with dead ends inside is not
+        # empty, but still larger than the example's blocks
+        faces = faces[shapely.area(faces) > max_block] if len(faces) else faces
+        big = list({_face_key(f): f for f in faces if _face_key(f) not in exhausted}.values())
         if not big:
             break
         counts["rounds"] += 1
@@ -767,18 +800,7 @@ def _fill_stage(geometry, level, attrs, databases, names, inserter, rng, max_blo
     # what the rule is about: faces over the threshold with no street inside
     faces = _faces_in(geometry, min_area, min_width, target)
     big = faces[shapely.area(faces) > max_block] if len(faces) else faces
-    if len(big):
-        shapely.prepare(big)
-        hit = shapely.STRtree(geometry).query(big, predicate="contains_properly")[0] \
-            if len(geometry) else np.zeros(0, np.int64)
-        inner = np.zeros(len(big), bool)
-        inner[hit] = True
-        # a street touching the boundary from inside also counts
-        touch = shapely.STRtree(geometry).query(shapely.buffer(big, -0.5), predicate="intersects")[0]
-        inner[touch] = True
-        counts["left_empty"] = int((~inner).sum())
-    else:
-        counts["left_empty"] = 0
+    counts["left_empty"] = int(_empty(big, geometry).sum()) if len(big) else 0
     return geometry, level, attrs, counts, query_id
 
 
@@ -788,8 +810,8 @@ def _link_floating(geometry, level, attrs):
     Each floating piece (streets of faces closed only by the boundary, whose outline is no
     street) gets the shortest straight street from one of its nodes to the anchored network
     that crosses no other street; pieces are linked nearest first, so a linked piece anchors
-    the next. Without arterials the largest piece anchors. Returns the network and the
-    number of links.
+    the next. Without arterials the largest piece anchors; a piece that no such street can
+    reach is dropped. Returns the network and the number of links.
     """
     n = len(geometry)
     if n < 2:
@@ -820,7 +842,7 @@ def _link_floating(geometry, level, attrs):
             nodes = np.unique(np.r_[g.u[edge_comp == comp], g.v[edge_comp == comp]])
             pts = shapely.points(g.nodes[nodes])
             d = shapely.distance(target, pts)
-            for k in np.argsort(d)[:8]:
+            for k in np.argsort(d)[:32]:
                 if best is not None and d[k] >= best[0]:
                     break
                 link = shapely.shortest_line(pts[k], target)
@@ -840,6 +862,13 @@ def _link_floating(geometry, level, attrs):
         links.append(link)
         lines.append(link)
         anchored[comp] = True
+    # what cannot be linked without a crossing is dropped: no floating piece is left
+    drop = ~anchored[edge_comp]
+    if drop.any():
+        keep = np.ones(len(geometry), bool)
+        keep[src[drop]] = False
+        geometry, level = geometry[keep], level[keep]
+        attrs = {k: v[keep] for k, v in attrs.items()}
     if not links:
         return geometry, level, attrs, 0
     new_attrs = [("link", "", -1, len(links), -1)]
@@ -908,8 +937,9 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
                gamma: float = 0.5, names: Optional[Sequence[str]] = None,
                min_area: float = MIN_BLOCK_AREA, min_width: float = MIN_BLOCK_WIDTH,
                snap_tolerance: float = 1.0, snap_distance: float = 3.0,
-               min_dangle: float = 5.0, c: int = N_CANDIDATES, max_scale: float = MAX_SCALE,
-               boundary=None, fill: bool = True,
+               min_dangle: float = MIN_DANGLE, c: int = N_CANDIDATES,
+               max_scale: float = MAX_SCALE,
+               boundary=None, fill: bool = True, fill_quantile: float = FILL_QUANTILE,
                progress: Optional[Progress] = None) -> SynthesisResult:
     """Synthesise a street network inside sketched arterials from fragment databases.
 
@@ -939,8 +969,10 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
     boundary : Polygon(s), optional, the target: the arterials are clipped to it and its
         outline closes the faces they leave open (:func:`close_sketch`); the outline is no
         street of the result, so streets that reach it end there
-    fill : bool, fill every face larger than the example's p90 block area (see below); a
+    fill : bool, fill the faces down to the example's block sizes (see below); a
         ``max_level`` that stops the recursion early turns the fill off
+    fill_quantile : float, quantile (%) of the example's block areas above which no face
+        stays empty (the issue's rule: 90)
     progress : Progress, optional (per query fragment; raises Canceled)
 
     Returns
@@ -951,8 +983,10 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
     -----
     The fill stage (not in the thesis, whose Function 2 stops when the databases have no
     deeper level and leaves a face empty when its best match is a block): a face may stay
-    empty only when it is no larger than the example's p90 block area
-    (:func:`example_blocks`). Larger faces are filled, round after round, (1) with a
+    empty (no street inside), and is split down to the example's block sizes, only when it
+    is no larger than the example's p90 block area
+    (:func:`example_blocks`; ``fill_quantile`` chooses another quantile). Larger faces
+    are filled, round after round, (1) with a
     fragment of any level that holds streets and fits within ``max_scale``; else (2) with
     the best-matching such fragment at whatever scale, which splits the face along the
     fragment's streets (its pieces are filled in the next rounds); else (3) by a
@@ -1022,7 +1056,9 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
                          "fill with fragments")
     area = shapely.union_all(faces0)
     blocks_ex = example_blocks(databases)
-    max_block = float(np.percentile(blocks_ex["area_m2"], FILL_QUANTILE)) \
+    if not 0 <= fill_quantile <= 100:
+        raise InputError(f"the fill quantile must lie in [0, 100], got {fill_quantile}")
+    max_block = float(np.percentile(blocks_ex["area_m2"], fill_quantile)) \
         if fill and len(blocks_ex) else np.inf
     base_level = [int(_db_levels(d).min()) if len(d) else 0 for d in databases]
     levels_of = [set(int(x) for x in _db_levels(d)) for d in databases]
@@ -1159,7 +1195,7 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
         fill_counts["seconds"] = time.perf_counter() - t_fill
         fill_counts["max_block_m2"] = max_block
         stats["fill"] = fill_counts
-        progress.info(f"Fill: faces over the example's p{FILL_QUANTILE:g} block area "
+        progress.info(f"Fill: faces over the example's p{fill_quantile:g} block area "
                       f"({max_block:,.0f} m²): {fill_counts['fill_fragment']} filled with "
                       f"fragments at scale, {fill_counts['fill_scaled']} split along a scaled "
                       f"fragment's streets, {fill_counts['fill_statistics']} split from the "

@@ -9,18 +9,17 @@ streets inside its settlement envelope. Plus Helsinki (example: Bubeneč) and Bu
 
 For each target town:
 
-- **boundary**: its settlement envelope, the drivable streets inside the municipality
-  buffered by 120 m and shrunk by 100 m (a morphological closing that fills gaps between
-  streets up to ~240 m and leaves a 20 m margin), holes filled (fields enclosed by the
-  town's roads belong to it), cut to the municipality, parts under 0.2 km² dropped. It
-  says where the town is, not where its minor streets are.
+- **boundary**: its settlement envelope (``tests/towns.py``: the streets' morphological
+  closing, holes filled, cut to the municipality). It says where the town is, not where
+  its minor streets are.
 - **input**: its level-0 roads (:mod:`plugin.network.hierarchy`, OSM classes
   primary/secondary where present) clipped to the boundary.
 - **example**: the drivable streets of the other municipalities, each clipped to its own
   envelope (for Helsinki: Bubeneč and back). Never the target's own streets.
 - **methods** (3 seeds each): fragments (database built from the example), random walk
   (intersection points of the example, expanding the given roads), StreetGAN (the shipped
-  Helsinki generator), and the non-example references growroads and splitdomain.
+  Helsinki generator), and the non-example references growroads and splitdomain (without
+  its global mesh optimisation, which costs ten times the rest on 2 cores).
 - **baselines** in the same target, given roads included: a grid at the example's median
   segment length, random chords and random Delaunay edges up to the example's km / km².
 - **statistics** (:data:`plugin.measure.fidelity.STATISTICS`, sixteen of them, from
@@ -59,22 +58,13 @@ for p in (ROOT / "build" / "plugins", ROOT / "tests"):
         sys.path.insert(0, str(p))
 
 from urban_synthesis.plugin.measure import fidelity  # noqa: E402
-from urban_synthesis.plugin.network import hierarchy, invariants  # noqa: E402
-from urban_synthesis.plugin.network import street_graph as sg  # noqa: E402
+from urban_synthesis.plugin.network import invariants  # noqa: E402
 
-LI_PBF = Path(os.environ.get("URBANSYNTH_LI_PBF",
-                             "/work/shared/data/liechtenstein-2013-08-03.osm.pbf"))
-HELSINKI = ROOT / "data" / "examples" / "Helsinki.osm.pbf"
-BUBENEC = ROOT / "data" / "examples" / "bubenec.gpkg"
 RESULTS = ROOT / "tests" / "benchmarks" / "results" / "fidelity.json"
 TABLES = ROOT / "tests" / "benchmarks" / "results" / "fidelity.md"
 DOCS = ROOT / "docs"
 ATTRIBUTION = "© OpenStreetMap contributors, ODbL"
 
-#: Settlement envelope: buffer out, buffer in (m), smallest part kept (m²).
-ENVELOPE_OUT, ENVELOPE_IN, ENVELOPE_MIN_PART = 120.0, 100.0, 2e5
-#: A municipality is a target when this much drivable street (km) lies in its envelope.
-MIN_STREET_KM = 15.0
 #: Towns used while tuning the fragment fill (the others were only ever measured).
 TUNED_ON = ("Schaan", "Eschen", "Helsinki")
 QUICK_TOWNS = ("Vaduz", "Mauren", "Helsinki")
@@ -84,108 +74,9 @@ BASELINES = ("grid", "chords", "delaunay")
 
 # --------------------------------------------------------------------------- data
 
-@dataclass
-class Town:
-    """One town: its boundary, its real drivable streets (with levels and classes) inside."""
-
-    name: str
-    region: str
-    area: shapely.Geometry              # settlement envelope (metric CRS)
-    lines: np.ndarray                   # real drivable streets clipped to the area
-    level: np.ndarray                   # hierarchy level per line
-    road_class: np.ndarray
-    villages: List[str] = field(default_factory=list)
-
-    @property
-    def given(self) -> np.ndarray:
-        return self.lines[self.level == 0]
-
-    @property
-    def given_class(self) -> np.ndarray:
-        return self.road_class[self.level == 0]
-
-    @property
-    def km2(self) -> float:
-        return self.area.area / 1e6
-
-
-def _drivable_graph(df):
-    tags = [sg.parse_other_tags(t) for t in df.other_tags] if "other_tags" in df else []
-    z = [sg.vertical_layer(t.get("layer"), t.get("bridge"), t.get("tunnel")) for t in tags] \
-        if tags else None
-    g = sg.clean_network(df.geometry.values, df.highway.values,
-                         df.name.values if "name" in df else None, z)
-    return g, hierarchy.road_hierarchy(g).edge_level
-
-
-def envelope(streets: np.ndarray, within=None) -> shapely.Geometry:
-    """Settlement envelope of a street network (see the module docstring)."""
-    grown = shapely.union_all(shapely.buffer(streets, ENVELOPE_OUT, quad_segs=4))
-    env = shapely.buffer(grown, -ENVELOPE_IN, quad_segs=4)
-    if within is not None:
-        env = shapely.intersection(env, within)
-    parts = shapely.get_parts(env)
-    parts = parts[shapely.area(parts) >= ENVELOPE_MIN_PART]
-    # a town has no holes: fields enclosed by its streets belong to it
-    parts = shapely.polygons(shapely.get_exterior_ring(parts))
-    if within is not None:
-        parts = shapely.get_parts(shapely.intersection(parts, within))
-        parts = parts[shapely.area(parts) >= ENVELOPE_MIN_PART]
-    return shapely.make_valid(shapely.union_all(parts))
-
-
-def _town(name, region, area, g, level, villages=()):
-    with np.errstate(invalid="ignore"):
-        cut = shapely.intersection(g.geometry, area)
-    parts, idx = shapely.get_parts(cut, return_index=True)
-    keep = (shapely.get_type_id(parts) == 1) & (shapely.length(parts) > 0.01)
-    return Town(name, region, area, parts[keep], np.asarray(level)[idx[keep]],
-                np.asarray(g.road_class, dtype=object)[idx[keep]], list(villages))
-
-
-def liechtenstein_towns() -> List[Town]:
-    import pyogrio
-
-    crs = 32632
-    lines = pyogrio.read_dataframe(LI_PBF, layer="lines",
-                                   columns=["highway", "name", "other_tags"]).to_crs(crs)
-    lines = lines[lines.highway.isin(sg.DRIVABLE_CLASSES)].reset_index(drop=True)
-    munis = pyogrio.read_dataframe(LI_PBF, layer="multipolygons", columns=["name", "admin_level"],
-                                   where="admin_level='8'").to_crs(crs)
-    places = pyogrio.read_dataframe(LI_PBF, layer="points", columns=["name", "place"])
-    places = places[places.place.isin(["town", "village", "suburb", "hamlet"])].to_crs(crs)
-    g, level = _drivable_graph(lines)
-    towns = []
-    for _, m in munis.sort_values("name").iterrows():
-        inside = g.geometry[shapely.intersects(m.geometry, g.geometry)]
-        if not len(inside):
-            continue
-        env = envelope(inside, m.geometry)
-        if env.is_empty:
-            continue
-        villages = sorted(set(places.name[shapely.within(places.geometry.values, m.geometry)]))
-        t = _town(m["name"], "Liechtenstein", env, g, level, villages)
-        if shapely.length(t.lines).sum() / 1000 >= MIN_STREET_KM:
-            towns.append(t)
-    return towns
-
-
-def helsinki_town() -> Town:
-    import pyogrio
-
-    df = pyogrio.read_dataframe(HELSINKI, layer="lines").to_crs(32635)
-    df = df[df.highway.isin(sg.DRIVABLE_CLASSES)].reset_index(drop=True)
-    g, level = _drivable_graph(df)
-    return _town("Helsinki", "Helsinki", envelope(g.geometry), g, level)
-
-
-def bubenec_town() -> Town:
-    import pyogrio
-
-    df = pyogrio.read_dataframe(BUBENEC, layer="streets").to_crs(32633)
-    df["highway"] = "residential"   # the momepy streets carry no class: all drivable
-    g, level = _drivable_graph(df)
-    return _town("Bubenec", "Prague", envelope(g.geometry), g, level)
+import towns as towns_module  # noqa: E402
+from towns import (Town, bubenec_town, envelope, helsinki_town,  # noqa: E402,F401
+                   liechtenstein_towns)
 
 
 @dataclass
@@ -220,8 +111,10 @@ def example_for(target: Town, towns: List[Town]) -> Example:
 class Runner:
     """Per target: what a method needs, built once (databases, point sets)."""
 
-    def __init__(self, target: Town, example: Example, workdir: Path):
+    def __init__(self, target: Town, example: Example, workdir: Path,
+                 fill_quantile: float = 90.0):
         self.target, self.example, self.workdir = target, example, workdir
+        self.fill_quantile = fill_quantile
         self._cache: Dict[str, object] = {}
 
     def cached(self, key, make):
@@ -244,7 +137,8 @@ class Runner:
             return database.load_fragment_database(path)
 
         db = self.cached("fragment_db", build)
-        res = ff.synthesize(self.target.given, [db], seed=seed, boundary=self.target.area)
+        res = ff.synthesize(self.target.given, [db], seed=seed, boundary=self.target.area,
+                            fill_quantile=self.fill_quantile)
         self.last_log = res.queries.outcome.value_counts().to_dict()
         return res.geometry
 
@@ -274,7 +168,10 @@ class Runner:
         from urban_synthesis.plugin.planned import domain_split
 
         parts = shapely.get_parts(self.target.area)
-        return domain_split.split_domain(parts, key_roads=self.target.given, seed=seed).roads
+        # without the global mesh optimisation (sec. 6): a reference, at a tenth of the time
+        settings = domain_split.SplitSettings(optimise=False)
+        return domain_split.split_domain(parts, key_roads=self.target.given, seed=seed,
+                                         settings=settings).roads
 
     # baselines
 
@@ -391,6 +288,8 @@ def main(argv=None):
     ap.add_argument("--methods", default=",".join(METHOD_ORDER))
     ap.add_argument("--seeds", type=int, default=3)
     ap.add_argument("--no-pictures", action="store_true")
+    ap.add_argument("--fill-quantile", type=float, default=90.0,
+                    help="fragments: example block-area quantile no face may exceed empty")
     ap.add_argument("--out", default=str(RESULTS))
     args = ap.parse_args(argv)
     seeds = list(range(1 if args.quick else args.seeds))
@@ -400,9 +299,10 @@ def main(argv=None):
     wanted = [s for s in args.towns.split(",") if s] or (list(QUICK_TOWNS) if args.quick else
                                                          [t.name for t in towns])
     results = {"benchmark": "fidelity", "seeds": seeds, "methods": methods,
+               "fill_quantile": args.fill_quantile,
                "statistics": [k for k, _ in fidelity.STATISTICS], "tuned_on": list(TUNED_ON),
                "machine": {"platform": platform.platform(), "cpus": os.cpu_count()},
-               "data": {"liechtenstein": str(LI_PBF), "attribution": ATTRIBUTION},
+               "data": {"liechtenstein": str(towns_module.LI_PBF), "attribution": ATTRIBUTION},
                "targets": {}}
     print(f"{len(towns)} towns loaded in {time.perf_counter() - t0:.1f} s: "
           + ", ".join(f"{t.name} {t.km2:.2f} km²" for t in towns))
@@ -410,7 +310,7 @@ def main(argv=None):
         for target in [t for t in towns if t.name in wanted]:
             ex = example_for(target, towns)
             real = fidelity.fidelity_statistics(target.lines, target.area)
-            runner = Runner(target, ex, Path(tmp))
+            runner = Runner(target, ex, Path(tmp), args.fill_quantile)
             entry = {"region": target.region, "km2": target.km2, "villages": target.villages,
                      "example": ex.names, "given_km": float(shapely.length(target.given).sum()
                                                            / 1e3),
