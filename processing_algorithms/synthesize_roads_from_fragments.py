@@ -28,6 +28,7 @@ class SynthesizeRoadsFromFragments(AlgorithmBase):
     ARTERIALS = "ARTERIALS"
     BOUNDARY = "BOUNDARY"
     FILL = "FILL"
+    FILL_QUANTILE = "FILL_QUANTILE"
     FRAGMENT_DB = "FRAGMENT_DB"
     FRAGMENT_DB_2 = "FRAGMENT_DB_2"
     DEM = "DEM"
@@ -93,6 +94,13 @@ class SynthesizeRoadsFromFragments(AlgorithmBase):
             "level, scaled fragments, then splits from the example's block dimensions). Off: "
             "the thesis's Function 2 alone, which keeps a face empty when its match is a block.",
             advanced=True)
+        self.add(QgsProcessingParameterNumber(
+            self.FILL_QUANTILE, "Largest empty face (quantile of the example's block areas, %)",
+            QgsProcessingParameterNumber.Double, defaultValue=90.0, minValue=50.0,
+            maxValue=100.0),
+            "Faces larger than this quantile of the example's block areas are filled (90: the "
+            "p90). A city whose large blocks are parks or yards (Helsinki) keeps them empty "
+            "with a higher value.", advanced=True)
         self.add(QgsProcessingParameterFile(
             self.FRAGMENT_DB, "Fragment database", extension="gpkg"),
             "A GeoPackage written by 'Build fragment database' (database 1).")
@@ -207,6 +215,9 @@ class SynthesizeRoadsFromFragments(AlgorithmBase):
             style_polygons=style_polys, style_database=style_db, n_best=n_best, seed=seed,
             max_level=max_level, gamma=gamma, names=names, boundary=boundary,
             fill=self.parameterAsBool(parameters, self.FILL, context),
+            fill_quantile=qgis_io.check_number(
+                self.parameterAsDouble(parameters, self.FILL_QUANTILE, context),
+                self.FILL_QUANTILE, 50.0, 100.0),
             progress=qgis_io.progress_for(feedback, 12, 92))
         q = result.queries
         n_inserted = int((q.outcome == "fragment").sum())

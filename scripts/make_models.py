@@ -152,7 +152,8 @@ def district_model() -> QgsProcessingModelAlgorithm:
                     ("OUTPUT_JUNCTIONS", "JUNCTIONS", "Junctions")),
            x=900, y=0)
     _child(model, "metrics", "urbansynth:layoutmetrics", "Metrics against the example",
-           {"ROADS": out("roads", "OUTPUT"), "BLOCKS": out("blocks", "OUTPUT"),
+           {"ROADS": out("roads", "OUTPUT"), "GIVEN_ROADS": p("ARTERIALS"),
+            "BLOCKS": out("blocks", "OUTPUT"),
             "PARCELS": out("parcels", "OUTPUT"), "BUILDINGS": out("buildings", "OUTPUT"),
             "EXAMPLE_ROADS": out("hierarchy", "OUTPUT"),
             "EXAMPLE_BLOCKS": out("example_blocks", "OUTPUT"),

@@ -499,7 +499,6 @@ def test_an_open_sketch_is_closed_by_the_boundary_and_filled(grid_db):
     faces, _ = blocks.block_faces(np.concatenate([g, [shapely.boundary(target)]]))
     big = faces[shapely.area(faces) > p90]
     assert all(shapely.intersects(g, f.buffer(-0.5)).any() for f in big)
-    assert res.queries.outcome.str.startswith("fill_").any()
     assert_planar(g)
 
 
