@@ -703,7 +703,8 @@ def _face_key(face) -> tuple:
 
 def _fill_stage(geometry, level, attrs, databases, names, inserter, rng, max_block,
                 blocks_ex, n_best, c, gamma, max_scale, min_area, min_width, min_dangle,
-                query_rows, query_id, progress, target=None):
+                query_rows, query_id, progress, target=None, style_polygons=None,
+                style_database=None):
     """Fill every face larger than ``max_block`` (see :func:`synthesize`, Notes)."""
     counts = dict(rounds=0, fill_fragment=0, fill_scaled=0, fill_statistics=0, left_empty=0)
     sides = np.concatenate([blocks_ex["long_m"].to_numpy(), blocks_ex["short_m"].to_numpy()])
@@ -731,16 +732,19 @@ def _fill_stage(geometry, level, attrs, databases, names, inserter, rng, max_blo
         counts["rounds"] += 1
         big = np.asarray(big, dtype=object)
         options: List[list] = [[] for _ in range(len(big))]
+        # style polygons choose the database here as in the levels
+        style = _style_index(big, style_polygons, style_database, len(databases))
         for i, db in enumerate(databases):
-            if not len(with_streets[i]):
+            sel = np.arange(len(big)) if style_polygons is None else np.flatnonzero(style == i)
+            if not len(with_streets[i]) or not len(sel):
                 continue
-            ret = retrieve(db, big, None, None, gamma, max(c, 2 * FILL_TRIES),
+            ret = retrieve(db, big[sel], None, None, gamma, max(c, 2 * FILL_TRIES),
                            rows=with_streets[i])
-            for j in range(len(big)):
-                for k in ret.ranked(j, ret.rows.shape[1]):
-                    row = int(ret.rows[j, k])
+            for jj, j in enumerate(sel):
+                for k in ret.ranked(jj, ret.rows.shape[1]):
+                    row = int(ret.rows[jj, k])
                     ratio = big[j].area / max(float(db.table["area_m2"].iat[row]), 1e-9)
-                    options[j].append((float(ret.costs[j, k]), i, ret, j, int(k), ratio))
+                    options[j].append((float(ret.costs[jj, k]), i, ret, jj, int(k), ratio))
         new_geoms, new_attrs = [], []
         for j, face in enumerate(big):
             progress.step((rnd + j / len(big)) / MAX_FILL_ROUNDS)
@@ -1191,7 +1195,7 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
         geometry, level, attrs, fill_counts, query_id = _fill_stage(
             geometry, level, attrs, databases, names, inserter, rng, max_block, blocks_ex,
             n_best, c, gamma, max_scale, min_area, min_width, min_dangle, query_rows, query_id,
-            progress.sub(0.6, 0.95), target)
+            progress.sub(0.6, 0.95), target, style_polygons, style_database)
         fill_counts["seconds"] = time.perf_counter() - t_fill
         fill_counts["max_block_m2"] = max_block
         stats["fill"] = fill_counts
