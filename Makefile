@@ -8,7 +8,7 @@ PLUGIN_NAME := urban_synthesis
 PLUGIN_LINK := build/plugins/$(PLUGIN_NAME)
 QGIS_PROCESS := scripts/qgis-process
 
-.PHONY: setup demo test test-fast sweep bench package desktop-check clean
+.PHONY: setup demo test test-fast sweep bench fidelity package desktop-check clean
 
 setup: build/.system $(VENV)/.installed data/examples/.installed build/.plugin-enabled
 
@@ -63,6 +63,12 @@ sweep: setup
 bench: setup $(VENV)/.bench-installed
 	set -e; for b in tests/benchmarks/bench_*.py; do \
 		echo "== $$b"; QT_QPA_PLATFORM=offscreen $(PY) $$b; done
+
+# Road synthesis judged on towns it never saw (leave-one-town-out on Liechtenstein, plus
+# Helsinki <-> Bubenec): tables in tests/benchmarks/results/fidelity.{json,md}, pictures in
+# docs/fidelity_<town>.png. FIDELITY_ARGS=--quick for three towns and one seed.
+fidelity: setup
+	QT_QPA_PLATFORM=offscreen nice -n 10 $(PY) tests/benchmarks/bench_fidelity.py $(FIDELITY_ARGS)
 
 # The plugin zip (top folder urban_synthesis/) holds what QGIS needs to run the plugin, taken
 # from the committed tree (git archive HEAD): no tests, example data, dev scripts or README

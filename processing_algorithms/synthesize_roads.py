@@ -92,7 +92,8 @@ class SynthesizeRoads(AlgorithmBase):
         self.add(QgsProcessingParameterFeatureSource(
             self.BOUNDARY, "District boundary", [QgsProcessing.TypeVectorPolygon],
             optional=True),
-            "Polygon(s) the district grows in (growth, StreetGAN). Default: the convex hull "
+            "Polygon(s) the district fills (all methods; fragments close the faces the "
+            "arterials leave open with it). Default: the convex hull "
             "of the arterials.")
         self.add(QgsProcessingParameterFile(
             self.FRAGMENT_DB, "Fragment database", extension="gpkg", optional=True),
@@ -159,13 +160,15 @@ class SynthesizeRoads(AlgorithmBase):
                               {"ROADS": parameters[self.EXAMPLE_ROADS], "DEM": dem,
                                "OUTPUT": QgsProcessing.TEMPORARY_OUTPUT})["OUTPUT"]
             steps.setCurrentStep(1)
+        # fragment synthesis and growth fill the district: the boundary given, or the
+        # arterials' convex hull
+        boundary = parameters.get(self.BOUNDARY)
+        if not self.given(parameters, self.BOUNDARY):
+            boundary = self._hull_layer(area, arterials, context)
         if method.key == "fragments":
-            params = {"ARTERIALS": parameters[self.ARTERIALS], "FRAGMENT_DB": fragment_db,
-                      "DEM": dem, "SEED": seed}
+            params = {"ARTERIALS": parameters[self.ARTERIALS], "BOUNDARY": boundary,
+                      "FRAGMENT_DB": fragment_db, "DEM": dem, "SEED": seed}
         else:
-            boundary = parameters.get(self.BOUNDARY)
-            if not self.given(parameters, self.BOUNDARY):
-                boundary = self._hull_layer(area, arterials, context)
             params = {"BOUNDARY": boundary, "MAJOR_ROADS": parameters[self.ARTERIALS],
                       "DEM": dem, "SEED": seed}
         # the destination as a path/URI (a model or a command line may leave it unset)

@@ -6,6 +6,7 @@ from qgis.core import (
     QgsProcessing,
     QgsProcessingException,
     QgsProcessingOutputNumber,
+    QgsProcessingParameterBoolean,
     QgsProcessingParameterFeatureSink,
     QgsProcessingParameterFeatureSource,
     QgsProcessingParameterField,
@@ -25,6 +26,9 @@ from .common import AlgorithmBase
 class SynthesizeRoadsFromFragments(AlgorithmBase):
     GROUP_ID = "synthesis"
     ARTERIALS = "ARTERIALS"
+    BOUNDARY = "BOUNDARY"
+    FILL = "FILL"
+    FILL_QUANTILE = "FILL_QUANTILE"
     FRAGMENT_DB = "FRAGMENT_DB"
     FRAGMENT_DB_2 = "FRAGMENT_DB_2"
     DEM = "DEM"
@@ -61,6 +65,12 @@ class SynthesizeRoadsFromFragments(AlgorithmBase):
             "faces are then filled with the next level's fragments, until the databases have no "
             "deeper level. A warp that would put junctions outside a very concave face is "
             "replaced by a simple split of the face.\n\n"
+            "With a BOUNDARY (the target area), the arterials are clipped to it and its outline "
+            "closes the faces they leave open; the outline itself is no street. With FILL (on "
+            "by default), no face larger than the example's p90 block area stays empty: it gets "
+            "a fragment of any level at scale, else is split along a scaled fragment's streets, "
+            "else by a street that cuts off a piece of the example's block size; the log counts "
+            "each way. Pieces that reach only the boundary are linked to the arterials.\n\n"
             "Databases come from 'Build fragment database'. A second database mixes two "
             "styles: without style polygons the best-matching fragments of both compete, with "
             "STYLE polygons the field STYLE_FIELD (1 or 2) says which database to use inside "
@@ -76,6 +86,24 @@ class SynthesizeRoadsFromFragments(AlgorithmBase):
             self.ARTERIALS, "Arterial roads", [QgsProcessing.TypeVectorLine]),
             "Sketched arterials, or the level 0 roads of a real city: lines that close faces to "
             "fill. They are noded and cleaned first.")
+        self.add(QgsProcessingParameterFeatureSource(
+            self.BOUNDARY, "Target boundary (optional)", [QgsProcessing.TypeVectorPolygon],
+            optional=True),
+            "The area to fill (e.g. a town's outline): closes the faces the arterials leave "
+            "open. Without it only the faces the arterials close are filled.")
+        self.add(QgsProcessingParameterBoolean(
+            self.FILL, "Fill every face down to the example's block sizes", defaultValue=True),
+            "No face larger than the example's p90 block area stays empty (fragments of any "
+            "level, scaled fragments, then splits from the example's block dimensions). Off: "
+            "the thesis's Function 2 alone, which keeps a face empty when its match is a block.",
+            advanced=True)
+        self.add(QgsProcessingParameterNumber(
+            self.FILL_QUANTILE, "Largest empty face (quantile of the example's block areas, %)",
+            QgsProcessingParameterNumber.Double, defaultValue=90.0, minValue=50.0,
+            maxValue=100.0),
+            "Faces larger than this quantile of the example's block areas are filled (90: the "
+            "p90). A city whose large blocks are parks or yards (Helsinki) keeps them empty "
+            "with a higher value.", advanced=True)
         self.add(QgsProcessingParameterFile(
             self.FRAGMENT_DB, "Fragment database", extension="gpkg"),
             "A GeoPackage written by 'Build fragment database' (database 1).")
@@ -176,17 +204,27 @@ class SynthesizeRoadsFromFragments(AlgorithmBase):
                                          "fragments' relief into.")
         feedback.setProgress(12)
 
+        boundary = None
+        if self.given(parameters, self.BOUNDARY):
+            boundary = qgis_io.read_source(self, parameters, self.BOUNDARY, context, feedback,
+                                           kind="polygons", target_crs=frame.crs,
+                                           fields=[]).geometry
         result = qgis_io.run_engine(
             label, synthesis_fragments.synthesize, frame.geometry, dbs, dem=dem,
             style_polygons=style_polys, style_database=style_db, n_best=n_best, seed=seed,
-            max_level=max_level, gamma=gamma, names=names,
+            max_level=max_level, gamma=gamma, names=names, boundary=boundary,
+            fill=self.parameterAsBool(parameters, self.FILL, context),
+            fill_quantile=qgis_io.check_number(
+                self.parameterAsDouble(parameters, self.FILL_QUANTILE, context),
+                self.FILL_QUANTILE, 50.0, 100.0),
             progress=qgis_io.progress_for(feedback, 12, 92))
         q = result.queries
         n_inserted = int((q.outcome == "fragment").sum())
         feedback.pushInfo(
             f"{len(q)} query fragments: {n_inserted} filled from examples, "
             f"{int((q.outcome == 'procedural').sum())} split procedurally, "
-            f"{int(q.outcome.isin(['block', 'unsplit', 'no_candidate']).sum())} left as blocks; "
+            f"{int(q.outcome.isin(['block', 'unsplit', 'no_candidate']).sum())} left as blocks, "
+            f"{int(q.outcome.str.startswith('fill_').sum())} filled by the fill stage; "
             f"{len(result.geometry)} road edges over {result.stats['area_km2']:.3f} km² in "
             f"{result.stats['seconds']:.1f} s.")
 

@@ -100,7 +100,8 @@ def district_model() -> QgsProcessingModelAlgorithm:
         0, 160)
     _param(model, QgsProcessingParameterFeatureSource(
         "BOUNDARY", "District boundary", [QgsProcessing.TypeVectorPolygon], optional=True),
-        "Polygon the district fills (growth, StreetGAN); default the arterials' hull.",
+        "Polygon the district fills (every road method; fragments close the faces the "
+        "arterials leave open with it); default the arterials' hull.",
         0, 240)
     _param(model, QgsProcessingParameterRasterLayer("DEM", "Terrain (DEM)", optional=True),
            "Optional terrain: steers the road synthesis and drapes the street surfaces.", 0, 320)
@@ -154,7 +155,8 @@ def district_model() -> QgsProcessingModelAlgorithm:
                     ("OUTPUT_JUNCTIONS", "JUNCTIONS", "Junctions")),
            x=900, y=0)
     _child(model, "metrics", "urbansynth:layoutmetrics", "Metrics against the example",
-           {"ROADS": out("roads", "OUTPUT"), "BLOCKS": out("blocks", "OUTPUT"),
+           {"ROADS": out("roads", "OUTPUT"), "GIVEN_ROADS": p("ARTERIALS"),
+            "BLOCKS": out("blocks", "OUTPUT"),
             "PARCELS": out("parcels", "OUTPUT"), "BUILDINGS": out("buildings", "OUTPUT"),
             "EXAMPLE_ROADS": out("hierarchy", "OUTPUT"),
             "EXAMPLE_BLOCKS": out("example_blocks", "OUTPUT"),

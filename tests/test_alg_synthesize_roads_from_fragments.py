@@ -79,7 +79,8 @@ def test_helsinki_synthesis_through_processing(qgis_processing, helsinki):
     assert set(level) >= {0, 1}
     src = np.array(attrs["source_fragment"], dtype=object)
     assert set(src[level == 0]) == {"arterial"}
-    assert all(s.startswith("helsinki_fragments:") or s == "procedural" for s in src[level > 0])
+    assert all(s.startswith("helsinki_fragments:") or s in ("procedural", "statistics", "link")
+               for s in src[level > 0])
     assert any(m.startswith("Level 0:") for m in log.messages)
     assert log.progress and max(log.progress) == pytest.approx(100)
     # planar in a metric CRS
@@ -156,7 +157,8 @@ def test_two_databases_with_style_polygons(qgis_processing, helsinki, tmp_path):
                                     "OUTPUT": "memory:"})
     _, attrs = layer_arrays(res["OUTPUT"])
     level = np.array(attrs["level"])
-    assert set(np.array(attrs["database"], dtype=object)[level > 0]) <= {"other_city"}
+    # fragments only from database 2 (statistics splits and links have none)
+    assert set(np.array(attrs["database"], dtype=object)[level > 0]) - {""} <= {"other_city"}
     assert (level > 0).any()
 
 
@@ -227,3 +229,41 @@ def test_qgis_process_exits_zero(helsinki, tmp_path):
     df = pyogrio.read_dataframe(out)
     assert len(df) == result["results"]["N_EDGES"]
     assert {"level", "source_fragment", "database"} <= set(df.columns)
+
+
+def test_boundary_closes_the_sketch_and_the_fill_is_logged(qgis_processing, helsinki, tmp_path):
+    """Helsinki's arterials with their convex hull as BOUNDARY, through qgis_process: the
+    hull closes the faces the clipped extract leaves open, the log counts each way of the
+    fill, and the new streets keep the network invariants against the arterials."""
+    from urban_synthesis.plugin.network import invariants
+
+    hull = qgis_processing.run("qgis:minimumboundinggeometry", {
+        "INPUT": helsinki["arterials"], "TYPE": 3,
+        "OUTPUT": str(tmp_path / "hull.gpkg")})["OUTPUT"]
+    out = tmp_path / "filled.gpkg"
+    code, result, err = run_qgis_process("synthesizeroadsfromfragments", {
+        "ARTERIALS": helsinki["arterials"], "BOUNDARY": hull, "FRAGMENT_DB": helsinki["db"],
+        "SEED": 2, "OUTPUT": str(out)})
+    assert code == 0, err
+    import geopandas as gpd
+
+    roads = gpd.read_file(out).to_crs(32635)
+    arterials = gpd.read_file(helsinki["arterials"]).to_crs(32635)
+    hull_m = gpd.read_file(hull).to_crs(32635).geometry.values[0]
+    new = roads[roads["level"] > 0].geometry.values
+    # far more streets than the faces the arterials close on their own (issue 15: 12 km)
+    assert shapely.length(new).sum() > 1.5 * shapely.length(arterials.geometry.values).sum()
+    assert shapely.within(roads.geometry.values, hull_m.buffer(0.01)).all()
+    given = shapely.get_parts(shapely.intersection(arterials.geometry.values, hull_m))
+    given = given[shapely.length(given) > 0.01]
+    check = invariants.check_network(new, given, area=hull_m)
+    v = check.violations()
+    assert v["crossings_given"] == v["crossings_synthesised"] == v["overlaps"] == 0, v
+    assert v["floating_pieces"] == 0 and v["parallel_duplicates"] == 0, v
+    log = Log()
+    res = qgis_processing.run(ALG, {"ARTERIALS": helsinki["arterials"], "BOUNDARY": hull,
+                                    "FRAGMENT_DB": helsinki["db"], "SEED": 2,
+                                    "OUTPUT": "memory:"}, feedback=log)
+    assert res["N_EDGES"] == len(roads)
+    fill = [m for m in log.messages if m.startswith("Fill:")]
+    assert fill and "left empty" in fill[0] and "0 left empty" in fill[0]

@@ -64,7 +64,8 @@ from .street_graph import clean_network
 
 __all__ = [
     "JUNCTION_TOLERANCE", "CORRIDOR_HALF_WIDTH", "MIN_DUPLICATE_LENGTH", "JUNCTION_RADIUS",
-    "DEAD_END_TOLERANCE", "EDGE_DISTANCE", "UNDERSHOOT_DISTANCE", "CONTROLLED_ACCESS",
+    "DEAD_END_TOLERANCE", "EDGE_DISTANCE", "SNAP_TOLERANCE", "UNDERSHOOT_DISTANCE",
+    "CONTROLLED_ACCESS",
     "CHECKS", "Contacts", "NetworkCheck", "line_contacts", "dead_end_share", "new_streets",
     "check_network",
 ]
@@ -81,6 +82,8 @@ JUNCTION_RADIUS = 1.0
 DEAD_END_TOLERANCE = 0.3
 #: Nodes this close (m) to the study-area boundary are clip ends, not dead ends.
 EDGE_DISTANCE = 1.0
+#: Nodes closer than this (m) are one node when degrees are counted (``layoutmetrics``).
+SNAP_TOLERANCE = 0.5
 #: A dangling synthesised end this close (m) to another line but not on it undershoots it.
 UNDERSHOOT_DISTANCE = 2.0
 #: OSM classes crossed only at existing junctions.
@@ -240,12 +243,15 @@ def _unique_points(points: np.ndarray, tolerance: float) -> np.ndarray:
 
 
 def dead_end_share(lines: Sequence, area=None, edge_distance: float = EDGE_DISTANCE,
-                   snap_tolerance: float = JUNCTION_TOLERANCE) -> float:
+                   snap_tolerance: float = SNAP_TOLERANCE) -> float:
     """Share of dead ends among the nodes of degree != 2 of a noded street network.
 
-    Lines are noded at crossings and chains through degree-2 nodes dissolved (the plain
-    count); with ``area``, only nodes inside it and at least ``edge_distance`` m from its
-    boundary count (the ends of a network clipped to the area are not dead ends).
+    Lines are noded at crossings, nodes closer than ``snap_tolerance`` merged and chains
+    through degree-2 nodes dissolved: the street graph of ``layoutmetrics`` (its default
+    0.5 m), so that this is its ``dead_end_share``; with ``area``, only nodes inside it (or
+    on its boundary, within the millimetre the nodes are rounded to) and at least
+    ``edge_distance`` m from its boundary count (the ends of a network clipped to the area
+    are not dead ends).
 
     Returns
     -------
@@ -255,12 +261,12 @@ def dead_end_share(lines: Sequence, area=None, edge_distance: float = EDGE_DISTA
     if not len(lines):
         return float("nan")
     g = clean_network(lines, snap_tolerance=snap_tolerance, min_dangle_length=0.0,
-                      merge_degree2=True)
+                      merge_degree2=True, duplicate_tolerance=snap_tolerance)
     deg = g.degree
     count = deg != 2
     if area is not None:
         pts = shapely.points(g.nodes)
-        count &= shapely.dwithin(area, pts, 1e-6)      # on the boundary counts as inside
+        count &= shapely.dwithin(area, pts, 1e-3)      # on the boundary counts as inside
         if edge_distance > 0:
             count &= ~shapely.dwithin(shapely.boundary(area), pts, edge_distance)
     n = int(count.sum())
@@ -383,7 +389,7 @@ class NetworkCheck:
 
 
 def check_network(synthesised: Sequence, given: Optional[Sequence] = None,
-                  given_class: Optional[Sequence] = None, area=None,
+                  given_class: Optional[Sequence] = None, area=None, *,
                   given_layer: Optional[Sequence] = None,
                   synthesised_layer: Optional[Sequence] = None,
                   example_dead_end_share: Optional[float] = None,

@@ -59,6 +59,7 @@ from scipy.sparse.csgraph import connected_components
 
 from ..core.progress import InputError, Progress, ensure
 from ..network import street_graph as _roads
+from ..network.invariants import CORRIDOR_HALF_WIDTH, MIN_DUPLICATE_LENGTH
 from ..network.blocks import (
     MIN_BLOCK_AREA,
     MIN_BLOCK_WIDTH,
@@ -73,7 +74,8 @@ from ..retrieval.warp import poisson_blend, warp_geometries, warp_points
 
 __all__ = [
     "MAX_N_BEST", "MAX_LEVELS", "EDGE_FIELDS", "Retrieval", "SynthesisResult",
-    "retrieve", "synthesize", "procedural_split", "grid_streets",
+    "retrieve", "synthesize", "procedural_split", "grid_streets", "example_blocks",
+    "close_sketch", "statistical_split",
 ]
 
 #: Upper bound of N_BEST: beyond it the "random choice among the best" is just random.
@@ -89,6 +91,15 @@ MAX_CLIPPED_SHARE = 0.2
 MAX_SCALE = 2.0
 #: Street ends closer than this (m) to the example fragment's boundary end on it.
 _ON_BOUNDARY = 0.5
+#: New dead-end edges shorter than this (m) are pruned (stubs of clipped warps: tuned on the
+#: fidelity benchmark's tuning towns, where 5 m left a dead-end share 30 % over the example's).
+MIN_DANGLE = 25.0
+#: Rounds of the fill stage: each fills the faces the previous round left too large.
+MAX_FILL_ROUNDS = 16
+#: Candidates tried per face and way (at scale, scaled) in the fill stage.
+FILL_TRIES = 6
+#: Quantile of the example's block areas above which a face must not stay empty.
+FILL_QUANTILE = 90.0
 
 
 @dataclass
@@ -158,9 +169,10 @@ def _query_relief(faces: np.ndarray, dem: Optional[DemGrid]) -> Optional[np.ndar
     return relief_patches(faces, dem, cell_size=max(dem.cell_size, 1.0))[0]
 
 
-def retrieve(db: FragmentDatabase, faces: Sequence, level: int, dem: Optional[DemGrid] = None,
-             gamma: float = 0.5, c: int = N_CANDIDATES, relief: Optional[np.ndarray] = None,
-             chunk: int = 8) -> Retrieval:
+def retrieve(db: FragmentDatabase, faces: Sequence, level: Optional[int],
+             dem: Optional[DemGrid] = None, gamma: float = 0.5, c: int = N_CANDIDATES,
+             relief: Optional[np.ndarray] = None, chunk: int = 8,
+             rows: Optional[np.ndarray] = None) -> Retrieval:
     """Retrieve candidates for many query faces of one level at once (vectorised).
 
     The batch version of :meth:`FragmentDatabase.query`: the prefilter (standardised log
@@ -174,6 +186,8 @@ def retrieve(db: FragmentDatabase, faces: Sequence, level: int, dem: Optional[De
     db : FragmentDatabase
     faces : array of Polygon (the database's metric units)
     level : int, the *database* level to retrieve from (exact; no fallback)
+    rows : int array, optional, the database rows to retrieve from instead of a level (the
+        fill stage retrieves among the fragments of every level that hold streets)
     dem : DemGrid, optional, terrain of the queries (adds the slope term when the database
         has slope descriptors and ``gamma < 1``)
     gamma : float, weight of the shape term in eq. 4.2
@@ -192,7 +206,7 @@ def retrieve(db: FragmentDatabase, faces: Sequence, level: int, dem: Optional[De
     desc = db.descriptors
     n = desc.samples.shape[1]
     k = len(faces)
-    rows_all = np.flatnonzero(db.levels == level)
+    rows_all = np.flatnonzero(db.levels == level) if rows is None else np.asarray(rows)
     samples = sc.sample_boundaries(faces, n) if k else np.zeros((0, n, 2))
     c_eff = int(min(c, len(rows_all)))
     if k == 0 or c_eff == 0:
@@ -245,9 +259,15 @@ def _sliver_count(faces: np.ndarray, area: np.ndarray, perimeter: np.ndarray,
 
 
 def _sub_faces(polygon, streets: np.ndarray):
-    lines = np.concatenate([[shapely.get_exterior_ring(polygon)],
-                            np.asarray(streets, dtype=object)])
-    return planar_faces(lines)
+    """Faces of a polygon's outline cut by streets (street ends made vertices of the outline:
+    an end clipped onto it lies on it only up to round-off)."""
+    ring = shapely.get_exterior_ring(polygon)
+    streets = np.asarray(streets, dtype=object)
+    if len(streets):
+        ends = np.concatenate([shapely.get_coordinates(shapely.get_point(streets, 0)),
+                               shapely.get_coordinates(shapely.get_point(streets, -1))])
+        ring = shapely.snap(ring, shapely.multipoints(ends), 1e-6)
+    return planar_faces(np.concatenate([[ring], streets]))
 
 
 def procedural_split(face, min_area: float = MIN_BLOCK_AREA,
@@ -331,6 +351,112 @@ def grid_streets(faces: Sequence, spacing: float) -> np.ndarray:
     return np.concatenate(out) if out else np.empty(0, dtype=object)
 
 
+def example_blocks(databases: Sequence[FragmentDatabase]) -> pd.DataFrame:
+    """The example's city blocks as the databases know them: area and rectangle sides.
+
+    A block is a fragment that no street of the next level splits (``is_block``); the same
+    face is a fragment of every deeper level, so faces are counted once (same area and
+    perimeter). The sides are those of the minimum rotated rectangle, recovered from
+    compactness (area / rectangle area) and aspect ratio (short / long side).
+    """
+    frames = []
+    for db in databases:
+        t = db.table
+        if "is_block" not in t:
+            continue
+        b = t[t["is_block"].astype(bool)][["area_m2", "perimeter_m", "compactness",
+                                            "aspect_ratio"]]
+        frames.append(b.round({"area_m2": 1, "perimeter_m": 1}).drop_duplicates(
+            ["area_m2", "perimeter_m"]))
+    if not frames:
+        return pd.DataFrame(columns=["area_m2", "long_m", "short_m"])
+    b = pd.concat(frames, ignore_index=True)
+    rect = b["area_m2"] / b["compactness"].clip(lower=1e-6)
+    long = np.sqrt(rect / b["aspect_ratio"].clip(lower=1e-6))
+    return pd.DataFrame({"area_m2": b["area_m2"].to_numpy(), "long_m": long.to_numpy(),
+                         "short_m": (long * b["aspect_ratio"]).to_numpy()})
+
+
+def close_sketch(arterials: Sequence, boundary) -> tuple:
+    """The sketch closed by the target boundary: arterials clipped to it, plus its rings.
+
+    An open sketch (arterials that close few faces) leaves most of a town unfilled; the
+    boundary's rings close every face. Returns (lines, is_boundary).
+    """
+    arterials = np.asarray(arterials, dtype=object).ravel()
+    area = shapely.union_all(shapely.get_parts(np.asarray(boundary, dtype=object).ravel()))
+    if area is None or area.is_empty or shapely.area(area) <= 0:
+        raise InputError("the target boundary has no area")
+    area = shapely.make_valid(area)
+    with np.errstate(invalid="ignore"):
+        inside = shapely.get_parts(shapely.intersection(arterials, area)) if len(arterials) \
+            else np.empty(0, dtype=object)
+    inside = shapely.get_parts(inside)
+    inside = inside[(shapely.get_type_id(inside) == 1) & (shapely.length(inside) > 1e-6)]
+    rings = shapely.get_parts(shapely.boundary(shapely.get_parts(area)))
+    rings = shapely.get_parts(rings)
+    rings = rings[shapely.length(rings) > 0]
+    # the cut ends lie on the outline only up to round-off: make them vertices of it, so
+    # that noding joins the two
+    if len(inside):
+        ends = shapely.multipoints(np.concatenate([
+            shapely.get_coordinates(shapely.get_point(inside, 0)),
+            shapely.get_coordinates(shapely.get_point(inside, -1))]))
+        rings = shapely.snap(rings, ends, 1e-6)
+    lines = np.concatenate([inside, rings]).astype(object)
+    return lines, np.r_[np.zeros(len(inside), bool), np.ones(len(rings), bool)]
+
+
+def statistical_split(face, sides: np.ndarray, rng: np.random.Generator,
+                      min_area: float = MIN_BLOCK_AREA, min_width: float = MIN_BLOCK_WIDTH,
+                      tries: int = 8) -> np.ndarray:
+    """One street across a face, cutting off a block-sized piece (the fill's fallback).
+
+    The street runs across the long axis of the face's minimum rotated rectangle, at a
+    distance from one end drawn from the example's block sides (``sides``: the sides of
+    the rectangles of its blocks), so that recursion leaves blocks of the example's
+    dimensions; a face shorter than twice the drawn side is cut near its middle. Only the
+    piece of the cut through the chosen point is kept (in a concave face a straight line
+    meets the outline many times). A cut that would leave a sliver is tried elsewhere
+    (``tries`` positions: from the drawn side at both ends, then uniformly along the
+    axis); no street when every cut makes slivers.
+    """
+    m = shape_metrics([face]).iloc[0]
+    length = float(m.mbr_length_m)
+    if not np.isfinite(length) or length <= 0 or not len(sides):
+        return np.empty(0, dtype=object)
+    rect = shapely.oriented_envelope(face)
+    centre = np.asarray(rect.centroid.coords[0])
+    a = np.radians(m.mbr_angle_deg)
+    along = np.array([np.cos(a), np.sin(a)])
+    across = np.array([-along[1], along[0]])
+    d = float(rng.choice(sides))
+    if length < 2 * d:
+        d = length * float(rng.uniform(0.4, 0.6))
+    sign = float(rng.choice([-1.0, 1.0]))
+    half = length + float(m.mbr_width_m)
+    positions = [sign * (d - length / 2), -sign * (d - length / 2)] + \
+        list(rng.uniform(-0.4, 0.4, max(tries - 2, 0)) * length)
+    # slivers the outline makes on its own (a spur of the boundary) are not the cut's
+    _, area0, perimeter0 = _sub_faces(face, np.empty(0, dtype=object))
+    base = _sliver_count(None, area0, perimeter0, min_area, min_width)
+    for t in positions:
+        p = centre + t * along
+        line = shapely.LineString([p - half * across, p + half * across])
+        parts = shapely.get_parts(shapely.intersection(line, face))
+        parts = parts[(shapely.get_type_id(parts) == 1) & (shapely.length(parts) > 1e-6)]
+        if not len(parts):
+            continue
+        # the piece through the cut's centre (the longest where the centre is outside)
+        dist = shapely.distance(parts, shapely.Point(p))
+        parts = parts[[int(np.argmin(dist)) if dist.min() < 1e-6 else
+                       int(np.argmax(shapely.length(parts)))]]
+        _, area, perimeter = _sub_faces(face, parts)
+        if len(area) >= 2 and _sliver_count(None, area, perimeter, min_area, min_width) <= base:
+            return parts
+    return np.empty(0, dtype=object)
+
+
 # --------------------------------------------------------------------------- insertion
 
 class _Inserter:
@@ -412,6 +538,12 @@ class _Inserter:
             # nothing that runs along the query boundary (it is a street already)
             along = shapely.within(pieces, shapely.buffer(shapely.boundary(face), 1e-3))
             pieces = pieces[~along]
+        if len(pieces):
+            # nothing that doubles a street of the query boundary in its corridor
+            corridor = shapely.buffer(shapely.boundary(face), CORRIDOR_HALF_WIDTH, quad_segs=2)
+            with np.errstate(invalid="ignore"):
+                inside = shapely.length(shapely.intersection(pieces, corridor))
+            pieces = pieces[inside <= MIN_DUPLICATE_LENGTH]
         kept = float(shapely.length(pieces).sum()) if len(pieces) else 0.0
         if total > 0 and kept < (1 - MAX_CLIPPED_SHARE) * total:
             return None, "clipped"
@@ -425,25 +557,39 @@ class _Inserter:
 
 # --------------------------------------------------------------------------- network
 
-def _snap_onto(geometry: np.ndarray, new: np.ndarray, tolerance: float = 1e-5) -> np.ndarray:
-    """Insert the end points of the new lines into the existing lines they lie on.
+def _snap_onto(geometry: np.ndarray, new: np.ndarray, tolerance: float = 1e-3) -> np.ndarray:
+    """Make every line end that lies on another line (up to ``tolerance``) a vertex of it.
 
     An end point put onto a boundary by interpolation lies on it only up to round-off
-    (1e-9 m); noding would then leave it dangling next to the edge. GEOS snapping inserts
-    the point as a vertex of the edge, so that both share it exactly.
+    (1e-9 m), and a warped street may pass a junction at a micrometre; noding would leave
+    the end dangling next to the edge, or the street crossing the junction without
+    meeting it (a crossing without a junction, :mod:`plugin.network.invariants`). GEOS
+    snapping inserts the points as vertices, so that both lines share them exactly. Only
+    pairs with a new line take part (the old network is already noded).
     """
     geometry = np.asarray(geometry, dtype=object).copy()
-    old_idx = np.flatnonzero(~new)
-    new_idx = np.flatnonzero(new)
-    if not len(old_idx) or not len(new_idx):
+    new = np.asarray(new, dtype=bool)
+    if not new.any() or new.all() and len(geometry) < 2:
         return geometry
-    ends = np.concatenate([shapely.get_point(geometry[new_idx], 0),
-                           shapely.get_point(geometry[new_idx], -1)])
-    e_i, o_i = shapely.STRtree(geometry[old_idx]).query(ends, predicate="dwithin",
-                                                        distance=tolerance)
-    for o in np.unique(o_i):
-        pts = shapely.multipoints(ends[e_i[o_i == o]])
-        geometry[old_idx[o]] = shapely.snap(geometry[old_idx[o]], pts, tolerance)
+    n = len(geometry)
+    ends = np.concatenate([shapely.get_point(geometry, 0), shapely.get_point(geometry, -1)])
+    owner = np.r_[np.arange(n), np.arange(n)]
+    e_i, l_i = shapely.STRtree(geometry).query(ends, predicate="dwithin", distance=tolerance)
+    keep = (owner[e_i] != l_i) & (new[owner[e_i]] | new[l_i])
+    e_i, l_i = e_i[keep], l_i[keep]
+    if not len(e_i):
+        return geometry
+    # an end already on a vertex of the line needs nothing
+    on_vertex = shapely.dwithin(ends[e_i], shapely.extract_unique_points(geometry[l_i]), 1e-9)
+    e_i, l_i = e_i[~on_vertex], l_i[~on_vertex]
+    if not len(e_i):
+        return geometry
+    order = np.argsort(l_i, kind="stable")
+    e_i, l_i = e_i[order], l_i[order]
+    lines, first = np.unique(l_i, return_index=True)
+    group = np.repeat(np.arange(len(lines)), np.diff(np.r_[first, len(l_i)]))
+    pts = shapely.multipoints(shapely.get_coordinates(ends[e_i]), indices=group)
+    geometry[lines] = shapely.snap(geometry[lines], pts, tolerance)
     return geometry
 
 
@@ -457,7 +603,13 @@ def _renode(geometry: np.ndarray, level: np.ndarray, attrs: Dict[str, np.ndarray
     source.
     """
     geometry = _snap_onto(geometry, level == new_level)
-    pieces = shapely.get_parts(shapely.node(shapely.multilinestrings(geometry)))
+    try:
+        noded = shapely.node(shapely.multilinestrings(geometry))
+    except shapely.errors.GEOSException:
+        # nearly coincident lines can defeat floating-point noding; snap-rounding on a
+        # millimetre grid always converges
+        noded = shapely.node(shapely.set_precision(shapely.multilinestrings(geometry), 1e-3))
+    pieces = shapely.get_parts(noded)
     pieces = pieces[shapely.length(pieces) > 1e-6]
     parent = _roads._attach_attributes(pieces, geometry, np.arange(len(geometry)),
                                        level.astype(np.int64))
@@ -499,6 +651,235 @@ def _renode(geometry: np.ndarray, level: np.ndarray, attrs: Dict[str, np.ndarray
             geom = np.concatenate([merged[single], geom[multi_members]])
             src = np.concatenate([src[rep][single], src[multi_members]])
     return geom, src
+
+
+def _add_streets(geometry, level, attrs, new_geoms, new_attrs, new_level: int,
+                 min_dangle: float):
+    """Add new streets (one array per face, attributes per face) and re-node the network."""
+    sizes = [a[3] for a in new_attrs]
+    add = np.concatenate(new_geoms)
+    geometry_all = np.concatenate([geometry, add])
+    level_all = np.concatenate([level, np.full(len(add), new_level)])
+    attrs_all = {
+        "source_fragment": np.concatenate([attrs["source_fragment"], np.repeat(
+            np.array([a[0] for a in new_attrs], dtype=object), sizes)]),
+        "database": np.concatenate([attrs["database"], np.repeat(
+            np.array([a[1] for a in new_attrs], dtype=object), sizes)]),
+        "fragment_id": np.concatenate([attrs["fragment_id"], np.repeat(
+            np.array([a[2] for a in new_attrs], dtype=np.int64), sizes)]),
+        "query": np.concatenate([attrs["query"], np.repeat(
+            np.array([a[4] for a in new_attrs], dtype=np.int64), sizes)]),
+    }
+    geometry, src = _renode(geometry_all, level_all, attrs_all, new_level, min_dangle)
+    return geometry, level_all[src], {k: v[src] for k, v in attrs_all.items()}
+
+
+def _faces_in(lines, min_area: float, min_width: float, target=None) -> np.ndarray:
+    """Block faces of the lines that lie in the target (a hole of the boundary is a face of
+    its outline too, but outside the target)."""
+    try:
+        faces, _ = block_faces(lines, min_area, min_width)
+    except InputError:
+        return np.empty(0, dtype=object)
+    if target is not None and len(faces):
+        faces = faces[shapely.contains(target, shapely.point_on_surface(faces))]
+    return faces
+
+
+def _empty(faces: np.ndarray, lines: np.ndarray) -> np.ndarray:
+    """Which faces hold no street (a dead end inside a face makes it not empty)."""
+    inner = np.zeros(len(faces), bool)
+    if len(faces) and len(lines):
+        # half a metre inside the outline: the streets that bound the face do not count
+        hit = shapely.STRtree(lines).query(shapely.buffer(faces, -0.5), predicate="intersects")[0]
+        inner[hit] = True
+    return ~inner
+
+
+def _face_key(face) -> tuple:
+    c = face.centroid
+    return (round(c.x, 1), round(c.y, 1), round(face.area))
+
+
+def _fill_stage(geometry, level, attrs, databases, names, inserter, rng, max_block,
+                blocks_ex, n_best, c, gamma, max_scale, min_area, min_width, min_dangle,
+                query_rows, query_id, progress, target=None, style_polygons=None,
+                style_database=None):
+    """Fill every face larger than ``max_block`` (see :func:`synthesize`, Notes)."""
+    counts = dict(rounds=0, fill_fragment=0, fill_scaled=0, fill_statistics=0, left_empty=0)
+    sides = np.concatenate([blocks_ex["long_m"].to_numpy(), blocks_ex["short_m"].to_numpy()])
+    sides = sides[np.isfinite(sides) & (sides > 0)]
+    # the fragments whose streets split them (not blocks), per database: a fill that left
+    # only dead ends would leave the face as large as it was
+    with_streets = []
+    for db in databases:
+        t = db.table
+        ok = t["n_interior"].to_numpy() > 0 if "n_interior" in t else np.ones(len(t), bool)
+        if "is_block" in t:
+            ok &= ~t["is_block"].to_numpy().astype(bool)
+        with_streets.append(np.flatnonzero(ok))
+    exhausted = set()   # faces nothing could split
+    tried = set()       # faces a fragment was put into (the next try is a statistical split)
+    next_level = int(level.max()) + 1 if len(level) else 1
+    for rnd in range(MAX_FILL_ROUNDS):
+        faces = _faces_in(geometry, min_area, min_width, target)
+        # filled down to the example's block sizes: a face with dead ends inside is not
+        # empty, but still larger than the example's blocks
+        faces = faces[shapely.area(faces) > max_block] if len(faces) else faces
+        big = list({_face_key(f): f for f in faces if _face_key(f) not in exhausted}.values())
+        if not big:
+            break
+        counts["rounds"] += 1
+        big = np.asarray(big, dtype=object)
+        options: List[list] = [[] for _ in range(len(big))]
+        # style polygons choose the database here as in the levels
+        style = _style_index(big, style_polygons, style_database, len(databases))
+        for i, db in enumerate(databases):
+            sel = np.arange(len(big)) if style_polygons is None else np.flatnonzero(style == i)
+            if not len(with_streets[i]) or not len(sel):
+                continue
+            ret = retrieve(db, big[sel], None, None, gamma, max(c, 2 * FILL_TRIES),
+                           rows=with_streets[i])
+            for jj, j in enumerate(sel):
+                for k in ret.ranked(jj, ret.rows.shape[1]):
+                    row = int(ret.rows[jj, k])
+                    ratio = big[j].area / max(float(db.table["area_m2"].iat[row]), 1e-9)
+                    options[j].append((float(ret.costs[jj, k]), i, ret, jj, int(k), ratio))
+        new_geoms, new_attrs = [], []
+        for j, face in enumerate(big):
+            progress.step((rnd + j / len(big)) / MAX_FILL_ROUNDS)
+            opts = sorted(options[j], key=lambda o: o[0])
+            at_scale = [o for o in opts if 1 / max_scale ** 2 <= o[5] <= max_scale ** 2]
+            # larger than the query: its streets would be shrunk into it; smaller: scaled up
+            scaled = [o for o in opts if o[5] > max_scale ** 2]
+            row = dict(query=query_id, level=next_level, database="", fragment_id=-1,
+                       cost=np.nan, outcome="left_empty", area_m2=float(face.area), n_rejected=0)
+            pieces = None
+            key = _face_key(face)
+            ways = (("fill_fragment", at_scale), ("fill_scaled", scaled)) \
+                if key not in tried else ()
+            for outcome, pool in ways:
+                head = pool[:n_best]
+                tries = [head[int(p)] for p in rng.permutation(len(head))] + \
+                    pool[n_best:FILL_TRIES]
+                for cost, i, ret, jj, k, _ in tries:
+                    db = databases[i]
+                    db_row = int(ret.rows[jj, k])
+                    _, dtw = sc.dtw_path(ret.cost_matrices[jj, k], int(ret.offsets[jj, k]))
+                    streets, on, ex_slivers = inserter.example(db, db_row)
+                    if not len(streets):
+                        continue
+                    got, _ = inserter.insert(face, ret.samples[jj],
+                                             db.descriptors.samples[db_row], dtw, streets, on,
+                                             ex_slivers)
+                    if got is None:
+                        row["n_rejected"] += 1
+                        continue
+                    pieces = got
+                    row.update(outcome=outcome, database=names[i],
+                               fragment_id=int(db.ids[db_row]), cost=cost)
+                    new_attrs.append((f"{names[i]}:{int(db.ids[db_row])}", names[i],
+                                      int(db.ids[db_row]), len(pieces), query_id))
+                    break
+                if pieces is not None:
+                    break
+            if pieces is None:
+                split = statistical_split(face, sides, rng, min_area, min_width)
+                if len(split):
+                    pieces = split
+                    row.update(outcome="fill_statistics")
+                    new_attrs.append(("statistics", "", -1, len(split), query_id))
+                else:
+                    exhausted.add(key)
+            if pieces is not None:
+                new_geoms.append(pieces)
+                tried.add(key)
+            counts[row["outcome"]] += 1
+            query_rows.append(row)
+            query_id += 1
+        if new_geoms:
+            geometry, level, attrs = _add_streets(geometry, level, attrs, new_geoms, new_attrs,
+                                                  next_level, min_dangle)
+            next_level += 1
+    # what the rule is about: faces over the threshold with no street inside
+    faces = _faces_in(geometry, min_area, min_width, target)
+    big = faces[shapely.area(faces) > max_block] if len(faces) else faces
+    counts["left_empty"] = int(_empty(big, geometry).sum()) if len(big) else 0
+    return geometry, level, attrs, counts, query_id
+
+
+def _link_floating(geometry, level, attrs):
+    """Link the pieces of the network that do not reach an arterial to the network that does.
+
+    Each floating piece (streets of faces closed only by the boundary, whose outline is no
+    street) gets the shortest straight street from one of its nodes to the anchored network
+    that crosses no other street; pieces are linked nearest first, so a linked piece anchors
+    the next. Without arterials the largest piece anchors; a piece that no such street can
+    reach is dropped. Returns the network and the number of links.
+    """
+    n = len(geometry)
+    if n < 2:
+        return geometry, level, attrs, 0
+    g = _roads.graph_from_lines(geometry, np.full(n, None, object), np.full(n, None, object),
+                                np.zeros(n, int), np.arange(n), snap_tolerance=0.0)
+    m = len(g.nodes)
+    adj = coo_matrix((np.ones(g.n_edges), (g.u, g.v)), shape=(m, m))
+    n_comp, label = connected_components(adj, directed=False)
+    if n_comp == 1:
+        return geometry, level, attrs, 0
+    edge_comp = label[g.u]
+    src = np.asarray(g.source)
+    arterial = attrs["source_fragment"][src] == "arterial"
+    anchored = np.zeros(n_comp, bool)
+    anchored[edge_comp[arterial]] = True
+    if not anchored.any():
+        anchored[np.argmax(np.bincount(edge_comp, weights=shapely.length(g.geometry),
+                                       minlength=n_comp))] = True
+    links = []
+    lines = list(g.geometry)
+    tree_lines = np.asarray(g.geometry, dtype=object)
+    while not anchored.all():
+        anchor_lines = tree_lines[anchored[edge_comp]]
+        target = shapely.union_all(anchor_lines)
+        best = None
+        for comp in np.flatnonzero(~anchored):
+            nodes = np.unique(np.r_[g.u[edge_comp == comp], g.v[edge_comp == comp]])
+            pts = shapely.points(g.nodes[nodes])
+            d = shapely.distance(target, pts)
+            for k in np.argsort(d)[:32]:
+                if best is not None and d[k] >= best[0]:
+                    break
+                link = shapely.shortest_line(pts[k], target)
+                if link.length <= 1e-6:
+                    continue
+                others = np.asarray(lines, dtype=object)
+                hit = shapely.intersects(others, link)
+                # it may touch only the piece at its start and the anchored line at its end
+                inner = shapely.intersection(others[hit], link)
+                ends = shapely.boundary(link)
+                if shapely.covers(shapely.buffer(ends, 1e-6), inner).all():
+                    best = (float(d[k]), comp, link)
+                    break
+        if best is None:
+            break  # no piece can be linked without crossing a street
+        _, comp, link = best
+        links.append(link)
+        lines.append(link)
+        anchored[comp] = True
+    # what cannot be linked without a crossing is dropped: no floating piece is left
+    drop = ~anchored[edge_comp]
+    if drop.any():
+        keep = np.ones(len(geometry), bool)
+        keep[src[drop]] = False
+        geometry, level = geometry[keep], level[keep]
+        attrs = {k: v[keep] for k, v in attrs.items()}
+    if not links:
+        return geometry, level, attrs, 0
+    new_attrs = [("link", "", -1, len(links), -1)]
+    lvl = int(level.max()) + 1 if len(level) else 1
+    geometry, level, attrs = _add_streets(geometry, level, attrs,
+                                          [np.asarray(links, dtype=object)], new_attrs, lvl, 0.0)
+    return geometry, level, attrs, len(links)
 
 
 # --------------------------------------------------------------------------- relief
@@ -560,7 +941,9 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
                gamma: float = 0.5, names: Optional[Sequence[str]] = None,
                min_area: float = MIN_BLOCK_AREA, min_width: float = MIN_BLOCK_WIDTH,
                snap_tolerance: float = 1.0, snap_distance: float = 3.0,
-               min_dangle: float = 5.0, c: int = N_CANDIDATES, max_scale: float = MAX_SCALE,
+               min_dangle: float = MIN_DANGLE, c: int = N_CANDIDATES,
+               max_scale: float = MAX_SCALE,
+               boundary=None, fill: bool = True, fill_quantile: float = FILL_QUANTILE,
                progress: Optional[Progress] = None) -> SynthesisResult:
     """Synthesise a street network inside sketched arterials from fragment databases.
 
@@ -587,11 +970,35 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
     max_scale : float, a fragment is inserted only when the query's linear size (square
         root of the area) is within this factor of the fragment's
     c : int, prefilter size (thesis: 10)
+    boundary : Polygon(s), optional, the target: the arterials are clipped to it and its
+        outline closes the faces they leave open (:func:`close_sketch`); the outline is no
+        street of the result, so streets that reach it end there
+    fill : bool, fill the faces down to the example's block sizes (see below); a
+        ``max_level`` that stops the recursion early turns the fill off
+    fill_quantile : float, quantile (%) of the example's block areas above which no face
+        stays empty (the issue's rule: 90)
     progress : Progress, optional (per query fragment; raises Canceled)
 
     Returns
     -------
     SynthesisResult
+
+    Notes
+    -----
+    The fill stage (not in the thesis, whose Function 2 stops when the databases have no
+    deeper level and leaves a face empty when its best match is a block): a face may stay
+    empty (no street inside), and is split down to the example's block sizes, only when it
+    is no larger than the example's p90 block area
+    (:func:`example_blocks`; ``fill_quantile`` chooses another quantile). Larger faces
+    are filled, round after round, (1) with a
+    fragment of any level that holds streets and fits within ``max_scale``; else (2) with
+    the best-matching such fragment at whatever scale, which splits the face along the
+    fragment's streets (its pieces are filled in the next rounds); else (3) by a
+    statistics-driven split (:func:`statistical_split`, a street cutting off a piece of the
+    example's block dimensions). ``queries.outcome`` says which way each face went
+    ('fill_fragment', 'fill_scaled', 'fill_statistics', 'left_empty'). At the end, pieces
+    of the network not connected to the arterials (streets of faces closed only by the
+    boundary) are linked to them by the shortest street that crosses nothing ('link').
 
     Raises
     ------
@@ -627,23 +1034,36 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
     rng = np.random.default_rng(seed)
     t_start = time.perf_counter()
 
-    graph = _roads.clean_network(arterials, snap_tolerance=snap_tolerance,
+    if boundary is not None:
+        sketch, is_ring = close_sketch(arterials, boundary)
+    else:
+        sketch, is_ring = np.asarray(arterials, dtype=object), None
+    graph = _roads.clean_network(sketch, snap_tolerance=snap_tolerance,
                                  min_dangle_length=0.0)
     geometry = np.asarray(graph.geometry, dtype=object)
     level = np.zeros(len(geometry), dtype=np.int64)
-    attrs = {"source_fragment": np.full(len(geometry), "arterial", dtype=object),
+    attrs = {"source_fragment": np.where(is_ring[graph.source], "boundary", "arterial")
+             .astype(object) if is_ring is not None else
+             np.full(len(geometry), "arterial", dtype=object),
              "database": np.full(len(geometry), "", dtype=object),
              "fragment_id": np.full(len(geometry), -1, dtype=np.int64),
              "query": np.full(len(geometry), -1, dtype=np.int64)}
-    try:
-        faces0, _ = block_faces(geometry, min_area, min_width)
-    except InputError:
-        faces0 = np.empty(0, dtype=object)
+    target = None
+    if boundary is not None:
+        target = shapely.make_valid(shapely.union_all(shapely.get_parts(
+            np.asarray(boundary, dtype=object).ravel())))
+        shapely.prepare(target)
+    faces0 = _faces_in(geometry, min_area, min_width, target)
     if len(faces0) == 0:
         raise InputError("the arterials enclose no face: draw closed loops of streets "
                          f"(each at least {min_area:g} m² and {min_width:g} m wide) to "
                          "fill with fragments")
     area = shapely.union_all(faces0)
+    blocks_ex = example_blocks(databases)
+    if not 0 <= fill_quantile <= 100:
+        raise InputError(f"the fill quantile must lie in [0, 100], got {fill_quantile}")
+    max_block = float(np.percentile(blocks_ex["area_m2"], fill_quantile)) \
+        if fill and len(blocks_ex) else np.inf
     base_level = [int(_db_levels(d).min()) if len(d) else 0 for d in databases]
     levels_of = [set(int(x) for x in _db_levels(d)) for d in databases]
     inserter = _Inserter(min_area, min_width, snap_distance)
@@ -661,10 +1081,7 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
         if lvl == 0:
             faces = faces0
         else:
-            try:
-                faces, _ = block_faces(geometry[level <= lvl], min_area, min_width)
-            except InputError:
-                break
+            faces = _faces_in(geometry[level <= lvl], min_area, min_width, target)
         if len(faces) == 0:
             break
         cur_dem = None if dem is None else DemGrid(heights, dem.geotransform)
@@ -690,7 +1107,7 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
                       too_small=0, no_candidate=0, rejected=0)
         n_faces = len(faces)
         for f, face in enumerate(faces):
-            progress.step((lvl + f / n_faces) / max(deepest, 1) * 0.95)
+            progress.step((lvl + f / n_faces) / max(deepest, 1) * 0.6)
             opts = sorted(options[f], key=lambda o: o[0])[:n_best]
             row = dict(query=query_id, level=lvl, database="", fragment_id=-1, cost=np.nan,
                        outcome="no_candidate", area_m2=float(face.area), n_rejected=0)
@@ -709,6 +1126,9 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
                 _, dtw = sc.dtw_path(ret.cost_matrices[j, k], int(ret.offsets[j, k]))
                 streets, on, ex_slivers = inserter.example(db, db_row)
                 if len(streets) == 0:
+                    if face.area > max_block:   # too large to stay empty: the fill's job
+                        row["n_rejected"] += 1
+                        continue
                     chosen = (o, dtw)
                     row.update(outcome="block")
                     break
@@ -761,23 +1181,8 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
             heights = poisson_blend(base, guidance.reshape(heights.shape),
                                     mask.reshape(heights.shape), labels.reshape(heights.shape))
         if new_geoms:
-            sizes = [a[3] for a in new_attrs]
-            add = np.concatenate(new_geoms)
-            geometry_all = np.concatenate([geometry, add])
-            level_all = np.concatenate([level, np.full(len(add), lvl + 1)])
-            attrs_all = {
-                "source_fragment": np.concatenate([attrs["source_fragment"], np.repeat(
-                    np.array([a[0] for a in new_attrs], dtype=object), sizes)]),
-                "database": np.concatenate([attrs["database"], np.repeat(
-                    np.array([a[1] for a in new_attrs], dtype=object), sizes)]),
-                "fragment_id": np.concatenate([attrs["fragment_id"], np.repeat(
-                    np.array([a[2] for a in new_attrs], dtype=np.int64), sizes)]),
-                "query": np.concatenate([attrs["query"], np.repeat(
-                    np.array([a[4] for a in new_attrs], dtype=np.int64), sizes)]),
-            }
-            geometry, src = _renode(geometry_all, level_all, attrs_all, lvl + 1, min_dangle)
-            level = level_all[src]
-            attrs = {k: v[src] for k, v in attrs_all.items()}
+            geometry, level, attrs = _add_streets(geometry, level, attrs, new_geoms,
+                                                  new_attrs, lvl + 1, min_dangle)
         counts["seconds"] = time.perf_counter() - t_level
         stats["levels"][lvl] = counts
         progress.info(f"Level {lvl}: {counts['queries']} query fragments, "
@@ -785,6 +1190,29 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
                       f"blocks, {counts['procedural']} split procedurally"
                       + (f" ({counts['rejected']} warps rejected)" if counts["rejected"] else "")
                       + ".")
+    if fill and max_level is None and np.isfinite(max_block):
+        t_fill = time.perf_counter()
+        geometry, level, attrs, fill_counts, query_id = _fill_stage(
+            geometry, level, attrs, databases, names, inserter, rng, max_block, blocks_ex,
+            n_best, c, gamma, max_scale, min_area, min_width, min_dangle, query_rows, query_id,
+            progress.sub(0.6, 0.95), target, style_polygons, style_database)
+        fill_counts["seconds"] = time.perf_counter() - t_fill
+        fill_counts["max_block_m2"] = max_block
+        stats["fill"] = fill_counts
+        progress.info(f"Fill: faces over the example's p{fill_quantile:g} block area "
+                      f"({max_block:,.0f} m²): {fill_counts['fill_fragment']} filled with "
+                      f"fragments at scale, {fill_counts['fill_scaled']} split along a scaled "
+                      f"fragment's streets, {fill_counts['fill_statistics']} split from the "
+                      f"example's block dimensions, {fill_counts['left_empty']} left empty.")
+    if is_ring is not None:
+        on_ring = attrs["source_fragment"] == "boundary"
+        geometry, level = geometry[~on_ring], level[~on_ring]
+        attrs = {k: v[~on_ring] for k, v in attrs.items()}
+    geometry, level, attrs, n_links = _link_floating(geometry, level, attrs)
+    stats["links"] = n_links
+    if n_links:
+        progress.info(f"{n_links} street(s) added to link pieces of the network that "
+                      "touched only the boundary to the arterials.")
     keep = shapely.length(geometry) > 1e-6
     geometry = geometry[keep]
     table = pd.DataFrame({"level": level[keep],
@@ -796,6 +1224,7 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
     stats["seconds"] = time.perf_counter() - t_start
     stats["n_queries"] = len(query_rows)
     stats["area_km2"] = float(area.area) / 1e6
+    stats["max_block_m2"] = max_block
     progress.step(1.0)
     queries = pd.DataFrame(query_rows, columns=["query", "level", "database", "fragment_id",
                                                 "cost", "outcome", "area_m2", "n_rejected"])
