@@ -272,3 +272,26 @@ def test_cancellation():
     with pytest.raises(Canceled):
         solve([[1], [2]], np.zeros((2, 2)), [Constraint.equal(0, 30)],
               progress=Progress(is_canceled=canceled))
+
+
+@pytest.mark.parametrize("seed", range(15))
+def test_start_mask_matches_brute_force(seed):
+    """A start mask confines elements to start levels (the substructure copies of a 1.5D
+    structure): the same answers as a data term that forbids the masked starts."""
+    rng = np.random.default_rng(400 + seed)
+    U, T = random_instance(rng, n_res=1 + seed % 2, p_forbid=0.1)
+    n = len(U)
+    L = int(rng.integers(6, 13))
+    mask = rng.uniform(size=(n, L + 1)) < 0.6
+    bounds = {0: (L, L)} if seed % 2 == 0 else {0: (L, L), 1: (0, int(rng.integers(2, 8)))}
+    truth = brute_force(U, T, bounds, position_cost=np.where(mask, 0.0, INF))
+    constraints = [Constraint(r, lo, hi) for r, (lo, hi) in bounds.items()]
+    if not truth:
+        with pytest.raises(InfeasibleError):
+            solve(U, T, constraints, k=3, start_mask=mask)
+        return
+    sols = solve(U, T, constraints, k=3, start_mask=mask)
+    assert np.allclose([s.cost for s in sols], [c for c, _ in truth[:3]], atol=1e-9)
+    for s in sols:
+        starts = np.rint(np.asarray(s.starts)).astype(int)
+        assert mask[list(s.sequence), starts].all()

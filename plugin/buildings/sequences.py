@@ -15,21 +15,28 @@ graph** (thesis sec. 3.3.1): a DAG whose nodes are the signatures ``(e, rc)`` --
 ``e`` placed after ``rc - r(e)`` was consumed, ``rc`` the consumption including ``e`` --
 and whose source-to-sink paths are exactly the feasible sequences.
 
-- **Construction by resource consumption, not by cost** (:func:`build_graph`). Resources
-  are quantised to a grid (``resolution``: 0.2 m lengths, 1 m² floor areas in the thesis);
-  the first resource is the *primary* one (length, height): every element consumes at least
-  one grid step of it and it must be bounded above, so consumption orders the graph. The
-  forward sweep grows the states level by level from the source, vectorised over whole
-  waves of states (numpy), a node being created only if its signature is new.
-- **Pruning.** (a) overflow / underflow: a state is never created when it exceeds an
-  upper bound, or when even the most (least) resource-dense elements cannot reach (stay
-  under) a bound within the primary budget that is left; (b) dead ends: the backward sweep
-  from the sink (breadth-first search on the reversed graph, scipy) keeps only the nodes
-  that can still complete a feasible sequence. The node set is the thesis's bidirectionally
-  grown graph (the nodes on a source-sink path); the growth here is forward then backward
-  rather than interleaved, which gives the same graph. Infeasible problems (a 50 m street
-  from 20 m buildings) are detected when nothing reaches the sink.
-- **Several resources, equality and interval constraints**: states carry the vector of
+- **Construction by resource consumption, not by cost.** Resources are quantised to a
+  grid (``resolution``: 0.2 m lengths, 1 m² floor areas in the thesis) and become integers;
+  the first resource is the *primary* one (length, height): every element consumes at
+  least one grid step of it and it must be bounded above, so its consumption orders the
+  graph in levels.
+- **Kept implicit** (:class:`ImplicitGraph`, ``method="graph"``, the default): the node
+  set per primary level (the secondary consumptions present, as integer codes, and per
+  code and element the cost of the cheapest prefix); no edge is stored -- the in-edges of
+  ``(e, rc)`` are the nodes ``(e', rc - r(e))`` of its allowed predecessors, derived on
+  demand. The nodes are grown level by level with one vectorised min-plus product of a
+  level's cost table with the transitions (with one resource, ``min r_0`` levels at once).
+  ``method="explicit"`` materialises every edge (:func:`build_graph`), the former
+  engine, kept as a reference: same graph, same answers, 20-40 bytes per edge.
+- **Pruning.** (a) overflow / underflow: a node is never created when it exceeds an
+  upper bound or can no longer be completed -- the *backward growth* from the sink gives,
+  per secondary resource, the set of (level, consumption) pairs from which the bounds are
+  still reachable by elements allowed where they would start (the thesis's backward
+  tree with the elements merged, a relaxation, so exact pruning); (b) dead ends: the k
+  best paths are enumerated backwards from the sink, so nodes on no source-sink path are
+  never visited. Infeasible problems (a 50 m street from 20 m buildings) are detected
+  when nothing reaches the sink.
+- **Several resources, equality and interval constraints**: nodes carry the vector of
   every constrained resource; unconstrained resources are only summed for the report.
 - **Key points** (thesis sec. 3.3.4, "structure"): a :class:`KeyPoint` forces one of a set
   of elements to sit at a primary position -- a corner part at a skeleton vertex, end
@@ -38,22 +45,23 @@ and whose source-to-sink paths are exactly the feasible sequences.
   element may touch the key point* (its closed extent may not contain it), so an element
   anchored at its start can only begin the sequence and one anchored at its end only end
   it. ``key_only`` elements (corners) appear nowhere but at key points that list them.
+  ``start_mask`` confines elements to given start levels: the substructure copies of a
+  1.5D structure (:mod:`structures`: T-junctions, virtual duplicates, local constraints).
 - **Data terms**: ``position_cost[e, l]`` is added when ``e`` starts at grid level ``l``
   (the overlap data term of the footprint re-synthesis, thesis eq. 5.1), ``start_cost``
   and ``end_cost`` on the first and last element (a closed loop's closing transition).
-- **Best and k best** (:func:`k_best`): the graph is a DAG in consumption order, so the
-  shortest path (Dijkstra in the thesis) is a dynamic program over the levels, vectorised;
-  the k best paths come from the Recursive Enumeration Algorithm of Jimenez and Marzal
-  (1999), an exact k-shortest-paths algorithm equivalent in its output to Eppstein's
-  (1998): the j-th solution is optimal among the sequences not in the first j-1. Every
-  sequence is one path (its states are determined by the sequence), so the k solutions are
-  distinct sequences, in non-decreasing cost. For k = 1 with only the primary resource
-  constrained (a frontage of exact length) :func:`solve` keeps the same DAG implicit, as
-  an (elements x levels) cost table relaxed level by level (``method="dense"``).
+- **Best and k best** (:meth:`ImplicitGraph.k_best`, :func:`k_best`): the graph is a DAG
+  in consumption order, so the shortest-path labels (Dijkstra's in the thesis) are set
+  level by level; the k best paths come from the Recursive Enumeration Algorithm of
+  Jimenez and Marzal (1999), an exact k-shortest-paths algorithm equivalent in its output
+  to Eppstein's (1998), run lazily from the sink: the j-th solution is optimal among the
+  sequences not in the first j-1. Every sequence is one path (its nodes are determined
+  by the sequence), so the k solutions are distinct sequences, in non-decreasing cost.
 
 Complexity for one resource: at most ``n`` nodes per level, ``d`` successors each, ``L``
-levels: O(L d n) (thesis sec. 3.4). Not implemented: 1.5D structures (T-junction parts
-with virtual duplicates, sec. 3.3.4); :mod:`building_parts` cuts closed loops itself.
+levels: O(L d n) time (thesis sec. 3.4), O(L n) memory (no edges). Not implemented:
+dominance between nodes of different secondary consumption (it does not hold under
+equality constraints, whose completions differ).
 
 Worked example -- a 10 m frontage from a 3 m house (``0``), a 4 m house (``1``) and 1 m
 of empty space (``2``); a house may not follow itself (repetition cost), the whole row must
