@@ -294,3 +294,52 @@ if __name__ == "__main__":
     target = ROOT / "tests" / "benchmarks" / "results" / "sequences.json"
     target.write_text(json.dumps(out, indent=2), encoding="utf-8")
     print(f"\nwritten to {target.relative_to(ROOT)}")
+
+
+def draw_complex_building(path: Path, k: int = 5, show=(1, 3, 5)) -> Path:
+    """Top views of three of the k best courtyard buildings (thesis Fig. 6.6 / 6.9)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import shapely
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import Normalize
+    from urban_synthesis.plugin.buildings import parts as bp
+    from urban_synthesis.plugin.buildings import structures
+
+    lib = bp.terrace_library()
+    skel = _complex_skeleton()
+    res = structures.build_along_network(
+        skel, lib, k=k, far=(2.6, 2.8), site_area=4800.0, area_resolution=10.0,
+        local={4: {"doors": (3, 3)}, 3: {"straight": (1, 1)}})
+    norm = Normalize(9.0, 15.0)
+    cmap = plt.get_cmap("viridis")
+    fig, axes = plt.subplots(1, len(show), figsize=(5.2 * len(show), 5.6))
+    edge = {"tee": "red", "corner": "orange"}
+    for ax, rank in zip(axes, show):
+        parts = res.table[res.table.solution == rank]
+        for i, row in parts.iterrows():
+            g = res.geometry[i]
+            for poly in shapely.get_parts(g):
+                x, y = poly.exterior.xy
+                ax.fill(x, y, color=cmap(norm(row.height_m)), ec="black", lw=0.6)
+            if row.kind in edge:
+                for poly in shapely.get_parts(g):
+                    x, y = poly.exterior.xy
+                    ax.plot(x, y, color=edge[row.kind], lw=1.8)
+        for line in skel:
+            x, y = line.xy
+            ax.plot(x, y, color="white", lw=0.8, ls="--")
+        s = res.summary.iloc[rank - 1]
+        ax.set_title(f"solution {rank} of {k}: cost {s.cost:g}, {int(s.n_parts)} parts, "
+                     f"FAR {s.far:.2f}", fontsize=10)
+        ax.set_aspect("equal")
+        ax.set_xticks([])
+        ax.set_yticks([])
+    fig.colorbar(ScalarMappable(norm, cmap), ax=axes, shrink=0.7, label="part height (m)")
+    fig.suptitle("1.5D building (thesis Fig. 6.6/6.9): courtyard loop, three wings, one "
+                 "nested T; T-parts red, corner parts orange; FAR 2.6-2.8, east wing 3 "
+                 "doors, north wing one straight part", fontsize=10)
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    return path
