@@ -31,6 +31,7 @@ import tempfile
 import time
 import warnings
 from pathlib import Path
+from typing import Optional, Sequence
 
 import numpy as np
 import shapely
@@ -275,6 +276,192 @@ def district(ex, n=1000):
         out[method] = dict(blocks=n, footprints=len(r.geometry),
                            seconds=time.perf_counter() - t0, cpu_seconds=time.process_time() - c0)
     return out
+
+
+# --------------------------------------------------------------------------- Liechtenstein
+
+#: The Liechtenstein extract (DESIGN.md "Real example data"), ODbL.
+LIECHTENSTEIN_SHA256 = "e9b3e17b9c3ccaa670c5e7ecf4d0a2cf932d23abd8bb66f78a9f4631cfef3211"
+#: Issue 20's goals on unseen towns.
+GOAL_ANGLE_FACTOR = 1.5          # mean angle to the street within 1.5x the real one
+GOAL_WITHIN_10 = 0.75            # share of footprints within 10° of their street
+GOAL_AREA_KS = 0.10              # footprint-area KS statistic against the real buildings
+
+
+def liechtenstein_path() -> Path:
+    for base in (ROOT / "data", ROOT.parent / "shared" / "data",
+                 ROOT.parent.parent / "shared" / "data"):
+        p = base / "liechtenstein-2013-08-03.osm.pbf"
+        if p.exists():
+            return p
+    raise FileNotFoundError("liechtenstein-2013-08-03.osm.pbf (../shared/data)")
+
+
+def liechtenstein(crs: int = 32632) -> dict:
+    """The country's drivable roads, blocks, buildings (assigned to blocks) and the 11
+    municipalities (OSM admin_level 8), in UTM 32N."""
+    import pyogrio
+    from urban_synthesis.plugin.buildings import attributes as building_attributes
+    from urban_synthesis.plugin.network import street_graph as roads
+
+    path = liechtenstein_path()
+    lines = pyogrio.read_dataframe(path, layer="lines")
+    lines = lines[lines.highway.isin(roads.DRIVABLE_CLASSES)].to_crs(crs).reset_index(drop=True)
+    tags = [roads.parse_other_tags(t) for t in lines.other_tags]
+    z = [roads.vertical_layer(t.get("layer"), t.get("bridge"), t.get("tunnel")) for t in tags]
+    graph = roads.clean_network(lines.geometry.values, lines.highway.values, z_layer=z)
+    mp = pyogrio.read_dataframe(path, layer="multipolygons", on_invalid="ignore")
+    towns = mp[(mp.admin_level == "8")].to_crs(crs)
+    b = mp[mp.building.notna() & mp.geometry.notna()].to_crs(crs).reset_index(drop=True)
+    # one polygon per building (GDAL's multipolygons layer gives MultiPolygons)
+    geoms = footprints._largest_polygon(b.geometry.values)
+    b, geoms = b[geoms != None].reset_index(drop=True), geoms[geoms != None]  # noqa: E711
+    ext = blocks.extract_blocks(graph, buildings=geoms)
+    attrs = building_attributes.building_attributes(len(b), building=b.building.values,
+                                                    other_tags=b.other_tags.values)
+    rep = shapely.point_on_surface(ext.geometry)
+    town_of = np.full(len(ext.geometry), None, dtype=object)
+    for name, poly in zip(towns.name, towns.geometry):
+        town_of[shapely.within(rep, poly)] = name
+    return dict(graph=graph, roads=graph.geometry, blocks=ext.geometry,
+                block_ids=ext.table.block_id.to_numpy(), block_town=town_of,
+                buildings=geoms, building_block=ext.buildings.block_id.to_numpy(
+                    dtype=float, na_value=np.nan), attrs=attrs,
+                towns=sorted(towns.name.tolist()), crs=f"EPSG:{crs}")
+
+
+def loto_database(data: dict, target: str, path: Path):
+    """Block database of every town but ``target`` (blocks with their buildings)."""
+    from urban_synthesis.plugin.retrieval import database
+
+    keep = (data["block_town"] != target) & (data["block_town"] != None)  # noqa: E711
+    ids = data["block_ids"][keep]
+    inb = np.isin(data["building_block"], ids)
+    database.write_block_database(
+        str(path), data["blocks"][keep], data["buildings"][inb],
+        data["building_block"][inb].astype(np.int64), data["crs"], block_ids=ids,
+        building_attributes=data["attrs"][inb].reset_index(drop=True),
+        source=f"Liechtenstein 2013 without {target} (ODbL)")
+    return database.load_block_database(path)
+
+
+def _angle_stats(angles: np.ndarray) -> dict:
+    return dict(mean_angle=float(np.mean(angles)) if len(angles) else float("nan"),
+                within_10=float(np.mean(angles <= 10.0)) if len(angles) else float("nan"))
+
+
+def loto_town(data: dict, target: str, methods=("transfer", "resynthesis"),
+              seed: int = 0) -> dict:
+    """Synthesise ``target``'s populated blocks from the other towns' database and compare
+    with its real buildings: angle to the street, footprint areas, slivers, empty blocks."""
+    from scipy.stats import ks_2samp
+    from urban_synthesis.plugin.buildings import frontage
+
+    sel = np.flatnonzero(data["block_town"] == target)
+    ids = data["block_ids"][sel]
+    real_mask = np.isin(data["building_block"], ids)
+    populated = np.isin(ids, data["building_block"][real_mask])
+    sel, ids = sel[populated], ids[populated]
+    real = data["buildings"][real_mask]
+    roads_ = data["roads"]
+    tree = shapely.STRtree(roads_)
+    out = {"town": target, "blocks": int(len(sel)), "real": {}}
+    real_angle = frontage.street_angle(real, roads_)
+    out["real"] = dict(footprints=int(len(real)), **_angle_stats(real_angle),
+                       area_median=float(np.median(shapely.area(real))))
+    # blocks holding a dead-end street (cul-de-sacs)
+    dead = shapely.points(data["graph"].nodes[data["graph"].degree == 1])
+    bi, _ = shapely.STRtree(dead).query(data["blocks"][sel], predicate="contains")
+    culdesac = np.zeros(len(sel), dtype=bool)
+    culdesac[np.unique(bi)] = True
+    with tempfile.TemporaryDirectory() as tmp:
+        t0 = time.process_time()
+        db = loto_database(data, target, Path(tmp) / "db.gpkg")
+        ex = footprints.prepare_examples(db, f"without {target}")
+        out["database"] = dict(blocks=len(db), usable=int(len(ex.usable)),
+                               seconds_cpu=time.process_time() - t0)
+        ex_area = shapely.area(ex.polygons[[p is not None for p in ex.polygons]])
+        p10 = float(np.percentile(ex_area, 10))
+        for method in methods:
+            c0, w0 = time.process_time(), time.perf_counter()
+            near = [roads_[tree.query(b, predicate="intersects")] for b in data["blocks"][sel]]
+            r = footprints.synthesize_footprints(
+                data["blocks"][sel], [ex], method, seed=seed, block_ids=ids,
+                roads=roads_)
+            cpu, wall = time.process_time() - c0, time.perf_counter() - w0
+            g = r.geometry
+            ang = frontage.street_angle(g, roads_)
+            area = shapely.area(g)
+            filled = np.isin(ids, r.table.block_id.to_numpy()) if len(g) else \
+                np.zeros(len(ids), bool)
+            m = metrics.footprint_metrics(g, data["blocks"][sel], roads_, road_half_width=3.0)
+            out[method] = dict(
+                footprints=int(len(g)), **_angle_stats(ang),
+                area_ks=float(ks_2samp(area, shapely.area(real)).statistic) if len(g) else 1.0,
+                area_median=float(np.median(area)) if len(g) else float("nan"),
+                sliver_share=float(np.mean(area < p10)) if len(g) else 0.0,
+                example_p10_m2=p10,
+                blocks_filled=float(filled.mean()),
+                culdesac_blocks=int(culdesac.sum()),
+                culdesac_filled=float(filled[culdesac].mean()) if culdesac.any() else
+                float("nan"),
+                area_ratio=float(area.sum() / shapely.area(real).sum()),
+                overlapping_pairs=int(m.scalar("buildings", "overlapping_pairs")),
+                outside_blocks=int(m.scalar("buildings", "outside_blocks")),
+                road_overlap_count=int(m.scalar("buildings", "road_overlap_count")),
+                moved=int(r.blocks.n_conflicted.sum()), deleted=int(r.blocks.n_deleted.sum()),
+                dropped=int(r.blocks.n_dropped.sum()), trimmed=int(r.blocks.n_trimmed.sum()),
+                cpu_s=cpu, wall_s=wall)
+            del near
+    return out
+
+
+def loto(towns: Optional[Sequence[str]] = None, methods=("transfer", "resynthesis")) -> dict:
+    """Leave-one-town-out over the Liechtenstein municipalities."""
+    data = liechtenstein()
+    rows = [loto_town(data, t, methods) for t in (towns or data["towns"])]
+    summary = {}
+    for method in methods:
+        ok = [r for r in rows if r[method]["footprints"]]
+        summary[method] = dict(
+            towns=len(ok),
+            angle_ratio_mean=float(np.mean([r[method]["mean_angle"] / r["real"]["mean_angle"]
+                                            for r in ok])),
+            within_10_mean=float(np.mean([r[method]["within_10"] for r in ok])),
+            area_ks_mean=float(np.mean([r[method]["area_ks"] for r in ok])),
+            sliver_share_mean=float(np.mean([r[method]["sliver_share"] for r in ok])),
+            blocks_filled_mean=float(np.mean([r[method]["blocks_filled"] for r in ok])))
+    summary["real"] = dict(mean_angle=float(np.mean([r["real"]["mean_angle"] for r in rows])),
+                           within_10=float(np.mean([r["real"]["within_10"] for r in rows])))
+    return {"towns": rows, "summary": summary}
+
+
+def print_loto(res: dict) -> None:
+    print("\nLeave-one-town-out, Liechtenstein (database = the other 10 towns; targets = the "
+          "town's blocks that hold buildings; © OpenStreetMap contributors, ODbL)")
+    print(f"  goals: mean angle to the street <= {GOAL_ANGLE_FACTOR}x real, share within 10° "
+          f">= {GOAL_WITHIN_10:.0%}, footprint-area KS <= {GOAL_AREA_KS}")
+    head = (f"  {'town':13s} {'blocks':>6s} | {'real °':>6s} {'≤10°':>5s} |")
+    methods = [m for m in ("transfer", "resynthesis") if m in res["towns"][0]]
+    for m in methods:
+        head += f" {m[:5]} °  ≤10°   KS  slv  fill cul |"
+    print(head)
+    for r in res["towns"]:
+        line = (f"  {r['town']:13s} {r['blocks']:6d} | {r['real']['mean_angle']:6.1f} "
+                f"{r['real']['within_10']:5.0%} |")
+        for m in methods:
+            x = r[m]
+            line += (f" {x['mean_angle']:7.1f} {x['within_10']:5.0%} {x['area_ks']:5.2f} "
+                     f"{x['sliver_share']:4.0%} {x['blocks_filled']:4.0%} "
+                     f"{x['culdesac_filled']:4.0%} |")
+        print(line)
+    s = res["summary"]
+    print(f"  mean over towns: real {s['real']['mean_angle']:.1f}°, {s['real']['within_10']:.0%} "
+          "within 10°; " + "; ".join(
+              f"{m}: angle {s[m]['angle_ratio_mean']:.2f}x real, {s[m]['within_10_mean']:.0%} "
+              f"within 10°, area KS {s[m]['area_ks_mean']:.3f}, slivers "
+              f"{s[m]['sliver_share_mean']:.1%}, blocks filled {s[m]['blocks_filled_mean']:.0%}"
+              for m in methods))
 
 
 def print_table(title, rows: dict):
