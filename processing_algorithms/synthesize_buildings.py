@@ -1,6 +1,5 @@
 """urbansynth:synthesizebuildings - building attributes or models per footprint or parcel
 (Hartmann thesis ch. 6, Scharl 2010 ch. 6)."""
-import re
 from collections import namedtuple
 
 import numpy as np
@@ -9,6 +8,7 @@ import shapely
 from qgis.core import (
     QgsProcessing,
     QgsProcessingException,
+    QgsProcessingParameterBoolean,
     QgsProcessingParameterEnum,
     QgsProcessingParameterFeatureSink,
     QgsProcessingParameterFeatureSource,
@@ -22,6 +22,7 @@ from ..plugin.buildings import attribute_transfer as transfer
 from ..plugin.buildings import attributes as building_attributes
 from ..plugin.buildings import bestfit as building_bestfit
 from ..plugin.buildings import parts as building_parts
+from ..plugin.buildings import structures as building_structures
 from ..plugin.core.progress import InputError
 from ..plugin.network import street_graph as roads
 from ..plugin.qgis_glue import qgis_io
@@ -72,6 +73,7 @@ class SynthesizeBuildings(AlgorithmBase):
     AREA_RESOLUTION = "AREA_RESOLUTION"
     CORNER_TOLERANCE = "CORNER_TOLERANCE"
     SKELETON_SIMPLIFY = "SKELETON_SIMPLIFY"
+    SKELETON_NETWORK = "SKELETON_NETWORK"
     OUTPUT = "OUTPUT"
 
     CHOICES = (("medoid", "Most typical of the k (lowest error)"),
@@ -298,6 +300,14 @@ class SynthesizeBuildings(AlgorithmBase):
             defaultValue=building_parts.CORNER_TOLERANCE, minValue=0.0, maxValue=90.0),
             "A corner part fits a skeleton vertex whose turn is this close to its angle.",
             advanced=True)
+        self.add(QgsProcessingParameterBoolean(
+            self.SKELETON_NETWORK, "Skeleton lines are wing centrelines (T-junctions, 1.5D)",
+            defaultValue=False),
+            "Lines that touch form one building (thesis ch. 6, Fig. 6.6): each line is a "
+            "wing's centreline, parts reach half their depth to both sides, T-parts sit "
+            "where a wing ends on another one, corner parts at bends, end parts at free "
+            "ends; at most one closed loop (a courtyard). A 'counts' field ('doors=2..4; "
+            "straight=1') constrains the parts of that wing alone (local constraints).")
         self.add(QgsProcessingParameterNumber(
             self.SKELETON_SIMPLIFY, "Skeleton simplification (m)",
             QgsProcessingParameterNumber.Double, defaultValue=0.5, minValue=0.0, maxValue=50.0),
@@ -540,23 +550,37 @@ class SynthesizeBuildings(AlgorithmBase):
     def _parts_counts(self, parameters, context, library, label):
         """'corner=4; doors=2..6' -> {'corner': (4, 4), 'doors': (2, 6)}, checked."""
         text = self.parameterAsString(parameters, self.PARTS_COUNTS, context) or ""
-        counts = {}
-        for item in filter(None, (s.strip() for s in re.split(r"[;,]", text))):
-            m = re.fullmatch(r"([^=\s]+)\s*=\s*(\d+(?:\.\d*)?)\s*(?:\.\.\s*(\d+(?:\.\d*)?))?",
-                             item)
-            if not m:
-                raise QgsProcessingException(
-                    f"Count constraint '{item}' is not 'name=n' or 'name=lo..hi'.")
-            name, lo = m.group(1), float(m.group(2))
-            hi = float(m.group(3)) if m.group(3) else lo
-            if hi < lo:
-                raise QgsProcessingException(f"Count constraint '{item}': {hi:g} < {lo:g}.")
-            if name not in building_parts.PART_KINDS and name not in library.table:
-                raise QgsProcessingException(
-                    f"Count constraint on '{name}': neither a part kind "
-                    f"({', '.join(building_parts.PART_KINDS)}) nor a field of {label}.")
-            counts[name] = (lo, hi)
-        return counts
+        try:
+            return building_parts.parse_counts(text, library, label)
+        except InputError as err:
+            raise QgsProcessingException(str(err)) from err
+
+    def _networks(self, parameters, context, feedback, library, label):
+        """Buildings of touching wing lines (1.5D): one MultiLineString each, the smallest
+        feature id, and the local constraints of its wings from a 'counts' field."""
+        frame = qgis_io.read_source(self, parameters, self.SKELETON, context, feedback,
+                                    kind="lines", fields=["counts"])
+        lines, index = shapely.get_parts(frame.geometry, return_index=True)
+        texts = qgis_io.field_values(frame, "counts", "")
+        buildings, fids, local = [], [], []
+        for group in building_structures.connected_networks(lines):
+            buildings.append(shapely.multilinestrings(lines[group]))
+            fids.append(int(frame.fids[index[group]].min()))
+            wing = {}
+            for k, i in enumerate(group):
+                text = texts[index[i]]
+                try:
+                    counts = building_parts.parse_counts(
+                        None if pd.isna(text) else str(text), library, label)
+                except InputError as err:
+                    raise QgsProcessingException(
+                        f"Layer {frame.name}, feature {frame.fids[index[i]]}: {err}") from err
+                if counts:
+                    wing[k] = counts
+            local.append(wing)
+        feedback.pushInfo(f"{frame.name}: {len(lines)} wing lines form {len(buildings)} "
+                          "buildings.")
+        return frame, np.array(buildings, dtype=object), np.array(fids), local
 
     def _skeletons(self, parameters, context, feedback):
         """Skeleton parts (multi-part features split, lines merged) with their feature ids."""
@@ -609,6 +633,13 @@ class SynthesizeBuildings(AlgorithmBase):
         frame, kind, parts, fids, fronts = self._skeletons(parameters, context, feedback)
         crs = frame.crs
         library, label = self._parts_library(parameters, context, feedback, crs)
+        network = kind == "lines" and self.parameterAsBoolean(parameters,
+                                                               self.SKELETON_NETWORK, context)
+        local = [None] * len(parts)
+        if network:
+            frame, parts, fids, local = self._networks(parameters, context, feedback,
+                                                       library, label)
+            fronts = [None] * len(parts)
         kinds = set(library.table["kind"])
         towers = kinds == {"floor"}
         if towers and kind != "polygons":
@@ -655,6 +686,11 @@ class SynthesizeBuildings(AlgorithmBase):
                     result = qgis_io.run_engine(
                         frame.name, building_parts.stack_floors, library, height,
                         far=far_bounds, site=skeleton, site_area=site, progress=sub, **options)
+                elif network:
+                    result = qgis_io.run_engine(
+                        frame.name, building_structures.build_along_network, skeleton,
+                        library, far=far_bounds, site_area=site, local=local[n],
+                        corner_tolerance=tolerance, progress=sub, **options)
                 else:
                     result = qgis_io.run_engine(
                         frame.name, building_parts.build_along_skeleton, skeleton, library,

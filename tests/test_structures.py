@@ -324,3 +324,21 @@ def test_real_units_and_inputs_unchanged():
     assert shapely.symmetric_difference(union, wings_area(lines, 12.0)).area < 0.2 * 12 * 4
     # 60.08 m + 23.98 m of wings, each stretch on the 0.2 m grid
     assert math.isclose(res.summary.length_m.iloc[0], 84.0, abs_tol=1e-9)
+
+
+def test_wings_drawn_onto_a_side_and_grouped_into_buildings():
+    """A wing snapped onto another wing's side (no vertex there) makes a T-junction; lines
+    that touch form one building, others their own (the Processing algorithm's rule)."""
+    lines = [shapely.LineString([(0, 0), (60, 0)]), shapely.LineString([(30, 0), (30, 24)]),
+             shapely.LineString([(100, 0), (140, 0)]),
+             shapely.LineString([(0, 100), (60, 100), (60, 150), (0, 150), (0, 100)]),
+             shapely.LineString([(60, 125), (90, 125)])]
+    groups = st.connected_networks(lines)
+    assert [g.tolist() for g in groups] == [[0, 1], [2], [3, 4]]
+    wings = st.skeleton_network([lines[i] for i in groups[0]])
+    assert wings[0].kind == ["tip", "tee", "tip"]
+    ring = st.skeleton_network([lines[i] for i in groups[2]])
+    assert ring[0].closed and ring[0].kind.count("tee") == 1
+    res = st.build_along_network([lines[i] for i in groups[2]], bp.terrace_library())
+    assert shapely.symmetric_difference(shapely.union_all(res.geometry),
+                                        wings_area([lines[3], lines[4]], 12.0)).area < 1e-6

@@ -39,8 +39,9 @@ Hartmann, S. Example-based generation of virtual urban environments, thesis, ch.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
-from typing import List, Mapping, Optional, Sequence, Tuple
+from typing import Dict, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 import pandas as pd
@@ -52,7 +53,7 @@ from ..core.progress import InputError, Progress, ensure
 from . import sequences
 from .sequences import Constraint, InfeasibleError, KeyPoint
 
-__all__ = ["PART_KINDS", "PartsLibrary", "PartsResult", "library_from_table",
+__all__ = ["PART_KINDS", "PartsLibrary", "PartsResult", "library_from_table", "parse_counts",
            "skyscraper_library", "terrace_library", "stack_floors", "build_along_skeleton"]
 
 #: Part kinds: floors stack vertically; the others follow a skeleton in plan; T-parts sit
@@ -353,6 +354,27 @@ def _thicken(line, depth: float):
 
 
 # --------------------------------------------------------------------------- solving
+
+
+def parse_counts(text: Optional[str], library: PartsLibrary, label: str = "the parts"
+                 ) -> Dict[str, Tuple[float, float]]:
+    """'corner=4; doors=2..6' -> {'corner': (4, 4), 'doors': (2, 6)}, checked against the
+    library (a part kind or a numeric field). Raises :class:`InputError` with the item."""
+    counts: Dict[str, Tuple[float, float]] = {}
+    for item in filter(None, (x.strip() for x in re.split(r"[;,]", text or ""))):
+        m = re.fullmatch(r"([^=\s]+)\s*=\s*(\d+(?:\.\d*)?)\s*(?:\.\.\s*(\d+(?:\.\d*)?))?",
+                         item)
+        if not m:
+            raise InputError(f"Count constraint '{item}' is not 'name=n' or 'name=lo..hi'.")
+        name, lo = m.group(1), float(m.group(2))
+        hi = float(m.group(3)) if m.group(3) else lo
+        if hi < lo:
+            raise InputError(f"Count constraint '{item}': {hi:g} < {lo:g}.")
+        if name not in PART_KINDS and name not in library.table:
+            raise InputError(f"Count constraint on '{name}': neither a part kind "
+                             f"({', '.join(PART_KINDS)}) nor a field of {label}.")
+        counts[name] = (lo, hi)
+    return counts
 
 
 def _resource_matrix(lib: PartsLibrary, counts: Mapping[str, Tuple[float, float]],

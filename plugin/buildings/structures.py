@@ -62,7 +62,8 @@ from .parts import (AREA_QUANTUM, CORNER_TOLERANCE, LENGTH_QUANTUM, STRAIGHT_TOL
                     PartsLibrary, PartsResult, _area_bounds, _constraints, _resource_matrix)
 from .sequences import Constraint, InfeasibleError
 
-__all__ = ["TEE_TOLERANCE", "Wing", "skeleton_network", "build_along_network"]
+__all__ = ["TEE_TOLERANCE", "Wing", "skeleton_network", "connected_networks",
+           "build_along_network"]
 
 #: A T-junction's branch must leave its through wings at 90° within this (degrees).
 TEE_TOLERANCE = 20.0
@@ -138,6 +139,29 @@ def _lines_of(skeleton) -> List[Tuple[np.ndarray, bool]]:
     return out
 
 
+def _insert_junctions(lines: List[Tuple[np.ndarray, bool]]) -> List[Tuple[np.ndarray, bool]]:
+    """A wing drawn to end on another wing's side (snapped to the segment, not to a
+    vertex) makes a junction there: the end point becomes a vertex of that wing."""
+    ends = np.vstack([xy[[0, -1]] for xy, closed in lines if not closed] or
+                     [np.zeros((0, 2))])
+    out = []
+    for xy, closed in lines:
+        ring = xy                                 # a closed line repeats its first vertex
+        line = shapely.LineString(ring)
+        near = ends[shapely.distance(shapely.points(ends), line) <= SNAP] if len(ends) else ends
+        if len(near):
+            pos = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(ring, axis=0), axis=1))]
+            at = shapely.line_locate_point(line, shapely.points(near))
+            new = (np.abs(at[:, None] - pos[None, :]) > SNAP).all(axis=1)
+            if new.any():
+                allpos = np.r_[pos, at[new]]
+                allxy = np.vstack([ring, near[new]])
+                order = np.argsort(allpos, kind="stable")
+                ring = allxy[order]
+        out.append((ring, closed))
+    return out
+
+
 def _angle(v: np.ndarray) -> float:
     return math.atan2(v[1], v[0])
 
@@ -170,7 +194,7 @@ def skeleton_network(skeleton, tee_tolerance: float = TEE_TOLERANCE) -> List[Win
         T-junction whose wings are not two straight through and one at 90°, a wing between
         two T-junctions, or a loop without a corner to cut it at.
     """
-    lines = _lines_of(skeleton)
+    lines = _insert_junctions(_lines_of(skeleton))
     pts, seg_a, seg_b, seg_line = [], [], [], []
     offset = 0
     for li, (xy, closed) in enumerate(lines):
@@ -381,6 +405,22 @@ def skeleton_network(skeleton, tee_tolerance: float = TEE_TOLERANCE) -> List[Win
 
     visit(root, None)
     return wings
+
+
+def connected_networks(lines: Sequence) -> List[np.ndarray]:
+    """Group lines that touch (within :data:`SNAP`) into networks: one building each.
+
+    Returns the line indices of every network, ordered by their smallest index.
+    """
+    lines = np.asarray(lines, dtype=object)
+    if not len(lines):
+        return []
+    tree = shapely.STRtree(lines)
+    i, j = tree.query(shapely.buffer(lines, SNAP), predicate="intersects")
+    graph = sparse.coo_matrix((np.ones(len(i)), (i, j)), shape=(len(lines), len(lines)))
+    _, label = connected_components(graph, directed=False)
+    groups = [np.flatnonzero(label == k) for k in np.unique(label)]
+    return sorted(groups, key=lambda g: int(g[0]))
 
 
 # --------------------------------------------------------------------------- layout
