@@ -140,3 +140,38 @@ def test_slivers_are_dropped_intact_footprints_kept():
     assert status[idx.index(4)] == "trimmed"
     out, idx, _ = footprints.legalise(polys, [0, 1, 2, 3, 4], block, block, min_area=0.0)
     assert 2 in idx                                     # without the rule the sliver stays
+
+
+@pytest.mark.parametrize("method", footprints.METHODS)
+def test_cul_de_sac_is_filled_along_its_frontage(tmp_path, method):
+    """A dead-end street inside the target block, which the example block did not have:
+    with the frontage fill, houses stand along it (facing it), legally, up to the share of
+    frontage the example block has built; without it the dead end stays bare."""
+    ex = street_facing_database(tmp_path / "rows.gpkg")
+    example_share = fr.served_share([ex.db.geometry[0]], ex.polygons)
+    block = shapely.box(0, 0, 200, 160)
+    dead_end = shapely.LineString([(100, 0), (100, 120)])
+    roads = np.array([block.exterior, dead_end], dtype=object)
+    runs = {}
+    for fill in (False, True):
+        layout = footprints.synthesize_block(block, [ex], method, roads=roads, fill=fill)
+        runs[fill] = layout
+        surface = shapely.buffer(shapely.union_all(roads), 3.0)
+        assert_legal(layout.geometry, np.full(len(layout.geometry), block, dtype=object),
+                     shapely.intersection(surface, block))
+    filled = runs[True]
+    added = np.array(filled.geometry, dtype=object)[(filled.table.placement == "filled").to_numpy()]
+    assert filled.stats["n_filled"] == len(added) > 0
+    inner = [shapely.intersection(dead_end, shapely.buffer(block, -0.5))]
+    bare = fr.served_share(inner, runs[False].geometry)
+    full = fr.served_share(inner, filled.geometry)
+    assert bare < 0.9 and full >= example_share - 0.05
+    # the block as a whole is built up to the example's share (here all its frontage)
+    everything = [block.exterior, inner[0]]
+    assert fr.served_share(everything, runs[False].geometry) < example_share - 0.1
+    assert fr.served_share(everything, filled.geometry) >= example_share - 0.05
+    # added houses face their street as the example's do (angle 0)
+    assert np.max(fr.street_angle(added, roads)) < 1.0
+    # same seed, same result
+    again = footprints.synthesize_block(block, [ex], method, roads=roads)
+    assert [g.wkb for g in again.geometry] == [g.wkb for g in filled.geometry]

@@ -8,10 +8,15 @@ symmetry (modulo 90°), is the footprint's angle to its street. Real towns keep 
 into a block of another shape loses it. The thesis names the problem ("non-constant
 setback", Hartmann ch. 5.1.6) and leaves the orientation of re-synthesised footprints
 unspecified (ch. 5.2); :func:`align_to_frontage` keeps each footprint's angle to its
-street from the example block in the target block.
+street from the example block in the target block. The layout of a block of another
+shape also leaves frontage empty -- the dead-end streets inside a target block, which the
+example block did not have, and the sides of irregular blocks; :func:`fill_frontage`
+builds it up to the share of frontage the example block has built (a simplification of
+ours: the thesis leaves such blocks under-filled, ch. 5.1.6, "irregular blocks poorly
+covered").
 
-Hand-written here: only the folding of angles; rectangles, nearest segments and
-rotations are shapely's and :mod:`core.coordinates`'.
+Hand-written here: the folding of angles and the greedy frontage fill; rectangles,
+nearest segments, distances and rotations are shapely's and :mod:`core.coordinates`'.
 
 References
 ----------
@@ -20,15 +25,16 @@ street segments).
 """
 from __future__ import annotations
 
-from typing import Optional, Sequence, Tuple
+from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 import shapely
 
 from ..core import coordinates
 
-__all__ = ["REACH", "fold", "main_axis", "street_segments", "nearest_street",
-           "street_angle", "relative_angle", "align_to_frontage"]
+__all__ = ["REACH", "SERVE", "fold", "main_axis", "street_segments", "nearest_street",
+           "street_angle", "relative_angle", "align_to_frontage", "street_points",
+           "served_share", "fill_frontage"]
 
 #: Footprints farther than this from every street (m) have no frontage: interior
 #: buildings (the thesis's grouping distance tau is 25 m, ch. 5.2).
@@ -140,3 +146,112 @@ def align_to_frontage(polygons: Sequence, example_angle: np.ndarray,
         cen = shapely.get_coordinates(shapely.centroid(polygons[idx]))
         out[idx] = coordinates.rotate(polygons[idx], turn[idx], cen)
     return out, turn
+
+
+#: A street point is served when a footprint stands within this distance (m): the
+#: thesis's grouping distance tau (ch. 5.2).
+SERVE = 25.0
+#: Street points are sampled this far apart (m).
+SAMPLE_STEP = 5.0
+#: Example footprints tried per unserved street point.
+TRIES = 6
+
+
+def street_points(lines: Sequence, step: float = SAMPLE_STEP) -> Tuple[np.ndarray, np.ndarray]:
+    """Points every ``step`` metres along lines (or polygon outlines), with the direction
+    (radians) of the street at each."""
+    seg = street_segments(lines)
+    if not len(seg):
+        return np.zeros((0, 2)), np.zeros(0)
+    xy = shapely.get_coordinates(seg).reshape(-1, 2, 2)
+    length = np.hypot(*(xy[:, 1] - xy[:, 0]).T)
+    n = np.maximum(1, np.floor(length / step)).astype(np.int64)
+    s = np.repeat(np.arange(len(seg)), n)
+    k = np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)
+    t = (k + 0.5) / n[s]
+    pts = xy[s, 0] + t[:, None] * (xy[s, 1] - xy[s, 0])
+    d = xy[:, 1] - xy[:, 0]
+    return pts, np.arctan2(d[s, 1], d[s, 0])
+
+
+def served_share(lines: Sequence, polygons: Sequence, reach: float = SERVE) -> float:
+    """Share of the street points (:func:`street_points`) with a footprint within reach."""
+    pts, _ = street_points(lines)
+    polygons = np.asarray(polygons, dtype=object)
+    if not len(pts):
+        return 0.0
+    if not len(polygons):
+        return 0.0
+    return float(np.mean(shapely.distance(shapely.points(pts), shapely.union_all(polygons))
+                         <= reach))
+
+
+def fill_frontage(placed: Sequence, buildable, lines: Sequence, examples: Sequence,
+                  example_angle: np.ndarray, example_offset: np.ndarray, share: float,
+                  rng: np.random.Generator, gap: float = 0.01, reach: float = SERVE,
+                  tries: int = TRIES) -> Tuple[List, List[int]]:
+    """Place example footprints along the street frontage a layout leaves empty -- the
+    dead-end streets inside a block (cul-de-sacs) and the sides of irregular blocks that a
+    rigid fit of another block's layout does not reach -- until the share of served
+    street points equals the example block's.
+
+    Each added footprint is an example footprint that faces a street in its block: turned
+    so that it keeps its example angle to the target street (:func:`align_to_frontage`)
+    and set back by its example distance (centroid to street), on the side of the street
+    where it fits inside ``buildable`` without touching the footprints already there.
+    Unserved street points are visited in a seeded random order.
+
+    Parameters
+    ----------
+    placed : footprints already in the block (legal)
+    buildable : where footprints may stand
+    lines : the block's streets (outline and the roads inside it)
+    examples, example_angle, example_offset : street-facing example footprints (any
+        frame), their signed angle to their street (radians) and centroid distance to it
+    share : the example block's served share (:func:`served_share`)
+    rng : numpy Generator (the block's)
+
+    Returns
+    -------
+    (added footprints, index into ``examples`` of each)
+    """
+    examples = np.asarray(examples, dtype=object)
+    pts, direction = street_points(lines)
+    added: List = []
+    source: List[int] = []
+    if not len(examples) or not len(pts) or share <= 0:
+        return added, source
+    current = list(placed)
+    point_geoms = shapely.points(pts)
+    if current:
+        served = shapely.distance(point_geoms, shapely.union_all(current)) <= reach
+    else:
+        served = np.zeros(len(pts), dtype=bool)
+    shapely.prepare(buildable)
+    cen = shapely.get_coordinates(shapely.centroid(examples))
+    centred = coordinates.translate(examples, -cen)
+    axis = main_axis(centred)
+    for i in rng.permutation(len(pts)):
+        if served.mean() >= share:
+            break
+        if served[i]:
+            continue
+        grown = shapely.buffer(shapely.union_all(current), gap) if current else None
+        normal = np.array([-np.sin(direction[i]), np.cos(direction[i])])
+        for k in rng.integers(len(examples), size=tries):
+            shape = coordinates.rotate(
+                centred[k:k + 1], fold(direction[i] + example_angle[k] - axis[k]), (0.0, 0.0))
+            placed_ok = None
+            for side in rng.permutation([1.0, -1.0]):
+                poly = coordinates.translate(shape, pts[i] + side * example_offset[k] * normal)[0]
+                if shapely.within(poly, buildable) and (grown is None or
+                                                        not shapely.intersects(poly, grown)):
+                    placed_ok = poly
+                    break
+            if placed_ok is not None:
+                added.append(placed_ok)
+                source.append(int(k))
+                current.append(placed_ok)
+                served |= shapely.distance(point_geoms, placed_ok) <= reach
+                break
+    return added, source
