@@ -43,7 +43,8 @@ demo: setup
 # The whole suite under the machine's own BLAS kernel, then the engine tests (geometry,
 # footprints, roads, parcels: no QGIS) again under a forced generic one, so that a result
 # that depends on how a processor rounds a matrix product fails here, not on a user's
-# machine (DESIGN.md; tests/test_reproducible.py compares the two kernels' outputs).
+# machine (docs/ARCHITECTURE.md, "Floating point across processors"; tests/test_reproducible.py
+# compares the two kernels' outputs).
 ENGINE_TESTS := $(filter-out tests/test_alg_% tests/test_model_% tests/test_desktop.py \
 	tests/test_package.py tests/test_provider.py tests/test_environment.py \
 	tests/test_reproducible.py tests/test_distributed.py,$(wildcard tests/test_*.py))
@@ -59,7 +60,7 @@ bench: setup $(VENV)/.bench-installed
 # The plugin zip (top folder urban_synthesis/) holds what QGIS needs to run the plugin, taken
 # from the committed tree (git archive HEAD): no tests, example data, dev scripts or README
 # pictures. Uncommitted changes are not packaged (a warning says so).
-PACKAGE_FILES := __init__.py metadata.txt README.md plugin processing_algorithms resources \
+PACKAGE_FILES := __init__.py metadata.txt README.md requirements.txt plugin processing_algorithms resources \
 	$(shell git ls-files -- 'LICENSE*' 'COPYING*' 'ATTRIBUTION*' 2>/dev/null)
 PACKAGE_ZIP := build/dist/$(PLUGIN_NAME).zip
 

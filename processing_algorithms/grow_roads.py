@@ -185,46 +185,36 @@ class GrowRoads(AlgorithmBase):
             "Any density raster (normalised by its maximum): the first seed goes to the "
             "densest place near the centre, major roads head for population, and growth, "
             "branching and block size follow density; nothing grows where it is 0.")
-        self.add(QgsProcessingParameterNumber(
-            self.SEED, "Random seed", QgsProcessingParameterNumber.Integer, defaultValue=1,
-            minValue=0),
+        self.add_seed(
             "The same seed and inputs give the same network.")
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT, "Grown roads", QgsProcessing.TypeVectorLine),
             "Roads with level (0 major, 1 minor), road_class, pattern, width_m, length_m.")
-
-    def _number(self, parameters, name, context, lo, hi):
-        return qgis_io.check_number(self.parameterAsDouble(parameters, name, context), name, lo, hi)
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         frame = qgis_io.read_source(self, parameters, self.BOUNDARY, context, feedback,
                                     kind="polygons", fields=[])
         label = frame.name
         crs = frame.crs
-        num = self._number
         settings = growth.GrowthSettings(
             major_pattern=self.PATTERN_KEYS[self.parameterAsEnum(parameters, self.MAJOR_PATTERN,
                                                                  context)],
             minor_pattern=self.PATTERN_KEYS[self.parameterAsEnum(parameters, self.MINOR_PATTERN,
                                                                  context)],
-            major_length=num(parameters, self.MAJOR_SEGMENT_LENGTH, context, 5.0, 10000.0),
-            minor_length=num(parameters, self.MINOR_SEGMENT_LENGTH, context, 5.0, 10000.0),
-            length_deviation=num(parameters, self.LENGTH_DEVIATION, context, 0.0, 90.0) / 100.0,
-            angle_deviation=num(parameters, self.ANGLE_DEVIATION, context, 0.0, 90.0),
-            branch_probability=num(parameters, self.BRANCH_PROBABILITY, context, 0.0, 1.0),
-            snap_distance=num(parameters, self.SNAP_DISTANCE, context, 0.0, 5000.0),
-            min_street_distance=num(parameters, self.MIN_STREET_DISTANCE, context, 0.0, 5000.0),
-            major_width=num(parameters, self.MAJOR_WIDTH, context, 0.0, 200.0),
-            minor_width=num(parameters, self.MINOR_WIDTH, context, 0.0, 200.0),
-            max_segments=int(qgis_io.check_number(
-                self.parameterAsInt(parameters, self.MAX_SEGMENTS, context), self.MAX_SEGMENTS,
-                1, 1000000)),
-            max_slope=num(parameters, self.MAX_SLOPE, context, 0.1, 100.0) / 100.0,
+            major_length=self.number(parameters, self.MAJOR_SEGMENT_LENGTH, context),
+            minor_length=self.number(parameters, self.MINOR_SEGMENT_LENGTH, context),
+            length_deviation=self.number(parameters, self.LENGTH_DEVIATION, context) / 100.0,
+            angle_deviation=self.number(parameters, self.ANGLE_DEVIATION, context),
+            branch_probability=self.number(parameters, self.BRANCH_PROBABILITY, context),
+            snap_distance=self.number(parameters, self.SNAP_DISTANCE, context),
+            min_street_distance=self.number(parameters, self.MIN_STREET_DISTANCE, context),
+            major_width=self.number(parameters, self.MAJOR_WIDTH, context),
+            minor_width=self.number(parameters, self.MINOR_WIDTH, context),
+            max_segments=self.number(parameters, self.MAX_SEGMENTS, context),
+            max_slope=self.number(parameters, self.MAX_SLOPE, context) / 100.0,
             grow_major=self.parameterAsBoolean(parameters, self.GROW_MAJOR, context),
         )
-        seed = self.parameterAsInt(parameters, self.SEED, context)
-        if seed < 0:
-            raise QgsProcessingException(f"Parameter {self.SEED} must not be negative.")
+        seed = self.seed(parameters, context)
         try:
             settings = settings.validated()
         except InputError as exc:

@@ -5,6 +5,7 @@ from qgis.core import (
     QgsCoordinateReferenceSystem,
     QgsProcessing,
     QgsProcessingException,
+    QgsProcessingParameterBoolean,
     QgsProcessingParameterFeatureSink,
     QgsProcessingParameterFeatureSource,
     QgsProcessingParameterField,
@@ -32,6 +33,12 @@ class LayoutMetrics(AlgorithmBase):
     EXAMPLE_STUDY_AREA = "EXAMPLE_STUDY_AREA"
     ROAD_HALF_WIDTH = "ROAD_HALF_WIDTH"
     LANDUSE_FIELD = "LANDUSE_FIELD"
+    GIVEN_ROADS = "GIVEN_ROADS"
+    DRIVABLE_ONLY = "DRIVABLE_ONLY"
+    MIN_BLOCK_AREA = "MIN_BLOCK_AREA"
+    MIN_BLOCK_WIDTH = "MIN_BLOCK_WIDTH"
+    EDGE_DISTANCE = "EDGE_DISTANCE"
+    SNAP_TOLERANCE = "SNAP_TOLERANCE"
     OUTPUT = "OUTPUT"
     OUTPUT_HTML = "OUTPUT_HTML"
 
@@ -60,6 +67,15 @@ class LayoutMetrics(AlgorithmBase):
             "p_n, p_angle, p_area, undesirable parcels (p_angle > 15° or p_area > 1.2) and, with "
             "a land-use field, the land-use shares. Buildings: coverage, overlaps between "
             "footprints and with the road surface, footprints outside blocks, setback.\n\n"
+            "Network invariants of the roads (against GIVEN_ROADS, the roads a synthesis was "
+            "given): crossings without a junction, floating pieces, streets inside a given "
+            "road's corridor, motorway / trunk contacts away from their junctions, dead-end "
+            "share (flagged beyond ±30 % of the example's).\n\n"
+            "Counting choices, all visible: roads are every line (DRIVABLE_ONLY drops footways "
+            "and other non-drivable OSM classes); faces under MIN_BLOCK_AREA m² or thinner "
+            "than MIN_BLOCK_WIDTH m are slivers, not blocks (0 and 0 keep every face of a plain "
+            "polygonize); nodes within EDGE_DISTANCE m of the study area's boundary are clip "
+            "ends, not dead ends (0 counts them).\n\n"
             "Outputs: a table with one row per measure (candidate and example values, "
             "Wasserstein distance and Kolmogorov-Smirnov statistic of every distribution) and "
             "an HTML report with histograms of example and candidate side by side. Each layer "
@@ -113,6 +129,38 @@ class LayoutMetrics(AlgorithmBase):
             "Parcel field with the land use (residential / park / street / other labels, matched "
             "case-insensitively) for the Yang 2013 shares l_s, l_r, l_p, l_o. The example "
             "parcels use a field of the same name when they have one.", advanced=True)
+        self.add(QgsProcessingParameterFeatureSource(
+            self.GIVEN_ROADS, "Given roads (for the network invariants)", line, optional=True),
+            "The roads the layout was given (e.g. the arterials of a synthesis). Road lines "
+            "that are copies of them are left out of the check; the others must meet them at "
+            "junctions, connect to them and not run along them. Without it the roads are "
+            "checked on their own.")
+        self.add(QgsProcessingParameterBoolean(
+            self.DRIVABLE_ONLY, "Drivable streets only", defaultValue=False),
+            "Keep only road lines whose OSM class (field 'highway', else 'road_class') is "
+            "drivable: no footways, paths, cycleways, service roads or tracks. Off: every line "
+            "counts, and the log says how many non-drivable lines are counted.")
+        self.add(QgsProcessingParameterNumber(
+            self.MIN_BLOCK_AREA, "Smallest block (m²)", QgsProcessingParameterNumber.Double,
+            defaultValue=400.0, minValue=0.0, maxValue=1e6),
+            "Faces of the road graph smaller than this are traffic islands, not blocks (as in "
+            "Extract blocks); the log counts them. 0 keeps every face.")
+        self.add(QgsProcessingParameterNumber(
+            self.MIN_BLOCK_WIDTH, "Thinnest block (m)", QgsProcessingParameterNumber.Double,
+            defaultValue=8.0, minValue=0.0, maxValue=1000.0),
+            "Faces whose mean width 2·area/perimeter is under this are slivers between dual "
+            "carriageways; the log counts them. 0 keeps every face.")
+        self.add(QgsProcessingParameterNumber(
+            self.EDGE_DISTANCE, "Clip ends at the study-area edge (m)",
+            QgsProcessingParameterNumber.Double, defaultValue=0.0, minValue=0.0, maxValue=1000.0),
+            "Nodes closer than this to the study area's boundary are not counted in densities "
+            "and shares (the cut ends of a clipped network are not dead ends). 0 counts every "
+            "node inside the area or on its boundary.", advanced=True)
+        self.add(QgsProcessingParameterNumber(
+            self.SNAP_TOLERANCE, "Node snapping (m)", QgsProcessingParameterNumber.Double,
+            defaultValue=0.5, minValue=0.0, maxValue=10.0),
+            "Road nodes closer than this are one node, and edges between the same nodes this "
+            "close are one street. 0 counts exactly what noding the lines gives.", advanced=True)
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT, "Layout metrics table", QgsProcessing.TypeVector),
             "One row per measure: kind, metric, statistic, unit, candidate and example values, "
@@ -138,6 +186,7 @@ class LayoutMetrics(AlgorithmBase):
             kwargs[arg] = frame.geometry
             if arg == "roads":  # bridges and tunnels cross without an intersection
                 kwargs["road_z_layer"] = qgis_io.osm_vertical_layers(frame)
+                kwargs["road_class"] = self._road_class(frame)
             names.append(f"{arg}: {frame.name} ({len(frame)} features)")
             if arg == "parcels" and landuse_field:
                 if landuse_field in frame.attributes:
@@ -152,27 +201,51 @@ class LayoutMetrics(AlgorithmBase):
             names.append(f"study area: {area.name}")
         return kwargs, names, crs
 
+    @staticmethod
+    def _road_class(frame):
+        """OSM class per road line ('highway', else 'road_class'), or None."""
+        for name in ("highway", "road_class"):
+            if name in frame.attributes:
+                return frame.attributes[name].to_numpy(dtype=object)
+        return None
+
     # ------------------------------------------------------------------ run
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         if not any(self.given(parameters, name) for name, _, _ in self.CANDIDATE):
             raise QgsProcessingException(
                 "No layer to measure: give at least one of Roads, Blocks, Parcels or Buildings.")
-        half_width = qgis_io.check_number(
-            self.parameterAsDouble(parameters, self.ROAD_HALF_WIDTH, context),
-            self.ROAD_HALF_WIDTH, 0.0, 100.0)
+        half_width = self.number(parameters, self.ROAD_HALF_WIDTH, context)
         landuse_field = self.parameterAsString(parameters, self.LANDUSE_FIELD, context)
         html_path = self.parameterAsFileOutput(parameters, self.OUTPUT_HTML, context)
 
+        counting = dict(
+            drivable_only=self.parameterAsBool(parameters, self.DRIVABLE_ONLY, context),
+            min_block_area=self.number(parameters, self.MIN_BLOCK_AREA, context),
+            min_block_width=self.number(parameters, self.MIN_BLOCK_WIDTH, context),
+            edge_distance=self.number(parameters, self.EDGE_DISTANCE, context),
+            snap_tolerance=self.number(parameters, self.SNAP_TOLERANCE, context))
         cand_args, cand_names, cand_crs = self._read_set(
             parameters, context, feedback, self.CANDIDATE, self.STUDY_AREA, landuse_field)
         if not cand_args:
             raise QgsProcessingException(
                 "No layer to measure could be loaded: check Roads, Blocks, Parcels and Buildings.")
+        if self.given(parameters, self.GIVEN_ROADS):
+            if "roads" not in cand_args:
+                raise QgsProcessingException("Given roads need Roads to check against them.")
+            given = qgis_io.read_source(self, parameters, self.GIVEN_ROADS, context, feedback,
+                                        kind="lines", target_crs=cand_crs)
+            cand_args.update(given_roads=given.geometry, given_class=self._road_class(given),
+                             given_z_layer=qgis_io.osm_vertical_layers(given))
+            cand_names.append(f"given roads: {given.name} ({len(given)} features)")
+        if counting["drivable_only"] and "roads" in cand_args and \
+                cand_args.get("road_class") is None:
+            raise QgsProcessingException(
+                "Drivable streets only needs a 'highway' or 'road_class' field in Roads.")
         feedback.setProgress(10)
         candidate = qgis_io.run_engine(
             "Layout", metrics.compute_layout_metrics, road_half_width=half_width,
-            progress=qgis_io.progress_for(feedback, 10, 45), **cand_args)
+            progress=qgis_io.progress_for(feedback, 10, 45), **counting, **cand_args)
         for note in candidate.notes:
             feedback.pushInfo(f"Layout: {note}")
 
@@ -180,9 +253,12 @@ class LayoutMetrics(AlgorithmBase):
         ex_args, ex_names, ex_crs = self._read_set(
             parameters, context, feedback, self.EXAMPLE, self.EXAMPLE_STUDY_AREA, landuse_field)
         if ex_args:
+            # an example without classes (a synthesis) keeps all its lines
+            ex_counting = dict(counting, drivable_only=counting["drivable_only"]
+                               and ex_args.get("road_class") is not None)
             example = qgis_io.run_engine(
                 "Example", metrics.compute_layout_metrics, road_half_width=half_width,
-                progress=qgis_io.progress_for(feedback, 50, 80), **ex_args)
+                progress=qgis_io.progress_for(feedback, 50, 80), **ex_counting, **ex_args)
             for note in example.notes:
                 feedback.pushInfo(f"Example: {note}")
         elif self.given(parameters, self.EXAMPLE_STUDY_AREA):
@@ -208,10 +284,19 @@ class LayoutMetrics(AlgorithmBase):
             meta["Example"] = "; ".join(ex_names)
             meta["Example CRS (metric)"] = ex_crs.authid() if ex_crs else ""
         meta["Road half-width"] = f"{half_width:g} m"
+        meta["Counting"] = (("drivable streets only" if counting["drivable_only"] else
+                             "every road line") + f"; blocks from {counting['min_block_area']:g} "
+                            f"m² and {counting['min_block_width']:g} m wide; clip ends within "
+                            f"{counting['edge_distance']:g} m of the study-area edge not "
+                            f"counted; nodes snapped within {counting['snap_tolerance']:g} m")
         if html_path:
+            drawn = ("roads", "blocks", "parcels", "buildings")
+            maps = {"Layout": {k: cand_args[k] for k in drawn if k in cand_args}}
+            if example is not None:
+                maps["Example"] = {k: ex_args[k] for k in drawn if k in ex_args}
             qgis_io.run_engine("Report", report.write_report, html_path, candidate, example,
                                table, "Layout metrics", meta,
-                               progress=qgis_io.progress_for(feedback, 85, 100))
+                               progress=qgis_io.progress_for(feedback, 85, 100), maps=maps)
             results[self.OUTPUT_HTML] = html_path
         feedback.setProgress(100)
         return results

@@ -113,9 +113,7 @@ class SplitDomain(AlgorithmBase):
             self.VARIATIONS, "Variations", QgsProcessingParameterNumber.Integer,
             defaultValue=1, minValue=1, maxValue=100),
             "Number of layouts to make (field 'variation' in every output).")
-        self.add(QgsProcessingParameterNumber(
-            self.SEED, "Random seed", QgsProcessingParameterNumber.Integer, defaultValue=1,
-            minValue=0),
+        self.add_seed(
             "The same seed gives the same layouts; variation v draws from (seed, v).")
         self.add(QgsProcessingParameterBoolean(
             self.OPTIMISE, "Optimise the street mesh", defaultValue=True),
@@ -143,12 +141,9 @@ class SplitDomain(AlgorithmBase):
         number = {}
         for name, lo, hi in ((self.PARCEL_LENGTH, 1.0, 1000.0), (self.PARCEL_WIDTH, 1.0, 1000.0),
                              (self.STREET_WIDTH, 1.0, 200.0)):
-            number[name] = qgis_io.check_number(
-                self.parameterAsDouble(parameters, name, context), name, lo, hi)
-        variations = int(qgis_io.check_number(
-            self.parameterAsInt(parameters, self.VARIATIONS, context), self.VARIATIONS, 1, 100))
-        seed = int(qgis_io.check_number(self.parameterAsInt(parameters, self.SEED, context),
-                                        self.SEED, 0))
+            number[name] = self.number(parameters, name, context)
+        variations = self.number(parameters, self.VARIATIONS, context)
+        seed = self.seed(parameters, context)
         settings = domain_split.SplitSettings(
             parcel_length=number[self.PARCEL_LENGTH], parcel_width=number[self.PARCEL_WIDTH],
             street_width=number[self.STREET_WIDTH],

@@ -138,9 +138,6 @@ class TessellateStreets(AlgorithmBase):
             "One polygon per junction: junction_id (= from/to_junction of the surfaces), "
             "degree, merged_nodes, z_layer, area_m2; with a DEM z_centre and slopes.")
 
-    def _number(self, parameters, name, context, lo, hi):
-        return qgis_io.check_number(self.parameterAsDouble(parameters, name, context), name, lo, hi)
-
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         width_field = self.parameterAsString(parameters, self.WIDTH_FIELD, context)
         class_field = self.parameterAsString(parameters, self.CLASS_FIELD, context)
@@ -151,11 +148,11 @@ class TessellateStreets(AlgorithmBase):
                     "level", "oneway", "layer", "bridge", "tunnel", "other_tags"])
         label = frame.name
         classes = parse_class_list(self.parameterAsString(parameters, self.CLASSES, context))
-        default_width = self._number(parameters, self.DEFAULT_WIDTH, context, 0.5, 200.0)
-        merge = self._number(parameters, self.MERGE_DISTANCE, context, 0.0, 100.0)
-        max_long = self._number(parameters, self.MAX_LONGITUDINAL_SLOPE, context, 0.0, 100.0)
-        max_lat = self._number(parameters, self.MAX_LATERAL_SLOPE, context, 0.0, 100.0)
-        snap = self._number(parameters, self.SNAP_TOLERANCE, context, 0.0, 50.0)
+        default_width = self.number(parameters, self.DEFAULT_WIDTH, context)
+        merge = self.number(parameters, self.MERGE_DISTANCE, context)
+        max_long = self.number(parameters, self.MAX_LONGITUDINAL_SLOPE, context)
+        max_lat = self.number(parameters, self.MAX_LATERAL_SLOPE, context)
+        snap = self.number(parameters, self.SNAP_TOLERANCE, context)
         merge_heads = self.parameterAsBoolean(parameters, self.MERGE_OVERLAPPING, context)
 
         frame, road_class = drivable_lines(frame, class_field, classes, feedback)
@@ -208,6 +205,7 @@ class TessellateStreets(AlgorithmBase):
                     feedback.pushWarning(f"{n_long} {what} steeper than {max_long:g} % along "
                                          f"and {n_lat} steeper than {max_lat:g} % across.")
 
+        # PolygonZ with a DEM (write_sink keeps z through the reprojection)
         wkb = QgsWkbTypes.MultiPolygonZ if dem is not None else QgsWkbTypes.MultiPolygon
         results = {}
         for name, geoms, table, spec, qml in (
@@ -217,23 +215,10 @@ class TessellateStreets(AlgorithmBase):
                  street_surfaces.JUNCTION_FIELDS, "junctions.qml")):
             if parameters.get(name) is None:
                 continue
-            out = self._to_output_crs(geoms, frame, context, dem is not None)
-            dest = qgis_io.write_sink(self, parameters, name, context, out, table, spec, wkb,
-                                      frame.source_crs, frame.source_crs, feedback)
+            dest = qgis_io.write_sink(self, parameters, name, context, geoms, table, spec, wkb,
+                                      frame.source_crs, frame.crs, feedback)
             qgis_io.style_output(context, dest, qml)
             results[name] = dest
         feedback.setProgress(100)
         return results
 
-    @staticmethod
-    def _to_output_crs(geoms, frame, context, has_z):
-        """Reproject to the input CRS keeping Z (qgis_io's transform is 2D)."""
-        geoms = np.asarray(geoms, dtype=object)
-        if not len(geoms) or frame.crs == frame.source_crs:
-            return geoms
-        if not has_z:
-            return qgis_io.reproject(geoms, frame.crs, frame.source_crs, context)
-        z = shapely.get_coordinates(geoms, include_z=True)[:, 2]
-        flat = qgis_io.reproject(shapely.force_2d(geoms), frame.crs, frame.source_crs, context)
-        xy = shapely.get_coordinates(flat)
-        return shapely.set_coordinates(shapely.force_3d(flat, 0.0), np.column_stack([xy, z]))

@@ -59,7 +59,46 @@ def buildings_by_height():
                                           "outline_width": "0.1"})
     root.appendChild(QgsRuleBasedRenderer.Rule(unknown, elseRule=True, label="height unknown"))
     layer.setRenderer(QgsRuleBasedRenderer(root))
+    layer.setRenderer3D(buildings_3d())
     layer.saveNamedStyle(str(OUT / "buildings_by_height.qml"))
+
+
+#: building_type -> colour of its walls and roof in QGIS's 3D view
+TYPE_COLOURS_3D = {"residential": "#f1d9b5", "commercial": "#a6bddb", "industrial": "#bdbdbd",
+                   "public": "#b8e186", "religious": "#cbc9e2"}
+
+
+def buildings_3d():
+    """Buildings extruded by ``height_m`` in QGIS's 3D map view (3 m where the height is
+    unknown), coloured by ``building_type``."""
+    from qgis._3d import (Qgs3D, QgsPhongMaterialSettings, QgsPolygon3DSymbol,
+                          QgsRuleBased3DRenderer)
+    from qgis.core import QgsAbstract3DSymbol, QgsProperty
+    from qgis.PyQt.QtGui import QColor
+
+    Qgs3D.initialize()
+
+    def symbol(colour):
+        sym = QgsPolygon3DSymbol()
+        material = QgsPhongMaterialSettings()
+        material.setDiffuse(QColor(colour))
+        material.setAmbient(QColor(colour).darker(160))
+        sym.setMaterial(material)
+        props = sym.dataDefinedProperties()
+        props.setProperty(QgsAbstract3DSymbol.PropertyExtrusionHeight,
+                          QgsProperty.fromExpression('coalesce("height_m", 3)'))
+        sym.setDataDefinedProperties(props)
+        return sym
+
+    root = QgsRuleBased3DRenderer.Rule(None)
+    for building_type, colour in TYPE_COLOURS_3D.items():
+        root.appendChild(QgsRuleBased3DRenderer.Rule(
+            symbol(colour), f"\"building_type\" = '{building_type}'", building_type))
+    known = ", ".join(f"'{t}'" for t in TYPE_COLOURS_3D)
+    root.appendChild(QgsRuleBased3DRenderer.Rule(
+        symbol("#f7f7f7"), f'"building_type" IS NULL OR "building_type" NOT IN ({known})',
+        "other"))
+    return QgsRuleBased3DRenderer(root)
 
 
 def parcels_by_quality():

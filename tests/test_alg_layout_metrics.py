@@ -25,7 +25,8 @@ def test_helsinki_against_bubenec(qgis_processing, tmp_path):
     table = out["OUTPUT"]
     assert table.wkbType() == QgsWkbTypes.NoGeometry
     rows = layer_rows(table)
-    assert {r["kind"] for r in rows} == {"layout", "roads", "blocks", "parcels", "buildings"}
+    assert {r["kind"] for r in rows} == {"layout", "invariants", "roads", "blocks", "parcels",
+                                        "buildings"}
     for metric in ("segment_length", "node_degree", "intersection_angle", "street_bearing"):
         r = _row(rows, "roads", metric)
         assert r["statistic"] in ("mean", "axial_mean")
@@ -143,3 +144,43 @@ def test_qgis_process_exit_code(tmp_path):
     with sqlite3.connect(table) as db:
         n, = db.execute("SELECT count(*) FROM metrics").fetchone()
     assert n > 30
+
+
+def test_counting_choices_and_invariants(qgis_processing, tmp_path):
+    """Plain counts with the choices off; footways dropped on request; the invariants of a
+    street drawn over an arterial reported in the table and flagged in the report."""
+    from helpers import memory_layer
+
+    plain = layer_rows(qgis_processing.run(ALG, {
+        "ROADS": helsinki_layer("lines"), "MIN_BLOCK_AREA": 0, "MIN_BLOCK_WIDTH": 0,
+        "OUTPUT": "memory:"})["OUTPUT"])
+    default = layer_rows(qgis_processing.run(ALG, {
+        "ROADS": helsinki_layer("lines"), "OUTPUT": "memory:"})["OUTPUT"])
+    cars = layer_rows(qgis_processing.run(ALG, {
+        "ROADS": helsinki_layer("lines"), "DRIVABLE_ONLY": True, "OUTPUT": "memory:"})["OUTPUT"])
+    n_faces = _row(plain, "blocks", "count")["candidate"]
+    assert n_faces > 1.4 * _row(default, "blocks", "count")["candidate"]
+    s_l = {name: _row(rows, "roads", "street_length_km_per_km2")["candidate"]
+           for name, rows in (("all", default), ("cars", cars))}
+    assert s_l["cars"] < 0.5 * s_l["all"]
+    arterials = memory_layer("LineString", ["LINESTRING(0 0, 300 0)", "LINESTRING(300 0, 300 300)",
+                                            "LINESTRING(300 300, 0 300)", "LINESTRING(0 300, 0 0)"],
+                             crs="EPSG:32633", fields="&field=highway:string",
+                             rows=[["trunk"], ["primary"], ["primary"], ["primary"]],
+                             name="arterials")
+    synthesis = memory_layer("LineString", ["LINESTRING(0 0, 300 0)", "LINESTRING(150 -20, 150 320)",
+                                            "LINESTRING(0 100, 300 100)"], crs="EPSG:32633",
+                             name="synthesis")
+    html = tmp_path / "inv.html"
+    rows = layer_rows(qgis_processing.run(ALG, {
+        "ROADS": synthesis, "GIVEN_ROADS": arterials, "OUTPUT": "memory:",
+        "OUTPUT_HTML": str(html)})["OUTPUT"])
+    assert _row(rows, "invariants", "crossings_given")["candidate"] == 2
+    assert _row(rows, "invariants", "crossings_synthesised")["candidate"] == 1
+    assert _row(rows, "invariants", "controlled_access")["candidate"] == 1   # on the trunk
+    assert _row(rows, "invariants", "violations")["candidate"] >= 4
+    text = html.read_text(encoding="utf-8")
+    assert "Network invariants" in text and "class='warn'" in text
+    from qgis.core import QgsProcessingException
+    with pytest.raises(QgsProcessingException, match="needs a 'highway' or 'road_class'"):
+        qgis_processing.run(ALG, {"ROADS": synthesis, "DRIVABLE_ONLY": True, "OUTPUT": "memory:"})

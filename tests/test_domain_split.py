@@ -14,6 +14,7 @@ from urban_synthesis.plugin.measure import metrics
 from urban_synthesis.plugin.planned import streamlines
 from urban_synthesis.plugin.planned import templates
 from urban_synthesis.plugin.core.progress import InputError
+from urban_synthesis.plugin.core.geometry import minimum_rectangle_corners
 
 L, W, S = 30.0, 18.0, 15.0
 LIB = templates.load_library(subset="strips")
@@ -330,7 +331,7 @@ def test_minimum_rectangle_and_deep_nodes_are_exact():
     rng = np.random.default_rng(3)
     for _ in range(50):
         pts = rng.normal(size=(10, 2)) * [40, 12]
-        ours = shapely.Polygon(templates._mrr_corners(pts)).area
+        ours = shapely.Polygon(minimum_rectangle_corners([shapely.multipoints(pts)])[0]).area
         ref = shapely.minimum_rotated_rectangle(shapely.multipoints(pts)).area
         assert abs(ours - ref) < 1e-6 * ref
     disc = shapely.Point(0, 0).buffer(100)

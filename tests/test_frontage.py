@@ -16,6 +16,7 @@ import shapely
 
 from test_footprints import assert_legal
 from urban_synthesis.plugin.buildings import footprints
+from urban_synthesis.plugin.core.geometry import largest_polygons
 from urban_synthesis.plugin.buildings import frontage as fr
 from urban_synthesis.plugin.retrieval import database
 
@@ -57,7 +58,7 @@ def test_street_angle_matches_a_direct_computation(seed):
         p = rotated_box(cx, cy, w, h, rng.uniform(-90, 90))
         if rng.random() < 0.4:   # an L-shape
             p = shapely.difference(p, rotated_box(cx + w / 4, cy + h / 4, w / 2, h / 2, 0))
-            p = footprints._largest_polygon(np.array([p], dtype=object))[0]
+            p = largest_polygons(np.array([p], dtype=object))[0]
         d = sorted(shapely.LineString([a, b]).distance(p) for ln in lines
                    for a, b in zip(np.asarray(ln.coords)[:-1], np.asarray(ln.coords)[1:]))
         if d[1] - d[0] > 1e-3:       # a unique nearest segment (no tie, no crossing)

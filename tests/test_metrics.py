@@ -232,7 +232,7 @@ def test_compare_rows():
     dist = self_table[self_table.statistic != "value"]
     assert (dist.wasserstein == 0).all() and (dist.ks_stat == 0).all()
     # kinds come in a fixed order, distributions before scalars
-    assert list(dict.fromkeys(table.kind)) == ["layout", "roads", "blocks"]
+    assert list(dict.fromkeys(table.kind)) == ["layout", "invariants", "roads", "blocks"]
     alone = M.compare(cand)
     assert alone.example.isna().all() and (alone.n_example == 0).all()
     # bearings are axial: 175 and 5 degrees average to 0, not 90
@@ -240,6 +240,78 @@ def test_compare_rows():
     assert bearing.statistic == "axial_mean"
     assert M._axial_mean(np.array([175.0, 5.0])) == pytest.approx(0.0, abs=1e-9) or \
         M._axial_mean(np.array([175.0, 5.0])) == pytest.approx(180.0)
+
+
+def test_counts_agree_with_plain_noding_and_polygonising():
+    """With snapping and the sliver filter off, the counts are those of shapely.node and
+    shapely.polygonize on real, dirty OSM lines (footways, bridges and all)."""
+    from helpers import _helsinki_lines
+
+    lines = _helsinki_lines().to_crs(32635).geometry.values
+    lines = shapely.get_parts(lines[shapely.get_type_id(lines) == 1])
+    r = M.compute_layout_metrics(roads=lines, snap_tolerance=0.0, min_block_area=0.0,
+                                 min_block_width=0.0)
+    pieces = shapely.get_parts(shapely.node(shapely.multilinestrings(lines)))
+    pieces = pieces[shapely.length(pieces) > 0]          # one zero-length OSM way
+    ends = np.concatenate([shapely.get_coordinates(shapely.get_point(pieces, i))
+                           for i in (0, -1)])
+    _, degree = np.unique(ends[:, 0] + 1j * ends[:, 1], return_counts=True)
+    faces = shapely.get_parts(shapely.polygonize(pieces))
+    km2 = r.scalar("layout", "area_km2")
+    assert r.scalar("roads", "dead_ends_per_km2") * km2 == pytest.approx((degree == 1).sum())
+    assert r.scalar("roads", "intersections_per_km2") * km2 == pytest.approx((degree >= 3).sum())
+    assert r.scalar("blocks", "count") == len(faces) > 1000
+    assert r.scalar("roads", "street_length_km_per_km2") * km2 == pytest.approx(
+        shapely.length(pieces).sum() / 1000)
+    # the defaults drop the faces under 400 m² and thinner than 8 m, and say so
+    d = M.compute_layout_metrics(roads=lines)
+    assert d.scalar("blocks", "count") < 0.7 * len(faces)
+    assert any("faces under 400 m²" in n and "dropped as slivers" in n for n in d.notes)
+
+
+def test_drivable_only_and_edge_dead_ends():
+    from helpers import _helsinki_lines
+
+    df = _helsinki_lines().to_crs(32635)
+    df = df[shapely.get_type_id(df.geometry.values) == 1]
+    every = M.compute_layout_metrics(roads=df.geometry.values, road_class=df.highway.values)
+    assert any("non-drivable" in n and "counted" in n for n in every.notes)
+    cars = M.compute_layout_metrics(roads=df.geometry.values, road_class=df.highway.values,
+                                    drivable_only=True)
+    assert cars.scalar("roads", "street_length_km_per_km2") < \
+        0.5 * every.scalar("roads", "street_length_km_per_km2")
+    with pytest.raises(InputError, match="road class"):
+        M.compute_layout_metrics(roads=df.geometry.values, drivable_only=True)
+    # a grid clipped to a box: its 8 cut ends lie on the box's edge
+    box = shapely.box(-30, -30, 330, 330)
+    clipped = shapely.intersection(grid(4, 100.0, overhang=80.0), box)
+    plain = M.compute_layout_metrics(roads=clipped, area=box)
+    assert plain.scalar("roads", "dead_ends_per_km2") * 0.36 ** 2 == pytest.approx(16)
+    assert plain.scalar("roads", "dead_end_share") == pytest.approx(16 / 32)
+    edge = M.compute_layout_metrics(roads=clipped, area=box, edge_distance=1.0)
+    assert edge.scalar("roads", "dead_ends_per_km2") == 0
+    assert edge.scalar("roads", "degree4_share") == 1.0     # the 16 crosses
+    assert edge.scalar("invariants", "dead_end_share") == 0
+
+
+def test_invariants_are_reported():
+    arterials = grid(2, 300.0)                      # a 300 m square
+    streets = np.array([shapely.LineString([(150, -20), (150, 320)]),     # crosses twice
+                        shapely.LineString([(0, 100), (300, 100)])], dtype=object)
+    r = M.compute_layout_metrics(roads=np.concatenate([arterials, streets]),
+                                 given_roads=arterials)
+    assert r.scalar("invariants", "crossings_given") == 2
+    assert r.scalar("invariants", "crossings_synthesised") == 1
+    assert r.scalar("invariants", "violations") >= 3
+    assert any("2 of 6 road lines are not on the 4 given roads" in n for n in r.notes)
+    # a grid of long lines drawn over each other: 4 crossings inside; noded, it is planar
+    assert M.compute_layout_metrics(roads=grid(4)).scalar("invariants", "violations") == 4
+    noded = shapely.get_parts(shapely.node(shapely.multilinestrings(grid(4))))
+    ok = M.compute_layout_metrics(roads=noded)
+    assert ok.scalar("invariants", "violations") == 0
+    table = M.compare(r, ok)
+    row = table[(table.kind == "invariants") & (table.metric == "dead_end_share")].iloc[0]
+    assert row.example == 0 and row.candidate > 0
 
 
 def test_study_area_counts_only_what_is_inside():
@@ -300,3 +372,56 @@ def test_report_is_self_contained(tmp_path):
     alone = R.render_report(cand)
     assert "Colours" not in alone and "Wasserstein</th>" not in alone
     assert alone.count("<img") >= 8
+
+
+def test_report_speaks_to_a_planner_first():
+    """A denser grid against a sparser one: the summary comes first, says in words which
+    measures differ and by how much, maps both layouts, and explains its units."""
+    def noded(n, spacing):
+        return shapely.get_parts(shapely.node(shapely.multilinestrings(grid(n, spacing))))
+
+    cand = M.compute_layout_metrics(roads=noded(6, 60.0))
+    ex = M.compute_layout_metrics(roads=noded(4, 100.0))
+    same = M.compute_layout_metrics(roads=noded(4, 100.0))
+    text = R.render_report(cand, ex, maps={"Layout": {"roads": noded(6, 60.0)},
+                                           "Example": {"roads": noded(4, 100.0)}})
+    summary = text[text.index("<h2>Summary</h2>"):text.index("<h2>Inputs</h2>")]
+    assert text.index("<h2>Summary</h2>") < text.index("<h3>Measures</h3>")
+    assert "The street network is sound" in summary
+    differs = summary[summary.index("What differs"):]
+    assert "Junctions per km²: much more than the example" in differs
+    assert "Street length per km² (how much street there is): much more" in differs
+    assert summary.count(" map' src='data:image/png") == 2  # both layouts mapped up front
+    assert "How to read the numbers" in text and "nats" in text[text.index("How to read"):]
+    twin = R.render_report(same, ex)
+    twin_summary = twin[twin.index("<h2>Summary</h2>"):twin.index("<h2>Inputs</h2>")]
+    assert "What differs" not in twin_summary and "match the example" in twin_summary
+    assert "about the same as the example" in twin_summary
+
+
+def test_bearings_compare_on_the_circle():
+    """Streets at 5° and at 175° run 10° apart, not 170°: the comparison of bearings does
+    not depend on where the circle of directions is cut."""
+    rng = np.random.default_rng(0)
+    north_east = rng.normal(5.0, 5.0, 2000) % 180.0
+    north_west = rng.normal(-5.0, 5.0, 2000) % 180.0
+    d = M.two_sample_axial(north_east, north_west)
+    assert 8.0 < d["wasserstein"] < 12.0
+    assert M.two_sample(north_east, north_west)["wasserstein"] > 100.0  # the linear trap
+    turned = M.two_sample_axial(north_east, (north_east + 30.0) % 180.0)
+    assert turned["wasserstein"] == pytest.approx(30.0, abs=1e-6)
+    # the same shape cut elsewhere is the same distance (rotation invariance)
+    again = M.two_sample_axial((north_east + 77.0) % 180.0, (north_west + 77.0) % 180.0)
+    assert again["wasserstein"] == pytest.approx(d["wasserstein"], rel=1e-6)
+    assert again["ks_stat"] == pytest.approx(d["ks_stat"], rel=1e-9)
+    same = M.two_sample_axial(north_east, north_east)
+    assert same["wasserstein"] == 0.0 and same["ks_pvalue"] == 1.0
+
+
+def test_bearing_row_reports_the_turn_between_mean_directions():
+    a, b = M.MetricsResult(), M.MetricsResult()
+    a.add_distribution("roads", "street_bearing", np.array([176.0, 178.0, 177.0]), "°", "b")
+    b.add_distribution("roads", "street_bearing", np.array([4.0, 6.0, 5.0]), "°", "b")
+    row = M.compare(a, b).iloc[0]
+    assert row.statistic == "axial_mean"
+    assert row.rel_diff == pytest.approx(-8.0, abs=1e-6)

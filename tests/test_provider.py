@@ -7,7 +7,7 @@ from conftest import ROOT
 def test_every_algorithm_is_documented(qgis_processing):
     from qgis.core import QgsApplication
 
-    from urban_synthesis.processing_algorithms.common import GROUPS
+    from urban_synthesis.plugin.qgis_glue.toolbox import GROUPS
 
     provider = QgsApplication.processingRegistry().providerById("urbansynth")
     algs = provider.algorithms()
@@ -24,6 +24,33 @@ def test_every_algorithm_is_documented(qgis_processing):
             name = p.name().split(":")[-1]
             assert name == name.upper(), (alg.name(), p.name())
             assert p.help() and len(p.help()) > 15, (alg.name(), p.name())
+
+
+def test_toolbox_table_matches_the_algorithms(qgis_processing):
+    """The table that lists algorithms even when their packages are missing says what the
+    classes say: same ids, display names and groups, in the provider."""
+    from qgis.core import QgsApplication
+
+    from urban_synthesis.plugin.qgis_glue.toolbox import ALGORITHMS, GROUPS, algorithm_id
+
+    provider = QgsApplication.processingRegistry().providerById("urbansynth")
+    for module, _, display_name, group_id in ALGORITHMS:
+        alg = provider.algorithm(algorithm_id(module))
+        assert alg is not None, module
+        assert (alg.displayName(), alg.groupId(), alg.group()) == \
+            (display_name, group_id, GROUPS[group_id])
+
+
+def test_missing_package_keeps_the_algorithm_listed_with_a_clear_message(qgis_processing):
+    from qgis.core import QgsProcessingContext
+
+    from urban_synthesis.plugin.qgis_glue.provider import UnavailableAlgorithm
+
+    alg = UnavailableAlgorithm("extract_blocks", "Extract city blocks", "analysis", ["shapely"])
+    assert alg.name() == "extractblocks" and "needs shapely" in alg.displayName()
+    ok, message = alg.createInstance().checkParameterValues({}, QgsProcessingContext())
+    assert not ok
+    assert "shapely" in message and "Install Python dependencies" in message
 
 
 def test_metadata_is_complete():

@@ -46,7 +46,7 @@ from ..core import coordinates
 from ..core.progress import InputError, Progress, ensure
 
 __all__ = ["LibraryBuilding", "BestFit", "PLACEMENT_FIELDS", "MAX_ANGLE", "parse_sides",
-           "library_from_table", "default_library", "side_normals", "faces_street",
+           "library_from_table", "default_library", "side_normals",
            "fit_buildings"]
 
 #: Scharl's maximum deviation from parallel for a side to face a street (degrees).
@@ -233,13 +233,6 @@ class _Streets:
         cos = np.abs(np.sum(t * dirs[r], axis=1))
         out[r] = cos >= math.cos(math.radians(max_angle)) - 1e-9
         return out
-
-
-def faces_street(polygon, roads, reach: float = DEFAULT_REACH,
-                 max_angle: float = MAX_ANGLE) -> np.ndarray:
-    """Per edge of the polygon's exterior ring: does it face a street (Scharl's test)?"""
-    mids, dirs, normals = side_normals(np.asarray(polygon.exterior.coords))
-    return _Streets(roads).faces(mids, dirs, normals, reach, max_angle)
 
 
 # --------------------------------------------------------------------------- fitting

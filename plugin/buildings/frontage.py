@@ -31,6 +31,7 @@ import numpy as np
 import shapely
 
 from ..core import coordinates
+from ..core.geometry import minimum_rectangles
 
 __all__ = ["REACH", "SERVE", "fold", "main_axis", "street_segments", "nearest_street",
            "street_angle", "relative_angle", "align_to_frontage", "street_points",
@@ -47,19 +48,9 @@ def fold(angle: np.ndarray) -> np.ndarray:
 
 
 def main_axis(polygons: Sequence) -> np.ndarray:
-    """Direction (radians) of the long side of each polygon's minimum rotated rectangle."""
-    rect = shapely.oriented_envelope(np.asarray(polygons, dtype=object))
-    xy = shapely.get_coordinates(shapely.get_exterior_ring(rect))
-    counts = shapely.get_num_coordinates(shapely.get_exterior_ring(rect))
-    start = np.r_[0, np.cumsum(counts)[:-1]]
-    out = np.zeros(len(start))
-    ok = counts >= 4
-    a, b, c = xy[start[ok]], xy[start[ok] + 1], xy[start[ok] + 2]
-    d1, d2 = b - a, c - b
-    long1 = np.hypot(*d1.T) >= np.hypot(*d2.T)
-    d = np.where(long1[:, None], d1, d2)
-    out[ok] = np.arctan2(d[:, 1], d[:, 0])
-    return out
+    """Direction (radians) of the long side of each polygon's minimum-area rectangle
+    (:func:`core.geometry.minimum_rectangles`, rotating calipers)."""
+    return np.radians(minimum_rectangles(np.asarray(polygons, dtype=object))[2])
 
 
 def street_segments(lines: Sequence) -> np.ndarray:
@@ -221,37 +212,59 @@ def fill_frontage(placed: Sequence, buildable, lines: Sequence, examples: Sequen
     source: List[int] = []
     if not len(examples) or not len(pts) or share <= 0:
         return added, source
-    current = list(placed)
     point_geoms = shapely.points(pts)
-    if current:
-        served = shapely.distance(point_geoms, shapely.union_all(current)) <= reach
+    placed = np.asarray(placed, dtype=object)
+    if len(placed):
+        served = shapely.distance(point_geoms, shapely.union_all(placed)) <= reach
     else:
         served = np.zeros(len(pts), dtype=bool)
+    if served.mean() >= share:
+        return added, source
+    # footprints already there, grown by the gap, with their bounding boxes (quick test)
+    taken = list(shapely.buffer(placed, gap, quad_segs=2, join_style="mitre")) \
+        if len(placed) else []
+    boxes = [shapely.bounds(g) for g in taken]
     shapely.prepare(buildable)
     cen = shapely.get_coordinates(shapely.centroid(examples))
     centred = coordinates.translate(examples, -cen)
     axis = main_axis(centred)
+
+    def free(poly) -> bool:
+        x0, y0, x1, y1 = shapely.bounds(poly)
+        for g, (a0, b0, a1, b1) in zip(taken, boxes):
+            if a0 <= x1 and x0 <= a1 and b0 <= y1 and y0 <= b1 and shapely.intersects(poly, g):
+                return False
+        return True
+
     for i in rng.permutation(len(pts)):
         if served.mean() >= share:
             break
         if served[i]:
             continue
-        grown = shapely.buffer(shapely.union_all(current), gap) if current else None
         normal = np.array([-np.sin(direction[i]), np.cos(direction[i])])
-        for k in rng.integers(len(examples), size=tries):
-            shape = coordinates.rotate(
-                centred[k:k + 1], fold(direction[i] + example_angle[k] - axis[k]), (0.0, 0.0))
-            placed_ok = None
-            for side in rng.permutation([1.0, -1.0]):
-                poly = coordinates.translate(shape, pts[i] + side * example_offset[k] * normal)[0]
-                if shapely.within(poly, buildable) and (grown is None or
-                                                        not shapely.intersects(poly, grown)):
-                    placed_ok = poly
-                    break
-            if placed_ok is not None:
-                added.append(placed_ok)
-                source.append(int(k))
-                current.append(placed_ok)
-                served |= shapely.distance(point_geoms, placed_ok) <= reach
+        # the candidates in the order they are tried: example k, then its two sides
+        ks = rng.integers(len(examples), size=tries)
+        sides = np.array([rng.permutation([1.0, -1.0]) for _ in ks]).ravel()
+        ks = np.repeat(ks, 2)
+        turn = fold(direction[i] + example_angle[ks] - axis[ks])
+        centre = pts[i] + (sides * example_offset[ks])[:, None] * normal[None, :]
+        inside = shapely.contains_xy(buildable, centre[:, 0], centre[:, 1])
+        if not inside.any():
+            continue
+        ks, turn, centre = ks[inside], turn[inside], centre[inside]
+
+        def place(xy, j, turn=turn, centre=centre):
+            c, s_ = np.cos(turn[j]), np.sin(turn[j])
+            return np.column_stack([c * xy[:, 0] - s_ * xy[:, 1],
+                                    s_ * xy[:, 0] + c * xy[:, 1]]) + centre[j]
+        candidates = coordinates.transform(centred[ks], place)
+        for j in np.flatnonzero(shapely.within(candidates, buildable)):
+            if free(candidates[j]):
+                added.append(candidates[j])
+                source.append(int(ks[j]))
+                g = shapely.buffer(candidates[j], gap, quad_segs=2, join_style="mitre")
+                taken.append(g)
+                boxes.append(shapely.bounds(g))
+                served |= shapely.distance(point_geoms, candidates[j]) <= reach
                 break
     return added, source

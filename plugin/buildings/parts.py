@@ -39,9 +39,8 @@ Hartmann, S. Example-based generation of virtual urban environments, thesis, ch.
 from __future__ import annotations
 
 import math
-import re
 from dataclasses import dataclass
-from typing import Dict, List, Mapping, Optional, Sequence, Tuple
+from typing import List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 import pandas as pd
@@ -49,11 +48,12 @@ import shapely
 from shapely.geometry.polygon import orient
 
 from ..core import coordinates
+from ..core.geometry import substrings
 from ..core.progress import InputError, Progress, ensure
 from . import sequences
 from .sequences import Constraint, InfeasibleError, KeyPoint
 
-__all__ = ["PART_KINDS", "PartsLibrary", "PartsResult", "library_from_table", "parse_counts",
+__all__ = ["PART_KINDS", "PartsLibrary", "PartsResult", "library_from_table",
            "skyscraper_library", "terrace_library", "stack_floors", "build_along_skeleton"]
 
 #: Part kinds: floors stack vertically; the others follow a skeleton in plan; T-parts sit
@@ -354,27 +354,6 @@ def _thicken(line, depth: float):
 
 
 # --------------------------------------------------------------------------- solving
-
-
-def parse_counts(text: Optional[str], library: PartsLibrary, label: str = "the parts"
-                 ) -> Dict[str, Tuple[float, float]]:
-    """'corner=4; doors=2..6' -> {'corner': (4, 4), 'doors': (2, 6)}, checked against the
-    library (a part kind or a numeric field). Raises :class:`InputError` with the item."""
-    counts: Dict[str, Tuple[float, float]] = {}
-    for item in filter(None, (x.strip() for x in re.split(r"[;,]", text or ""))):
-        m = re.fullmatch(r"([^=\s]+)\s*=\s*(\d+(?:\.\d*)?)\s*(?:\.\.\s*(\d+(?:\.\d*)?))?",
-                         item)
-        if not m:
-            raise InputError(f"Count constraint '{item}' is not 'name=n' or 'name=lo..hi'.")
-        name, lo = m.group(1), float(m.group(2))
-        hi = float(m.group(3)) if m.group(3) else lo
-        if hi < lo:
-            raise InputError(f"Count constraint '{item}': {hi:g} < {lo:g}.")
-        if name not in PART_KINDS and name not in library.table:
-            raise InputError(f"Count constraint on '{name}': neither a part kind "
-                             f"({', '.join(PART_KINDS)}) nor a field of {label}.")
-        counts[name] = (lo, hi)
-    return counts
 
 
 def _resource_matrix(lib: PartsLibrary, counts: Mapping[str, Tuple[float, float]],
@@ -693,7 +672,7 @@ def build_along_skeleton(skeleton, library: PartsLibrary, *, front: str = "right
     a = (start + shift) * scale + (total if closed else 0.0)
     b = a + length[E] * scale
     line = shapely.LineString(np.vstack([coords, coords, coords[:1]]) if closed else coords)
-    pieces = _substrings(line, a, b)
+    pieces = substrings(np.full(len(a), line, dtype=object), a, b)
     geoms = _thicken(pieces, t["depth_m"].to_numpy(float)[E])
     # where a part boundary falls on a slight bend (no corner part there) the neighbours'
     # square cuts overlap in a thin wedge on the inner side: the later part gives it up
@@ -726,19 +705,3 @@ def _parts_table(sols, t: pd.DataFrame, E: np.ndarray, start: np.ndarray,
         "base_m": base, "top_m": base + height, "height_m": height,
         "levels": t["levels"].to_numpy()[E].astype(int),
         "floor_area_m2": t["floor_area_m2"].to_numpy(float)[E]})
-
-
-def _substrings(line: shapely.LineString, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """The stretches [a_i, b_i] (arc length) of ``line`` with their interior vertices."""
-    coords = np.asarray(line.coords)[:, :2]
-    pos = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(coords, axis=0), axis=1))]
-    pa = shapely.get_coordinates(shapely.line_interpolate_point(line, a))
-    pb = shapely.get_coordinates(shapely.line_interpolate_point(line, b))
-    i0 = np.searchsorted(pos, a + 1e-9, side="right")
-    i1 = np.searchsorted(pos, b - 1e-9, side="left")
-    n_inner = np.maximum(i1 - i0, 0)
-    parts, index = [], []
-    for j in range(len(a)):
-        parts += [pa[j:j + 1], coords[i0[j]:i0[j] + n_inner[j]], pb[j:j + 1]]
-        index.append(np.full(n_inner[j] + 2, j))
-    return shapely.linestrings(np.vstack(parts), indices=np.concatenate(index))

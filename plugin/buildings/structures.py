@@ -56,6 +56,7 @@ import shapely
 from scipy import sparse
 from scipy.sparse.csgraph import connected_components
 
+from ..core.geometry import substrings
 from ..core.progress import InputError, Progress, ensure
 from . import sequences
 from .parts import (AREA_QUANTUM, CORNER_TOLERANCE, LENGTH_QUANTUM, STRAIGHT_TOLERANCE,
@@ -731,19 +732,12 @@ def _arc(w: Wing, g: np.ndarray, x: np.ndarray) -> np.ndarray:
     return np.interp(x, g, w.pos)
 
 
-def _band(line: shapely.LineString, a: np.ndarray, b: np.ndarray, width: np.ndarray):
+def _band(line: shapely.LineString, a, b, width):
     """The stretches [a_i, b_i] of ``line`` thickened by width_i / 2 to both sides."""
-    coords = np.asarray(line.coords)[:, :2]
-    pos = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(coords, axis=0), axis=1))]
-    out = []
-    for ai, bi, wi in zip(a, b, width):
-        inner = coords[(pos > ai + 1e-9) & (pos < bi - 1e-9)]
-        pa = shapely.get_coordinates(shapely.line_interpolate_point(line, ai))
-        pb = shapely.get_coordinates(shapely.line_interpolate_point(line, bi))
-        piece = shapely.LineString(np.vstack([pa, inner, pb]))
-        out.append(shapely.buffer(piece, wi / 2, cap_style="flat", join_style="mitre",
-                                  mitre_limit=10.0))
-    return out
+    a = np.asarray(a, dtype=np.float64)
+    pieces = substrings(np.full(len(a), line, dtype=object), a, np.asarray(b, np.float64))
+    return shapely.buffer(pieces, np.asarray(width, np.float64) / 2, cap_style="flat",
+                          join_style="mitre", mitre_limit=10.0)
 
 
 def _place(wings, grids, library, sols, metas, names, R_lib, site_area) -> PartsResult:

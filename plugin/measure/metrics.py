@@ -1,7 +1,7 @@
 """Layout quality and similarity metrics: roads, blocks, parcels and building footprints.
 
-Implements the "Quality measures" of DESIGN.md, which every synthesis uses to show that its
-result resembles its example:
+Implements the "Quality measures" of docs/ARCHITECTURE.md, which every synthesis uses to show
+that its result resembles its example:
 
 - roads: segment length, node degree, intersection angle and edge bearing distributions;
   dead ends, intersections and street length per km² (Yang et al. 2013, sec. 7, "street
@@ -11,7 +11,8 @@ result resembles its example:
 - parcels: p_n per km², p_angle, p_area, undesirable parcels, land-use shares l_s / l_r /
   l_p / l_o (Yang 2013, sec. 7 and Table 1);
 - footprints: coverage, overlap with each other and with the road surface, footprints not
-  inside one block, setback (DESIGN.md: overlaps and footprints outside blocks must be 0);
+  inside one block, setback (docs/ARCHITECTURE.md, "Quality measures": overlaps and
+  footprints outside blocks must be 0);
 - two-sample comparison of a candidate layout with its example: Wasserstein distance and
   Kolmogorov-Smirnov statistic per distribution, relative difference per scalar.
 
@@ -38,15 +39,17 @@ import pandas as pd
 import shapely
 from scipy import stats
 
+from ..core.geometry import minimum_rectangles
 from ..core.progress import InputError, Progress, ensure
 from ..network import blocks as _blocks
-from ..network.street_graph import RoadGraph, clean_network
+from ..network import invariants as _invariants
+from ..network.street_graph import DRIVABLE_CLASSES, RoadGraph, clean_network
 
 __all__ = [
     "Scalar", "Distribution", "MetricsResult", "COMPARISON_COLUMNS",
     "road_graph", "road_metrics", "block_faces", "block_metrics", "parcel_metrics",
     "footprint_metrics", "compute_layout_metrics", "compare", "two_sample",
-    "corner_angles", "street_bearings", "intersection_angles",
+    "corner_angles", "street_bearings", "intersection_angles", "network_invariants",
     "orientation_entropy", "landuse_category",
 ]
 
@@ -60,6 +63,9 @@ STRAIGHT_ANGLE = 170.0
 INSIDE_TOLERANCE = 1e-3
 #: Overlaps smaller than this (m²) are numerical noise of shared edges, not overlaps.
 OVERLAP_EPS = 1e-2
+#: A node this close (m) to the study-area boundary is on it (the cut end of a clipped street);
+#: graph nodes are rounded to the millimetre, which can put an extreme node just outside.
+ON_EDGE = 1e-3
 
 #: Columns of :func:`compare`, in order, with the type of each.
 COMPARISON_COLUMNS = (
@@ -70,7 +76,7 @@ COMPARISON_COLUMNS = (
     ("n_candidate", "int"), ("n_example", "int"),
 )
 
-_KIND_ORDER = ("layout", "roads", "blocks", "parcels", "buildings")
+_KIND_ORDER = ("layout", "invariants", "roads", "blocks", "parcels", "buildings")
 
 
 # --------------------------------------------------------------------------- results
@@ -267,7 +273,8 @@ def road_graph(lines, snap_tolerance: float = 0.5, z_layer=None,
             raise InputError(f"{len(z_layer)} vertical layers for {len(kept)} road lines")
         z_layer = z_layer[kept]
     return clean_network(lines, z_layer=z_layer, snap_tolerance=snap_tolerance,
-                         min_dangle_length=0.0, merge_degree2=True, progress=progress)
+                         min_dangle_length=0.0, merge_degree2=True,
+                         duplicate_tolerance=snap_tolerance, progress=progress)
 
 
 def street_bearings(lines, step: float = 10.0) -> Tuple[np.ndarray, np.ndarray]:
@@ -354,8 +361,9 @@ def intersection_angles(graph: RoadGraph, bearing_length: float = 10.0) -> np.nd
 
 
 def road_metrics(roads, area=None, snap_tolerance: float = 0.5, bearing_length: float = 10.0,
+                 edge_distance: float = 0.0,
                  progress: Optional[Progress] = None) -> MetricsResult:
-    """Street network measures of DESIGN.md and Yang 2013's street metrics.
+    """Street network measures of docs/ARCHITECTURE.md and Yang 2013's street metrics.
 
     Parameters
     ----------
@@ -367,6 +375,12 @@ def road_metrics(roads, area=None, snap_tolerance: float = 0.5, bearing_length: 
     bearing_length : float
         Length (m) of the start of each street that gives its direction at a node, and of
         the pieces whose bearings sample the streets (:func:`street_bearings`).
+    edge_distance : float
+        Nodes closer than this (m) to the boundary of the study area do not count in the
+        densities and shares: where a network was clipped to the area, its streets end on
+        the boundary without being dead ends. 0 (default) counts every node inside the area
+        or on its boundary (within a micrometre), as a plain count of the clipped network
+        does. Needs a study polygon (or the default hull).
 
     Returns
     -------
@@ -375,7 +389,9 @@ def road_metrics(roads, area=None, snap_tolerance: float = 0.5, bearing_length: 
         degree != 2), ``node_degree``, ``intersection_angle`` (degrees), ``street_bearing``
         (degrees, folded into [0, 180), one per piece of ``bearing_length`` m, so weighted by
         length); scalars ``edges``, ``nodes``, ``dead_ends_per_km2`` (s_d, degree 1),
-        ``intersections_per_km2`` (s_i, degree >= 3), ``street_length_km_per_km2`` (s_l),
+        ``intersections_per_km2`` (s_i, degree >= 3), ``dead_end_share``,
+        ``degree3_share``, ``degree4_share`` (degree 1, 3 and >= 4 among the counted nodes
+        of degree != 2), ``street_length_km_per_km2`` (s_l),
         ``orientation_entropy`` (nats, Boeing 2019, length-weighted), ``orientation_order``
         (phi = 1 - ((H - ln 4) / (ln 36 - ln 4))^2: 1 for a grid, 0 for uniform bearings).
 
@@ -402,9 +418,16 @@ def road_metrics(roads, area=None, snap_tolerance: float = 0.5, bearing_length: 
     km2 = area_m2 / M2_PER_KM2
     deg = graph.degree
     length = graph.length
-    # densities count the network inside the area (all of it for the default hull)
-    node_in = (np.ones(len(graph.nodes), dtype=bool) if area_geom is None else
-               shapely.intersects_xy(area_geom, graph.nodes[:, 0], graph.nodes[:, 1]))
+    if not (np.isfinite(edge_distance) and edge_distance >= 0):
+        raise InputError("the edge distance must be a non-negative number")
+    # densities count the network inside the area (all of it for the default hull); nodes on
+    # the boundary count unless edge_distance says they are clip ends
+    node_in = np.ones(len(graph.nodes), dtype=bool)
+    if area_geom is not None:
+        pts = shapely.points(graph.nodes)
+        node_in = shapely.dwithin(area_geom, pts, ON_EDGE)
+        if edge_distance > 0:
+            node_in &= ~shapely.dwithin(shapely.boundary(area_geom), pts, edge_distance)
     length_in = length.copy()
     if area_geom is not None:
         cut = ~shapely.within(graph.geometry, area_geom)
@@ -428,6 +451,14 @@ def road_metrics(roads, area=None, snap_tolerance: float = 0.5, bearing_length: 
                    "Intersections per km² (s_i)")
     res.add_scalar("roads", "dead_ends_per_km2", ((deg == 1) & node_in).sum() / km2, "1/km²",
                    "Dead ends per km² (s_d)")
+    ends = node_in & (deg != 2)
+    n_ends = max(int(ends.sum()), 1)
+    res.add_scalar("roads", "dead_end_share", ((deg == 1) & ends).sum() / n_ends, "",
+                   "Share of dead ends (degree 1)")
+    res.add_scalar("roads", "degree3_share", ((deg == 3) & ends).sum() / n_ends, "",
+                   "Share of 3-way junctions")
+    res.add_scalar("roads", "degree4_share", ((deg >= 4) & ends).sum() / n_ends, "",
+                   "Share of 4-way (and more) junctions")
     res.add_scalar("roads", "orientation_entropy", h, "nats", "Orientation entropy")
     res.add_scalar("roads", "orientation_order", 1.0 - ((h - h_grid) / (h_max - h_grid)) ** 2, "",
                    "Orientation order φ")
@@ -441,21 +472,22 @@ def road_metrics(roads, area=None, snap_tolerance: float = 0.5, bearing_length: 
 
 def block_faces(roads, min_area: float = _blocks.MIN_BLOCK_AREA,
                 min_width: float = _blocks.MIN_BLOCK_WIDTH,
-                snap_tolerance: float = 0.5) -> np.ndarray:
+                snap_tolerance: float = 0.5, return_counts: bool = False):
     """City blocks as the faces of the road graph, as ``extractblocks`` makes them.
 
     Delegates to :func:`plugin.network.blocks.block_faces` (dead ends stay inside their block;
     faces under ``min_area`` m² or thinner than ``min_width`` m are slivers between dual
     carriageways and are dropped), so that a layout is measured on the same blocks the
     toolbox extracts. ``roads`` is an array of lines or a :class:`RoadGraph`; returns an
-    empty array when no street closes a face.
+    empty array when no street closes a face. With ``return_counts``, also the counts of
+    :func:`plugin.network.blocks.block_faces` (``n_faces``, ``n_small``, ``n_thin``).
     """
     graph = roads if isinstance(roads, RoadGraph) else road_graph(roads, snap_tolerance)
     try:
-        faces, _ = _blocks.block_faces(graph.geometry, min_area, min_width)
+        faces, counts = _blocks.block_faces(graph.geometry, min_area, min_width)
     except InputError:  # the roads close no face: no blocks, not an error here
-        return np.zeros(0, dtype=object)
-    return faces
+        faces, counts = np.zeros(0, dtype=object), dict(n_faces=0, n_small=0, n_thin=0)
+    return (faces, counts) if return_counts else faces
 
 
 def block_metrics(blocks, area=None) -> MetricsResult:
@@ -572,7 +604,7 @@ def parcel_metrics(parcels, area=None, landuse=None,
     n = len(parcels)
     area_geom, area_m2, _ = _area(area, parcels)
     a = shapely.area(parcels)
-    long, short, _ = _blocks.minimum_rectangles(parcels)
+    long, short, _ = minimum_rectangles(parcels)
     with np.errstate(divide="ignore", invalid="ignore"):
         p_area = np.where(a > 0, long * short / a, np.nan)
     angles, owner = corner_angles(parcels, straight)
@@ -648,7 +680,7 @@ def footprint_metrics(footprints, blocks=None, roads=None, road_half_width: floa
         pairs of footprints), ``overlapping_pairs``, ``coverage`` (total footprint area in
         blocks / total block area), ``outside_blocks`` (footprints not inside one block, up
         to 0.1 % of their area), ``road_overlap_area`` (m²), ``road_overlap_count``.
-        DESIGN.md: overlaps and footprints outside blocks must be 0 in a synthesis.
+        docs/ARCHITECTURE.md: overlaps and footprints outside blocks must be 0 in a synthesis.
     """
     res = MetricsResult()
     fp = _as_array(footprints, "buildings", 2, res.notes)
@@ -706,6 +738,45 @@ def footprint_metrics(footprints, blocks=None, roads=None, road_half_width: floa
     return res
 
 
+# --------------------------------------------------------------------------- invariants
+
+def network_invariants(roads, z_layer=None, given_roads=None, given_class=None,
+                       given_z_layer=None, area=None, edge_distance: float = 0.0,
+                       progress: Optional[Progress] = None) -> MetricsResult:
+    """The network invariants of a layout's roads as scalars of kind ``invariants``.
+
+    Runs :func:`plugin.network.invariants.check_network` on the roads that are not copies of
+    ``given_roads`` (:func:`plugin.network.invariants.new_streets`), against the given
+    roads; one scalar per check of :data:`plugin.network.invariants.CHECKS` (a count, or the
+    dead-end share) plus ``violations``, the total of the violation counts without the
+    dead-end share, which needs an example (:func:`compare` gives its relative difference).
+    """
+    res = MetricsResult()
+    roads = np.asarray(roads, dtype=object)
+    layer = None if z_layer is None else np.asarray(z_layer)
+    given = None
+    if given_roads is not None:
+        given = _as_array(given_roads, "given roads", 1)
+        new = _invariants.new_streets(roads, given)
+        res.notes.append(f"Invariants: {int(new.sum())} of {len(roads)} road lines are not on "
+                         f"the {len(given)} given roads and are checked against them.")
+        roads = roads[new]
+        layer = None if layer is None else layer[new]
+    area_geom = area if isinstance(area, shapely.Geometry) else None
+    check = _invariants.check_network(roads, given, given_class, area_geom,
+                                      given_layer=given_z_layer, synthesised_layer=layer,
+                                      edge_distance=edge_distance, progress=progress)
+    counts = check.counts()
+    for name, label, _ in _invariants.CHECKS:
+        res.add_scalar("invariants", name, counts[name], "", label)
+    v = check.violations()
+    v.pop("dead_end_share")
+    res.add_scalar("invariants", "violations", sum(v.values()), "",
+                   "Violations (all checks but the dead-end share)")
+    res.notes.append(f"Invariants: {check.summary()}")
+    return res
+
+
 # --------------------------------------------------------------------------- top level
 
 def compute_layout_metrics(roads=None, blocks=None, parcels=None, buildings=None, area=None,
@@ -713,6 +784,9 @@ def compute_layout_metrics(roads=None, blocks=None, parcels=None, buildings=None
                            snap_tolerance: float = 0.5, bearing_length: float = 10.0,
                            min_block_area: float = _blocks.MIN_BLOCK_AREA,
                            min_block_width: float = _blocks.MIN_BLOCK_WIDTH,
+                           road_class=None, drivable_only: bool = False,
+                           edge_distance: float = 0.0, given_roads=None, given_class=None,
+                           given_z_layer=None,
                            progress: Optional[Progress] = None) -> MetricsResult:
     """All measures of one layout, from whichever layers are given.
 
@@ -737,14 +811,33 @@ def compute_layout_metrics(roads=None, blocks=None, parcels=None, buildings=None
         See :func:`road_metrics`.
     min_block_area, min_block_width : float
         Road-graph faces smaller (m²) or thinner (m) than this are slivers, not blocks
-        (:func:`block_faces`).
+        (:func:`block_faces`); the notes count them. 0 and 0 keep every face, as a plain
+        ``shapely.polygonize`` of the noded roads does; the defaults (400 m², 8 m) drop the
+        traffic islands and dual-carriageway strips that ``extractblocks`` drops.
+    road_class : OSM ``highway`` value per road line, optional
+    drivable_only : bool
+        Keep only roads whose class is in :data:`street_graph.DRIVABLE_CLASSES` (no
+        footways, paths, service roads, tracks); needs ``road_class``. Default: every line
+        counts (a synthesis has no class); the notes say how many non-drivable lines count.
+    edge_distance : float
+        Nodes this close (m) to the study-area boundary are clip ends, not dead ends (see
+        :func:`road_metrics`); default 0 counts them like any node.
+    given_roads : array of lines, optional
+        The roads the layout was given (arterials, existing roads): the network invariants
+        (:func:`plugin.network.invariants.check_network`) check the layout's roads that are
+        not copies of them against them. Without given roads, the layout's roads are checked
+        on their own (crossings without junctions, connected components).
+    given_class, given_z_layer : OSM class and vertical layer per given road, optional
     progress : Progress, optional
 
     Returns
     -------
     MetricsResult
         kind ``layout`` scalar ``area_km2`` plus the results of :func:`road_metrics`,
-        :func:`block_metrics`, :func:`parcel_metrics` and :func:`footprint_metrics`.
+        :func:`block_metrics`, :func:`parcel_metrics` and :func:`footprint_metrics`, and with
+        roads the scalars of kind ``invariants``: one per check of
+        :data:`plugin.network.invariants.CHECKS` plus ``violations`` (their total; the
+        dead-end share is compared with an example by :func:`compare`).
 
     Raises
     ------
@@ -762,12 +855,31 @@ def compute_layout_metrics(roads=None, blocks=None, parcels=None, buildings=None
         raise InputError("land-use values need a parcel layer")
     res = MetricsResult()
     if roads is not None:
+        n_lines = len(np.asarray(roads, dtype=object).ravel()) \
+            if not isinstance(roads, shapely.Geometry) else 1
+        for name, values in (("vertical layers", road_z_layer), ("road classes", road_class)):
+            if values is not None and len(values) != n_lines:
+                raise InputError(f"{len(values)} {name} for {n_lines} road lines")
         roads, kept = _as_array(roads, "roads", 1, res.notes, return_mask=True)
         if road_z_layer is not None:
-            road_z_layer = np.asarray(road_z_layer)
-            if len(road_z_layer) != len(kept):
-                raise InputError(f"{len(road_z_layer)} vertical layers for {len(kept)} road lines")
-            road_z_layer = road_z_layer[kept]
+            road_z_layer = np.asarray(road_z_layer)[kept]
+        if road_class is not None:
+            road_class = np.asarray(road_class, dtype=object)[kept]
+            drivable = np.isin(np.asarray([str(c) for c in road_class], dtype=object),
+                               DRIVABLE_CLASSES)
+            if drivable_only:
+                if not drivable.any():
+                    raise InputError("no road line has a drivable highway class")
+                roads = roads[drivable]
+                road_z_layer = None if road_z_layer is None else road_z_layer[drivable]
+                res.notes.append(f"Roads: {int((~drivable).sum())} lines of non-drivable "
+                                 "classes (footways, paths, service roads ...) left out.")
+            elif not drivable.all():
+                res.notes.append(f"Roads: {int((~drivable).sum())} lines of non-drivable "
+                                 "classes (footways, paths, service roads ...) are counted "
+                                 "as streets.")
+        elif drivable_only:
+            raise InputError("drivable streets only needs a road class (highway) per line")
     blocks = None if blocks is None else _as_array(blocks, "blocks", 2, res.notes)
     if parcels is not None:
         parcels, kept = _as_array(parcels, "parcels", 2, res.notes, return_mask=True)
@@ -787,19 +899,27 @@ def compute_layout_metrics(roads=None, blocks=None, parcels=None, buildings=None
     if roads is not None:
         graph = road_graph(roads, snap_tolerance, road_z_layer, progress.sub(0.02, 0.5))
         res.extend(road_metrics(graph, area, bearing_length=bearing_length,
-                                progress=progress.sub(0.5, 0.6)))
+                                edge_distance=edge_distance, progress=progress.sub(0.5, 0.55)))
         res.notes.append(f"Road graph: {len(roads)} lines -> {graph.n_edges} street segments "
-                         f"between {len(graph.nodes)} nodes.")
+                         f"between {len(graph.nodes)} nodes"
+                         + (f"; nodes within {edge_distance:g} m of the study-area boundary "
+                            "are not counted" if edge_distance > 0 else "") + ".")
+        res.extend(network_invariants(roads, road_z_layer, given_roads, given_class,
+                                      given_z_layer, area_geom, edge_distance,
+                                      progress.sub(0.55, 0.6)))
     progress.step(0.6)
     if blocks is None and graph is not None:
-        faces = block_faces(graph, min_block_area, min_block_width)
+        faces, counts = block_faces(graph, min_block_area, min_block_width, return_counts=True)
+        dropped = (f" ({counts['n_small']} faces under {min_block_area:g} m² and "
+                   f"{counts['n_thin']} thinner than {min_block_width:g} m dropped as "
+                   "slivers)" if counts["n_faces"] > len(faces) else "")
         if len(faces):
             blocks = faces
-            res.notes.append(f"Blocks: {len(faces)} faces of the road graph (faces under "
-                             f"{min_block_area:g} m² or thinner than {min_block_width:g} m "
-                             "dropped as slivers).")
+            res.notes.append(f"Blocks: {len(faces)} of the {counts['n_faces']} faces of the "
+                             f"road graph{dropped}.")
         else:
-            res.notes.append("Blocks: the roads close no face, so there are no block metrics.")
+            res.notes.append(f"Blocks: the roads close no block{dropped}, so there are no "
+                             "block metrics.")
     if blocks is not None:
         res.extend(block_metrics(blocks, area))
     progress.step(0.7)
@@ -844,6 +964,43 @@ def two_sample(candidate, example) -> Dict[str, float]:
                 ks_pvalue=float(ks.pvalue))
 
 
+def two_sample_axial(candidate, example, period: float = 180.0) -> Dict[str, float]:
+    """:func:`two_sample` for directions on a circle of ``period`` degrees (street bearings:
+    180, a street at 10° runs at 190° too), independent of where the circle is cut.
+
+    ``wasserstein`` is the earth mover's distance on the circle, min over c of the integral
+    of |F - G - c| (Rabin, Delon & Gousseau 2011), in degrees; ``wasserstein_norm`` divides
+    it by the example's circular standard deviation (of the doubled angles, halved);
+    ``ks_stat`` and ``ks_pvalue`` are Kuiper's V = max(F - G) + max(G - F), the KS statistic
+    that does not depend on the cut, and its asymptotic p-value (Stephens 1970).
+    """
+    c = np.asarray(candidate, dtype=float) % period
+    e = np.asarray(example, dtype=float) % period
+    c, e = c[np.isfinite(c)], e[np.isfinite(e)]
+    if len(c) == 0 or len(e) == 0:
+        return dict(wasserstein=np.nan, wasserstein_norm=np.nan, ks_stat=np.nan, ks_pvalue=np.nan)
+    cuts = np.unique(np.concatenate([c, e, [0.0, period]]))
+    f = np.searchsorted(np.sort(c), cuts[:-1], side="right") / len(c)
+    g = np.searchsorted(np.sort(e), cuts[:-1], side="right") / len(e)
+    diff, width = f - g, np.diff(cuts)
+    # the shift c minimising the weighted L1 norm is the weighted median of F - G
+    order = np.argsort(diff)
+    half = np.searchsorted(np.cumsum(width[order]), 0.5 * period)
+    shift = diff[order][min(half, len(order) - 1)]
+    w = float(np.sum(np.abs(diff - shift) * width))
+    t = np.radians(e * 360.0 / period)
+    r = min(float(np.hypot(np.cos(t).mean(), np.sin(t).mean())), 1.0)
+    sd = float(np.degrees(np.sqrt(-2.0 * np.log(r))) * period / 360.0) if r > 0 else np.inf
+    wn = w / sd if sd > 0 else (0.0 if w == 0 else np.nan)
+    v = float(diff.max() - diff.min())
+    n = len(c) * len(e) / (len(c) + len(e))
+    lam = (np.sqrt(n) + 0.155 + 0.24 / np.sqrt(n)) * v
+    j = np.arange(1, 101)
+    p = float(np.clip(np.sum(2 * (4 * j**2 * lam**2 - 1) * np.exp(-2 * j**2 * lam**2)), 0, 1)) \
+        if lam > 0.4 else 1.0
+    return dict(wasserstein=w, wasserstein_norm=wn, ks_stat=v, ks_pvalue=p)
+
+
 def _rel_diff(c: float, e: float) -> float:
     if not (np.isfinite(c) and np.isfinite(e)):
         return np.nan
@@ -864,13 +1021,22 @@ def _axial_mean(degrees: np.ndarray) -> float:
     return float(np.degrees(np.arctan2(np.sin(t).mean(), np.cos(t).mean())) / 2.0 % 180.0)
 
 
+def _axial_difference(c: float, e: float) -> float:
+    """Turn between two axial directions in degrees, signed, in [-90, 90): a difference of
+    directions, not a relative one (it is reported in the rel_diff column)."""
+    if not (np.isfinite(c) and np.isfinite(e)):
+        return np.nan
+    return float((c - e + 90.0) % 180.0 - 90.0)
+
+
 def compare(candidate: MetricsResult, example: Optional[MetricsResult] = None) -> pd.DataFrame:
     """One row per measure: candidate and example values and their distance.
 
     Distributions give one row with ``statistic`` = 'mean' (the means of both samples and
-    their relative difference; 'axial_mean' for street bearings, whose plain mean means
-    nothing) and the two-sample distances of :func:`two_sample` (for bearings on the
-    [0, 180) line, ignoring the wrap-around); scalars
+    their relative difference) and the two-sample distances of :func:`two_sample`; street
+    bearings, whose plain mean means nothing, give 'axial_mean' (the mean directions, and in
+    ``rel_diff`` the turn between them in degrees) and the circular distances of
+    :func:`two_sample_axial`; scalars
     give one row with ``statistic`` = 'value' and the relative difference
     (candidate - example) / |example|. Measures present on one side only keep NaN on the
     other. Without an example, the rows just list the candidate.
@@ -902,11 +1068,13 @@ def compare(candidate: MetricsResult, example: Optional[MetricsResult] = None) -
         if typ == "d":
             cv = c.values if c is not None else np.zeros(0)
             ev = e.values if e is not None else np.zeros(0)
-            statistic, mean = ("axial_mean", _axial_mean) if ref.unit == "°" and \
-                name.endswith("bearing") else ("mean", _mean)
+            axial = ref.unit == "°" and name.endswith("bearing")
+            statistic, mean, distance = ("axial_mean", _axial_mean, two_sample_axial) if axial \
+                else ("mean", _mean, two_sample)
             cm, em = mean(cv), mean(ev)
-            row.update(statistic=statistic, candidate=cm, example=em, rel_diff=_rel_diff(cm, em),
-                       n_candidate=len(cv), n_example=len(ev), **two_sample(cv, ev))
+            rel = _axial_difference(cm, em) if axial else _rel_diff(cm, em)
+            row.update(statistic=statistic, candidate=cm, example=em, rel_diff=rel,
+                       n_candidate=len(cv), n_example=len(ev), **distance(cv, ev))
         else:
             cs = c.value if c is not None else np.nan
             es = e.value if e is not None else np.nan

@@ -20,9 +20,10 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
-from typing import Iterable, Optional, Sequence
+from typing import Optional, Sequence
 
 import numpy as np
+import pandas as pd
 import shapely
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
@@ -32,7 +33,8 @@ from ..core.progress import InputError, Progress, ensure
 
 __all__ = [
     "DRIVABLE_CLASSES", "ARTERIAL_CLASSES", "CLASS_RANK", "RoadGraph",
-    "parse_other_tags", "vertical_layer", "class_rank", "clean_network", "graph_from_lines",
+    "drivable_and_arterial", "parse_other_tags", "vertical_layer", "class_rank",
+    "clean_network", "graph_from_lines",
 ]
 
 #: OSM highway classes kept by default: what cars drive on and what forms city blocks.
@@ -54,6 +56,42 @@ UNKNOWN_RANK = len(_RANKED)
 
 _TAG_RE = re.compile(r'"((?:[^"\\]|\\.)*)"=>"((?:[^"\\]|\\.)*)"')
 _YES = {"yes", "true", "1", "viaduct", "covered", "building_passage", "culvert", "boardwalk"}
+
+
+def drivable_and_arterial(road_class: Optional[Sequence] = None,
+                          level: Optional[Sequence] = None, n: Optional[int] = None):
+    """Which roads count, and which of them are arterials: the rule of the tools that take
+    roads around buildings (attributes, best fit, the command line).
+
+    A layer with OSM classes keeps its drivable lines (one without any keeps every line);
+    arterials are level 0 when there is a level, else the arterial OSM classes.
+
+    Returns
+    -------
+    (keep, arterial) : bool arrays over all lines (arterial only where kept)
+
+    Examples
+    --------
+    >>> keep, art = drivable_and_arterial(["primary", "footway", "residential"])
+    >>> keep.tolist(), art.tolist()
+    ([True, False, True], [True, False, False])
+    >>> drivable_and_arterial(level=[0, 1, None])[1].tolist()
+    [True, False, False]
+    """
+    n = len(road_class if road_class is not None else level) if n is None else n
+    keep = np.ones(n, dtype=bool)
+    if road_class is not None:
+        drivable = np.array([c in DRIVABLE_CLASSES for c in road_class], dtype=bool)
+        if drivable.any():
+            keep = drivable
+    if level is not None:
+        numbers = pd.to_numeric(pd.Series(np.asarray(level, dtype=object)), errors="coerce")
+        arterial = (numbers == 0).to_numpy()
+    elif road_class is not None:
+        arterial = np.array([c in ARTERIAL_CLASSES for c in road_class], dtype=bool)
+    else:
+        arterial = np.zeros(n, dtype=bool)
+    return keep, arterial & keep
 
 
 def parse_other_tags(text: Optional[str]) -> dict:
@@ -198,7 +236,7 @@ def _split_at_vertices(geoms: np.ndarray, split_mask_fn):
 def clean_network(geometries: Sequence, road_class: Optional[Sequence] = None,
                   name: Optional[Sequence] = None, z_layer: Optional[Sequence] = None,
                   snap_tolerance: float = 1.0, min_dangle_length: float = 5.0,
-                  merge_degree2: bool = True,
+                  merge_degree2: bool = True, duplicate_tolerance: Optional[float] = None,
                   progress: Optional[Progress] = None) -> RoadGraph:
     """Turn raw road lines into a clean planar :class:`RoadGraph`.
 
@@ -213,6 +251,9 @@ def clean_network(geometries: Sequence, road_class: Optional[Sequence] = None,
         Dead-end edges shorter than this are removed (dangling slivers of OSM digitising).
     merge_degree2 : bool
         Merge chains through nodes of degree 2 into one edge.
+    duplicate_tolerance : float, optional
+        Edges between the same nodes within this Hausdorff distance (m) are one street;
+        default ``max(snap_tolerance, 0.5)``. 0 drops only exact duplicates (a plain count).
 
     Returns
     -------
@@ -275,7 +316,8 @@ def clean_network(geometries: Sequence, road_class: Optional[Sequence] = None,
     graph = graph_from_lines(pieces, road_class[src], name[src], zl[src], src,
                              snap_tolerance=snap_tolerance)
     progress.step(0.55)
-    graph = _drop_duplicates(graph, snap_tolerance)
+    graph = _drop_duplicates(graph, max(snap_tolerance, 0.5) if duplicate_tolerance is None
+                             else duplicate_tolerance)
     progress.step(0.65)
     if min_dangle_length > 0:
         graph = _prune_dangles(graph, min_dangle_length)
@@ -347,7 +389,7 @@ def _drop_duplicates(g: RoadGraph, tolerance: float) -> RoadGraph:
     if len(dup_groups) == 0:
         return g
     drop = np.zeros(g.n_edges, dtype=bool)
-    tol = max(tolerance, 0.5)
+    tol = tolerance
     starts = np.unique(np.searchsorted(sk, sk[dup_groups]))
     for s in starts:
         e = s
@@ -405,8 +447,31 @@ def merge_degree2_chains(g: RoadGraph) -> RoadGraph:
     single = shapely.get_type_id(merged) == 1
     if not single.all():
         merged = np.where(single, merged, shapely.get_geometry(merged, 0))
+    merged = _loops_start_at_their_node(merged, g, comp, deg)
     return graph_from_lines(merged, g.road_class[rep], g.name[rep], g.z_layer[rep], g.source[rep])
 
 
-def edges_to_lines(graph: RoadGraph) -> Iterable:
-    return graph.geometry
+def _loops_start_at_their_node(merged: np.ndarray, g: RoadGraph, comp: np.ndarray,
+                               deg: np.ndarray) -> np.ndarray:
+    """Rotate merged rings so that they start at the junction they hang from.
+
+    A loop hanging off a junction P (edges P-a, a-b, b-P) merges into one closed line, and
+    ``line_merge`` may start it at a or b: P would lose its loop and become a dead end. Such
+    loops are rare (a few per city), so they are fixed one by one.
+    """
+    closed = np.flatnonzero(shapely.is_closed(merged) & (shapely.get_num_points(merged) > 3))
+    if not len(closed):
+        return merged
+    merged = merged.copy()
+    ends = np.concatenate([g.u, g.v])
+    owner = np.concatenate([comp, comp])
+    for c in closed:
+        anchor = np.unique(ends[(owner == c) & (deg[ends] != 2)])
+        if not len(anchor):
+            continue  # an isolated ring: any start will do
+        xy = shapely.get_coordinates(merged[c])[:-1]
+        at = np.flatnonzero(np.hypot(*(xy - g.nodes[anchor[0]]).T) < 1e-3)  # nodes: mm
+        if len(at) and at[0] != 0:
+            ring = np.roll(xy, -at[0], axis=0)
+            merged[c] = shapely.linestrings(np.vstack([ring, ring[:1]]))
+    return merged

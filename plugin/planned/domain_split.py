@@ -48,6 +48,7 @@ import numpy as np
 import pandas as pd
 import shapely
 
+from ..core.geometry import minimum_rectangles, unit
 from ..core.progress import InputError, Progress, ensure
 from ..measure import metrics as _metrics
 from ..parcels import subdivision as _parcels
@@ -276,12 +277,12 @@ class _Splitter:
 
     def _children(self, region, line):
         coords = shapely.get_coordinates(line)
-        ext = np.vstack([coords[0] + 0.5 * _unit(coords[0] - coords[1]), coords,
-                         coords[-1] + 0.5 * _unit(coords[-1] - coords[-2])])
+        ext = np.vstack([coords[0] + 0.5 * unit(coords[0] - coords[1]), coords,
+                         coords[-1] + 0.5 * unit(coords[-1] - coords[-2])])
         faces = _faces([shapely.boundary(region), shapely.LineString(ext)], region)
         if len(faces) < 2:
             return None
-        _, short, _ = _blocks_rect(faces)
+        _, short, _ = minimum_rectangles(faces)
         if (short < self.min_depth).any():
             return None
         r = self.s.street_width / 2 + 0.3 * self.s.parcel_length
@@ -296,15 +297,6 @@ class _Splitter:
         return faces
 
 
-def _blocks_rect(polys):
-    from ..network import blocks as _blocks
-    return _blocks.minimum_rectangles(polys)
-
-
-def _unit(v):
-    return v / max(float(np.hypot(*v)), 1e-12)
-
-
 def _end_dirs(lines) -> np.ndarray:
     """Street ends (x, y, outward unit direction) of lines."""
     out = []
@@ -313,7 +305,7 @@ def _end_dirs(lines) -> np.ndarray:
         if len(xy) < 2:
             continue
         for p, q in ((xy[0], xy[1]), (xy[-1], xy[-2])):
-            out.append(np.r_[p, _unit(p - q)])
+            out.append(np.r_[p, unit(p - q)])
     return np.asarray(out) if out else np.zeros((0, 4))
 
 

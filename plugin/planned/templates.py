@@ -52,8 +52,8 @@ import numpy as np
 import shapely
 
 from ..core.paths import RESOURCES
+from ..core.geometry import minimum_rectangle_corners, minimum_rectangles
 from ..core.progress import InputError
-from ..network import blocks as _blocks
 from ..parcels import subdivision as _parcels
 
 __all__ = ["Template", "LIBRARY_PATH", "LIBRARY_SUBSETS", "default_library", "write_library",
@@ -210,7 +210,7 @@ def templates_from_drawn(geoms: Sequence, names: Sequence, labels: Sequence) -> 
         res = g[lab == "R"]
         # a parcel is deeper than wide: its long axis runs across the street, and rows
         # are the clusters of parcel centres along that axis
-        depth, _, angle = _blocks.minimum_rectangles(res)
+        depth, _, angle = minimum_rectangles(res)
         a = np.radians(float(np.median(angle)))
         across = shapely.get_coordinates(shapely.centroid(res)) @ np.array([np.cos(a), np.sin(a)])
         gap = max(0.5 * float(np.median(depth)), 1e-6)
@@ -230,7 +230,7 @@ def templates_from_drawn(geoms: Sequence, names: Sequence, labels: Sequence) -> 
 def region_shape(region):
     """(long side, short side of the minimum rectangle, shape distortion) of a region:
     the template-independent part of :func:`fit_energy`, computed once per region."""
-    long_side, short_side, _ = _blocks.minimum_rectangles([region])
+    long_side, short_side, _ = minimum_rectangles([region])
     p_angle, p_area, _ = _parcels.lot_quality([region])
     shape = (float(np.nan_to_num(p_area[0], nan=10.0)) - 1.0) + \
         0.5 * float(np.nan_to_num(p_angle[0], nan=45.0)) / 45.0
@@ -278,7 +278,7 @@ def region_frame(poly):
     ring = np.asarray(poly.exterior.coords)[:-1]
     if len(ring) < 4:
         return None
-    mrr = _mrr_corners(ring)
+    mrr = minimum_rectangle_corners([shapely.Polygon(ring)])[0]
     corner_idx = []
     for c in mrr:
         d = np.hypot(ring[:, 0] - c[0], ring[:, 1] - c[1])
@@ -298,26 +298,6 @@ def region_frame(poly):
     e0 = sides[(k + 3) % 4][::-1]  # from c1's start to c2's start
     e1 = sides[(k + 1) % 4]        # from c1's end to c2's end
     return c1, c2, e0, e1
-
-
-def _mrr_corners(xy: np.ndarray) -> np.ndarray:
-    """Corners (4, 2) of the minimum-area rectangle of points: every convex-hull edge
-    direction tried at once in numpy (shapely's oriented_envelope loops in Python, and
-    this runs for every block and on every optimisation iteration)."""
-    hull = shapely.get_coordinates(shapely.convex_hull(shapely.multipoints(xy)))
-    if len(hull) < 4:
-        hull = np.asarray(xy, dtype=float)
-        hull = np.vstack([hull, hull[:1]])
-    e = np.diff(hull, axis=0)
-    ln = np.hypot(e[:, 0], e[:, 1])
-    e, ln = e[ln > 1e-9], ln[ln > 1e-9]
-    u = e / ln[:, None]
-    v = np.stack([-u[:, 1], u[:, 0]], axis=1)
-    pu, pv = u @ hull.T, v @ hull.T                   # (edges, points)
-    a0, a1, b0, b1 = pu.min(1), pu.max(1), pv.min(1), pv.max(1)
-    k = int(np.argmin((a1 - a0) * (b1 - b0)))
-    return np.array([a * u[k] + b * v[k] for a, b in
-                     ((a0[k], b0[k]), (a1[k], b0[k]), (a1[k], b1[k]), (a0[k], b1[k]))])
 
 
 @dataclass

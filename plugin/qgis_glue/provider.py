@@ -5,34 +5,17 @@ from qgis.core import (
     Qgis,
     QgsApplication,
     QgsMessageLog,
+    QgsProcessingAlgorithm,
     QgsProcessingModelAlgorithm,
     QgsProcessingProvider,
 )
 from qgis.PyQt.QtGui import QIcon
 
 from ..core.paths import RESOURCES
+from . import dependencies
+from .toolbox import ALGORITHMS, GROUPS, algorithm_id
 
 ICON = RESOURCES / "icons" / "urbansynth.svg"
-
-#: (module in processing_algorithms, class) of every algorithm, in toolbox order.
-ALGORITHMS = (
-    ("extract_road_hierarchy", "ExtractRoadHierarchy"),
-    ("extract_blocks", "ExtractBlocks"),
-    ("build_block_database", "BuildBlockDatabase"),
-    ("build_fragment_database", "BuildFragmentDatabase"),
-    ("layout_metrics", "LayoutMetrics"),
-    ("grow_roads", "GrowRoads"),
-    ("subdivide_parcels", "SubdivideParcels"),
-    ("synthesize_roads_from_fragments", "SynthesizeRoadsFromFragments"),
-    ("tessellate_streets", "TessellateStreets"),
-    ("synthesize_roads_gan", "SynthesizeRoadsGan"),
-    ("raster_roads_to_vector", "RasterRoadsToVector"),
-    ("synthesize_buildings", "SynthesizeBuildings"),
-    ("synthesize_roads_random_walk", "SynthesizeRoadsRandomWalk"),
-    ("synthesize_footprints", "SynthesizeFootprints"),
-    ("split_domain", "SplitDomain"),
-    ("synthesize_roads", "SynthesizeRoads"),
-)
 
 #: Processing models shipped with the provider (made by scripts/make_models.py).
 MODELS = RESOURCES / "models"
@@ -48,6 +31,48 @@ class ShippedModel(QgsProcessingModelAlgorithm):
 
     def groupId(self):  # noqa: N802
         return self.group().lower()
+
+
+class UnavailableAlgorithm(QgsProcessingAlgorithm):
+    """Stands in the toolbox for an algorithm whose Python packages are missing: listed
+    under its own name, it fails its parameter check with what to install and how."""
+
+    def __init__(self, module: str, display_name: str, group_id: str, missing):
+        super().__init__()
+        self._module, self._display, self._group_id = module, display_name, group_id
+        self._missing = list(missing)
+
+    def name(self):
+        return algorithm_id(self._module)
+
+    def displayName(self):  # noqa: N802
+        return f"{self._display} (needs {', '.join(self._missing)})"
+
+    def group(self):
+        return GROUPS[self._group_id]
+
+    def groupId(self):  # noqa: N802
+        return self._group_id
+
+    def icon(self):
+        return QIcon(str(ICON))
+
+    def shortHelpString(self):  # noqa: N802
+        return dependencies.missing_message(self._missing)
+
+    def createInstance(self):  # noqa: N802
+        return UnavailableAlgorithm(self._module, self._display, self._group_id, self._missing)
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        pass
+
+    def checkParameterValues(self, parameters, context):  # noqa: N802
+        return False, dependencies.missing_message(self._missing)
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        from qgis.core import QgsProcessingException
+
+        raise QgsProcessingException(dependencies.missing_message(self._missing))
 
 
 class UrbanSynthesisProvider(QgsProcessingProvider):
@@ -66,12 +91,21 @@ class UrbanSynthesisProvider(QgsProcessingProvider):
     def loadAlgorithms(self):  # noqa: N802
         # One algorithm that fails to import (e.g. a missing optional library) must not hide
         # the others: it is reported in the message log and left out of the toolbox.
+        # An algorithm whose packages are missing stays listed and says what to install.
+        dependencies.activate()
+        missing = dependencies.missing_packages()
+        if missing:
+            QgsMessageLog.logMessage(dependencies.missing_message(missing), "Urban Synthesis",
+                                     Qgis.Warning)
         package = __package__.split(".")[0] + ".processing_algorithms"
-        for module_name, class_name in ALGORITHMS:
+        for module_name, class_name, display_name, group_id in ALGORITHMS:
             try:
                 module = importlib.import_module(f"{package}.{module_name}")
                 self.addAlgorithm(getattr(module, class_name)())
-            except Exception as error:  # noqa: BLE001 (any import failure is reported)
+            except ImportError as error:
+                self.addAlgorithm(UnavailableAlgorithm(module_name, display_name, group_id,
+                                                       missing or [error.name or str(error)]))
+            except Exception as error:  # noqa: BLE001 (any other failure is reported)
                 QgsMessageLog.logMessage(
                     f"Urban Synthesis: algorithm {module_name} not loaded: {error!r}",
                     "Processing", Qgis.Critical)

@@ -19,9 +19,9 @@ vectorised retrieval without recomputation. ``metadata`` is a key/value table: f
 format version, CRS, source, sampling and histogram parameters (the absolute radial scale
 of the shape context must be the same for database and query), creation time.
 
-Spatial layers are written with pyogrio (GDAL's GPKG driver); the non-spatial tables with
-the standard library's sqlite3 and registered in ``gpkg_contents`` as attribute tables,
-because pyogrio 0.10 writes bytes columns as text.
+Spatial layers are written with GDAL's own bindings (:mod:`core.vector_io`, the GDAL every
+QGIS ships); the non-spatial tables, which hold binary descriptor arrays, with the standard
+library's sqlite3, registered in ``gpkg_contents`` as attribute tables.
 
 Retrieval (:meth:`ExampleDatabase.prefilter`, :meth:`ExampleDatabase.query`) follows the
 thesis: prefilter by area, aspect ratio and relief change (fragments, ch. 4.1.2) or by
@@ -51,6 +51,7 @@ import numpy as np
 import pandas as pd
 import shapely
 
+from ..core import vector_io
 from ..core.progress import InputError, Progress, ensure
 from ..network.blocks import shape_metrics
 from ..network.fragments import Fragments
@@ -208,24 +209,11 @@ def _write_tables(path: str, descriptors: Descriptors, ids: np.ndarray, id_name:
         con.close()
 
 
-def _write_layer(frame: pd.DataFrame, geometry: np.ndarray, crs: str, path: str,
-                 layer: str, geometry_type: str) -> None:
-    # imported here: the engine's other modules must stay importable without GDAL bindings
-    import geopandas as gpd
-    import pyogrio
-
-    geometry = np.asarray(geometry, dtype=object)
-    multi = geometry_type.startswith("Multi")
-    gdf = gpd.GeoDataFrame(frame.reset_index(drop=True), geometry=list(geometry), crs=crs or None)
-    pyogrio.write_dataframe(gdf, path, layer=layer, driver="GPKG", geometry_type=geometry_type,
-                            promote_to_multi=multi or None)
-
-
 def _plain_column(values: pd.Series) -> pd.Series:
     """An attribute column GDAL can store: numbers stay numbers, anything else text.
 
     Attribute tables read from QGIS hold Python objects (ints with None for nulls, bools,
-    strings); pyogrio needs one type per column.
+    strings); a GeoPackage field has one type.
     """
     v = values.reset_index(drop=True)
     if v.dtype != object:
@@ -320,7 +308,7 @@ def write_fragment_database(path: str, fragments: Fragments, crs: str, source: s
     table = fragments.table
     ids = table["fragment_id"].to_numpy()
     with _atomic_gpkg(path) as tmp:
-        _write_layer(table, fragments.geometry, crs, tmp, "fragments", "Polygon")
+        vector_io.write_layer(tmp, "fragments", table, fragments.geometry, crs, "Polygon")
         progress.step(0.6)
         streets = pd.DataFrame({
             "fragment_id": ids[fragments.street_fragment] if len(fragments.street_fragment)
@@ -328,8 +316,8 @@ def write_fragment_database(path: str, fragments: Fragments, crs: str, source: s
             "level": fragments.street_level,
             "length_m": shapely.length(fragments.street_geometry),
         })
-        _write_layer(streets, fragments.street_geometry, crs, tmp, "fragment_streets",
-                     "LineString")
+        vector_io.write_layer(tmp, "fragment_streets", streets, fragments.street_geometry, crs,
+                              "LineString")
         progress.step(0.8)
         relief = None
         if fragments.patches is not None:
@@ -417,9 +405,9 @@ def write_block_database(path: str, blocks: Sequence, buildings: Sequence,
         if name not in btable:
             btable[name] = _plain_column(attrs[name])
     with _atomic_gpkg(path) as tmp:
-        _write_layer(table, blocks, crs, tmp, "blocks", "Polygon")
+        vector_io.write_layer(tmp, "blocks", table, blocks, crs, "Polygon")
         progress.step(0.6)
-        _write_layer(btable, buildings, crs, tmp, "buildings", "MultiPolygon")
+        vector_io.write_layer(tmp, "buildings", btable, buildings, crs, "MultiPolygon")
         progress.step(0.8)
         meta = _metadata(BLOCK_FORMAT, crs, source, desc, {
             "n_blocks": len(blocks), "n_buildings": len(buildings), **(extra or {})})
@@ -491,17 +479,6 @@ def _check_format(path, meta: Dict[str, str], expected: str) -> int:
         raise InputError(f"{path} has format version {version}; this plugin reads versions "
                          f"1 to {FORMAT_VERSION} (update the plugin or rebuild the database)")
     return version
-
-
-def _read_layer(path, layer: str):
-    import pyogrio
-
-    try:
-        gdf = pyogrio.read_dataframe(str(path), layer=layer)
-    except Exception as exc:  # noqa: BLE001 - pyogrio raises several GDAL error types
-        raise InputError(f"{path}: layer '{layer}' cannot be read ({exc})") from exc
-    geoms = np.asarray(gdf.geometry.values, dtype=object) if "geometry" in gdf else None
-    return pd.DataFrame(gdf.drop(columns="geometry", errors="ignore")), geoms
 
 
 def _read_descriptors(con, path, id_name: str, meta: Dict[str, str]):
@@ -828,7 +805,7 @@ def _load(path, fmt: str, shape_layer: str, id_name: str):
                                   (r[1], r[3], 0.0, r[2], 0.0, -r[3])) for r in rows}
     finally:
         con.close()
-    table, geoms = _read_layer(path, shape_layer)
+    table, geoms = vector_io.read_layer(path, shape_layer)
     if id_name not in table or len(table) != len(ids):
         raise InputError(f"{path}: layer '{shape_layer}' does not match its descriptors")
     # align the shape rows with the descriptor rows by id
@@ -850,7 +827,7 @@ def load_fragment_database(path) -> FragmentDatabase:
     """
     meta, ids, desc, table, geoms, relief = _load(path, FRAGMENT_FORMAT, "fragments",
                                                   "fragment_id")
-    streets, street_geoms = _read_layer(path, "fragment_streets")
+    streets, street_geoms = vector_io.read_layer(path, "fragment_streets")
     return FragmentDatabase(str(path), meta, meta.get("crs", ""), geoms, table, ids, desc,
                             streets=streets, street_geometry=street_geoms, relief=relief)
 
@@ -864,6 +841,6 @@ def load_block_database(path) -> BlockDatabase:
         As :func:`load_fragment_database`.
     """
     meta, ids, desc, table, geoms, _ = _load(path, BLOCK_FORMAT, "blocks", "block_id")
-    buildings, building_geoms = _read_layer(path, "buildings")
+    buildings, building_geoms = vector_io.read_layer(path, "buildings")
     return BlockDatabase(str(path), meta, meta.get("crs", ""), geoms, table, ids, desc,
                          buildings=buildings, building_geometry=building_geoms)

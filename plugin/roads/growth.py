@@ -58,7 +58,8 @@ import pandas as pd
 import shapely
 
 from ..core.progress import InputError, Progress, ensure
-from ..network.blocks import minimum_rectangles, planar_faces
+from ..core.geometry import minimum_rectangles
+from ..network.blocks import planar_faces
 from ..network.street_graph import clean_network
 from ..retrieval.shape_context import DemGrid
 

@@ -53,6 +53,7 @@ for p in (ROOT / "build" / "plugins", ROOT / "tests"):
 from urban_synthesis.plugin.network import blocks  # noqa: E402
 from urban_synthesis.plugin.buildings import footprint_resynthesis  # noqa: E402
 from urban_synthesis.plugin.buildings import footprints  # noqa: E402
+from urban_synthesis.plugin.core.geometry import largest_polygons  # noqa: E402
 from urban_synthesis.plugin.roads import growth  # noqa: E402
 from urban_synthesis.plugin.measure import metrics  # noqa: E402
 
@@ -300,7 +301,7 @@ MIN_EXAMPLE_BUILDINGS = int(os.environ.get("MIN_EXAMPLE_BUILDINGS", "1"))
 
 
 def liechtenstein_path() -> Path:
-    for base in (ROOT / "data", ROOT.parent / "shared" / "data",
+    for base in (ROOT / "tests" / "data", ROOT / "data", ROOT.parent / "shared" / "data",
                  ROOT.parent.parent / "shared" / "data"):
         p = base / "liechtenstein-2013-08-03.osm.pbf"
         if p.exists():
@@ -325,7 +326,7 @@ def liechtenstein(crs: int = 32632) -> dict:
     towns = mp[(mp.admin_level == "8")].to_crs(crs)
     b = mp[mp.building.notna() & mp.geometry.notna()].to_crs(crs).reset_index(drop=True)
     # one polygon per building (GDAL's multipolygons layer gives MultiPolygons)
-    geoms = footprints._largest_polygon(b.geometry.values)
+    geoms = largest_polygons(b.geometry.values)
     b, geoms = b[geoms != None].reset_index(drop=True), geoms[geoms != None]  # noqa: E711
     ext = blocks.extract_blocks(graph, buildings=geoms)
     attrs = building_attributes.building_attributes(len(b), building=b.building.values,

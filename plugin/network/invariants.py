@@ -1,0 +1,551 @@
+"""Network invariants of a synthesised street network, checked against the roads it was given.
+
+docs/ARCHITECTURE.md ("Quality measures") asks of every road synthesis that "every crossing is a
+junction, the result is connected to the given roads, no street doubles a given road";
+the fidelity issue adds that motorways and trunks are crossed only at existing junctions and
+that the dead-end share stays within ±30 % of the example's. This module is the one checker
+all road-synthesis methods, the fidelity benchmark and ``layoutmetrics`` use.
+
+Definitions (one home for each rule):
+
+- **Contact**: a point where two lines meet (intersect, or come within ``tolerance`` m).
+- **Junction**: a contact at an end point of either line (a street ending on another one,
+  a T), or at a vertex of both lines (an OSM node shared by two ways). Noding the union of
+  the lines makes every junction a graph node without moving anything.
+- **Crossing without junction**: any other point contact: at least one line passes through
+  the point with no vertex there (a street drawn over an arterial, an underpass that no
+  layer attribute explains). A synthesised line that crosses itself counts once per line.
+- **Overlap**: two lines sharing a stretch (a line-shaped intersection longer than the
+  tolerance) where at least one of them is synthesised.
+- **Floating piece**: a connected component (lines joined at junctions and overlaps, not at
+  crossings) that holds synthesised streets but no given road; without given roads, every
+  component after the first.
+- **Parallel duplicate**: a piece of a synthesised street inside the corridor of a given road
+  (``corridor_half_width`` m either side of its centreline) longer than
+  ``min_duplicate_length`` m. A street crossing the corridor at an angle theta spends
+  ``2 w / sin(theta)`` in it (< 40 m for theta > 24 degrees at w = 8 m); one running along it
+  spends its whole length.
+- **Controlled-access contact**: a contact of a synthesised street with a given motorway or
+  trunk (or their links) farther than ``junction_radius`` m from an existing junction of
+  the given roads (a point where their degree is at least 3).
+- **Dead-end share**: degree-1 nodes over all nodes of degree != 2 of the noded network of
+  synthesised and given roads together, chains through degree-2 nodes dissolved, counting
+  nodes inside ``area`` and farther than ``edge_distance`` m from its boundary (a network
+  clipped to an area ends there without being a dead end). It is a violation when an
+  example share is given and the result is off by more than ``dead_end_tolerance`` of it.
+
+The given roads are taken as they are: crossings among them are not violations (a bridge
+of a real network crosses what it passes over). Pass as ``synthesised`` only what a method
+added, not its copy of the given roads (a copy would double them).
+
+Everything is vectorised with shapely 2 (``STRtree.query`` with ``dwithin``, one
+intersection per candidate pair) and scipy's connected components; no loop over lines.
+
+References
+----------
+docs/ARCHITECTURE.md, "Quality measures" (network invariants for any synthesised roads); Aliaga,
+Vanegas, Benes 2008, sec. 5 (intersections are "all the pair-wise intersection points
+between street centerlines" - so every crossing must be a node); Hartmann thesis ch. 4.1.2
+(the street graph is planar).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Dict, List, Optional, Sequence
+
+import numpy as np
+import pandas as pd
+import shapely
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from ..core.progress import InputError, Progress, ensure
+from .street_graph import clean_network
+
+__all__ = [
+    "JUNCTION_TOLERANCE", "CORRIDOR_HALF_WIDTH", "MIN_DUPLICATE_LENGTH", "JUNCTION_RADIUS",
+    "DEAD_END_TOLERANCE", "EDGE_DISTANCE", "UNDERSHOOT_DISTANCE", "CONTROLLED_ACCESS",
+    "CHECKS", "Contacts", "NetworkCheck", "line_contacts", "dead_end_share", "new_streets",
+    "check_network",
+]
+
+#: Points closer than this (m) are one point: a street end this close to a line touches it.
+JUNCTION_TOLERANCE = 1e-3
+#: Half-width (m) of the corridor of a given road in which no synthesised street may run.
+CORRIDOR_HALF_WIDTH = 8.0
+#: A synthesised piece inside a corridor longer than this (m) doubles the given road.
+MIN_DUPLICATE_LENGTH = 40.0
+#: A contact with a motorway or trunk this close (m) to an existing junction is at it.
+JUNCTION_RADIUS = 1.0
+#: Allowed relative deviation of the dead-end share from the example's (issue: ±30 %).
+DEAD_END_TOLERANCE = 0.3
+#: Nodes this close (m) to the study-area boundary are clip ends, not dead ends.
+EDGE_DISTANCE = 1.0
+#: A dangling synthesised end this close (m) to another line but not on it undershoots it.
+UNDERSHOOT_DISTANCE = 2.0
+#: OSM classes crossed only at existing junctions.
+CONTROLLED_ACCESS = ("motorway", "motorway_link", "trunk", "trunk_link")
+
+#: The checks, in report order: (name, description, is a violation count).
+CHECKS = (
+    ("crossings_given", "Crossings of a given road without a junction", True),
+    ("crossings_synthesised", "Crossings of synthesised streets without a junction", True),
+    ("overlaps", "Synthesised streets overlapping another line", True),
+    ("floating_pieces", "Floating pieces (not connected to the given roads)", True),
+    ("parallel_duplicates", "Streets running inside a given road's corridor", True),
+    ("controlled_access", "Motorway / trunk contacts away from existing junctions", True),
+    ("dead_end_share", "Dead-end share outside the example's ±30 %", True),
+    ("components", "Connected components (synthesised and given roads)", False),
+    ("undershoots", "Dangling ends just short of another line", False),
+)
+
+
+def _lines(geoms, what: str, layer=None):
+    """Single-part, non-empty 2D lines of an array of (multi)lines, and the layer of each."""
+    arr = np.asarray(geoms if geoms is not None else [], dtype=object).ravel()
+    lay = np.zeros(len(arr), np.int64) if layer is None else \
+        np.asarray(layer, dtype=np.int64).ravel()
+    if len(arr) == 0:
+        return np.empty(0, dtype=object), np.zeros(0, np.int64)
+    ok = ~(shapely.is_missing(arr) | shapely.is_empty(arr))
+    arr, lay = arr[ok], lay[ok]
+    if len(arr) and not np.isin(shapely.get_type_id(arr), (1, 2, 5)).all():
+        raise InputError(f"the {what} must be lines")
+    parts, src = shapely.get_parts(arr, return_index=True)
+    keep = shapely.get_type_id(parts) != 2
+    parts, src = shapely.force_2d(parts[keep]), src[keep]
+    keep = shapely.length(parts) > 0
+    return parts[keep], lay[src[keep]]
+
+
+@dataclass
+class Contacts:
+    """Where lines meet, one row per point (or stretch) of contact of two lines.
+
+    Attributes
+    ----------
+    a, b : int arrays, indices of the two lines (``a < b``)
+    geometry : Point, or LineString for an overlap
+    junction : bool array, the contact is a junction (an end point of either line, or a
+        vertex of both)
+    overlap : bool array, the lines share a stretch here
+    """
+
+    a: np.ndarray
+    b: np.ndarray
+    geometry: np.ndarray
+    junction: np.ndarray
+    overlap: np.ndarray
+
+
+def line_contacts(lines: Sequence, tolerance: float = JUNCTION_TOLERANCE) -> Contacts:
+    """All contacts between pairs of distinct lines, classified as junctions or crossings.
+
+    Parameters
+    ----------
+    lines : array of LineString (metric CRS)
+    tolerance : float, lines closer than this (m) touch; a point this close to a vertex or
+        an end point is at it
+
+    Returns
+    -------
+    Contacts
+
+    Examples
+    --------
+    >>> import shapely
+    >>> plus = [shapely.LineString([(0, 5), (10, 5)]), shapely.LineString([(5, 0), (5, 10)])]
+    >>> line_contacts(plus).junction.tolist()        # drawn over each other: a crossing
+    [False]
+    >>> tee = [shapely.LineString([(0, 5), (10, 5)]), shapely.LineString([(5, 5), (5, 10)])]
+    >>> line_contacts(tee).junction.tolist()         # a street ending on another: a junction
+    [True]
+    """
+    lines = np.asarray(lines, dtype=object)
+    empty = Contacts(np.zeros(0, np.int64), np.zeros(0, np.int64), np.empty(0, dtype=object),
+                     np.zeros(0, bool), np.zeros(0, bool))
+    if len(lines) < 2:
+        return empty
+    a, b = shapely.STRtree(lines).query(lines, predicate="dwithin", distance=tolerance)
+    keep = a < b
+    a, b = a[keep], b[keep]
+    if not len(a):
+        return empty
+    inter = shapely.intersection(lines[a], lines[b])
+    # lines within the tolerance that do not intersect meet at their nearest points
+    miss = shapely.is_empty(inter)
+    if miss.any():
+        inter[miss] = shapely.get_point(shapely.shortest_line(lines[a[miss]], lines[b[miss]]), 0)
+    parts, pair = shapely.get_parts(inter, return_index=True)
+    parts, sub = shapely.get_parts(parts, return_index=True)   # collections of multi-parts
+    pair = pair[sub]
+    dim = shapely.get_dimensions(parts)
+    overlap = (dim == 1) & (shapely.length(parts) > tolerance)
+    point = dim == 0
+    # a point-like line piece (shorter than the tolerance) is a point contact at its start
+    short = (dim == 1) & ~overlap
+    parts = parts.copy()
+    parts[short] = shapely.get_point(parts[short], 0)
+    point |= short
+    pa, pb = a[pair], b[pair]
+    junction = np.ones(len(parts), dtype=bool)
+    if point.any():
+        p = parts[point]
+        la, lb = lines[pa[point]], lines[pb[point]]
+        with np.errstate(invalid="ignore"):
+            end_a = shapely.distance(p, shapely.boundary(la)) <= tolerance
+            end_b = shapely.distance(p, shapely.boundary(lb)) <= tolerance
+            vtx_a = shapely.distance(p, shapely.extract_unique_points(la)) <= tolerance
+            vtx_b = shapely.distance(p, shapely.extract_unique_points(lb)) <= tolerance
+        junction[point] = end_a | end_b | (vtx_a & vtx_b)
+    keep = point | overlap
+    return Contacts(pa[keep], pb[keep], parts[keep], junction[keep], overlap[keep])
+
+
+def _node_degrees(lines: np.ndarray, points: np.ndarray, tolerance: float) -> np.ndarray:
+    """Degree of the network of ``lines`` at each point: 1 per line ending there, 2 per line
+    passing through."""
+    if not len(points) or not len(lines):
+        return np.zeros(len(points), dtype=np.int64)
+    p_i, l_i = shapely.STRtree(lines).query(points, predicate="dwithin", distance=tolerance)
+    with np.errstate(invalid="ignore"):
+        at_end = shapely.distance(points[p_i], shapely.boundary(lines[l_i])) <= tolerance
+    return np.bincount(p_i, weights=np.where(at_end, 1, 2), minlength=len(points)).astype(
+        np.int64)
+
+
+def _self_crossings(lines: np.ndarray, tolerance: float) -> np.ndarray:
+    """Points where a line crosses or touches itself (one per point and line)."""
+    bad = lines[~shapely.is_simple(lines)] if len(lines) else lines
+    if not len(bad):
+        return np.empty(0, dtype=object)
+    pieces, owner = shapely.get_parts(shapely.node(bad), return_index=True)
+    ends = np.concatenate([shapely.get_coordinates(shapely.get_point(pieces, 0)),
+                           shapely.get_coordinates(shapely.get_point(pieces, -1))])
+    owner = np.r_[owner, owner]
+    key = np.round(ends / max(tolerance, 1e-9))
+    _, first, count = np.unique(np.column_stack([owner, key]), axis=0, return_index=True,
+                                return_counts=True)
+    # a crossing is where noding cut a line into pieces meeting 3 or more times
+    sel = first[count >= 3]
+    return shapely.points(ends[sel])
+
+
+def _unique_points(points: np.ndarray, tolerance: float) -> np.ndarray:
+    if not len(points):
+        return points
+    xy = np.round(shapely.get_coordinates(points) / max(tolerance, 1e-9))
+    _, first = np.unique(xy[:, 0] + 1j * xy[:, 1], return_index=True)
+    return points[np.sort(first)]
+
+
+def dead_end_share(lines: Sequence, area=None, edge_distance: float = EDGE_DISTANCE,
+                   snap_tolerance: float = JUNCTION_TOLERANCE) -> float:
+    """Share of dead ends among the nodes of degree != 2 of a noded street network.
+
+    Lines are noded at crossings and chains through degree-2 nodes dissolved (the plain
+    count); with ``area``, only nodes inside it and at least ``edge_distance`` m from its
+    boundary count (the ends of a network clipped to the area are not dead ends).
+
+    Returns
+    -------
+    float in [0, 1], NaN when no node counts.
+    """
+    lines, _ = _lines(lines, "roads")
+    if not len(lines):
+        return float("nan")
+    g = clean_network(lines, snap_tolerance=snap_tolerance, min_dangle_length=0.0,
+                      merge_degree2=True)
+    deg = g.degree
+    count = deg != 2
+    if area is not None:
+        pts = shapely.points(g.nodes)
+        count &= shapely.dwithin(area, pts, 1e-6)      # on the boundary counts as inside
+        if edge_distance > 0:
+            count &= ~shapely.dwithin(shapely.boundary(area), pts, edge_distance)
+    n = int(count.sum())
+    return float(((deg == 1) & count).sum() / n) if n else float("nan")
+
+
+def new_streets(lines: Sequence, given: Sequence, tolerance: float = 0.01) -> np.ndarray:
+    """Which lines are not copies of the given roads (a mask).
+
+    A method's output often holds the given roads again (re-noded arterials of level 0);
+    a line that lies within ``tolerance`` m of the given roads all along is such a copy and
+    must not be checked against itself.
+    """
+    lines = np.asarray(lines, dtype=object).ravel()
+    given = np.asarray(given, dtype=object).ravel()
+    if not len(lines) or not len(given):
+        return np.ones(len(lines), dtype=bool)
+    cover = shapely.union_all(shapely.buffer(given, tolerance, quad_segs=2))
+    shapely.prepare(cover)
+    return ~shapely.covers(cover, lines)
+
+
+@dataclass
+class NetworkCheck:
+    """Result of :func:`check_network`: counts, and where each violation is.
+
+    Attributes
+    ----------
+    crossings_given, crossings_synthesised : Points where a synthesised street crosses a
+        given road / another synthesised street (or itself) without a junction
+    overlaps : LineStrings shared by a synthesised street and another line
+    duplicates : pieces of synthesised streets inside a given road's corridor
+    controlled_access : Points where a synthesised street meets a motorway or trunk away
+        from an existing junction
+    undershoots : dangling synthesised end points just short of another line (not counted
+        as violations; they leave the street a dead end)
+    n_components : connected components of synthesised and given roads together
+    floating_pieces : components with synthesised streets and no given road
+    dead_end_share, example_dead_end_share : float (NaN / None when unknown)
+    dead_end_tolerance : relative tolerance of the dead-end share
+    n_synthesised, n_given : number of single-part lines checked
+    """
+
+    crossings_given: np.ndarray
+    crossings_synthesised: np.ndarray
+    overlaps: np.ndarray
+    duplicates: np.ndarray
+    controlled_access: np.ndarray
+    undershoots: np.ndarray
+    n_components: int
+    floating_pieces: int
+    dead_end_share: float
+    example_dead_end_share: Optional[float] = None
+    dead_end_tolerance: float = DEAD_END_TOLERANCE
+    n_synthesised: int = 0
+    n_given: int = 0
+    notes: List[str] = field(default_factory=list)
+
+    @property
+    def dead_end_ok(self) -> Optional[bool]:
+        """The dead-end share is within the tolerance of the example's (None: no example)."""
+        e = self.example_dead_end_share
+        if e is None or not np.isfinite(e) or not np.isfinite(self.dead_end_share):
+            return None
+        return bool(abs(self.dead_end_share - e) <= self.dead_end_tolerance * e + 1e-12)
+
+    def counts(self) -> Dict[str, float]:
+        """Every check by name (see :data:`CHECKS`): a count, or the share for dead ends."""
+        return {"crossings_given": len(self.crossings_given),
+                "crossings_synthesised": len(self.crossings_synthesised),
+                "overlaps": len(self.overlaps),
+                "floating_pieces": self.floating_pieces,
+                "parallel_duplicates": len(self.duplicates),
+                "controlled_access": len(self.controlled_access),
+                "dead_end_share": self.dead_end_share,
+                "components": self.n_components,
+                "undershoots": len(self.undershoots)}
+
+    def violations(self) -> Dict[str, int]:
+        """Violation count per check (the dead-end share gives 1 when out of tolerance)."""
+        c = self.counts()
+        out = {name: int(c[name]) for name, _, is_violation in CHECKS
+               if is_violation and name != "dead_end_share"}
+        out["dead_end_share"] = int(self.dead_end_ok is False)
+        return out
+
+    @property
+    def n_violations(self) -> int:
+        return int(sum(self.violations().values()))
+
+    @property
+    def ok(self) -> bool:
+        return self.n_violations == 0
+
+    def table(self) -> pd.DataFrame:
+        """One row per check: check, description, value, limit, violations."""
+        c, v = self.counts(), self.violations()
+        rows = []
+        for name, text, is_violation in CHECKS:
+            limit = np.nan
+            if name == "dead_end_share" and self.example_dead_end_share is not None:
+                limit = self.example_dead_end_share
+                text = (f"Dead-end share (example {self.example_dead_end_share:.3f} "
+                        f"± {100 * self.dead_end_tolerance:.0f} %)")
+            elif is_violation:
+                limit = 0.0
+            rows.append(dict(check=name, description=text, value=float(c[name]), limit=limit,
+                             violations=v.get(name, 0) if is_violation else 0))
+        return pd.DataFrame(rows)
+
+    def summary(self) -> str:
+        v = self.violations()
+        bad = [f"{n} {name.replace('_', ' ')}" for name, n in v.items() if n]
+        share = (f"dead-end share {self.dead_end_share:.2f}"
+                 + (f" (example {self.example_dead_end_share:.2f})"
+                    if self.example_dead_end_share is not None else ""))
+        head = (f"{self.n_synthesised} synthesised lines against {self.n_given} given: "
+                f"{self.n_components} connected component(s), {share}")
+        return head + (": no violation." if not bad else ": " + ", ".join(bad) + ".")
+
+
+def check_network(synthesised: Sequence, given: Optional[Sequence] = None,
+                  given_class: Optional[Sequence] = None, area=None,
+                  given_layer: Optional[Sequence] = None,
+                  synthesised_layer: Optional[Sequence] = None,
+                  example_dead_end_share: Optional[float] = None,
+                  tolerance: float = JUNCTION_TOLERANCE,
+                  corridor_half_width: float = CORRIDOR_HALF_WIDTH,
+                  min_duplicate_length: float = MIN_DUPLICATE_LENGTH,
+                  junction_radius: float = JUNCTION_RADIUS,
+                  dead_end_tolerance: float = DEAD_END_TOLERANCE,
+                  edge_distance: float = EDGE_DISTANCE,
+                  progress: Optional[Progress] = None) -> NetworkCheck:
+    """Check the network invariants of synthesised streets against the roads they were given.
+
+    Parameters
+    ----------
+    synthesised : array of LineString / MultiLineString (metric CRS), what a method added
+    given : array of lines, optional, the roads the method was given (arterials, existing
+        roads); crossings among them are not checked
+    given_class : OSM ``highway`` class per given line, optional (for the motorway / trunk
+        check, :data:`CONTROLLED_ACCESS`)
+    area : Polygon, optional, the target: dead ends are counted inside it, away from its
+        boundary
+    given_layer : OSM vertical layer per given line, optional: given roads of another layer
+        than 0 (bridges, tunnels) cross synthesised streets (layer 0) and each other
+        without a junction when no end point or shared vertex joins them
+    synthesised_layer : vertical layer per synthesised line, optional (default 0: a
+        synthesis knows no bridges; pass the OSM layers to check a real network)
+    example_dead_end_share : float, optional, the example's share (:func:`dead_end_share`)
+    tolerance, corridor_half_width, min_duplicate_length, junction_radius,
+    dead_end_tolerance, edge_distance : float, see the module constants
+    progress : Progress, optional
+
+    Returns
+    -------
+    NetworkCheck
+
+    Raises
+    ------
+    InputError
+        Geometries that are not lines, a class list of the wrong length, absurd tolerances.
+
+    Examples
+    --------
+    >>> import shapely
+    >>> arterial = [shapely.LineString([(0, 0), (200, 0)])]
+    >>> street = [shapely.LineString([(100, -50), (100, 50)])]
+    >>> check_network(street, arterial).violations()["crossings_given"]
+    1
+    """
+    progress = ensure(progress)
+    for name, value in (("tolerance", tolerance), ("corridor half-width", corridor_half_width),
+                        ("minimum duplicate length", min_duplicate_length),
+                        ("junction radius", junction_radius),
+                        ("dead-end tolerance", dead_end_tolerance),
+                        ("edge distance", edge_distance)):
+        if not (np.isfinite(value) and value >= 0):
+            raise InputError(f"the {name} must be a non-negative number, got {value}")
+    given_in = np.asarray(given if given is not None else [], dtype=object).ravel()
+    cls = None
+    if given_class is not None:
+        cls = np.asarray(given_class, dtype=object).ravel()
+        if len(cls) != len(given_in):
+            raise InputError(f"{len(cls)} road classes for {len(given_in)} given roads")
+    if given_layer is not None and len(np.ravel(given_layer)) != len(given_in):
+        raise InputError(f"{len(np.ravel(given_layer))} vertical layers for {len(given_in)} "
+                         "given roads")
+    syn_in = np.asarray(synthesised if synthesised is not None else [], dtype=object).ravel()
+    if synthesised_layer is not None and len(np.ravel(synthesised_layer)) != len(syn_in):
+        raise InputError(f"{len(np.ravel(synthesised_layer))} vertical layers for "
+                         f"{len(syn_in)} synthesised roads")
+    syn, slay = _lines(syn_in, "synthesised roads", synthesised_layer)
+    # given lines single-part, keeping the class of each part
+    giv, glay = _lines(given_in, "given roads", given_layer)
+    gcls = None
+    if cls is not None:   # the class of each part: carried like the layer, by index
+        _, idx = _lines(given_in, "given roads", np.arange(len(given_in)))
+        gcls = cls[idx]
+    n_s, n_g = len(syn), len(giv)
+    lines = np.concatenate([syn, giv])
+    is_given = np.r_[np.zeros(n_s, bool), np.ones(n_g, bool)]
+    layer = np.r_[slay, glay]
+    progress.step(0.1)
+
+    con = line_contacts(lines, tolerance)
+    progress.step(0.5)
+    ga, gb = is_given[con.a], is_given[con.b]
+    # lines of different vertical layers pass over each other unless a junction joins them
+    apart = (layer[con.a] != layer[con.b]) & ~con.junction
+    crossing = ~con.junction & ~con.overlap & ~apart
+    crossings_given = con.geometry[crossing & (ga ^ gb)]
+    crossings_synthesised = np.concatenate([con.geometry[crossing & ~ga & ~gb],
+                                            _self_crossings(syn, tolerance)])
+    overlaps = con.geometry[con.overlap & ~(ga & gb) & ~apart]
+
+    # components: lines joined where they meet at a junction or share a stretch
+    joined = (con.junction | con.overlap) & ~apart
+    n = len(lines)
+    if n:
+        adj = coo_matrix((np.ones(joined.sum()), (con.a[joined], con.b[joined])), shape=(n, n))
+        n_comp, label = connected_components(adj, directed=False)
+        with_given = np.zeros(n_comp, bool)
+        with_given[label[is_given]] = True
+        with_syn = np.zeros(n_comp, bool)
+        with_syn[label[~is_given]] = True
+        floating = int((with_syn & ~with_given).sum()) if n_g else max(int(with_syn.sum()) - 1, 0)
+    else:
+        n_comp, floating = 0, 0
+    progress.step(0.6)
+
+    # parallel duplicates: long pieces inside the corridors of the given roads
+    duplicates = np.empty(0, dtype=object)
+    if n_s and n_g and corridor_half_width > 0:
+        corridor = shapely.union_all(shapely.buffer(giv, corridor_half_width, quad_segs=4))
+        shapely.prepare(corridor)
+        hit = shapely.intersects(corridor, syn)
+        if hit.any():
+            with np.errstate(invalid="ignore"):
+                pieces = shapely.get_parts(shapely.intersection(syn[hit], corridor))
+            pieces = pieces[shapely.get_dimensions(pieces) == 1]
+            duplicates = pieces[shapely.length(pieces) > min_duplicate_length]
+    progress.step(0.75)
+
+    # motorway / trunk contacts away from the given network's own junctions
+    controlled = np.empty(0, dtype=object)
+    if n_s and gcls is not None:
+        is_ca = np.zeros(len(lines), bool)
+        is_ca[n_s:] = np.isin(np.asarray([str(c) if c is not None else "" for c in gcls]),
+                              CONTROLLED_ACCESS)
+        sel = (ga ^ gb) & (is_ca[con.a] | is_ca[con.b])
+        if sel.any():
+            pts = con.geometry[sel]
+            pts = np.where(shapely.get_dimensions(pts) == 0, pts, shapely.get_point(pts, 0))
+            gg = ga & gb & con.junction & ~con.overlap
+            cand = _unique_points(con.geometry[gg], tolerance)
+            existing = cand[_node_degrees(giv, cand, tolerance) >= 3]
+            if len(existing):
+                near = shapely.STRtree(existing).query(pts, predicate="dwithin",
+                                                       distance=junction_radius)[0]
+                at = np.zeros(len(pts), bool)
+                at[near] = True
+            else:
+                at = np.zeros(len(pts), bool)
+            # a street meeting two ways of one motorway at their common end is one contact
+            controlled = _unique_points(pts[~at], tolerance)
+    progress.step(0.85)
+
+    # dangling synthesised ends just short of another line (information)
+    undershoots = np.empty(0, dtype=object)
+    if n_s and n > 1:
+        ends = np.concatenate([shapely.get_point(syn, 0), shapely.get_point(syn, -1)])
+        own = np.r_[np.arange(n_s), np.arange(n_s)]
+        tree = shapely.STRtree(lines)
+        e_i, l_i = tree.query(ends, predicate="dwithin", distance=tolerance)
+        touching = np.zeros(len(ends), bool)
+        touching[e_i[l_i != own[e_i]]] = True
+        e_i, l_i = tree.query(ends, predicate="dwithin", distance=UNDERSHOOT_DISTANCE)
+        close = np.zeros(len(ends), bool)
+        close[e_i[l_i != own[e_i]]] = True
+        undershoots = ends[close & ~touching]
+
+    share = dead_end_share(lines, area, edge_distance) if n else float("nan")
+    progress.step(1.0)
+    return NetworkCheck(crossings_given, crossings_synthesised, overlaps, duplicates, controlled,
+                        undershoots, int(n_comp), floating, share,
+                        None if example_dead_end_share is None else float(example_dead_end_share),
+                        dead_end_tolerance, n_s, n_g)

@@ -1,0 +1,181 @@
+"""Engine tests of plugin.network.invariants: hand-made networks whose answer is known, and
+real Helsinki streets checked against their own arterials (no QGIS)."""
+import numpy as np
+import pytest
+import shapely
+
+from urban_synthesis.plugin.core.progress import Canceled, InputError, Progress
+from urban_synthesis.plugin.network import invariants as I
+
+L = shapely.LineString
+ARTERIAL = [L([(0, 0), (200, 0)])]
+
+
+def test_street_drawn_over_an_arterial_is_a_crossing_and_floats():
+    c = I.check_network([L([(100, -50), (100, 50)])], ARTERIAL)
+    assert c.violations()["crossings_given"] == 1
+    assert shapely.get_coordinates(c.crossings_given).tolist() == [[100.0, 0.0]]
+    # a crossing does not connect: the street is a floating piece
+    assert c.floating_pieces == 1 and c.n_components == 2 and not c.ok
+
+
+def test_street_ending_on_an_arterial_is_a_junction():
+    # the arterial has no vertex at x = 100: a T still joins the network
+    c = I.check_network([L([(100, 0), (100, 80)])], ARTERIAL)
+    assert c.ok and c.n_components == 1 and c.floating_pieces == 0
+
+
+def test_street_through_a_shared_vertex_is_a_junction():
+    given = [L([(0, 0), (100, 0), (200, 0)])]
+    c = I.check_network([L([(100, -50), (100, 0), (100, 50)])], given)
+    assert c.violations()["crossings_given"] == 0 and c.n_components == 1
+    # a vertex on one side only is not enough
+    c = I.check_network([L([(100, -50), (100, 50)])], given)
+    assert c.violations()["crossings_given"] == 1
+
+
+def test_end_within_the_tolerance_touches():
+    near = L([(100, 1e-7), (100, 80)])     # interpolated onto the arterial up to round-off
+    assert I.check_network([near], ARTERIAL).ok
+    short = L([(100, 0.5), (100, 80)])     # half a metre short: floating, an undershoot
+    c = I.check_network([short], ARTERIAL)
+    assert c.floating_pieces == 1 and len(c.undershoots) == 1
+
+
+def test_synthesised_streets_crossing_each_other_and_themselves():
+    streets = [L([(50, 0), (50, 100)]), L([(150, 0), (150, 100)]),
+               L([(20, 50), (180, 50)]),                              # crosses both
+               L([(60, 70), (90, 90), (90, 70), (60, 90)])]           # a bow tie
+    c = I.check_network(streets, ARTERIAL)
+    assert c.violations()["crossings_synthesised"] == 3
+    xy = sorted(map(tuple, shapely.get_coordinates(c.crossings_synthesised).round(6)))
+    assert xy == [(50.0, 50.0), (75.0, 80.0), (150.0, 50.0)]
+    # noded, the same streets are a planar network with no crossing
+    noded = shapely.get_parts(shapely.node(shapely.multilinestrings(streets[:3])))
+    assert I.check_network(noded, ARTERIAL).violations()["crossings_synthesised"] == 0
+
+
+def test_crossing_count_agrees_with_pairwise_intersections():
+    rng = np.random.default_rng(7)
+    ends = rng.uniform(0, 500, (60, 2, 2))
+    lines = shapely.linestrings(ends)
+    # straight segments in general position: every intersecting pair is one crossing
+    a, b = shapely.STRtree(lines).query(lines, predicate="intersects")
+    expected = int((a < b).sum())
+    c = I.check_network(lines)
+    assert expected > 50
+    assert c.violations()["crossings_synthesised"] == expected
+
+
+def test_floating_pieces_without_and_with_given_roads():
+    island = [L([(0, 300), (100, 300)]), L([(100, 300), (100, 400)])]
+    c = I.check_network([L([(100, 0), (100, 80)])] + island, ARTERIAL)
+    assert c.floating_pieces == 1 and c.n_components == 2
+    # without given roads, every component after the first floats
+    assert I.check_network(island + [L([(300, 0), (400, 0)])]).floating_pieces == 1
+
+
+def test_parallel_duplicate_inside_the_corridor():
+    beside = L([(20, 5), (180, 5)])             # 5 m off the arterial, 160 m long
+    across = L([(100, 0), (100, 80)])            # leaves it at a right angle
+    oblique = L([(100, 0), (160, 40)])           # at 34 degrees: 14 m in the corridor
+    c = I.check_network([beside, across, oblique], ARTERIAL)
+    assert c.violations()["parallel_duplicates"] == 1
+    assert c.duplicates[0].length == pytest.approx(160.0)
+    # 12 m away it is a street of its own (a frontage road), not a duplicate
+    assert I.check_network([L([(20, 12), (180, 12)])], ARTERIAL).violations()[
+        "parallel_duplicates"] == 0
+
+
+def test_overlap_with_a_given_road():
+    c = I.check_network([L([(50, 0), (150, 0)])], ARTERIAL)
+    assert c.violations()["overlaps"] == 1 and c.overlaps[0].length == pytest.approx(100.0)
+    assert c.violations()["parallel_duplicates"] == 1
+
+
+def test_motorway_is_met_only_at_existing_junctions():
+    given = [L([(0, 0), (200, 0)]), L([(200, 0), (400, 0)]),      # a motorway in two ways
+             L([(200, 0), (200, -150)])]                          # a road joining it at x=200
+    cls = ["motorway", "motorway", "secondary"]
+    at_junction = L([(200, 0), (200, 120)])
+    mid_way = L([(100, 0), (100, 120)])
+    c = I.check_network([at_junction, mid_way], given, cls)
+    assert c.violations()["controlled_access"] == 1
+    assert shapely.get_coordinates(c.controlled_access).tolist() == [[100.0, 0.0]]
+    # where the motorway ways only continue each other (degree 2) there is no junction
+    c = I.check_network([L([(200, 0), (200, 120)])], given[:2], cls[:2])
+    assert c.violations()["controlled_access"] == 1
+    # the same street onto a secondary road is fine
+    assert I.check_network([mid_way], given, ["secondary"] * 3).ok
+
+
+def test_bridges_of_the_given_roads_are_not_crossings():
+    bridge = [L([(0, 0), (200, 0)])]
+    street = [L([(100, -50), (100, 50)])]
+    c = I.check_network(street, bridge, given_layer=[1])
+    assert c.violations()["crossings_given"] == 0
+    # but passing under a bridge does not connect
+    assert c.floating_pieces == 1
+
+
+def test_dead_end_share_counts_inside_and_away_from_the_edge():
+    # a '#': 4 crosses and 8 dead ends
+    h = [L([(-50, y), (150, y)]) for y in (0, 100)]
+    v = [L([(x, -50), (x, 150)]) for x in (0, 100)]
+    assert I.dead_end_share(h + v) == pytest.approx(8 / 12)
+    # clipped to the area whose edge the ends lie on: no dead end counts
+    area = shapely.box(-50, -50, 150, 150)
+    assert I.dead_end_share(h + v, area) == 0.0
+    assert I.dead_end_share(h + v, area, edge_distance=0.0) == pytest.approx(8 / 12)
+    # the vertical streets noded at the crossings: a junction with the given ones at each
+    v = shapely.get_parts(shapely.node(shapely.multilinestrings(h + v)))[6:]
+    c = I.check_network(v, h, example_dead_end_share=0.25)
+    assert c.dead_end_share == pytest.approx(8 / 12) and c.violations()["dead_end_share"] == 1
+    c = I.check_network(v, h, example_dead_end_share=0.6)
+    assert c.dead_end_ok and c.ok
+
+
+def test_table_and_summary():
+    c = I.check_network([L([(100, -50), (100, 50)])], ARTERIAL, example_dead_end_share=0.5)
+    t = c.table()
+    assert list(t.check) == [name for name, _, _ in I.CHECKS]
+    assert t.violations.sum() == c.n_violations
+    assert "1 crossings given" in c.summary()
+
+
+def test_bad_input():
+    with pytest.raises(InputError, match="must be lines"):
+        I.check_network([shapely.Point(0, 0)])
+    with pytest.raises(InputError, match="road classes"):
+        I.check_network(ARTERIAL, ARTERIAL, ["primary", "primary"])
+    with pytest.raises(InputError, match="corridor"):
+        I.check_network(ARTERIAL, corridor_half_width=-1)
+    with pytest.raises(Canceled):
+        I.check_network(ARTERIAL, progress=Progress(is_canceled=lambda: True))
+    # nothing synthesised is no violation
+    assert I.check_network([], ARTERIAL).ok
+
+
+def test_real_streets_keep_the_invariants_of_their_own_arterials():
+    """Helsinki's real minor streets against its real level-0 roads: the checker must pass
+    a real city (bridges carry their OSM layer), and catch what a sloppy synthesis does."""
+    from helpers import helsinki_roads
+    from urban_synthesis.plugin.network import hierarchy, street_graph
+
+    df = helsinki_roads()
+    g = street_graph.clean_network(df.geometry.values, df.highway.values, df.name.values,
+                                   df.z.values)
+    level = hierarchy.road_hierarchy(g).edge_level
+    given, minor = g.geometry[level == 0], g.geometry[level > 0]
+    c = I.check_network(minor, given, g.road_class[level == 0],
+                        given_layer=g.z_layer[level == 0])
+    v = c.violations()
+    assert len(minor) > 100
+    assert v["crossings_given"] == v["crossings_synthesised"] == v["overlaps"] == 0
+    assert v["parallel_duplicates"] == 0 and v["controlled_access"] == 0
+    assert c.floating_pieces <= 1        # one clipped-off piece at the extract's edge
+    assert 0.1 < c.dead_end_share < 0.5
+    # shifted by 30 m across the arterials, the same streets cross them without junctions
+    moved = shapely.transform(minor, lambda xy: xy + [30.0, 30.0])
+    v = I.check_network(moved, given).violations()
+    assert v["crossings_given"] > 20 and v["floating_pieces"] > 5
