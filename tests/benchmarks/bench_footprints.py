@@ -422,6 +422,8 @@ def loto_town(data: dict, target: str, methods=("transfer", "resynthesis"),
                 area_ks_vs_example=float(ks_2samp(area, ex_area).statistic) if len(g) else 1.0,
                 area_median=float(np.median(area)) if len(g) else float("nan"),
                 sliver_share=float(np.mean(area < p10)) if len(g) else 0.0,
+                trimmed_below_p10=int(np.sum((area < p10) & r.table.placement.str.contains(
+                    "trimmed").to_numpy())) if len(g) else 0,
                 example_p10_m2=p10,
                 blocks_filled=float(filled.mean()),
                 culdesac_served=frontage.served_share(inner, g),
