@@ -4,6 +4,7 @@ import shapely
 from qgis.core import (
     QgsProcessing,
     QgsProcessingException,
+    QgsProcessingParameterBoolean,
     QgsProcessingParameterEnum,
     QgsProcessingParameterFeatureSink,
     QgsProcessingParameterFeatureSource,
@@ -35,6 +36,7 @@ class SynthesizePartBuildings(AlgorithmBase):
     AREA_RESOLUTION = "AREA_RESOLUTION"
     CORNER_TOLERANCE = "CORNER_TOLERANCE"
     SKELETON_SIMPLIFY = "SKELETON_SIMPLIFY"
+    SKELETON_NETWORK = "SKELETON_NETWORK"
     OUTPUT = "OUTPUT"
 
     #: The longest skeleton of one building (the part sequences grow with its length / 0.2 m).
@@ -73,19 +75,29 @@ class SynthesizePartBuildings(AlgorithmBase):
             "the line's direction; default right), with end parts at its ends and corner parts "
             "at its vertices. A polygon is filled all round its ring (e.g. a block buffered "
             "inward by half a street), or is the site a tower of floor parts stands on.")
+        self.add(QgsProcessingParameterBoolean(
+            self.SKELETON_NETWORK, "Lines are wing centrelines (T-junctions, 1.5D)",
+            defaultValue=False),
+            "Lines that touch form one building (thesis ch. 6, Fig. 6.6): each line is a "
+            "wing's centreline, parts reach half their depth to both sides, T-parts sit "
+            "where a wing ends on another one, corner parts at bends, end parts at free "
+            "ends; at most one closed loop (a courtyard). A 'counts' field ('doors=2..4; "
+            "straight=1') constrains the parts of that wing alone (local constraints).")
         self.add(QgsProcessingParameterEnum(
             self.PARTS_LIBRARY, "Built-in parts library",
             options=[p[1] for p in self.PARTS_LIBRARIES], defaultValue=0),
-            "Used without a Building parts layer. Terrace: 36 straight, corner and end parts, "
+            "Used without a Building parts layer. Terrace: 36 straight, corner and end parts "
+            "and 3 T-parts, "
             "3-5 levels of 3 m (the 2 m variant leaves out the 4.2-5 m infill parts so that "
             "FAR constraints stay fast, but fills only skeletons with sides on a 2 m grid). "
             "Skyscraper: 18 square floor parts of 20-40 m (thesis Fig. 6.5).")
         self.add(QgsProcessingParameterFeatureSource(
             self.BUILDING_PARTS, "Building parts", poly, optional=True),
             "A parts database: footprint polygons (any position) with fields 'kind' (floor, "
-            "straight, corner, end_left, end_right), 'length_m' (along the skeleton; a floor's "
-            "height) and 'height_m'; optional part_id, depth_m, levels, floor_area_m2, "
-            "area_left_m2 / area_right_m2 (cross-sections), angle_deg (a corner's turn) and "
+            "straight, corner, end_left, end_right, tee), 'length_m' (along the skeleton; a "
+            "floor's height) and 'height_m'; optional part_id, depth_m, levels, floor_area_m2, "
+            "area_left_m2 / area_right_m2 (cross-sections), angle_deg (a corner's turn), "
+            "branch_m / area_branch_m2 (a T-part's stub and branch cross-section) and "
             "numeric fields to count. Floor parts only: towers; otherwise parts along the "
             "skeleton.")
         self.add(QgsProcessingParameterFeatureSource(
@@ -164,6 +176,19 @@ class SynthesizePartBuildings(AlgorithmBase):
         if self.given(parameters, self.BLOCKS):
             blocks = qgis_io.read_source(self, parameters, self.BLOCKS, context, feedback,
                                          kind="polygons", target_crs=frame.crs).geometry
+        local = None
+        if kind == "lines" and self.parameterAsBoolean(parameters, self.SKELETON_NETWORK,
+                                                       context):
+            frame = qgis_io.read_source(self, parameters, self.SKELETON, context, feedback,
+                                        kind="lines", fields=["counts"])
+            lines, index = shapely.get_parts(frame.geometry, return_index=True)
+            skeletons, building_ids, local = qgis_io.run_engine(
+                f"Layer {frame.name}", part_buildings.wing_networks, lines,
+                frame.fids[index], qgis_io.field_values(frame, "counts")[index], library,
+                label)
+            fronts = [None] * len(skeletons)
+            feedback.pushInfo(f"{frame.name}: {len(lines)} wing lines form {len(skeletons)} "
+                              "buildings.")
         floor_area = self.number(parameters, self.PARTS_FLOOR_AREA, context)
         height = self.number(parameters, self.PARTS_HEIGHT, context)
         feedback.pushInfo(f"{len(skeletons)} buildings from {label} ({len(library)} parts, "
@@ -177,7 +202,7 @@ class SynthesizePartBuildings(AlgorithmBase):
             k=self.number(parameters, self.K_SOLUTIONS, context),
             corner_tolerance=self.number(parameters, self.CORNER_TOLERANCE, context),
             area_resolution=self.number(parameters, self.AREA_RESOLUTION, context),
-            progress=qgis_io.progress_for(feedback, 10, 90))
+            local=local, progress=qgis_io.progress_for(feedback, 10, 90))
         for building_id, reason in result.failed[:10]:
             feedback.reportError(f"Layer {frame.name}, feature {building_id}: {reason}",
                                  fatalError=False)

@@ -252,3 +252,70 @@ def test_qgis_process_on_bubenec_blocks(tmp_path):
             # the FAR is taken on the block holding the skeleton (Blocks), not on the ring
             assert parts.building_far.iloc[0] == pytest.approx(
                 parts.floor_area_m2.sum() / block.area, rel=1e-9)
+
+
+COURTYARD = [shapely.LineString([(0, 0), (24, 0), (48, 0), (48, 18), (48, 36), (24, 36),
+                                 (0, 36), (0, 0)]),
+             shapely.LineString([(24, 0), (24, -18), (24, -30)]),
+             shapely.LineString([(24, -18), (44, -18)]),
+             shapely.LineString([(24, 36), (24, 60)]),
+             shapely.LineString([(48, 18), (72, 18)])]
+
+
+def test_wing_network_with_local_counts(qgis_processing):
+    """SKELETON_NETWORK: touching wing lines form one building with T-parts (thesis Fig.
+    6.6); a wing's 'counts' field is a local constraint; a separate T is its own building;
+    a malformed 'counts' names its feature."""
+    from qgis.core import QgsProcessingException
+    from urban_synthesis.plugin.buildings import parts as bp
+
+    tee = [shapely.LineString([(200, 0), (260, 0)]), shapely.LineString([(230, 0), (230, 24)])]
+    wkts = [_at(g).wkt for g in COURTYARD + tee]
+    counts = [None, None, None, None, "doors=3"] + [None, None]
+    skel = memory_layer("LineString", wkts, CRS, fields="&field=counts:string",
+                        rows=[(c,) for c in counts], name="wings")
+    _, rows, geoms = _run(qgis_processing, SKELETON=skel, SKELETON_NETWORK=True,
+                          K_SOLUTIONS=2)
+    assert {r["building_id"] for r in rows} == {1, 6}
+    doors = bp.terrace_library().table.set_index("part_id")["doors"]
+    target = shapely.union_all([shapely.buffer(_at(g), 6.0, cap_style="flat",
+                                               join_style="mitre") for g in COURTYARD])
+    solutions = _by_solution(rows, geoms, 1)
+    assert len(solutions) == 2
+    _assert_k_best(solutions)
+    for rows_s, geoms_s in solutions.values():
+        flat = shapely.force_2d(geoms_s)
+        _assert_no_overlaps(flat)
+        assert shapely.symmetric_difference(shapely.union_all(flat), target).area < 1e-3
+        kinds = [r["kind"] for r in rows_s]
+        assert kinds.count("corner") == 4 and kinds.count("tee") == 4
+        assert kinds.count("end_left") + kinds.count("end_right") == 4
+        east = shapely.get_coordinates(shapely.centroid(flat))[:, 0] > X0 + 55
+        assert sum(doors[r["part_id"]] for r, e in zip(rows_s, east) if e) == 3
+    tee_rows = _by_solution(rows, geoms, 6)[1][0]
+    assert [r["kind"] for r in tee_rows].count("tee") == 1
+    bad = memory_layer("LineString", [_at(g).wkt for g in tee], CRS,
+                       fields="&field=counts:string", rows=[("doors>2",), (None,)],
+                       name="bad wings")
+    with pytest.raises(QgsProcessingException, match="'bad wings': feature 1: .*not 'name=n'"):
+        qgis_processing.run(ALG, {"OUTPUT": "memory:", "SKELETON": bad,
+                                  "SKELETON_NETWORK": True})
+
+
+def test_qgis_process_wing_network(tmp_path):
+    """The courtyard building through qgis_process.bin: exit 0, T-parts written."""
+    import geopandas as gpd
+    import pyogrio
+
+    path = tmp_path / "wings.gpkg"
+    gpd.GeoDataFrame({"counts": [None] * len(COURTYARD)},
+                     geometry=[_at(g) for g in COURTYARD], crs=32633).to_file(
+        path, layer="wings", driver="GPKG")
+    target = tmp_path / "building.gpkg"
+    code, out, err = run_qgis_process("synthesizepartbuildings", {
+        "SKELETON": f"{path}|layername=wings", "SKELETON_NETWORK": "true",
+        "OUTPUT": str(target)})
+    assert code == 0, err
+    df = pyogrio.read_dataframe(target)
+    assert df.geometry.is_valid.all() and (df.kind == "tee").sum() == 4
+    assert df.building_id.nunique() == 1

@@ -165,7 +165,7 @@ def test_block_filling_ring(terrace):
 
 def test_far_and_count_constraints_along_a_skeleton(terrace):
     coarse = bp.terrace_library(infill=False)     # 2 m lengths: few floor-area sums
-    assert len(coarse) == 23
+    assert len(coarse) == 26      # 23 parts along a facade line + 3 T-parts
     res = bp.build_along_skeleton(BLOCK, coarse, k=2, far=(2.0, 2.2), site_area=BLOCK.area,
                                   counts={"corner": (4, 4)})
     assert ((res.summary.far >= 2.0 - 1e-9) & (res.summary.far <= 2.2 + 1e-9)).all()

@@ -104,15 +104,12 @@ def check(U, T, bounds, k, **kw):
         with pytest.raises(InfeasibleError):
             solve(U, T, constraints, k=k, **opts)
         with pytest.raises(InfeasibleError):
-            solve(U, T, constraints, k=k, method="graph", **opts)
+            solve(U, T, constraints, k=k, method="explicit", **opts)
         return 0
     sols = solve(U, T, constraints, k=k, **opts)
-    if k == 1:   # the graph and (single resource) the implicit dense solver agree
-        graph = solve(U, T, constraints, k=1, method="graph", **opts)
-        assert graph[0].cost == pytest.approx(sols[0].cost)
-        if len(bounds) == 1:
-            assert solve(U, T, constraints, method="dense", **opts)[0].cost == \
-                pytest.approx(truth[0][0])
+    # the implicit graph and the explicit edge list agree (two independent builders)
+    explicit = solve(U, T, constraints, k=k, method="explicit", **opts)
+    assert np.allclose([s.cost for s in explicit], [s.cost for s in sols], atol=1e-9)
     want = [c for c, _ in truth[:k]]
     assert np.allclose([s.cost for s in sols], want, atol=1e-9), (sols, truth[:k])
     # every returned sequence is feasible, distinct, with the cost it claims
@@ -187,7 +184,7 @@ def test_data_terms_and_end_costs_match_brute_force(seed):
     opts = dict(position_cost=pc, start_cost=sc, end_cost=ec, first=first,
                 last=list(range(1, n)))
     check(U, T, {0: (L, L), 1: (0, int(rng.integers(2, 8)))}, k=4, **opts)
-    check(U, T, {0: (L - 2, L)}, k=1, **opts)   # single resource: the dense solver
+    check(U, T, {0: (L - 2, L)}, k=3, **opts)   # single resource: the dense table
 
 
 def test_brute_force_families_are_not_trivial():
@@ -261,7 +258,7 @@ def test_bad_input_is_rejected():
         solve([[1.0]], np.zeros((2, 2)), [Constraint.equal(0, 3)])
     with pytest.raises(InputError, match="grid"):
         solve([[1.0]], [[0.0]], [Constraint.equal(0, 3)], key_points=[KeyPoint(1.5, (0,))])
-    with pytest.raises(InputError, match="dense method"):
+    with pytest.raises(InputError, match="method"):
         solve([[1.0]], [[0.0]], [Constraint.equal(0, 3)], k=2, method="dense")
     with pytest.raises(InputError, match="states"):
         solve(np.arange(1, 6)[:, None], np.zeros((5, 5)), [Constraint.equal(0, 200)],
@@ -275,3 +272,26 @@ def test_cancellation():
     with pytest.raises(Canceled):
         solve([[1], [2]], np.zeros((2, 2)), [Constraint.equal(0, 30)],
               progress=Progress(is_canceled=canceled))
+
+
+@pytest.mark.parametrize("seed", range(15))
+def test_start_mask_matches_brute_force(seed):
+    """A start mask confines elements to start levels (the substructure copies of a 1.5D
+    structure): the same answers as a data term that forbids the masked starts."""
+    rng = np.random.default_rng(400 + seed)
+    U, T = random_instance(rng, n_res=1 + seed % 2, p_forbid=0.1)
+    n = len(U)
+    L = int(rng.integers(6, 13))
+    mask = rng.uniform(size=(n, L + 1)) < 0.6
+    bounds = {0: (L, L)} if seed % 2 == 0 else {0: (L, L), 1: (0, int(rng.integers(2, 8)))}
+    truth = brute_force(U, T, bounds, position_cost=np.where(mask, 0.0, INF))
+    constraints = [Constraint(r, lo, hi) for r, (lo, hi) in bounds.items()]
+    if not truth:
+        with pytest.raises(InfeasibleError):
+            solve(U, T, constraints, k=3, start_mask=mask)
+        return
+    sols = solve(U, T, constraints, k=3, start_mask=mask)
+    assert np.allclose([s.cost for s in sols], [c for c, _ in truth[:3]], atol=1e-9)
+    for s in sols:
+        starts = np.rint(np.asarray(s.starts)).astype(int)
+        assert mask[list(s.sequence), starts].all()

@@ -44,6 +44,7 @@ from ..core.progress import InputError, Progress, ensure
 from ..network.blocks import shape_metrics
 from ..retrieval import shape_context as sc
 from ..retrieval.database import N_CANDIDATES, BlockDatabase
+from . import frontage
 from .footprint_resynthesis import retarget_layout
 from .footprint_transfer import classify, relax
 
@@ -62,6 +63,8 @@ STREET_WIDTH = 6.0
 MIN_KEEP = 0.5
 #: Footprints smaller than this (m²) after trimming are dropped.
 MIN_AREA = 4.0
+#: A trimmed footprint keeping this share of its area is intact (not a sliver).
+INTACT = 0.9
 #: Distance kept between footprints and from the street offset (m).
 GAP = 0.01
 #: Boundary correspondences (at most) of the re-synthesis warp.
@@ -72,7 +75,14 @@ MAX_BLOCK_AREA = 2.0e6
 
 @dataclass
 class ExampleSet:
-    """A block database prepared for synthesis: footprints as clean polygons per block."""
+    """A block database prepared for synthesis: footprints as clean polygons per block.
+
+    ``frontage_angle``: per database building, its signed angle (radians) to the nearest
+    street of its example block (the block outline runs along the centrelines), NaN when
+    farther than :data:`frontage.REACH` (interior buildings), and ``frontage_offset`` its
+    centroid's distance to that street; ``min_area``: the 10th percentile of the example
+    footprint areas -- a footprint trimmed below it is a sliver.
+    """
 
     db: BlockDatabase
     name: str
@@ -80,6 +90,9 @@ class ExampleSet:
     attributes: pd.DataFrame             # height_m, levels, building_type, building_id
     rows_of_block: Dict[int, np.ndarray]  # block_id -> building rows
     usable: np.ndarray                   # database rows with enough footprints
+    frontage_angle: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    min_area: float = 0.0
+    frontage_offset: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 def prepare_examples(db: BlockDatabase, name: str = "", min_buildings: int = 1) -> ExampleSet:
@@ -109,7 +122,17 @@ def prepare_examples(db: BlockDatabase, name: str = "", min_buildings: int = 1) 
     if len(usable) == 0:
         raise InputError(f"the block database {name or db.path} has no block with at least "
                          f"{min_buildings} footprint(s)")
-    return ExampleSet(db, name or str(db.path), polys, attrs, rows, usable)
+    angle = np.full(len(polys), np.nan)
+    offset = np.full(len(polys), np.nan)
+    if ok.any():
+        segments = frontage.street_segments(db.geometry)
+        rel, dist = frontage.relative_angle(polys[ok], segments)
+        angle[ok] = np.where(dist <= frontage.REACH, rel, np.nan)
+        _, centre_dist = frontage.nearest_street(shapely.centroid(polys[ok]), segments)
+        offset[ok] = np.where(dist <= frontage.REACH, centre_dist, np.nan)
+    min_area = float(np.percentile(shapely.area(polys[ok]), 10)) if ok.any() else 0.0
+    return ExampleSet(db, name or str(db.path), polys, attrs, rows, usable, angle, min_area,
+                      offset)
 
 
 def street_offset(block, street_width: float = STREET_WIDTH, setback: float = 0.0,
@@ -131,12 +154,16 @@ def street_offset(block, street_width: float = STREET_WIDTH, setback: float = 0.
     return shapely.make_valid(area) if not shapely.is_valid(area) else area
 
 
-def legalise(polygons: Sequence, order: Sequence[int], buildable, block):
+def legalise(polygons: Sequence, order: Sequence[int], buildable, block,
+             min_area: float = MIN_AREA):
     """Hard guarantee: footprints inside ``buildable`` (and the block), none overlapping.
 
     Footprints are accepted in ``order``; each is clipped to the buildable area less the
     footprints accepted before it (with a 1 cm gap) and kept when one polygon of at least
-    :data:`MIN_KEEP` of its area remains.
+    :data:`MIN_KEEP` of its area remains, and -- unless it is nearly intact (at least
+    :data:`INTACT` of it) -- at least ``min_area`` m² (no slivers: the example's 10th
+    percentile footprint area in :func:`synthesize_block`); footprints that need no or
+    hardly any cut keep whatever size they have (a shed of the example).
 
     Returns
     -------
@@ -169,7 +196,8 @@ def legalise(polygons: Sequence, order: Sequence[int], buildable, block):
             if len(near):
                 g = shapely.difference(g, shapely.union_all(near))
             g = largest_polygons(np.array([g], dtype=object))[0]
-            if g is None or g.area < max(MIN_KEEP * a0, MIN_AREA):
+            if g is None or g.area < max(MIN_KEEP * a0, MIN_AREA) or \
+                    (g.area < min_area and g.area < INTACT * a0):
                 continue
             taken = np.array(out, dtype=object)
 
@@ -230,8 +258,8 @@ def _retrieve(block, examples: Sequence[ExampleSet], db_choice: int, n_best: int
 def synthesize_block(block, examples: Sequence[ExampleSet], method: str = "transfer",
                      seed: int = 0, block_index: int = 0, street_width: float = STREET_WIDTH,
                      setback: float = 0.0, roads: Optional[Sequence] = None,
-                     db_choice: int = -1, n_best: int = 1, block_id: Optional[int] = None
-                     ) -> BlockLayout:
+                     db_choice: int = -1, n_best: int = 1, block_id: Optional[int] = None,
+                     fill: bool = True) -> BlockLayout:
     """Footprints for one target block (a pure function of its arguments).
 
     Parameters
@@ -247,6 +275,9 @@ def synthesize_block(block, examples: Sequence[ExampleSet], method: str = "trans
     db_choice : database index to use, -1 = the best match over all
     n_best : random choice among this many best matches (1 = always the best)
     block_id : the id written to the output (default block_index + 1)
+    fill : fill the street frontage the layout leaves empty (dead-end streets inside the
+        block, sides of irregular blocks) with the example's street-facing footprints, up
+        to the share of frontage the example block has built (:func:`frontage.fill_frontage`)
 
     Returns
     -------
@@ -257,8 +288,8 @@ def synthesize_block(block, examples: Sequence[ExampleSet], method: str = "trans
     t0 = time.perf_counter()
     bid = block_index + 1 if block_id is None else block_id
     stats = dict(block_id=bid, method=method, example=None, database=None, cost=np.nan,
-                 n_example=0, n_deleted=0, n_conflicted=0, n_placed=0, n_trimmed=0,
-                 n_dropped=0, seconds=0.0)
+                 n_example=0, n_deleted=0, n_conflicted=0, n_turned=0, n_placed=0,
+                 n_trimmed=0, n_dropped=0, n_filled=0, seconds=0.0)
     block = largest_polygons(np.array([block], dtype=object))[0]
     if block is None or block.area <= 0 or block.area > MAX_BLOCK_AREA:
         stats["seconds"] = time.perf_counter() - t0
@@ -277,7 +308,18 @@ def synthesize_block(block, examples: Sequence[ExampleSet], method: str = "trans
     rows = ex.rows_of_block.get(int(match.id), np.zeros(0, np.int64))
     stats.update(example=int(match.id), database=ex.name, cost=match.cost, n_example=len(rows))
     aligned = match.transform(ex.polygons[rows]) if len(rows) else np.zeros(0, object)
+    road_lines = np.asarray(roads if roads is not None else [], dtype=object)
+    if len(road_lines):
+        # the roads inside the block (dead ends), clipped to it
+        road_lines = shapely.intersection(road_lines, shapely.buffer(block, -0.5))
+        road_lines = road_lines[~shapely.is_empty(road_lines)
+                                & (shapely.get_dimensions(road_lines) == 1)]
+    streets = frontage.street_segments(np.r_[np.array([block], dtype=object), road_lines])
     if method == "transfer":
+        # each footprint keeps the angle to its nearest street that it had in the example
+        # block (a rigid fit of two blocks of different shapes turns the frontage)
+        aligned, turn = frontage.align_to_frontage(aligned, ex.frontage_angle[rows], streets)
+        stats["n_turned"] = int((np.abs(turn) > np.radians(1.0)).sum())
         keep, conflicted = classify(aligned, block, buildable)
         stats["n_deleted"] = int((~keep).sum())
         stats["n_conflicted"] = int(conflicted.sum())
@@ -302,24 +344,46 @@ def synthesize_block(block, examples: Sequence[ExampleSet], method: str = "trans
         cand = np.array([p.polygon for p in placements], dtype=object)
         src = rows[np.array([p.element for p in placements], dtype=np.int64)] \
             if placements else np.zeros(0, np.int64)
+        # outside the exact rows (squared to their street already), each element keeps
+        # its example angle to the nearest street, as in the transfer
+        loose = np.array([not p.row for p in placements], dtype=bool)
+        cand, turn = frontage.align_to_frontage(cand, ex.frontage_angle[src], streets,
+                                                mask=loose)
+        stats["n_turned"] = int((np.abs(turn) > np.radians(1.0)).sum())
         kinds = np.array([p.kind for p in placements], dtype=object)
         # placement order: the DP's groups first, interior elements last, large first
         order = np.lexsort((-shapely.area(cand), kinds == "interior")) if len(cand) else []
-    geoms, idx, status = legalise(cand, order, buildable, block)
+    geoms, idx, status = legalise(cand, order, buildable, block, min_area=ex.min_area)
     stats["n_placed"] = len(geoms)
     stats["n_trimmed"] = int(sum(s == "trimmed" for s in status))
     stats["n_dropped"] = len(cand) - len(geoms)
     idx = np.asarray(idx, dtype=np.int64)
-    a = ex.attributes.iloc[src[idx]] if len(idx) else ex.attributes.iloc[[]]
+    sources = src[idx] if len(idx) else np.zeros(0, np.int64)
     placement = [f"{kinds[i]}, trimmed" if s == "trimmed" else str(kinds[i])
                  for i, s in zip(idx, status)]
+    if fill and len(rows):
+        # the frontage the layout left empty (cul-de-sacs, sides of irregular blocks), up
+        # to the share the example block has built
+        facing = rows[np.isfinite(ex.frontage_angle[rows])]
+        share = frontage.served_share([ex.db.geometry[match.index]], ex.polygons[rows])
+        lines = np.r_[np.array([block.exterior], dtype=object), road_lines]
+        added, k = frontage.fill_frontage(geoms, buildable, lines, ex.polygons[facing],
+                                          ex.frontage_angle[facing],
+                                          ex.frontage_offset[facing], share, rng)
+        geoms = list(geoms) + added
+        sources = np.r_[sources, facing[np.asarray(k, dtype=np.int64)]].astype(np.int64)
+        placement += ["filled"] * len(added)
+        stats["n_filled"] = len(added)
+        stats["n_placed"] = len(geoms)
+    a = ex.attributes.iloc[sources] if len(sources) else ex.attributes.iloc[[]]
+    n_out = len(geoms)
     table = pd.DataFrame({
-        "block_id": np.full(len(idx), bid, dtype=np.int64),
+        "block_id": np.full(n_out, bid, dtype=np.int64),
         "height_m": a["height_m"].to_numpy(), "levels": a["levels"].to_numpy(),
         "building_type": a["building_type"].to_numpy(),
-        "source_block": np.full(len(idx), int(match.id), dtype=np.int64),
+        "source_block": np.full(n_out, int(match.id), dtype=np.int64),
         "source_building": a["building_id"].to_numpy(),
-        "database": [ex.name] * len(idx), "method": [method] * len(idx),
+        "database": [ex.name] * n_out, "method": [method] * n_out,
         "placement": placement,
     })
     stats["seconds"] = time.perf_counter() - t0

@@ -9,6 +9,8 @@ Processing algorithm stays a thin adapter:
 - :func:`far_bounds`: an exact target FAR, or an interval, never both;
 - :func:`site_areas`: the site of each building, the block holding most of its skeleton
   (thesis ch. 6: the FAR refers to the plot the building stands on);
+- :func:`wing_networks`: touching wing lines grouped into 1.5D buildings
+  (:mod:`structures`), with the local constraints of their wings;
 - :func:`build_buildings`: every skeleton's building, infeasible ones reported, not fatal.
 
 Nothing here imports QGIS.
@@ -32,10 +34,10 @@ import pandas as pd
 import shapely
 
 from ..core.progress import InputError, Progress, ensure
-from . import parts
+from . import parts, structures
 
-__all__ = ["OUTPUT_FIELDS", "parse_counts", "far_bounds", "site_areas", "BuildingsResult",
-           "build_buildings"]
+__all__ = ["OUTPUT_FIELDS", "parse_counts", "far_bounds", "site_areas", "wing_networks",
+           "BuildingsResult", "build_buildings"]
 
 #: The output table: :attr:`parts.PartsResult.table` with the building each part belongs to.
 OUTPUT_FIELDS = [("building_id", "int"), ("solution", "int"), ("cost", "float"),
@@ -112,6 +114,41 @@ def site_areas(skeletons: Sequence, blocks: Optional[Sequence] = None) -> np.nda
     return area
 
 
+def wing_networks(lines: Sequence, ids: Sequence[int], counts: Sequence[Optional[str]],
+                  library: parts.PartsLibrary, label: str = "the parts"):
+    """1.5D buildings from wing lines (thesis sec. 3.3.4): lines that touch form one
+    building (:func:`structures.connected_networks`); each line's ``counts`` text
+    (``'doors=3; straight=1'``) is a local constraint of that wing.
+
+    Returns
+    -------
+    (MultiLineString per building, its smallest id, {wing index: counts} per building)
+
+    Raises
+    ------
+    InputError
+        Naming the id of a line whose counts text is malformed.
+    """
+    lines = np.asarray(lines, dtype=object)
+    ids = np.asarray(ids)
+    skeletons, building_ids, local = [], [], []
+    for group in structures.connected_networks(lines):
+        skeletons.append(shapely.multilinestrings(lines[group]))
+        building_ids.append(int(ids[group].min()))
+        wings = {}
+        for k, i in enumerate(group):
+            text = counts[i]
+            try:
+                found = parse_counts(None if text is None or pd.isna(text) else str(text),
+                                     library, label)
+            except InputError as err:
+                raise InputError(f"feature {ids[i]}: {err}") from None
+            if found:
+                wings[k] = found
+        local.append(wings)
+    return np.array(skeletons, dtype=object), np.array(building_ids, dtype=np.int64), local
+
+
 @dataclass
 class BuildingsResult:
     """Parts of every building made: ``geometry`` (PolygonZ at each part's base) and
@@ -128,10 +165,12 @@ def build_buildings(skeletons: Sequence, building_ids: Sequence[int], fronts: Se
                     site_area: Optional[np.ndarray] = None, far=None, floor_area=None,
                     counts=None, k: int = 1, corner_tolerance: float = parts.CORNER_TOLERANCE,
                     area_resolution: float = parts.AREA_QUANTUM,
+                    local: Optional[Sequence[dict]] = None,
                     progress: Optional[Progress] = None) -> BuildingsResult:
     """One building of parts per skeleton (:func:`parts.build_along_skeleton`, or
     :func:`parts.stack_floors` on the skeleton polygon as site when ``tower_height`` is
-    given).
+    given, or -- with ``local``, the local constraints of every skeleton's wings --
+    :func:`structures.build_along_network` on wing networks, :func:`wing_networks`).
 
     A skeleton without a feasible sequence is reported in ``failed`` and the others are
     built; when none is feasible, the first reason is raised. Cancellation (progress)
@@ -155,6 +194,10 @@ def build_buildings(skeletons: Sequence, building_ids: Sequence[int], fronts: Se
             if tower_height is not None:
                 result = parts.stack_floors(library, tower_height, site=skeleton,
                                             site_area=site, progress=sub, **options)
+            elif local is not None:
+                result = structures.build_along_network(
+                    skeleton, library, site_area=site, local=local[i],
+                    corner_tolerance=corner_tolerance, progress=sub, **options)
             else:
                 result = parts.build_along_skeleton(
                     skeleton, library, front=front, site_area=site,

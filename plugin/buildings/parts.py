@@ -56,8 +56,9 @@ from .sequences import Constraint, InfeasibleError, KeyPoint
 __all__ = ["PART_KINDS", "PartsLibrary", "PartsResult", "library_from_table",
            "skyscraper_library", "terrace_library", "stack_floors", "build_along_skeleton"]
 
-#: Part kinds: floors stack vertically; the others follow a skeleton in plan.
-PART_KINDS = ("floor", "straight", "corner", "end_left", "end_right")
+#: Part kinds: floors stack vertically; the others follow a skeleton in plan; T-parts sit
+#: at the T-junctions of a skeleton network (:mod:`structures`).
+PART_KINDS = ("floor", "straight", "corner", "end_left", "end_right", "tee")
 #: Length grid of the parts (thesis ch. 6: multiples of 0.2 m) and floor-area grid (1 m²).
 LENGTH_QUANTUM = 0.2
 AREA_QUANTUM = 1.0
@@ -131,10 +132,15 @@ def library_from_table(table: pd.DataFrame, geoms: Optional[Sequence] = None,
     ``part_id`` (row number), ``depth_m`` (footprint area / length, else 10 m), ``levels``
     (height / 3 m, at least 1), ``footprint_m2`` (polygon area, else length x depth),
     ``floor_area_m2`` (footprint x levels), ``area_left_m2`` / ``area_right_m2`` (depth x
-    height; a floor part: its footprint), ``angle_deg`` (90 for corners). Extra numeric
-    columns are kept for count constraints. Without ``transition`` every pair costs the
-    cross-section disagreement (eq. 6.1); end parts can only begin (``end_left``) or end
-    (``end_right``) a sequence and floors only follow floors.
+    height; a floor part: its footprint), ``angle_deg`` (90 for corners). A T-part (kind
+    ``tee``, thesis Fig. 6.4: three cross-sections, two length attributes) also has
+    ``branch_m`` (how far it reaches into the branch, from the junction's centre; default
+    ``depth_m / 2``: no stub) and ``area_branch_m2`` (its branch-side cross-section,
+    default depth x height); its ``length_m`` along the through wing must be at least
+    ``depth_m`` (the branch must fit). Extra numeric columns are kept for count
+    constraints. Without ``transition`` every pair costs the cross-section disagreement
+    (eq. 6.1); end parts can only begin (``end_left``) or end (``end_right``) a sequence and
+    floors only follow floors.
 
     Raises :class:`InputError` naming ``name`` for missing columns, unknown kinds,
     non-positive lengths or heights.
@@ -188,6 +194,19 @@ def library_from_table(table: pd.DataFrame, geoms: Optional[Sequence] = None,
             t[side] = np.where(floors, t["footprint_m2"], t["depth_m"] * t["height_m"])
     if "angle_deg" not in t.columns:
         t["angle_deg"] = np.where(t["kind"] == "corner", 90.0, 0.0)
+    tee = (t["kind"] == "tee").to_numpy()
+    if "branch_m" not in t.columns:
+        t["branch_m"] = np.where(tee, t["depth_m"] / 2, 0.0)
+    t["branch_m"] = pd.to_numeric(t["branch_m"], errors="coerce").fillna(0.0)
+    t["branch_m"] = np.round(np.round(t["branch_m"] / LENGTH_QUANTUM) * LENGTH_QUANTUM, 6)
+    if "area_branch_m2" not in t.columns:
+        t["area_branch_m2"] = np.where(tee, t["depth_m"] * t["height_m"], 0.0)
+    bad_tee = tee & ((t["length_m"] < t["depth_m"] - 1e-6)
+                     | (t["branch_m"] < t["depth_m"] / 2 - 1e-6)).to_numpy()
+    if bad_tee.any():
+        raise InputError(f"{name}: T-part(s) {t.part_id[bad_tee].tolist()} must be at least "
+                         "depth_m long (length_m) and reach depth_m / 2 into the branch "
+                         "(branch_m)")
     # a corner turning towards the building needs legs reaching the inner mitre point
     corner = (t["kind"] == "corner").to_numpy()
     need = t["depth_m"] * np.tan(np.radians(np.clip(t["angle_deg"], 0, 179)) / 2)
@@ -256,13 +275,16 @@ def terrace_library(depth: float = 12.0, infill: bool = True) -> PartsLibrary:
       a third 90° part with 15.6 m legs takes turns up to 105°) and -30°, -60°, -90°
       (reflex corners), 4 levels, one 90° part with 5; with :data:`CORNER_TOLERANCE` turns
       of 15-135° (convex) and 15-105° (reflex) are covered;
-    - left and right end parts, 6 m, 3 and 4 levels.
+    - left and right end parts, 6 m, 3 and 4 levels;
+    - three T-parts for skeleton networks (:func:`structures.build_along_network`):
+      ``depth`` long with no stub, 4 and 5 levels, and ``depth`` + 4 m long reaching 4 m
+      into the branch past the through wing, with a door.
 
     Transitions: the cross-section disagreement (depth x height), so that neighbours of
     equal height are free; end parts only at the ends.
 
     ``infill=False`` leaves out the 4.2-5.0 m parts (and the 105° and 120° corners): 23
-    parts whose lengths are whole multiples of 2 m, so that only skeletons with such side
+    facade parts (+ the 3 T-parts) whose lengths are whole multiples of 2 m, so that only skeletons with such side
     lengths can be filled, but floor-area / FAR constraints stay cheap (the floor-area sums
     are few); with the infill parts a FAR interval multiplies the graph by the many
     distinct floor-area sums (use a coarse ``area_resolution`` then).
@@ -289,16 +311,25 @@ def terrace_library(depth: float = 12.0, infill: bool = True) -> PartsLibrary:
     for kind in ("end_left", "end_right"):
         for levels in (3, 4):
             rows.append(dict(kind=kind, length_m=6.0, levels=levels, doors=0, balconies=levels))
+    # T-parts for skeleton networks (centreline placement, :mod:`structures`): the plain
+    # crossing (depth x depth) and a wider one with a 4 m stub into the branch and a door
+    for extra, levels, doors in ((0.0, 4, 0), (0.0, 5, 0), (4.0, 4, 1)):
+        rows.append(dict(kind="tee", length_m=depth + extra, branch_m=depth / 2 + extra,
+                         levels=levels, doors=doors, balconies=levels))
     t = pd.DataFrame(rows)
     t["angle_deg"] = t["angle_deg"].fillna(0.0)
+    t["branch_m"] = t["branch_m"].fillna(0.0)
     t["depth_m"] = depth
     t["height_m"] = 3.0 * t["levels"]
     t["part_id"] = [f"{k[0].upper()}{i}" for i, k in enumerate(t["kind"])]
     # a corner's footprint: the two legs thickened by the depth (its placed area at its angle)
     fp = []
-    for kind, length, angle in zip(t["kind"], t["length_m"], t["angle_deg"]):
+    for kind, length, angle, branch in zip(t["kind"], t["length_m"], t["angle_deg"],
+                                           t["branch_m"]):
         if kind == "corner":
             fp.append(_corner_area(length / 2, depth, angle))
+        elif kind == "tee":
+            fp.append(length * depth + (branch - depth / 2) * depth)
         else:
             fp.append(length * depth)
     t["footprint_m2"] = fp
@@ -575,7 +606,7 @@ def build_along_skeleton(skeleton, library: PartsLibrary, *, front: str = "right
     R, res, names = _resource_matrix(library, counts, area_resolution)
     area = _area_bounds(floor_area, far, site_area)
     key_only = np.isin(kind, ("corner", "end_left", "end_right"))
-    usable = kind != "floor"
+    usable = ~np.isin(kind, ("floor", "tee"))
     trans = library.transition.copy()
     trans[~usable, :] = np.inf
     trans[:, ~usable] = np.inf

@@ -15,21 +15,28 @@ graph** (thesis sec. 3.3.1): a DAG whose nodes are the signatures ``(e, rc)`` --
 ``e`` placed after ``rc - r(e)`` was consumed, ``rc`` the consumption including ``e`` --
 and whose source-to-sink paths are exactly the feasible sequences.
 
-- **Construction by resource consumption, not by cost** (:func:`build_graph`). Resources
-  are quantised to a grid (``resolution``: 0.2 m lengths, 1 m² floor areas in the thesis);
-  the first resource is the *primary* one (length, height): every element consumes at least
-  one grid step of it and it must be bounded above, so consumption orders the graph. The
-  forward sweep grows the states level by level from the source, vectorised over whole
-  waves of states (numpy), a node being created only if its signature is new.
-- **Pruning.** (a) overflow / underflow: a state is never created when it exceeds an
-  upper bound, or when even the most (least) resource-dense elements cannot reach (stay
-  under) a bound within the primary budget that is left; (b) dead ends: the backward sweep
-  from the sink (breadth-first search on the reversed graph, scipy) keeps only the nodes
-  that can still complete a feasible sequence. The node set is the thesis's bidirectionally
-  grown graph (the nodes on a source-sink path); the growth here is forward then backward
-  rather than interleaved, which gives the same graph. Infeasible problems (a 50 m street
-  from 20 m buildings) are detected when nothing reaches the sink.
-- **Several resources, equality and interval constraints**: states carry the vector of
+- **Construction by resource consumption, not by cost.** Resources are quantised to a
+  grid (``resolution``: 0.2 m lengths, 1 m² floor areas in the thesis) and become integers;
+  the first resource is the *primary* one (length, height): every element consumes at
+  least one grid step of it and it must be bounded above, so its consumption orders the
+  graph in levels.
+- **Kept implicit** (:class:`ImplicitGraph`, ``method="graph"``, the default): the node
+  set per primary level (the secondary consumptions present, as integer codes, and per
+  code and element the cost of the cheapest prefix); no edge is stored -- the in-edges of
+  ``(e, rc)`` are the nodes ``(e', rc - r(e))`` of its allowed predecessors, derived on
+  demand. The nodes are grown level by level with one vectorised min-plus product of a
+  level's cost table with the transitions (with one resource, ``min r_0`` levels at once).
+  ``method="explicit"`` materialises every edge (:func:`build_graph`), the former
+  engine, kept as a reference: same graph, same answers, 20-40 bytes per edge.
+- **Pruning.** (a) overflow / underflow: a node is never created when it exceeds an
+  upper bound or can no longer be completed -- the *backward growth* from the sink gives,
+  per secondary resource, the set of (level, consumption) pairs from which the bounds are
+  still reachable by elements allowed where they would start (the thesis's backward
+  tree with the elements merged, a relaxation, so exact pruning); (b) dead ends: the k
+  best paths are enumerated backwards from the sink, so nodes on no source-sink path are
+  never visited. Infeasible problems (a 50 m street from 20 m buildings) are detected
+  when nothing reaches the sink.
+- **Several resources, equality and interval constraints**: nodes carry the vector of
   every constrained resource; unconstrained resources are only summed for the report.
 - **Key points** (thesis sec. 3.3.4, "structure"): a :class:`KeyPoint` forces one of a set
   of elements to sit at a primary position -- a corner part at a skeleton vertex, end
@@ -38,22 +45,23 @@ and whose source-to-sink paths are exactly the feasible sequences.
   element may touch the key point* (its closed extent may not contain it), so an element
   anchored at its start can only begin the sequence and one anchored at its end only end
   it. ``key_only`` elements (corners) appear nowhere but at key points that list them.
+  ``start_mask`` confines elements to given start levels: the substructure copies of a
+  1.5D structure (:mod:`structures`: T-junctions, virtual duplicates, local constraints).
 - **Data terms**: ``position_cost[e, l]`` is added when ``e`` starts at grid level ``l``
   (the overlap data term of the footprint re-synthesis, thesis eq. 5.1), ``start_cost``
   and ``end_cost`` on the first and last element (a closed loop's closing transition).
-- **Best and k best** (:func:`k_best`): the graph is a DAG in consumption order, so the
-  shortest path (Dijkstra in the thesis) is a dynamic program over the levels, vectorised;
-  the k best paths come from the Recursive Enumeration Algorithm of Jimenez and Marzal
-  (1999), an exact k-shortest-paths algorithm equivalent in its output to Eppstein's
-  (1998): the j-th solution is optimal among the sequences not in the first j-1. Every
-  sequence is one path (its states are determined by the sequence), so the k solutions are
-  distinct sequences, in non-decreasing cost. For k = 1 with only the primary resource
-  constrained (a frontage of exact length) :func:`solve` keeps the same DAG implicit, as
-  an (elements x levels) cost table relaxed level by level (``method="dense"``).
+- **Best and k best** (:meth:`ImplicitGraph.k_best`, :func:`k_best`): the graph is a DAG
+  in consumption order, so the shortest-path labels (Dijkstra's in the thesis) are set
+  level by level; the k best paths come from the Recursive Enumeration Algorithm of
+  Jimenez and Marzal (1999), an exact k-shortest-paths algorithm equivalent in its output
+  to Eppstein's (1998), run lazily from the sink: the j-th solution is optimal among the
+  sequences not in the first j-1. Every sequence is one path (its nodes are determined
+  by the sequence), so the k solutions are distinct sequences, in non-decreasing cost.
 
 Complexity for one resource: at most ``n`` nodes per level, ``d`` successors each, ``L``
-levels: O(L d n) (thesis sec. 3.4). Not implemented: 1.5D structures (T-junction parts
-with virtual duplicates, sec. 3.3.4); :mod:`building_parts` cuts closed loops itself.
+levels: O(L d n) time (thesis sec. 3.4), O(L n) memory (no edges). Not implemented:
+dominance between nodes of different secondary consumption (it does not hold under
+equality constraints, whose completions differ).
 
 Worked example -- a 10 m frontage from a 3 m house (``0``), a 4 m house (``1``) and 1 m
 of empty space (``2``); a house may not follow itself (repetition cost), the whole row must
@@ -268,15 +276,20 @@ def _bounds(constraints: Sequence[Constraint], m: int, res: np.ndarray):
     return order, lo_u, hi_u
 
 
-def _start_mask(n, H0, U0, anchor, key_points, res0, first, key_only, position_cost):
-    """allowed[e, l]: may element e start at primary level l? (key points, first, data term)."""
+def _start_mask(n, H0, U0, anchor, key_points, res0, first, key_only, position_cost,
+                start_mask):
+    """allowed[e, l]: may element e start at primary level l? (key points, first, data term,
+    the caller's mask). Also returns the largest key point position (the sequence must
+    reach it)."""
     allowed = np.ones((n, H0 + 1), dtype=bool)
+    if start_mask is not None:
+        allowed &= start_mask
     if position_cost is not None:
         allowed &= np.isfinite(position_cost)
     allowed[~first, 0] = False
     levels = np.arange(H0 + 1)
     satisfying_any = np.zeros((n, H0 + 1), dtype=bool)
-    key_positions = []
+    key_positions = [0]
     for kp in key_points:
         p = int(round(kp.position / res0))
         if abs(p * res0 - kp.position) > 1e-6 * max(1.0, abs(kp.position)) + 1e-9:
@@ -285,14 +298,17 @@ def _start_mask(n, H0, U0, anchor, key_points, res0, first, key_only, position_c
         if p < 0 or p > H0:
             raise InfeasibleError(f"key point {kp.position:g} lies outside the length bound")
         members = _as_mask(kp.elements, n, "key point elements")
-        touches = (levels[None, :] <= p) & (p <= levels[None, :] + U0[:, None])
-        satisfying = members[:, None] & (levels[None, :] + anchor[:, None] == p)
-        allowed &= ~touches | satisfying
-        satisfying_any |= satisfying
+        # only the start levels from which an element's closed extent reaches p
+        lo = max(p - int(U0.max()), 0)
+        lv = levels[lo:p + 1]
+        touches = lv[None, :] + U0[:, None] >= p
+        satisfying = members[:, None] & (lv[None, :] + anchor[:, None] == p)
+        allowed[:, lo:p + 1] &= ~touches | satisfying
+        satisfying_any[:, lo:p + 1] |= satisfying
         key_positions.append(p)
     if key_only.any():
         allowed[key_only] &= satisfying_any[key_only]
-    return allowed, (max(key_positions) if key_positions else 0)
+    return allowed, max(key_positions)
 
 
 class _Grow:
@@ -323,7 +339,7 @@ def _prepare(resources, transition, constraints: Sequence[Constraint], *,
              resolution=None, key_points: Sequence[KeyPoint] = (), first=None, last=None,
              key_only=None, anchor=None,
              position_cost: Union[None, np.ndarray, Callable[[np.ndarray], np.ndarray]] = None,
-             start_cost=None, end_cost=None, max_states: int = MAX_STATES,
+             start_cost=None, end_cost=None, start_mask=None, max_states: int = MAX_STATES,
              progress: Optional[Progress] = None) -> dict:
     """Validate and quantise the input; the start mask (see :func:`build_graph`)."""
     progress = ensure(progress)
@@ -386,8 +402,13 @@ def _prepare(resources, transition, constraints: Sequence[Constraint], *,
     e_cost = _cost_vector(end_cost, n, "end_cost")
     first_m &= np.isfinite(s_cost)
     last_m &= np.isfinite(e_cost)
+    if start_mask is not None:
+        start_mask = np.asarray(start_mask, dtype=bool)
+        if start_mask.ndim != 2 or start_mask.shape[0] != n or start_mask.shape[1] < H0 + 1:
+            raise InputError(f"start_mask must be ({n}, >= {H0 + 1}), got {start_mask.shape}")
+        start_mask = start_mask[:, :H0 + 1]
     allowed, last_key = _start_mask(n, H0, U0, anchor_u, key_points, res[0], first_m,
-                                    key_only_m, PC)
+                                    key_only_m, PC, start_mask)
     return dict(n=n, H0=H0, U=U, U0=U0, UC=UC, lo_c=lo_c, hi_c=hi_c, max_rate=max_rate,
                 min_rate=min_rate, allowed=allowed, last_key=last_key, T=T, order=order,
                 last_m=last_m, PC=PC, s_cost=s_cost, e_cost=e_cost, R=R, res=res,
@@ -398,7 +419,7 @@ def build_graph(resources, transition, constraints: Sequence[Constraint], *,
                 resolution=None, key_points: Sequence[KeyPoint] = (), first=None, last=None,
                 key_only=None, anchor=None,
                 position_cost: Union[None, np.ndarray, Callable[[np.ndarray], np.ndarray]] = None,
-                start_cost=None, end_cost=None, max_states: int = MAX_STATES,
+                start_cost=None, end_cost=None, start_mask=None, max_states: int = MAX_STATES,
                 progress: Optional[Progress] = None) -> IntermediateGraph:
     """Build the pruned feasible intermediate graph (thesis sec. 3.3.1-3.3.4).
 
@@ -430,6 +451,9 @@ def build_graph(resources, transition, constraints: Sequence[Constraint], *,
         the real start positions ``l * resolution[0]`` and returns the (n, H+1) array.
     start_cost, end_cost : (n,) array_like, optional
         Extra cost of an element at the front / back (``inf`` forbids).
+    start_mask : (n, >= H+1) bool array, optional
+        Where each element may start (grid levels): the substructure copies of a 1.5D
+        structure (:func:`parts.build_along_network`) are confined to their stretch so.
     max_states : int
         Raise :class:`InputError` rather than build a larger graph.
 
@@ -447,7 +471,8 @@ def build_graph(resources, transition, constraints: Sequence[Constraint], *,
     p = _prepare(resources, transition, constraints, resolution=resolution,
                  key_points=key_points, first=first, last=last, key_only=key_only,
                  anchor=anchor, position_cost=position_cost, start_cost=start_cost,
-                 end_cost=end_cost, max_states=max_states, progress=progress)
+                 end_cost=end_cost, start_mask=start_mask, max_states=max_states,
+                 progress=progress)
     return _graph(**p)
 
 
@@ -723,94 +748,435 @@ def k_best(g: IntermediateGraph, k: int = 1) -> List[Tuple[float, List[int]]]:
     return out
 
 
-def _dense_best(n, H0, U, U0, lo_c, hi_c, allowed, last_key, T, order, last_m, PC, s_cost,
-                e_cost, progress, **_) -> Optional[Tuple[float, List[int], List[int]]]:
-    """k = 1 with only the primary resource constrained: the same DAG, kept implicit.
+# --------------------------------------------------------------------------- implicit graph
 
-    ``D[e, c]``: cheapest prefix ending with ``e`` at consumption ``c``; levels in order,
-    each relaxing all (predecessor, successor) pairs at once (an n x n minimum), so the
-    cost is O(L n^2) vectorised with no node tables (the frontage sequences of ch. 5.2).
-    Returns (cost, elements, ends) or None when infeasible.
+#: Node keys of the implicit graph: (primary level p including the element, secondary
+#: consumption code, element); the source and the sink.
+SOURCE = (-1, -1, -1)
+SINK = (-2, -2, -2)
+#: Largest temporary (entries) of one min-plus product of a level's cost table.
+_CHUNK = 1 << 21
+#: Largest backward completion sets (levels x secondary values, booleans) kept.
+_BACKWARD_CELLS = 1 << 28
+
+
+class ImplicitGraph:
+    """The pruned feasible intermediate graph of thesis sec. 3.3.1, kept implicit.
+
+    A node of the thesis's graph is the signature ``N(e, l, rc)``: element ``e`` with the
+    resource vector ``rc`` consumed up to and including it. Its in-edges need no storage:
+    they come from the nodes ``(e', rc - r(e))`` of every allowed predecessor ``e'``, at a
+    cost of ``delta(e', e)`` (+ the position data term of ``e``). So only the node set is
+    kept, grouped by primary level ``p = rc_0`` (every element advances the primary, which
+    orders the DAG): per level, the sorted integer codes of the secondary consumptions
+    present and, per code and element, the cost of the cheapest prefix reaching that node
+    (Dijkstra's distance label; ``inf``: no such node). With no secondary resource the
+    table is one dense ``(levels x elements)`` array. Memory: 8 bytes per (code, element)
+    cell of a level; no edge is ever stored (the thesis's 1000 m street: 25.5 M edges).
+
+    The k best paths are then enumerated lazily from the sink
+    (:meth:`k_best`, the recursive enumeration algorithm), which only ever visits nodes
+    that lie on a source-sink path: the thesis's dead-end pruning is implicit.
     """
-    D = np.full((n, H0 + 1), np.inf)
-    P = np.full((n, H0 + 1), -1, dtype=np.int64)
-    col = np.arange(n)
-    e0 = np.flatnonzero(allowed[:, 0] & (U0 <= H0))
-    D[e0, U0[e0]] = s_cost[e0] + (PC[e0, 0] if PC is not None else 0.0)
-    T_or_inf = np.where(np.isfinite(T), T, np.inf)
-    for lvl in range(1, H0):
-        ends = D[:, lvl]
-        live = np.isfinite(ends)
-        if not live.any():
-            continue
-        cand = ends[live, None] + T_or_inf[live]
-        arg = cand.argmin(axis=0)
-        inc = cand[arg, col] + (PC[:, lvl] if PC is not None else 0.0)
-        tgt = lvl + U0
-        ok = allowed[:, lvl] & (tgt <= H0) & np.isfinite(inc)
-        if not ok.any():
-            continue
-        e_ok, t_ok = col[ok], tgt[ok]
-        better = inc[ok] < D[e_ok, t_ok]
-        D[e_ok[better], t_ok[better]] = inc[ok][better]
-        P[e_ok[better], t_ok[better]] = np.flatnonzero(live)[arg[ok][better]]
-        if lvl % 256 == 0:
-            progress.step(0.9 * lvl / H0)
-    c_lo = max(int(lo_c[0]), int(last_key), 1)
-    total = D[:, c_lo:H0 + 1] + e_cost[:, None]
-    total[~last_m] = np.inf
-    if not np.isfinite(total).any():
-        return None
-    e, c = np.unravel_index(np.argmin(total), total.shape)
-    cost = float(total[e, c])
-    c += c_lo
-    seq, ends = [], []
-    while e >= 0:
-        seq.append(int(e))
-        ends.append(int(c))
-        e, c = P[e, c], c - U0[e]
-    return cost, seq[::-1], ends[::-1]
+
+    def __init__(self, p: dict):
+        self.p = p
+        n, H0 = p["n"], p["H0"]
+        UC = p["UC"]
+        self.n, self.H0 = n, H0
+        self.U0 = p["U0"]
+        self.secondary = UC[:, 1:]
+        self.lo_s, self.hi_s = p["lo_c"][1:], p["hi_c"][1:]
+        radix = self.hi_s + 1
+        if n * float(np.prod(radix.astype(np.float64))) >= 2.0 ** 62:
+            raise InputError("too many resource combinations to index; coarsen the resolution "
+                             "of the secondary resources")
+        self.stride = np.concatenate([[1], np.cumprod(radix[:-1])]).astype(np.int64) \
+            if len(radix) else np.zeros(0, dtype=np.int64)
+        self.radix = radix
+        self.code_e = self.secondary @ self.stride if len(radix) else np.zeros(n, np.int64)
+        T = p["T"]
+        self.T = T
+        PC = p["PC"]
+        self.PCt = None if PC is None else np.ascontiguousarray(PC.T)
+        levels = np.arange(H0 + 1)
+        # ok[l, e]: e may start at level l and end within the primary bound
+        self.ok = np.ascontiguousarray(
+            (p["allowed"] & (levels[None, :] + self.U0[:, None] <= H0)).T)
+        self.n_states = 0
+        self.dense = len(radix) == 0
+        if self.dense:
+            self._build_dense()
+        else:
+            self._build_sparse()
+
+    # -- construction ---------------------------------------------------------------
+
+    def _source_states(self):
+        """Elements allowed at the front: (element, cost) at their own end level."""
+        p = self.p
+        e0 = np.flatnonzero(self.ok[0])
+        c0 = p["s_cost"][e0] + (self.PCt[0, e0] if self.PCt is not None else 0.0)
+        if not self.dense:
+            ok = self._feasible(self.secondary[e0][None], (self.U0[e0])[None])[0]
+            e0, c0 = e0[ok], c0[ok]
+        return e0, c0
+
+    def _guard(self, added: int) -> None:
+        self.n_states += added
+        if self.n_states > self.p["max_states"]:
+            raise InputError(f"the intermediate graph exceeds {self.p['max_states']} states; "
+                             "coarsen the resolution or tighten the constraints")
+
+    def _build_dense(self) -> None:
+        """One resource: ``D[p, e]`` relaxed by a min-plus product with the transitions.
+
+        No element advances the primary by less than ``w = min r_0(e)`` steps, so the rows
+        of ``w`` consecutive levels depend only on earlier ones: they are relaxed together
+        (one vectorised product per ``w`` levels; 30 for the thesis's street of 6-30 m
+        buildings on the 0.2 m grid).
+        """
+        n, H0, U0, T = self.n, self.H0, self.U0, self.T
+        progress = self.p["progress"]
+        D = np.full((H0 + 1, n), np.inf)
+        e0, c0 = self._source_states()
+        D[U0[e0], e0] = c0
+        finite_T = np.isfinite(T)
+        width = int(U0.min())
+        budget = max(1, _CHUNK // (n * n))
+        q, reported = 1, 0
+        while q < H0:
+            rows = D[q:min(q + width, H0)]
+            live = rows < np.inf
+            A = np.flatnonzero(live.any(axis=0))
+            if not len(A):
+                q += len(rows)
+                continue
+            ok = self.ok[q:q + len(rows)]
+            B = np.flatnonzero(ok.any(axis=0) & finite_T[A].any(axis=0))
+            if len(B):
+                sub = T[np.ix_(A, B)]
+                for a in range(0, len(rows), budget):
+                    r = rows[a:a + budget, A]
+                    cand = (r[:, :, None] + sub[None]).min(axis=1)
+                    lv = q + a + np.arange(len(r))
+                    if self.PCt is not None:
+                        cand += self.PCt[lv][:, B]
+                    # (level, element) targets are distinct within one product
+                    i, j = np.nonzero(ok[a:a + len(r)][:, B] & (cand < np.inf))
+                    tgt, col = lv[i] + U0[B[j]], B[j]
+                    D[tgt, col] = np.minimum(D[tgt, col], cand[i, j])
+            q += len(rows)
+            if q - reported >= 512:
+                reported = q
+                progress.step(0.9 * q / H0)
+        self.D = D
+        self._guard(int(np.isfinite(D).sum()))
+
+    def _backward_sets(self) -> None:
+        """The backward growth (thesis sec. 3.3.1, from the sink): per secondary resource
+        ``i``, ``G_i[p, c]`` is True when a prefix that consumed ``p`` primary steps and
+        ``c`` of resource ``i`` can still be completed -- by elements allowed where they
+        would start, ending in a terminal level with ``lo_i <= total <= hi_i``.
+
+        The sets merge the thesis's backward tree over the elements (transitions are
+        ignored: a relaxation), so they never cut a completable prefix; the forward growth
+        creates a node only where every ``G_i`` allows it. This is exact over-/underflow
+        pruning: a prefix that no multiset of allowed elements can complete is never made.
+        Grown level by level from the top, ``min r_0`` levels at a time; left out (the
+        weaker rate bounds only) when the sets would exceed :data:`_BACKWARD_CELLS`.
+        """
+        H0, U0 = self.H0, self.U0
+        self.G = None
+        if (H0 + 1) * int(self.radix.sum()) > _BACKWARD_CELLS:
+            return
+        top = max(int(self.p["lo_c"][0]), int(self.p["last_key"]), 1)
+        width = int(U0.min())
+        sets = []
+        for i in range(len(self.radix)):
+            R, lo, hi = int(self.radix[i]), int(self.lo_s[i]), int(self.hi_s[i])
+            G = np.zeros((H0 + 1, R), dtype=bool)
+            G[top:, lo:hi + 1] = True
+            pairs, group = np.unique(np.c_[U0, self.secondary[:, i]], axis=0,
+                                     return_inverse=True)
+            group = group.ravel()
+            starts = np.zeros((H0 + 1, len(pairs)), dtype=bool)
+            for g in range(len(pairs)):
+                starts[:, g] = self.ok[:, group == g].any(axis=1)
+            hi_lvl = H0 - 1
+            while hi_lvl >= 0:
+                lo_lvl = max(0, hi_lvl - width + 1)
+                lv = np.arange(lo_lvl, hi_lvl + 1)
+                for g, (a, b) in enumerate(pairs):
+                    at = lv[starts[lo_lvl:hi_lvl + 1, g]]
+                    if not len(at) or b >= R:
+                        continue
+                    G[at, :R - b] |= G[at + a, b:]
+                hi_lvl = lo_lvl - 1
+            sets.append(G)
+        self.G = sets
+
+    def _feasible(self, c: np.ndarray, p_new: np.ndarray) -> np.ndarray:
+        """May a node with secondary consumption ``c`` (..., m) end at primary level
+        ``p_new`` (broadcast)? Within the upper bounds and completable: the backward sets,
+        or (when too large to keep) the bounds still reachable at the extreme rates."""
+        p = self.p
+        hi, lo = self.hi_s, self.lo_s
+        ok = (c <= hi).all(axis=-1)
+        if self.G is not None:
+            pn = np.broadcast_to(p_new, ok.shape)
+            for i, G in enumerate(self.G):
+                ci = np.minimum(c[..., i], hi[i])
+                ok &= G[pn, ci]
+            return ok
+        rest = (self.H0 - p_new)[..., None]
+        need = np.maximum(p["lo_c"][0] - p_new, 0)[..., None]
+        ok &= (c + rest * p["max_rate"][1:] >= lo - 1e-9).all(axis=-1)
+        ok &= (c + need * p["min_rate"][1:] <= hi + 1e-9).all(axis=-1)
+        return ok
+
+    def _decode(self, codes: np.ndarray) -> np.ndarray:
+        return (codes[:, None] // self.stride[None, :]) % self.radix[None, :]
+
+    def _build_sparse(self) -> None:
+        """Several resources: per level, the codes present and a (codes x elements) table."""
+        n, H0, U0, T = self.n, self.H0, self.U0, self.T
+        progress = self.p["progress"]
+        finite_T = np.isfinite(T)
+        self._backward_sets()
+        self.codes: List[Optional[np.ndarray]] = [None] * (H0 + 1)
+        self.cols: List[Optional[np.ndarray]] = [None] * (H0 + 1)
+        self.D: List[Optional[np.ndarray]] = [None] * (H0 + 1)
+        pending: Dict[int, list] = {}
+        by_size = np.argsort(U0, kind="stable")
+
+        def push(levels_new, codes, elems, cost):
+            # contributions to later levels (levels_new non-decreasing), one batch per level
+            if not len(levels_new):
+                return
+            cut = np.r_[0, np.flatnonzero(np.diff(levels_new)) + 1, len(levels_new)]
+            for a, b in zip(cut[:-1], cut[1:]):
+                pending.setdefault(int(levels_new[a]), []).append(
+                    (codes[a:b], elems[a:b], cost[a:b]))
+
+        e0, c0 = self._source_states()
+        o = np.argsort(U0[e0], kind="stable")
+        push(U0[e0][o], self.code_e[e0][o], e0[o], c0[o])
+        for q in range(1, H0 + 1):
+            batch = pending.pop(q, None)
+            if batch is None:
+                continue
+            codes = np.concatenate([b[0] for b in batch])
+            elems = np.concatenate([b[1] for b in batch])
+            cost = np.concatenate([b[2] for b in batch])
+            uc, row = np.unique(codes, return_inverse=True)
+            full = np.full(len(uc) * n, np.inf)
+            np.minimum.at(full, row * n + elems, cost)
+            full = full.reshape(len(uc), n)
+            ue = np.flatnonzero((full < np.inf).any(axis=0))
+            Dq = full[:, ue]
+            self.codes[q], self.cols[q], self.D[q] = uc, ue, Dq
+            self._guard(int((Dq < np.inf).sum()))
+            if q % 64 == 0:
+                progress.step(0.9 * q / H0)
+            if q == H0:
+                break
+            B = by_size[self.ok[q, by_size] & finite_T[ue][:, by_size].any(axis=0)]
+            if not len(B):
+                continue
+            # min-plus product of the level's table with the transitions, in chunks
+            sub = T[np.ix_(ue, B)]
+            step = max(1, _CHUNK // max(1, len(ue) * len(B)))
+            if step >= len(uc):
+                cand = (Dq[:, :, None] + sub[None]).min(axis=1)
+            else:
+                cand = np.empty((len(uc), len(B)))
+                for a in range(0, len(uc), step):
+                    cand[a:a + step] = (Dq[a:a + step, :, None] + sub[None]).min(axis=1)
+            if self.PCt is not None:
+                cand += self.PCt[q, B][None, :]
+            p_new = q + U0[B]
+            c_new = self._decode(uc)[:, None, :] + self.secondary[B][None, :, :]
+            ok = (cand < np.inf) & self._feasible(c_new, p_new[None, :])
+            b_i, r_i = np.nonzero(ok.T)          # grouped by element: p_new non-decreasing
+            if len(b_i):
+                push(p_new[b_i], uc[r_i] + self.code_e[B[b_i]], B[b_i], cand[r_i, b_i])
+
+    # -- access ---------------------------------------------------------------------
+
+    def _row(self, p: int, code: int):
+        """(elements, costs) of the nodes at level p with secondary code ``code``."""
+        if self.dense:
+            return None, self.D[p]
+        codes = self.codes[p]
+        if codes is None:
+            return None, None
+        i = int(np.searchsorted(codes, code))
+        if i == len(codes) or codes[i] != code:
+            return None, None
+        return self.cols[p], self.D[p][i]
+
+    def in_edges(self, v) -> List[tuple]:
+        """(cost through the best path of u, u, edge cost) for every in-neighbour u of v."""
+        if v == SINK:
+            return self.sink_edges()
+        p, code, e = v
+        q = p - int(self.U0[e])
+        w0 = 0.0 if self.PCt is None else float(self.PCt[q, e])
+        if q == 0:
+            if code == int(self.code_e[e]) and self.ok[0, e]:
+                w = float(self.p["s_cost"][e]) + w0
+                return [(w, SOURCE, w)]
+            return []
+        prev = code - int(self.code_e[e])
+        cols, dist = self._row(q, prev)
+        if dist is None:
+            return []
+        w = self.T[cols if cols is not None else slice(None), e] + w0
+        c = dist + w
+        idx = np.flatnonzero(np.isfinite(c))
+        el = idx if cols is None else cols[idx]
+        return [(float(c[i]), (q, prev, int(x)), float(w[i])) for i, x in zip(idx, el)]
+
+    def sink_edges(self) -> List[tuple]:
+        """The terminal nodes: allowed at the back, every bound met, past the key points."""
+        p = self.p
+        last_m, e_cost = p["last_m"], p["e_cost"]
+        out = []
+        for lvl in range(max(int(p["lo_c"][0]), int(p["last_key"]), 1), self.H0 + 1):
+            if self.dense:
+                c = self.D[lvl] + e_cost
+                idx = np.flatnonzero(np.isfinite(c) & last_m)
+                out += [(float(c[i]), (lvl, 0, int(i)), float(e_cost[i])) for i in idx]
+                continue
+            codes = self.codes[lvl]
+            if codes is None:
+                continue
+            cons = self._decode(codes)
+            rows = np.flatnonzero(((cons >= self.lo_s) & (cons <= self.hi_s)).all(axis=1))
+            cols = self.cols[lvl]
+            keep = last_m[cols]
+            if not len(rows) or not keep.any():
+                continue
+            c = self.D[lvl][np.ix_(rows, np.flatnonzero(keep))] + e_cost[cols[keep]][None, :]
+            r_i, c_i = np.nonzero(np.isfinite(c))
+            ec = e_cost[cols[keep]]
+            out += [(float(c[a, b]), (lvl, int(codes[rows[a]]), int(cols[keep][b])),
+                     float(ec[b])) for a, b in zip(r_i, c_i)]
+        return out
+
+    # -- paths ----------------------------------------------------------------------
+
+    def k_best(self, k: int = 1) -> List[Tuple[float, List[tuple]]]:
+        """The k cheapest source-sink paths as (cost, [node keys]), non-decreasing cost.
+
+        The Recursive Enumeration Algorithm (Jimenez & Marzal 1999), lazily from the sink:
+        the j-th path into a node is the best candidate among the first paths of its
+        in-neighbours and the successors of the paths already used, so only the nodes and
+        paths the k answers need are ever touched (exact, like Eppstein's, thesis sec. 3.3.1).
+        """
+        if k < 1:
+            raise InputError("k must be at least 1")
+        return _enumerate(self.in_edges, k)
+
+
+def _enumerate(in_edges: Callable[[tuple], List[tuple]], k: int
+               ) -> List[Tuple[float, List[tuple]]]:
+    """k shortest SOURCE-SINK paths of a DAG given by ``in_edges`` (REA, see k_best)."""
+    paths: Dict[tuple, list] = {SOURCE: [(0.0, None, 0.0, 0)]}
+    heaps: Dict[tuple, list] = {}
+    pushed: Dict[tuple, bool] = {}
+    exhausted = {SOURCE}
+
+    def ensure_path(v0: tuple, j0: int) -> None:
+        stack = [(v0, j0)]
+        while stack:
+            v, j = stack[-1]
+            P = paths.get(v)
+            if P is not None and (len(P) >= j or v in exhausted):
+                stack.pop()
+                continue
+            if P is None:
+                heap = [(c, u, w, 1) for c, u, w in in_edges(v)]
+                heapq.heapify(heap)
+                heaps[v], P = heap, []
+                paths[v] = P
+                pushed[v] = True
+            if not pushed[v]:
+                _, u, w, r = P[-1]
+                Pu = paths.get(u)
+                if Pu is None or (len(Pu) <= r and u not in exhausted):
+                    stack.append((u, r + 1))
+                    continue
+                if len(Pu) > r:
+                    heapq.heappush(heaps[v], (Pu[r][0] + w, u, w, r + 1))
+                pushed[v] = True
+            if heaps[v]:
+                P.append(heapq.heappop(heaps[v]))
+                pushed[v] = False
+            else:
+                exhausted.add(v)
+
+    out = []
+    for j in range(1, k + 1):
+        ensure_path(SINK, j)
+        if len(paths[SINK]) < j:
+            break
+        c_total = paths[SINK][j - 1][0]
+        path, v, idx = [], SINK, j - 1
+        while v != SOURCE:
+            ensure_path(v, idx + 1)
+            _, u, _, r = paths[v][idx]
+            v, idx = u, r - 1
+            if v != SOURCE:
+                path.append(v)
+        out.append((float(c_total), path[::-1]))
+    return out
+
+
+def build_implicit_graph(resources, transition, constraints: Sequence[Constraint],
+                         **options) -> ImplicitGraph:
+    """The implicit intermediate graph (same options as :func:`build_graph`)."""
+    return ImplicitGraph(_prepare(resources, transition, constraints, **options))
 
 
 def solve(resources, transition, constraints: Sequence[Constraint], k: int = 1,
-          method: str = "auto", **options) -> List[Solution]:
+          method: str = "graph", **options) -> List[Solution]:
     """The k best feasible sequences (thesis eq. 3.2); see :func:`build_graph` for options.
 
-    ``method``: ``"graph"`` builds the intermediate graph (any k, any constraints);
-    ``"dense"`` keeps it implicit (k = 1, only the primary resource constrained: the
-    frontage case, several times faster); ``"auto"`` picks dense where it applies.
-    Returns a list of :class:`Solution` (rank 1 first, costs non-decreasing; fewer than k
-    when fewer feasible sequences exist). Raises :class:`InfeasibleError` when none does.
+    ``method``: ``"graph"`` (default) keeps the intermediate graph implicit
+    (:class:`ImplicitGraph`: node tables per level, in-edges derived on demand, lazy k
+    best); ``"explicit"`` materialises it (:func:`build_graph`, an edge list, then
+    :func:`k_best`) -- the same graph and the same answers, at the memory cost of every
+    edge; kept as a reference. Returns a list of :class:`Solution` (rank 1 first, costs
+    non-decreasing; fewer than k when fewer feasible sequences exist). Raises
+    :class:`InfeasibleError` when none does.
     """
-    if method not in ("auto", "graph", "dense"):
-        raise InputError("method must be 'auto', 'graph' or 'dense'")
+    if method not in ("graph", "explicit"):
+        raise InputError("method must be 'graph' or 'explicit'")
+    if k < 1:
+        raise InputError("k must be at least 1")
     p = _prepare(resources, transition, constraints, **options)
-    dense_ok = k == 1 and len(p["order"]) == 1
-    if method == "dense" and not dense_ok:
-        raise InputError("the dense method needs k = 1 and only the primary resource "
-                         "constrained")
     U, res = p["U"], p["res"]
-    if dense_ok and method != "graph":
-        found = _dense_best(**p)
-        if found is None:
-            raise InfeasibleError(_infeasible_message(p["U0"], res[0], p["lo_c"][0], p["H0"]))
-        cost, seq, ends = found
-        seq = np.asarray(seq)
-        starts = (np.asarray(ends) - U[seq, 0]) * res[0]
+    U0 = p["U0"]
+    if method == "explicit":
+        g = _graph(**p)
+        found = k_best(g, k)
+        if not found:
+            raise InfeasibleError("no feasible sequence (the graph has no finite-cost path)")
+        paths = [(c, g.element[nodes], g.consumed[nodes, 0]) for c, nodes in found]
+    else:
+        g = ImplicitGraph(p)
+        found = g.k_best(k)
         p["progress"].step(1.0)
-        return [Solution(rank=1, cost=cost, sequence=tuple(int(x) for x in seq),
-                         starts=tuple(float(x) for x in starts),
-                         totals=U[seq].sum(axis=0) * res)]
-    g = _graph(**p)
-    found = k_best(g, k)
-    if not found:
-        raise InfeasibleError("no feasible sequence (the graph has no finite-cost path)")
-    U0 = g.units[:, 0]
+        if not found:
+            raise InfeasibleError(_infeasible_message(U0, res[0], p["lo_c"][0], p["H0"]))
+        paths = [(c, np.array([v[2] for v in nodes], dtype=np.int64),
+                  np.array([v[0] for v in nodes], dtype=np.int64)) for c, nodes in found]
     out = []
-    for rank, (c, nodes) in enumerate(found, start=1):
-        seq = g.element[nodes]
-        starts = (g.consumed[nodes, 0] - U0[seq]) * g.resolution[0]
-        totals = g.units[seq].sum(axis=0) * g.resolution
+    for rank, (c, seq, ends) in enumerate(paths, start=1):
+        starts = (ends - U0[seq]) * res[0]
         out.append(Solution(rank=rank, cost=c, sequence=tuple(int(s) for s in seq),
-                            starts=tuple(float(s) for s in starts), totals=totals))
+                            starts=tuple(float(s) for s in starts),
+                            totals=U[seq].sum(axis=0) * res))
     return out
