@@ -155,3 +155,44 @@ def sketch_cells(cell=250.0, n=4, seed=0):
         out.append(shapely.LineString([(x + rng.normal(0, 8), y) for y in ys]))
         out.append(shapely.LineString([(y, x + rng.normal(0, 8)) for y in ys]))
     return np.array(out, dtype=object)
+
+
+# ------------------------------------------ Liechtenstein towns (leave-one-town-out checks)
+
+def liechtenstein_town(name):
+    """A town of ``tools/liechtenstein.py`` as a leave-one-town-out case, in UTM 32N: dict
+    with ``area`` (its outline), ``real`` (its drivable streets), ``given`` + ``given_class``
+    (its level-0 roads, from the hierarchy of the whole country) and ``example`` +
+    ``example_class`` (the streets of all other towns)."""
+    import sys
+
+    from conftest import ROOT
+
+    if str(ROOT / "tools") not in sys.path:
+        sys.path.insert(0, str(ROOT / "tools"))
+    import liechtenstein
+
+    return _liechtenstein_case(liechtenstein, name)
+
+
+_LI_CACHE = {}
+
+
+def _liechtenstein_case(li, name):
+    from urban_synthesis.plugin.network import hierarchy
+    from urban_synthesis.plugin.network import street_graph as roads
+
+    if "graph" not in _LI_CACHE:
+        lines, cls = li.drivable_roads()
+        graph = roads.clean_network(lines, cls)
+        _LI_CACHE["graph"] = graph
+        _LI_CACHE["level"] = hierarchy.road_hierarchy(graph).edge_level
+    graph, level = _LI_CACHE["graph"], _LI_CACHE["level"]
+    towns = li.towns()
+    area = towns[name]
+    others = shapely.union_all([a for n, a in towns.items() if n != name])
+    given, given_class = li.clip(graph.geometry[level == 0], area, graph.road_class[level == 0])
+    example, example_class = li.clip(graph.geometry, others, graph.road_class)
+    return {"area": area, "real": li.clip(graph.geometry, area), "given": given,
+            "given_class": given_class, "example": example, "example_class": example_class,
+            "example_area": others}
