@@ -57,7 +57,9 @@ class SynthesizeRoads(AlgorithmBase):
             "fragments of the example (FRAGMENT_DB, or a database built here from "
             "EXAMPLE_ROADS).\n"
             "- Procedural growth: grid major roads and organic minor roads grow inside the "
-            "BOUNDARY from the ARTERIALS (the example is not used).\n\n"
+            "BOUNDARY from the ARTERIALS (the example is not used).\n"
+            "- StreetGAN: a generator trained on real towns fills the BOUNDARY; the ARTERIALS "
+            "are kept and the generated streets join them.\n\n"
             "Without a BOUNDARY, the convex hull of the arterials is the district. Each method "
             "is also a tool of its own with every option; this one uses their defaults."
         )
@@ -139,7 +141,8 @@ class SynthesizeRoads(AlgorithmBase):
                 raise QgsProcessingException(
                     f"The StreetGAN model '{GAN_MODEL}' is missing from resources/models "
                     "(reinstall the plugin).")
-            params = {"TARGET": boundary, "SEED": seed, "MODEL": models.index(GAN_MODEL)}
+            params = {"TARGET": boundary, "SEED": seed, "MODEL": models.index(GAN_MODEL),
+                      "GIVEN_ROADS": arterials}
         # the destination as a path/URI (a model or a command line may leave it unset)
         params["OUTPUT"] = self.parameterAsOutputLayer(parameters, self.OUTPUT, context) \
             or QgsProcessing.TEMPORARY_OUTPUT
