@@ -56,6 +56,7 @@ Aliaga, D. G., Vanegas, C. A., Benes, B. (2008). Interactive example-based urban
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from typing import List, Optional
@@ -195,6 +196,7 @@ class _Walker:
         self.tree = None
         self._rebuild()
         self.cos_min = math.cos(math.radians(settings.min_angle))
+        self.area = None  # the target: junctions made on streets stay inside it
 
     # -- segment index ---------------------------------------------------------------
 
@@ -491,6 +493,9 @@ class _Walker:
             v, u = ok[i], pool[idx[i, j]]
             if self.deg[u] == 0 or self.deg[u] >= cap or root(np.array([u]))[0] == own:
                 continue
+            if self.area is not None and self.p.example[u] < 0 and \
+                    not shapely.contains_xy(self.area, *self.xy[u]):
+                continue  # a node of the given roads outside the target takes no street
             vec = self.xy[u] - self.xy[v]
             d = float(np.linalg.norm(vec))
             if d < 1e-6:
@@ -550,6 +555,8 @@ class _Walker:
                 if best is not None and d[i] >= best[0]:
                     break
                 if d[i] < 1.0:
+                    continue
+                if self.area is not None and not shapely.contains_xy(self.area, *q[i]):
                     continue
                 unit = (q[i] - pv) / d[i]
                 along = dvec[i] / np.sqrt(ll[i])
@@ -663,7 +670,7 @@ class _Walker:
 
 def connect_points(points: iq.PointSet, rng: np.random.Generator,
                    settings: Optional[WalkSettings] = None, existing=None,
-                   dead_end_share: Optional[float] = None,
+                   dead_end_share: Optional[float] = None, area=None,
                    progress: Optional[Progress] = None):
     """Connect attributed points by random walks, level by level (fig. 3), into one network.
 
@@ -707,6 +714,9 @@ def connect_points(points: iq.PointSet, rng: np.random.Generator,
         seg0 = existing["segments"]
         seam[ex[existing["seam"]]] = True
     w = _Walker(points, s, rng, cap, cnt, slot_dir, dirs, seg0)
+    if area is not None:
+        w.area = shapely.buffer(area, 1.0)
+        shapely.prepare(w.area)
     if existing is not None:
         w.deg[existing["index"]] = existing["degree"]
     levels = np.unique(points.level[points.level >= 0])
@@ -733,27 +743,6 @@ def connect_points(points: iq.PointSet, rng: np.random.Generator,
             if points.level[v, slot] >= 0 and w.cnt[v, slot] == 1 and w.deg[v] < w.cap[v]:
                 w.extend(v, slot, points.level[v, slot], relaxed="seam", origin="seam")
     is_new = points.example >= 0
-    target = dead_end_share_of(points) if dead_end_share is None else float(dead_end_share)
-    n_closed = 0
-    if s.close_ends:
-        # streets that stopped short of what their point had in the example (deg 1 < cap):
-        # one more step to the nearest free point of any level, turn angle ignored, until
-        # the dead-end share of the new points is the example's
-        stubs = rng.permutation(np.flatnonzero((w.deg == 1) & (w.cap > 1) & is_new))
-        for v in stubs:
-            on = is_new & (w.deg[:n] > 0)
-            ends = on & (w.deg[:n] != 2)
-            if not ends.any() or ((w.deg[:n] == 1) & on).sum() / ends.sum() <= target:
-                break
-            slot = int(np.argmax(w.cnt[v] == 1))
-            if w.deg[v] == 1 and w.cnt[v, slot] == 1:
-                added = w.extend(v, slot, points.level[v, slot], relaxed="close",
-                                 origin="close")
-                if not added:  # no free point in reach: a T onto the nearest street
-                    reach = points.dist_mean[v, slot] + s.reach_sd * points.dist_sd[v, slot]
-                    added = int(w._join_by_split(np.array([v]), None, reach, "close",
-                                                 level=points.level[v, slot]) is not None)
-                n_closed += added
     n_crossed = 0
     if s.close_ends:
         # points a street passes whose crossing street never came (degree 2 where the
@@ -773,12 +762,61 @@ def connect_points(points: iq.PointSet, rng: np.random.Generator,
                                              level=h) is not None)
             n_crossed += added
     progress.step(0.8)
-    w.stats = {"n_closed": int(n_closed), "n_crossings_made": int(n_crossed), "n_joins": 0,
-               "n_join_splits": 0, "n_dropped_edges": 0}
+    w.stats = {"n_crossings_made": int(n_crossed), "n_joins": 0, "n_join_splits": 0,
+               "n_dropped_edges": 0}
     if s.join_pieces:
         anchors = np.flatnonzero(points.example < 0) if existing is not None else \
             np.zeros(0, dtype=np.int64)
         w.stats.update(w.join_pieces(anchors))
+    progress.step(0.9)
+    # closing stubs last: it only adds connections, so the network stays one piece
+    target = dead_end_share_of(points) if dead_end_share is None else float(dead_end_share)
+    n_closed = 0
+    if s.close_ends:
+        # streets that stopped short of what their point had in the example (deg 1 < cap):
+        # one more step to the nearest free point of any level, turn angle ignored, until
+        # the dead-end share of the new points is the example's
+        # first the stubs, then (if the share is still above the example's) points that
+        # were dead ends in the example too: copies near the edges of an example clipped to
+        # a study area, whose clip ends are no dead ends of the town
+        stubs = np.concatenate([
+            rng.permutation(np.flatnonzero((w.deg[:n] == 1) & (w.cap[:n] > 1) & is_new)),
+            rng.permutation(np.flatnonzero((w.deg[:n] == 1) & (w.cap[:n] == 1) & is_new))])
+        n_dead = int(((w.deg[:n] == 1) & is_new).sum())
+        n_ends = int((is_new & (w.deg[:n] > 0) & (w.deg[:n] != 2)).sum())
+        for v in stubs:
+            if not n_ends or n_dead / n_ends <= target:
+                break
+            if w.deg[v] != 1:
+                continue
+            was_end = w.cap[v] == 1
+            if was_end:  # the street may go on from here: one more connection on slot a
+                w.cap[v], w.cnt[v, 0] = 2, 1
+                slot = 0
+            else:
+                slot = int(np.argmax(w.cnt[v] == 1))
+            if w.cnt[v, slot] != 1:
+                continue
+            added = w.extend(v, slot, points.level[v, slot], relaxed="close", origin="close")
+            if not added:  # no free point in reach: a T onto the nearest street
+                reach = points.dist_mean[v, slot] + s.reach_sd * points.dist_sd[v, slot]
+                added = int(w._join_by_split(np.array([v]), None, reach, "close",
+                                             level=points.level[v, slot]) is not None)
+            if not added and was_end:
+                w.cap[v], w.cnt[v, 0] = 1, 2
+            if added:
+                n_closed += 1
+                # v is no dead end; its partner (a free point of degree 0 -> 1, or a street
+                # end 1 -> 2, or a junction) changes the counts too
+                a, _, b, _, _, _ = w.edges[-1]
+                u = b if a == v else a
+                for p_, before in ((v, 1), (u, int(w.deg[u]) - 1)):
+                    if p_ >= n or not is_new[p_]:
+                        continue
+                    after = int(w.deg[p_])
+                    n_dead += int(after == 1) - int(before == 1)
+                    n_ends += int(after > 0 and after != 2) - int(before > 0 and before != 2)
+    w.stats["n_closed"] = int(n_closed)
     progress.step(1.0)
     alive = np.asarray(w.edge_alive, dtype=bool)
     edges = np.array(w.edges, dtype=object).reshape(-1, 6)[alive]
@@ -911,14 +949,23 @@ def _bend(a, b, tortuosity, max_sagitta, sign, n=9):
     return shapely.LineString(pts)
 
 
-def _conflicts(lines, others, subset=None, tree=None):
+def _conflicts(lines, others, subset=None, tree=None, area=None, chord_inside=None):
     """Indices of the bent lines (of ``subset``, default all) that meet another line (or a
     given line) anywhere but at shared end points, and of the lines they meet. ``tree``:
-    an STRtree of ``lines`` + ``others`` whose envelopes are still valid (optional)."""
-    cand = np.arange(len(lines)) if subset is None else np.asarray(subset, dtype=np.int64)
-    bent = cand[shapely.get_num_coordinates(lines[cand]) > 2]
+    an STRtree of ``lines`` + ``others`` whose envelopes are still valid (optional). With
+    ``area`` (prepared), bent lines whose chord lies in it (``chord_inside``) but that
+    bulge out of it conflict too."""
+    if subset is None:  # chords never cross each other: only bent lines can
+        cand = np.arange(len(lines))
+        bent = cand[shapely.get_num_coordinates(lines[cand]) > 2]
+    else:  # changed lines, bent or not (a new chord can cut an unchanged bend)
+        bent = np.unique(np.asarray(subset, dtype=np.int64))
     if len(bent) == 0:
         return np.zeros(0, dtype=np.int64)
+    out_of_area = np.zeros(0, dtype=np.int64)
+    if area is not None:
+        check = bent[chord_inside[bent]]
+        out_of_area = check[~shapely.within(lines[check], area)]
     allg = np.concatenate([lines, others]) if len(others) else lines
     if tree is None:
         tree = shapely.STRtree(allg)
@@ -927,14 +974,14 @@ def _conflicts(lines, others, subset=None, tree=None):
     sel = a != b
     a, b = a[sel], b[sel]
     if len(a) == 0:
-        return np.zeros(0, dtype=np.int64)
+        return np.unique(out_of_area)
     # only boundary meets boundary: interiors and interior-boundary contacts are empty
     ok = shapely.relate_pattern(lines[a], allg[b], "FF*F*****")
     other = b[~ok]
-    return np.unique(np.concatenate([a[~ok], other[other < len(lines)]]))
+    return np.unique(np.concatenate([a[~ok], other[other < len(lines)], out_of_area]))
 
 
-def _draw_geometry(xy, a, b, level, tort, shapes, settings, rng, others):
+def _draw_geometry(xy, a, b, level, tort, shapes, settings, rng, others, area=None):
     """Polylines of the segments a -> b: example shapes (redrawn where they would cross),
     else parabolas; lines that still cross are straightened (chords are planar)."""
     straight = shapely.linestrings(np.stack([xy[a], xy[b]], axis=1))
@@ -948,6 +995,7 @@ def _draw_geometry(xy, a, b, level, tort, shapes, settings, rng, others):
             return _shape_lines(shapes, pick, xy[a[idx]], xy[b[idx]], mirror)
 
         lines = draw(np.arange(n)) if n else straight.copy()
+        drawn_t = shapely.length(lines) / np.maximum(chord, 1e-9)
         # the mean the segments should keep: the example's (the drawn shapes have it
         # up to the chord lengths of the new segments)
         drawn_mean = shapes.mean_tortuosity()
@@ -961,7 +1009,13 @@ def _draw_geometry(xy, a, b, level, tort, shapes, settings, rng, others):
                                    rng.choice([-1.0, 1.0])) for i in idx], dtype=object)
     others = np.asarray(others, dtype=object)
     n_redrawn = 0
-    bad = _conflicts(lines, others)
+    inside = None
+    if area is not None:  # a bend may not bulge out of the target where its chord is in
+        area = shapely.buffer(area, 1.0)
+        shapely.prepare(area)
+        inside = shapely.within(straight, area)
+    conflicts = functools.partial(_conflicts, area=area, chord_inside=inside)
+    bad = conflicts(lines, others)
     # the changed lines are checked again (against all): a line that did not change and
     # crossed nothing cannot cross anything now but a changed line
     for _ in range(settings.shape_retries):
@@ -969,7 +1023,7 @@ def _draw_geometry(xy, a, b, level, tort, shapes, settings, rng, others):
             break
         lines[bad] = draw(bad)
         n_redrawn += len(bad)
-        bad = _conflicts(lines, others, subset=bad)
+        bad = conflicts(lines, others, subset=bad)
     # then flatter versions of the last shape (its offsets from the chord scaled down),
     # then the chord itself
     for scale in (0.6, 0.3, 0.0, 0.0, 0.0):
@@ -977,27 +1031,35 @@ def _draw_geometry(xy, a, b, level, tort, shapes, settings, rng, others):
             break
         lines[bad] = _flatten(lines[bad], xy[a[bad]], xy[b[bad]], scale) if scale > 0 \
             else straight[bad]
-        bad = _conflicts(lines, others, subset=bad)
+        bad = conflicts(lines, others, subset=bad)
     if shapes is not None and len(shapes) and n:
         lines = _restore_tortuosity(lines, straight, chord, level, drawn_mean, shapes, xy, a, b,
-                                    others, rng)
+                                    others, rng, conflicts, drawn_t)
     return lines, straight, n_redrawn
 
 
 def _restore_tortuosity(lines, straight, chord, level, target, shapes, xy, a, b, others, rng,
-                        rounds: int = 12, tolerance: float = 0.002):
-    """Make up the tortuosity lost to flattened shapes: segments that are flatter than the
-    target get a curvier shape of their level and chord (the upper half of the quantiles of
-    :func:`_pick_shapes`) where it fits without crossing, until the mean tortuosity is the
-    target (the example's mean over its segments)."""
+                        conflicts=_conflicts, drawn=None, rounds: int = 20,
+                        tolerance: float = 0.002):
+    """Make up the tortuosity lost to flattened shapes: segments that lost their bend
+    (``drawn``: the tortuosity first drawn), then any segment flatter than the target, get
+    a curvier shape of their level and chord (the upper half of the quantiles of
+    :func:`_pick_shapes`, below the example's 95th percentile) where it fits without
+    crossing, until the mean tortuosity is the target (the example's mean over its
+    segments)."""
     lines = lines.copy()
     ll = np.maximum(chord, 1e-9)
+    stuck = drawn is None
     for _ in range(rounds):
         t = shapely.length(lines) / ll
         deficit = target * len(lines) - t.sum()
         if deficit <= tolerance * len(lines):
             break
-        low = np.flatnonzero(t < target)
+        # the segments that lost their bend first (the shape distribution stays the
+        # example's), then any segment flatter than the target
+        low = np.flatnonzero(t < drawn - 1e-6) if not stuck else np.zeros(0, int)
+        if not len(low):
+            low = np.flatnonzero(t < target)
         if not len(low):
             break
         prop_idx = rng.permutation(low)[:max(1, min(len(low), int(np.ceil(4 * deficit
@@ -1007,17 +1069,29 @@ def _restore_tortuosity(lines, straight, chord, level, target, shapes, xy, a, b,
         cand = _shape_lines(shapes, pick, xy[a[prop_idx]], xy[b[prop_idx]],
                             rng.choice([-1.0, 1.0], size=len(prop_idx)))
         gain = shapely.length(cand) / ll[prop_idx] - t[prop_idx]
+        # not the rare hairpins of the example's tail (above its 95th percentile)
+        gain[shapely.length(cand) / ll[prop_idx] > np.quantile(shapes.tortuosity, 0.95)] = 0.0
         # take the gains in order until the deficit is met
         order = np.argsort(-gain)
         keep = order[(gain[order] > 0) & (np.cumsum(np.maximum(gain[order], 0)) <= deficit
                                           + gain[order].clip(0))]
         if not len(keep):
             continue
-        trial = lines.copy()
-        trial[prop_idx[keep]] = cand[keep]
-        bad = set(_conflicts(trial, others, subset=prop_idx[keep]).tolist())
-        ok = np.array([i not in bad for i in prop_idx[keep]], dtype=bool)
-        lines[prop_idx[keep][ok]] = cand[keep][ok]
+        # accept the proposals that cross nothing; a rejected one keeps its old shape, which
+        # the accepted ones are checked against again, until none is left to reject
+        take = prop_idx[keep]
+        shape = cand[keep]
+        while len(take):
+            trial = lines.copy()
+            trial[take] = shape
+            bad = set(conflicts(trial, others, subset=take).tolist())
+            ok = np.array([i not in bad for i in take], dtype=bool)
+            if ok.all():
+                lines = trial
+                break
+            take, shape = take[ok], shape[ok]
+        # no flattened segment takes a bend any more: the other segments may
+        stuck = stuck or len(take) < 0.1 * len(prop_idx)
     return lines
 
 
@@ -1222,7 +1296,8 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
                example_b: Optional[iq.PointSet] = None, blend=0.0, seed: int = 0,
                settings: Optional[WalkSettings] = None, in_place: Optional[bool] = None,
                progress: Optional[Progress] = None, shapes: Optional[StreetShapes] = None,
-               shapes_b: Optional[StreetShapes] = None) -> Synthesis:
+               shapes_b: Optional[StreetShapes] = None,
+               dead_end_share: Optional[float] = None) -> Synthesis:
     """Join / expand / blend (sec. 4.2): place example points in ``target`` and connect them.
 
     Parameters
@@ -1235,6 +1310,10 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
     in_place : see :func:`intersection_quadtree.place_points`
     shapes, shapes_b : StreetShapes of the examples (:func:`street_shapes`), optional: the
         new segments bend like them; without, parabolas of the points' tortuosity
+    dead_end_share : the example's share of dead ends, optional; default the share among
+        the example's points (:func:`dead_end_share_of`), which counts the ends of an
+        example clipped to a study area as dead ends too: pass the share measured inside
+        the example's area (``invariants.dead_end_share(lines, area)``) when it is known
 
     Raises
     ------
@@ -1262,7 +1341,12 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
         elif shapes_b is not None or shapes is not None:
             shapes = None  # one example without shapes: parabolas for both
     progress.step(0.1)
-    target_share = dead_end_share_of(pts)
+    # the dead-end share to close stubs down to: the example's (a blend: the mix)
+    target_share = dead_end_share_of(example) if dead_end_share is None else \
+        float(dead_end_share)
+    if example_b is not None and dead_end_share is None:
+        beta = float(np.mean(blend(pts.xy))) if callable(blend) else float(blend)
+        target_share = (1 - beta) * target_share + beta * dead_end_share_of(example_b)
     n_new = len(pts)
     existing = None
     ex_lines = None
@@ -1284,7 +1368,7 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
     if n_new == 0:
         raise InputError("no example point is left in the target")
     edges, w = connect_points(pts, rng, settings, existing, dead_end_share=target_share,
-                              progress=progress.sub(0.1, 0.85))
+                              area=area, progress=progress.sub(0.1, 0.85))
     pts = w.p
     if len(edges) == 0:
         raise InputError("no street could be made: the points are too far apart for their "
@@ -1296,7 +1380,7 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
     tort = 0.5 * (pts.tortuosity[a, sa] + pts.tortuosity[b, sb])
     lines, straight, n_redrawn = _draw_geometry(
         pts.xy, a, b, level, tort, shapes, settings, rng,
-        ex_lines if ex_lines is not None else np.empty(0, dtype=object))
+        ex_lines if ex_lines is not None else np.empty(0, dtype=object), area)
     progress.step(0.95)
     length = shapely.length(lines)
     chord = shapely.length(straight)
@@ -1420,6 +1504,16 @@ def block_table(result: Synthesis, min_area: float = 50.0):
         cnt = np.bincount(fi[ok], minlength=len(faces))
         tot = np.bincount(fi[ok], vals[ok], minlength=len(faces))
         area_attr = np.where(cnt > 0, tot / np.maximum(cnt, 1), np.nan)
+        # a block with no value on its outline (its corners are dead ends or junctions made
+        # by joins): the mean of the 4 nearest points that have one
+        miss = ~np.isfinite(area_attr)
+        has = np.flatnonzero(np.isfinite(result.points.area))
+        if miss.any() and len(has):
+            k = min(4, len(has))
+            _, near = cKDTree(result.points.xy[has]).query(
+                shapely.get_coordinates(shapely.point_on_surface(faces[miss])), k=k)
+            area_attr[miss] = result.points.area[has[np.asarray(near).reshape(-1, k)]].mean(
+                axis=1)
     table = pd.DataFrame({"block_id": np.arange(1, len(faces) + 1), "area_m2": shapely.area(faces),
                           "neighbours": neighbours, "parcel_area": area_attr})
     return faces, table
