@@ -172,27 +172,4 @@ def liechtenstein_town(name):
         sys.path.insert(0, str(ROOT / "tools"))
     import liechtenstein
 
-    return _liechtenstein_case(liechtenstein, name)
-
-
-_LI_CACHE = {}
-
-
-def _liechtenstein_case(li, name):
-    from urban_synthesis.plugin.network import hierarchy
-    from urban_synthesis.plugin.network import street_graph as roads
-
-    if "graph" not in _LI_CACHE:
-        lines, cls = li.drivable_roads()
-        graph = roads.clean_network(lines, cls)
-        _LI_CACHE["graph"] = graph
-        _LI_CACHE["level"] = hierarchy.road_hierarchy(graph).edge_level
-    graph, level = _LI_CACHE["graph"], _LI_CACHE["level"]
-    towns = li.towns()
-    area = towns[name]
-    others = shapely.union_all([a for n, a in towns.items() if n != name])
-    given, given_class = li.clip(graph.geometry[level == 0], area, graph.road_class[level == 0])
-    example, example_class = li.clip(graph.geometry, others, graph.road_class)
-    return {"area": area, "real": li.clip(graph.geometry, area), "given": given,
-            "given_class": given_class, "example": example, "example_class": example_class,
-            "example_area": others}
+    return liechtenstein.leave_one_out(name)

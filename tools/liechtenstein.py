@@ -80,3 +80,31 @@ def clip(lines, area, classes=None):
     if classes is None:
         return parts[keep]
     return parts[keep], np.asarray(classes, dtype=object)[idx[keep]]
+
+
+_CACHE = {}
+
+
+def leave_one_out(name: str) -> dict:
+    """A town as a leave-one-town-out case, in UTM 32N: ``area`` (its outline), ``real``
+    (its drivable streets), ``given`` + ``given_class`` (its level-0 roads, from the
+    hierarchy of the whole country's network), ``example`` + ``example_class`` (the streets
+    of all other towns) and ``example_area`` (their outlines)."""
+    from urban_synthesis.plugin.network import hierarchy
+
+    if "graph" not in _CACHE:
+        lines, cls = drivable_roads()
+        graph = roads.clean_network(lines, cls)
+        _CACHE["graph"] = graph
+        _CACHE["level"] = hierarchy.road_hierarchy(graph).edge_level
+    graph, level = _CACHE["graph"], _CACHE["level"]
+    all_towns = towns()
+    if name not in all_towns:
+        raise KeyError(f"unknown town {name!r} (towns: {', '.join(all_towns)})")
+    area = all_towns[name]
+    others = shapely.union_all([a for n, a in all_towns.items() if n != name])
+    given, given_class = clip(graph.geometry[level == 0], area, graph.road_class[level == 0])
+    example, example_class = clip(graph.geometry, others, graph.road_class)
+    return {"area": area, "real": clip(graph.geometry, area), "given": given,
+            "given_class": given_class, "example": example, "example_class": example_class,
+            "example_area": others}

@@ -748,19 +748,20 @@ def connect_points(points: iq.PointSet, rng: np.random.Generator,
         # points a street passes whose crossing street never came (degree 2 where the
         # example had 3 or 4): the crossing street leaves with one step to a free point, so
         # that the point is the junction it was
-        through = rng.permutation(np.flatnonzero((w.deg[:n] == 2) & (w.cap[:n] >= 3) & is_new
-                                                 & (points.level[:, 1] >= 0)
-                                                 & ~w.used[:n, 1]))
+        # (and 3 where it had 4: the crossing street went on only one way)
+        through = rng.permutation(np.flatnonzero((w.deg[:n] >= 2) & (w.deg[:n] < w.cap[:n])
+                                                 & is_new))
         for v in through:
-            if w.deg[v] != 2 or w.cnt[v, 1] >= 2:
-                continue
-            h = points.level[v, 1]
-            added = w.extend(v, 1, h, relaxed="close", origin="cross")
-            if not added:  # no free point in reach: a T onto the nearest street
-                reach = points.dist_mean[v, 1] + s.reach_sd * points.dist_sd[v, 1]
-                added = int(w._join_by_split(np.array([v]), None, reach, "cross",
-                                             level=h) is not None)
-            n_crossed += added
+            for slot in (1, 0):
+                h = points.level[v, slot]
+                if h < 0 or w.deg[v] >= w.cap[v] or w.cnt[v, slot] >= 2:
+                    continue
+                added = w.extend(v, slot, h, relaxed="close", origin="cross")
+                if not added:  # no free point in reach: a T onto the nearest street
+                    reach = points.dist_mean[v, slot] + s.reach_sd * points.dist_sd[v, slot]
+                    added = int(w._join_by_split(np.array([v]), None, reach, "cross",
+                                                 level=h) is not None)
+                n_crossed += added
     progress.step(0.8)
     w.stats = {"n_crossings_made": int(n_crossed), "n_joins": 0, "n_join_splits": 0,
                "n_dropped_edges": 0}
@@ -949,12 +950,15 @@ def _bend(a, b, tortuosity, max_sagitta, sign, n=9):
     return shapely.LineString(pts)
 
 
-def _conflicts(lines, others, subset=None, tree=None, area=None, chord_inside=None):
+def _conflicts(lines, others, subset=None, tree=None, area=None, chord_inside=None,
+               corridor=None, chord_in_corridor=None):
     """Indices of the bent lines (of ``subset``, default all) that meet another line (or a
     given line) anywhere but at shared end points, and of the lines they meet. ``tree``:
     an STRtree of ``lines`` + ``others`` whose envelopes are still valid (optional). With
     ``area`` (prepared), bent lines whose chord lies in it (``chord_inside``) but that
-    bulge out of it conflict too."""
+    bulge out of it conflict too; with ``corridor`` (the given roads' corridors, prepared),
+    bent lines that run in it over 10 m longer than their chord does
+    (``chord_in_corridor``) double a given road and conflict too."""
     if subset is None:  # chords never cross each other: only bent lines can
         cand = np.arange(len(lines))
         bent = cand[shapely.get_num_coordinates(lines[cand]) > 2]
@@ -966,6 +970,12 @@ def _conflicts(lines, others, subset=None, tree=None, area=None, chord_inside=No
     if area is not None:
         check = bent[chord_inside[bent]]
         out_of_area = check[~shapely.within(lines[check], area)]
+    if corridor is not None:
+        check = bent[shapely.intersects(corridor, lines[bent])]
+        if len(check):
+            with np.errstate(invalid="ignore"):
+                run = shapely.length(shapely.intersection(lines[check], corridor))
+            out_of_area = np.r_[out_of_area, check[run > chord_in_corridor[check] + 10.0]]
     allg = np.concatenate([lines, others]) if len(others) else lines
     if tree is None:
         tree = shapely.STRtree(allg)
@@ -1014,7 +1024,16 @@ def _draw_geometry(xy, a, b, level, tort, shapes, settings, rng, others, area=No
         area = shapely.buffer(area, 1.0)
         shapely.prepare(area)
         inside = shapely.within(straight, area)
-    conflicts = functools.partial(_conflicts, area=area, chord_inside=inside)
+    corridor, chord_run = None, None
+    if len(others):  # no bend may run along a given road (the invariants' corridor)
+        from ..network.invariants import CORRIDOR_HALF_WIDTH
+
+        corridor = shapely.union_all(shapely.buffer(others, CORRIDOR_HALF_WIDTH, quad_segs=4))
+        shapely.prepare(corridor)
+        with np.errstate(invalid="ignore"):
+            chord_run = shapely.length(shapely.intersection(straight, corridor))
+    conflicts = functools.partial(_conflicts, area=area, chord_inside=inside,
+                                  corridor=corridor, chord_in_corridor=chord_run)
     bad = conflicts(lines, others)
     # the changed lines are checked again (against all): a line that did not change and
     # crossed nothing cannot cross anything now but a changed line
