@@ -189,6 +189,8 @@ class _Walker:
         self._coords[:len(seg0)] = seg0
         self._alive = np.ones(len(self._coords), dtype=bool)
         self._seg_edge = np.full(len(self._coords), -1, dtype=np.int64)  # -1: given road
+        self._seg_start = np.full(len(self._coords), -1, dtype=np.int64)  # the edge's a
+        self._seg_level = np.full(len(self._coords), -1, dtype=np.int64)  # the edge's level
         self._edge_seg: List[int] = []
         self.n_seg = len(seg0)
         self._recent = np.empty(len(self._coords), dtype=object)
@@ -212,11 +214,15 @@ class _Walker:
             self._coords = np.vstack([self._coords, np.zeros((grow, 4))])
             self._alive = np.r_[self._alive, np.ones(grow, dtype=bool)]
             self._seg_edge = np.r_[self._seg_edge, np.full(grow, -1, dtype=np.int64)]
+            self._seg_start = np.r_[self._seg_start, np.full(grow, -1, dtype=np.int64)]
+            self._seg_level = np.r_[self._seg_level, np.full(grow, -1, dtype=np.int64)]
             self._recent = np.r_[self._recent, np.empty(grow, dtype=object)]
         self._coords[self.n_seg] = (p[0], p[1], q[0], q[1])
         self._seg_edge[self.n_seg] = edge
         if edge >= 0:
             self._edge_seg.append(self.n_seg)
+            self._seg_start[self.n_seg] = self.edges[edge][0]
+            self._seg_level[self.n_seg] = self.edges[edge][4]
         self._recent[self.n_seg - self.n_tree] = shapely.LineString([p, q])
         self.n_seg += 1
         # the tree is rebuilt when the recent segments reach _BATCH or 3 sqrt(n): the
@@ -319,7 +325,8 @@ class _Walker:
         if len(others):
             rel = self.xy[others] - self.xy[v]
             u = np.clip(rel @ unit / max(dist, 1e-9), 0.0, 1.0)
-            near = np.linalg.norm(rel - u[:, None] * vec[None, :], axis=1)
+            off = rel - u[:, None] * vec[None, :]
+            near = np.sqrt((off * off).sum(axis=1))
             if (near < max(self.s.clearance * dist, self.s.min_clearance)).any():
                 return False
         return self._clear(v, j)
@@ -329,8 +336,9 @@ class _Walker:
         p = self.p
         mu, sd = p.dist_mean[v, slot], p.dist_sd[v, slot]
         reach = mu + self.s.reach_sd * sd
-        nb = np.asarray(self.kd.query_ball_point(self.xy[v], reach), dtype=np.int64)
-        nb = nb[nb != v]
+        nb = np.asarray(self.kd.query_ball_point(self.xy[v], reach, return_sorted=False),
+                        dtype=np.int64)
+        nb = np.sort(nb[nb != v])  # sorted: the same draw whatever the tree's order
         if len(nb) == 0:
             return None
         lv, cnt = p.level[nb], self.cnt[nb]
@@ -356,7 +364,7 @@ class _Walker:
             return None
         cand, cslots = nb[free], slot_ok[free]
         vec = self.xy[cand] - self.xy[v]
-        d = np.linalg.norm(vec, axis=1)
+        d = np.sqrt((vec * vec).sum(axis=1))
         unit = vec / np.maximum(d, 1e-9)[:, None]
         logp = -0.5 * ((d - mu) / sd) ** 2
         if prev_dir is not None and not relaxed:
@@ -533,9 +541,9 @@ class _Walker:
                 ends = seg.reshape(-1, 2, 2)
                 keep = ~(np.abs(ends - pv).sum(axis=2) < 1e-6).any(axis=1)
                 if level is not None:  # of that level (or a given road)
-                    keep &= np.array([x < 0 or self.edges[x][4] == level for x in e])
+                    keep &= (e < 0) | (self._seg_level[hit] == level)
             else:  # another piece's street, or a given road (never v's piece)
-                end_pt = np.array([self.edges[x][0] if x >= 0 else -1 for x in e])
+                end_pt = self._seg_start[hit]
                 keep = end_pt < 0
                 if (end_pt >= 0).any():
                     keep[end_pt >= 0] = root(end_pt[end_pt >= 0]) != root(np.array([v]))[0]
@@ -597,14 +605,14 @@ class _Walker:
         """Remove the walk edges of a piece that cannot be joined (rejected)."""
         inside = np.zeros(len(self.p), dtype=bool)
         inside[members] = True
-        dropped = 0
-        for e, (a, sa, b, sb, h, origin) in enumerate(self.edges):
-            if self.edge_alive[e] and (inside[a] or inside[b]):
-                self.edge_alive[e] = False
-                self._alive[self._edge_seg[e]] = False
-                dropped += 1
+        ends = np.array([(a, b) for a, _, b, _, _, _ in self.edges], dtype=np.int64)
+        alive = np.asarray(self.edge_alive, dtype=bool)
+        gone = np.flatnonzero(alive & (inside[ends[:, 0]] | inside[ends[:, 1]]))
+        for e in gone:
+            self.edge_alive[e] = False
+        self._alive[np.asarray(self._edge_seg, dtype=np.int64)[gone]] = False
         self.deg[members] = 0
-        return dropped
+        return len(gone)
 
     def join_pieces(self, anchors, progress=None):
         """Join every piece to the anchors' network (or the largest piece); drop what
