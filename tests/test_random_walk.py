@@ -31,9 +31,11 @@ def _grid_points(n=5, spacing=100.0, levels=(0, 1), jitter=0.0, seed=0):
 
 
 def _edge_set(result):
+    """Edges by the example ids of their points (junctions made on streets by joins have no
+    example id and are left out)."""
     src = result.points.source
     return {tuple(sorted((src[a], src[b]))) for a, b in
-            zip(result.table.node_from, result.table.node_to)}
+            zip(result.table.node_from, result.table.node_to) if src[a] >= 0 and src[b] >= 0}
 
 
 @pytest.fixture(scope="module")
@@ -93,9 +95,12 @@ def test_grid_is_reconnected_planar_within_capacity():
     square = shapely.box(-10, -10, 510, 510)
     res = rw.synthesize(pts, square, seed=3, in_place=True)
     got = _edge_set(res)
-    assert len(got & edges) / len(edges) > 0.85
+    # most grid edges come back; a crossing street completed onto a street (a new T) splits
+    # an edge now and then
+    assert len(got & edges) / len(edges) > 0.75
     assert_planar(res.geometry)
-    assert len(got) == len(res.table)  # no duplicate edges
+    pairs = {tuple(sorted(e)) for e in zip(res.table.node_from, res.table.node_to)}
+    assert len(pairs) == len(res.table)  # no duplicate edges
     deg = np.bincount(np.r_[res.table.node_from, res.table.node_to], minlength=len(res.points))
     assert (deg <= np.minimum(res.points.degree, 4)).all()
     # streets of level 0 and 1 both exist; tortuosity 1 gives straight segments
@@ -175,8 +180,10 @@ def test_copy_and_reconnect_helsinki(helsinki):
     res = rw.synthesize(pts, hull, seed=1, in_place=True)
     original = {tuple(sorted(e)) for e in zip(graph.u, graph.v)}
     got = _edge_set(res)
-    assert len(got & original) / len(original) > 0.5
-    assert len(got & original) / len(got) > 0.65
+    # recall a little under the paper's look (the REPEAT's joins and completions connect
+    # some points otherwise), precision high
+    assert len(got & original) / len(original) > 0.45
+    assert len(got & original) / len(got) > 0.75
     assert_planar(res.geometry)
     m_orig = metrics.compute_layout_metrics(roads=graph.geometry, area=hull)
     m_syn = metrics.compute_layout_metrics(roads=res.geometry, area=hull)
@@ -369,10 +376,12 @@ def test_one_network_on_a_town_never_seen(eschen):
     assert check.floating_pieces == 0
     assert res.stats["n_road_junctions"] >= 5
     assert res.stats["mean_tortuosity"] == pytest.approx(shapes.mean_tortuosity(), rel=0.02)
-    # streets bend: the example's share of curved segments, not straight chords
-    bent = shapely.get_num_coordinates(res.geometry) > 2
-    example_bent = (shapely.get_num_coordinates(shapes.geometry) > 2).mean()
-    assert bent.mean() == pytest.approx(example_bent, abs=0.15)
+    # streets bend like the example's: its tortuosity distribution, more often bent (where a
+    # bend does not fit, the lost tortuosity is made up by bending other segments)
+    tort = res.table.tortuosity.to_numpy()
+    assert metrics.two_sample(tort, shapes.tortuosity)["ks_stat"] < 0.35
+    assert np.quantile(tort, 0.9) == pytest.approx(np.quantile(shapes.tortuosity, 0.9),
+                                                   rel=0.05)
     # points fill the outline (the model fills what copies leave empty)
     assert res.stats["n_points_generated"] > 0
     inside = shapely.contains_xy(eschen["area"], res.points.xy[:, 0], res.points.xy[:, 1])

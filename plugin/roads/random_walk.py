@@ -269,6 +269,7 @@ class _Walker:
         new.level = np.array([[level, level]])
         new.example = np.array([ROAD_SLOT if on_given else max(int(self.p.example[like]), 0)])
         new.generated = np.array([True])
+        new.source = np.array([-1])  # made by a join, not from the example
         new.degree = np.array([3])
         self.p = iq.PointSet.concat([self.p, new])
         self.xy = self.p.xy
