@@ -24,11 +24,11 @@ METHODS = (
            "urbansynth:synthesizeroadsfromfragments"),
     Method("growth", "Procedural growth, grid major and organic minor roads (Scharl 2010)",
            "urbansynth:growroads"),
-    Method("gan", "StreetGAN generator trained on Helsinki (Hartmann thesis ch. 4.2)",
+    Method("gan", "StreetGAN generator trained on real towns (Hartmann thesis ch. 4.2)",
            "urbansynth:synthesizeroadsgan"),
 )
-#: The shipped StreetGAN generator the 'gan' method uses.
-GAN_MODEL = "streetgan_helsinki"
+#: The shipped StreetGAN generator the 'gan' method uses (Helsinki + 8 Liechtenstein towns).
+GAN_MODEL = "streetgan_towns"
 
 
 class SynthesizeRoads(AlgorithmBase):

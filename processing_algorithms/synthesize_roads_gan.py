@@ -24,6 +24,8 @@ from ..plugin.retrieval.shape_context import DemGrid
 from ..plugin.roads import streetgan
 from .common import AlgorithmBase, drivable_lines
 
+#: The shipped generator used unless another is chosen: trained on the most towns.
+DEFAULT_MODEL = "streetgan_towns"
 ROAD_FIELDS = [("edge_id", "int"), ("level", "int"), ("road_class", "str"), ("length_m", "float"),
                ("model", "str"), ("seed", "int")]
 
@@ -93,8 +95,10 @@ class SynthesizeRoadsGan(AlgorithmBase):
             "Roads the new network must respect and connect to (arterials, existing roads): "
             "kept in the output, no generated street in their corridor, new streets end on "
             "them. An OSM 'lines' layer is filtered to drivable classes.")
+        default = self.models.index(DEFAULT_MODEL) if DEFAULT_MODEL in self.models else 0
         self.add(QgsProcessingParameterEnum(
-            self.MODEL, "Model", options=self.models or ["(no model shipped)"], defaultValue=0),
+            self.MODEL, "Model", options=self.models or ["(no model shipped)"],
+            defaultValue=default),
             "A shipped generator: " + "; ".join(self._describe(m) for m in self.models) + ".")
         self.add(QgsProcessingParameterFile(
             self.MODEL_FILE, "Model file (.onnx, optional)", extension="onnx", optional=True),
