@@ -371,6 +371,18 @@ class _Walker:
         if prev_dir is not None and not relaxed:
             alpha = np.degrees(np.arccos(np.clip(unit @ prev_dir, -1.0, 1.0)))
             logp -= 0.5 * ((alpha - p.angle_mean[v, slot]) / p.angle_sd[v, slot]) ** 2
+        w_angle = 0.0
+        if relaxed == "close" and prev_dir is not None:
+            # a stub goes on about straight (its street's turn statistics, twice as wide)
+            alpha = np.degrees(np.arccos(np.clip(unit @ prev_dir, -1.0, 1.0)))
+            w_angle = -0.5 * ((alpha - p.angle_mean[v, slot]) / (2 * p.angle_sd[v, slot])) ** 2
+        elif relaxed == "cross" and self.dirs[v]:
+            # a crossing street leaves across the street through v (the example's 90 degrees
+            # give or take 30)
+            through = np.asarray(self.dirs[v])
+            across = np.abs(unit @ through.T).max(axis=1)
+            alpha = np.degrees(np.arcsin(np.clip(across, 0.0, 1.0)))
+            w_angle = -0.5 * (alpha / 30.0) ** 2
         prob = np.exp(logp)
         good = prob >= self.s.threshold
         # streets leave a point at least min_angle apart (at v and at the target)
@@ -379,7 +391,7 @@ class _Walker:
             good &= (unit @ dv.T).max(axis=1) < self.cos_min
         if not good.any():
             return None
-        w = prob if not relaxed else np.exp(-0.5 * (d / mu) ** 2)
+        w = prob if not relaxed else np.exp(-0.5 * (d / mu) ** 2 + w_angle)
         w = np.where(good, w, 0.0)
         # draw by the transition probabilities; the costlier constraints are checked on the
         # drawn point only, and a point that fails them gets p = 0 and the draw is repeated
@@ -765,7 +777,7 @@ def connect_points(points: iq.PointSet, rng: np.random.Generator,
                 h = points.level[v, slot]
                 if h < 0 or w.deg[v] >= w.cap[v] or w.cnt[v, slot] >= 2:
                     continue
-                added = w.extend(v, slot, h, relaxed="close", origin="cross")
+                added = w.extend(v, slot, h, relaxed="cross", origin="cross")
                 if not added:  # no free point in reach: a T onto the nearest street
                     reach = points.dist_mean[v, slot] + s.reach_sd * points.dist_sd[v, slot]
                     added = int(w._join_by_split(np.array([v]), None, reach, "cross",
@@ -1070,7 +1082,7 @@ def _restore_tortuosity(lines, straight, chord, level, target, shapes, xy, a, b,
                         conflicts=_conflicts, drawn=None, rounds: int = 20,
                         tolerance: float = 0.002):
     """Make up the tortuosity lost to flattened shapes: segments that lost their bend
-    (``drawn``: the tortuosity first drawn), then any segment flatter than the target, get
+    (``drawn``: the tortuosity first drawn), then bent segments flatter than the target, get
     a curvier shape of their level and chord (the upper half of the quantiles of
     :func:`_pick_shapes`, below the example's 95th percentile) where it fits without
     crossing, until the mean tortuosity is the target (the example's mean over its
@@ -1087,7 +1099,9 @@ def _restore_tortuosity(lines, straight, chord, level, target, shapes, xy, a, b,
         # example's), then any segment flatter than the target
         low = np.flatnonzero(t < drawn - 1e-6) if not stuck else np.zeros(0, int)
         if not len(low):
-            low = np.flatnonzero(t < target)
+            # segments drawn straight stay straight (a grid's streets keep their bearings)
+            low = np.flatnonzero((t < target) & (drawn > 1.005)) if drawn is not None \
+                else np.flatnonzero(t < target)
         if not len(low):
             break
         prop_idx = rng.permutation(low)[:max(1, min(len(low), int(np.ceil(4 * deficit
