@@ -216,6 +216,7 @@ def main() -> None:
         metas.append(meta)
     meta = metas[0] if len(metas) == 1 else {
         "name": "+".join(m_["name"] for m_ in metas), "networks": metas,
+        "source": " | ".join(m_["source"] for m_ in metas),
         "cell_size_m": metas[0]["cell_size_m"], "line_width_px": metas[0]["line_width_px"],
         "length_km": round(sum(m_["length_km"] for m_ in metas), 2),
         "sampling": "image drawn with probability proportional to its windows of the patch "
