@@ -43,7 +43,8 @@ demo: setup
 # The whole suite under the machine's own BLAS kernel, then the engine tests (geometry,
 # footprints, roads, parcels: no QGIS) again under a forced generic one, so that a result
 # that depends on how a processor rounds a matrix product fails here, not on a user's
-# machine (DESIGN.md; tests/test_reproducible.py compares the two kernels' outputs).
+# machine (docs/ARCHITECTURE.md, "Floating point across processors"; tests/test_reproducible.py
+# compares the two kernels' outputs).
 ENGINE_TESTS := $(filter-out tests/test_alg_% tests/test_model_% tests/test_desktop.py \
 	tests/test_package.py tests/test_provider.py tests/test_environment.py \
 	tests/test_reproducible.py tests/test_distributed.py,$(wildcard tests/test_*.py))

@@ -1,6 +1,5 @@
 """urbansynth:buildblockdatabase - example blocks with their footprints and building attributes."""
 import numpy as np
-import pandas as pd
 from qgis.core import (
     QgsProcessing,
     QgsProcessingException,
@@ -10,6 +9,7 @@ from qgis.core import (
     QgsProcessingParameterString,
 )
 
+from ..plugin.core.ids import as_numbers, whole_ids
 from ..plugin.network import blocks
 from ..plugin.qgis_glue import qgis_io
 from ..plugin.retrieval import database
@@ -79,12 +79,8 @@ class BuildBlockDatabase(AlgorithmBase):
         block_ids = None
         if id_field and id_field in block_frame.attributes:
             # the blocks' own ids, when they are usable, so that buildings can refer to them
-            raw = pd.to_numeric(block_frame.attributes[id_field], errors="coerce").to_numpy(
-                dtype=np.float64, na_value=np.nan)
-            if np.isfinite(raw).all() and len(np.unique(raw)) == len(raw) and \
-                    (raw == np.round(raw)).all():
-                block_ids = raw.astype(np.int64)
-            else:
+            block_ids = whole_ids(block_frame.attributes[id_field])
+            if block_ids is None:
                 feedback.pushInfo(f"{label}: field '{id_field}' is not a unique whole number per "
                                   "block; blocks are numbered 1..n and buildings assigned by "
                                   "location.")
@@ -95,8 +91,7 @@ class BuildBlockDatabase(AlgorithmBase):
         b_label = building_frame.name
         by_field = own_ids and id_field in building_frame.attributes
         if by_field:
-            bid = pd.to_numeric(building_frame.attributes[id_field], errors="coerce").to_numpy(
-                dtype=np.float64, na_value=np.nan)
+            bid = as_numbers(building_frame.attributes[id_field])
             known = np.isin(bid, block_ids) & np.isfinite(bid)
             if not known.any():
                 feedback.pushInfo(f"{b_label}: no building names one of the blocks in "

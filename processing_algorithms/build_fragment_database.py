@@ -90,12 +90,9 @@ class BuildFragmentDatabase(AlgorithmBase):
                                     kind="lines", required_fields=[level_field],
                                     fields=[level_field])
         label = frame.name
-        min_area = qgis_io.check_number(self.parameterAsDouble(parameters, self.MIN_AREA, context),
-                                        self.MIN_AREA, 0.0, 1e6)
-        min_width = qgis_io.check_number(
-            self.parameterAsDouble(parameters, self.MIN_WIDTH, context), self.MIN_WIDTH, 0, 1000)
-        cell = qgis_io.check_number(self.parameterAsDouble(parameters, self.DEM_CELL_SIZE, context),
-                                    self.DEM_CELL_SIZE, 0.5, 100.0)
+        min_area = self.number(parameters, self.MIN_AREA, context)
+        min_width = self.number(parameters, self.MIN_WIDTH, context)
+        cell = self.number(parameters, self.DEM_CELL_SIZE, context)
         output = self.parameterAsFileOutput(parameters, self.OUTPUT, context)
 
         levels = pd.to_numeric(frame.attributes[level_field], errors="coerce").to_numpy(

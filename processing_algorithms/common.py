@@ -1,4 +1,8 @@
-"""Shared plumbing of the urbansynth algorithms (identity, icon, parameter help)."""
+"""Shared plumbing of the urbansynth algorithms: identity, icon, parameter help, and the
+rules every algorithm follows once: numbers checked against the range they were declared
+with, seeds, field types by the declaration, roads -> blocks, the example databases."""
+import functools
+import math
 from pathlib import Path
 
 import numpy as np
@@ -7,22 +11,121 @@ from qgis.core import (
     QgsProcessingAlgorithm,
     QgsProcessingException,
     QgsProcessingParameterDefinition,
+    QgsProcessingParameterField,
+    QgsProcessingParameterNumber,
 )
 from qgis.PyQt.QtGui import QIcon
 
-from ..plugin.qgis_glue import qgis_io
+from ..plugin.core.ids import whole_ids
+from ..plugin.core.progress import Canceled, InputError
+from ..plugin.network import blocks as block_rules
+from ..plugin.network import street_graph
+from ..plugin.qgis_glue import outputs, qgis_io
 from ..plugin.qgis_glue.toolbox import GROUPS
 
 ICON = Path(__file__).resolve().parent.parent / "resources" / "icons" / "urbansynth.svg"
 
 
+#: Seeds are 32-bit integers in QGIS (parameterAsInt): larger values would wrap silently.
+MAX_SEED = 2 ** 31 - 1
+#: QGIS's "no bound" of a Number parameter is +-DBL_MAX.
+_UNBOUNDED = 1e300
+
+
+def _range_text(lo: float, hi: float) -> str:
+    if lo <= -_UNBOUNDED and hi >= _UNBOUNDED:
+        return "any finite number"
+    if lo <= -_UNBOUNDED:
+        return f"at most {hi:g}"
+    if hi >= _UNBOUNDED:
+        return f"at least {lo:g}"
+    return f"from {lo:g} to {hi:g}"
+
+
+def number_error(definition, value):
+    """Why ``value`` is not acceptable for a Number parameter (None when it is): the check
+    derived from the declaration (its minimum, maximum and data type), so that a range is
+    typed once. QGIS itself checks ranges only in the dialog, and says no more than
+    'Incorrect parameter value' on the command line."""
+    label = f"{definition.description()} ({definition.name()})"
+    integer = definition.dataType() == QgsProcessingParameterNumber.Integer
+    lo, hi = definition.minimum(), definition.maximum()
+    if value is None or not math.isfinite(value):
+        return f"{label} must be a finite number, not {value}."
+    if integer and value != round(value):
+        return f"{label} must be a whole number, not {value:g}."
+    if value < lo or value > hi:
+        return f"{label} = {value:g} is out of range: allowed {_range_text(lo, hi)}."
+    return None
+
+
+def clear_error(alg, exc: BaseException, feedback) -> BaseException:
+    """The exception a run ends with: a QgsProcessingException whose message a GIS analyst
+    understands. A cancel is a :class:`qgis_io.ProcessingCanceled` whatever raised it (an
+    engine loop, or a library interrupted half-way); an engine error that escaped
+    ``run_engine`` names the tool; anything unexpected says so in one sentence, never as
+    a traceback."""
+    if feedback is not None and feedback.isCanceled() and \
+            not isinstance(exc, qgis_io.ProcessingCanceled):
+        return qgis_io.ProcessingCanceled()
+    if isinstance(exc, QgsProcessingException):
+        return exc
+    if isinstance(exc, Canceled):
+        return qgis_io.ProcessingCanceled()
+    if isinstance(exc, InputError):
+        return QgsProcessingException(f"{alg.displayName()}: {exc}")
+    if isinstance(exc, MemoryError):
+        return QgsProcessingException(
+            f"{alg.displayName()} ran out of memory: run it on a smaller area or split the "
+            "input.")
+    if isinstance(exc, Exception):
+        return QgsProcessingException(
+            f"{alg.displayName()} failed on this input ({type(exc).__name__}: {exc}). This is "
+            "a defect of Urban Synthesis: please report it with the input layers.")
+    return exc
+
+
+def _guarded(run):
+    """``processAlgorithm`` with the rules of every run: the declarations checked (models do
+    not call checkParameterValues), an output that is an input refused before anything is
+    written, every file output staged and moved into place only when the run succeeded
+    (:mod:`qgis_glue.outputs`), a cancel typed, an unexpected error a clear message."""
+    @functools.wraps(run)
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802 (QGIS API)
+        message = self.declaration_error(parameters, context)
+        if message:
+            raise QgsProcessingException(message)
+        staging = outputs.OutputStaging(self, parameters, context)
+        staged = staging.prepare()
+        try:
+            results = run(self, staged, context, feedback)
+            qgis_io.stop_if_canceled(feedback)   # a cancel at the very end writes nothing
+            return staging.commit(results)
+        except BaseException as exc:
+            staging.discard()
+            error = clear_error(self, exc, feedback)
+            if error is exc:
+                raise
+            raise error from exc
+
+    processAlgorithm.guarded = True
+    return processAlgorithm
+
+
 class AlgorithmBase(QgsProcessingAlgorithm):
-    """Base for every urbansynth algorithm: group, icon, instance creation and ``add``.
+    """Base for every urbansynth algorithm: group, icon, instance creation and ``add``, and
+    the rules of every run (:func:`_guarded` wraps each subclass's ``processAlgorithm``).
 
     Subclasses set ``GROUP_ID`` (a key of :data:`GROUPS`).
     """
 
     GROUP_ID = "analysis"
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        run = cls.__dict__.get("processAlgorithm")
+        if run is not None and not getattr(run, "guarded", False):
+            cls.processAlgorithm = _guarded(run)
 
     def group(self):
         return GROUPS[self.GROUP_ID]
@@ -51,11 +154,156 @@ class AlgorithmBase(QgsProcessingAlgorithm):
         return None
 
     def checkParameterValues(self, parameters, context):  # noqa: N802 (QGIS API)
+        # numbers and field types first: QGIS's own message names neither range nor type
+        message = self.declaration_error(parameters, context) or \
+            outputs.same_file_error(self, parameters, context)
+        if message:
+            return False, message
         ok, message = super().checkParameterValues(parameters, context)
         if not ok:
             return ok, message
         message = self.input_error(parameters, context)
         return (False, message) if message else (True, "")
+
+    # ----------------------------------------------------------------- declared once
+
+    def declaration_error(self, parameters, context):
+        """The first value that breaks its parameter's declaration (a mandatory parameter
+        not given, a number out of its range or not whole, a field of the wrong type), else
+        None."""
+        for definition in self.parameterDefinitions():
+            name = definition.name()
+            if not self.given(parameters, name):
+                if not (definition.flags() & QgsProcessingParameterDefinition.FlagOptional) \
+                        and not definition.isDestination() and definition.defaultValue() is None:
+                    return f"{definition.description()} ({name}) is needed."
+                continue
+            if isinstance(definition, QgsProcessingParameterNumber):
+                message = self._number_message(parameters, definition, context)
+            elif isinstance(definition, QgsProcessingParameterField):
+                message = self._field_message(parameters, definition, context)
+            else:
+                message = None
+            if message:
+                return message
+        return None
+
+    def _number_message(self, parameters, definition, context):
+        raw = parameters.get(definition.name())
+        if isinstance(raw, str):
+            try:
+                float(raw)
+            except ValueError:
+                return (f"{definition.description()} ({definition.name()}) must be a number, "
+                        f"not '{raw}'.")
+        return number_error(definition, self.parameterAsDouble(parameters, definition.name(),
+                                                               context))
+
+    def _field_message(self, parameters, definition, context):
+        """A Numeric or String field parameter naming a field of another type."""
+        wanted = definition.dataType()
+        if wanted not in (QgsProcessingParameterField.Numeric,
+                          QgsProcessingParameterField.String):
+            return None
+        parent = definition.parentLayerParameterName()
+        try:
+            source = self.parameterAsSource(parameters, parent, context) if parent else None
+        except Exception:  # noqa: BLE001 - an unreadable parent is reported by its own check
+            source = None
+        if source is None:
+            return None
+        fields = source.fields()
+        for name in self.parameterAsFields(parameters, definition.name(), context):
+            index = fields.lookupField(name)
+            if index < 0:
+                continue  # a missing field is reported where the layer is read
+            field = fields.at(index)
+            numeric = field.isNumeric()
+            if wanted == QgsProcessingParameterField.Numeric and not numeric:
+                return (f"{definition.description()} ({definition.name()}): field '{name}' of "
+                        f"{qgis_io.layer_name(self, parameters, parent, context)} holds "
+                        f"{field.typeName() or 'text'} values; a numeric field is needed.")
+        return None
+
+    def number(self, parameters, name, context):
+        """A Number parameter's value checked against its declaration (range, whole number
+        for Integer parameters): an int for Integer parameters, else a float; None for an
+        optional parameter without default that was not given."""
+        definition = self.parameterDefinition(name)
+        if not self.given(parameters, name) and definition.defaultValue() is None:
+            if definition.flags() & QgsProcessingParameterDefinition.FlagOptional:
+                return None
+        message = self._number_message(parameters, definition, context) \
+            if self.given(parameters, name) else None
+        value = self.parameterAsDouble(parameters, name, context)
+        message = message or number_error(definition, value)
+        if message:
+            raise QgsProcessingException(message)
+        if definition.dataType() == QgsProcessingParameterNumber.Integer:
+            return int(round(value))
+        return float(value)
+
+    def add_seed(self, help_text: str, name: str = "SEED", advanced: bool = False):
+        """The random seed parameter: a whole number 0 .. 2^31 - 1, default 1."""
+        self.add(QgsProcessingParameterNumber(
+            name, "Random seed", QgsProcessingParameterNumber.Integer, defaultValue=1,
+            minValue=0, maxValue=MAX_SEED), help_text, advanced=advanced)
+
+    def seed(self, parameters, context, name: str = "SEED") -> int:
+        """The seed, a whole number in range (1.5 or 2^31 are refused, never rounded)."""
+        return self.number(parameters, name, context)
+
+    # ----------------------------------------------------------------- roads and blocks
+
+    def drivable_roads(self, parameters, name, context, feedback, class_field=None,
+                       classes=None, fields=(), required_fields=()):
+        """A road line layer (OSM lines filtered to drivable classes; a layer without
+        classes keeps every line) and its road classes (None without classes)."""
+        frame = qgis_io.read_source(
+            self, parameters, name, context, feedback, kind="lines",
+            fields=[class_field or "highway", "other_tags", *fields],
+            required_fields=required_fields)
+        classes = set(street_graph.DRIVABLE_CLASSES) if classes is None else classes
+        return drivable_lines(frame, class_field, classes, feedback)
+
+    def blocks_from_roads(self, frame, road_class, feedback, progress=(5.0, 30.0), **kwargs):
+        """The street graph and city blocks of a road frame (:func:`blocks.blocks_from_roads`,
+        the rule of 'Extract city blocks'), with the counts in the log. ``kwargs``:
+        buildings, parcels, min_area, min_width."""
+        graph, result = qgis_io.run_engine(
+            frame.name, block_rules.blocks_from_roads, frame.geometry, road_class,
+            progress=qgis_io.progress_for(feedback, *progress), **kwargs)
+        st = result.stats
+        feedback.pushInfo(
+            f"Street graph: {graph.n_edges} edges, {len(graph.nodes)} nodes; "
+            f"{st['n_blocks']} blocks from {st['n_faces']} closed faces of {frame.name} "
+            f"({st['n_small']} too small and {st['n_thin']} too thin dropped).")
+        return graph, result
+
+    def roads_and_arterials(self, parameters, name, context, feedback, crs):
+        """Road lines of an optional layer (drivable classes when it has OSM classes) and
+        the arterials among them (level 0, else OSM motorway .. secondary); (None, None)
+        when the layer is not given."""
+        frame = qgis_io.read_source(self, parameters, name, context, feedback, kind="lines",
+                                    target_crs=crs, optional=True,
+                                    fields=["highway", "other_tags", "level"])
+        if frame is None:
+            return None, None
+        keep, arterial = street_graph.drivable_and_arterial(
+            qgis_io.osm_tag_column(frame, "highway"),
+            frame.attributes["level"] if "level" in frame.attributes else None, len(frame))
+        return frame.geometry[keep], frame.geometry[arterial]
+
+    def block_ids(self, frame, feedback, field="block_id"):
+        """A block layer's own ids (:func:`core.ids.whole_ids`), or None with a note when
+        they are not a unique whole number per block (blocks are then numbered 1..n)."""
+        if field not in frame.attributes:
+            return None
+        ids = whole_ids(frame.attributes[field])
+        if ids is None:
+            feedback.pushInfo(f"{frame.name}: {field} is not a unique whole number per "
+                              "block; blocks are numbered 1..n in layer order instead.")
+        return ids
 
     def blocks_or_roads_error(self, parameters, done: str, to_do: str):
         """The message when not exactly one of BLOCKS and ROADS is given (``done``: what

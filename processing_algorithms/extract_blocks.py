@@ -10,22 +10,16 @@ from qgis.core import (
     QgsProcessingParameterString,
     QgsWkbTypes,
 )
-from qgis.PyQt.QtCore import QVariant
 
 from ..plugin.buildings import attributes as building_attributes
 from ..plugin.network import blocks
 from ..plugin.network import street_graph as roads
 from ..plugin.qgis_glue import qgis_io
-from .common import AlgorithmBase, drivable_lines, parse_class_list
+from .common import AlgorithmBase, parse_class_list
 
 MEMBERSHIP_FIELDS = [("source_fid", "int"), ("block_id", "int"), ("block_share", "float"),
                      ("in_block", "bool"), ("area_m2", "float")]
 BUILDING_FIELDS = MEMBERSHIP_FIELDS + building_attributes.ATTRIBUTE_FIELDS
-#: Tag columns of GDAL's OSM 'multipolygons' layer (or cadastre fields) read when present.
-TAG_FIELDS = ("height", "building:height", "building:levels", "levels", "roof:shape",
-              "building:use", "amenity", "shop", "office", "tourism", "craft", "industrial",
-              "religion", "healthcare", "leisure")
-_INT_TYPES = (QVariant.Int, QVariant.LongLong, QVariant.UInt, QVariant.ULongLong)
 
 
 class ExtractBlocks(AlgorithmBase):
@@ -109,12 +103,14 @@ class ExtractBlocks(AlgorithmBase):
             "with it when a building has only one of them.", advanced=True)
         self.add(QgsProcessingParameterField(
             self.HEIGHT_FIELD, "Building height field (cadastre)",
-            parentLayerParameterName=self.BUILDINGS, optional=True),
+            parentLayerParameterName=self.BUILDINGS, type=QgsProcessingParameterField.Numeric,
+            optional=True),
             "A field with the building height in metres; it wins over OSM height tags.",
             advanced=True)
         self.add(QgsProcessingParameterField(
             self.LEVELS_FIELD, "Number of storeys field (cadastre)",
-            parentLayerParameterName=self.BUILDINGS, optional=True),
+            parentLayerParameterName=self.BUILDINGS, type=QgsProcessingParameterField.Numeric,
+            optional=True),
             "A field with the number of storeys; it wins over OSM building:levels.",
             advanced=True)
         self.add(QgsProcessingParameterFeatureSink(
@@ -132,39 +128,24 @@ class ExtractBlocks(AlgorithmBase):
             "The parcels with their fields plus block_id and in_block.")
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
-        min_area = qgis_io.check_number(
-            self.parameterAsDouble(parameters, self.MIN_BLOCK_AREA, context),
-            self.MIN_BLOCK_AREA, 0.0, 1e7)
-        min_width = qgis_io.check_number(
-            self.parameterAsDouble(parameters, self.MIN_BLOCK_WIDTH, context),
-            self.MIN_BLOCK_WIDTH, 0.0, 1000.0)
-        storey = qgis_io.check_number(
-            self.parameterAsDouble(parameters, self.STOREY_HEIGHT, context),
-            self.STOREY_HEIGHT, 0.5, 20.0)
+        min_area = self.number(parameters, self.MIN_BLOCK_AREA, context)
+        min_width = self.number(parameters, self.MIN_BLOCK_WIDTH, context)
+        storey = self.number(parameters, self.STOREY_HEIGHT, context)
         class_field = self.parameterAsString(parameters, self.CLASS_FIELD, context)
         classes = parse_class_list(self.parameterAsString(parameters, self.CLASSES, context))
 
-        frame = qgis_io.read_source(self, parameters, self.ROADS, context, feedback, kind="lines",
-                                    fields=[class_field or "highway", "other_tags"])
-        frame, road_class = drivable_lines(frame, class_field, classes, feedback)
-        # one vertical layer: every drivable edge bounds blocks, bridges and tunnels too
-        # (blocks.py), so the graph is noded at every crossing and no OSM layer is parsed
-        graph = qgis_io.run_engine(
-            frame.name, roads.clean_network, frame.geometry, road_class, None, None,
-            merge_degree2=False, progress=qgis_io.progress_for(feedback, 5, 30))
-        feedback.pushInfo(f"Street graph: {graph.n_edges} edges, {len(graph.nodes)} nodes.")
-
+        frame, road_class = self.drivable_roads(parameters, self.ROADS, context, feedback,
+                                                class_field, classes)
         buildings = self._buildings(parameters, context, feedback, frame.crs)
         if buildings is not None:
             heights, levels = self._cadastre_fields(parameters, context, buildings)
         parcels = qgis_io.read_source(self, parameters, self.PARCELS, context, feedback,
                                       kind="polygons", target_crs=frame.crs, optional=True)
-        result = qgis_io.run_engine(
-            frame.name, blocks.extract_blocks, graph,
-            None if buildings is None else buildings.geometry,
-            None if parcels is None else parcels.geometry,
-            min_area=min_area, min_width=min_width,
-            progress=qgis_io.progress_for(feedback, 40, 70))
+        _, result = self.blocks_from_roads(
+            frame, road_class, feedback, (5, 70),
+            buildings=None if buildings is None else buildings.geometry,
+            parcels=None if parcels is None else parcels.geometry,
+            min_area=min_area, min_width=min_width)
         self._log(result.stats, feedback)
 
         results = {}
@@ -178,7 +159,7 @@ class ExtractBlocks(AlgorithmBase):
                 buildings.name, building_attributes.building_attributes, len(buildings), building=qgis_io.field_values(buildings, "building"),
                 other_tags=qgis_io.field_values(buildings, "other_tags"),
                 tags={k: buildings.attributes[k].to_numpy(dtype=object)
-                      for k in TAG_FIELDS if k in buildings.attributes},
+                      for k in building_attributes.TAG_FIELDS if k in buildings.attributes},
                 height=heights, levels=levels, storey_height=storey)
             n_h = int(attrs["height_m"].notna().sum())
             n_est = int(attrs["height_estimated"].fillna(False).sum())
@@ -230,20 +211,15 @@ class ExtractBlocks(AlgorithmBase):
     def _write_features(self, parameters, source_name, name, context, feedback, frame, table,
                         fields):
         """Write features with their source fields plus ``fields`` (ours win on a clash)."""
-        # field names compare case-insensitively: GeoPackage and shapefiles do
+        source_fields = self.parameterAsSource(parameters, source_name, context).fields()
         ours = {f.lower() for f, _ in fields}
-        source = self.parameterAsSource(parameters, source_name, context)
-        carried = []
-        for field in source.fields():
-            if field.name().lower() in ours or field.name() not in frame.attributes:
-                if field.name().lower() in ours:
-                    feedback.pushInfo(f"{frame.name}: field '{field.name()}' is replaced by "
-                                      "the computed one.")
-                continue
-            kind = ("int" if field.type() in _INT_TYPES else "float"
-                    if field.type() == QVariant.Double else "bool"
-                    if field.type() == QVariant.Bool else "str")
-            carried.append((field.name(), kind))
+        replaced = [f.name() for f in source_fields if f.name().lower() in ours]
+        if replaced:
+            feedback.pushInfo(f"{frame.name}: field(s) {', '.join(replaced)} replaced by the "
+                              "computed ones.")
+        carried = [(name, kind) for name, kind in
+                   qgis_io.carried_fields(source_fields, ours - {"fid"})
+                   if name in frame.attributes]
         out = table.copy()
         for field, kind in carried:
             column = frame.attributes[field]
@@ -256,9 +232,6 @@ class ExtractBlocks(AlgorithmBase):
 
     @staticmethod
     def _log(stats, feedback):
-        feedback.pushInfo(
-            f"{stats['n_blocks']} blocks from {stats['n_faces']} closed faces "
-            f"({stats['n_small']} too small and {stats['n_thin']} too thin dropped).")
         if "n_buildings" in stats:
             n, k = stats["n_buildings"], stats["n_buildings_in_blocks"]
             feedback.pushInfo(

@@ -141,16 +141,11 @@ class ExtractRoadHierarchy(AlgorithmBase):
         classes = parse_class_list(self.parameterAsString(parameters, self.CLASSES, context))
         method = self.METHOD_KEYS[self.parameterAsEnum(parameters, self.METHOD, context)]
         arterial = parse_class_list(self.parameterAsString(parameters, self.ARTERIAL_CLASSES, context))
-        share = qgis_io.check_number(self.parameterAsDouble(parameters, self.ARTERIAL_SHARE, context),
-                                     self.ARTERIAL_SHARE, 0.001, 1.0)
-        snap = qgis_io.check_number(self.parameterAsDouble(parameters, self.SNAP_TOLERANCE, context),
-                                    self.SNAP_TOLERANCE, 0.0, 50.0)
-        dangle = qgis_io.check_number(self.parameterAsDouble(parameters, self.MIN_DANGLE_LENGTH, context),
-                                      self.MIN_DANGLE_LENGTH, 0.0, 500.0)
-        deflection = qgis_io.check_number(self.parameterAsDouble(parameters, self.MAX_DEFLECTION, context),
-                                          self.MAX_DEFLECTION, 0.0, 90.0)
-        radius = qgis_io.check_number(self.parameterAsDouble(parameters, self.PARCEL_RADIUS, context),
-                                      self.PARCEL_RADIUS, 1.0, 5000.0)
+        share = self.number(parameters, self.ARTERIAL_SHARE, context)
+        snap = self.number(parameters, self.SNAP_TOLERANCE, context)
+        dangle = self.number(parameters, self.MIN_DANGLE_LENGTH, context)
+        deflection = self.number(parameters, self.MAX_DEFLECTION, context)
+        radius = self.number(parameters, self.PARCEL_RADIUS, context)
 
         frame, road_class = drivable_lines(frame, class_field, classes, feedback)
         if road_class is None and method == "osm":

@@ -27,6 +27,7 @@ class GrowRoads(AlgorithmBase):
     BOUNDARY = "BOUNDARY"
     MAJOR_ROADS = "MAJOR_ROADS"
     GROW_MAJOR = "GROW_MAJOR"
+    REMOVE_DEAD_ENDS = "REMOVE_DEAD_ENDS"
     MAJOR_PATTERN = "MAJOR_PATTERN"
     MINOR_PATTERN = "MINOR_PATTERN"
     CENTER = "CENTER"
@@ -84,14 +85,20 @@ class GrowRoads(AlgorithmBase):
         d = growth.GrowthSettings()
         patterns = ["Organic", "Grid", "Radial"]
         self.add(QgsProcessingParameterFeatureSource(
-            self.BOUNDARY, "Boundary", [QgsProcessing.TypeVectorPolygon]),
+            self.BOUNDARY, "Boundary", [QgsProcessing.TypeVectorPolygon], optional=True),
             "Polygon(s) of the city region: every road is grown inside them (Scharl's mask). "
-            "Several features are merged.")
+            "Several features are merged. Without a boundary, roads grow around the sketched "
+            "major roads (one major segment length beyond their extent) and the outskirts are "
+            "closed by Scharl's bulged convex hull of the major nodes (sec. 4.2.5).")
         self.add(QgsProcessingParameterFeatureSource(
             self.MAJOR_ROADS, "Sketched major roads (optional)", [QgsProcessing.TypeVectorLine],
             optional=True),
             "Major roads drawn by hand: clipped to the boundary and kept as they are (level 0, "
             "pattern 'sketch'); growth continues from their dead ends and branches off them.")
+        self.add(QgsProcessingParameterBoolean(
+            self.REMOVE_DEAD_ENDS, "Remove dead-end roads at the end", defaultValue=True),
+            "Scharl Fig. 4.12: grown streets with a free end are pruned until every grown "
+            "street ends at a junction (sketched roads stay).", advanced=True)
         self.add(QgsProcessingParameterBoolean(
             self.GROW_MAJOR, "Grow more major roads", defaultValue=True),
             "Unchecked with sketched major roads: keep only the sketch as the major network and "
@@ -185,46 +192,45 @@ class GrowRoads(AlgorithmBase):
             "Any density raster (normalised by its maximum): the first seed goes to the "
             "densest place near the centre, major roads head for population, and growth, "
             "branching and block size follow density; nothing grows where it is 0.")
-        self.add(QgsProcessingParameterNumber(
-            self.SEED, "Random seed", QgsProcessingParameterNumber.Integer, defaultValue=1,
-            minValue=0),
+        self.add_seed(
             "The same seed and inputs give the same network.")
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT, "Grown roads", QgsProcessing.TypeVectorLine),
             "Roads with level (0 major, 1 minor), road_class, pattern, width_m, length_m.")
 
-    def _number(self, parameters, name, context, lo, hi):
-        return qgis_io.check_number(self.parameterAsDouble(parameters, name, context), name, lo, hi)
-
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         frame = qgis_io.read_source(self, parameters, self.BOUNDARY, context, feedback,
-                                    kind="polygons", fields=[])
+                                    kind="polygons", fields=[], optional=True)
+        if frame is None:  # no boundary: the sketch bounds the growth (bulged hull)
+            frame = qgis_io.read_source(self, parameters, self.MAJOR_ROADS, context, feedback,
+                                        kind="lines", fields=[], optional=True)
+            if frame is None:
+                raise QgsProcessingException(
+                    "Give a boundary polygon or sketched major roads: without either there "
+                    "is no place to grow roads.")
+        boundary = frame.geometry if shapely.get_dimensions(frame.geometry).max() == 2 else None
         label = frame.name
         crs = frame.crs
-        num = self._number
         settings = growth.GrowthSettings(
             major_pattern=self.PATTERN_KEYS[self.parameterAsEnum(parameters, self.MAJOR_PATTERN,
                                                                  context)],
             minor_pattern=self.PATTERN_KEYS[self.parameterAsEnum(parameters, self.MINOR_PATTERN,
                                                                  context)],
-            major_length=num(parameters, self.MAJOR_SEGMENT_LENGTH, context, 5.0, 10000.0),
-            minor_length=num(parameters, self.MINOR_SEGMENT_LENGTH, context, 5.0, 10000.0),
-            length_deviation=num(parameters, self.LENGTH_DEVIATION, context, 0.0, 90.0) / 100.0,
-            angle_deviation=num(parameters, self.ANGLE_DEVIATION, context, 0.0, 90.0),
-            branch_probability=num(parameters, self.BRANCH_PROBABILITY, context, 0.0, 1.0),
-            snap_distance=num(parameters, self.SNAP_DISTANCE, context, 0.0, 5000.0),
-            min_street_distance=num(parameters, self.MIN_STREET_DISTANCE, context, 0.0, 5000.0),
-            major_width=num(parameters, self.MAJOR_WIDTH, context, 0.0, 200.0),
-            minor_width=num(parameters, self.MINOR_WIDTH, context, 0.0, 200.0),
-            max_segments=int(qgis_io.check_number(
-                self.parameterAsInt(parameters, self.MAX_SEGMENTS, context), self.MAX_SEGMENTS,
-                1, 1000000)),
-            max_slope=num(parameters, self.MAX_SLOPE, context, 0.1, 100.0) / 100.0,
+            major_length=self.number(parameters, self.MAJOR_SEGMENT_LENGTH, context),
+            minor_length=self.number(parameters, self.MINOR_SEGMENT_LENGTH, context),
+            length_deviation=self.number(parameters, self.LENGTH_DEVIATION, context) / 100.0,
+            angle_deviation=self.number(parameters, self.ANGLE_DEVIATION, context),
+            branch_probability=self.number(parameters, self.BRANCH_PROBABILITY, context),
+            snap_distance=self.number(parameters, self.SNAP_DISTANCE, context),
+            min_street_distance=self.number(parameters, self.MIN_STREET_DISTANCE, context),
+            major_width=self.number(parameters, self.MAJOR_WIDTH, context),
+            minor_width=self.number(parameters, self.MINOR_WIDTH, context),
+            max_segments=self.number(parameters, self.MAX_SEGMENTS, context),
+            max_slope=self.number(parameters, self.MAX_SLOPE, context) / 100.0,
             grow_major=self.parameterAsBoolean(parameters, self.GROW_MAJOR, context),
+            remove_dead_ends=self.parameterAsBoolean(parameters, self.REMOVE_DEAD_ENDS, context),
         )
-        seed = self.parameterAsInt(parameters, self.SEED, context)
-        if seed < 0:
-            raise QgsProcessingException(f"Parameter {self.SEED} must not be negative.")
+        seed = self.seed(parameters, context)
         try:
             settings = settings.validated()
         except InputError as exc:
@@ -244,6 +250,9 @@ class GrowRoads(AlgorithmBase):
         feedback.setProgress(5)
 
         bounds = shapely.total_bounds(frame.geometry)
+        if boundary is None:  # around the sketch, as the engine grows there
+            reach = settings.major_length
+            bounds = (bounds[0] - reach, bounds[1] - reach, bounds[2] + reach, bounds[3] + reach)
         dem = None
         dem_layer = self.parameterAsRasterLayer(parameters, self.DEM, context)
         if dem_layer is not None:
@@ -284,7 +293,7 @@ class GrowRoads(AlgorithmBase):
         feedback.setProgress(10)
 
         result = qgis_io.run_engine(
-            label, growth.grow_roads, frame.geometry, settings=settings,
+            label, growth.grow_roads, boundary, settings=settings,
             major_roads=None if sketch is None else sketch.geometry, center=center, dem=dem,
             obstacles=obstacles_geoms, density=density,
             seed=seed, progress=qgis_io.progress_for(feedback, 10, 90))
@@ -294,6 +303,11 @@ class GrowRoads(AlgorithmBase):
             f"{st['minor_segments']} minor) in {st['quarters']} quarters from "
             f"{st['proposals']} proposals in {st['seconds']:.1f} s; output: "
             f"{len(result.geometry)} planar edges.")
+        if st.get("dead_ends_removed"):
+            feedback.pushInfo(f"{st['dead_ends_removed']} dead-end edges removed at the end.")
+        if st.get("bulged_hull"):
+            feedback.pushInfo("No boundary: the quarters were closed by the bulged convex hull "
+                              "of the major nodes.")
         if st["rejected"]:
             feedback.pushInfo("Proposals dropped by the local constraints: " + ", ".join(
                 f"{k} {v}" for k, v in st["rejected"].items()) + ".")

@@ -215,18 +215,16 @@ class LayoutMetrics(AlgorithmBase):
         if not any(self.given(parameters, name) for name, _, _ in self.CANDIDATE):
             raise QgsProcessingException(
                 "No layer to measure: give at least one of Roads, Blocks, Parcels or Buildings.")
-        half_width = qgis_io.check_number(
-            self.parameterAsDouble(parameters, self.ROAD_HALF_WIDTH, context),
-            self.ROAD_HALF_WIDTH, 0.0, 100.0)
+        half_width = self.number(parameters, self.ROAD_HALF_WIDTH, context)
         landuse_field = self.parameterAsString(parameters, self.LANDUSE_FIELD, context)
         html_path = self.parameterAsFileOutput(parameters, self.OUTPUT_HTML, context)
 
         counting = dict(
             drivable_only=self.parameterAsBool(parameters, self.DRIVABLE_ONLY, context),
-            min_block_area=self.parameterAsDouble(parameters, self.MIN_BLOCK_AREA, context),
-            min_block_width=self.parameterAsDouble(parameters, self.MIN_BLOCK_WIDTH, context),
-            edge_distance=self.parameterAsDouble(parameters, self.EDGE_DISTANCE, context),
-            snap_tolerance=self.parameterAsDouble(parameters, self.SNAP_TOLERANCE, context))
+            min_block_area=self.number(parameters, self.MIN_BLOCK_AREA, context),
+            min_block_width=self.number(parameters, self.MIN_BLOCK_WIDTH, context),
+            edge_distance=self.number(parameters, self.EDGE_DISTANCE, context),
+            snap_tolerance=self.number(parameters, self.SNAP_TOLERANCE, context))
         cand_args, cand_names, cand_crs = self._read_set(
             parameters, context, feedback, self.CANDIDATE, self.STUDY_AREA, landuse_field)
         if not cand_args:
@@ -292,9 +290,13 @@ class LayoutMetrics(AlgorithmBase):
                             f"{counting['edge_distance']:g} m of the study-area edge not "
                             f"counted; nodes snapped within {counting['snap_tolerance']:g} m")
         if html_path:
+            drawn = ("roads", "blocks", "parcels", "buildings")
+            maps = {"Layout": {k: cand_args[k] for k in drawn if k in cand_args}}
+            if example is not None:
+                maps["Example"] = {k: ex_args[k] for k in drawn if k in ex_args}
             qgis_io.run_engine("Report", report.write_report, html_path, candidate, example,
                                table, "Layout metrics", meta,
-                               progress=qgis_io.progress_for(feedback, 85, 100))
+                               progress=qgis_io.progress_for(feedback, 85, 100), maps=maps)
             results[self.OUTPUT_HTML] = html_path
         feedback.setProgress(100)
         return results

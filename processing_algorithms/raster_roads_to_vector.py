@@ -109,16 +109,14 @@ class RasterRoadsToVector(AlgorithmBase):
         array = array.astype(np.float64)
         if nodata is not None:
             array[array == nodata] = np.nan
-        num = lambda n, lo, hi: qgis_io.check_number(  # noqa: E731
-            self.parameterAsDouble(parameters, n, context), n, lo, hi)
-        threshold = num(self.THRESHOLD, None, None)
+        threshold = self.number(parameters, self.THRESHOLD, context)
         feedback.pushInfo(f"{array.shape[0]} x {array.shape[1]} px, "
                           f"{100 * np.nanmean(array > threshold):.1f} % above the threshold.")
         result = qgis_io.run_engine(
             f"Raster '{layer.name()}'", raster_graph.raster_to_graph, array, gt,
-            threshold=threshold, simplify=num(self.SIMPLIFY, 0.0, 1000.0),
-            min_dead_end=num(self.MIN_DEAD_END, 0.0, 10000.0),
-            max_gap=num(self.MAX_GAP, 0.0, 1000.0),
+            threshold=threshold, simplify=self.number(parameters, self.SIMPLIFY, context),
+            min_dead_end=self.number(parameters, self.MIN_DEAD_END, context),
+            max_gap=self.number(parameters, self.MAX_GAP, context),
             from_edge=self.parameterAsBoolean(parameters, self.FROM_EDGE, context),
             progress=qgis_io.progress_for(feedback, 0, 90))
         g = result.graph

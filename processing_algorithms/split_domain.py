@@ -33,6 +33,9 @@ class SplitDomain(AlgorithmBase):
     VARIATIONS = "VARIATIONS"
     SEED = "SEED"
     OPTIMISE = "OPTIMISE"
+    REPAIR_LOTS = "REPAIR_LOTS"
+    OUTLINE_STREETS = "OUTLINE_STREETS"
+    KEY_ROAD_CLASS_FIELD = "KEY_ROAD_CLASS_FIELD"
     OUTPUT_ROADS = "OUTPUT_ROADS"
     OUTPUT_PARCELS = "OUTPUT_PARCELS"
     OUTPUT_METRICS = "OUTPUT_METRICS"
@@ -57,17 +60,17 @@ class SplitDomain(AlgorithmBase):
             "it is split along the best-scoring streamline of a smooth cross field aligned "
             "with its boundary, recursively. The street mesh is then optimised (strip "
             "fitting, fairness, closeness) and the templates re-warped.\n\n"
-            "Key roads are kept and split the region; key areas (parks, schools, lakes) are "
-            "left out and kept as parcels of their land use. Every region outline counts as "
-            "a street. Several variations can be made at once; each parcel has street "
-            "access, land use and Yang's quality (p_angle, p_area, undesirable). Where a "
-            "strip ends on a slanted street or streets meet at an acute angle, the lot keeps "
-            "the rectangle standing on its street and the leftover wedge (or a misshapen lot "
-            "smaller than a template parcel) becomes a pocket park (land_use 'park'), the "
-            "paper's park fallback; the undesirable flag is Yang's shape test on every "
-            "parcel, parks included. The metrics "
-            "table has one row per variation with the paper's Table 1 columns. Outputs are "
-            "in the region's CRS."
+            "Key roads are kept and split the region (a key road ending inside it is "
+            "continued to the next street); motorways (class motorway / motorway_link in the "
+            "class field) take no junction and give no frontage. Key areas (parks, schools, "
+            "lakes) are left out and kept as parcels of their land use. The region outline "
+            "counts as a street unless 'Outline is a street' is off. Several variations can "
+            "be made at once; each parcel has street access, land use and Yang's quality "
+            "(p_angle, p_area, undesirable). The metrics table has one row per variation "
+            "with the paper's Table 1 columns, counting every designed parcel, parks "
+            "included. The optional lot repair (off by default, not in the paper) cuts "
+            "misshapen lots to the rectangle on their street and turns the wedges into "
+            "pocket parks, which still count. Outputs are in the region's CRS."
         )
 
     def initAlgorithm(self, config=None):  # noqa: N802
@@ -113,19 +116,32 @@ class SplitDomain(AlgorithmBase):
             self.VARIATIONS, "Variations", QgsProcessingParameterNumber.Integer,
             defaultValue=1, minValue=1, maxValue=100),
             "Number of layouts to make (field 'variation' in every output).")
-        self.add(QgsProcessingParameterNumber(
-            self.SEED, "Random seed", QgsProcessingParameterNumber.Integer, defaultValue=1,
-            minValue=0),
+        self.add_seed(
             "The same seed gives the same layouts; variation v draws from (seed, v).")
         self.add(QgsProcessingParameterBoolean(
             self.OPTIMISE, "Optimise the street mesh", defaultValue=True),
             "Global optimisation of the streets made by splitting (strip fitting, fairness, "
             "closeness; w = 1, 0.8, 0.2; 10 iterations), then templates re-warped.",
             advanced=True)
+        self.add(QgsProcessingParameterField(
+            self.KEY_ROAD_CLASS_FIELD, "Road class field of the key roads",
+            defaultValue="highway", parentLayerParameterName=self.KEY_ROADS, optional=True),
+            "OSM-style class per key road; motorway and motorway_link take no junction.",
+            advanced=True)
+        self.add(QgsProcessingParameterBoolean(
+            self.OUTLINE_STREETS, "Outline is a street", defaultValue=True),
+            "On: the region is bounded by streets (the paper's boundary condition). Off: "
+            "the outline is a 'no street' edge (a town's edge against fields): parcels back "
+            "onto it and no street land is kept along it.", advanced=True)
+        self.add(QgsProcessingParameterBoolean(
+            self.REPAIR_LOTS, "Repair misshapen lots (not in the paper)", defaultValue=False),
+            "Optional post-process: a misshapen lot keeps the largest rectangle on its street "
+            "and its wedges become pocket parks; a misshapen lot smaller than a parcel becomes "
+            "a pocket park. The parks still count in the metrics.", advanced=True)
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT_ROADS, "Streets", QgsProcessing.TypeVectorLine),
-            "Street centre lines with level (0 key road, 1 region outline, 2 split street, "
-            "3 cul-de-sac), kind, variation and length_m.")
+            "Street centre lines, noded at every junction, with level (0 key road, 1 region "
+            "outline, 2 split street, 3 cul-de-sac), kind, variation and length_m.")
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT_PARCELS, "Parcels", QgsProcessing.TypeVectorPolygon),
             "Parcels with variation, land_use, template, area_m2, frontage_m, "
@@ -143,23 +159,27 @@ class SplitDomain(AlgorithmBase):
         number = {}
         for name, lo, hi in ((self.PARCEL_LENGTH, 1.0, 1000.0), (self.PARCEL_WIDTH, 1.0, 1000.0),
                              (self.STREET_WIDTH, 1.0, 200.0)):
-            number[name] = qgis_io.check_number(
-                self.parameterAsDouble(parameters, name, context), name, lo, hi)
-        variations = int(qgis_io.check_number(
-            self.parameterAsInt(parameters, self.VARIATIONS, context), self.VARIATIONS, 1, 100))
-        seed = int(qgis_io.check_number(self.parameterAsInt(parameters, self.SEED, context),
-                                        self.SEED, 0))
+            number[name] = self.number(parameters, name, context)
+        variations = self.number(parameters, self.VARIATIONS, context)
+        seed = self.seed(parameters, context)
         settings = domain_split.SplitSettings(
             parcel_length=number[self.PARCEL_LENGTH], parcel_width=number[self.PARCEL_WIDTH],
             street_width=number[self.STREET_WIDTH],
-            optimise=self.parameterAsBoolean(parameters, self.OPTIMISE, context))
+            optimise=self.parameterAsBoolean(parameters, self.OPTIMISE, context),
+            repair_lots=self.parameterAsBoolean(parameters, self.REPAIR_LOTS, context),
+            outline_streets=self.parameterAsBoolean(parameters, self.OUTLINE_STREETS, context))
         qgis_io.run_engine("Parameters", settings.validate)
 
         region = qgis_io.read_source(self, parameters, self.REGION, context, feedback,
                                      kind="polygons", fields=[])
         crs = region.crs
+        class_field = self.parameterAsString(parameters, self.KEY_ROAD_CLASS_FIELD, context)
         key_roads = qgis_io.read_source(self, parameters, self.KEY_ROADS, context, feedback,
-                                        kind="lines", fields=[], target_crs=crs, optional=True)
+                                        kind="lines", fields=[class_field] if class_field else [],
+                                        target_crs=crs, optional=True)
+        key_classes = None
+        if key_roads is not None and class_field:
+            key_classes = qgis_io.osm_tag_column(key_roads, class_field)
         use_field = self.parameterAsString(parameters, self.KEY_AREA_USE_FIELD, context)
         key_areas = qgis_io.read_source(
             self, parameters, self.KEY_AREAS, context, feedback, kind="polygons",
@@ -176,6 +196,7 @@ class SplitDomain(AlgorithmBase):
             key_roads=None if key_roads is None else key_roads.geometry,
             key_areas=None if key_areas is None else key_areas.geometry,
             key_area_use=key_use, templates=lib, settings=settings,
+            key_road_classes=key_classes,
             progress=qgis_io.progress_for(feedback, 5, 85))
         rows = []
         for v, lay in enumerate(layouts, start=1):
@@ -186,12 +207,15 @@ class SplitDomain(AlgorithmBase):
                 f"Variation {v}: {st['n_splits']} streamline splits "
                 f"({st['n_rejected_splits']} candidates rejected), {st['n_blocks']} blocks "
                 f"(templates {st['templates']}), {st['n_parcels']} parcels, "
-                f"{st['n_backtracked']} template choices backtracked; p_angle "
+                f"{st['n_backtracked']} splits undone by backtracking; p_angle "
                 f"{m['p_angle']:.2f}°, p_area {m['p_area']:.3f}, {m['undesirable']} "
                 f"undesirable; {st['n_no_access']} parcels without street access "
                 f"({st['n_inner_parks']} lots cut off from the street kept as inner greens, "
-                f"{st['n_pocket_parks']} misshapen remnants and wedges made pocket parks); times "
-                f"split {st['time_split_s']:.1f} s, optimise {st['time_optimise_s']:.1f} s.")
+                f"{st['n_pocket_parks']} pocket parks from the optional repair); road mesh "
+                f"optimisation: {st['optimisation'].get('iterations', 0)} iterations, "
+                f"{'kept' if st['optimisation'].get('kept') else 'not kept'} (it is kept "
+                f"when it lowers the warp distortion); times split "
+                f"{st['time_split_s']:.1f} s, optimise {st['time_optimise_s']:.1f} s.")
         feedback.setProgress(88)
 
         road_geoms = np.concatenate([lay.roads for lay in layouts])

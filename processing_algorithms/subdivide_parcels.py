@@ -12,11 +12,13 @@ from qgis.core import (
     QgsWkbTypes,
 )
 
-from ..plugin.network import blocks
-from ..plugin.network import street_graph as roads
 from ..plugin.parcels import subdivision as parcels
+from ..plugin.core.ids import as_numbers
 from ..plugin.qgis_glue import qgis_io
-from .common import AlgorithmBase, drivable_lines
+from .common import AlgorithmBase
+
+#: Block fields that size the Voronoi parcels (Aliaga's a(v) and sigma_b), when present.
+PARCEL_SIZE_FIELDS = ("parcel_area", "parcel_area_sd")
 
 
 class SubdivideParcels(AlgorithmBase):
@@ -90,8 +92,9 @@ class SubdivideParcels(AlgorithmBase):
             "(Scharl 4.2.6). Skeleton: strips along every street cut every lot width, every "
             "parcel with street frontage (Vanegas et al. 2012). Voronoi along the OBB axis: one "
             "or two rows of parcels along the block's oriented bounding box, spacing jittered "
-            "with a Gaussian, each parcel with street access; parcel size lot width² x 1.5 "
-            "(Aliaga et al. 2008, sec. 3.1.2).")
+            "with a Gaussian, each parcel with street access and at least the minimum width; "
+            "parcel size from the blocks' parcel_area field (e.g. the blocks of 'Synthesize "
+            "roads (random walk)'), else lot width² x 1.5 (Aliaga et al. 2008, sec. 3.1.2).")
         self.add(QgsProcessingParameterNumber(
             self.MAX_AREA, "Maximum parcel area (m²)", QgsProcessingParameterNumber.Double,
             defaultValue=parcels.DEFAULT_MAX_AREA, minValue=1.0, maxValue=self.MAX_AREA_LIMIT),
@@ -101,7 +104,8 @@ class SubdivideParcels(AlgorithmBase):
             self.LOT_WIDTH, "Lot width along the street (m)", QgsProcessingParameterNumber.Double,
             defaultValue=parcels.DEFAULT_LOT_WIDTH, minValue=0.1, maxValue=self.MAX_WIDTH_LIMIT),
             "Skeleton: target frontage of a parcel (Yang et al. 2013 aim at 18 m). Voronoi along "
-            "the OBB axis: sets the mean parcel area (lot width² x 1.5).")
+            "the OBB axis: sets the mean parcel area (lot width² x 1.5) of blocks without a "
+            "parcel_area.")
         self.add(QgsProcessingParameterNumber(
             self.IRREGULARITY, "Irregularity (0-1)", QgsProcessingParameterNumber.Double,
             defaultValue=parcels.DEFAULT_IRREGULARITY, minValue=0.0, maxValue=1.0),
@@ -120,9 +124,7 @@ class SubdivideParcels(AlgorithmBase):
             "Recursive: a cut that would leave a lot without street frontage is not made "
             "(the lot stays larger). Any method: lots left without frontage are merged into "
             "a neighbour. Off: recursive makes inner lots (Scharl's deleteInnerLots off).")
-        self.add(QgsProcessingParameterNumber(
-            self.SEED, "Random seed", QgsProcessingParameterNumber.Integer, defaultValue=1,
-            minValue=0),
+        self.add_seed(
             "The same seed gives the same parcels; each block draws its own random numbers, "
             "so a block's parcels do not change when other blocks are added.")
         self.add(QgsProcessingParameterNumber(
@@ -164,8 +166,7 @@ class SubdivideParcels(AlgorithmBase):
                              (self.LOT_WIDTH, 0.0, self.MAX_WIDTH_LIMIT),
                              (self.IRREGULARITY, 0.0, 1.0),
                              (self.STREET_WIDTH, 0.0, self.MAX_WIDTH_LIMIT)):
-            number[name] = qgis_io.check_number(
-                self.parameterAsDouble(parameters, name, context), name, lo, hi)
+            number[name] = self.number(parameters, name, context)
         if number[self.MAX_AREA] <= number[self.MIN_AREA]:
             raise QgsProcessingException(
                 f"The maximum parcel area ({number[self.MAX_AREA]:g} m²) must be larger than "
@@ -177,13 +178,14 @@ class SubdivideParcels(AlgorithmBase):
             force_street_access=self.parameterAsBoolean(parameters, self.FORCE_STREET_ACCESS,
                                                         context))
         qgis_io.run_engine("Parameters", settings.validate)
-        seed = int(qgis_io.check_number(self.parameterAsInt(parameters, self.SEED, context),
-                                        self.SEED, 0))
+        seed = self.seed(parameters, context)
         street_width = number[self.STREET_WIDTH]
 
+        size = {}
         if self.given(parameters, self.BLOCKS):
             frame, block_geoms, block_ids, road_lines, road_widths = \
                 self._blocks(parameters, context, feedback)
+            size = self._parcel_sizes(frame, method, feedback)
         else:
             frame, block_geoms, block_ids, road_lines, road_widths = \
                 self._blocks_from_roads(parameters, context, feedback)
@@ -191,7 +193,7 @@ class SubdivideParcels(AlgorithmBase):
         result = qgis_io.run_engine(
             frame.name, parcels.subdivide_blocks, block_geoms, method, settings, seed=seed,
             block_ids=block_ids, street_width=street_width, roads=road_lines,
-            road_widths=road_widths, progress=qgis_io.progress_for(feedback, 30, 90))
+            road_widths=road_widths, progress=qgis_io.progress_for(feedback, 30, 90), **size)
         self._log(result.stats, method, feedback)
         if len(result.geometry) == 0:
             raise QgsProcessingException(
@@ -208,34 +210,46 @@ class SubdivideParcels(AlgorithmBase):
 
     def _blocks(self, parameters, context, feedback):
         frame = qgis_io.read_source(self, parameters, self.BLOCKS, context, feedback,
-                                    kind="polygons", fields=["block_id"])
-        ids = None
-        if "block_id" in frame.attributes:
-            values = frame.attributes["block_id"].to_numpy(dtype=object)
-            try:
-                numbers = np.array([int(v) for v in values], dtype=np.int64)
-            except (TypeError, ValueError):
-                numbers = None
-            if numbers is not None and len(np.unique(numbers)) == len(numbers):
-                ids = numbers
-            else:
-                feedback.pushInfo(f"{frame.name}: block_id is not a unique whole number per "
-                                  "block; blocks are numbered 1..n in layer order instead.")
+                                    kind="polygons", fields=["block_id", *PARCEL_SIZE_FIELDS])
+        ids = self.block_ids(frame, feedback)
         feedback.pushInfo(f"{len(frame)} blocks read from {frame.name}; every block edge is "
                           "taken as a street.")
         feedback.setProgress(30)
         return frame, frame.geometry, ids, None, None
 
+    @staticmethod
+    def _parcel_sizes(frame, method, feedback) -> dict:
+        """The blocks' own parcel_area (and parcel_area_sd) for the engine, when present."""
+        if "parcel_area" not in frame.attributes:
+            return {}
+        size = {field: as_numbers(frame.attributes[field])
+                for field in PARCEL_SIZE_FIELDS if field in frame.attributes}
+        area = size["parcel_area"]
+        bad = np.isfinite(area) & (area <= 0)
+        if bad.any():
+            raise QgsProcessingException(
+                f"Layer {frame.name}: {int(bad.sum())} blocks have a parcel_area that is not "
+                "positive.")
+        if (size.get("parcel_area_sd", np.zeros(1)) < 0).any():
+            raise QgsProcessingException(
+                f"Layer {frame.name}: parcel_area_sd must not be negative.")
+        n = int(np.isfinite(area).sum())
+        if method == "voronoi-obb":
+            feedback.pushInfo(f"{n} of {len(area)} blocks have their own parcel_area (the "
+                              "others use lot width² x 1.5).")
+        else:
+            feedback.pushInfo(f"{frame.name} has parcel_area; only the Voronoi method sizes "
+                              f"parcels by it ({method} uses the maximum area and lot width).")
+        return size
+
     def _blocks_from_roads(self, parameters, context, feedback):
         width_field = self.parameterAsString(parameters, self.STREET_WIDTH_FIELD, context)
-        frame = qgis_io.read_source(
-            self, parameters, self.ROADS, context, feedback, kind="lines",
-            fields=[width_field, "highway", "other_tags"],
+        frame, road_class = self.drivable_roads(
+            parameters, self.ROADS, context, feedback, fields=[width_field],
             required_fields=[width_field] if width_field else ())
-        frame, road_class = drivable_lines(frame, None, set(roads.DRIVABLE_CLASSES), feedback)
         widths = None
         if width_field:
-            widths = np.array([_number(v) for v in frame.attributes[width_field]], dtype=float)
+            widths = as_numbers(frame.attributes[width_field])
             if (widths < 0).any():
                 raise QgsProcessingException(
                     f"Layer {frame.name}: {int((widths < 0).sum())} roads have a negative "
@@ -244,17 +258,7 @@ class SubdivideParcels(AlgorithmBase):
             if n_missing:
                 feedback.pushInfo(f"{frame.name}: {n_missing} roads have no width in "
                                   f"'{width_field}' and use the street width.")
-        graph = qgis_io.run_engine(
-            frame.name, roads.clean_network, frame.geometry, road_class, None, None,
-            merge_degree2=False, progress=qgis_io.progress_for(feedback, 5, 20))
-        extraction = qgis_io.run_engine(
-            frame.name, blocks.extract_blocks, graph,
-            progress=qgis_io.progress_for(feedback, 20, 30))
-        stats = extraction.stats
-        feedback.pushInfo(
-            f"{stats['n_blocks']} blocks from {stats['n_faces']} closed faces of the roads "
-            f"({stats['n_small']} too small and {stats['n_thin']} too thin dropped, as in "
-            "'Extract city blocks').")
+        graph, extraction = self.blocks_from_roads(frame, road_class, feedback, (5, 30))
         road_widths = None if widths is None else widths[graph.source]
         return (frame, extraction.geometry, extraction.table["block_id"].to_numpy(),
                 graph.geometry, road_widths)
@@ -272,17 +276,12 @@ class SubdivideParcels(AlgorithmBase):
                               "without street access.")
         if stats["n_without_access"]:
             feedback.pushInfo(f"{stats['n_without_access']} parcels have no street frontage.")
+        if stats.get("n_under_min_width"):
+            feedback.pushInfo(f"{stats['n_under_min_width']} parcels are narrower than the "
+                              "minimum width: their block part is too thin for a wider lot.")
         if stats["n_merged_for_access"]:
             feedback.pushInfo(f"{stats['n_merged_for_access']} lots without street frontage "
                               "were merged into a neighbour.")
         feedback.pushInfo(f"{stats['n_undesirable']} parcels are undesirable by Yang's "
                           "criteria (p_angle > 15° or p_area > 1.2).")
 
-
-def _number(value):
-    """A width value as a float; empty or non-numeric values are NaN (use the default)."""
-    try:
-        out = float(value)
-    except (TypeError, ValueError):
-        return float("nan")
-    return out

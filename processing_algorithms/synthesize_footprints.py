@@ -16,11 +16,9 @@ from qgis.core import (
 )
 
 from ..plugin.buildings import footprints
-from ..plugin.network import blocks
-from ..plugin.network import street_graph as roads
 from ..plugin.qgis_glue import qgis_io
 from ..plugin.retrieval import database
-from .common import AlgorithmBase, drivable_lines
+from .common import AlgorithmBase
 
 
 class SynthesizeFootprints(AlgorithmBase):
@@ -114,9 +112,7 @@ class SynthesizeFootprints(AlgorithmBase):
             self.SETBACK, "Setback (m)", QgsProcessingParameterNumber.Double,
             defaultValue=0.0, minValue=0.0, maxValue=self.MAX_WIDTH),
             "Extra distance between the road surface and the footprints.")
-        self.add(QgsProcessingParameterNumber(
-            self.SEED, "Random seed", QgsProcessingParameterNumber.Integer, defaultValue=1,
-            minValue=0),
+        self.add_seed(
             "With N best > 1 each block picks one of its best matches at random; the same "
             "seed gives the same footprints, block by block.")
         self.add(QgsProcessingParameterNumber(
@@ -149,19 +145,11 @@ class SynthesizeFootprints(AlgorithmBase):
         if message:
             raise QgsProcessingException(message)
         method = footprints.METHODS[self.parameterAsEnum(parameters, self.METHOD, context)]
-        street_width = qgis_io.check_number(
-            self.parameterAsDouble(parameters, self.STREET_WIDTH, context), self.STREET_WIDTH,
-            0.0, self.MAX_WIDTH)
-        setback = qgis_io.check_number(
-            self.parameterAsDouble(parameters, self.SETBACK, context), self.SETBACK, 0.0,
-            self.MAX_WIDTH)
-        seed = int(qgis_io.check_number(self.parameterAsInt(parameters, self.SEED, context),
-                                        self.SEED, 0))
-        n_best = int(qgis_io.check_number(self.parameterAsInt(parameters, self.N_BEST, context),
-                                          self.N_BEST, 1, self.MAX_N_BEST))
-        min_b = int(qgis_io.check_number(
-            self.parameterAsInt(parameters, self.MIN_EXAMPLE_BUILDINGS, context),
-            self.MIN_EXAMPLE_BUILDINGS, 0))
+        street_width = self.number(parameters, self.STREET_WIDTH, context)
+        setback = self.number(parameters, self.SETBACK, context)
+        seed = self.seed(parameters, context)
+        n_best = self.number(parameters, self.N_BEST, context)
+        min_b = self.number(parameters, self.MIN_EXAMPLE_BUILDINGS, context)
         examples = self._databases(parameters, context, feedback, min_b)
         feedback.setProgress(5)
 
@@ -207,27 +195,14 @@ class SynthesizeFootprints(AlgorithmBase):
     def _blocks(self, parameters, context, feedback):
         frame = qgis_io.read_source(self, parameters, self.BLOCKS, context, feedback,
                                     kind="polygons", fields=["block_id"])
-        ids = None
-        if "block_id" in frame.attributes:
-            ids = footprints.output_block_ids(frame.attributes["block_id"])
-            if ids is None:
-                feedback.pushInfo(f"{frame.name}: block_id is not a unique whole number per "
-                                  "block; blocks are numbered 1..n in layer order instead.")
+        ids = self.block_ids(frame, feedback)
         feedback.pushInfo(f"{len(frame)} blocks read from {frame.name}; every block edge is "
                           "taken as a street centreline.")
         return frame, frame.geometry, ids, None
 
     def _blocks_from_roads(self, parameters, context, feedback):
-        frame = qgis_io.read_source(self, parameters, self.ROADS, context, feedback,
-                                    kind="lines", fields=["highway", "other_tags"])
-        frame, road_class = drivable_lines(frame, None, set(roads.DRIVABLE_CLASSES), feedback)
-        graph = qgis_io.run_engine(
-            frame.name, roads.clean_network, frame.geometry, road_class, None, None,
-            merge_degree2=False, progress=qgis_io.progress_for(feedback, 5, 10))
-        extraction = qgis_io.run_engine(frame.name, blocks.extract_blocks, graph,
-                                        progress=qgis_io.progress_for(feedback, 10, 15))
-        feedback.pushInfo(f"{extraction.stats['n_blocks']} blocks from the closed faces of "
-                          f"{frame.name}.")
+        frame, road_class = self.drivable_roads(parameters, self.ROADS, context, feedback)
+        graph, extraction = self.blocks_from_roads(frame, road_class, feedback, (5, 15))
         return (frame, extraction.geometry, extraction.table["block_id"].to_numpy(),
                 graph.geometry)
 

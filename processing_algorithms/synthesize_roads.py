@@ -10,7 +10,6 @@ from qgis.core import (
     QgsProcessingParameterFeatureSink,
     QgsProcessingParameterFeatureSource,
     QgsProcessingParameterFile,
-    QgsProcessingParameterNumber,
     QgsProcessingParameterRasterLayer,
 )
 
@@ -88,8 +87,7 @@ class SynthesizeRoads(AlgorithmBase):
         self.add(QgsProcessingParameterRasterLayer(
             self.DEM, "Terrain (DEM)", optional=True),
             "Fragments and growth take the terrain into account (slope term, maximum slope).")
-        self.add(QgsProcessingParameterNumber(
-            self.SEED, "Random seed", QgsProcessingParameterNumber.Integer, defaultValue=1),
+        self.add_seed(
             "The same seed and inputs give the same network.")
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT, "Synthesised roads", QgsProcessing.TypeVectorLine),
@@ -99,7 +97,7 @@ class SynthesizeRoads(AlgorithmBase):
         import processing  # QGIS's Processing plugin, present wherever algorithms run
 
         method = METHODS[self.parameterAsEnum(parameters, self.METHOD, context)]
-        seed = self.parameterAsInt(parameters, self.SEED, context)
+        seed = self.seed(parameters, context)
         arterials = parameters[self.ARTERIALS]
         example = parameters[self.EXAMPLE_ROADS]
         dem = parameters.get(self.DEM)

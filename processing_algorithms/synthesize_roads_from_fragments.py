@@ -103,9 +103,7 @@ class SynthesizeRoadsFromFragments(AlgorithmBase):
             self.MAX_LEVEL, "Deepest street level (optional)", QgsProcessingParameterNumber.Integer,
             optional=True, minValue=1, maxValue=synthesis_fragments.MAX_LEVELS),
             "Stop after synthesising streets of this level (default: as deep as the databases go).")
-        self.add(QgsProcessingParameterNumber(
-            self.SEED, "Random seed", QgsProcessingParameterNumber.Integer, defaultValue=1,
-            minValue=0),
+        self.add_seed(
             "The same seed with the same inputs gives the same network.")
         self.add(QgsProcessingParameterNumber(
             self.GAMMA, "Shape weight gamma", QgsProcessingParameterNumber.Double,
@@ -141,17 +139,11 @@ class SynthesizeRoadsFromFragments(AlgorithmBase):
         frame = qgis_io.read_source(self, parameters, self.ARTERIALS, context, feedback,
                                     kind="lines", fields=[])
         label = frame.name
-        n_best = self.parameterAsInt(parameters, self.N_BEST, context)
-        qgis_io.check_number(n_best, self.N_BEST, 1, synthesis_fragments.MAX_N_BEST)
-        max_level = None
-        if parameters.get(self.MAX_LEVEL) not in (None, ""):
-            max_level = self.parameterAsInt(parameters, self.MAX_LEVEL, context)
-            qgis_io.check_number(max_level, self.MAX_LEVEL, 1, synthesis_fragments.MAX_LEVELS)
-        seed = self.parameterAsInt(parameters, self.SEED, context)
-        gamma = qgis_io.check_number(self.parameterAsDouble(parameters, self.GAMMA, context),
-                                     self.GAMMA, 0.0, 1.0)
-        cell = qgis_io.check_number(self.parameterAsDouble(parameters, self.DEM_CELL_SIZE, context),
-                                    self.DEM_CELL_SIZE, 0.5, 100.0)
+        n_best = self.number(parameters, self.N_BEST, context)
+        max_level = self.number(parameters, self.MAX_LEVEL, context)
+        seed = self.seed(parameters, context)
+        gamma = self.number(parameters, self.GAMMA, context)
+        cell = self.number(parameters, self.DEM_CELL_SIZE, context)
         dem_out = self.parameterAsOutputLayer(parameters, self.OUTPUT_DEM, context) \
             if parameters.get(self.OUTPUT_DEM) else ""
         dbs, names = self._databases(parameters, context)

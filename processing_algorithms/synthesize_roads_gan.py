@@ -104,9 +104,7 @@ class SynthesizeRoadsGan(AlgorithmBase):
             self.MODEL_FILE, "Model file (.onnx, optional)", extension="onnx", optional=True),
             "A generator exported by tools/streetgan/train.py, with its model card "
             "(<name>.json) next to it; used instead of the shipped model when given.")
-        self.add(QgsProcessingParameterNumber(
-            self.SEED, "Random seed", QgsProcessingParameterNumber.Integer, defaultValue=1,
-            minValue=0),
+        self.add_seed(
             "Seed of the noise field: the same seed and target give the same network.")
         self.add(QgsProcessingParameterNumber(
             self.CELL_SIZE, "Cell size (m, 0 = the model's)", QgsProcessingParameterNumber.Double,
@@ -178,18 +176,12 @@ class SynthesizeRoadsGan(AlgorithmBase):
                 raise QgsProcessingException(f"Parameter {self.MODEL} must be 0 .. "
                                              f"{len(self.models) - 1}.")
             model = self.models[index]
-        seed = self.parameterAsInt(parameters, self.SEED, context)
-        if seed < 0:
-            raise QgsProcessingException(f"Parameter {self.SEED} must not be negative.")
-        cell = qgis_io.check_number(self.parameterAsDouble(parameters, self.CELL_SIZE, context),
-                                    self.CELL_SIZE, 0.0, 100.0)
-        max_gap = qgis_io.check_number(self.parameterAsDouble(parameters, self.MAX_GAP, context),
-                                       self.MAX_GAP, 0.0, 500.0)
+        seed = self.seed(parameters, context)
+        cell = self.number(parameters, self.CELL_SIZE, context)
+        max_gap = self.number(parameters, self.MAX_GAP, context)
         min_dead = None  # the model card's value
         if parameters.get(self.MIN_DEAD_END) not in (None, ""):
-            min_dead = qgis_io.check_number(
-                self.parameterAsDouble(parameters, self.MIN_DEAD_END, context),
-                self.MIN_DEAD_END, 0.0, 1000.0)
+            min_dead = self.number(parameters, self.MIN_DEAD_END, context)
         gen = qgis_io.run_engine(f"Model '{Path(str(model)).name}'", streetgan.load_model, model)
         feedback.pushInfo(f"Model {gen.name}: {gen.card.get('title', '')}, "
                           f"{gen.cell_size:g} m per pixel.")

@@ -106,9 +106,7 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
             optional=True),
             "A 0-1 weight per target polygon for a spatially varying blend; empty values use "
             "the blend weight above.")
-        self.add(QgsProcessingParameterNumber(
-            self.SEED, "Random seed", QgsProcessingParameterNumber.Integer, defaultValue=1,
-            minValue=0),
+        self.add_seed(
             "The same seed and inputs give the same network.")
         self.add(QgsProcessingParameterEnum(
             self.PLACEMENT, "Placement of the example's points",
@@ -196,8 +194,7 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
         return points, random_walk.street_shapes(graph, h.edge_level)
 
     def _blend(self, parameters, context, target, field):
-        beta = qgis_io.check_number(self.parameterAsDouble(parameters, self.BLEND, context),
-                                    self.BLEND, 0.0, 1.0)
+        beta = self.number(parameters, self.BLEND, context)
         if not field:
             return beta
         values = np.array([_number(v) for v in target.attributes[field]], dtype=float)
@@ -222,13 +219,10 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
         field = self.parameterAsString(parameters, self.BLEND_FIELD, context)
         target = qgis_io.read_source(self, parameters, self.TARGET, context, feedback,
                                      kind="polygons", fields=[field] if field else [])
-        seed = int(qgis_io.check_number(self.parameterAsInt(parameters, self.SEED, context),
-                                        self.SEED, 0))
+        seed = self.seed(parameters, context)
         settings = random_walk.WalkSettings(
-            threshold=qgis_io.check_number(self.parameterAsDouble(
-                parameters, self.THRESHOLD, context), self.THRESHOLD, 0.0, 1.0),
-            min_angle=qgis_io.check_number(self.parameterAsDouble(
-                parameters, self.MIN_ANGLE, context), self.MIN_ANGLE, 0.0, 89.0))
+            threshold=self.number(parameters, self.THRESHOLD, context),
+            min_angle=self.number(parameters, self.MIN_ANGLE, context))
         placement = self.PLACEMENTS[self.parameterAsEnum(parameters, self.PLACEMENT, context)]
         feedback.setProgress(5)
         _, points, shapes = self._read_example(parameters, self.EXAMPLE, context, feedback,

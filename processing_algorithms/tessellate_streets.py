@@ -9,6 +9,7 @@ from qgis.core import (
     QgsProcessingParameterFeatureSink,
     QgsProcessingParameterFeatureSource,
     QgsProcessingParameterField,
+    QgsProcessingParameterFileDestination,
     QgsProcessingParameterNumber,
     QgsProcessingParameterRasterLayer,
     QgsProcessingParameterString,
@@ -16,7 +17,7 @@ from qgis.core import (
 )
 
 from ..plugin.network import street_graph as roads
-from ..plugin.network import street_surfaces
+from ..plugin.network import street_mesh, street_surfaces
 from ..plugin.qgis_glue import qgis_io
 from .common import AlgorithmBase, drivable_lines, parse_class_list
 
@@ -38,8 +39,12 @@ class TessellateStreets(AlgorithmBase):
     MAX_LONGITUDINAL_SLOPE = "MAX_LONGITUDINAL_SLOPE"
     MAX_LATERAL_SLOPE = "MAX_LATERAL_SLOPE"
     SNAP_TOLERANCE = "SNAP_TOLERANCE"
+    MESH_SPACING = "MESH_SPACING"
+    Z_OFFSET = "Z_OFFSET"
     OUTPUT_SURFACES = "OUTPUT_SURFACES"
     OUTPUT_JUNCTIONS = "OUTPUT_JUNCTIONS"
+    OUTPUT_MESH = "OUTPUT_MESH"
+    OUTPUT_TIN = "OUTPUT_TIN"
 
     def name(self):
         return "tessellatestreets"
@@ -65,7 +70,13 @@ class TessellateStreets(AlgorithmBase):
             "(Scharl: 12 % and 8 %).\n\n"
             "Polygons are valid, do not overlap within a vertical layer (bridges and tunnels "
             "may pass over other streets), and together cover the centre lines buffered by half "
-            "their width. Outputs are in the roads' CRS."
+            "their width. Outputs are in the roads' CRS.\n\n"
+            "The 3D mesh (Scharl ch. 5.2) triangulates every street between its connecting "
+            "lines (stations every mesh spacing, lifted by the z offset) and every junction "
+            "(its street heads, in the terrain's tangent plane), with side faces down into the "
+            "terrain wherever a street edge lies above it. It comes as MultiPolygon Z "
+            "triangles (QGIS 3D shows them) and, as a file, as TIN Z features in a "
+            "GeoPackage (written with GDAL; QGIS 3.22 reads them as MultiPolygon Z)."
         )
 
     def initAlgorithm(self, config=None):  # noqa: N802
@@ -127,6 +138,16 @@ class TessellateStreets(AlgorithmBase):
             QgsProcessingParameterNumber.Double, defaultValue=1.0, minValue=0.0,
             maxValue=50.0),
             "Line ends closer than this are joined when the network is noded.", advanced=True)
+        self.add(QgsProcessingParameterNumber(
+            self.MESH_SPACING, "Mesh station spacing (m)", QgsProcessingParameterNumber.Double,
+            defaultValue=5.0, minValue=0.5, maxValue=100.0, optional=True),
+            "Distance between the cross-sections of a street in the 3D mesh.", advanced=True)
+        self.add(QgsProcessingParameterNumber(
+            self.Z_OFFSET, "Mesh lift above the terrain (m)",
+            QgsProcessingParameterNumber.Double, defaultValue=0.1, minValue=0.0,
+            maxValue=10.0, optional=True),
+            "The mesh is lifted this much above the draped height (Scharl: against "
+            "z-fighting with the terrain); side faces close the gap.", advanced=True)
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT_SURFACES, "Street surfaces", QgsProcessing.TypeVectorPolygon),
             "One polygon per street segment between junctions: segment_id, edge_id, "
@@ -137,9 +158,16 @@ class TessellateStreets(AlgorithmBase):
             optional=True, createByDefault=True),
             "One polygon per junction: junction_id (= from/to_junction of the surfaces), "
             "degree, merged_nodes, z_layer, area_m2; with a DEM z_centre and slopes.")
-
-    def _number(self, parameters, name, context, lo, hi):
-        return qgis_io.check_number(self.parameterAsDouble(parameters, name, context), name, lo, hi)
+        self.add(QgsProcessingParameterFeatureSink(
+            self.OUTPUT_MESH, "3D street mesh (triangles)", QgsProcessing.TypeVectorPolygon,
+            optional=True, createByDefault=False),
+            "One MultiPolygon Z of triangles per street surface and junction: mesh_id, kind "
+            "(street / junction), source_id (segment_id / junction_id), triangles, "
+            "side_triangles, z_min, z_max. Flat (z = 0) without a DEM.")
+        self.add(QgsProcessingParameterFileDestination(
+            self.OUTPUT_TIN, "3D street mesh as TIN Z GeoPackage", "GeoPackage (*.gpkg)",
+            optional=True, createByDefault=False),
+            "The same mesh as TIN Z features (layer 'street_mesh') in a GeoPackage file.")
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         width_field = self.parameterAsString(parameters, self.WIDTH_FIELD, context)
@@ -151,11 +179,11 @@ class TessellateStreets(AlgorithmBase):
                     "level", "oneway", "layer", "bridge", "tunnel", "other_tags"])
         label = frame.name
         classes = parse_class_list(self.parameterAsString(parameters, self.CLASSES, context))
-        default_width = self._number(parameters, self.DEFAULT_WIDTH, context, 0.5, 200.0)
-        merge = self._number(parameters, self.MERGE_DISTANCE, context, 0.0, 100.0)
-        max_long = self._number(parameters, self.MAX_LONGITUDINAL_SLOPE, context, 0.0, 100.0)
-        max_lat = self._number(parameters, self.MAX_LATERAL_SLOPE, context, 0.0, 100.0)
-        snap = self._number(parameters, self.SNAP_TOLERANCE, context, 0.0, 50.0)
+        default_width = self.number(parameters, self.DEFAULT_WIDTH, context)
+        merge = self.number(parameters, self.MERGE_DISTANCE, context)
+        max_long = self.number(parameters, self.MAX_LONGITUDINAL_SLOPE, context)
+        max_lat = self.number(parameters, self.MAX_LATERAL_SLOPE, context)
+        snap = self.number(parameters, self.SNAP_TOLERANCE, context)
         merge_heads = self.parameterAsBoolean(parameters, self.MERGE_OVERLAPPING, context)
 
         frame, road_class = drivable_lines(frame, class_field, classes, feedback)
@@ -208,8 +236,30 @@ class TessellateStreets(AlgorithmBase):
                     feedback.pushWarning(f"{n_long} {what} steeper than {max_long:g} % along "
                                          f"and {n_lat} steeper than {max_lat:g} % across.")
 
+        # PolygonZ with a DEM (write_sink keeps z through the reprojection)
         wkb = QgsWkbTypes.MultiPolygonZ if dem is not None else QgsWkbTypes.MultiPolygon
         results = {}
+        tin_path = self.parameterAsFileOutput(parameters, self.OUTPUT_TIN, context) \
+            if parameters.get(self.OUTPUT_TIN) else ""
+        if parameters.get(self.OUTPUT_MESH) is not None or tin_path:
+            mesh = qgis_io.run_engine(
+                label, street_mesh.street_mesh, result,
+                spacing=self._number(parameters, self.MESH_SPACING, context, 0.5, 100.0),
+                z_offset=self._number(parameters, self.Z_OFFSET, context, 0.0, 10.0))
+            t = mesh.table
+            feedback.pushInfo(f"3D mesh: {len(mesh.triangles)} triangles "
+                              f"({int(mesh.side.sum())} in side faces) in {len(t)} features.")
+            geoms = self._to_output_crs(mesh.geometries(), frame, context, True)
+            if parameters.get(self.OUTPUT_MESH) is not None:
+                results[self.OUTPUT_MESH] = qgis_io.write_sink(
+                    self, parameters, self.OUTPUT_MESH, context, geoms, t,
+                    street_mesh.MESH_FIELDS, QgsWkbTypes.MultiPolygonZ, frame.source_crs,
+                    frame.source_crs, feedback)
+            if tin_path:
+                qgis_io.run_engine(tin_path, street_mesh.write_tin_geopackage, tin_path,
+                                   "street_mesh", geoms, t, street_mesh.MESH_FIELDS,
+                                   frame.source_crs.toWkt())
+                results[self.OUTPUT_TIN] = tin_path
         for name, geoms, table, spec, qml in (
                 (self.OUTPUT_SURFACES, result.surfaces, result.surface_table,
                  street_surfaces.SURFACE_FIELDS, "street_surfaces.qml"),
@@ -217,23 +267,10 @@ class TessellateStreets(AlgorithmBase):
                  street_surfaces.JUNCTION_FIELDS, "junctions.qml")):
             if parameters.get(name) is None:
                 continue
-            out = self._to_output_crs(geoms, frame, context, dem is not None)
-            dest = qgis_io.write_sink(self, parameters, name, context, out, table, spec, wkb,
-                                      frame.source_crs, frame.source_crs, feedback)
+            dest = qgis_io.write_sink(self, parameters, name, context, geoms, table, spec, wkb,
+                                      frame.source_crs, frame.crs, feedback)
             qgis_io.style_output(context, dest, qml)
             results[name] = dest
         feedback.setProgress(100)
         return results
 
-    @staticmethod
-    def _to_output_crs(geoms, frame, context, has_z):
-        """Reproject to the input CRS keeping Z (qgis_io's transform is 2D)."""
-        geoms = np.asarray(geoms, dtype=object)
-        if not len(geoms) or frame.crs == frame.source_crs:
-            return geoms
-        if not has_z:
-            return qgis_io.reproject(geoms, frame.crs, frame.source_crs, context)
-        z = shapely.get_coordinates(geoms, include_z=True)[:, 2]
-        flat = qgis_io.reproject(shapely.force_2d(geoms), frame.crs, frame.source_crs, context)
-        xy = shapely.get_coordinates(flat)
-        return shapely.set_coordinates(shapely.force_3d(flat, 0.0), np.column_stack([xy, z]))

@@ -1,8 +1,10 @@
 """Write the Processing models shipped with the provider (resources/models/*.model3).
 
 The .model3 files are committed; this script documents how they are made and regenerates
-them (run with the venv's python: `QT_QPA_PLATFORM=offscreen .venv/bin/python
-scripts/make_models.py`). A model made here opens in the QGIS model designer like any other.
+them (run with the venv's python: `QT_HASH_SEED=0 QT_QPA_PLATFORM=offscreen .venv/bin/python
+scripts/make_models.py`; the fixed hash seed keeps Qt's XML attribute order, so that the
+diff of a regenerated model shows only what changed). A model made here opens in the QGIS
+model designer like any other.
 """
 import os
 import sys
@@ -114,7 +116,8 @@ def district_model() -> QgsProcessingModelAlgorithm:
                  "Guided re-synthesis (thesis ch. 5.2)"], defaultValue=0),
         "How the blocks are filled with building footprints.", 0, 480)
     _param(model, QgsProcessingParameterNumber(
-        "SEED", "Random seed", QgsProcessingParameterNumber.Integer, defaultValue=1),
+        "SEED", "Random seed", QgsProcessingParameterNumber.Integer, defaultValue=1,
+        minValue=0, maxValue=2 ** 31 - 1),
         "The same seed and inputs give the same district.", 0, 560)
 
     _child(model, "hierarchy", "urbansynth:extractroadhierarchy", "Example road hierarchy",
@@ -139,8 +142,8 @@ def district_model() -> QgsProcessingModelAlgorithm:
            {"BLOCKS": out("blocks", "OUTPUT"), "BLOCK_DB": out("block_db", "OUTPUT"),
             "METHOD": p("FOOTPRINT_METHOD"),
             "SEED": p("SEED")}, x=600, y=300)
-    _child(model, "buildings", "urbansynth:synthesizebuildings", "Building attributes",
-           {"METHOD": fixed(0), "FOOTPRINTS": out("footprints", "OUTPUT"),
+    _child(model, "buildings", "urbansynth:synthesizebuildingattributes", "Building attributes",
+           {"FOOTPRINTS": out("footprints", "OUTPUT"),
             "EXAMPLE_BUILDINGS": out("example_blocks", "OUTPUT_BUILDINGS"),
             "ROADS": out("roads", "OUTPUT"), "EXAMPLE_ROADS": out("hierarchy", "OUTPUT"),
             "SEED": p("SEED")},

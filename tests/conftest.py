@@ -17,6 +17,10 @@ PLUGINS = ROOT / "build" / "plugins"
 DATA = ROOT / "data" / "examples"
 HELSINKI = DATA / "Helsinki.osm.pbf"
 BUBENEC = DATA / "bubenec.gpkg"
+#: The whole of Liechtenstein from OSM (tests/data, ODbL: see its ATTRIBUTION.txt), for
+#: leave-one-town-out evaluation; URBANSYNTH_LIECHTENSTEIN overrides where it is.
+LIECHTENSTEIN = Path(os.environ.get(
+    "URBANSYNTH_LIECHTENSTEIN", ROOT / "tests" / "data" / "liechtenstein-2013-08-03.osm.pbf"))
 
 # the plugin is imported as the package QGIS gives it: its folder name under build/plugins
 if str(PLUGINS) not in sys.path:
@@ -63,7 +67,8 @@ def run_qgis_process(alg_id, params, timeout=300):
     """Run ``qgis_process.bin --json run urbansynth:<alg_id> -- K=V ...``.
 
     Returns (exit code, parsed JSON or None, stderr). The exit code must be 0: the
-    native-library crash of DESIGN.md shows up as 134/139 after the results were printed.
+    native-library crash (docs/ARCHITECTURE.md, "Native libraries") shows up as 134/139
+    after the results were printed.
     """
     args = [str(ROOT / "scripts" / "qgis-process"), "--json", "run", f"urbansynth:{alg_id}", "--"]
     for key, value in params.items():

@@ -4,7 +4,7 @@ from functools import lru_cache
 import numpy as np
 import shapely
 
-from conftest import BUBENEC, HELSINKI
+from conftest import BUBENEC, HELSINKI, LIECHTENSTEIN
 
 
 @lru_cache(maxsize=1)
@@ -29,6 +29,41 @@ def bubenec(layer, crs=32633):
     import pyogrio
 
     return pyogrio.read_dataframe(BUBENEC, layer=layer).to_crs(crs)
+
+
+@lru_cache(maxsize=1)
+def _liechtenstein(crs=32632):
+    """Municipalities (admin_level 8), drivable street graph and its blocks (UTM 32N)."""
+    import pyogrio
+    import pytest
+
+    from urban_synthesis.plugin.network import blocks
+    from urban_synthesis.plugin.network import street_graph as roads
+
+    if not LIECHTENSTEIN.exists():
+        pytest.skip(f"{LIECHTENSTEIN} is not there (see DESIGN.md, real example data)")
+    towns = pyogrio.read_dataframe(LIECHTENSTEIN, layer="multipolygons",
+                                   columns=["name", "admin_level"])
+    towns = towns[towns.admin_level == "8"].to_crs(crs)
+    lines = pyogrio.read_dataframe(LIECHTENSTEIN, layer="lines", columns=["highway"])
+    lines = lines[lines.highway.isin(roads.DRIVABLE_CLASSES)].to_crs(crs)
+    graph = roads.clean_network(lines.geometry.values, lines.highway.values,
+                                merge_degree2=False)
+    extraction = blocks.extract_blocks(graph)
+    return dict(zip(towns.name, towns.geometry.values)), graph.geometry, extraction.geometry
+
+
+def liechtenstein_towns():
+    """Names of Liechtenstein's eleven municipalities (OSM admin_level 8), sorted."""
+    return sorted(_liechtenstein()[0])
+
+
+def liechtenstein_town_blocks(name):
+    """(streets, blocks) of one municipality: the blocks of the whole country's drivable
+    OSM streets (network engine) whose inner point lies in it, and all the streets."""
+    towns, streets, faces = _liechtenstein()
+    inside = shapely.within(shapely.point_on_surface(faces), towns[name])
+    return streets, faces[inside]
 
 
 def assert_planar(lines, z_layer=None, tol=1e-6):
@@ -155,6 +190,27 @@ def sketch_cells(cell=250.0, n=4, seed=0):
         out.append(shapely.LineString([(x + rng.normal(0, 8), y) for y in ys]))
         out.append(shapely.LineString([(y, x + rng.normal(0, 8)) for y in ys]))
     return np.array(out, dtype=object)
+
+
+def same_footprints(a, b, tol: float = 0.0):
+    """None when two results hold the same footprints in the same order (WKB-equal, or
+    coordinates within ``tol``) with the same attributes; else what differs (two
+    ``footprints.FootprintResult``: the serial and the Dask run of tests/test_distributed.py)."""
+    import pandas as pd
+
+    if len(a.geometry) != len(b.geometry):
+        return f"{len(a.geometry)} vs {len(b.geometry)} footprints"
+    ga, gb = np.asarray(a.geometry, dtype=object), np.asarray(b.geometry, dtype=object)
+    same = shapely.to_wkb(ga) == shapely.to_wkb(gb) if tol == 0 else \
+        shapely.equals_exact(ga, gb, tolerance=tol)
+    if not np.all(same):
+        return f"{int((~np.asarray(same)).sum())} footprints differ in geometry"
+    ta, tb = a.table.reset_index(drop=True), b.table.reset_index(drop=True)
+    try:
+        pd.testing.assert_frame_equal(ta, tb, check_dtype=False)
+    except AssertionError as exc:
+        return f"attributes differ: {exc}"
+    return None
 
 
 # ------------------------------------------ Liechtenstein towns (leave-one-town-out checks)

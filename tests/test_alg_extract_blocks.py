@@ -54,7 +54,7 @@ def test_helsinki_buildings(helsinki):
     inside = [r for r in rows if r["in_block"]]
     assert all(r["block_id"] is not None for r in inside)
     assert all(r["block_id"] is None for r in rows if not r["in_block"])
-    # DESIGN.md: only about 62 % of Helsinki's buildings lie inside a closed block
+    # docs/ARCHITECTURE.md: only about 62 % of Helsinki's buildings lie inside a closed block
     assert 0.5 < len(inside) / len(rows) < 0.75
     heights = [r for r in rows if r["height_m"] is not None]
     assert len(heights) > 150
@@ -73,7 +73,7 @@ def test_bubenec_blocks_buildings_parcels(qgis_processing):
     for key in ("OUTPUT", "OUTPUT_BUILDINGS", "OUTPUT_PARCELS"):
         assert out[key].crs().authid() == "EPSG:3857"
     blocks, _ = layer_features(out["OUTPUT"])
-    assert len(blocks) == 7  # DESIGN.md: Bubeneč has 7 closed blocks
+    assert len(blocks) == 7  # docs/ARCHITECTURE.md: Bubeneč has 7 closed blocks
     buildings, _ = layer_features(out["OUTPUT_BUILDINGS"])
     assert len(buildings) == 144
     assert "uID" in buildings[0]
@@ -184,7 +184,7 @@ def test_absurd_parameters_are_rejected(qgis_processing, name, value):
 
 
 def test_qgis_process_writes_geopackage(tmp_path):
-    """The real qgis_process.bin exits 0 (the native-library crash of DESIGN.md)."""
+    """The real qgis_process.bin exits 0 (the native-library crash of docs/ARCHITECTURE.md)."""
     blocks_out, buildings_out = tmp_path / "blocks.gpkg", tmp_path / "buildings.gpkg"
     code, result, stderr = run_qgis_process("extractblocks", {
         "ROADS": bubenec_layer("streets"), "BUILDINGS": bubenec_layer("buildings"),

@@ -171,3 +171,32 @@ def test_obstacle_raster_keeps_roads_out_of_masked_cells(qgis_processing, tmp_pa
                        x0 + 3 * cols // 4 * cell, y1 - rows // 4 * cell)
     inside = shapely.length(shapely.intersection(geoms, lake.buffer(-0.5)))
     assert inside.sum() < 1e-6
+
+
+def test_no_boundary_grows_around_the_sketch_in_a_bulged_hull(qgis_processing):
+    """Without a BOUNDARY the sketch bounds the growth and the bulged convex hull of the
+    major nodes closes the outskirts (Scharl sec. 4.2.5); dead ends are removed at the end
+    (Fig. 4.12), and can be kept."""
+    from qgis.core import QgsProcessingException
+
+    sketch = memory_layer("LineString", [f"LINESTRING({X0} {Y0 + 500}, {X0 + 1000} {Y0 + 500})",
+                                         f"LINESTRING({X0 + 500} {Y0}, {X0 + 500} {Y0 + 1000})"],
+                          CRS, name="sketch")
+    params = {"MAJOR_ROADS": sketch, "SEED": 2, "OUTPUT": "memory:"}
+    rows, geoms = layer_features(qgis_processing.run("urbansynth:growroads", params)["OUTPUT"])
+    levels = np.array([r["level"] for r in rows])
+    assert (levels == 1).sum() > 20                      # minor roads filled the quarters
+    assert_planar(geoms)
+    extent = shapely.box(X0 - 150, Y0 - 150, X0 + 1150, Y0 + 1150)
+    assert shapely.within(shapely.union_all(geoms), extent.buffer(1e-6))
+    # no dead end is left except the sketch's own
+    ends = np.vstack([shapely.get_coordinates(shapely.get_point(geoms, i)) for i in (0, -1)])
+    _, count = np.unique(ends.round(3), axis=0, return_counts=True)
+    sketch_ends = {(X0, Y0 + 500), (X0 + 1000, Y0 + 500), (X0 + 500, Y0), (X0 + 500, Y0 + 1000)}
+    dead = {tuple(p) for p, c in zip(np.unique(ends.round(3), axis=0), count) if c == 1}
+    assert dead <= {tuple(np.round(p, 3)) for p in sketch_ends} | set()
+    kept = layer_features(qgis_processing.run("urbansynth:growroads", {
+        **params, "REMOVE_DEAD_ENDS": False})["OUTPUT"])[1]
+    assert len(kept) > len(geoms)
+    with pytest.raises(QgsProcessingException, match="boundary polygon or sketched"):
+        qgis_processing.run("urbansynth:growroads", {"OUTPUT": "memory:"})

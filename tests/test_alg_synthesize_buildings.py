@@ -1,4 +1,5 @@
-"""urbansynth:synthesizebuildings through real QGIS (processing.run and qgis_process.bin)."""
+"""urbansynth:synthesizebuildingattributes and placelibrarybuildings (and the deprecated
+synthesizebuildings that runs them) through real QGIS (processing.run and qgis_process.bin)."""
 import numpy as np
 import pytest
 import shapely
@@ -9,7 +10,9 @@ from urban_synthesis.plugin.buildings import attributes as building_attributes
 from urban_synthesis.plugin.buildings import bestfit as building_bestfit
 from urban_synthesis.plugin.measure import metrics
 
-ALG = "urbansynth:synthesizebuildings"
+ATTRIBUTES = "urbansynth:synthesizebuildingattributes"
+BESTFIT = "urbansynth:placelibrarybuildings"
+DEPRECATED = "urbansynth:synthesizebuildings"
 ATTRIBUTE_FIELDS = ["height_m", "levels", "building_type", "roof_shape", "source_id",
                     "similarity", "floor_area_m2"]
 
@@ -25,8 +28,8 @@ def helsinki_buildings(qgis_processing):
 
 def test_attributes_on_helsinki(qgis_processing, helsinki_buildings):
     blocks, buildings = helsinki_buildings
-    out = qgis_processing.run(ALG, {
-        "METHOD": 0, "FOOTPRINTS": buildings, "EXAMPLE_BUILDINGS": helsinki_layer("multipolygons"),
+    out = qgis_processing.run(ATTRIBUTES, {
+        "FOOTPRINTS": buildings, "EXAMPLE_BUILDINGS": helsinki_layer("multipolygons"),
         "ROADS": helsinki_layer("lines"), "EXAMPLE_ROADS": helsinki_layer("lines"),
         "MAX_HEIGHT": 40, "SEED": 2, "OUTPUT": "memory:"})
     layer = out["OUTPUT"]
@@ -52,8 +55,8 @@ def test_example_without_heights_says_so(qgis_processing):
     """Bubeneč's buildings have no heights: types come across, heights stay empty, and
     the log says so instead of claiming heights were attributed."""
     log = log_feedback()
-    out = qgis_processing.run(ALG, {
-        "METHOD": 0, "FOOTPRINTS": bubenec_layer("buildings"),
+    out = qgis_processing.run(ATTRIBUTES, {
+        "FOOTPRINTS": bubenec_layer("buildings"),
         "EXAMPLE_BUILDINGS": bubenec_layer("buildings"), "OUTPUT": "memory:"}, feedback=log)
     rows, _ = layer_features(out["OUTPUT"])
     assert all(r["height_m"] is None for r in rows)
@@ -64,8 +67,8 @@ def test_example_without_heights_says_so(qgis_processing):
 
 def test_far_per_block(qgis_processing, helsinki_buildings):
     blocks, buildings = helsinki_buildings
-    out = qgis_processing.run(ALG, {
-        "METHOD": 0, "FOOTPRINTS": buildings, "EXAMPLE_BUILDINGS": buildings, "BLOCKS": blocks,
+    out = qgis_processing.run(ATTRIBUTES, {
+        "FOOTPRINTS": buildings, "EXAMPLE_BUILDINGS": buildings, "BLOCKS": blocks,
         "TARGET_FAR": 2.0, "CHOICE": 1, "OUTPUT": "memory:"})
     rows, geoms = layer_features(out["OUTPUT"])
     # floor area = footprint area (metric) x levels, per block
@@ -95,13 +98,14 @@ def test_far_per_block(qgis_processing, helsinki_buildings):
 
 
 def test_best_fit_on_bubenec(qgis_processing):
-    out = qgis_processing.run(ALG, {
-        "METHOD": 1, "PARCELS": bubenec_layer("plots"), "ROADS": bubenec_layer("streets"),
+    out = qgis_processing.run(BESTFIT, {
+        "PARCELS": bubenec_layer("plots"), "ROADS": bubenec_layer("streets"),
         "MIN_SETBACK": 1.0, "OUTPUT": "memory:"})
     layer = out["OUTPUT"]
     assert layer.crs().authid() == "EPSG:3857"
     names = [f.name() for f in layer.fields()]
-    assert names[:7] == [n for n, _ in building_bestfit.PLACEMENT_FIELDS]
+    assert names[:len(building_bestfit.PLACEMENT_FIELDS)] == [
+        n for n, _ in building_bestfit.PLACEMENT_FIELDS]
     assert {"height_m", "levels", "building_type", "street_access_sides"} <= set(names)
     rows, geoms = layer_features(layer)
     assert 150 < len(rows) < 407
@@ -109,6 +113,46 @@ def test_best_fit_on_bubenec(qgis_processing):
     for r, g in zip(rows, geoms):
         # parcel ids are 1..n in layer order (the plots have no parcel_id)
         assert pgeoms[r["parcel_id"] - 1].buffer(1e-3).contains(g)
+
+
+def test_best_fit_on_a_slope(qgis_processing, tmp_path):
+    """Scharl ch. 6.2 through QGIS: a synthetic DEM (no real DEM ships with the plugin),
+    the steep parcel stays empty, the building on the gentle one sits at the ground of
+    its lowest corner."""
+    from osgeo import gdal, osr
+    from qgis.core import QgsWkbTypes
+
+    crs = "EPSG:32633"
+    x0, y0 = 500000.0, 5550000.0
+    cell, cols, rows = 2.0, 150, 40
+    x, y = np.meshgrid(x0 - 60 + cell * (np.arange(cols) + 0.5),
+                       y0 + 20 - cell * (np.arange(rows) + 0.5))
+    z = 300 + np.where(x - x0 < 100, -0.10, -0.40) * (y - y0)   # 10 % / 40 % up to the south
+    path = tmp_path / "slope.tif"
+    ds = gdal.GetDriverByName("GTiff").Create(str(path), cols, rows, 1, gdal.GDT_Float32)
+    ds.SetGeoTransform((x0 - 60, cell, 0.0, y0 + 20, 0.0, -cell))
+    srs = osr.SpatialReference()
+    srs.ImportFromEPSG(32633)
+    ds.SetProjection(srs.ExportToWkt())
+    ds.GetRasterBand(1).WriteArray(z.astype(np.float32))
+    ds = None
+    roads = memory_layer("LineString", [f"LINESTRING ({x0 - 50} {y0}, {x0 + 200} {y0})"], crs)
+    plots = memory_layer("Polygon", [shapely.box(x0 + 20, y0 - 40, x0 + 70, y0 - 5).wkt,
+                                     shapely.box(x0 + 120, y0 - 40, x0 + 170, y0 - 5).wkt], crs)
+    out = qgis_processing.run(BESTFIT, {"PARCELS": plots, "ROADS": roads,
+                                        "DEM": str(path), "MAX_PARCEL_SLOPE": 25,
+                                        "OUTPUT": "memory:"})
+    layer = out["OUTPUT"]
+    assert layer.wkbType() == QgsWkbTypes.PolygonZ
+    rows_, geoms = layer_features(layer)
+    assert len(rows_) == 1 and rows_[0]["parcel_id"] == 1
+    r = rows_[0]
+    assert r["parcel_slope_pct"] == pytest.approx(10.0, abs=0.2)
+    xyz = shapely.get_coordinates(geoms[0], include_z=True)
+    ground = 300 - 0.10 * (xyz[:, 1] - y0)
+    assert np.allclose(xyz[:, 2], r["base_z"]) and r["base_z"] == pytest.approx(ground.min(),
+                                                                                  abs=0.01)
+    assert r["sunk_m"] == pytest.approx(np.ptp(ground), abs=0.01)
 
 
 def _ogr_layer(uri):
@@ -129,7 +173,7 @@ def test_library_layer(qgis_processing):
                        fields="&field=street_access_sides:string&field=blind_sides:string"
                               "&field=height_m:double",
                        rows=[("1", "3", 8.5)])
-    out = qgis_processing.run(ALG, {"METHOD": 1, "PARCELS": plots, "ROADS": roads,
+    out = qgis_processing.run(BESTFIT, {"PARCELS": plots, "ROADS": roads,
                                     "BUILDING_LIBRARY": lib, "MIN_SETBACK": 3,
                                     "OUTPUT": "memory:"})
     rows, geoms = layer_features(out["OUTPUT"])
@@ -143,14 +187,17 @@ def test_bad_input(qgis_processing):
     from qgis.core import QgsProcessingException
 
     def fails(params, match):
+        """METHOD 0 / 1 say which tool: attributes / best fit (the deprecated tool with
+        METHOD gives the same messages; test_deprecated_tool)."""
+        alg = (ATTRIBUTES, BESTFIT)[params.pop("METHOD")]
         with pytest.raises(QgsProcessingException, match=match):
-            qgis_processing.run(ALG, dict(params, OUTPUT="memory:"))
+            qgis_processing.run(alg, dict(params, OUTPUT="memory:"))
 
     crs = "EPSG:32633"
     plots = memory_layer("Polygon", ["POLYGON ((0 -5, 30 -5, 30 -40, 0 -40, 0 -5))"], crs)
     roads = memory_layer("LineString", ["LINESTRING (0 0, 300 0)"], crs)
-    fails({"METHOD": 0, "FOOTPRINTS": plots}, "needs: Example buildings")
-    fails({"METHOD": 1, "PARCELS": plots}, "needs: Roads")
+    fails({"METHOD": 0, "FOOTPRINTS": plots}, r"Example buildings \(EXAMPLE_BUILDINGS\) is needed")
+    fails({"METHOD": 1, "PARCELS": plots}, r"Roads \(ROADS\) is needed")
     fails({"METHOD": 0, "FOOTPRINTS": memory_layer("Polygon", [], crs),
            "EXAMPLE_BUILDINGS": plots}, "empty")
     fails({"METHOD": 0, "FOOTPRINTS": plots, "EXAMPLE_BUILDINGS": plots, "TARGET_FAR": 2.0},
@@ -171,8 +218,8 @@ def test_bad_input(qgis_processing):
 def test_qgis_process_run(tmp_path):
     """One real qgis_process.bin run on the example data: exit code 0."""
     target = tmp_path / "buildings.gpkg"
-    code, out, err = run_qgis_process("synthesizebuildings", {
-        "METHOD": 1, "PARCELS": bubenec_layer("plots"), "ROADS": bubenec_layer("streets"),
+    code, out, err = run_qgis_process("placelibrarybuildings", {
+        "PARCELS": bubenec_layer("plots"), "ROADS": bubenec_layer("streets"),
         "OUTPUT": str(target)})
     assert code == 0, err
     assert out is not None and target.exists()
@@ -181,3 +228,22 @@ def test_qgis_process_run(tmp_path):
     df = pyogrio.read_dataframe(target)
     assert 150 < len(df) < 407 and df.geometry.is_valid.all()
     assert (df.parcel_share > 0).all() and (df.parcel_share <= 1.0 + 1e-6).all()
+
+
+def test_deprecated_tool(qgis_processing):
+    """The old id still runs each method for existing models, flagged deprecated, with the
+    focused tool's result; a method without its inputs says what it needs."""
+    from qgis.core import QgsApplication, QgsProcessingAlgorithm, QgsProcessingException
+
+    alg = QgsApplication.processingRegistry().algorithmById(DEPRECATED)
+    assert alg.flags() & QgsProcessingAlgorithm.FlagDeprecated
+    params = {"PARCELS": bubenec_layer("plots"), "ROADS": bubenec_layer("streets")}
+    old = layer_features(qgis_processing.run(DEPRECATED, dict(params, METHOD=1,
+                                                              OUTPUT="memory:"))["OUTPUT"])
+    new = layer_features(qgis_processing.run(BESTFIT, dict(params, OUTPUT="memory:"))["OUTPUT"])
+    assert old[0] == new[0] and shapely.equals_exact(old[1], new[1], 1e-9).all()
+    for method, params, match in ((0, {}, "needs: Footprints, Example buildings"),
+                                  (1, {"PARCELS": bubenec_layer("plots")}, "needs: Roads"),
+                                  (2, {}, "needs: Skeletons")):
+        with pytest.raises(QgsProcessingException, match=match):
+            qgis_processing.run(DEPRECATED, dict(params, METHOD=method, OUTPUT="memory:"))

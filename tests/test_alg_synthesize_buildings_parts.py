@@ -1,4 +1,4 @@
-"""urbansynth:synthesizebuildings METHOD = parts (Hartmann thesis ch. 6) through real QGIS.
+"""urbansynth:synthesizepartbuildings (Hartmann thesis ch. 6) through real QGIS.
 
 The thesis's skyscraper case (120 m, FAR 10 / 15 / 20 from 18 floor parts) is met exactly;
 k-best solutions are distinct and ordered by cost; terraces along a line and around a block
@@ -15,8 +15,7 @@ from conftest import run_qgis_process
 from helpers import bubenec, layer_features, memory_layer
 from urban_synthesis.plugin.network import blocks
 
-ALG = "urbansynth:synthesizebuildings"
-PARTS = 2                     # METHOD index of parts (attributes 0, bestfit 1)
+ALG = "urbansynth:synthesizepartbuildings"
 TERRACE, TERRACE_2M, SKYSCRAPER = 0, 1, 2
 CRS = "EPSG:32633"
 SITE = "POLYGON ((500000 5500000, 500040 5500000, 500040 5500040, 500000 5500040, " \
@@ -31,7 +30,7 @@ def _at(geom):
 
 
 def _run(qgis_processing, **params):
-    out = qgis_processing.run(ALG, dict({"METHOD": PARTS, "OUTPUT": "memory:"}, **params))
+    out = qgis_processing.run(ALG, dict({"OUTPUT": "memory:"}, **params))
     rows, geoms = layer_features(out["OUTPUT"])
     return out["OUTPUT"], rows, geoms
 
@@ -189,11 +188,11 @@ def test_bad_input(qgis_processing):
 
     def fails(params, match):
         with pytest.raises(QgsProcessingException, match=match):
-            qgis_processing.run(ALG, dict({"METHOD": PARTS, "OUTPUT": "memory:"}, **params))
+            qgis_processing.run(ALG, dict({"OUTPUT": "memory:"}, **params))
 
     site = memory_layer("Polygon", [SITE], CRS, name="tower plot")
     line = memory_layer("LineString", [_at(L_LINE).wkt], CRS, name="facade line")
-    fails({}, "needs: Skeleton")
+    fails({}, r"Skeletons \(SKELETON\) is needed")
     no_kind = memory_layer("Polygon", [shapely.box(0, 0, 6, 10).wkt], CRS,
                            fields="&field=length_m:double&field=height_m:double",
                            rows=[(6, 9)], name="broken parts")
@@ -230,8 +229,8 @@ def test_qgis_process_on_bubenec_blocks(tmp_path):
     gpd.GeoDataFrame(geometry=list(extraction.geometry), crs=32633).to_file(
         path, layer="blocks", driver="GPKG")
     target = tmp_path / "parts.gpkg"
-    code, out, err = run_qgis_process("synthesizebuildings", {
-        "METHOD": PARTS, "SKELETON": f"{path}|layername=skeletons", "K_SOLUTIONS": 2,
+    code, out, err = run_qgis_process("synthesizepartbuildings", {
+        "SKELETON": f"{path}|layername=skeletons", "K_SOLUTIONS": 2,
         "BLOCKS": f"{path}|layername=blocks", "OUTPUT": str(target)})
     assert code == 0, err
     assert out is not None and target.exists()

@@ -213,3 +213,56 @@ def test_qgis_process_helsinki(tmp_path):
     assert 150 < len(s) < 400 and 60 < len(j) < 250
     assert (j.degree >= 3).all() and j.merged_nodes.max() >= 2   # 6 m merges some centres
     assert s.geometry.is_valid.all() and j.geometry.is_valid.all()
+
+
+def test_3d_mesh_on_an_inclined_plane(qgis_processing, stars, tmp_path):
+    """Scharl ch. 5.2: the triangle mesh lies on the terrain (lifted by the z offset), its
+    top faces tile the street and junction polygons, side faces reach into the terrain;
+    the TIN Z GeoPackage holds the same triangles and QGIS reads it back."""
+    from qgis.core import QgsVectorLayer, QgsWkbTypes
+
+    dem = _write_plane(tmp_path / "plane.tif")
+    tin = tmp_path / "mesh.gpkg"
+    out = qgis_processing.run(ALG, {"ROADS": stars, "WIDTH_FIELD": "w", "DEM": dem,
+                                    "Z_OFFSET": 0.2, "OUTPUT_SURFACES": "memory:",
+                                    "OUTPUT_JUNCTIONS": "memory:", "OUTPUT_MESH": "memory:",
+                                    "OUTPUT_TIN": str(tin)})
+    mesh = out["OUTPUT_MESH"]
+    assert mesh.wkbType() == QgsWkbTypes.MultiPolygonZ
+    rows, geoms = layer_features(mesh)
+    assert len(rows) == 11 + 2 and {r["kind"] for r in rows} == {"street", "junction"}
+    tris = shapely.get_parts(geoms)
+    xyz = shapely.get_coordinates(tris, include_z=True).reshape(-1, 4, 3)
+    assert np.allclose(xyz[:, 0], xyz[:, 3])                 # closed triangles
+    plane = 20 + A * (xyz[..., 0] - X0) + B * (xyz[..., 1] - Y0)
+    a, b, c = xyz[:, 0, :2], xyz[:, 1, :2], xyz[:, 2, :2]
+    flat_area = 0.5 * np.abs((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1])
+                             - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
+    vertical = flat_area < 1e-6                                # a wall seen from above
+    side = np.zeros(len(tris), dtype=bool)
+    n_side = sum(r["side_triangles"] for r in rows)
+    # the top faces: 0.2 m above the plane, and their 2D union is the polygons' union
+    up = np.abs(xyz[..., 2] - plane - 0.2).max(axis=1) < 1e-3   # the DEM is float32
+    assert up.sum() + n_side == len(tris) and n_side > 0
+    side[~up] = True
+    top2d = shapely.union_all(shapely.force_2d(tris[up]))
+    polys = shapely.union_all(shapely.force_2d(np.concatenate(
+        [layer_features(out["OUTPUT_SURFACES"])[1], layer_features(out["OUTPUT_JUNCTIONS"])[1]])))
+    assert shapely.symmetric_difference(top2d, polys).area < 1e-3 * polys.area
+    assert abs(shapely.area(shapely.force_2d(tris[up])).sum() - top2d.area) < 1e-3 * top2d.area
+    # side faces stand vertically along the street edges, from the top down below ground
+    dz = xyz[side, :3, 2] - plane[side, :3]
+    assert (np.isclose(dz, 0.2, atol=1e-3) | np.isclose(dz, -0.5, atol=1e-3)).all()
+    assert (dz.min(axis=1) < -0.4).all() and (dz.max(axis=1) > 0.1).all()
+    assert vertical[side].all() and not vertical[up].any()
+    layer = QgsVectorLayer(f"{tin}|layername=street_mesh", "tin", "ogr")
+    assert layer.isValid() and layer.featureCount() == len(rows)
+    assert layer.wkbType() == QgsWkbTypes.MultiPolygonZ      # how QGIS 3.22 reads a TIN
+    from osgeo import ogr
+
+    ds = ogr.Open(str(tin))
+    lyr = ds.GetLayerByName("street_mesh")
+    assert ogr.GeometryTypeToName(lyr.GetGeomType()) == "3D TIN"
+    f = lyr.GetNextFeature()
+    assert f.GetGeometryRef().GetGeometryName() == "TIN"
+    assert f.GetGeometryRef().GetGeometryCount() == f.GetField("triangles")

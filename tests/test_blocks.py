@@ -188,7 +188,7 @@ def test_helsinki_blocks_properties(helsinki_graph):
     # mostly rectangular blocks; an L-shaped face around a loop goes down to about 0.2
     assert (t.compactness.between(0.1, 1)).all() and t.compactness.median() > 0.75
     assert (t.aspect_ratio.between(0.05, 1)).all() and 0.3 < t.aspect_ratio.median() < 0.8
-    # DESIGN.md: about 62 % of Helsinki's buildings lie inside a closed block
+    # docs/ARCHITECTURE.md: about 62 % of Helsinki's buildings lie inside a closed block
     share_inside = r.stats["n_buildings_in_blocks"] / len(buildings)
     assert 0.5 < share_inside < 0.75
     assert t.n_buildings.sum() == r.stats["n_buildings_in_blocks"]
@@ -219,7 +219,7 @@ def test_bubenec_blocks_properties():
     streets, buildings, plots = bubenec("streets"), bubenec("buildings"), bubenec("plots")
     r = blocks.extract_blocks(roads.clean_network(streets.geometry.values),
                               buildings=buildings.geometry.values, parcels=plots.geometry.values)
-    assert len(r.geometry) == 7   # DESIGN.md: Bubeneč has 7 closed blocks
+    assert len(r.geometry) == 7   # docs/ARCHITECTURE.md: Bubeneč has 7 closed blocks
     assert_blocks_are_a_partition(r, buildings.geometry.values)
     assert r.table.compactness.min() > 0.5   # triangles at the oblique streets
     assert r.table.n_parcels.sum() == r.parcels.in_block.sum() > 100

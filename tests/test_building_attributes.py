@@ -108,7 +108,7 @@ def test_helsinki_buildings():
     out = ba.building_attributes(len(df), building=df.building.values,
                                  other_tags=df.other_tags.values,
                                  tags={k: df[k].values for k in ("amenity", "shop", "office")})
-    # DESIGN.md: 165 Helsinki buildings have building:levels, 17 a height
+    # docs/ARCHITECTURE.md: 165 Helsinki buildings have building:levels, 17 a height
     assert (out.levels_tag.notna()).sum() == 165
     assert (out.height_tag.notna()).sum() == 17
     assert out.height_m.notna().sum() >= 165

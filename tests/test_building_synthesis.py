@@ -232,6 +232,43 @@ def test_fit_on_a_street():
     assert r.stats["n_placed"] == 1
 
 
+def test_fit_on_a_slope_sinks_to_the_lowest_corner_and_skips_steep_parcels():
+    """Scharl ch. 6.2: on a slope the building goes down until every vertex is on the
+    ground or beneath; a parcel steeper than maxParcelSlope gets no building."""
+    from urban_synthesis.plugin.retrieval.shape_context import DemGrid
+
+    # terrain rising 10 % to the south (y < 0) for x < 100, 40 % beyond x = 100
+    cell = 1.0
+    x, y = np.meshgrid(np.arange(-60, 220, cell) + 0.5, 20 - np.arange(140) * cell - 0.5)
+    z = 100 + np.where(x < 100, -0.10, -0.40) * y
+    dem = DemGrid(z, (-60, cell, 0, 20, 0, -cell))
+    street = [shapely.LineString([(-50, 0), (210, 0)])]
+    gentle, steep = shapely.box(20, -40, 70, -5), shapely.box(120, -40, 170, -5)
+    lib = bf.default_library()
+    r = bf.fit_buildings([gentle, steep], street, lib, dem=dem, max_parcel_slope=0.25)
+    assert r.stats["n_placed"] == 1 and r.stats["too_steep"] == 1
+    row = r.table.iloc[0]
+    assert row.parcel_id == 1 and row.parcel_slope_pct == pytest.approx(10.0, abs=0.1)
+    g = r.geometry[0]
+    xy = shapely.get_coordinates(g)
+    ground = 100 - 0.10 * xy[:, 1]
+    # the base is the lowest corner's ground: every vertex on the ground or beneath
+    assert shapely.has_z(g) and np.allclose(shapely.get_coordinates(g, include_z=True)[:, 2],
+                                            row.base_z)
+    assert row.base_z == pytest.approx(ground.min(), abs=1e-6)
+    assert (row.base_z <= ground + 1e-6).all()
+    # sunk by the rise across the footprint: 10 % of its depth
+    depth = np.ptp(xy[:, 1])
+    assert row.sunk_m == pytest.approx(0.10 * depth, abs=1e-6)
+    # the limit is Scharl's threshold: at 45 % the steep parcel gets its building too
+    r = bf.fit_buildings([gentle, steep], street, lib, dem=dem, max_parcel_slope=0.45)
+    assert r.stats["n_placed"] == 2 and r.stats["too_steep"] == 0
+    # without a DEM nothing changes: flat footprints, no slope columns
+    r = bf.fit_buildings([gentle, steep], street, lib)
+    assert r.stats["n_placed"] == 2 and not shapely.has_z(r.geometry).any()
+    assert r.table.base_z.isna().all()
+
+
 @pytest.fixture(scope="module")
 def bubenec_inputs():
     streets = bubenec("streets").geometry.values

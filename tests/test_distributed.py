@@ -20,7 +20,7 @@ import pytest
 import shapely
 
 from conftest import ROOT
-from helpers import helsinki_roads
+from helpers import helsinki_roads, same_footprints
 from urban_synthesis.plugin.network import blocks
 from urban_synthesis.plugin.scale import distributed
 from urban_synthesis.plugin.buildings import footprints
@@ -114,7 +114,7 @@ def test_distributed_equals_serial(district, client, method):
     # few large partitions for one method, one per 2 blocks for the other
     parts = 5 if method == "transfer" else len(b) // 2
     dist = distributed.footprints_distributed(client, b, job, n_partitions=parts)
-    assert distributed.same_footprints(serial, dist) is None
+    assert same_footprints(serial, dist) is None
     # block statistics agree too (all but the timing)
     cols = [c for c in serial.blocks.columns if c != "seconds"]
     pd.testing.assert_frame_equal(serial.blocks[cols], dist.blocks[cols], check_dtype=False)
@@ -128,10 +128,10 @@ def test_roads_and_seed_matter(district):
     base = distributed.footprints_serial(sub, job)
     other_seed = distributed.footprints_serial(sub, distributed.FootprintJob(
         job.examples, job.roads, "transfer", seed=8, n_best=2))
-    assert distributed.same_footprints(base, other_seed) is not None
+    assert same_footprints(base, other_seed) is not None
     no_roads = distributed.footprints_serial(sub, distributed.FootprintJob(
         job.examples, None, "transfer", seed=7, n_best=2))
-    assert distributed.same_footprints(base, no_roads) is not None
+    assert same_footprints(base, no_roads) is not None
 
 
 def test_cli_end_to_end(district, tmp_path):

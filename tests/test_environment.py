@@ -1,5 +1,5 @@
-"""Guards against the native-library clash of DESIGN.md (PyPI wheels bundling PROJ/GDAL/GEOS
-crash QGIS at exit): the venv must use Debian's pyproj and shapely/pyogrio built on Debian's
+"""Guards against the native-library clash (docs/ARCHITECTURE.md, "Native libraries": PyPI
+wheels bundling PROJ/GDAL/GEOS crash QGIS at exit): the venv must use Debian's pyproj and shapely/pyogrio built on Debian's
 GEOS/GDAL. The qgis_process tests of each algorithm assert exit code 0 on top of this."""
 import subprocess
 import sys

@@ -285,3 +285,44 @@ def test_network_statistics_of_a_perfect_grid():
     assert st["orientation_entropy"] == pytest.approx(np.log(4), abs=1e-9)
     assert st["mean_abs_angle_dev_90"] == pytest.approx(0.0, abs=1e-9)
     assert st["segment_length_median"] == pytest.approx(100.0)
+
+
+def test_bulged_hull_without_a_boundary_and_dead_ends_removed():
+    """Scharl sec. 4.2.5: without a boundary the outskirts are closed by the convex hull of
+    the major nodes, its sides split in four and bulged outwards at random; Fig. 4.12: the
+    dead-end roads are removed at the end."""
+    from urban_synthesis.plugin.retrieval.shape_context import DemGrid
+
+    rng = np.random.default_rng(5)
+    pts = rng.uniform(0, 500, (40, 2))
+    hull = growth.bulged_hull(pts, np.random.default_rng(1))
+    convex = shapely.convex_hull(shapely.multipoints(pts))
+    n_hull = len(shapely.get_coordinates(convex)) - 1
+    # 4 sides per hull side, every new node pushed out: the bulged outline contains the
+    # hull, is larger, and is not convex in general
+    assert len(shapely.get_coordinates(hull)) - 1 == 4 * n_hull
+    assert hull.is_valid and hull.buffer(1e-6).contains(convex) and hull.area > convex.area
+    assert shapely.convex_hull(hull).area > hull.area
+    # the same seed, the same outline
+    again = growth.bulged_hull(pts, np.random.default_rng(1))
+    assert shapely.equals_exact(hull, again, 0)
+
+    flat = DemGrid(np.zeros((100, 100)), (0, 10, 0, 1000, 0, -10))
+    res = growth.grow_roads(None, dem=flat, seed=3)
+    assert res.stats["bulged_hull"] and res.stats["quarters"] >= 4
+    # minor roads fill the outskirts beyond the outermost major roads
+    major = shapely.union_all(res.geometry[res.level == growth.MAJOR])
+    minor = res.geometry[res.level == growth.MINOR]
+    assert (shapely.length(minor) > 0).sum() > 50
+    assert shapely.within(shapely.union_all(res.geometry), shapely.box(0, 0, 1000, 1000)
+                          .buffer(1e-6))
+    assert not shapely.within(shapely.union_all(minor), shapely.convex_hull(major))
+    # no dead end is left, and pruning only removed grown edges
+    stats = growth.network_statistics(res.geometry)
+    assert stats["dead_ends_per_km2"] == 0 and res.stats["dead_ends_removed"] > 0
+    kept = growth.grow_roads(None, dem=flat, seed=3,
+                             settings=growth.GrowthSettings(remove_dead_ends=False))
+    assert growth.network_statistics(kept.geometry)["dead_ends_per_km2"] > 0
+    assert len(kept.geometry) == len(res.geometry) + res.stats["dead_ends_removed"]
+    with pytest.raises(InputError, match="no boundary"):
+        growth.grow_roads(None, seed=1)

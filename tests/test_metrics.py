@@ -372,3 +372,56 @@ def test_report_is_self_contained(tmp_path):
     alone = R.render_report(cand)
     assert "Colours" not in alone and "Wasserstein</th>" not in alone
     assert alone.count("<img") >= 8
+
+
+def test_report_speaks_to_a_planner_first():
+    """A denser grid against a sparser one: the summary comes first, says in words which
+    measures differ and by how much, maps both layouts, and explains its units."""
+    def noded(n, spacing):
+        return shapely.get_parts(shapely.node(shapely.multilinestrings(grid(n, spacing))))
+
+    cand = M.compute_layout_metrics(roads=noded(6, 60.0))
+    ex = M.compute_layout_metrics(roads=noded(4, 100.0))
+    same = M.compute_layout_metrics(roads=noded(4, 100.0))
+    text = R.render_report(cand, ex, maps={"Layout": {"roads": noded(6, 60.0)},
+                                           "Example": {"roads": noded(4, 100.0)}})
+    summary = text[text.index("<h2>Summary</h2>"):text.index("<h2>Inputs</h2>")]
+    assert text.index("<h2>Summary</h2>") < text.index("<h3>Measures</h3>")
+    assert "The street network is sound" in summary
+    differs = summary[summary.index("What differs"):]
+    assert "Junctions per km²: much more than the example" in differs
+    assert "Street length per km² (how much street there is): much more" in differs
+    assert summary.count(" map' src='data:image/png") == 2  # both layouts mapped up front
+    assert "How to read the numbers" in text and "nats" in text[text.index("How to read"):]
+    twin = R.render_report(same, ex)
+    twin_summary = twin[twin.index("<h2>Summary</h2>"):twin.index("<h2>Inputs</h2>")]
+    assert "What differs" not in twin_summary and "match the example" in twin_summary
+    assert "about the same as the example" in twin_summary
+
+
+def test_bearings_compare_on_the_circle():
+    """Streets at 5° and at 175° run 10° apart, not 170°: the comparison of bearings does
+    not depend on where the circle of directions is cut."""
+    rng = np.random.default_rng(0)
+    north_east = rng.normal(5.0, 5.0, 2000) % 180.0
+    north_west = rng.normal(-5.0, 5.0, 2000) % 180.0
+    d = M.two_sample_axial(north_east, north_west)
+    assert 8.0 < d["wasserstein"] < 12.0
+    assert M.two_sample(north_east, north_west)["wasserstein"] > 100.0  # the linear trap
+    turned = M.two_sample_axial(north_east, (north_east + 30.0) % 180.0)
+    assert turned["wasserstein"] == pytest.approx(30.0, abs=1e-6)
+    # the same shape cut elsewhere is the same distance (rotation invariance)
+    again = M.two_sample_axial((north_east + 77.0) % 180.0, (north_west + 77.0) % 180.0)
+    assert again["wasserstein"] == pytest.approx(d["wasserstein"], rel=1e-6)
+    assert again["ks_stat"] == pytest.approx(d["ks_stat"], rel=1e-9)
+    same = M.two_sample_axial(north_east, north_east)
+    assert same["wasserstein"] == 0.0 and same["ks_pvalue"] == 1.0
+
+
+def test_bearing_row_reports_the_turn_between_mean_directions():
+    a, b = M.MetricsResult(), M.MetricsResult()
+    a.add_distribution("roads", "street_bearing", np.array([176.0, 178.0, 177.0]), "°", "b")
+    b.add_distribution("roads", "street_bearing", np.array([4.0, 6.0, 5.0]), "°", "b")
+    row = M.compare(a, b).iloc[0]
+    assert row.statistic == "axial_mean"
+    assert row.rel_diff == pytest.approx(-8.0, abs=1e-6)

@@ -1,8 +1,8 @@
 """Same seed, same output on any x86-64 processor: two BLAS kernels, one result.
 
 OpenBLAS picks a kernel per processor, and a matrix product may round the same row
-differently on two machines (DESIGN.md). ``kernel_probe.py`` runs seeded syntheses in a
-fresh process under the machine's own kernel and under a forced generic one
+differently on two machines (docs/ARCHITECTURE.md, "Floating point across processors").
+``kernel_probe.py`` runs seeded syntheses in a fresh process under the machine's own kernel and under a forced generic one
 (``OPENBLAS_CORETYPE=Prescott``, which every x86-64 processor runs); every coordinate must
 agree within 1e-6 m and every geometry must be valid under both.
 """

@@ -263,3 +263,65 @@ def test_helsinki_streets():
     assert len(res.junctions) + res.stats["merged_away"] >= n_nodes - 2
     assert len(res.surfaces) >= 0.9 * graph.n_edges
     np.testing.assert_allclose(res.surface_table.area_m2, shapely.area(res.surfaces))
+
+
+# --------------------------------------------------------------------------- 3D mesh
+
+def test_mesh_tiles_the_surfaces_and_skirts_the_terrain():
+    """Scharl 5.2: the top triangles tile the street and junction polygons (up to the
+    curves' chords), lie on the draped heights plus the offset; side faces reach below
+    the terrain; no side faces and z = 0 without a DEM; TIN WKB round-trips."""
+    from osgeo import ogr
+
+    from urban_synthesis.plugin.network import street_mesh as sm
+
+    arc = shapely.LineString([(0, 0), (40, 5), (80, 20), (110, 45)])   # a curved street
+    lines, widths = star([0, 70, 150, 215, 290], [8, 8, 14, 6, 8])
+    lines = lines + [shapely.LineString([(60 * np.cos(np.radians(70)),
+                                          60 * np.sin(np.radians(70))), (60, 120)])]
+    g = roads.clean_network(lines + [shapely.transform(arc, lambda c: c + [200, 0])],
+                            min_dangle_length=0.0)
+    w = np.r_[widths, 8.0, 10.0][g.source]
+    x, y = np.meshgrid(np.arange(-100, 340, 2.0) + 1, 200 - np.arange(260) * 2.0 - 1)
+    dem = DemGrid(0.05 * x + 2 * np.sin(y / 20), (-100, 2.0, 0, 200, 0, -2.0))
+    for terrain in (None, dem):
+        t = ss.tessellate_network(g, w, dem=terrain)
+        m = sm.street_mesh(t, spacing=3.0, z_offset=0.1)
+        top = m.triangles[~m.side]
+        flat = shapely.polygons(np.concatenate([top[:, :, :2], top[:, :1, :2]], axis=1))
+        assert (shapely.area(flat) > 0).all()
+        union = shapely.union_all(flat)
+        polys = shapely.union_all(shapely.force_2d(np.concatenate([t.surfaces, t.junctions])))
+        # no two top triangles overlap; they cover the polygons to within the chords
+        assert shapely.area(flat).sum() - union.area < 1e-6 * union.area
+        assert shapely.symmetric_difference(union, polys).area < 0.01 * polys.area
+        assert len(m.table) == len(t.surfaces) + len(t.junctions)
+        assert (m.table.triangles > 0).all()
+        if terrain is None:
+            assert not m.side.any() and np.allclose(m.triangles[:, :, 2], 0.0)
+            continue
+        # top vertices of the streets: draped height + offset
+        s_tri = m.triangles[~m.side & (m.owner < len(t.surfaces))]
+        k = np.repeat(m.owner[~m.side & (m.owner < len(t.surfaces))], 3)
+        xyz = s_tri.reshape(-1, 3)
+        np.testing.assert_allclose(xyz[:, 2], t.surface_z(k, xyz[:, :2]) + 0.1, atol=1e-9)
+        side = m.triangles[m.side].reshape(-1, 3)
+        ground = t.terrain_z(side[:, :2])
+        low = np.isclose(side[:, 2], ground - 0.5, atol=1e-9)
+        assert low.any() and (low | (side[:, 2] > ground)).all()
+        wkb = sm.tin_wkb(m.geometries()[:3])
+        for b, n in zip(wkb, m.table.triangles[:3]):
+            geom = ogr.CreateGeometryFromWkb(b)
+            assert geom.GetGeometryName() == "TIN" and geom.GetGeometryCount() == n
+
+
+def test_ear_clipping_of_a_non_star_ring():
+    from urban_synthesis.plugin.network import street_mesh as sm
+
+    ring = np.array([(0, 0), (10, 0), (10, 10), (6, 10), (6, 3), (4, 3), (4, 10), (0, 10)],
+                    dtype=float)                                  # a U: not star-shaped
+    tri = sm._ear_clip(ring)
+    assert len(tri) == len(ring) - 2
+    polys = shapely.polygons(np.concatenate([ring[tri], ring[tri][:, :1]], axis=1))
+    assert abs(shapely.area(polys).sum() - shapely.Polygon(ring).area) < 1e-9
+    assert shapely.union_all(polys).equals(shapely.Polygon(ring))

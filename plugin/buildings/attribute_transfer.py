@@ -35,7 +35,7 @@ References
 ----------
 Hartmann, S. (2017). Example-based urban modeling (thesis), ch. 4.1.2 (block database with
     building semantics), ch. 6 (building synthesis; FAR = floor area / ground area).
-DESIGN.md, "Real example data": OSM heights are sparse (165 of ~490 Helsinki buildings).
+docs/ARCHITECTURE.md, "Real example data": OSM heights are sparse (165 of ~490 Helsinki buildings).
 """
 from __future__ import annotations
 
@@ -49,8 +49,8 @@ import shapely
 from scipy import sparse
 from scipy.spatial import cKDTree
 
+from ..core.geometry import minimum_rectangles
 from ..core.progress import InputError, Progress, ensure
-from ..network import blocks as _blocks
 from .attributes import STOREY_HEIGHT
 
 __all__ = ["FEATURE_NAMES", "OUTPUT_FIELDS", "AttributeTransfer", "footprint_features",
@@ -136,7 +136,7 @@ def footprint_features(footprints, context=None, roads=None, arterials=None) -> 
     area = shapely.area(fp)
     perim = shapely.length(fp)
     # vectorised rotating calipers (shapely's oriented_envelope is a Python loop on GEOS 3.11)
-    length, width, _ = _blocks.minimum_rectangles(fp)
+    length, width, _ = minimum_rectangles(fp)
     side = np.column_stack([length, width])
     with np.errstate(divide="ignore", invalid="ignore"):
         elong = np.where(side.max(1) > 0, side.min(1) / side.max(1), 1.0)

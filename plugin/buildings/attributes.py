@@ -4,7 +4,7 @@ The block database of Hartmann's thesis stores each block with its footprints an
 semantics (ch. 4.1.2: "optional semantics (... building density, building heights,
 footprints)"; ch. 5.1 places 3D buildings by an architectural style map, ch. 6
 synthesises buildings per footprint). Real attribute data is sparse and messy
-(DESIGN.md, "Real example data": 165 of Helsinki's ~490 buildings have
+(docs/ARCHITECTURE.md, "Real example data": 165 of Helsinki's ~490 buildings have
 ``building:levels``, 17 a ``height``; values such as ``"12.13 m"`` occur), so every
 building gets:
 
@@ -37,7 +37,7 @@ from ..core.progress import InputError
 from ..network.street_graph import parse_other_tags
 
 __all__ = [
-    "STOREY_HEIGHT", "BUILDING_TYPES", "TYPE_OF_BUILDING_VALUE", "ATTRIBUTE_FIELDS",
+    "STOREY_HEIGHT", "BUILDING_TYPES", "TYPE_OF_BUILDING_VALUE", "ATTRIBUTE_FIELDS", "TAG_FIELDS",
     "parse_height", "parse_levels", "building_type", "building_attributes",
 ]
 
@@ -91,6 +91,10 @@ _GENERIC = {"yes", "true", "1", "building", "y", "unknown", "undefined", ""}
 #: Tags consulted, in order, when the ``building`` value is generic.
 _HINT_TAGS = ("building:use", "amenity", "shop", "office", "tourism", "craft", "industrial",
               "religion", "healthcare", "leisure")
+#: Every tag :func:`building_attributes` reads: the columns an OSM 'multipolygons' layer (or
+#: a cadastre) is read with when present.
+TAG_FIELDS = ("height", "building:height", "building:levels", "levels", "roof:shape") + \
+    _HINT_TAGS
 _HINT_DEFAULT = {"shop": "commercial", "office": "commercial", "craft": "industrial",
                  "industrial": "industrial", "religion": "religious",
                  "healthcare": "public"}
@@ -289,7 +293,7 @@ def building_attributes(n: int, building: Optional[Sequence] = None,
     References
     ----------
     Hartmann, thesis ch. 4.1.2 and 5.1 (block database with footprint semantics);
-    DESIGN.md, "Real example data" (165 of ~490 Helsinki buildings have levels).
+    docs/ARCHITECTURE.md, "Real example data" (165 of ~490 Helsinki buildings have levels).
 
     Examples
     --------

@@ -20,6 +20,15 @@ library, sorted by footprint area from largest to smallest, is enumerated:
 - the footprint must lie inside the parcel (step 5) and satisfy the side constraints;
   the first building that passes is placed (step 6), else the parcel stays empty.
 
+On terrain (a DEM given), Scharl ch. 6.2: "If the parcel is located on a slope, the
+building is moved down so that every vertex is on the ground or beneath. If the slope of
+the gradient of the parcel exceeds a user defined threshold ``maxParcelSlope``, the
+parcel is discarded and no building is assigned." The parcel's slope is the gradient of
+the least-squares plane through DEM samples over the parcel (a 2 m grid, at least 25
+points); the building's base is the lowest terrain height under its footprint's vertices
+(``base_z``), so no corner floats; ``sunk_m`` is how far its highest corner's ground lies
+above the base (the depth the building is sunk into the slope there).
+
 Library sides are edge indices of the footprint's exterior ring as stored (edge ``i``
 runs from vertex ``i`` to vertex ``i + 1``). The placement is
 ``translate(rotate(footprint, rotation, origin=centroid), offset_x, offset_y)``.
@@ -45,8 +54,9 @@ import shapely.ops
 from ..core import coordinates
 from ..core.progress import InputError, Progress, ensure
 
-__all__ = ["LibraryBuilding", "BestFit", "PLACEMENT_FIELDS", "MAX_ANGLE", "parse_sides",
-           "library_from_table", "default_library", "side_normals", "faces_street",
+__all__ = ["LibraryBuilding", "BestFit", "PLACEMENT_FIELDS", "MAX_ANGLE",
+           "DEFAULT_MAX_PARCEL_SLOPE", "parcel_slopes", "parse_sides",
+           "library_from_table", "default_library", "side_normals",
            "fit_buildings"]
 
 #: Scharl's maximum deviation from parallel for a side to face a street (degrees).
@@ -58,7 +68,10 @@ DEFAULT_SETBACK = 1.0
 #: Output fields of a placement.
 PLACEMENT_FIELDS = [("parcel_id", "int"), ("source_id", "int"), ("rotation", "float"),
                     ("offset_x", "float"), ("offset_y", "float"), ("area_m2", "float"),
-                    ("parcel_share", "float")]
+                    ("parcel_share", "float"), ("base_z", "float"),
+                    ("parcel_slope_pct", "float"), ("sunk_m", "float")]
+#: Default steepest parcel (rise over run) that still gets a building, with a DEM.
+DEFAULT_MAX_PARCEL_SLOPE = 0.25
 
 
 @dataclass
@@ -235,13 +248,6 @@ class _Streets:
         return out
 
 
-def faces_street(polygon, roads, reach: float = DEFAULT_REACH,
-                 max_angle: float = MAX_ANGLE) -> np.ndarray:
-    """Per edge of the polygon's exterior ring: does it face a street (Scharl's test)?"""
-    mids, dirs, normals = side_normals(np.asarray(polygon.exterior.coords))
-    return _Streets(roads).faces(mids, dirs, normals, reach, max_angle)
-
-
 # --------------------------------------------------------------------------- fitting
 
 def _angle(v) -> float:
@@ -299,10 +305,38 @@ def _rotations(building: LibraryBuilding, street_sides, parcel_lengths) -> List[
     return out
 
 
+def parcel_slopes(parcels, dem, spacing: float = 2.0) -> np.ndarray:
+    """Slope (rise over run) of the least-squares plane through the DEM over each parcel.
+
+    Samples lie on a grid of ``spacing`` metres (refined to at least 25 points inside
+    small parcels); NaN where the DEM has no value over the parcel.
+    """
+    out = np.full(len(parcels), np.nan)
+    for i, p in enumerate(parcels):
+        if p is None or p.is_empty:
+            continue
+        x0, y0, x1, y1 = p.bounds
+        step = min(spacing, max(x1 - x0, y1 - y0) / 5.0) or spacing
+        xs, ys = np.meshgrid(np.arange(x0 + step / 2, x1, step), np.arange(y0 + step / 2, y1, step))
+        pts = np.column_stack([xs.ravel(), ys.ravel()])
+        pts = pts[shapely.contains_xy(p, pts[:, 0], pts[:, 1])]
+        if len(pts) < 3:
+            pts = shapely.get_coordinates(p.exterior)[:-1]
+        z = dem(pts)
+        ok = np.isfinite(z)
+        if ok.sum() < 3:
+            continue
+        a = np.column_stack([pts[ok] - pts[ok].mean(0), np.ones(ok.sum())])
+        coef, *_ = np.linalg.lstsq(a, z[ok], rcond=None)
+        out[i] = float(np.hypot(coef[0], coef[1]))
+    return out
+
+
 def fit_buildings(parcels, roads, library: Sequence[LibraryBuilding],
                   parcel_ids: Optional[Sequence[int]] = None,
                   min_setback: float = DEFAULT_SETBACK, reach: float = DEFAULT_REACH,
-                  max_angle: float = MAX_ANGLE,
+                  max_angle: float = MAX_ANGLE, dem=None,
+                  max_parcel_slope: float = DEFAULT_MAX_PARCEL_SLOPE,
                   progress: Optional[Progress] = None) -> BestFit:
     """Place the largest fitting library building on each parcel (Scharl ch. 6.2).
 
@@ -319,13 +353,19 @@ def fit_buildings(parcels, roads, library: Sequence[LibraryBuilding],
         a road centreline lies within this distance in front of it.
     max_angle : float
         Maximum deviation (degrees) from parallel of a facing side (Scharl: 30).
+    dem : callable (n, 2) -> (n,) heights, optional
+        Terrain (a :class:`retrieval.shape_context.DemGrid`) in the parcels' CRS.
+    max_parcel_slope : float
+        With a DEM, parcels steeper than this (rise over run) get no building (Scharl's
+        ``maxParcelSlope``).
 
     Returns
     -------
     BestFit
-        ``geometry`` placed footprints; ``table`` with :data:`PLACEMENT_FIELDS` and the
-        library building's attributes; ``stats`` with ``n_parcels``, ``n_placed``,
-        ``empty_share``, ``no_street`` (parcels with no street side).
+        ``geometry`` placed footprints (with a DEM: Polygon Z at ``base_z``); ``table``
+        with :data:`PLACEMENT_FIELDS` and the library building's attributes; ``stats``
+        with ``n_parcels``, ``n_placed``, ``empty_share``, ``no_street`` (parcels with no
+        street side), ``too_steep`` (parcels over the slope limit).
     """
     progress = ensure(progress)
     parcels = np.asarray(parcels, dtype=object)
@@ -336,7 +376,8 @@ def fit_buildings(parcels, roads, library: Sequence[LibraryBuilding],
     if roads is None or len(roads) == 0:
         raise InputError("no roads: the street sides of the parcels are unknown")
     for name, v, lo, hi in (("minimum setback", min_setback, 0, 1000), ("reach", reach, 0.1, 1000),
-                            ("maximum angle", max_angle, 0, 90)):
+                            ("maximum angle", max_angle, 0, 90),
+                            ("maximum parcel slope", max_parcel_slope, 0, 100)):
         if not (lo <= v <= hi):
             raise InputError(f"the {name} {v} is outside {lo}..{hi}")
     streets = _Streets(roads)
@@ -345,12 +386,17 @@ def fit_buildings(parcels, roads, library: Sequence[LibraryBuilding],
     lib_areas = np.array([b.area for b in lib])
     geoms, rows = [], []
     no_street = 0
+    slopes = parcel_slopes(parcels, dem) if dem is not None else np.full(len(parcels), np.nan)
+    too_steep = 0
     for pi, parcel in enumerate(parcels):
         if pi % 20 == 0:
             progress.step(pi / len(parcels))
         parts = shapely.get_parts(parcel)
         parcel = parts[np.argmax(shapely.area(parts))] if len(parts) else parcel
         if parcel.is_empty or shapely.get_type_id(parcel) != 3:
+            continue
+        if dem is not None and not (slopes[pi] <= max_parcel_slope):
+            too_steep += 1  # Scharl: a parcel over maxParcelSlope is discarded
             continue
         # sides of the parcel: simplified so that collinear pieces count as one side
         simple = shapely.geometry.polygon.orient(parcel.simplify(0.3), 1.0)
@@ -388,13 +434,20 @@ def fit_buildings(parcels, roads, library: Sequence[LibraryBuilding],
         if placed is None:
             continue
         b, rot, g, off = placed
+        base = sunk = np.nan
+        if dem is not None:
+            # Scharl: moved down so that every vertex is on the ground or beneath
+            ground = dem(shapely.get_coordinates(g.exterior)[:-1])
+            base, sunk = float(np.nanmin(ground)), float(np.nanmax(ground) - np.nanmin(ground))
+            g = shapely.force_3d(g, base)
         geoms.append(g)
         rows.append({**b.attributes, "parcel_id": int(ids[pi]), "source_id": b.source_id,
                      "rotation": float((rot + 180.0) % 360.0 - 180.0), "offset_x": off[0],
                      "offset_y": off[1], "area_m2": float(g.area),
-                     "parcel_share": float(g.area / area)})
+                     "parcel_share": float(g.area / area), "base_z": base,
+                     "parcel_slope_pct": 100.0 * slopes[pi], "sunk_m": sunk})
     progress.step(1.0)
     n = len(parcels)
     stats = {"n_parcels": n, "n_placed": len(rows), "empty_share": 1.0 - len(rows) / n,
-             "no_street": no_street}
+             "no_street": no_street, "too_steep": too_steep}
     return BestFit(np.array(geoms, dtype=object), pd.DataFrame(rows), stats)

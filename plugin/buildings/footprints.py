@@ -15,10 +15,10 @@ For each target block the most similar example block of a block database is retr
     new layout is composed per street segment by dynamic programming
     (:mod:`footprint_resynthesis`).
 
-Both end with :func:`legalise`, the hard guarantee of DESIGN.md: every output footprint
-lies inside its block and outside the road surface + setback, and no two footprints
-overlap (they keep at least 1 cm apart); what still conflicts is trimmed to the free
-space (kept when at least half of it remains) or dropped.
+Both end with :func:`legalise`, the hard guarantee of docs/ARCHITECTURE.md ("Quality
+measures"): every output footprint lies inside its block and outside the road surface +
+setback, and no two footprints overlap (they keep at least 1 cm apart); what still
+conflicts is trimmed to the free space (kept when at least half of it remains) or dropped.
 
 The per-block work :func:`synthesize_block` is a pure function of (block, databases,
 method, seed, block index, parameters), so blocks can be distributed over workers with
@@ -39,6 +39,7 @@ import numpy as np
 import pandas as pd
 import shapely
 
+from ..core.geometry import largest_polygons
 from ..core.progress import InputError, Progress, ensure
 from ..network.blocks import shape_metrics
 from ..retrieval import shape_context as sc
@@ -69,21 +70,6 @@ WARP_VERTICES = 50
 MAX_BLOCK_AREA = 2.0e6
 
 
-def _largest_polygon(geoms: np.ndarray) -> np.ndarray:
-    """Valid single polygons: the largest part of each (repaired) geometry."""
-    geoms = shapely.make_valid(np.asarray(geoms, dtype=object))
-    parts, idx = shapely.get_parts(geoms, return_index=True)
-    poly = shapely.get_type_id(parts) == 3
-    parts, idx = parts[poly], idx[poly]
-    out = np.full(len(geoms), None, dtype=object)
-    if len(parts):
-        area = shapely.area(parts)
-        order = np.lexsort((-area, idx))
-        first = order[np.r_[True, idx[order][1:] != idx[order][:-1]]]
-        out[idx[first]] = parts[first]
-    return out
-
-
 @dataclass
 class ExampleSet:
     """A block database prepared for synthesis: footprints as clean polygons per block."""
@@ -105,7 +91,7 @@ def prepare_examples(db: BlockDatabase, name: str = "", min_buildings: int = 1) 
     if len(db) == 0:
         raise InputError(f"the block database {name or db.path} holds no block")
     b = db.buildings if db.buildings is not None else pd.DataFrame()
-    polys = _largest_polygon(db.building_geometry) if len(b) else np.zeros(0, object)
+    polys = largest_polygons(db.building_geometry) if len(b) else np.zeros(0, object)
     attrs = pd.DataFrame({
         "height_m": pd.to_numeric(b.get("height_m", pd.Series(np.nan, index=b.index)),
                                   errors="coerce").to_numpy(dtype=float),
@@ -182,7 +168,7 @@ def legalise(polygons: Sequence, order: Sequence[int], buildable, block):
             g = shapely.intersection(g, clip)
             if len(near):
                 g = shapely.difference(g, shapely.union_all(near))
-            g = _largest_polygon(np.array([g], dtype=object))[0]
+            g = largest_polygons(np.array([g], dtype=object))[0]
             if g is None or g.area < max(MIN_KEEP * a0, MIN_AREA):
                 continue
             taken = np.array(out, dtype=object)
@@ -241,17 +227,6 @@ def _retrieve(block, examples: Sequence[ExampleSet], db_choice: int, n_best: int
     return found[pick][1], found[pick][2]
 
 
-def output_block_ids(values) -> Optional[np.ndarray]:
-    """A target layer's block ids as written to the output when they are a unique whole
-    number per block; None otherwise (blocks are then numbered 1..n)."""
-    numbers = pd.to_numeric(pd.Series(np.asarray(values, dtype=object)),
-                            errors="coerce").to_numpy(dtype=np.float64, na_value=np.nan)
-    if np.isfinite(numbers).all() and (numbers == np.round(numbers)).all() and \
-            len(np.unique(numbers)) == len(numbers):
-        return numbers.astype(np.int64)
-    return None
-
-
 def synthesize_block(block, examples: Sequence[ExampleSet], method: str = "transfer",
                      seed: int = 0, block_index: int = 0, street_width: float = STREET_WIDTH,
                      setback: float = 0.0, roads: Optional[Sequence] = None,
@@ -284,7 +259,7 @@ def synthesize_block(block, examples: Sequence[ExampleSet], method: str = "trans
     stats = dict(block_id=bid, method=method, example=None, database=None, cost=np.nan,
                  n_example=0, n_deleted=0, n_conflicted=0, n_placed=0, n_trimmed=0,
                  n_dropped=0, seconds=0.0)
-    block = _largest_polygon(np.array([block], dtype=object))[0]
+    block = largest_polygons(np.array([block], dtype=object))[0]
     if block is None or block.area <= 0 or block.area > MAX_BLOCK_AREA:
         stats["seconds"] = time.perf_counter() - t0
         return _empty_layout(stats)

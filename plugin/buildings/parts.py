@@ -48,6 +48,7 @@ import shapely
 from shapely.geometry.polygon import orient
 
 from ..core import coordinates
+from ..core.geometry import substrings
 from ..core.progress import InputError, Progress, ensure
 from . import sequences
 from .sequences import Constraint, InfeasibleError, KeyPoint
@@ -640,7 +641,7 @@ def build_along_skeleton(skeleton, library: PartsLibrary, *, front: str = "right
     a = (start + shift) * scale + (total if closed else 0.0)
     b = a + length[E] * scale
     line = shapely.LineString(np.vstack([coords, coords, coords[:1]]) if closed else coords)
-    pieces = _substrings(line, a, b)
+    pieces = substrings(np.full(len(a), line, dtype=object), a, b)
     geoms = _thicken(pieces, t["depth_m"].to_numpy(float)[E])
     # where a part boundary falls on a slight bend (no corner part there) the neighbours'
     # square cuts overlap in a thin wedge on the inner side: the later part gives it up
@@ -673,19 +674,3 @@ def _parts_table(sols, t: pd.DataFrame, E: np.ndarray, start: np.ndarray,
         "base_m": base, "top_m": base + height, "height_m": height,
         "levels": t["levels"].to_numpy()[E].astype(int),
         "floor_area_m2": t["floor_area_m2"].to_numpy(float)[E]})
-
-
-def _substrings(line: shapely.LineString, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """The stretches [a_i, b_i] (arc length) of ``line`` with their interior vertices."""
-    coords = np.asarray(line.coords)[:, :2]
-    pos = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(coords, axis=0), axis=1))]
-    pa = shapely.get_coordinates(shapely.line_interpolate_point(line, a))
-    pb = shapely.get_coordinates(shapely.line_interpolate_point(line, b))
-    i0 = np.searchsorted(pos, a + 1e-9, side="right")
-    i1 = np.searchsorted(pos, b - 1e-9, side="left")
-    n_inner = np.maximum(i1 - i0, 0)
-    parts, index = [], []
-    for j in range(len(a)):
-        parts += [pa[j:j + 1], coords[i0[j]:i0[j] + n_inner[j]], pb[j:j + 1]]
-        index.append(np.full(n_inner[j] + 2, j))
-    return shapely.linestrings(np.vstack(parts), indices=np.concatenate(index))

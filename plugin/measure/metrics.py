@@ -1,7 +1,7 @@
 """Layout quality and similarity metrics: roads, blocks, parcels and building footprints.
 
-Implements the "Quality measures" of DESIGN.md, which every synthesis uses to show that its
-result resembles its example:
+Implements the "Quality measures" of docs/ARCHITECTURE.md, which every synthesis uses to show
+that its result resembles its example:
 
 - roads: segment length, node degree, intersection angle and edge bearing distributions;
   dead ends, intersections and street length per km² (Yang et al. 2013, sec. 7, "street
@@ -11,7 +11,8 @@ result resembles its example:
 - parcels: p_n per km², p_angle, p_area, undesirable parcels, land-use shares l_s / l_r /
   l_p / l_o (Yang 2013, sec. 7 and Table 1);
 - footprints: coverage, overlap with each other and with the road surface, footprints not
-  inside one block, setback (DESIGN.md: overlaps and footprints outside blocks must be 0);
+  inside one block, setback (docs/ARCHITECTURE.md, "Quality measures": overlaps and
+  footprints outside blocks must be 0);
 - two-sample comparison of a candidate layout with its example: Wasserstein distance and
   Kolmogorov-Smirnov statistic per distribution, relative difference per scalar.
 
@@ -38,6 +39,7 @@ import pandas as pd
 import shapely
 from scipy import stats
 
+from ..core.geometry import minimum_rectangles
 from ..core.progress import InputError, Progress, ensure
 from ..network import blocks as _blocks
 from ..network import invariants as _invariants
@@ -361,7 +363,7 @@ def intersection_angles(graph: RoadGraph, bearing_length: float = 10.0) -> np.nd
 def road_metrics(roads, area=None, snap_tolerance: float = 0.5, bearing_length: float = 10.0,
                  edge_distance: float = 0.0,
                  progress: Optional[Progress] = None) -> MetricsResult:
-    """Street network measures of DESIGN.md and Yang 2013's street metrics.
+    """Street network measures of docs/ARCHITECTURE.md and Yang 2013's street metrics.
 
     Parameters
     ----------
@@ -602,7 +604,7 @@ def parcel_metrics(parcels, area=None, landuse=None,
     n = len(parcels)
     area_geom, area_m2, _ = _area(area, parcels)
     a = shapely.area(parcels)
-    long, short, _ = _blocks.minimum_rectangles(parcels)
+    long, short, _ = minimum_rectangles(parcels)
     with np.errstate(divide="ignore", invalid="ignore"):
         p_area = np.where(a > 0, long * short / a, np.nan)
     angles, owner = corner_angles(parcels, straight)
@@ -678,7 +680,7 @@ def footprint_metrics(footprints, blocks=None, roads=None, road_half_width: floa
         pairs of footprints), ``overlapping_pairs``, ``coverage`` (total footprint area in
         blocks / total block area), ``outside_blocks`` (footprints not inside one block, up
         to 0.1 % of their area), ``road_overlap_area`` (m²), ``road_overlap_count``.
-        DESIGN.md: overlaps and footprints outside blocks must be 0 in a synthesis.
+        docs/ARCHITECTURE.md: overlaps and footprints outside blocks must be 0 in a synthesis.
     """
     res = MetricsResult()
     fp = _as_array(footprints, "buildings", 2, res.notes)
@@ -962,6 +964,43 @@ def two_sample(candidate, example) -> Dict[str, float]:
                 ks_pvalue=float(ks.pvalue))
 
 
+def two_sample_axial(candidate, example, period: float = 180.0) -> Dict[str, float]:
+    """:func:`two_sample` for directions on a circle of ``period`` degrees (street bearings:
+    180, a street at 10° runs at 190° too), independent of where the circle is cut.
+
+    ``wasserstein`` is the earth mover's distance on the circle, min over c of the integral
+    of |F - G - c| (Rabin, Delon & Gousseau 2011), in degrees; ``wasserstein_norm`` divides
+    it by the example's circular standard deviation (of the doubled angles, halved);
+    ``ks_stat`` and ``ks_pvalue`` are Kuiper's V = max(F - G) + max(G - F), the KS statistic
+    that does not depend on the cut, and its asymptotic p-value (Stephens 1970).
+    """
+    c = np.asarray(candidate, dtype=float) % period
+    e = np.asarray(example, dtype=float) % period
+    c, e = c[np.isfinite(c)], e[np.isfinite(e)]
+    if len(c) == 0 or len(e) == 0:
+        return dict(wasserstein=np.nan, wasserstein_norm=np.nan, ks_stat=np.nan, ks_pvalue=np.nan)
+    cuts = np.unique(np.concatenate([c, e, [0.0, period]]))
+    f = np.searchsorted(np.sort(c), cuts[:-1], side="right") / len(c)
+    g = np.searchsorted(np.sort(e), cuts[:-1], side="right") / len(e)
+    diff, width = f - g, np.diff(cuts)
+    # the shift c minimising the weighted L1 norm is the weighted median of F - G
+    order = np.argsort(diff)
+    half = np.searchsorted(np.cumsum(width[order]), 0.5 * period)
+    shift = diff[order][min(half, len(order) - 1)]
+    w = float(np.sum(np.abs(diff - shift) * width))
+    t = np.radians(e * 360.0 / period)
+    r = min(float(np.hypot(np.cos(t).mean(), np.sin(t).mean())), 1.0)
+    sd = float(np.degrees(np.sqrt(-2.0 * np.log(r))) * period / 360.0) if r > 0 else np.inf
+    wn = w / sd if sd > 0 else (0.0 if w == 0 else np.nan)
+    v = float(diff.max() - diff.min())
+    n = len(c) * len(e) / (len(c) + len(e))
+    lam = (np.sqrt(n) + 0.155 + 0.24 / np.sqrt(n)) * v
+    j = np.arange(1, 101)
+    p = float(np.clip(np.sum(2 * (4 * j**2 * lam**2 - 1) * np.exp(-2 * j**2 * lam**2)), 0, 1)) \
+        if lam > 0.4 else 1.0
+    return dict(wasserstein=w, wasserstein_norm=wn, ks_stat=v, ks_pvalue=p)
+
+
 def _rel_diff(c: float, e: float) -> float:
     if not (np.isfinite(c) and np.isfinite(e)):
         return np.nan
@@ -982,13 +1021,22 @@ def _axial_mean(degrees: np.ndarray) -> float:
     return float(np.degrees(np.arctan2(np.sin(t).mean(), np.cos(t).mean())) / 2.0 % 180.0)
 
 
+def _axial_difference(c: float, e: float) -> float:
+    """Turn between two axial directions in degrees, signed, in [-90, 90): a difference of
+    directions, not a relative one (it is reported in the rel_diff column)."""
+    if not (np.isfinite(c) and np.isfinite(e)):
+        return np.nan
+    return float((c - e + 90.0) % 180.0 - 90.0)
+
+
 def compare(candidate: MetricsResult, example: Optional[MetricsResult] = None) -> pd.DataFrame:
     """One row per measure: candidate and example values and their distance.
 
     Distributions give one row with ``statistic`` = 'mean' (the means of both samples and
-    their relative difference; 'axial_mean' for street bearings, whose plain mean means
-    nothing) and the two-sample distances of :func:`two_sample` (for bearings on the
-    [0, 180) line, ignoring the wrap-around); scalars
+    their relative difference) and the two-sample distances of :func:`two_sample`; street
+    bearings, whose plain mean means nothing, give 'axial_mean' (the mean directions, and in
+    ``rel_diff`` the turn between them in degrees) and the circular distances of
+    :func:`two_sample_axial`; scalars
     give one row with ``statistic`` = 'value' and the relative difference
     (candidate - example) / |example|. Measures present on one side only keep NaN on the
     other. Without an example, the rows just list the candidate.
@@ -1020,11 +1068,13 @@ def compare(candidate: MetricsResult, example: Optional[MetricsResult] = None) -
         if typ == "d":
             cv = c.values if c is not None else np.zeros(0)
             ev = e.values if e is not None else np.zeros(0)
-            statistic, mean = ("axial_mean", _axial_mean) if ref.unit == "°" and \
-                name.endswith("bearing") else ("mean", _mean)
+            axial = ref.unit == "°" and name.endswith("bearing")
+            statistic, mean, distance = ("axial_mean", _axial_mean, two_sample_axial) if axial \
+                else ("mean", _mean, two_sample)
             cm, em = mean(cv), mean(ev)
-            row.update(statistic=statistic, candidate=cm, example=em, rel_diff=_rel_diff(cm, em),
-                       n_candidate=len(cv), n_example=len(ev), **two_sample(cv, ev))
+            rel = _axial_difference(cm, em) if axial else _rel_diff(cm, em)
+            row.update(statistic=statistic, candidate=cm, example=em, rel_diff=rel,
+                       n_candidate=len(cv), n_example=len(ev), **distance(cv, ev))
         else:
             cs = c.value if c is not None else np.nan
             es = e.value if e is not None else np.nan

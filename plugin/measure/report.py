@@ -23,16 +23,18 @@ from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 import pandas as pd
+import shapely
 
 from ..core.progress import Progress, ensure
 from ..network.invariants import CHECKS, DEAD_END_TOLERANCE
 from .metrics import Distribution, MetricsResult, compare
 
-__all__ = ["render_report", "write_report", "histogram_png", "rose_png"]
+__all__ = ["render_report", "write_report", "histogram_png", "rose_png", "map_png",
+           "summary_html"]
 
 EXAMPLE_COLOR = "#3b6fb6"
 CANDIDATE_COLOR = "#e07b39"
-#: Scalars that DESIGN.md requires to be 0 in a synthesis: flagged when they are not.
+#: Scalars that docs/ARCHITECTURE.md requires to be 0 in a synthesis: flagged when they are not.
 MUST_BE_ZERO = {("buildings", "overlap_area"), ("buildings", "overlapping_pairs"),
                 ("buildings", "outside_blocks"), ("buildings", "road_overlap_area"),
                 ("buildings", "road_overlap_count"), ("invariants", "violations")} | {
@@ -57,6 +59,9 @@ td.name, th.name { text-align: left; }
 td.warn { color: #b00020; font-weight: 600; }
 tr:hover td { background: #fafbfd; }
 .legend span { display: inline-block; width: 0.9em; height: 0.9em; margin: 0 0.3em -0.1em 1em; }
+.grid.maps { grid-template-columns: repeat(auto-fill, minmax(360px, 1fr)); }
+p.warn { color: #b00020; }
+dt { font-weight: 600; margin-top: 0.5em; }
 .grid { display: grid; grid-template-columns: repeat(auto-fill, minmax(540px, 1fr)); gap: 1em; }
 figure { margin: 0; border: 1px solid #e3e3e3; border-radius: 4px; padding: 0.4em;
          background: #fff; }
@@ -206,6 +211,178 @@ def rose_png(candidate: Optional[np.ndarray], example: Optional[np.ndarray]) -> 
     return _png(fig)
 
 
+def map_png(layers: Dict[str, np.ndarray], title: str, extent=None) -> str:
+    """A thumbnail map of one layout (metric CRS): blocks, parcels, buildings, roads; a
+    100 m / 500 m scale bar. ``extent`` (x0, y0, x1, y1) frames it, else its own bounds."""
+    from matplotlib.collections import LineCollection, PolyCollection
+
+    fig = _figure(4.2, 4.2)
+    fig.subplots_adjust(left=0.02, right=0.98, bottom=0.02, top=0.9)
+    ax = fig.add_subplot()
+    styles = {"blocks": ("#f2efe9", "#c8c2b6"), "parcels": ("none", "#d9a066"),
+              "buildings": ("#5a6b84", "#3b475a")}
+    for name, (face, edge) in styles.items():
+        geoms = layers.get(name)
+        if geoms is None or not len(geoms):
+            continue
+        rings = shapely.get_exterior_ring(shapely.get_parts(np.asarray(geoms, dtype=object)))
+        rings = rings[~shapely.is_missing(rings)]
+        polys = [shapely.get_coordinates(r) for r in rings]
+        ax.add_collection(PolyCollection(polys, facecolors=face, edgecolors=edge,
+                                         linewidths=0.3))
+    roads = layers.get("roads")
+    if roads is not None and len(roads):
+        parts = shapely.get_parts(np.asarray(roads, dtype=object))
+        ax.add_collection(LineCollection([shapely.get_coordinates(g) for g in parts],
+                                         colors="#333333", linewidths=0.6))
+    every = [np.asarray(g, dtype=object) for g in layers.values() if g is not None and len(g)]
+    if extent is None and every:
+        extent = shapely.total_bounds(np.concatenate(every))
+    if extent is not None and np.isfinite(extent).all():
+        x0, y0, x1, y1 = extent
+        side = max(x1 - x0, y1 - y0, 1.0)
+        cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
+        ax.set_xlim(cx - side / 2, cx + side / 2)
+        ax.set_ylim(cy - side / 2, cy + side / 2)
+        bar = 500.0 if side > 2500 else 100.0
+        bx, by = cx - side / 2 + 0.05 * side, cy - side / 2 + 0.05 * side
+        ax.plot([bx, bx + bar], [by, by], color="black", linewidth=2)
+        ax.text(bx + bar / 2, by + 0.015 * side, f"{bar:g} m", ha="center", fontsize=8)
+    ax.set_aspect("equal")
+    ax.set_axis_off()
+    ax.set_title(title, fontsize=11, fontweight="bold")
+    return _png(fig)
+
+
+#: The measures of the plain-language summary: (kind, metric, a scalar?) -> what it says
+#: to a planner.
+SUMMARY_MEASURES = {
+    ("roads", "street_length_km_per_km2", True): "street length per km² (how much street "
+                                                 "there is)",
+    ("roads", "intersections_per_km2", True): "junctions per km²",
+    ("roads", "dead_end_share", True): "share of street ends that are dead ends",
+    ("roads", "degree4_share", True): "share of four-way crossings",
+    ("roads", "orientation_order", True): "how grid-like the streets are",
+    ("blocks", "blocks_per_km2", True): "city blocks per km²",
+    ("blocks", "area", False): "block sizes",
+    ("roads", "segment_length", False): "lengths of streets between junctions",
+    ("parcels", "p_n_per_km2", True): "parcels per km²",
+    ("parcels", "area", False): "parcel sizes",
+    ("buildings", "per_km2", True): "buildings per km²",
+    ("buildings", "coverage", True): "share of block land covered by buildings",
+    ("buildings", "area", False): "building footprint sizes",
+}
+#: |relative difference| up to which a value "matches" the example, and "is close"
+MATCH, CLOSE = 0.10, 0.30
+#: W / sigma up to which two distributions are "alike", "fairly alike"
+ALIKE, FAIRLY_ALIKE = 0.25, 0.6
+
+
+def _judge(row) -> Tuple[str, bool, float]:
+    """(sentence fragment, matches the example, size of the difference) of one comparison
+    row: scalars by their relative difference, distributions by W / sigma."""
+    if row.statistic == "value":
+        rel = float(row.rel_diff)
+        direction = "more" if rel > 0 else "less"
+        if abs(rel) <= MATCH:
+            return "about the same as the example", True, abs(rel)
+        word = "somewhat" if abs(rel) <= CLOSE else "much"
+        return (f"{word} {direction} than the example ({abs(rel) * 100:.0f} % {direction})",
+                False, abs(rel))
+    wn = float(row.wasserstein_norm)
+    if wn <= ALIKE:
+        return "distributed like the example's", True, wn
+    if wn <= FAIRLY_ALIKE:
+        return "fairly like the example's", False, wn
+    ratio = row.candidate / row.example if row.example else np.nan
+    trend = "" if not np.isfinite(ratio) else \
+        (f" (on average {ratio:.1f}× the example's)" if ratio >= 1 else
+         f" (on average {1 / ratio:.1f}× smaller than the example's)")
+    return "unlike the example's" + trend, False, wn
+
+
+def summary_html(comparison: pd.DataFrame, has_example: bool) -> str:
+    """The plain-language summary: what matches the example, what does not, by how much,
+    and whether the street network is sound (the invariants)."""
+    rows = {(r.kind, r.metric, r.statistic == "value"): r
+            for r in comparison.itertuples(index=False)}
+    out = ["<h2>Summary</h2>"]
+    inv = rows.get(("invariants", "violations", True))
+    if inv is not None and np.isfinite(inv.candidate):
+        if inv.candidate == 0:
+            out.append("<p>The street network is sound: every crossing is a junction, it "
+                       "is connected to the given roads, and no new street doubles one.</p>")
+        else:
+            problems = [f"{_fmt(rows[('invariants', name, True)].candidate)} × "
+                        f"{html.escape(label.lower())}"
+                        for name, label, is_violation in CHECKS
+                        if is_violation and name != "dead_end_share"
+                        and ("invariants", name, True) in rows
+                        and rows[("invariants", name, True)].candidate > 0]
+            out.append("<p class='warn'><b>The street network has "
+                       f"{_fmt(inv.candidate)} problems</b>: {'; '.join(problems)}.</p>")
+    if not has_example:
+        out.append("<p>No example was given: the tables below describe the layout alone.</p>")
+        return "".join(out)
+    good, bad = [], []
+    for key, what in SUMMARY_MEASURES.items():
+        row = rows.get(key)
+        if row is None:
+            continue
+        scalar = key[2]
+        if not np.isfinite(row.rel_diff if scalar else row.wasserstein_norm):
+            continue
+        verdict, matches, size = _judge(row)
+        unit = f" {row.unit}" if row.unit else ""
+        value = f": {_fmt(row.candidate, 3)}{unit} against {_fmt(row.example, 3)}{unit}" \
+            if scalar else ""
+        sentence = f"{what[0].upper() + what[1:]}: {verdict}{value}."
+        (good if matches else bad).append((size, html.escape(sentence)))
+    n = len(good) + len(bad)
+    if n:
+        out.append(f"<p>Of the {n} main measures, <b>{len(good)} match the example</b> "
+                   f"(values within {MATCH * 100:.0f} %, distributions with W / σ under "
+                   f"{ALIKE:g}) and <b>{len(bad)} differ</b>.</p>")
+    if good:
+        out.append("<h3>What matches the example</h3><ul>" + "".join(
+            f"<li>{t}</li>" for _, t in sorted(good)) + "</ul>")
+    if bad:
+        out.append("<h3>What differs, largest differences first</h3><ul>" + "".join(
+            f"<li>{t}</li>" for _, t in sorted(bad, reverse=True)) + "</ul>")
+    return "".join(out)
+
+
+GLOSSARY = """
+<h2>How to read the numbers</h2>
+<dl class='notes'>
+<dt>km/km², 1/km²</dt><dd>per square kilometre of the study area (or of the layout's own
+extent): street kilometres, junctions, blocks, buildings.</dd>
+<dt>Dead-end share, degree shares</dt><dd>of all street ends and junctions (nodes where
+a street only bends are not counted): a dead end has one street, a T-junction three, a
+crossing four.</dd>
+<dt>Orientation entropy (nats) and order</dt><dd>how spread the street directions are
+(Boeing 2019): entropy 1.39 nats for a perfect grid, 3.58 nats when every direction is
+equally common; order φ rescales it to 1 for a perfect grid and 0 for no preferred
+direction.</dd>
+<dt>Street bearing</dt><dd>the direction of each street piece in degrees from north, the same
+for both ways along it (0–180°); compared on the circle, so 5° and 175° are 10° apart; the
+mean row gives the mean direction of each side and the turn between them.</dd>
+<dt>Wasserstein distance (W) and W / σ</dt><dd>how far one distribution has to move to
+become the other, in the measure's unit; W / σ divides by the example's spread: under 0.25
+the two are alike, above 1 they are clearly different. For bearings, the distance on the
+circle.</dd>
+<dt>KS D and p</dt><dd>the largest gap between the two cumulative distributions (0 to 1) and
+the chance of a gap that large between samples of one distribution; with thousands of
+values even small differences get a small p, so read D and W / σ as the size of the
+difference. For bearings, Kuiper's V, its version on the circle.</dd>
+<dt>p_angle, p_area (parcels)</dt><dd>Yang et al. 2013: the mean deviation of a parcel's
+corners from 90° and its area over that of its minimum bounding rectangle (1 = a rectangle);
+a parcel is undesirable above 15° or 1.2.</dd>
+<dt>Difference</dt><dd>(candidate − example) / |example|.</dd>
+</dl>
+"""
+
+
 # --------------------------------------------------------------------------- html
 
 def _scalar_table(rows: pd.DataFrame, has_example: bool, labels: Dict) -> str:
@@ -258,7 +435,8 @@ def _find(result: Optional[MetricsResult], kind: str, name: str) -> Optional[Dis
 def render_report(candidate: MetricsResult, example: Optional[MetricsResult] = None,
                   comparison: Optional[pd.DataFrame] = None, title: str = "Layout metrics",
                   meta: Optional[Dict[str, str]] = None,
-                  progress: Optional[Progress] = None) -> str:
+                  progress: Optional[Progress] = None,
+                  maps: Optional[Dict[str, Dict[str, np.ndarray]]] = None) -> str:
     """The HTML report as a string.
 
     Parameters
@@ -274,6 +452,10 @@ def render_report(candidate: MetricsResult, example: Optional[MetricsResult] = N
         Lines for the header table (input layers, CRS, parameters).
     progress : Progress, optional
         Stepped once per plot (raises ``Canceled`` when the user cancels).
+    maps : dict, optional
+        ``{"Candidate": layers, "Example": layers}``, layers a dict of geometry arrays
+        (roads, blocks, parcels, buildings) in a metric CRS: thumbnail maps side by side,
+        each framed on its own extent at its own scale (with a scale bar).
     """
     progress = ensure(progress)
     has_example = example is not None
@@ -291,6 +473,14 @@ def render_report(candidate: MetricsResult, example: Optional[MetricsResult] = N
         f"<p class='sub'>Urban Synthesis · layout metrics · generated "
         f"{_dt.datetime.now().strftime('%Y-%m-%d %H:%M')}</p>",
     ]
+    out.append(summary_html(comparison, has_example))
+    if maps:
+        thumbs = [f"<figure><img alt='{html.escape(name)} map' src='data:image/png;base64,"
+                  f"{map_png(layers, name)}'><figcaption>{html.escape(name)}: roads, blocks, "
+                  "parcels and buildings.</figcaption></figure>"
+                  for name, layers in maps.items() if layers]
+        out.append("<div class='grid maps'>" + "".join(thumbs) + "</div>")
+    out.append("<h2>Inputs</h2>")
     if meta:
         out.append("<table>" + "".join(
             f"<tr><td class='name'><b>{html.escape(str(k))}</b></td>"
@@ -350,8 +540,9 @@ def render_report(candidate: MetricsResult, example: Optional[MetricsResult] = N
                 done += 1
                 progress.step(done / n_plots)
         out.append("<div class='grid'>" + "".join(figures) + "</div>")
-    out.append("<footer>Measures: DESIGN.md “Quality measures” (network invariants: every "
-               "crossing a junction, connected to the given roads, no street in a given "
+    out.append(GLOSSARY)
+    out.append("<footer>Measures: docs/ARCHITECTURE.md “Quality measures” (network "
+               "invariants: every crossing a junction, connected to the given roads, no street in a given "
                "road's corridor, motorways met only at their junctions); Yang et al. 2013, Table 1 "
                "(p_angle, p_area, b_n, b_max/b_avg/b_min, s_l, s_i, s_d); Hartmann thesis ch. 4.2 "
                "(block area, compactness, aspect ratio); Boeing 2019 (orientation entropy)."
@@ -363,9 +554,10 @@ def render_report(candidate: MetricsResult, example: Optional[MetricsResult] = N
 def write_report(path, candidate: MetricsResult, example: Optional[MetricsResult] = None,
                  comparison: Optional[pd.DataFrame] = None, title: str = "Layout metrics",
                  meta: Optional[Dict[str, str]] = None,
-                 progress: Optional[Progress] = None) -> str:
+                 progress: Optional[Progress] = None,
+                 maps: Optional[Dict[str, Dict[str, np.ndarray]]] = None) -> str:
     """Write :func:`render_report` to ``path`` (UTF-8) and return the path."""
-    text = render_report(candidate, example, comparison, title, meta, progress)
+    text = render_report(candidate, example, comparison, title, meta, progress, maps)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(text, encoding="utf-8")

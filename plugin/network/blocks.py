@@ -11,7 +11,7 @@ bridges of the graph between two loops) lie inside a block and do not split it, 
 thesis. Every drivable edge bounds blocks whatever its vertical layer (the thesis's street
 graph is planar; bridges and tunnels of city streets are short).
 
-Real OSM makes artefact faces (DESIGN.md, "Real example data"): dual carriageways, slip
+Real OSM makes artefact faces (docs/ARCHITECTURE.md, "Real example data"): dual carriageways, slip
 roads and traffic islands close small or thin faces that are road surface, not blocks.
 A face is dropped when its area is under ``min_area`` or its mean width ``2 * area /
 perimeter`` (the width of a long strip) is under ``min_width``; the thesis does the same
@@ -21,7 +21,7 @@ Buildings and parcels are assigned to at most one block each: the block that hol
 largest share of their area, if that share is at least ``min_share`` (a half by default).
 Features outside every closed block (the extract is clipped, so many lie beyond the
 outermost street loop: only 62 % of Helsinki's buildings are inside a face closed by
-drivable roads, DESIGN.md) keep no block: ``block_id`` is missing and ``in_block`` False.
+drivable roads, docs/ARCHITECTURE.md) keep no block: ``block_id`` is missing and ``in_block`` False.
 They are kept, not deleted, so the caller decides what to do with them.
 
 Shape measures follow the thesis (ch. 4.2 evaluation): compactness = block area / area of
@@ -41,13 +41,14 @@ import numpy as np
 import pandas as pd
 import shapely
 
+from ..core.geometry import group_ends, group_starts, largest_polygons, minimum_rectangles
 from ..core.progress import InputError, Progress, ensure
 from .street_graph import RoadGraph
 
 __all__ = [
     "MIN_BLOCK_AREA", "MIN_BLOCK_WIDTH", "MIN_SHARE", "BLOCK_FIELDS", "BlockExtraction",
-    "planar_faces", "block_faces", "minimum_rectangles", "shape_metrics", "assign_to_blocks",
-    "extract_blocks",
+    "planar_faces", "block_faces", "shape_metrics", "assign_to_blocks",
+    "extract_blocks", "blocks_from_roads",
 ]
 
 #: Faces smaller than this (m²) are traffic islands and junction artefacts, not blocks.
@@ -98,20 +99,6 @@ class BlockExtraction:
 
 
 # --------------------------------------------------------------------------- array helpers
-
-def _group_starts(keys: np.ndarray) -> np.ndarray:
-    """True where a run of equal values in ``keys`` begins."""
-    out = np.ones(len(keys), dtype=bool)
-    np.not_equal(keys[1:], keys[:-1], out=out[1:])
-    return out
-
-
-def _group_ends(keys: np.ndarray) -> np.ndarray:
-    """True where a run of equal values in ``keys`` ends."""
-    out = np.ones(len(keys), dtype=bool)
-    np.not_equal(keys[1:], keys[:-1], out=out[:-1])
-    return out
-
 
 def _offsets(counts: np.ndarray) -> np.ndarray:
     """Start of each group in a concatenation of groups of the given sizes."""
@@ -199,8 +186,8 @@ class _Network:
         order = np.lexsort((np.arctan2(d[:, 1], d[:, 0]), self.org))
         so = self.org[order]
         h = np.arange(2 * m)
-        group_start = _group_starts(so)
-        group_end = _group_ends(so)
+        group_start = group_starts(so)
+        group_end = group_ends(so)
         last_pos = np.minimum.accumulate(np.where(group_end, h, 2 * m)[::-1])[::-1]
         clockwise = np.empty(2 * m, dtype=np.int64)
         clockwise[order] = order[np.where(group_start, last_pos, h - 1)]
@@ -290,7 +277,7 @@ def _walk_polygons(net: "_Network", alive, label, seq):
     n_ring = label.max() + 1
     ring_start = np.searchsorted(ring, np.arange(n_ring))
     k = np.arange(1, len(ring) + 1)
-    wrap = _group_ends(ring)
+    wrap = group_ends(ring)
     k[wrap] = ring_start[ring[wrap]]
     x, y = xy[:, 0], xy[:, 1]
     area = 0.5 * np.bincount(ring, x * y[k] - x[k] * y, minlength=n_ring)
@@ -318,7 +305,7 @@ def _walk_polygons(net: "_Network", alive, label, seq):
         h_i, f_i = shapely.STRtree(faces).query(probe, predicate="within")
         if len(h_i):
             best = np.lexsort((face_area[f_i], h_i))
-            best = best[_group_starts(h_i[best])]
+            best = best[group_starts(h_i[best])]
             h_i, f_i = h_i[best], f_i[best]
             hole_mask = np.zeros(n_ring, dtype=bool)
             hole_mask[holes] = True
@@ -337,7 +324,8 @@ def _walk_polygons(net: "_Network", alive, label, seq):
     touching[node_key[1:][node_key[1:] == node_key[:-1]] // (net.org.max() + 1)] = True
     suspect = np.flatnonzero(touching[is_shell])
     for i in suspect[~shapely.is_valid(faces[suspect])]:
-        faces[i] = _largest_polygon(shapely.make_valid(faces[i]))
+        largest = largest_polygons([faces[i]])[0]
+        faces[i] = shapely.Polygon() if largest is None else largest
         face_area[i], face_perimeter[i] = shapely.area(faces[i]), shapely.length(faces[i])
     return faces, face_area, face_perimeter
 
@@ -368,7 +356,7 @@ def block_faces(lines: Sequence, min_area: float = MIN_BLOCK_AREA,
     References
     ----------
     Hartmann, thesis ch. 4.1.2 and 5.1 (blocks are the minimal cycles of the street graph);
-    DESIGN.md, "Real example data" (slivers of dual carriageways and service roads).
+    docs/ARCHITECTURE.md, "Real example data" (slivers of dual carriageways and service roads).
 
     Examples
     --------
@@ -423,91 +411,7 @@ def _planar_lines(graph: RoadGraph) -> np.ndarray:
     return np.concatenate([lines[~involved], noded])
 
 
-def _largest_polygon(geom):
-    parts = [p for p in shapely.get_parts(geom) if shapely.get_type_id(p) == 3]
-    if not parts:
-        return shapely.from_wkt("POLYGON EMPTY")
-    return max(parts, key=shapely.area)
-
-
 # --------------------------------------------------------------------------- shape
-
-def minimum_rectangles(polygons: Sequence):
-    """Minimum-area bounding rectangles of polygons, vectorised rotating calipers.
-
-    The minimum-area rectangle has a side on an edge of the convex hull (Freeman &
-    Shapira 1975). For every hull edge the three other sides touch the hull at its support
-    vertices in the edge's directions; on a convex polygon walked counter-clockwise, the
-    edge angles increase through one turn, so each support vertex is found by a binary
-    search over the hull's edge angles (all edges of all polygons at once).
-
-    Parameters
-    ----------
-    polygons : array of Polygon
-
-    Returns
-    -------
-    length, width : float arrays
-        Longer and shorter side of the rectangle (m); 0 for degenerate polygons.
-    angle : float array
-        Direction of the longer side in degrees, in [0, 180) counter-clockwise from east.
-
-    Examples
-    --------
-    >>> import shapely
-    >>> rect = shapely.affinity.rotate(shapely.box(0, 0, 40, 10), 30, origin=(0, 0))
-    >>> [round(float(v[0]), 6) for v in minimum_rectangles([rect])]
-    [40.0, 10.0, 30.0]
-    """
-    polygons = np.asarray(polygons, dtype=object)
-    n = len(polygons)
-    length, width, angle = np.zeros(n), np.zeros(n), np.zeros(n)
-    if n == 0:
-        return length, width, angle
-    hulls = shapely.convex_hull(polygons)
-    ok = shapely.get_type_id(hulls) == 3  # degenerate hulls (points, lines) have no area
-    if not ok.any():
-        return length, width, angle
-    rings = shapely.get_exterior_ring(hulls[ok])
-    # the search below needs counter-clockwise rings (GEOS returns clockwise hulls)
-    rings = np.where(shapely.is_ccw(rings), rings, shapely.reverse(rings))
-    coords, idx = shapely.get_coordinates(rings, return_index=True)
-    # vertex i starts edge i; the ring repeats its first vertex at its end
-    e0 = np.flatnonzero(idx[1:] == idx[:-1])
-    v = coords[e0]
-    hull = idx[e0]
-    d = coords[e0 + 1] - v
-    alpha = np.arctan2(d[:, 1], d[:, 0])
-    start = _group_starts(hull)
-    first_of = np.flatnonzero(start)            # first edge of each hull
-    n_edges = np.diff(np.append(first_of, len(hull)))
-    # edge angles relative to the first edge of their hull: increasing in [0, 2 pi)
-    rel = np.mod(alpha - alpha[first_of][hull], 2 * np.pi)
-    rel[start] = 0.0
-    key = hull * 8.0 + rel
-
-    def support(turn):
-        """Index of the vertex extreme in direction (edge angle + turn - pi/2)."""
-        target = hull * 8.0 + np.mod(rel + turn, 2 * np.pi)
-        i = np.searchsorted(key, target, side="left")
-        end = first_of[hull] + n_edges[hull]
-        return np.where(i >= end, first_of[hull], i)
-
-    u = d / np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-300)[:, None]
-    hi_along, lo_along, far = support(np.pi / 2), support(1.5 * np.pi), support(np.pi)
-    along = np.einsum("ij,ij->i", v[hi_along] - v[lo_along], u)
-    w = v[far] - v
-    across = u[:, 0] * w[:, 1] - u[:, 1] * w[:, 0]
-    area = along * across
-    order = np.lexsort((area, hull))
-    best = order[_group_starts(hull[order])]
-    a, b = along[best], across[best]
-    dir_long = np.where((a >= b)[:, None], u[best], np.column_stack([-u[best, 1], u[best, 0]]))
-    length[ok] = np.maximum(a, b)
-    width[ok] = np.minimum(a, b)
-    angle[ok] = np.degrees(np.arctan2(dir_long[:, 1], dir_long[:, 0])) % 180.0
-    return length, width, angle
-
 
 def shape_metrics(polygons: Sequence) -> pd.DataFrame:
     """Area, perimeter, compactness and aspect ratio of polygons.
@@ -603,7 +507,7 @@ def assign_to_blocks(blocks: Sequence, geometries: Sequence, min_share: float = 
                 inter = shapely.area(shapely.intersection(geoms[g], blocks[b]))
                 s = np.where(area > 0, inter / area, 0.0)
             order = np.lexsort((-s, g))
-            best = order[_group_starts(g[order])]
+            best = order[group_starts(g[order])]
             ok = s[best] >= min_share
             index[g[best[ok]]] = b[best[ok]]
             share[g[best[ok]]] = np.minimum(s[best[ok]], 1.0)
@@ -655,7 +559,7 @@ def extract_blocks(roads, buildings: Optional[Sequence] = None,
     References
     ----------
     Hartmann, thesis ch. 4.1.2 (blocks keep their dead-end streets) and ch. 5.1 (a block
-    is its boundary polygon and its footprints); DESIGN.md, "Real example data".
+    is its boundary polygon and its footprints); docs/ARCHITECTURE.md, "Real example data".
 
     Examples
     --------
@@ -721,3 +625,44 @@ def extract_blocks(roads, buildings: Optional[Sequence] = None,
     result.table = pd.DataFrame({name: columns[name] for name, _ in BLOCK_FIELDS})
     progress.step(1.0)
     return result
+
+
+def blocks_from_roads(lines: Sequence, road_class: Optional[Sequence] = None,
+                      buildings: Optional[Sequence] = None, parcels: Optional[Sequence] = None,
+                      min_area: float = MIN_BLOCK_AREA, min_width: float = MIN_BLOCK_WIDTH,
+                      progress: Optional[Progress] = None):
+    """City blocks of raw road lines: the one rule of every tool that takes roads instead
+    of blocks ('Extract city blocks', parcels and footprints from roads).
+
+    The lines are cleaned into a planar street graph with one vertical layer (every
+    drivable edge bounds blocks, bridges and tunnels too; degree-2 chains are not merged,
+    so the faces follow the lines exactly), then :func:`extract_blocks` finds its faces.
+
+    Parameters
+    ----------
+    lines : array of LineString in a metric CRS (already filtered to drivable classes)
+    road_class : per-line class (optional)
+    buildings, parcels, min_area, min_width : as :func:`extract_blocks`
+    progress : Progress, optional
+
+    Returns
+    -------
+    (RoadGraph, BlockExtraction)
+
+    Examples
+    --------
+    >>> import shapely
+    >>> grid = [shapely.LineString([(0, y), (200, y)]) for y in (0, 100, 200)] + \\
+    ...        [shapely.LineString([(x, 0), (x, 200)]) for x in (0, 100, 200)]
+    >>> graph, result = blocks_from_roads(grid)
+    >>> graph.n_edges, result.stats["n_blocks"]
+    (12, 4)
+    """
+    from .street_graph import clean_network
+
+    progress = ensure(progress)
+    graph = clean_network(lines, road_class, None, None, merge_degree2=False,
+                          progress=progress.sub(0.0, 0.6))
+    result = extract_blocks(graph, buildings, parcels, min_area=min_area, min_width=min_width,
+                            progress=progress.sub(0.6, 1.0))
+    return graph, result

@@ -1,6 +1,6 @@
 """Network invariants of a synthesised street network, checked against the roads it was given.
 
-DESIGN.md ("Quality measures") asks of every road synthesis that "every crossing is a
+docs/ARCHITECTURE.md ("Quality measures") asks of every road synthesis that "every crossing is a
 junction, the result is connected to the given roads, no street doubles a given road";
 the fidelity issue adds that motorways and trunks are crossed only at existing junctions and
 that the dead-end share stays within ±30 % of the example's. This module is the one checker
@@ -43,7 +43,7 @@ intersection per candidate pair) and scipy's connected components; no loop over 
 
 References
 ----------
-DESIGN.md, "Quality measures" (network invariants for any synthesised roads); Aliaga,
+docs/ARCHITECTURE.md, "Quality measures" (network invariants for any synthesised roads); Aliaga,
 Vanegas, Benes 2008, sec. 5 (intersections are "all the pair-wise intersection points
 between street centerlines" - so every crossing must be a node); Hartmann thesis ch. 4.1.2
 (the street graph is planar).

@@ -20,9 +20,10 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
-from typing import Iterable, Optional, Sequence
+from typing import Optional, Sequence
 
 import numpy as np
+import pandas as pd
 import shapely
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
@@ -32,7 +33,8 @@ from ..core.progress import InputError, Progress, ensure
 
 __all__ = [
     "DRIVABLE_CLASSES", "ARTERIAL_CLASSES", "CLASS_RANK", "RoadGraph",
-    "parse_other_tags", "vertical_layer", "class_rank", "clean_network", "graph_from_lines",
+    "drivable_and_arterial", "parse_other_tags", "vertical_layer", "class_rank",
+    "clean_network", "graph_from_lines",
 ]
 
 #: OSM highway classes kept by default: what cars drive on and what forms city blocks.
@@ -54,6 +56,42 @@ UNKNOWN_RANK = len(_RANKED)
 
 _TAG_RE = re.compile(r'"((?:[^"\\]|\\.)*)"=>"((?:[^"\\]|\\.)*)"')
 _YES = {"yes", "true", "1", "viaduct", "covered", "building_passage", "culvert", "boardwalk"}
+
+
+def drivable_and_arterial(road_class: Optional[Sequence] = None,
+                          level: Optional[Sequence] = None, n: Optional[int] = None):
+    """Which roads count, and which of them are arterials: the rule of the tools that take
+    roads around buildings (attributes, best fit, the command line).
+
+    A layer with OSM classes keeps its drivable lines (one without any keeps every line);
+    arterials are level 0 when there is a level, else the arterial OSM classes.
+
+    Returns
+    -------
+    (keep, arterial) : bool arrays over all lines (arterial only where kept)
+
+    Examples
+    --------
+    >>> keep, art = drivable_and_arterial(["primary", "footway", "residential"])
+    >>> keep.tolist(), art.tolist()
+    ([True, False, True], [True, False, False])
+    >>> drivable_and_arterial(level=[0, 1, None])[1].tolist()
+    [True, False, False]
+    """
+    n = len(road_class if road_class is not None else level) if n is None else n
+    keep = np.ones(n, dtype=bool)
+    if road_class is not None:
+        drivable = np.array([c in DRIVABLE_CLASSES for c in road_class], dtype=bool)
+        if drivable.any():
+            keep = drivable
+    if level is not None:
+        numbers = pd.to_numeric(pd.Series(np.asarray(level, dtype=object)), errors="coerce")
+        arterial = (numbers == 0).to_numpy()
+    elif road_class is not None:
+        arterial = np.array([c in ARTERIAL_CLASSES for c in road_class], dtype=bool)
+    else:
+        arterial = np.zeros(n, dtype=bool)
+    return keep, arterial & keep
 
 
 def parse_other_tags(text: Optional[str]) -> dict:
@@ -437,7 +475,3 @@ def _loops_start_at_their_node(merged: np.ndarray, g: RoadGraph, comp: np.ndarra
             ring = np.roll(xy, -at[0], axis=0)
             merged[c] = shapely.linestrings(np.vstack([ring, ring[:1]]))
     return merged
-
-
-def edges_to_lines(graph: RoadGraph) -> Iterable:
-    return graph.geometry

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
-from typing import Optional, Sequence
+from typing import Callable, Optional, Sequence
 
 import numpy as np
 import pandas as pd
@@ -37,6 +37,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from ..core import coordinates
+from ..core.geometry import substrings, unit
 from ..core.progress import InputError, Progress, ensure
 from .street_graph import RoadGraph, clean_network
 
@@ -150,6 +151,16 @@ class Tessellation:
     graph: RoadGraph
     widths: np.ndarray
     stats: dict = field(default_factory=dict)
+    #: centre line, edge index and width of every surface (kept rows), for the mesh
+    centres: Optional[np.ndarray] = None
+    surface_edge: Optional[np.ndarray] = None
+    #: graph node of every junction (kept rows)
+    junction_node: Optional[np.ndarray] = None
+    #: with a DEM: z of points on surface k (terrain blended into the junction planes),
+    #: z of points in the plane of junction node n, and the terrain itself
+    surface_z: Optional[Callable] = None
+    junction_z: Optional[Callable] = None
+    terrain_z: Optional[Callable] = None
 
 
 # --------------------------------------------------------------------------- merging
@@ -194,12 +205,6 @@ def merge_junctions(graph: RoadGraph, widths: np.ndarray, pairs: np.ndarray):
 
 # --------------------------------------------------------------------------- geometry
 
-def _unit(v):
-    n = np.hypot(v[:, 0], v[:, 1])
-    n = np.where(n > 0, n, 1.0)
-    return v / n[:, None]
-
-
 def _incidences(graph: RoadGraph, widths: np.ndarray):
     """Both ends of every edge as incidences (node, edge, end), sorted CCW around the node.
 
@@ -217,7 +222,7 @@ def _incidences(graph: RoadGraph, widths: np.ndarray):
     node = np.concatenate([graph.u, graph.v])
     edge = np.concatenate([np.arange(m), np.arange(m)])
     at_end = np.r_[np.zeros(m, bool), np.ones(m, bool)]
-    direction = _unit(np.vstack([a - start, b - end]))
+    direction = unit(np.vstack([a - start, b - end]))
     angle = np.arctan2(direction[:, 1], direction[:, 0])
     order = np.lexsort((angle, node))
     return (node[order], edge[order], at_end[order], direction[order], angle[order],
@@ -277,7 +282,7 @@ def _cut_points(lines, at_end, cut, length):
     here = shapely.get_coordinates(shapely.line_interpolate_point(lines, pos))
     ahead = shapely.get_coordinates(shapely.line_interpolate_point(
         lines, np.where(at_end, pos - eps, pos + eps)))
-    return here, _unit(ahead - here)
+    return here, unit(ahead - here)
 
 
 def _junction_rings(h, cut_xy, cut_dir):
@@ -312,25 +317,6 @@ def _junction_rings(h, cut_xy, cut_dir):
     coords = ring.reshape(-1, 2)
     owner = np.repeat(h["node"], ring.shape[1])
     return coords, owner
-
-
-def _substrings(lines, a, b):
-    """Vectorised substring of each line from distance a to b (a < b), as linestrings."""
-    coords, idx = shapely.get_coordinates(lines, return_index=True)
-    seg = np.r_[0.0, np.hypot(*np.diff(coords, axis=0).T)]
-    first = np.r_[True, idx[1:] != idx[:-1]]
-    seg[first] = 0.0
-    cum = np.cumsum(seg)
-    cum -= cum[np.flatnonzero(first)][idx]
-    inner = (cum > a[idx] + 1e-9) & (cum < b[idx] - 1e-9)
-    pa = shapely.get_coordinates(shapely.line_interpolate_point(lines, a))
-    pb = shapely.get_coordinates(shapely.line_interpolate_point(lines, b))
-    n = len(lines)
-    all_xy = np.vstack([pa, coords[inner], pb])
-    all_line = np.r_[np.arange(n), idx[inner], np.arange(n)]
-    all_pos = np.r_[a, cum[inner], b]
-    order = np.lexsort((all_pos, all_line))
-    return shapely.linestrings(all_xy[order], indices=all_line[order])
 
 
 def _cut_overlaps(polys, layer, fixed=None, fixed_layer=None, incident=None, priority=None,
@@ -591,7 +577,7 @@ def tessellate_network(graph: RoadGraph, widths: Sequence[float],
     length = graph.length
     a, b = cut_start, length - cut_end
     has_surface = (b - a) > 1e-3
-    centre = _substrings(graph.geometry[has_surface], a[has_surface], b[has_surface])
+    centre = substrings(graph.geometry[has_surface], a[has_surface], b[has_surface])
     surf_edge = np.flatnonzero(has_surface)
     surfaces = shapely.buffer(centre, widths[surf_edge] / 2.0, quad_segs=_QUAD_SEGS,
                               cap_style="flat", join_style="round")
@@ -638,14 +624,15 @@ def tessellate_network(graph: RoadGraph, widths: Sequence[float],
         j_table[col] = np.nan
     j_table["slope_pct"] = np.nan
     if dem is not None:
-        surfaces, jpolys = _drape(dem, graph, widths, h, junction_nodes, jpolys, surfaces,
-                                  centre, surf_edge, s_table, j_table, sample_spacing,
-                                  progress.sub(0.7, 0.98))
+        surfaces, jpolys, heights = _drape(dem, graph, widths, h, junction_nodes, jpolys,
+                                           surfaces, centre, surf_edge, s_table, j_table,
+                                           sample_spacing, progress.sub(0.7, 0.98))
         s_table["too_steep_long"] = s_table["slope_long_pct"] > 100 * max_longitudinal_slope
         s_table["too_steep_lat"] = s_table["slope_lat_pct"] > 100 * max_lateral_slope
         j_table["too_steep_long"] = j_table["slope_long_pct"] > 100 * max_longitudinal_slope
         j_table["too_steep_lat"] = j_table["slope_lat_pct"] > 100 * max_lateral_slope
     else:
+        heights = None
         for t in (s_table, j_table):
             t["too_steep_long"] = None
             t["too_steep_lat"] = None
@@ -661,7 +648,16 @@ def tessellate_network(graph: RoadGraph, widths: Sequence[float],
              "cut_surfaces": len(np.union1d(n_scut, n_sscut)),
              "max_degree": int(j_deg.max()) if len(j_deg) else 0}
     progress.step(1.0)
-    return Tessellation(surfaces, s_table, jpolys, j_table, graph, widths, stats)
+    out = Tessellation(surfaces, s_table, jpolys, j_table, graph, widths, stats,
+                       centres=centre[keep_s], surface_edge=surf_edge[keep_s],
+                       junction_node=junction_nodes[keep_j])
+    if dem is not None:
+        kept = np.flatnonzero(keep_s)
+        height, plane, terrain = heights
+        out.surface_z = lambda k, xy: height(kept[k], xy)
+        out.junction_z = plane
+        out.terrain_z = terrain
+    return out
 
 
 def _drape(dem, graph, widths, h, junction_nodes, jpolys, surfaces, centre, surf_edge,
@@ -712,8 +708,8 @@ def _drape(dem, graph, widths, h, junction_nodes, jpolys, surfaces, centre, surf
     # distance from each end's connecting line, measured along the street's end direction
     # (vectorised; exact on straight ends, and only used for the blend near the ends)
     ends = [shapely.get_coordinates(shapely.get_point(centre, i)) for i in (0, 1, -2, -1)]
-    start, dir_u = ends[0], _unit(ends[1] - ends[0])
-    stop, dir_v = ends[3], _unit(ends[2] - ends[3])
+    start, dir_u = ends[0], unit(ends[1] - ends[0])
+    stop, dir_v = ends[3], unit(ends[2] - ends[3])
 
     def height(k, xy):
         """Height of points ``xy`` on street surface k: terrain, blended into the junction
@@ -743,7 +739,7 @@ def _drape(dem, graph, widths, h, junction_nodes, jpolys, surfaces, centre, surf
     np.maximum.at(lon, k[1:][same], grade)
     # direction at each sample: of the segment that starts there, the last one at the end
     dvec = np.zeros_like(xy)
-    seg_dir = _unit(step)
+    seg_dir = unit(step)
     dvec[:-1][k[1:] == k[:-1]] = seg_dir[k[1:] == k[:-1]]
     last = np.r_[k[1:] != k[:-1], True]
     dvec[last] = dvec[np.maximum(np.flatnonzero(last) - 1, 0)]
@@ -757,7 +753,7 @@ def _drape(dem, graph, widths, h, junction_nodes, jpolys, surfaces, centre, surf
     s_table["slope_long_pct"] = 100 * lon
     s_table["slope_lat_pct"] = 100 * lat
     progress.step(1.0)
-    return surfaces, jpolys
+    return surfaces, jpolys, (height, plane, lambda xy: _dem_z(dem, xy))
 
 
 def tessellate_lines(lines: Sequence, widths: Sequence[float], road_class=None, z_layer=None,

@@ -48,7 +48,7 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
@@ -57,16 +57,17 @@ import shapely
 from scipy.spatial import cKDTree
 from shapely.geometry.polygon import orient
 
+from ..core.geometry import group_starts, minimum_rectangles
 from ..core.progress import InputError, Progress, ensure
 from ..measure import metrics as _metrics
-from ..network import blocks as _blocks
 
 __all__ = [
     "PARCEL_FIELDS", "DEFAULT_STREET_WIDTH", "DEFAULT_MAX_AREA", "DEFAULT_MIN_AREA",
     "DEFAULT_MIN_WIDTH", "DEFAULT_LOT_WIDTH", "DEFAULT_IRREGULARITY", "MIN_FRONTAGE",
     "SubdivisionSettings", "Method", "METHODS", "register_method", "method_names",
     "Subdivision", "shrink_blocks", "street_frontage", "lot_quality", "street_sides",
-    "edge_faces", "merge_into_neighbours", "split_recursive", "split_skeleton",
+    "edge_faces", "merge_into_neighbours", "unfit_lots", "merge_unfit_lots",
+    "split_recursive", "split_skeleton",
     "subdivide_blocks",
 ]
 
@@ -255,12 +256,6 @@ def _snap(geoms):
     return shapely.set_precision(shapely.set_precision(geoms, _GRID), 0.0)
 
 
-def _group_starts(keys: np.ndarray) -> np.ndarray:
-    out = np.ones(len(keys), dtype=bool)
-    np.not_equal(keys[1:], keys[:-1], out=out[1:])
-    return out
-
-
 def _polygon_parts(geoms, min_area: float = _CRUMB) -> np.ndarray:
     """The Polygon parts (area > ``min_area``) of any geometries, as a flat array."""
     geoms = np.asarray(geoms, dtype=object).ravel()
@@ -370,7 +365,7 @@ def lot_quality(lots) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     if n == 0:
         return np.zeros(0), np.zeros(0), np.zeros(0, dtype=bool)
     area = shapely.area(lots)
-    length, width, _ = _blocks.minimum_rectangles(lots)
+    length, width, _ = minimum_rectangles(lots)
     with np.errstate(divide="ignore", invalid="ignore"):
         p_area = np.where(area > 0, length * width / area, np.nan)
         angles, owner = _metrics.corner_angles(lots)
@@ -451,7 +446,7 @@ def merge_into_neighbours(geoms, bad, max_rounds: int = 50):
         if len(i) == 0:
             break
         order = np.lexsort((-shared, i))
-        first = order[_group_starts(i[order])]
+        first = order[group_starts(i[order])]
         src, dst = i[first], j[first]
         for target in np.unique(dst):
             members = src[dst == target]
@@ -465,6 +460,85 @@ def merge_into_neighbours(geoms, bad, max_rounds: int = 50):
     kept = np.flatnonzero(alive)
     position = np.cumsum(alive) - 1
     return geoms[alive], kept, position[into]
+
+
+def unfit_lots(lots, zone, settings: SubdivisionSettings) -> np.ndarray:
+    """Lots that break a hard limit of the settings: smaller than ``min_area``, narrower
+    than ``min_width`` (the short side of the minimum bounding rectangle) or with less than
+    ``min_frontage`` on the street (``zone``: the block's :func:`_street_zone`)."""
+    lots = np.asarray(lots, dtype=object)
+    _, width, _ = minimum_rectangles(lots)
+    return (shapely.area(lots) < settings.min_area) | (width < settings.min_width) | \
+        (_frontage(lots, zone) < settings.min_frontage)
+
+
+@_quiet
+def merge_unfit_lots(lots, block, settings: SubdivisionSettings,
+                     max_rounds: int = 4) -> np.ndarray:
+    """Merge every :func:`unfit_lots` lot into the neighbour sharing most boundary.
+
+    A merge only adds area and frontage, but the union's minimum rectangle can still be
+    narrow (two slivers side by side), so the check repeats; when no lot of the block fits
+    the limits, the whole block is one lot.
+
+    Parameters
+    ----------
+    lots : array of Polygon
+        A subdivision of ``block``.
+    block : Polygon
+        The shrunk block, whose whole outline is street.
+    settings : SubdivisionSettings
+
+    Returns
+    -------
+    ndarray of Polygon
+        The lots, covering the block as before; none unfit unless merging could not reach
+        a fit neighbour (an island), which :func:`subdivide_blocks` counts.
+    """
+    lots = _polygon_parts(lots)
+    zone = _street_zone(block)
+    for _ in range(max_rounds):
+        if len(lots) == 0:
+            break
+        bad = unfit_lots(lots, zone, settings)
+        if not bad.any():
+            return lots
+        if bad.all():
+            return _polygon_parts([block])  # no lot fits: the block is one lot
+        merged = _polygon_parts(merge_into_neighbours(lots, bad)[0])
+        if len(merged) == len(lots):
+            # stuck: the neighbour sharing most boundary by the band measure touches the
+            # lot only at a point across a hair-thin spike of a third lot (cells clipped
+            # where a Voronoi edge nearly follows a cut), or the lot is a crumb whose
+            # sides are all shorter than a neighbourhood: merge along real shared edges
+            merged = _merge_along_shared_edges(lots, bad)
+            if len(merged) == len(lots):
+                break  # islands: no neighbour to merge into
+        lots = merged
+    return lots if len(lots) else _polygon_parts([block])
+
+
+def _merge_along_shared_edges(lots: np.ndarray, bad: np.ndarray) -> np.ndarray:
+    """Merge each flagged lot into the touching lot whose union with it is one polygon,
+    trying them by decreasing length of exactly shared boundary (one by one: the rare
+    lots :func:`merge_into_neighbours` cannot place)."""
+    lots = np.asarray(lots, dtype=object).copy()
+    alive = np.ones(len(lots), dtype=bool)
+    tree = shapely.STRtree(lots)
+    for j in np.flatnonzero(bad):
+        cand = tree.query(lots[j], predicate="dwithin", distance=_SHARE_EPS)
+        cand = cand[(cand != j) & alive[cand]]
+        if len(cand) == 0:
+            continue
+        shared = shapely.length(shapely.intersection(shapely.boundary(lots[j]),
+                                                     shapely.buffer(lots[cand], _TOUCH)))
+        for c in cand[np.argsort(-shared, kind="stable")]:
+            union = _clean_union([lots[c], lots[j]])
+            if shapely.get_type_id(union) == 3:
+                lots[c] = union
+                alive[j] = False
+                break
+    return _polygon_parts(lots[alive])
 
 
 # --------------------------------------------------------------------------- shrinking
@@ -538,7 +612,7 @@ def shrink_blocks(blocks, half_width=DEFAULT_STREET_WIDTH / 2, roads=None,
         if len(bands):
             b_idx, r_idx = shapely.STRtree(bands).query(blocks, predicate="intersects")
             if len(b_idx):
-                starts = np.flatnonzero(_group_starts(b_idx))
+                starts = np.flatnonzero(group_starts(b_idx))
                 ends = np.append(starts[1:], len(b_idx))
                 for s, e in zip(starts, ends):  # one union per block: its own streets only
                     i = b_idx[s]
@@ -579,7 +653,7 @@ def _cut(lots: np.ndarray, angle: np.ndarray, t: np.ndarray, turn: np.ndarray):
     """
     k = len(lots)
     coords, idx = shapely.get_coordinates(lots, return_index=True)
-    starts = np.flatnonzero(_group_starts(idx))
+    starts = np.flatnonzero(group_starts(idx))
     u = np.column_stack([np.cos(angle), np.sin(angle)])
     nrm = np.column_stack([-u[:, 1], u[:, 0]])
     umin, umax = _projections(coords, idx, starts, u)
@@ -618,7 +692,7 @@ def _accept(parts, owner, side, k, settings: SubdivisionSettings, zone) -> np.nd
     """Which of ``k`` cuts are acceptable: both sides non-empty, every piece big, wide
     and (with forced street access) on the street."""
     area = shapely.area(parts)
-    _, width, _ = _blocks.minimum_rectangles(parts)
+    _, width, _ = minimum_rectangles(parts)
     good = (area >= settings.min_area) & (width >= settings.min_width)
     if settings.force_street_access and len(parts):
         good &= _frontage(parts, zone) >= settings.min_frontage
@@ -687,7 +761,7 @@ def split_recursive(block, settings: SubdivisionSettings,
         k = len(lots)
         if k == 0:
             break
-        _, _, axis = _blocks.minimum_rectangles(lots)
+        _, _, axis = minimum_rectangles(lots)
         axis = np.radians(axis)
         # one draw per lot and level, also when a later attempt wins: deterministic order
         shift = rng.uniform(-1.0, 1.0, k)
@@ -1142,14 +1216,7 @@ def split_skeleton(block, settings: SubdivisionSettings,
     lots = np.concatenate(lots) if lots else np.empty(0, dtype=object)
     if len(lots) == 0:
         return _polygon_parts([block])
-    zone = _street_zone(block)
-    _, width, _ = _blocks.minimum_rectangles(lots)
-    bad = (shapely.area(lots) < settings.min_area) | (width < settings.min_width) | \
-          (_frontage(lots, zone) < settings.min_frontage)
-    if bad.all():
-        return _polygon_parts([block])  # no lot fits: the block is one lot
-    lots, _, _ = merge_into_neighbours(lots, bad)
-    return _polygon_parts(lots)
+    return merge_unfit_lots(lots, block, settings)
 
 
 # --------------------------------------------------------------------------- registry entries
@@ -1181,7 +1248,9 @@ class Subdivision:
     stats : dict
         ``n_blocks``, ``n_empty_blocks`` (nothing left after shrinking), ``n_lots``,
         ``n_over_max_area`` (lots no acceptable cut could split), ``n_without_access``,
-        ``n_merged_for_access``, ``n_undesirable``.
+        ``n_merged_for_access``, ``n_under_min_width`` (lots narrower than ``min_width``:
+        a block part too thin for any lot), ``n_sized_by_block`` (blocks with their own
+        parcel area), ``n_undesirable``.
     """
 
     geometry: np.ndarray
@@ -1208,12 +1277,43 @@ def _as_polygons(blocks) -> np.ndarray:
     return out
 
 
+def _block_settings(settings: SubdivisionSettings, n: int, parcel_area,
+                    parcel_area_sd) -> list:
+    """Per block: the settings with the block's own parcel size in ``options`` (or None)."""
+    if parcel_area is None:
+        return [None] * n
+    mean = np.asarray(parcel_area, dtype=float).ravel()
+    sd = np.full(n, np.nan) if parcel_area_sd is None else \
+        np.asarray(parcel_area_sd, dtype=float).ravel()
+    if len(mean) != n or len(sd) != n:
+        raise InputError(f"{len(mean)} parcel areas for {n} blocks")
+    given = np.isfinite(mean)
+    if (mean[given] <= 0).any():
+        raise InputError(f"{int((mean[given] <= 0).sum())} blocks have a parcel area that "
+                         "is not positive")
+    if (sd[np.isfinite(sd)] < 0).any():
+        raise InputError("a parcel area standard deviation is negative")
+    out = []
+    base = {k: v for k, v in dict(settings.options or {}).items()
+            if k not in ("parcel_areas", "mean_area", "area_sd")}
+    for a, s in zip(mean, sd):
+        if not math.isfinite(a):
+            out.append(None)
+            continue
+        options = dict(base, mean_area=float(a),
+                       area_sd=float(s) if math.isfinite(s) else
+                       settings.irregularity * 0.5 * float(a))
+        out.append(replace(settings, options=options))
+    return out
+
+
 @_quiet
 def subdivide_blocks(blocks, method: str = "recursive",
                      settings: Optional[SubdivisionSettings] = None, seed: int = 0,
                      block_ids: Optional[Sequence[int]] = None,
                      street_width: float = DEFAULT_STREET_WIDTH, roads=None,
-                     road_widths=None, progress: Optional[Progress] = None) -> Subdivision:
+                     road_widths=None, parcel_area=None, parcel_area_sd=None,
+                     progress: Optional[Progress] = None) -> Subdivision:
     """Shrink blocks by their streets and subdivide them into lots (Scharl 4.2.6).
 
     Parameters
@@ -1236,6 +1336,12 @@ def subdivide_blocks(blocks, method: str = "recursive",
         street by street (and dead-end streets inside blocks are cut out).
     road_widths : float array, optional
         Full width (m) of each road of ``roads``; NaN = ``street_width``.
+    parcel_area, parcel_area_sd : float arrays, optional
+        Per block: the mean parcel area (m²) and its standard deviation, Aliaga et al.'s
+        a(v) and sigma_b of the points around the block (e.g. the ``parcel_area`` of the
+        blocks of 'synthesizeroadsrandomwalk'); NaN = the settings' size. They reach the
+        method as ``options['mean_area']`` / ``['area_sd']`` (used by ``voronoi-obb``; the
+        other methods size lots by ``max_area`` / ``lot_width``).
     progress : Progress, optional
         Stepped once per block (cancellation raises :class:`progress.Canceled`).
 
@@ -1286,6 +1392,7 @@ def subdivide_blocks(blocks, method: str = "recursive",
         road_hw = w / 2.0
     shrunk = shrink_blocks(blocks, street_width / 2.0, roads, road_hw,
                            min_area=settings.min_area)
+    block_settings = _block_settings(settings, n, parcel_area, parcel_area_sd)
     progress.step(0.05)
 
     lots: List[np.ndarray] = []
@@ -1298,7 +1405,7 @@ def subdivide_blocks(blocks, method: str = "recursive",
         rng = np.random.default_rng([int(seed), i])
         for part in _polygon_parts([shrunk[i]]):
             zone = _street_zone(part)
-            got = _polygon_parts(spec.subdivide(part, settings, rng))
+            got = _polygon_parts(spec.subdivide(part, block_settings[i] or settings, rng))
             front = _frontage(got, zone)
             no_access = front < settings.min_frontage
             if fix_access and no_access.any() and len(got) > 1:
@@ -1314,6 +1421,7 @@ def subdivide_blocks(blocks, method: str = "recursive",
     front = np.concatenate(frontage) if frontage else np.zeros(0)
     p_angle, p_area, bad = lot_quality(geometry)
     area = shapely.area(geometry)
+    _, lot_width, _ = minimum_rectangles(geometry)
     table = pd.DataFrame({
         "parcel_id": np.arange(1, len(geometry) + 1, dtype=np.int64),
         "block_id": ids[owner] if len(owner) else np.zeros(0, dtype=np.int64),
@@ -1327,7 +1435,10 @@ def subdivide_blocks(blocks, method: str = "recursive",
         "n_blocks": n, "n_empty_blocks": int(empty.sum()), "n_lots": len(geometry),
         "n_over_max_area": int((area > settings.max_area * (1 + 1e-6)).sum()),
         "n_without_access": int((~table.has_street_access).sum()),
-        "n_merged_for_access": n_merged, "n_undesirable": int(bad.sum()),
+        "n_merged_for_access": n_merged,
+        "n_under_min_width": int((lot_width < settings.min_width).sum()),
+        "n_sized_by_block": sum(b is not None for b in block_settings),
+        "n_undesirable": int(bad.sum()),
     }
     progress.step(1.0)
     return Subdivision(geometry, table, shrunk, stats)

@@ -9,8 +9,18 @@ not tied to any particular method"); here the field is the classic 4-RoSy smooth
   is the same for the four directions theta + k pi / 2;
 * grid nodes near the boundary are constrained (softly, by a large weight) to the
   representation of the tangent of the nearest boundary segment;
-* the other nodes minimise the Dirichlet energy sum |u_i - u_j|^2 over grid edges, a
-  sparse linear system (scipy) solved once for both components;
+* the other nodes minimise the Dirichlet energy sum |u_i - u_j|^2 over grid edges (the
+  field's smoothness) plus a **divergence term**: Yang et al. ask for fields that are
+  "smooth, have low divergence, and are adapted to the boundary" so that "parallel
+  streets stay a roughly constant distance apart". For the unit field v = (cos t, sin t)
+  of the cross line parallel to the nearest boundary, div v = grad t . n, the derivative
+  of its angle along the boundary normal n (the direction to the nearest boundary point);
+  a field with div v = 0 keeps its streets parallel to the boundary at constant spacing
+  (offset curves). Written on u it is |d u / d n|^2 = 16 (div v)^2 |u|^2, quadratic in u,
+  so the energy stays one sparse linear system (scipy) solved once for both components:
+  (L + lambda D_n^T D_n h^2 + W) u = W t, D_n the central-difference derivative along n.
+  (The paper's supplement gives three field designs; this is our reading of the stated
+  terms, not a copy of any of them.)
 * the field's angle is atan2(u) / 4; where |u| is small the field is singular, and the
   singular cells are found by the index (the turning of 4 theta around the cell).
 
@@ -34,10 +44,13 @@ import scipy.sparse.linalg as spla
 import shapely
 from scipy.spatial import cKDTree
 
-__all__ = ["CrossField", "cross_field", "boundary_segments"]
+__all__ = ["CrossField", "cross_field", "boundary_segments", "DIVERGENCE_WEIGHT",
+           "divergence"]
 
 #: Weight of the boundary alignment against the smoothness of one grid edge.
 BOUNDARY_WEIGHT = 100.0
+#: Weight of the divergence term (see the module doc) against the Dirichlet smoothing.
+DIVERGENCE_WEIGHT = 4.0
 #: |u| below this (after interpolation) counts as singular: streamlines stop there.
 SINGULAR_NORM = 0.05
 
@@ -118,7 +131,42 @@ class CrossField:
         return np.stack([np.cos(a), np.sin(a)], axis=1), norm
 
 
-def cross_field(region, h: float) -> CrossField:
+def _normal_derivative(grid: np.ndarray, normal: np.ndarray, h: float):
+    """Sparse operator D_n with (D_n u)_i = n_i . grad u at active node i (central
+    differences where both neighbours are active, one-sided otherwise, none at isolated
+    nodes)."""
+    n = int(grid.max()) + 1 if grid.size and grid.max() >= 0 else 0
+    rows, cols, vals = [], [], []
+    ny, nx = grid.shape
+    iy, ix = np.nonzero(grid >= 0)
+    k = grid[iy, ix]
+    for axis, comp in ((1, 0), (0, 1)):
+        prev = np.full(len(k), -1)
+        nxt = np.full(len(k), -1)
+        if axis == 1:
+            ok = ix > 0
+            prev[ok] = grid[iy[ok], ix[ok] - 1]
+            ok = ix < nx - 1
+            nxt[ok] = grid[iy[ok], ix[ok] + 1]
+        else:
+            ok = iy > 0
+            prev[ok] = grid[iy[ok] - 1, ix[ok]]
+            ok = iy < ny - 1
+            nxt[ok] = grid[iy[ok] + 1, ix[ok]]
+        c = normal[k, comp]
+        both = (prev >= 0) & (nxt >= 0)
+        only_n = (prev < 0) & (nxt >= 0)
+        only_p = (prev >= 0) & (nxt < 0)
+        for sel, a, b, scale in ((both, nxt, prev, 0.5), (only_n, nxt, k, 1.0),
+                                 (only_p, k, prev, 1.0)):
+            rows += [k[sel], k[sel]]
+            cols += [a[sel], b[sel]]
+            vals += [c[sel] * scale / h, -c[sel] * scale / h]
+    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                         shape=(n, n))
+
+
+def cross_field(region, h: float, divergence_weight: float = DIVERGENCE_WEIGHT) -> CrossField:
     """Smooth cross field aligned with the boundary of ``region`` (metric CRS).
 
     Parameters
@@ -126,6 +174,9 @@ def cross_field(region, h: float) -> CrossField:
     region : Polygon or MultiPolygon
     h : float
         Grid spacing (m).
+    divergence_weight : float
+        Weight of the divergence term against the smoothness of one grid edge (0: the
+        plain 4-RoSy smoothing).
 
     Returns
     -------
@@ -181,8 +232,15 @@ def cross_field(region, h: float) -> CrossField:
     adj = adj + adj.T
     lap = sp.diags(np.asarray(adj.sum(axis=1)).ravel()) - adj
     w = np.where(near[act], BOUNDARY_WEIGHT, 0.0)
+    # divergence term: the derivative of u along the boundary normal n (the direction
+    # to the nearest boundary point), by central differences on the grid
+    _, foot = cKDTree(samples).query(pts[act])
+    normal = pts[act] - samples[foot]
+    length = np.hypot(normal[:, 0], normal[:, 1])
+    normal = np.where(length[:, None] > 1e-9, normal / np.maximum(length, 1e-9)[:, None], 0.0)
+    g_n = _normal_derivative(grid, normal, h)
     # a tiny regulariser keeps components without constraint (none in practice) solvable
-    system = (lap + sp.diags(w + 1e-8)).tocsc()
+    system = (lap + divergence_weight * (g_n.T @ g_n) * h * h + sp.diags(w + 1e-8)).tocsc()
     rhs = w[:, None] * target[act]
     sol = spla.splu(system).solve(rhs)
     u = np.zeros((len(pts), 2))
@@ -204,3 +262,28 @@ def _singular_cells(u: np.ndarray, inside: np.ndarray, x0, y0, h) -> np.ndarray:
     ok = inside[:-1, :-1] & inside[:-1, 1:] & inside[1:, 1:] & inside[1:, :-1]
     iy, ix = np.nonzero(ok & (np.abs(turn) > np.pi))
     return np.stack([x0 + h * (ix + 0.5), y0 + h * (iy + 0.5)], axis=1)
+
+
+def divergence(field: CrossField, region) -> float:
+    """Mean |div v| (1/m) over the region's inner nodes, v the unit field of the cross line
+    parallel to the nearest boundary: the quantity the divergence term keeps low."""
+    ny, nx, _ = field.u.shape
+    gx, gy = np.meshgrid(field.x0 + field.h * np.arange(nx), field.y0 + field.h * np.arange(ny))
+    pts = np.column_stack([gx.ravel(), gy.ravel()])
+    inner = shapely.buffer(region, -2 * field.h)
+    if inner.is_empty:
+        return 0.0
+    ok = shapely.contains_xy(inner, pts[:, 0], pts[:, 1])
+    p = pts[ok]
+    segs = boundary_segments(region)
+    mid = 0.5 * (segs[:, 0] + segs[:, 1])
+    tree = cKDTree(mid)
+    _, near = tree.query(p)
+    d = segs[near, 1] - segs[near, 0]
+    t = d / np.hypot(d[:, 0], d[:, 1])[:, None]
+    nrm = np.column_stack([-t[:, 1], t[:, 0]])
+    eps = field.h
+    th0, _ = field.angle(p - eps * nrm)
+    th1, _ = field.angle(p + eps * nrm)
+    dth = (th1 - th0 + np.pi / 4) % (np.pi / 2) - np.pi / 4
+    return float(np.mean(np.abs(dth) / (2 * eps)))

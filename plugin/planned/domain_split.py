@@ -3,29 +3,35 @@
 Pipeline of :func:`split_domain` (one layout) and :func:`split_variations` (k layouts):
 
 1. **Constraints** (sec. 3): the region minus the key areas (parks, school, lake: kept
-   as parcels of their own land use) is cut by the key roads into sub-regions. Every
-   region outline (outer ring, holes, key areas, key roads) is taken as a street centre
-   line: the region is a development bounded by streets.
-2. **Hierarchical splitting** (sec. 3-5): a queue of regions; each region is replaced by
-   a template when one fits with energy under the threshold (:mod:`templates`,
-   template-based splitting preferred); otherwise it is split along a streamline of its
-   boundary-aligned cross field (:mod:`cross_field`, :mod:`streamlines`), drawn at
-   random by quality. A streamline whose sub-regions could hold no template (too thin) is
-   rejected and the next one drawn (backtracking of the split); a region that can be
-   neither matched nor split falls back to skeleton parcels (Vanegas et al. 2012, via
-   :func:`parcels.split_skeleton`) or, when too small for parcels, a park.
-3. **Backtracking for template counts**: templates over their ``max_count`` are
-   reassigned, at random, to the next best template of their region.
-4. **Global optimisation of the road mesh** (sec. 6, :mod:`mesh_optimisation`), then the
-   templates are warped again onto the optimised blocks (:func:`templates.warp_rows`).
-5. Parcels get their land use, street access and Yang's quality; :func:`table1` gives the
-   paper's Table 1 metrics through :mod:`metrics`. Undesirable lots (Yang's Fig. 12 test)
-   are repaired where a strip meets a slanted street or streets meet at an acute angle:
-   a lot of at least 0.6 of a template parcel keeps the largest rectangle standing on its
-   street edge (:func:`_front_rectangle`) and its wedges become pocket parks; a misshapen
-   lot smaller than a template parcel becomes a pocket park (the paper's fallback "places
-   a park" for what no template fills). Splits leaving a child that is a band thinner than
-   any template anywhere along it are rejected (morphological opening test).
+   as parcels of their own land use) is cut by the key roads into sub-regions. A key road
+   ending inside the region is continued straight to the next street (a dangle leaves a
+   slit no template fills). Region outlines count as streets (a development bounded by
+   roads) unless ``outline_streets`` is off: then they are "no street" edges (Fig. 4 edge
+   labels). Key roads of a motorway class take no junction and give no frontage.
+2. **Hierarchical splitting with backtracking** (sec. 3-5, :class:`_Search`): a region is
+   replaced by a template when one matches: row templates are warped onto it
+   (:func:`templates.warp_rows`, registration / regression) and their **warp energy**
+   (registration residual per corner / parcel width, plus the turn of region corners the
+   template cannot take) is under ``energy_threshold``; edge labels must agree (a double
+   strip needs a street on both long sides); drawn by probability x exp(-energy / 0.1).
+   Otherwise the region is split along a streamline of its cross field (:mod:`cross_field`
+   with a divergence term, :mod:`streamlines`: Delaunay seeds, RK2, the four quality
+   terms), drawn by quality; a split whose children could hold no template is rejected,
+   and when a child can be neither matched nor split the split is undone and another
+   streamline drawn (``MAX_TRIES`` per region, ``MAX_BACKTRACKS`` per layout; template
+   ``max_count`` limits are kept during the search). A region that fails everything
+   falls back to skeleton parcels (Vanegas et al. 2012) or, when small, a park.
+3. **Global optimisation of the road mesh** (sec. 6, :mod:`mesh_optimisation`): strip
+   fitting, fairness and closeness on the noded street mesh, junctions sliding along the
+   fixed roads, until converged; kept when it lowers the summed warp distortion of the
+   row templates (what the paper optimises for), then the templates are warped again.
+4. Parcels: lots without frontage and crumbs join their neighbours; a lot still without
+   frontage is an inner green (the paper's template with a private park). The optional
+   :func:`repair_lots` (off by default; not in the paper) cuts misshapen lots to the
+   rectangle on their street and makes the wedges pocket parks. :func:`table1` gives the
+   paper's Table 1 through :mod:`metrics`, counting every designed parcel, parks too.
+5. Streets: :func:`road_network` nodes every line at its junctions (snap-rounded) and
+   drops dangling pieces under 1 m (overshoot stubs).
 
 Nothing here imports QGIS. Geometry is metric; each variation draws from
 ``numpy.random.default_rng([seed, variation])``.
@@ -40,7 +46,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections import Counter, deque
+from collections import Counter
 from dataclasses import dataclass, field
 from typing import Dict, List, Optional, Sequence
 
@@ -48,12 +54,13 @@ import numpy as np
 import pandas as pd
 import shapely
 
+from ..core.geometry import minimum_rectangles, unit
 from ..core.progress import InputError, Progress, ensure
 from ..measure import metrics as _metrics
 from ..parcels import subdivision as _parcels
 from . import templates as _templates
 from .cross_field import cross_field
-from .mesh_optimisation import optimise_roads
+from .mesh_optimisation import NODING_GRID, faces_of, noded, optimise_roads
 from .streamlines import score_streamlines, seed_points, trace_streamlines, width_fit
 
 __all__ = ["SplitSettings", "Layout", "ROAD_FIELDS", "PARCEL_FIELDS", "METRIC_FIELDS",
@@ -71,8 +78,16 @@ METRIC_FIELDS = [("variation", "int"), ("l_s", "float"), ("l_r", "float"), ("l_p
                  ("b_min", "float"), ("s_l", "float"), ("s_i", "float"), ("s_d", "float"),
                  ("p_n", "float"), ("p_count", "int"), ("p_angle", "float"),
                  ("p_area", "float"), ("undesirable", "int"), ("undesirable_pct", "float"),
-                 ("no_access", "int"), ("time_split_s", "float"),
+                 ("p_count_residential", "int"), ("p_angle_residential", "float"),
+                 ("p_area_residential", "float"), ("no_access", "int"), ("time_split_s", "float"),
                  ("time_backtrack_s", "float"), ("time_optimise_s", "float")]
+
+#: Streamline candidates drawn per region before it counts as not splittable.
+MAX_DRAWS = 20
+#: Alternative splits tried per region when a child cannot be filled (backtracking) ...
+MAX_TRIES = 3
+#: ... and the most abandoned attempts in one layout.
+MAX_BACKTRACKS = 60
 
 #: Parcel outlines are simplified with this tolerance (m).
 _OUTPUT_GRID = 0.01
@@ -97,15 +112,24 @@ class SplitSettings:
     choice_temperature : float
         Streamlines are drawn with probability exp((qual - best) / T): small T = nearly
         always the best (the paper's comparison runs), larger T = more variety.
+    repair_lots : bool
+        Run the optional lot repair (:func:`repair_lots`, not in the paper); off by default.
+    outline_streets : bool
+        The region's outline is a street (a development bounded by roads, the paper's
+        boundary condition). False labels it "no street" (Yang Fig. 4 edge labels): no
+        street land is reserved along it and parcels back onto it (a town's edge against
+        fields or forest).
     """
 
     parcel_length: float = 30.0
     parcel_width: float = 18.0
     street_width: float = 15.0
-    energy_threshold: float = 0.45
+    energy_threshold: float = 0.1
     optimise: bool = True
     max_regions: int = 2000
     choice_temperature: float = 0.3
+    repair_lots: bool = False
+    outline_streets: bool = True
 
     def validate(self) -> "SplitSettings":
         for name in ("parcel_length", "parcel_width", "street_width"):
@@ -160,10 +184,25 @@ def _polygonal(geoms, what: str) -> shapely.Geometry:
     return shapely.union_all(parts)
 
 
-def prepare_domain(region, key_roads=None, key_areas=None, street_width: float = 15.0):
+#: OSM classes of limited-access roads: no street joins them at grade and no parcel
+#: fronts on them (the hierarchy rule of the layout's key roads).
+LIMITED_ACCESS = frozenset({"motorway", "motorway_link"})
+
+
+def prepare_domain(region, key_roads=None, key_areas=None, street_width: float = 15.0,
+                   key_road_classes=None, max_extension: float = 200.0,
+                   outline_streets: bool = True):
     """Work regions, the fixed street lines and the key-area polygons.
 
-    Returns (faces, fixed_lines, fixed_kinds, key_polys, domain).
+    A key road that ends inside the region (a dangling street of a real network) is
+    continued straight ahead to the next street or the region outline when that is at
+    most ``max_extension`` metres away: a dangle would otherwise leave a slit in its face
+    that no template fits (the continuity rule of Yang sec. 5, applied to the given roads).
+    Key roads of a :data:`LIMITED_ACCESS` class stay as they are and are returned in
+    ``no_access`` (a line geometry, or None): no new street may end on them and no parcel
+    counts them as frontage.
+
+    Returns (faces, fixed_lines, fixed_kinds, key_polys, domain, no_access).
     """
     domain = _polygonal(region, "region")
     key_polys = np.empty(0, dtype=object)
@@ -176,28 +215,84 @@ def prepare_domain(region, key_roads=None, key_areas=None, street_width: float =
         work = shapely.difference(domain, keys)
     outline = shapely.get_parts(shapely.line_merge(shapely.boundary(work)))
     lines = list(outline)
-    kinds = ["outline"] * len(lines)
+    kinds = ["outline" if outline_streets else "edge"] * len(lines)
+    no_access = None
     if key_roads is not None and len(key_roads):
-        roads = np.asarray([g for g in np.asarray(key_roads, dtype=object).ravel()
-                            if g is not None and not shapely.is_empty(g)], dtype=object)
+        raw = np.asarray(key_roads, dtype=object).ravel()
+        cls = (np.asarray([str(c) if c is not None else "" for c in key_road_classes],
+                          dtype=object) if key_road_classes is not None
+               else np.full(len(raw), "", dtype=object))
+        if len(cls) != len(raw):
+            raise InputError(f"{len(cls)} road classes for {len(raw)} key roads")
+        ok = np.array([g is not None and not shapely.is_empty(g) for g in raw], dtype=bool)
+        roads, cls = raw[ok], cls[ok]
         if len(roads) and not (shapely.get_dimensions(roads) == 1).all():
             raise InputError("the key roads must be lines")
-        with np.errstate(invalid="ignore"):
-            inside = shapely.get_parts(shapely.intersection(shapely.union_all(roads), work))
-        inside = inside[(shapely.get_type_id(inside) == 1) & (shapely.length(inside) > 0.5)]
-        merged = shapely.get_parts(shapely.line_merge(shapely.union_all(inside))) \
-            if len(inside) else []
-        lines += list(merged)
-        kinds += ["key"] * len(merged)
+        limited = np.isin(cls, list(LIMITED_ACCESS))
+        merged_all = []
+        for sel, kind in ((~limited, "key"), (limited, "limited")):
+            if not sel.any():
+                continue
+            with np.errstate(invalid="ignore"):
+                inside = shapely.get_parts(shapely.intersection(shapely.union_all(roads[sel]),
+                                                                work))
+            inside = inside[(shapely.get_type_id(inside) == 1) & (shapely.length(inside) > 0.5)]
+            merged = shapely.get_parts(shapely.line_merge(shapely.union_all(inside))) \
+                if len(inside) else np.empty(0, dtype=object)
+            merged_all.append((merged, kind))
+        barrier = shapely.union_all(np.concatenate([outline] + [m for m, _ in merged_all]))
+        for merged, kind in merged_all:
+            if kind == "key":
+                merged = _extend_dangles(merged, barrier, max_extension)
+            else:
+                no_access = shapely.union_all(merged) if len(merged) else None
+            lines += list(merged)
+            kinds += [kind] * len(merged)
     faces = _faces(lines, work)
     if len(faces) == 0:
         raise InputError("the region is empty once the key areas are removed")
-    return faces, np.asarray(lines, dtype=object), np.asarray(kinds), key_polys, domain
+    return faces, np.asarray(lines, dtype=object), np.asarray(kinds), key_polys, domain, no_access
+
+
+def _extend_dangles(lines: np.ndarray, barrier, max_extension: float) -> np.ndarray:
+    """Lines whose free ends (touching no other line nor the outline) are continued
+    straight ahead to the first line they meet within ``max_extension``."""
+    if len(lines) == 0:
+        return lines
+    out = []
+    for k, g in enumerate(lines):
+        xy = shapely.get_coordinates(g)
+        others = shapely.union_all(np.concatenate([lines[:k], lines[k + 1:]])) \
+            if len(lines) > 1 else shapely.GeometryCollection()
+        rest = shapely.union_all([others, barrier])
+        stop = shapely.union_all([others, _outline_of(barrier, g)])
+        for end, prev in ((0, 1), (-1, -2)):
+            p = xy[end]
+            touching = shapely.distance(stop, shapely.Point(p)) < 0.5
+            if touching:
+                continue
+            d = p - xy[prev]
+            d = d / max(float(np.hypot(*d)), 1e-12)
+            ray = shapely.LineString([p + 0.01 * d, p + max_extension * d])
+            with np.errstate(invalid="ignore"):
+                hit = shapely.intersection(ray, rest)
+            if hit.is_empty:
+                continue
+            dist = shapely.distance(shapely.Point(p), hit)
+            q = p + (dist + 1e-6) * d
+            xy = np.vstack([q[None], xy]) if end == 0 else np.vstack([xy, q[None]])
+        out.append(shapely.LineString(xy))
+    return np.asarray(out, dtype=object)
+
+
+def _outline_of(barrier, line):
+    """The barrier less the line itself (its own vertices touch it)."""
+    with np.errstate(invalid="ignore"):
+        return shapely.difference(barrier, shapely.buffer(line, 0.01))
 
 
 def _faces(lines, work) -> np.ndarray:
-    noded = shapely.union_all(np.asarray(lines, dtype=object))
-    faces = shapely.get_parts(shapely.polygonize(shapely.get_parts(noded)))
+    faces = faces_of(lines)
     if len(faces) == 0:
         return faces
     inside = shapely.within(shapely.point_on_surface(faces), work)
@@ -212,24 +307,51 @@ class _Splitter:
         self.s = settings
         self.rng = rng
         L, S = settings.parcel_length, settings.street_width
-        parts = [t for t in lib if t.kind in ("rows", "spike")]
+        parts = [t for t in lib if t.kind in ("rows", "spike", "loop")]
         widths = [t.gross_depth(L, S) for t in parts]
         # the templates' user probabilities weight the widths: with the shipped library a
         # double strip (one street per two rows) is preferred to two single strips
         top = max(t.probability for t in parts) or 1.0
-        self.opt = width_fit(widths, 4 * max(widths + [L + S]), 0.12 * L,
+        self.opt = width_fit(widths, 6 * max(widths + [L + S]), 0.12 * L,
                              weights=[max(t.probability / top, 0.05) for t in parts])
         # a sub-region thinner than this holds no template: its split is rejected
         self.min_depth = S + min([t.rows * L * t.depth_scale[0] for t in lib if t.kind == "rows"]
                                  + [2.6 * L])
         self.n_split = 0
         self.n_rejected = 0
+        self.n_no_access = 0
+        self.no_access = None      # motorways: no junction
+        self.no_street = None      # no-street edges: no street land
+        self.no_frontage = None    # both: no parcel fronts on them
 
     def energies(self, region) -> Dict[str, float]:
+        """Warp energy of every template on a region (Yang sec. 4.1): row templates are
+        warped onto the region shrunk by half a street and scored by their registration
+        residual; the others by :func:`templates.fit_energy`."""
         s = self.s
         shape = _templates.region_shape(region)
-        return {t.name: _templates.fit_energy(region, t, s.parcel_length, s.parcel_width,
-                                              s.street_width, shape) for t in self.lib}
+        out = {t.name: _templates.fit_energy(region, t, s.parcel_length, s.parcel_width,
+                                             s.street_width, shape)
+               for t in self.lib if t.kind != "rows"}
+        parts = _parcels._polygon_parts([net_block(region, s.street_width, self.no_street)],
+                                        1.0)
+        for t in self.lib:
+            if t.kind != "rows":
+                continue
+            warp = None
+            if len(parts) == 1:
+                warp = _templates.warp_rows(parts[0], t, s.parcel_length, s.parcel_width,
+                                            None, cut=False)
+            ok = warp is not None
+            if ok and self.no_frontage is not None:
+                # edge labels (Yang Fig. 4): a double strip needs a street on both long
+                # sides, a strip on one; a side mostly along a no-street edge or a
+                # motorway is no street
+                streets = [_street_share(side, self.no_frontage, s.street_width) > 0.5
+                           for side in warp.long_sides]
+                ok = sum(streets) >= t.rows
+            out[t.name] = warp.energy if ok else math.inf
+        return out
 
     def pick_template(self, energies, exclude=()):
         by_name = {t.name: t for t in self.lib}
@@ -242,46 +364,66 @@ class _Splitter:
             return None
         return ok[int(self.rng.choice(len(ok), p=p / p.sum()))][0]
 
-    def split(self, region, ends):
-        """Split along a streamline: (line, children) or None."""
+    def candidates(self, region, ends):
+        """Streamline splits of a region, drawn by quality without replacement: yields
+        (line, children) for every drawn candidate whose children could hold a template
+        (at most ``MAX_DRAWS`` draws). Lines ending on a limited-access road are skipped:
+        no side street joins a motorway at grade."""
         L = self.s.parcel_length
         area = shapely.area(region)
         h = max(L / 5.0, math.sqrt(area) / 35.0)
         field_ = cross_field(region, h)
         d_eps = 0.3 * L
-        seeds = seed_points(region, d_eps, self.rng, max_seeds=30)
+        seeds = seed_points(region, d_eps, self.rng)
         cands = trace_streamlines(field_, region, seeds, max(h, L / 4.0), d_eps, self.rng)
         if len(cands.lines) == 0:
-            return None
+            return
         keep = shapely.length(cands.lines) >= L
+        if self.no_access is not None:
+            ends_xy = np.array([shapely.get_coordinates(g)[[0, -1]] for g in cands.lines])
+            if len(ends_xy):
+                near = shapely.dwithin(self.no_access, shapely.points(ends_xy.reshape(-1, 2)),
+                                       0.5).reshape(-1, 2).any(1)
+                self.n_no_access += int((keep & near).sum())
+                keep &= ~near
         if not keep.any():
-            return None
+            return
         cands.lines, cands.seeds, cands.orientation = (cands.lines[keep], cands.seeds[keep],
                                                        cands.orientation[keep])
         qual, _ = score_streamlines(cands, field_, region, self.opt, ends, step=h)
         alive = np.ones(len(qual), dtype=bool)
-        for _ in range(20):
+        for _ in range(MAX_DRAWS):
             if not alive.any():
-                return None
+                return
             q = np.where(alive, qual, -np.inf)
             p = np.exp((q - q.max()) / max(self.s.choice_temperature, 1e-6))
             i = int(self.rng.choice(len(q), p=p / p.sum()))
             alive[i] = False
-            children = self._children(region, cands.lines[i])
-            if children is not None:
+            got = self._children(region, cands.lines[i])
+            if got is not None:
                 self.n_split += 1
-                return cands.lines[i], children
-            self.n_rejected += 1
-        return None
+                yield got
+            else:
+                self.n_rejected += 1
 
     def _children(self, region, line):
+        """(street, children) of a split along ``line``, or None when a child could hold
+        no template. The street is the streamline clipped by the region, so that its ends
+        lie exactly on the region's outline (no overshoot, no gap)."""
         coords = shapely.get_coordinates(line)
-        ext = np.vstack([coords[0] + 0.5 * _unit(coords[0] - coords[1]), coords,
-                         coords[-1] + 0.5 * _unit(coords[-1] - coords[-2])])
-        faces = _faces([shapely.boundary(region), shapely.LineString(ext)], region)
+        ext = shapely.LineString(np.vstack([coords[0] + 0.5 * unit(coords[0] - coords[1]),
+                                            coords,
+                                            coords[-1] + 0.5 * unit(coords[-1] - coords[-2])]))
+        with np.errstate(invalid="ignore"):
+            inside = shapely.get_parts(shapely.intersection(ext, region))
+        inside = inside[shapely.get_type_id(inside) == 1]
+        if len(inside) != 1:
+            return None
+        street = inside[0]
+        faces = _faces([shapely.boundary(region), ext], region)
         if len(faces) < 2:
             return None
-        _, short, _ = _blocks_rect(faces)
+        _, short, _ = minimum_rectangles(faces)
         if (short < self.min_depth).any():
             return None
         r = self.s.street_width / 2 + 0.3 * self.s.parcel_length
@@ -293,16 +435,188 @@ class _Splitter:
         opened = shapely.area(shapely.buffer(inner, r, join_style="mitre"))
         if (opened < 0.85 * shapely.area(faces)).any():
             return None
-        return faces
+        return street, faces
 
 
-def _blocks_rect(polys):
-    from ..network import blocks as _blocks
-    return _blocks.minimum_rectangles(polys)
+class _Search:
+    """Hierarchical splitting with backtracking (Yang sec. 3).
+
+    A region is replaced by a template when one matches (energy under the threshold,
+    drawn by probability x exp(-energy / 0.1), templates at their ``max_count`` left out);
+    otherwise it is split along a streamline drawn by quality and its children are filled
+    the same way, depth first. When a child can be neither matched nor split (it would
+    fall back to skeleton parcels or a park), the split is undone and another streamline
+    drawn (``MAX_TRIES`` per region, ``MAX_BACKTRACKS`` per layout); the attempt with the
+    least fallback area is kept. Template counts are restored on every undo.
+    """
+
+    def __init__(self, splitter, by_name, s, work_area, progress):
+        self.sp = splitter
+        self.by_name = by_name
+        self.s = s
+        self.work_area = work_area
+        self.progress = progress
+        self.counts = Counter()
+        self.n_regions = 0
+        self.n_backtracks = 0
+        self.time_abandoned = 0.0
+        self.done_area = 0.0
+
+    def _full(self):
+        return {n for n, t in self.by_name.items()
+                if t.max_count is not None and self.counts[n] >= t.max_count}
+
+    def fill(self, region, ends, depth):
+        """(leaves, street lines, fallback area) of a region."""
+        s = self.s
+        L, W = s.parcel_length, s.parcel_width
+        self.n_regions += 1
+        if self.n_regions > s.max_regions or shapely.area(region) < 0.5 * L * W:
+            name = "skeleton" if shapely.area(region) >= 0.5 * L * W else "park"
+            return [[region, name, {}]], [], float(shapely.area(region))
+        energies = self.sp.energies(region)
+        name = self.sp.pick_template(energies, exclude=self._full())
+        if name is not None:
+            self.counts[name] += 1
+            self._report(region)
+            return [[region, name, energies]], [], 0.0
+        best = None
+        tries = 0
+        for street, children in self.sp.candidates(region, ends):
+            t0 = time.perf_counter()
+            inner0 = self.time_abandoned
+            saved = self.counts.copy()
+            leaves, lines, bad = [], [street], 0.0
+            sub_ends = np.vstack([ends, _end_dirs([street])])
+            for child in children:
+                got = self.fill(child, sub_ends, depth + 1)
+                leaves += got[0]
+                lines += got[1]
+                bad += got[2]
+                sub_ends = np.vstack([sub_ends, _end_dirs(got[1])])
+            # the time of this attempt less what its own sub-searches already counted as
+            # abandoned (so nested backtracking is not counted twice)
+            own = time.perf_counter() - t0 - (self.time_abandoned - inner0)
+            if best is None or bad < best[2]:
+                if best is not None:
+                    self.time_abandoned += best[4]
+                best = (leaves, lines, bad, self.counts.copy(), own)
+            else:
+                self.time_abandoned += own
+            tries += 1
+            if bad <= 0 or tries >= MAX_TRIES or self.n_backtracks >= MAX_BACKTRACKS:
+                break
+            self.n_backtracks += 1  # a child failed: undo this split, draw another
+            self.counts = saved
+        if best is None:
+            fb = _fallback(region, energies, self.by_name, s)
+            self.counts[fb] += 1
+            self._report(region)
+            return [[region, fb, energies]], [], (0.0 if fb in self.by_name and
+                                                  self.by_name[fb].kind == "rows"
+                                                  else float(shapely.area(region)))
+        self.counts = best[3]
+        return best[0], best[1], best[2]
+
+    def _report(self, region):
+        self.done_area += float(shapely.area(region))
+        if self.work_area:
+            self.progress.step(min(0.6, 0.6 * self.done_area / self.work_area))
 
 
-def _unit(v):
-    return v / max(float(np.hypot(*v)), 1e-12)
+def road_network(roads, level, kind, stub: float = 1.0):
+    """The streets of a layout as a planar network: every line noded at its crossings and
+    T-junctions (snap-rounded, :data:`mesh_optimisation.NODING_GRID`), each piece keeping
+    the level and kind of the line it came from; dangling pieces shorter than ``stub``
+    metres (overshoots of a junction computed in floating point) are dropped.
+
+    Returns (pieces, level, kind, number of stubs dropped).
+    """
+    roads = np.asarray(roads, dtype=object)
+    level = np.asarray(level)
+    kind = np.asarray(kind, dtype=object)
+    if len(roads) == 0:
+        return roads, level, kind, 0
+    pieces = noded(roads)
+    pieces = pieces[shapely.length(pieces) > 0]
+    mid = shapely.line_interpolate_point(pieces, 0.5, normalized=True)
+    pi, ri = shapely.STRtree(roads).query_nearest(mid, all_matches=True)
+    # the lowest level (most important road) wins where two lines share a piece
+    order = np.lexsort((level[ri], pi))
+    pi, ri = pi[order], ri[order]
+    first = np.r_[True, pi[1:] != pi[:-1]]
+    src = np.empty(len(pieces), dtype=np.int64)
+    src[pi[first]] = ri[first]
+    xy0 = shapely.get_coordinates(shapely.get_point(pieces, 0))
+    xy1 = shapely.get_coordinates(shapely.get_point(pieces, -1))
+    ends = np.round(np.vstack([xy0, xy1]) / NODING_GRID).astype(np.int64)
+    _, inv, count = np.unique(ends, axis=0, return_inverse=True, return_counts=True)
+    inv = inv.ravel()
+    deg = count[inv]
+    dangling = (deg[:len(pieces)] == 1) | (deg[len(pieces):] == 1)
+    stubs = dangling & (shapely.length(pieces) < stub)
+    keep = ~stubs
+    return pieces[keep], level[src][keep], kind[src][keep], int(stubs.sum())
+
+
+def net_block(region, street_width: float, no_street=None):
+    """The land of a centre-line region left for parcels: the region less half a street
+    along every side that is a street. Sides on ``no_street`` lines (a region outline
+    labelled "no street") keep their land; the street bands end flat there.
+    """
+    edge = shapely.boundary(region)
+    if no_street is not None:
+        with np.errstate(invalid="ignore"):
+            edge = shapely.difference(edge, shapely.buffer(no_street, 0.01))
+    if shapely.is_empty(edge):
+        return region
+    zone = shapely.buffer(edge, street_width / 2, cap_style="flat", join_style="mitre")
+    with np.errstate(invalid="ignore"):
+        return shapely.difference(region, zone)
+
+
+def access_frontage(lots, region, street_width: float, no_access=None) -> np.ndarray:
+    """Length (m) of each lot's outline along a street of its centre-line region that
+    gives access: every side but the ``no_access`` lines (no-street edges, motorways)."""
+    lots = np.asarray(lots, dtype=object)
+    if len(lots) == 0:
+        return np.zeros(0)
+    edge = shapely.boundary(region)
+    if no_access is not None:
+        with np.errstate(invalid="ignore"):
+            edge = shapely.difference(edge, shapely.buffer(no_access, 0.01))
+    if shapely.is_empty(edge):
+        return np.zeros(len(lots))
+    band = shapely.buffer(edge, street_width / 2 + 0.05, cap_style="flat", join_style="mitre")
+    with np.errstate(invalid="ignore"):
+        inside = shapely.intersection(shapely.boundary(lots), band)
+    # a side leaving the street crosses the 5 cm band: to the decimetre, the rest is frontage
+    return np.round(np.maximum(shapely.length(inside) - 0.2, 0.0), 2)
+
+
+def _warp_distortion(regions, leaves, by_name, s: SplitSettings) -> float:
+    """Sum of the warp energies of the row templates of ``leaves`` on ``regions``."""
+    total = 0.0
+    for reg, leaf in zip(regions, leaves):
+        t = by_name.get(leaf[1])
+        if t is None or t.kind != "rows":
+            continue
+        parts = _parcels._polygon_parts([shapely.buffer(reg, -s.street_width / 2,
+                                                        join_style="mitre")], 1.0)
+        warp = _templates.warp_rows(parts[0], t, s.parcel_length, s.parcel_width, None,
+                                    cut=False) if len(parts) == 1 else None
+        total += warp.energy if warp is not None else 1.0
+    return total
+
+
+def _street_share(side, no_frontage, street_width: float) -> float:
+    """Share of a block side (of the net block) that lies along an access street."""
+    line = shapely.LineString(side)
+    if line.length <= 0:
+        return 0.0
+    near = shapely.buffer(no_frontage, street_width / 2 + 1.0)
+    with np.errstate(invalid="ignore"):
+        return 1.0 - shapely.length(shapely.intersection(line, near)) / line.length
 
 
 def _end_dirs(lines) -> np.ndarray:
@@ -313,14 +627,14 @@ def _end_dirs(lines) -> np.ndarray:
         if len(xy) < 2:
             continue
         for p, q in ((xy[0], xy[1]), (xy[-1], xy[-2])):
-            out.append(np.r_[p, _unit(p - q)])
+            out.append(np.r_[p, unit(p - q)])
     return np.asarray(out) if out else np.zeros((0, 4))
 
 
 # --------------------------------------------------------------------------- main API
 
 def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
-                 templates: Optional[Sequence] = None,
+                 templates: Optional[Sequence] = None, key_road_classes=None,
                  settings: Optional[SplitSettings] = None, seed: int = 0, variation: int = 1,
                  progress: Optional[Progress] = None) -> Layout:
     """One street and parcel layout of a region (see module doc).
@@ -333,6 +647,9 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
     key_areas : polygons, optional
         Parks, schools, lakes: excluded from the splitting, kept as parcels.
     key_area_use : labels per key area, optional (default 'park')
+    key_road_classes : OSM highway class per key road, optional
+        Key roads of a :data:`LIMITED_ACCESS` class (motorways) take no junction and give
+        no frontage.
     templates : list of :class:`templates.Template`, optional (default: the shipped library)
     settings : SplitSettings
     seed, variation : int
@@ -355,68 +672,38 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
     if seed is None or int(seed) != seed or seed < 0:
         raise InputError(f"the seed must be a whole number >= 0 (got {seed})")
     lib = list(templates) if templates is not None else _templates.load_library()
-    if not any(t.kind in ("rows", "spike") for t in lib):
+    if not any(t.kind in ("rows", "spike", "loop") for t in lib):
         raise InputError("the templates hold no parcel template")
     rng = np.random.default_rng([int(seed), int(variation)])
-    faces, fixed, fixed_kinds, key_polys, domain = prepare_domain(
-        region, key_roads, key_areas, s.street_width)
+    faces, fixed, fixed_kinds, key_polys, domain, no_access = prepare_domain(
+        region, key_roads, key_areas, s.street_width, key_road_classes,
+        outline_streets=s.outline_streets)
     work_area = float(shapely.area(domain))
     L, W, S = s.parcel_length, s.parcel_width, s.street_width
     splitter = _Splitter(lib, s, rng)
     by_name = {t.name: t for t in lib}
 
-    # ---- hierarchical splitting
+    # ---- hierarchical splitting with backtracking
     t0 = time.perf_counter()
-    queue = deque(faces)
+    splitter.no_access = no_access
+    edges = fixed[fixed_kinds == "edge"]
+    splitter.no_street = shapely.union_all(edges) if len(edges) else None
+    blocked = [g for g in (no_access, splitter.no_street) if g is not None]
+    splitter.no_frontage = shapely.union_all(blocked) if blocked else None
+    search = _Search(splitter, by_name, s, work_area, progress)
     leaves: List[list] = []  # [region, template name or 'skeleton' / 'park', energies]
     split_lines: List[shapely.LineString] = []
     ends = _end_dirs(fixed[fixed_kinds == "key"])
-    n_done = 0
-    while queue:
-        if n_done >= s.max_regions:
-            leaves.extend([[r, "skeleton", {}] for r in queue])
-            break
-        n_done += 1
-        region_ = queue.popleft()
-        progress.step(min(0.6, 0.6 * (1 - shapely.area(region_) / work_area) ** 2
-                          if work_area else 0.0))
-        if shapely.area(region_) < 0.5 * L * W:
-            leaves.append([region_, "park", {}])
-            continue
-        energies = splitter.energies(region_)
-        name = splitter.pick_template(energies)
-        if name is not None:
-            leaves.append([region_, name, energies])
-            continue
-        got = splitter.split(region_, ends)
-        if got is None:
-            leaves.append([region_, _fallback(region_, energies, by_name, s), energies])
-            continue
-        line, children = got
-        split_lines.append(line)
-        ends = np.vstack([ends, _end_dirs([line])])
-        queue.extend(children)
-    t_split = time.perf_counter() - t0
+    for face in faces:
+        got_leaves, got_lines, _ = search.fill(face, ends, 0)
+        leaves += got_leaves
+        split_lines += got_lines
+        ends = np.vstack([ends, _end_dirs(got_lines)])
+    n_done = search.n_regions
+    n_backtracked = search.n_backtracks
+    t_back = search.time_abandoned
+    t_split = time.perf_counter() - t0 - t_back
     progress.step(0.6)
-
-    # ---- backtracking: template counts over their maximum go to the next best template
-    t0 = time.perf_counter()
-    n_backtracked = 0
-    by_name = {t.name: t for t in lib}
-    counts = Counter(leaf[1] for leaf in leaves)
-    for t in lib:
-        if t.max_count is None or counts[t.name] <= t.max_count:
-            continue
-        idx = [i for i, leaf in enumerate(leaves) if leaf[1] == t.name]
-        excess = rng.permutation(idx)[: counts[t.name] - t.max_count]
-        for i in excess:
-            counts[t.name] -= 1
-            full = [n for n in by_name if counts[n] >= (by_name[n].max_count or 10 ** 9)]
-            alt = splitter.pick_template(leaves[i][2], exclude=set(full) | {t.name})
-            leaves[i][1] = alt or "skeleton"
-            counts[leaves[i][1]] += 1
-            n_backtracked += 1
-    t_back = time.perf_counter() - t0
 
     # ---- global optimisation of the road mesh
     t0 = time.perf_counter()
@@ -431,22 +718,39 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
             hit = tree.query(shapely.point_on_surface(face), predicate="within")
             return float(leaf_width[hit[0]]) if len(hit) else float("nan")
 
-        new_lines, opt_stats = optimise_roads(split_lines, fixed, face_width, spacing=W)
+        # vertices every third of a parcel: a curved street bends by a few degrees per
+        # vertex, not by the 10-20° that a parcel corner rule would count as a corner
+        new_lines, opt_stats = optimise_roads(split_lines, fixed, face_width,
+                                              spacing=min(L, W) / 3.0)
         if opt_stats["iterations"]:
             new_faces = _faces(list(fixed) + list(new_lines), shapely.difference(
                 domain, shapely.union_all(key_polys)) if len(key_polys) else domain)
-            centre = shapely.point_on_surface(new_faces)
-            # every new block inherits the template of the old block it grew from
-            owner = []
-            for c in centre:
-                hit = tree.query(c, predicate="within")
-                owner.append(int(hit[0]) if len(hit) else -1)
+            # every new block inherits the template of the old block it overlaps most
+            fi, li = tree.query(new_faces, predicate="intersects")
+            with np.errstate(invalid="ignore"):
+                share = shapely.area(shapely.intersection(new_faces[fi], leaf_regions[li]))
+            owner = np.full(len(new_faces), -1)
+            best = np.zeros(len(new_faces))
+            for f, leaf, a in zip(fi, li, share):
+                if a > best[f]:
+                    owner[f], best[f] = leaf, a
             if len(new_faces) == len(leaves) and sorted(owner) == list(range(len(leaves))):
+                # the optimisation is kept when it lowers what it is for: the distortion of
+                # the template warps (Yang sec. 6), summed over the row-template blocks
+                moved = [None] * len(leaves)
                 for face, o in zip(new_faces, owner):
-                    leaves[o][0] = face
-                split_lines = list(new_lines)
+                    moved[o] = face
+                before = _warp_distortion([leaf[0] for leaf in leaves], leaves, by_name, s)
+                after = _warp_distortion(moved, leaves, by_name, s)
+                opt_stats["warp_energy_before"], opt_stats["warp_energy_after"] = before, after
+                opt_stats["kept"] = bool(after < before)
+                if after < before:
+                    for o, face in enumerate(moved):
+                        leaves[o][0] = face
+                    split_lines = list(new_lines)
             else:
                 opt_stats["reverted"] = True
+                opt_stats["relabel_failed"] = True
     t_opt = time.perf_counter() - t0
     progress.step(0.7)
 
@@ -463,39 +767,47 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
     n_inner = n_pocket = 0
     for k, (reg, name, _) in enumerate(leaves):
         progress.step(0.7 + 0.25 * k / max(len(leaves), 1))
-        shrunk = shapely.buffer(reg, -S / 2, join_style="mitre")
+        shrunk = net_block(reg, S, splitter.no_street)
         if key_road_zone is not None:
             shrunk = shapely.difference(shrunk, key_road_zone)
         for part in _parcels._polygon_parts([shrunk], 1.0):
-            lots, kind, street_area = _lots_for(part, reg, name, by_name, s, settings_sk, rng,
-                                                template_roads)
+            lots, kind, own_roads = _lots_for(part, reg, name, by_name, s, settings_sk, rng,
+                                              template_roads)
             if kind == "park":
                 lots_all.append(lots)
                 use_all += ["park"] * len(lots)
                 tmpl_all += [name] * len(lots)
                 front_all.append(np.full(len(lots), np.nan))
                 continue
-            zone_poly = street_area
-            front = _parcels.street_frontage(lots, zone_poly)
+            def frontage(lots_, reg=reg, own=own_roads):
+                """Frontage on the region's streets and on the template's own streets."""
+                front_ = access_frontage(lots_, reg, S, splitter.no_frontage)
+                if len(own):
+                    band = shapely.buffer(shapely.union_all(own), S / 2 + 0.05,
+                                          cap_style="flat", join_style="mitre")
+                    with np.errstate(invalid="ignore"):
+                        inner_ = shapely.length(shapely.intersection(
+                            shapely.boundary(lots_), band))
+                    front_ = front_ + np.round(np.maximum(inner_ - 0.2, 0.0), 2)
+                return front_
+
+            front = frontage(lots)
             # lots without frontage, crumbs, and small misshapen end lots (the triangle
             # left where a strip meets a slanted street) join their neighbour
+            # lots without frontage and crumbs join their neighbour (parcelling: every lot
+            # needs street access and a useful size)
             area = shapely.area(lots)
-            misshapen = _parcels.lot_quality(lots)[2] & (area < 0.6 * L * W)
-            bad = (front < _parcels.MIN_FRONTAGE) | (area < 0.25 * L * W) | misshapen
+            bad = (front < _parcels.MIN_FRONTAGE) | (area < 0.25 * L * W)
+            if s.repair_lots:
+                bad |= _parcels.lot_quality(lots)[2] & (area < 0.6 * L * W)
             if bad.any() and len(lots) > 1:
                 lots = _parcels._polygon_parts(_parcels.merge_into_neighbours(lots, bad)[0])
-                front = _parcels.street_frontage(lots, zone_poly)
+                front = frontage(lots)
+            remnant = np.zeros(len(lots), dtype=bool)
+            if s.repair_lots:
+                lots, front, remnant = repair_lots(lots, front, part, L, W)
             # a lot still without frontage (all its neighbours were merged away) is kept as
-            # a green inside the block, as the paper's template with a private park; an
-            # undesirable remnant no larger than a parcel (the wedge left where a strip
-            # meets a slanted or curved street, a block corner) becomes a pocket park: the
-            # paper's fallback "places a park" for what no template fills
-            area = shapely.area(lots)
-            bad = _parcels.lot_quality(lots)[2]
-            remnant = bad & (area < 1.0 * L * W)
-            fixable = bad & (area >= 0.6 * L * W) & (front >= _parcels.MIN_FRONTAGE)
-            if fixable.any():
-                lots, front, remnant = _rectify(lots, front, remnant, fixable, part, L, W)
+            # a green inside the block, as the paper's template with a private park
             cut_off = front < _parcels.MIN_FRONTAGE
             inner = cut_off | remnant
             n_inner += int(cut_off.sum())
@@ -536,14 +848,18 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
         "p_angle": p_angle, "p_area": p_area, "undesirable": bad})
 
     # roads
-    roads = list(fixed) + list(split_lines) + template_roads
-    level = [LEVEL_KEY if k == "key" else LEVEL_OUTLINE for k in fixed_kinds] + \
+    is_road = fixed_kinds != "edge"  # a no-street edge is no road
+    roads = list(fixed[is_road]) + list(split_lines) + [g for g, _ in template_roads]
+    level = [LEVEL_KEY if k in ("key", "limited") else LEVEL_OUTLINE
+             for k in fixed_kinds[is_road]] + \
         [LEVEL_SPLIT] * len(split_lines) + [LEVEL_TEMPLATE] * len(template_roads)
-    kind = [str(k) for k in fixed_kinds] + ["split"] * len(split_lines) + \
-        ["cul_de_sac"] * len(template_roads)
+    kind = [str(k) for k in fixed_kinds[is_road]] + ["split"] * len(split_lines) + \
+        [k for _, k in template_roads]
+    roads, level, kind, n_stubs = road_network(roads, level, kind)
     stats = {
         "n_regions": n_done, "n_splits": splitter.n_split, "n_rejected_splits": splitter.n_rejected,
         "n_backtracked": n_backtracked, "n_blocks": len(leaves),
+        "n_no_access_rejected": splitter.n_no_access, "n_stubs_dropped": n_stubs,
         "templates": dict(Counter(leaf[1] for leaf in leaves)),
         "n_parcels": int(residential.sum()),
         "n_no_access": int((residential & ~table.has_street_access.to_numpy(bool)).sum()),
@@ -601,6 +917,27 @@ def _front_rectangle(lot, street, L: float, W: float):
     return rect if ok else None
 
 
+def repair_lots(lots, front, street, L: float, W: float):
+    """The optional lot repair (``SplitSettings.repair_lots``; off by default).
+
+    Not in Yang et al. 2013: a cosmetic post-process of the undesirable lots (Fig. 12
+    test). A misshapen lot of at least 0.6 template parcels keeps the largest rectangle
+    standing on its street edge (:func:`_front_rectangle`) and its wedges become pocket
+    parks; an undesirable lot smaller than a template parcel becomes a pocket park. The
+    parks are counted by :func:`table1` (p_angle and p_area over every designed parcel),
+    so the repair cannot hide a bad lot, only turn it into a park.
+
+    Returns (lots, frontage, park flag per lot).
+    """
+    area = shapely.area(lots)
+    bad = _parcels.lot_quality(lots)[2]
+    remnant = bad & (area < 1.0 * L * W)
+    fixable = bad & (area >= 0.6 * L * W) & (front >= _parcels.MIN_FRONTAGE)
+    if fixable.any():
+        return _rectify(lots, front, remnant, fixable, street, L, W)
+    return lots, front, remnant
+
+
 def _rectify(lots, front, remnant, which, street, L: float, W: float):
     """Undesirable lots (triangles and wedges where streets meet at acute angles or a strip
     ends on a slanted street) keep the rectangle standing on their street edge when it is
@@ -643,23 +980,27 @@ def _fallback(region, energies, by_name, s: SplitSettings) -> str:
 
 
 def _lots_for(part, reg, name, by_name, s: SplitSettings, settings_sk, rng, template_roads):
-    """Lots of one shrunk block part: (lots, template name, street polygon for frontage)."""
+    """Lots of one shrunk block part: (lots, template name, the template's own streets)."""
     L, W, S = s.parcel_length, s.parcel_width, s.street_width
+    none = np.empty(0, dtype=object)
     if name == "park" or shapely.area(part) < 0.5 * L * W:
-        return np.array([part], dtype=object), "park", part
+        return np.array([part], dtype=object), "park", none
     t = by_name.get(name)
     if t is not None and t.kind == "rows":
         warped = _templates.warp_rows(part, t, L, W, rng)
         if warped is not None and len(warped.lots):
-            return warped.lots, t.name, part
-    if t is not None and t.kind == "spike":
-        got = _templates.spike_lots(reg, part, L, W, S, settings_sk, rng)
+            return warped.lots, t.name, none
+    if t is not None and t.kind in ("spike", "loop"):
+        make = _templates.spike_lots if t.kind == "spike" else _templates.loop_lots
+        got = make(reg, part, L, W, S, settings_sk, rng)
         if got is not None and len(got[0]):
-            lots, road = got
-            template_roads.append(road)
-            return lots, t.name, shapely.union_all(lots)
+            lots, roads = got
+            roads = list(roads) if isinstance(roads, (list, tuple)) else [roads]
+            kind = "cul_de_sac" if t.kind == "spike" else "loop"
+            template_roads += [(r, kind) for r in roads]
+            return lots, t.name, np.asarray(roads, dtype=object)
     lots = _parcels._polygon_parts(_parcels.split_skeleton(part, settings_sk, rng))
-    return (lots if len(lots) else np.array([part], dtype=object)), "skeleton", part
+    return (lots if len(lots) else np.array([part], dtype=object)), "skeleton", none
 
 
 def split_variations(region, variations: int = 1, seed: int = 0, progress=None,
@@ -680,14 +1021,32 @@ def table1(layout: Layout) -> Dict[str, float]:
     """The paper's Table 1 metrics of a layout (land use %, blocks, streets, parcels).
 
     Land use is over the whole region; block metrics over the centre-line blocks; street
-    densities over the road graph; parcel metrics over the residential parcels.
+    densities over the noded road graph. The parcel metrics (p_n, p_angle, p_area,
+    undesirable) count **every parcel the layout designed**, residential lots and parks
+    alike (inner greens, pocket parks of the optional repair, park templates): a
+    misshapen lot turned into a park still counts. Only the user's key areas (given, not
+    designed) are left out. ``p_angle_residential`` / ``p_area_residential`` are the same
+    over the residential lots alone.
+
+    p_angle is the mean over all parcel corners of |angle - 90°| (Yang sec. 7); a vertex
+    whose two edges turn by less than 10° (an angle above
+    :data:`metrics.STRAIGHT_ANGLE` = 170°) is not a corner but a bend of a straight or
+    curved side, and is left out (a lot along a curved street would otherwise count
+    every vertex of its curve as a 0-10° "corner" and look better than it is, or, with
+    the 170-180° deviation measured from 90°, far worse).
     """
     res = _metrics.compute_layout_metrics(
         roads=layout.roads, blocks=layout.blocks, parcels=layout.parcels,
         area=layout.domain, landuse=layout.table.land_use.to_numpy())
-    resid = layout.table.land_use.to_numpy() == "residential"
-    pm = _metrics.parcel_metrics(layout.parcels[resid], area=layout.domain) if resid.any() else None
+    use = layout.table.land_use.to_numpy()
+    resid = use == "residential"
+    designed = (layout.table.template.to_numpy() != "key_area")
+    pm = _metrics.parcel_metrics(layout.parcels[designed], area=layout.domain) \
+        if designed.any() else None
+    pr = _metrics.parcel_metrics(layout.parcels[resid], area=layout.domain) \
+        if resid.any() else None
     st = layout.stats
+    nan = float("nan")
     return {
         "l_s": res.scalar("parcels", "l_s"), "l_r": res.scalar("parcels", "l_r"),
         "l_p": res.scalar("parcels", "l_p"), "l_o": res.scalar("parcels", "l_o"),
@@ -697,11 +1056,14 @@ def table1(layout: Layout) -> Dict[str, float]:
         "s_i": res.scalar("roads", "intersections_per_km2"),
         "s_d": res.scalar("roads", "dead_ends_per_km2"),
         "p_n": pm.scalar("parcels", "p_n_per_km2") if pm else 0.0,
-        "p_count": int(resid.sum()),
-        "p_angle": pm.scalar("parcels", "p_angle") if pm else float("nan"),
-        "p_area": pm.scalar("parcels", "p_area") if pm else float("nan"),
+        "p_count": int(designed.sum()),
+        "p_angle": pm.scalar("parcels", "p_angle") if pm else nan,
+        "p_area": pm.scalar("parcels", "p_area") if pm else nan,
         "undesirable": int(pm.scalar("parcels", "undesirable_count")) if pm else 0,
         "undesirable_pct": pm.scalar("parcels", "undesirable_share") if pm else 0.0,
+        "p_count_residential": int(resid.sum()),
+        "p_angle_residential": pr.scalar("parcels", "p_angle") if pr else nan,
+        "p_area_residential": pr.scalar("parcels", "p_area") if pr else nan,
         "no_access": st.get("n_no_access", 0),
         "time_split_s": st.get("time_split_s", 0.0),
         "time_backtrack_s": st.get("time_backtrack_s", 0.0),

@@ -3,10 +3,9 @@
 Streamline-based splitting cuts a region along one streamline of its cross field:
 
 1. **Seeds** (:func:`seed_points`): Yang et al. seed at the inner vertices of a constrained
-   Delaunay triangulation; shapely 2.0 has no constrained Delaunay, so the seeds are the
-   inner vertices of a Delaunay triangulation of the densified boundary plus a jittered
-   lattice of spacing ``d_eps`` (0.3 x parcel length in the paper) - the same role: points
-   spread over the region at the streamline spacing.
+   Delaunay triangulation; here the inner vertices of a Delaunay mesh of the region made
+   by Delaunay refinement (circumcentres inserted until no triangle is wider than
+   ``d_eps``, 0.3 x parcel length in the paper).
 2. **Tracing** (:func:`trace_streamlines`): from each seed, both orientations of the cross,
    both ways, with 2nd-order Runge-Kutta (midpoint), all seeds at once (numpy), until the streamline
    leaves the region; streamlines that run into a singularity (|u| small) or cross
@@ -18,7 +17,9 @@ Streamline-based splitting cuts a region along one streamline of its cross field
    - DIV: ``length^-p * sum |div f| ds`` with p = 0.9 (for a unit field the divergence is
      the derivative of its angle across the streamline);
    - DB: mean over the streamline of opt(distance to the boundary), opt(y) telling how well
-     y is a sum of template widths (exhaustive sums up to a threshold);
+     y is a sum of template widths (exhaustive sums up to a threshold); the distance is
+     taken along the streamline's normal on both sides (geometric mean of the two opt
+     values), so that the strips fit on either side of the new street;
    - DS: distance to the nearest singularity (a streamline near a singularity is
      preferred: it removes singularities from the sub-regions);
    - CT: continuity with existing street ends (4 m, 20 degrees): 1, 0.5 or 0.
@@ -36,17 +37,22 @@ from dataclasses import dataclass
 
 import numpy as np
 import shapely
+from scipy.spatial import Delaunay, cKDTree
 
 from .cross_field import SINGULAR_NORM, CrossField
 
 __all__ = ["DIVERGENCE_P", "CONTINUITY_DIST", "CONTINUITY_ANGLE", "Candidates",
-           "seed_points", "trace_streamlines", "width_fit", "score_streamlines"]
+           "QUALITY_WEIGHTS", "seed_points", "trace_streamlines", "width_fit", "score_streamlines"]
 
 #: Exponent of the length normalisation of the divergence score (eq. 2).
 DIVERGENCE_P = 0.9
 #: Continuity thresholds: distance (m) and angle (degrees) to an existing street end.
 CONTINUITY_DIST = 4.0
 CONTINUITY_ANGLE = 20.0
+#: Weights lambda_1..4 of the normalised DIV, DB, DS and CT scores. The paper sets all to
+#: one and lets the user change them; here DB counts twice: the regions must be filled by
+#: strips of the template widths (see the README's notes on the Table 1 runs).
+QUALITY_WEIGHTS = (1.0, 2.0, 1.0, 1.0)
 
 
 @dataclass
@@ -67,22 +73,63 @@ class Candidates:
 
 
 def seed_points(region, d_eps: float, rng: np.random.Generator, max_seeds: int = 400):
-    """Seed points inside ``region``: inner Delaunay vertices of a lattice of spacing
-    ``d_eps`` (coarsened so that at most ``max_seeds`` seeds are made)."""
+    """Seed points: the inner vertices of a Delaunay mesh of ``region`` (Yang sec. 5).
+
+    Yang et al. seed at the inner vertices of a constrained Delaunay triangulation of the
+    region. shapely 2.0 offers no constrained or quality triangulation, so the mesh is made
+    by Delaunay refinement (Chew / Ruppert style, with scipy's Delaunay): the outline is
+    sampled every ``spacing`` metres, then the circumcentres of the triangles inside the
+    region whose circumradius exceeds ``spacing`` are inserted, round after round, until
+    none is left; the inserted points are the seeds. ``spacing`` is ``d_eps`` (0.3 x the
+    parcel length in the paper), coarsened so that at most ``max_seeds`` seeds are made.
+    ``rng`` is not used (the mesh is deterministic); it is kept for the signature.
+    """
     area = shapely.area(region)
-    spacing = max(d_eps, np.sqrt(area / max_seeds))
-    xmin, ymin, xmax, ymax = shapely.bounds(region)
-    gx, gy = np.meshgrid(np.arange(xmin + spacing / 2, xmax, spacing),
-                         np.arange(ymin + spacing / 2, ymax, spacing))
-    pts = np.stack([gx.ravel(), gy.ravel()], axis=1)
-    pts = pts + rng.uniform(-0.3, 0.3, pts.shape) * spacing
-    inner = shapely.buffer(region, -0.5 * spacing)
-    keep = shapely.contains_xy(inner, pts[:, 0], pts[:, 1]) if not inner.is_empty else \
-        shapely.contains_xy(region, pts[:, 0], pts[:, 1])
-    pts = pts[keep]
-    if len(pts) == 0:
-        pts = shapely.get_coordinates(shapely.point_on_surface(region))
-    return pts
+    spacing = max(d_eps, np.sqrt(2.0 * area / max_seeds))
+    boundary = shapely.boundary(region)
+    dense = shapely.segmentize(boundary, spacing)
+    pts = np.unique(shapely.get_coordinates(dense), axis=0)
+    inner = np.zeros((0, 2))
+    shapely.prepare(region)
+    for _ in range(30):
+        allp = np.vstack([pts, inner])
+        if len(allp) < 3:
+            break
+        tri = Delaunay(allp)
+        a, b, c = (allp[tri.simplices[:, k]] for k in range(3))
+        d = 2 * (a[:, 0] * (b[:, 1] - c[:, 1]) + b[:, 0] * (c[:, 1] - a[:, 1])
+                 + c[:, 0] * (a[:, 1] - b[:, 1]))
+        ok = np.abs(d) > 1e-12
+        a2, b2, c2 = (a ** 2).sum(1), (b ** 2).sum(1), (c ** 2).sum(1)
+        ux = (a2 * (b[:, 1] - c[:, 1]) + b2 * (c[:, 1] - a[:, 1]) + c2 * (a[:, 1] - b[:, 1]))
+        uy = (a2 * (c[:, 0] - b[:, 0]) + b2 * (a[:, 0] - c[:, 0]) + c2 * (b[:, 0] - a[:, 0]))
+        cc = np.column_stack([ux, uy]) / np.where(ok, d, 1.0)[:, None]
+        radius = np.hypot(*(cc - a).T)
+        centroid = (a + b + c) / 3.0
+        big = ok & (radius > spacing) & shapely.contains_xy(region, centroid[:, 0], centroid[:, 1])
+        cand = cc[big]
+        cand = cand[shapely.contains_xy(region, cand[:, 0], cand[:, 1])]
+        # keep new points off the outline and apart from each other
+        cand = cand[shapely.distance(boundary, shapely.points(cand)) > 0.5 * spacing]
+        if len(cand) == 0:
+            break
+        existing = cKDTree(allp)
+        d_old, _ = existing.query(cand)
+        chosen = np.zeros((0, 2))
+        for q, dq in zip(cand, d_old):
+            if dq < 0.5 * spacing:
+                continue
+            if len(chosen) and np.hypot(*(chosen - q).T).min() < 0.5 * spacing:
+                continue
+            chosen = np.vstack([chosen, q])
+        if len(chosen) == 0:
+            break
+        inner = np.vstack([inner, chosen])
+        if len(inner) >= max_seeds:
+            break
+    if len(inner) == 0:
+        inner = shapely.get_coordinates(shapely.point_on_surface(region))
+    return inner[:max_seeds]
 
 
 def _rk2(field: CrossField, p: np.ndarray, d: np.ndarray, step: float):
@@ -244,7 +291,7 @@ def _resample(lines: np.ndarray, step: float):
 
 
 def score_streamlines(cands: Candidates, field: CrossField, region, opt, ends=None,
-                      step: float = 4.0):
+                      step: float = 4.0, weights=QUALITY_WEIGHTS):
     """Quality of each candidate (higher is better) and its four raw components.
 
     Parameters
@@ -286,10 +333,21 @@ def score_streamlines(cands: Candidates, field: CrossField, region, opt, ends=No
                       (da * db_).sum(axis=1)) / (2 * eps)
     div = np.bincount(owner, np.abs(dphi) * step, minlength=n) / \
         np.maximum(length, 1e-9) ** DIVERGENCE_P
-    # distance to the boundary explained by template widths
+    # distance to the boundary explained by template widths, on both sides: the
+    # boundary is found along the streamline's normal (a ray each way), so that the
+    # strips between the streamline and the boundary fit on the left and on the right
     boundary = shapely.boundary(region)
-    dist = shapely.distance(boundary, shapely.points(xy))
-    pointwise = opt(dist)
+    reach = float(np.hypot(*(np.subtract(*np.reshape(shapely.bounds(region), (2, 2)))))) + 1.0
+    pts = shapely.points(xy)
+    side = []
+    for sign in (1.0, -1.0):
+        rays = shapely.linestrings(np.stack([xy + sign * 0.01 * normal,
+                                             xy + sign * reach * normal], axis=1))
+        with np.errstate(invalid="ignore"):
+            hit = shapely.intersection(rays, boundary)
+        d = shapely.distance(pts, hit)
+        side.append(np.where(np.isfinite(d), d, shapely.distance(boundary, pts)))
+    pointwise = np.sqrt(opt(side[0]) * opt(side[1]))
     count = np.bincount(owner, minlength=n)
     dbs = np.bincount(owner, pointwise, minlength=n) / np.maximum(count, 1)
     # distance to singularities (smaller preferred)
@@ -314,7 +372,8 @@ def score_streamlines(cands: Candidates, field: CrossField, region, opt, ends=No
             ok = (d <= CONTINUITY_DIST) & (cosang >= np.cos(np.radians(CONTINUITY_ANGLE)))
             cont += ok.any(axis=1)
         ct = 1.0 - 0.5 * np.minimum(cont, 2)
-    qual = (1 - _norm(div)) + _norm(dbs) + (1 - _norm(ds)) + (1 - ct)
+    l1, l2, l3, l4 = weights
+    qual = l1 * (1 - _norm(div)) + l2 * _norm(dbs) + l3 * (1 - _norm(ds)) + l4 * (1 - ct)
     return qual, {"div": div, "db": dbs, "ds": ds, "ct": ct}
 
 

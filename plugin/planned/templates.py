@@ -10,6 +10,8 @@ name           label  pattern
 parcel_strip   L      one row of parcels (R) between two streets
 double_strip   D      two rows of parcels (R) back to back, each facing its street
 spike          S      a cul-de-sac street into the block, parcels (R) around it
+loop           O      a loop street inside a deep block, joined to the block's longest
+                      street at its middle, parcels on both sides of the loop
 park           A      an area template kept as a park (the fallback of the paper)
 =============  =====  ===============================================================
 
@@ -18,18 +20,25 @@ level-two row templates, which the paper draws but does not label in its text.
 
 Template-based splitting (:func:`fit_energy`, :func:`warp_rows`):
 
-* **Selection**: a region matches a template when its corners and widths agree: the
-  region's minimum rectangle gives its depth across the streets; the energy is the
-  log-distortion of the parcel depth plus the region's distortion from a rectangle
-  (p_area - 1) and its corner deviation (p_angle / 45). Templates with energy under a
-  threshold are drawn with probability template probability x exp(-energy / 0.1).
+* **Selection** (sec. 4.1, "the warping energy that is necessary to deform the template
+  region to the region"): a row template is warped onto the region (below) and scored by
+  its registration residual, the root mean square distance between the warped parcel
+  corners and each parcel's best registration in its allowed deformation class, divided
+  by the parcel width, plus the turn (radians) of the region's corners that the
+  template's four corners cannot take (:func:`region_frame`). A template whose depth
+  range or row length (``max_columns``) the region exceeds does not match. Spikes and
+  area templates keep the rectangle heuristic of :func:`fit_energy` (simplification).
+  Templates with energy under a threshold are drawn with probability template
+  probability x exp(-energy / 0.1).
 * **Hierarchical warping** of the row templates: level one chooses the number of parcels
   per row (Fig. 5) from the length of the region's street sides; level two warps the grid
   of parcel corners by the paper's alternating optimisation: *registration* of each
   parcel to its template rectangle by a similarity followed by a non-uniform scaling in
   its principal directions with bounded factors (the constrained affine class), then
   *regression*: every shared corner moves to the mean of its registered copies and corners
-  on the street sides are projected back onto them (alignment constraints); 30 iterations.
+  on the street sides are projected back onto them (alignment constraints), the four
+  corners stay on the region's corners and a corner nearest a bend of a street side
+  (> 8°) is pinned to the bend, so no parcel straddles one; 30 iterations.
   The arc-length initialisation is the paper's; the final cut lines split the exact
   (curved) block outline, so the parcels tile the block.
 
@@ -50,22 +59,24 @@ from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 import shapely
+import shapely.ops
+from scipy.spatial import cKDTree
 
 from ..core.paths import RESOURCES
+from ..core.geometry import minimum_rectangles
 from ..core.progress import InputError
-from ..network import blocks as _blocks
 from ..parcels import subdivision as _parcels
 
 __all__ = ["Template", "LIBRARY_PATH", "LIBRARY_SUBSETS", "default_library", "write_library",
            "load_library", "templates_from_drawn", "fit_energy", "region_shape", "region_frame",
-           "warp_rows", "spike_lots", "WarpResult", "WARP_ITERATIONS"]
+           "warp_rows", "spike_lots", "loop_lots", "WarpResult", "WARP_ITERATIONS"]
 
 LIBRARY_PATH = RESOURCES / "templates" / "library.json"
 #: Iterations of registration / regression (the paper: about 30 per match).
 WARP_ITERATIONS = 30
 #: Named subsets of the shipped library (the toolbox's TEMPLATES enum, in this order).
 LIBRARY_SUBSETS = {
-    "all": ("parcel_strip", "double_strip", "spike", "park"),
+    "all": ("parcel_strip", "double_strip", "spike", "loop", "park"),
     "strips": ("parcel_strip", "double_strip", "park"),
     "double_strips": ("double_strip", "park"),
 }
@@ -92,6 +103,10 @@ class Template:
         For spikes: the block depth in parcel lengths that the pattern fits.
     max_count : int or None
         At most this many per layout (met by backtracking).
+    max_columns : int
+        Most parcels in one row: the repeating element's limit, i.e. the longest block
+        (22 x 18 m = 396 m with the paper's parcels; Yang's longest blocks have perimeters of
+        1,000-1,450 m, Table 1).
     land_use : str
     parcels : list of polygons (unit coordinates: x in parcel widths, y in parcel lengths)
         The drawn layout, for display and user templates.
@@ -106,6 +121,7 @@ class Template:
     depth_scale: Tuple[float, float] = (0.8, 1.25)
     depth_range: Tuple[float, float] = (0.0, 0.0)
     max_count: Optional[int] = None
+    max_columns: int = 22
     land_use: str = "residential"
     parcels: tuple = field(default=(), compare=False)
 
@@ -113,7 +129,7 @@ class Template:
         """Ideal centre-line width of a block of this template (m)."""
         if self.kind == "rows":
             return self.rows * length + street
-        if self.kind == "spike":
+        if self.kind in ("spike", "loop"):
             return 0.5 * sum(self.depth_range) * length + street
         return 0.0
 
@@ -132,6 +148,10 @@ def default_library() -> List[Template]:
         Template("spike", "S", "spike", probability=0.4, depth_range=(2.6, 4.6), max_count=4,
                  parcels=tuple([_rect(0, 0, 1, 1), _rect(2, 0, 3, 1), _rect(0, 1, 1, 2),
                                 _rect(2, 1, 3, 2), _rect(0.5, 2, 2.5, 3)])),
+        Template("loop", "O", "loop", probability=0.3, depth_range=(4.6, 7.0), max_count=3,
+                 parcels=tuple([_rect(i, 0, i + 1, 1) for i in range(5)]
+                               + [_rect(i, 5, i + 1, 6) for i in range(5)]
+                               + [_rect(1.5, 2, 3.5, 4)])),
         Template("park", "A", "park", probability=0.05, land_use="park",
                  parcels=(_rect(0, 0, 2, 2),)),
     ]
@@ -167,7 +187,7 @@ def load_library(path=LIBRARY_PATH, subset: Optional[str] = None) -> List[Templa
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise InputError(f"the template library {path} cannot be read ({exc})") from exc
     for t in out:
-        if t.kind not in ("rows", "spike", "park") or t.rows < 1 or t.probability < 0:
+        if t.kind not in ("rows", "spike", "loop", "park") or t.rows < 1 or t.probability < 0:
             raise InputError(f"template {t.name!r} in {path} is not a valid template")
     if subset is not None:
         if subset not in LIBRARY_SUBSETS:
@@ -210,7 +230,7 @@ def templates_from_drawn(geoms: Sequence, names: Sequence, labels: Sequence) -> 
         res = g[lab == "R"]
         # a parcel is deeper than wide: its long axis runs across the street, and rows
         # are the clusters of parcel centres along that axis
-        depth, _, angle = _blocks.minimum_rectangles(res)
+        depth, _, angle = minimum_rectangles(res)
         a = np.radians(float(np.median(angle)))
         across = shapely.get_coordinates(shapely.centroid(res)) @ np.array([np.cos(a), np.sin(a)])
         gap = max(0.5 * float(np.median(depth)), 1e-6)
@@ -230,7 +250,7 @@ def templates_from_drawn(geoms: Sequence, names: Sequence, labels: Sequence) -> 
 def region_shape(region):
     """(long side, short side of the minimum rectangle, shape distortion) of a region:
     the template-independent part of :func:`fit_energy`, computed once per region."""
-    long_side, short_side, _ = _blocks.minimum_rectangles([region])
+    long_side, short_side, _ = minimum_rectangles([region])
     p_angle, p_area, _ = _parcels.lot_quality([region])
     shape = (float(np.nan_to_num(p_area[0], nan=10.0)) - 1.0) + \
         0.5 * float(np.nan_to_num(p_angle[0], nan=45.0)) / 45.0
@@ -261,72 +281,108 @@ def fit_energy(region, template: Template, length: float, width: float,
         if not lo <= depth <= hi or net_long < 2.5 * length:
             return math.inf
         return 0.15 + shape
+    if template.kind == "loop":
+        lo, hi = template.depth_range
+        depth = net_depth / length
+        if not lo <= depth <= hi or net_long < 1.2 * net_depth:
+            return math.inf
+        return 0.15 + shape
     # an area template fits anything, at a price: it is the fallback
     return 0.9
 
 
-def region_frame(poly):
-    """Four corners of a quad-like polygon and its sides.
+#: A vertex of a region whose outline turns by more than this (degrees) is a corner
+#: (Yang sec. 4.1, "we first detect the convex and concave corners of R").
+CORNER_TURN = 35.0
 
-    Returns (c1, c2, e0, e1) as coordinate arrays: the two long (street) sides running the
-    same way and the two end sides from c1's start to c2's start and from c1's end to c2's
-    end; or None when the polygon has no four distinct corners.
+
+def region_corners(poly, min_turn: float = CORNER_TURN):
+    """Corners of a polygon's outer ring: (ring (n, 2) counter-clockwise without the
+    closing vertex, corner vertex indices, signed turn at every vertex in degrees).
+
+    The turn is measured on the ring simplified by 0.5 m (a streamline's small wiggles
+    are not corners) and each corner is put back on the nearest vertex of the exact ring.
+    Positive turns are convex corners, negative ones concave (Yang sec. 4.1).
+    """
+    poly = shapely.geometry.polygon.orient(poly)
+    ring = np.asarray(poly.exterior.coords)[:-1]
+    coarse = shapely.geometry.polygon.orient(shapely.simplify(poly, 0.5))
+    if coarse.geom_type != "Polygon" or coarse.is_empty:
+        coarse = poly
+    c = np.asarray(coarse.exterior.coords)[:-1]
+    a = c - np.roll(c, 1, axis=0)
+    b = np.roll(c, -1, axis=0) - c
+    turn = np.degrees(np.arctan2(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0], (a * b).sum(1)))
+    near = cKDTree(ring).query(c)[1]
+    full = np.zeros(len(ring))
+    full[near] = turn
+    idx = np.flatnonzero(np.abs(full) > min_turn)
+    return ring, idx, full
+
+
+def region_frame(poly, with_penalty: bool = False):
+    """Four corners of a quad-like polygon and its sides (Yang sec. 4.1 initialisation).
+
+    The region's corners (:func:`region_corners`) are matched to the four corners of a
+    strip template: with more than four, the four sharpest convex ones are kept and the
+    others become regular boundary vertices (their turn is the ``penalty``, in radians);
+    with fewer, the sharpest remaining vertices fill in. Returns (c1, c2, e0, e1) as
+    coordinate arrays: the two long (street) sides running the same way and the two end
+    sides from c1's start to c2's start and from c1's end to c2's end; or None when the
+    polygon has no four distinct vertices. ``with_penalty`` adds the penalty.
     """
     poly = shapely.simplify(shapely.geometry.polygon.orient(poly), 0.05)
-    if poly.geom_type != "Polygon":
+    if poly.geom_type != "Polygon" or len(poly.exterior.coords) < 5:
         return None
-    ring = np.asarray(poly.exterior.coords)[:-1]
-    if len(ring) < 4:
-        return None
-    mrr = _mrr_corners(ring)
-    corner_idx = []
-    for c in mrr:
-        d = np.hypot(ring[:, 0] - c[0], ring[:, 1] - c[1])
-        corner_idx.append(int(np.argmin(d)))
+    ring, idx, turn = region_corners(poly)
+    order = np.argsort(-turn)                       # convex first, sharpest first
+    corner_idx = sorted(int(i) for i in order[:4])
+    dropped = [i for i in idx if i not in corner_idx]
+    penalty = float(np.radians(np.abs(turn[dropped])).sum())
     if len(set(corner_idx)) < 4:
         return None
-    corner_idx = sorted(corner_idx)
     n = len(ring)
     sides = []
     for a, b in zip(corner_idx, corner_idx[1:] + corner_idx[:1]):
-        idx = np.arange(a, b + 1) if b > a else np.r_[np.arange(a, n), np.arange(0, b + 1)]
-        sides.append(ring[idx % n])
+        ids = np.arange(a, b + 1) if b > a else np.r_[np.arange(a, n), np.arange(0, b + 1)]
+        sides.append(ring[ids % n])
     lengths = [np.hypot(*np.diff(s, axis=0).T).sum() for s in sides]
     k = 0 if lengths[0] + lengths[2] >= lengths[1] + lengths[3] else 1
     c1 = sides[k]
     c2 = sides[(k + 2) % 4][::-1]
     e0 = sides[(k + 3) % 4][::-1]  # from c1's start to c2's start
     e1 = sides[(k + 1) % 4]        # from c1's end to c2's end
-    return c1, c2, e0, e1
-
-
-def _mrr_corners(xy: np.ndarray) -> np.ndarray:
-    """Corners (4, 2) of the minimum-area rectangle of points: every convex-hull edge
-    direction tried at once in numpy (shapely's oriented_envelope loops in Python, and
-    this runs for every block and on every optimisation iteration)."""
-    hull = shapely.get_coordinates(shapely.convex_hull(shapely.multipoints(xy)))
-    if len(hull) < 4:
-        hull = np.asarray(xy, dtype=float)
-        hull = np.vstack([hull, hull[:1]])
-    e = np.diff(hull, axis=0)
-    ln = np.hypot(e[:, 0], e[:, 1])
-    e, ln = e[ln > 1e-9], ln[ln > 1e-9]
-    u = e / ln[:, None]
-    v = np.stack([-u[:, 1], u[:, 0]], axis=1)
-    pu, pv = u @ hull.T, v @ hull.T                   # (edges, points)
-    a0, a1, b0, b1 = pu.min(1), pu.max(1), pv.min(1), pv.max(1)
-    k = int(np.argmin((a1 - a0) * (b1 - b0)))
-    return np.array([a * u[k] + b * v[k] for a, b in
-                     ((a0[k], b0[k]), (a1[k], b0[k]), (a1[k], b1[k]), (a0[k], b1[k]))])
+    return (c1, c2, e0, e1, penalty) if with_penalty else (c1, c2, e0, e1)
 
 
 @dataclass
 class WarpResult:
-    """Parcels of one warped row template and its registration residual (m)."""
+    """Parcels of one warped row template and its warp energy.
+
+    Attributes
+    ----------
+    lots : ndarray of Polygon
+    residual : float
+        Root mean square registration distance (m) of the parcel corners: the distance
+        between each warped corner and its parcel's best registration within the allowed
+        deformation class (Yang eq. 1, summed over the parcels, per corner).
+    columns : int
+        Parcels per row.
+    energy : float
+        ``residual / width`` plus the turn (radians) of the region corners that the
+        template's four corners could not take: the selection energy (sec. 4.1).
+    depth_scale : float
+        Block depth / template depth.
+    long_sides : (ndarray, ndarray)
+        The two street sides the rows run along (for the edge labels).
+    """
 
     lots: np.ndarray
     residual: float
     columns: int
+    energy: float = 0.0
+    depth_scale: float = 1.0
+    long_sides: tuple = ()
 
 
 def _project(line, pts: np.ndarray) -> np.ndarray:
@@ -338,8 +394,27 @@ def _along(line, t: np.ndarray) -> np.ndarray:
     return shapely.get_coordinates(shapely.line_interpolate_point(line, t, normalized=True))
 
 
+def _register(grid, quad_r, quad_j, tmpl, wlo, whi, dlo, dhi):
+    """Registration (Yang sec. 4.1): every parcel quad of the grid registered to the
+    template rectangle by a rotation (Kabsch) and a scaling along the template's axes
+    bounded to the allowed ranges (the constrained affine class of a rectangle).
+    Returns the registered corners (nq, 4, 2)."""
+    q = grid[quad_r, quad_j]                       # (nq, 4, 2)
+    cq = q.mean(axis=1, keepdims=True)
+    qc = q - cq
+    h = np.einsum("ki,nkj->nij", tmpl, qc)
+    ang = np.arctan2(h[:, 0, 1] - h[:, 1, 0], h[:, 0, 0] + h[:, 1, 1])
+    cos, sin = np.cos(ang), np.sin(ang)
+    rot = np.stack([np.stack([cos, -sin], -1), np.stack([sin, cos], -1)], 1)  # (nq,2,2)
+    local = np.einsum("nji,nkj->nki", rot, qc)     # R^T q
+    sx = np.clip((local[:, :, 0] * tmpl[:, 0]).sum(1) / (tmpl[:, 0] ** 2).sum(), wlo, whi)
+    sy = np.clip((local[:, :, 1] * tmpl[:, 1]).sum(1) / (tmpl[:, 1] ** 2).sum(), dlo, dhi)
+    return np.einsum("nij,nkj->nki", rot, tmpl[None] * np.stack([sx, sy], -1)[:, None]) + cq
+
+
 def warp_rows(block, template: Template, length: float, width: float,
-              rng: np.random.Generator, iterations: int = WARP_ITERATIONS) -> Optional[WarpResult]:
+              rng: Optional[np.random.Generator], iterations: int = WARP_ITERATIONS,
+              cut: bool = True) -> Optional[WarpResult]:
     """Warp a row template (strip or double strip) onto a shrunk block (see module doc).
 
     Parameters
@@ -349,60 +424,68 @@ def warp_rows(block, template: Template, length: float, width: float,
     template : Template (kind 'rows')
     length, width : float
         Template parcel depth and width (m).
-    rng : numpy Generator
-        Draws the number of parcels per row (level one) among the near-best counts.
+    rng : numpy Generator or None
+        Draws the number of parcels per row (level one) among the near-best counts; None
+        takes the best count (the energy evaluation of the selection).
+    cut : bool
+        Cut the block into the lots (False: only the energy, for the selection).
 
     Returns
     -------
-    WarpResult or None when the block has no four corners.
+    WarpResult, or None when the block has no four corners, its depth is outside the
+    template's depth range or its rows would need more than ``max_columns`` parcels.
     """
-    frame = region_frame(block)
+    frame = region_frame(block, with_penalty=True)
     if frame is None:
         return None
-    c1, c2, e0, e1 = (shapely.LineString(s) for s in frame)
+    *sides, penalty = frame
+    c1, c2, e0, e1 = (shapely.LineString(s) for s in sides)
     rows = template.rows
+    # depth of the block across the rows: mean distance between the two street sides
+    probe = _along(c1, np.linspace(0.1, 0.9, 9))
+    depth = float(np.mean(shapely.distance(c2, shapely.points(probe))))
+    depth_scale = depth / (rows * length)
+    dlo, dhi = template.depth_scale
+    if not dlo <= depth_scale <= dhi:
+        return None
     # level one: parcels per row, drawn among the counts whose width distortion is small
     mean_len = 0.5 * (c1.length + c2.length)
     base = max(1, int(round(mean_len / width)))
+    if base > template.max_columns:
+        return None
     counts = np.array([c for c in (base - 1, base, base + 1) if c >= 1])
     dev = np.log(mean_len / (counts * width))
     lo, hi = template.width_scale
     w = np.exp(-0.5 * (dev / 0.08) ** 2) * ((mean_len / counts >= lo * width) &
                                               (mean_len / counts <= hi * width) | (counts == base))
-    m = int(rng.choice(counts, p=w / w.sum()))
+    m = int(counts[np.argmax(w)]) if rng is None else int(rng.choice(counts, p=w / w.sum()))
     t = np.linspace(0.0, 1.0, m + 1)
     top, bottom = _along(c1, t), _along(c2, t)
     grid = np.stack([top + (bottom - top) * r / rows for r in range(rows + 1)])  # (rows+1, m+1, 2)
-    depth = length
-    tmpl = np.array([[0, 0], [width, 0], [width, depth], [0, depth]], dtype=float)
+    tmpl = np.array([[0, 0], [width, 0], [width, length], [0, length]], dtype=float)
     tmpl -= tmpl.mean(axis=0)
     r_idx, j_idx = np.meshgrid(np.arange(rows), np.arange(m), indexing="ij")
     r_idx, j_idx = r_idx.ravel(), j_idx.ravel()
     quad_r = np.stack([r_idx, r_idx, r_idx + 1, r_idx + 1], axis=1)
     quad_j = np.stack([j_idx, j_idx + 1, j_idx + 1, j_idx], axis=1)
     wlo, whi = template.width_scale
-    dlo, dhi = template.depth_scale
-    residual = 0.0
+    # alignment (sec. 4.1): where a street side bends by more than BEND_TURN, the nearest
+    # parcel corner on it is pinned to the bend, so that no parcel straddles a bend (its
+    # street side would have a corner of 170-135° there)
+    pins = []
+    for r, side in ((0, sides[0]), (rows, sides[1][::-1])):
+        for xy in _bends(side):
+            j = int(np.argmin(np.hypot(*(grid[r] - xy).T)))
+            if 0 < j < m and np.hypot(*(grid[r, j] - xy)) < 0.5 * mean_len / m:
+                pins.append((r, j, xy))
     for _ in range(iterations):
-        q = grid[quad_r, quad_j]                       # (nq, 4, 2)
-        cq = q.mean(axis=1, keepdims=True)
-        qc = q - cq
-        # registration: rotation (Kabsch), then bounded scaling along the template axes
-        h = np.einsum("ki,nkj->nij", tmpl, qc)
-        ang = np.arctan2(h[:, 0, 1] - h[:, 1, 0], h[:, 0, 0] + h[:, 1, 1])
-        cos, sin = np.cos(ang), np.sin(ang)
-        rot = np.stack([np.stack([cos, -sin], -1), np.stack([sin, cos], -1)], 1)  # (nq,2,2)
-        local = np.einsum("nji,nkj->nki", rot, qc)     # R^T q
-        sx = np.clip((local[:, :, 0] * tmpl[:, 0]).sum(1) / (tmpl[:, 0] ** 2).sum(), wlo, whi)
-        sy = np.clip((local[:, :, 1] * tmpl[:, 1]).sum(1) / (tmpl[:, 1] ** 2).sum(), dlo, dhi)
-        reg = np.einsum("nij,nkj->nki", rot, tmpl[None] * np.stack([sx, sy], -1)[:, None]) + cq
+        reg = _register(grid, quad_r, quad_j, tmpl, wlo, whi, dlo, dhi)
         # regression: shared corners to the mean of their registered copies
         acc = np.zeros_like(grid)
         cnt = np.zeros(grid.shape[:2])
         np.add.at(acc, (quad_r, quad_j), reg)
         np.add.at(cnt, (quad_r, quad_j), 1.0)
         new = acc / cnt[..., None]
-        residual = float(np.mean(np.hypot(*(reg - new[quad_r, quad_j]).reshape(-1, 2).T)))
         # alignment constraints: street sides stay on the street sides, corners fixed
         new[0] = _project(c1, new[0])
         new[rows] = _project(c2, new[rows])
@@ -410,15 +493,33 @@ def warp_rows(block, template: Template, length: float, width: float,
         new[1:rows, m] = _project(e1, new[1:rows, m]) if rows > 1 else new[1:rows, m]
         new[0, 0], new[0, m] = top[0], top[-1]
         new[rows, 0], new[rows, m] = bottom[0], bottom[-1]
+        for r, j, xy in pins:
+            new[r, j] = xy
         grid = new
-    cuts = []
-    ext = 2.0
-    for j in range(1, m):
-        cuts.append(_extend(grid[:, j], ext))
-    for r in range(1, rows):
-        cuts.append(_extend(grid[r, :], ext))
-    lots = _cut(block, cuts)
-    return WarpResult(lots, residual, m)
+    reg = _register(grid, quad_r, quad_j, tmpl, wlo, whi, dlo, dhi)
+    residual = float(np.sqrt(np.mean(((reg - grid[quad_r, quad_j]) ** 2).sum(-1))))
+    energy = residual / width + penalty
+    lots = np.empty(0, dtype=object)
+    if cut:
+        cuts = [_extend(grid[:, j], 2.0) for j in range(1, m)]
+        cuts += [_extend(grid[r, :], 2.0) for r in range(1, rows)]
+        lots = _cut(block, cuts)
+    return WarpResult(lots, residual, m, energy, depth_scale, (sides[0], sides[1]))
+
+
+#: A street side that turns by more than this (degrees) at a vertex bends there.
+BEND_TURN = 8.0
+
+
+def _bends(xy: np.ndarray) -> np.ndarray:
+    """Interior vertices of a polyline where it turns by more than :data:`BEND_TURN`."""
+    xy = np.asarray(xy, dtype=float)
+    if len(xy) < 3:
+        return np.zeros((0, 2))
+    a = xy[1:-1] - xy[:-2]
+    b = xy[2:] - xy[1:-1]
+    turn = np.degrees(np.abs(np.arctan2(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0], (a * b).sum(1))))
+    return xy[1:-1][turn > BEND_TURN]
 
 
 def _extend(xy: np.ndarray, ext: float) -> shapely.LineString:
@@ -480,3 +581,37 @@ def spike_lots(block_centre, block, length: float, width: float, street: float,
         lots.append(_parcels.split_skeleton(part, settings, rng))
     lots = _parcels._polygon_parts(np.concatenate(lots)) if lots else np.empty(0, dtype=object)
     return lots, road
+
+
+def loop_lots(block_centre, block, length: float, width: float, street: float,
+              settings, rng: np.random.Generator):
+    """Loop template: a street loop one parcel depth inside a deep block, joined by a
+    short street to the middle of the block's longest side, lots between the block's
+    streets and the loop and inside the loop (the loop pattern of Yang 2013, Fig. 2/4;
+    simplified: the loop follows the block's outline offset inwards, its lots are made by
+    the skeleton method, every lot with frontage).
+
+    Returns (lots, [loop, connector]) or None when the block is too shallow for a loop
+    with lots inside it.
+    """
+    ring_poly = shapely.buffer(block, -(length + street / 2), join_style="mitre")
+    if ring_poly.is_empty or shapely.get_type_id(ring_poly) != 3:
+        return None
+    inner = shapely.buffer(ring_poly, -street / 2, join_style="mitre")
+    if inner.is_empty or shapely.get_type_id(inner) != 3 or \
+            minimum_rectangles([inner])[1][0] < 1.2 * length:
+        return None
+    loop = shapely.LineString(shapely.get_coordinates(ring_poly.exterior))
+    frame = region_frame(block_centre)
+    if frame is None:
+        return None
+    c1 = shapely.LineString(frame[0])
+    start = np.asarray(c1.interpolate(0.5, normalized=True).coords[0])
+    foot = np.asarray(shapely.ops.nearest_points(loop, shapely.Point(start))[0].coords[0])
+    connector = shapely.LineString([start, foot])
+    roads = shapely.union_all([loop, connector])
+    cut = shapely.buffer(roads, street / 2, cap_style="flat", join_style="mitre")
+    rest = _parcels._polygon_parts([shapely.difference(block, cut)])
+    lots = [_parcels.split_skeleton(part, settings, rng) for part in rest]
+    lots = _parcels._polygon_parts(np.concatenate(lots)) if lots else np.empty(0, dtype=object)
+    return lots, [loop, connector]

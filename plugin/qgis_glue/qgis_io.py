@@ -3,7 +3,9 @@
 Data flows one way: QGIS layer -> :func:`read_source` (features reprojected into a local
 metric CRS, geometries as shapely arrays, attributes as a pandas DataFrame) -> engine ->
 :func:`write_sink` (back to the input CRS). Engine errors (:class:`InputError`) become
-:class:`QgsProcessingException` with the layer's name; cancellation stops the algorithm.
+:class:`QgsProcessingException` with the layer's name; the engine's :class:`Canceled` becomes
+:class:`ProcessingCanceled`, a QgsProcessingException of its own type, so that callers tell a
+cancel from a failure by type, never by searching the message.
 """
 from __future__ import annotations
 
@@ -35,6 +37,7 @@ from qgis.core import (
 from qgis.PyQt.QtCore import QVariant
 
 from ..core import coordinates
+from ..core import crs as crs_rule
 from ..core.paths import RESOURCES
 from ..core.progress import Canceled, InputError, Progress
 
@@ -42,33 +45,65 @@ _GEOM_NAMES = {QgsWkbTypes.PointGeometry: "points", QgsWkbTypes.LineGeometry: "l
                QgsWkbTypes.PolygonGeometry: "polygons"}
 _KIND_TO_GEOMTYPE = {"points": QgsWkbTypes.PointGeometry, "lines": QgsWkbTypes.LineGeometry,
                      "polygons": QgsWkbTypes.PolygonGeometry}
-_WEB_MERCATOR = {"EPSG:3857", "EPSG:900913", "EPSG:3785", "EPSG:102100", "EPSG:102113"}
+
+
+class ProcessingCanceled(QgsProcessingException):
+    """The user canceled the run (a QgsProcessingException, so QGIS ends the run with its
+    message; a type of its own, so the plugin's code and tests tell it from a failure)."""
+
+    def __init__(self, message: str = "Canceled by the user."):
+        super().__init__(message)
+
+
+def stop_if_canceled(feedback) -> None:
+    """Raise :class:`ProcessingCanceled` when the user asked to stop."""
+    if feedback is not None and feedback.isCanceled():
+        raise ProcessingCanceled()
 
 
 # --------------------------------------------------------------------------- CRS
 
 def working_crs(crs: QgsCoordinateReferenceSystem, extent_in_crs: QgsRectangle,
                 context) -> QgsCoordinateReferenceSystem:
-    """The metric CRS the engine works in.
+    """The metric CRS the engine works in, by the plugin's rule (:func:`core.crs.working_crs`:
+    a projected CRS in metres as it is, except Web Mercator; else the UTM zone of the data's
+    centre)."""
+    def centre_lonlat():
+        centre = extent_in_crs.center()
+        wgs84 = QgsCoordinateReferenceSystem("EPSG:4326")
+        if crs.isValid() and crs != wgs84:
+            try:
+                tr = QgsCoordinateTransform(crs, wgs84, context.transformContext())
+                centre = tr.transform(centre)
+            except Exception as exc:  # noqa: BLE001 - QgsCsException: a CRS PROJ cannot use
+                raise QgsProcessingException(
+                    f"The data's CRS ({crs_label(crs)}) cannot be transformed to longitude and "
+                    "latitude to choose a metric working CRS: assign a known CRS to the layer "
+                    "(Layer Properties > Source).") from exc
+        return centre.x(), centre.y()
 
-    A projected CRS in metres is used as is, except Web Mercator (its scale error is 1.5x at
-    50 degrees latitude, so lengths and areas would be wrong); anything else is replaced by
-    the UTM zone of the data's centre.
-    """
-    if (crs.isValid() and not crs.isGeographic()
-            and crs.mapUnits() == QgsUnitTypes.DistanceMeters
-            and crs.authid() not in _WEB_MERCATOR):
-        return crs
-    wgs84 = QgsCoordinateReferenceSystem("EPSG:4326")
-    centre = extent_in_crs.center()
-    if crs.isValid() and crs != wgs84:
-        tr = QgsCoordinateTransform(crs, wgs84, context.transformContext())
-        centre = tr.transform(centre)
-    lon, lat = centre.x(), centre.y()
-    if not (math.isfinite(lon) and math.isfinite(lat)):
-        raise QgsProcessingException("Cannot find a metric CRS for the data: its extent is not finite.")
-    zone = int((lon + 180.0) // 6.0) % 60 + 1
-    return QgsCoordinateReferenceSystem(f"EPSG:{32600 + zone if lat >= 0 else 32700 + zone}")
+    projected_in_metres = (crs.isValid() and not crs.isGeographic()
+                           and crs.mapUnits() == QgsUnitTypes.DistanceMeters)
+    try:
+        code = crs_rule.working_crs(crs.authid(), projected_in_metres, centre_lonlat)
+    except InputError as exc:
+        raise QgsProcessingException(f"Cannot find a metric CRS for the data: {exc}.") from exc
+    return crs if code is None else QgsCoordinateReferenceSystem(code)
+
+
+def crs_label(crs: QgsCoordinateReferenceSystem) -> str:
+    """A CRS for messages: 'EPSG:3857 (WGS 84 / Pseudo-Mercator)', or what it is without one."""
+    if not crs.isValid():
+        return "no CRS"
+    name = crs.description() or crs.toProj() or "an unnamed CRS"
+    return f"{crs.authid()} ({name})" if crs.authid() else f"'{name}'"
+
+
+def usable_crs(crs: QgsCoordinateReferenceSystem) -> bool:
+    """Whether a CRS is defined well enough to transform coordinates: valid and known to
+    PROJ (a GeoPackage layer with srs_id 0 'Undefined' is valid in QGIS but has neither an
+    authority id nor a PROJ definition)."""
+    return crs.isValid() and bool(crs.authid() or crs.toProj())
 
 
 @dataclass
@@ -140,7 +175,7 @@ def read_source(alg, parameters, name: str, context, feedback,
             f"Layer {label} has no field {', '.join(repr(m) for m in missing)} "
             f"(fields: {', '.join(all_names) or 'none'}).")
     src_crs = source.sourceCrs()
-    if not src_crs.isValid():
+    if not usable_crs(src_crs):
         # metres, feet and degrees differ by 10^5: a guess would give silently wrong sizes
         raise QgsProcessingException(
             f"Layer {label} has no coordinate reference system (CRS), so its units are "
@@ -171,8 +206,8 @@ def read_source(alg, parameters, name: str, context, feedback,
     # invalid geometries are repaired below (and counted), not rejected by the context's check
     features = source.getFeatures(request, QgsProcessingFeatureSource.FlagSkipGeometryValidityChecks)
     for i, feature in enumerate(features):
-        if feedback is not None and feedback.isCanceled():
-            raise QgsProcessingException("Canceled by the user.")
+        if i % 256 == 0:
+            stop_if_canceled(feedback)
         geom = feature.geometry()
         if geom is None or geom.isNull() or geom.isEmpty():
             n_null += 1
@@ -211,8 +246,8 @@ def read_source(alg, parameters, name: str, context, feedback,
     if target_crs is None:
         b = shapely.total_bounds(geoms)
         target_crs = working_crs(src_crs, QgsRectangle(*b), context)
-    if src_crs.isValid() and target_crs != src_crs:
-        geoms = _transform(geoms, src_crs, target_crs, context)
+    if target_crs != src_crs:
+        geoms = _transform(geoms, src_crs, target_crs, context, label)
     if n_null and feedback is not None:
         feedback.pushInfo(f"{label}: {n_null} features with a null or empty geometry skipped.")
     if repair and kind in ("polygons", "lines"):
@@ -262,45 +297,77 @@ def crs_text(crs: QgsCoordinateReferenceSystem) -> str:
     return crs.authid() or crs.toWkt(QgsCoordinateReferenceSystem.WKT_PREFERRED)
 
 
-def _transform(geoms: np.ndarray, src, dst, context) -> np.ndarray:
-    """Reproject shapely geometries, vectorised over all coordinates.
+def _transform(geoms: np.ndarray, src, dst, context, label: str = "The data") -> np.ndarray:
+    """Reproject shapely geometries, vectorised over all coordinates; z values (when the
+    geometries have them) are carried along unchanged.
 
-    Uses Debian's pyproj (built on the same PROJ as QGIS, see DESIGN.md) when available,
-    else QGIS's own transform point by point.
+    Uses Debian's pyproj (built on the same PROJ as QGIS; docs/ARCHITECTURE.md, "Native
+    libraries") when available, else QGIS's own transform point by point.
     """
     if shapely.get_num_coordinates(geoms).sum() == 0:
         return geoms
+    has_z = bool(shapely.has_z(geoms).any())
     try:
         from pyproj import Transformer
 
-        tr = Transformer.from_crs(crs_text(src), crs_text(dst), always_xy=True)
+        try:
+            tr = Transformer.from_crs(crs_text(src), crs_text(dst), always_xy=True)
+        except Exception as exc:  # noqa: BLE001 - pyproj's CRSError / ProjError
+            raise QgsProcessingException(
+                f"{label}: its CRS ({crs_label(src)}) cannot be transformed to "
+                f"{crs_label(dst)}: {exc}") from exc
 
         def project(coords, _):
-            return np.column_stack(tr.transform(coords[:, 0], coords[:, 1]))
+            return np.column_stack([*tr.transform(coords[:, 0], coords[:, 1]), coords[:, 2:]])
     except ImportError:  # pragma: no cover - QGIS without pyproj
         ctx = context.transformContext() if context else QgsProject.instance().transformContext()
         qtr = QgsCoordinateTransform(src, dst, ctx)
 
         def project(coords, _):
-            return np.array([[p.x(), p.y()] for p in
-                             (qtr.transform(QgsPointXY(x, y)) for x, y in coords)])
-    out = coordinates.transform(shapely.force_2d(geoms), project)
+            xy = np.array([[p.x(), p.y()] for p in
+                           (qtr.transform(QgsPointXY(x, y)) for x, y in coords[:, :2])])
+            return np.column_stack([xy, coords[:, 2:]])
+    out = coordinates.transform(geoms if has_z else shapely.force_2d(geoms), project,
+                                include_z=has_z)
     if not np.isfinite(shapely.get_coordinates(out)).all():
         raise QgsProcessingException(
-            f"Some coordinates cannot be transformed from {src.authid()} to {dst.authid()}.")
+            f"{label}: some coordinates cannot be transformed from {crs_label(src)} to "
+            f"{crs_label(dst)} (outside the area where the CRS is defined?).")
     return out
 
 
-def reproject(geoms: np.ndarray, src, dst, context) -> np.ndarray:
+def reproject(geoms: np.ndarray, src, dst, context, label: str = "The data") -> np.ndarray:
+    """Geometries from CRS ``src`` to ``dst`` (z values kept); unchanged when either CRS is
+    missing (geometry-less tables) or both are the same."""
     if src == dst or not src.isValid() or not dst.isValid():
         return geoms
-    return _transform(np.asarray(geoms, dtype=object), src, dst, context)
+    return _transform(np.asarray(geoms, dtype=object), src, dst, context, label)
 
 
 # --------------------------------------------------------------------------- sinks
 
 _QVARIANT = {"int": QVariant.LongLong, "float": QVariant.Double, "str": QVariant.String,
              "bool": QVariant.Bool}
+
+
+_INT_TYPES = (QVariant.Int, QVariant.LongLong, QVariant.UInt, QVariant.ULongLong)
+
+
+def field_kind(field: QgsField) -> str:
+    """A QGIS field's type in the terms of :func:`make_fields`: int, float, bool or str."""
+    if field.type() in _INT_TYPES:
+        return "int"
+    if field.type() == QVariant.Double:
+        return "float"
+    return "bool" if field.type() == QVariant.Bool else "str"
+
+
+def carried_fields(fields: QgsFields, reserved=()) -> List[tuple]:
+    """(name, type) of a layer's own fields to carry to an output, leaving out ``reserved``
+    names (the computed ones win; compared case-insensitively, as GeoPackage and shapefiles
+    do) and 'fid' (the GeoPackage key)."""
+    reserved = {r.lower() for r in reserved} | {"fid"}
+    return [(f.name(), field_kind(f)) for f in fields if f.name().lower() not in reserved]
 
 
 def make_fields(spec: Sequence[tuple]) -> QgsFields:
@@ -317,24 +384,29 @@ def write_sink(alg, parameters, name: str, context, geoms: np.ndarray, table: pd
     """Write engine results to a feature sink parameter, back in ``out_crs``.
 
     ``spec`` lists the output fields (name, type); ``table`` holds their values per row.
-    Returns the destination id (None when the output was not requested).
+    Geometries with z values are written as such (``wkb_type`` gets its Z variant) and keep
+    their z through the reprojection. Returns the destination id (None when the output was
+    not requested).
     """
     fields = make_fields(spec)
+    geoms = np.asarray(geoms, dtype=object)
+    has_z = bool(len(geoms)) and bool(shapely.has_z(geoms).any())
+    if has_z:
+        wkb_type = QgsWkbTypes.addZ(wkb_type)
     sink, dest_id = alg.parameterAsSink(parameters, name, context, fields, wkb_type, out_crs)
     if sink is None:
         return None
-    geoms = np.asarray(geoms, dtype=object)
     if len(geoms):
-        geoms = reproject(geoms, work_crs, out_crs, context)
-    wkbs = shapely.to_wkb(geoms) if len(geoms) else []
+        geoms = reproject(geoms, work_crs, out_crs, context, f"Output {name}")
+    wkbs = shapely.to_wkb(geoms, output_dimension=3 if has_z else 2) if len(geoms) else []
     n = len(geoms)
     columns = [_column_values(table[f] if f in table else None, typ, n) for f, typ in spec]
     rows = list(zip(*columns)) if columns else [()] * n
     features = []
     multi = QgsWkbTypes.isMultiType(wkb_type)
     for i, wkb in enumerate(wkbs):
-        if feedback is not None and i % 1000 == 0 and feedback.isCanceled():
-            raise QgsProcessingException("Canceled by the user.")
+        if i % 1000 == 0:
+            stop_if_canceled(feedback)
         f = QgsFeature(fields)
         g = QgsGeometry()
         g.fromWkb(wkb)
@@ -385,11 +457,12 @@ def progress_for(feedback: Optional[QgsProcessingFeedback], start: float = 0.0,
 
 
 def run_engine(label: str, fn, *args, **kwargs):
-    """Call an engine function; its InputError becomes a QgsProcessingException naming ``label``."""
+    """Call an engine function: its :class:`InputError` becomes a QgsProcessingException
+    naming ``label``, its :class:`Canceled` a :class:`ProcessingCanceled`."""
     try:
         return fn(*args, **kwargs)
     except Canceled as exc:
-        raise QgsProcessingException(str(exc)) from exc
+        raise ProcessingCanceled(str(exc) or "Canceled by the user.") from exc
     except InputError as exc:
         raise QgsProcessingException(f"{label}: {exc}") from exc
 
@@ -398,17 +471,6 @@ def field_values(frame: Frame, field: Optional[str], default=None) -> np.ndarray
     if field and field in frame.attributes:
         return frame.attributes[field].to_numpy(dtype=object)
     return np.full(len(frame), default, dtype=object)
-
-
-def check_number(value, name: str, lo: float = None, hi: float = None):
-    """Raise a clear error for absurd numeric parameters (QGIS checks min/max only in the GUI)."""
-    if value is None or not math.isfinite(value):
-        raise QgsProcessingException(f"Parameter {name} must be a finite number.")
-    if lo is not None and value < lo:
-        raise QgsProcessingException(f"Parameter {name} = {value} is too small (minimum {lo}).")
-    if hi is not None and value > hi:
-        raise QgsProcessingException(f"Parameter {name} = {value} is too large (maximum {hi}).")
-    return value
 
 
 # --------------------------------------------------------------------------- OSM attributes
@@ -534,9 +596,11 @@ def read_raster(layer, work_crs: QgsCoordinateReferenceSystem, bounds, cell_size
     return dem
 
 
-def raster_cell_size(layer, work_crs, bounds, context, max_cells: int = 2048) -> float:
-    """Cell size (m) for a raster in the working CRS: its own resolution, at least 1 m, and
-    coarse enough that the input's extent spans at most ``max_cells`` cells."""
+def raster_cell_size(layer, work_crs, bounds, context, max_cells: int = 2048,
+                     min_cell: float = 1.0) -> float:
+    """Cell size (m) for a raster in the working CRS: its own resolution, at least
+    ``min_cell`` m, and coarse enough that the input's extent spans at most ``max_cells``
+    cells."""
     ext = layer.extent()
     native = max(layer.rasterUnitsPerPixelX(), layer.rasterUnitsPerPixelY())
     try:  # the resolution in metres: the length of one pixel's diagonal, transformed
@@ -547,19 +611,100 @@ def raster_cell_size(layer, work_crs, bounds, context, max_cells: int = 2048) ->
     except Exception:  # noqa: BLE001 - an unknown CRS: trust the number as metres
         native_m = native
     span = max(bounds[2] - bounds[0], bounds[3] - bounds[1])
-    cell = max(native_m if math.isfinite(native_m) and native_m > 0 else 1.0, 1.0)
+    cell = max(native_m if math.isfinite(native_m) and native_m > 0 else 1.0, min_cell)
     return max(cell, span / max_cells)
 
 
-def write_geotiff(path: str, dem, crs_wkt: str) -> None:
-    """Write a DemGrid as a single-band float32 GeoTIFF (NaN = no data) with GDAL."""
+def read_image(layer, work_crs: QgsCoordinateReferenceSystem, bounds, cell_size: float,
+               what: str = "Image"):
+    """All bands of an image layer warped into the working CRS over ``bounds`` with GDAL
+    (bilinear, its own data type), as an engine GeoImage whose ``valid`` mask is GDAL's
+    alpha (no data, outside the source, or the source's own alpha)."""
+    from osgeo import gdal
+
+    from ..imagery.aerial_image import GeoImage
+
+    if not layer.crs().isValid():
+        raise QgsProcessingException(
+            f"{what} '{layer.name()}' has no coordinate reference system (CRS). Assign its "
+            "CRS (Layer Properties > Source, or GDAL 'Assign projection') and run again.")
+    source = layer.source().split("|")[0]
+    x0, y0, x1, y1 = bounds
+    options = gdal.WarpOptions(
+        format="MEM", dstSRS=crs_text(work_crs), srcSRS=crs_text(layer.crs()) or None,
+        outputBounds=(x0, y0, x1, y1), xRes=cell_size, yRes=cell_size,
+        resampleAlg="bilinear", dstAlpha=True, multithread=False)
+    try:
+        ds = gdal.Warp("", source, options=options)
+    except RuntimeError as exc:
+        raise QgsProcessingException(f"{what} '{layer.name()}' cannot be read or reprojected: "
+                                     f"{exc}") from exc
+    if ds is None:
+        raise QgsProcessingException(f"{what} '{layer.name()}' cannot be read or reprojected: "
+                                     f"{gdal.GetLastErrorMsg() or 'unknown GDAL error'}.")
+    data = ds.ReadAsArray()
+    data = data[None] if data.ndim == 2 else data
+    valid = data[-1] > 0
+    if not valid.any():
+        raise QgsProcessingException(
+            f"{what} '{layer.name()}' has no value over the example's extent: check that "
+            "they overlap.")
+    return GeoImage(np.moveaxis(data[:-1], 0, -1), ds.GetGeoTransform(), valid)
+
+
+def write_image(path: str, image, alpha: np.ndarray, work_crs: QgsCoordinateReferenceSystem,
+                target_crs: QgsCoordinateReferenceSystem) -> None:
+    """An engine GeoImage as a tiled, compressed GeoTIFF in ``target_crs`` (warped there
+    with GDAL when it is not the working CRS) with an alpha band and averaged overviews
+    (halving until under 128 pixels, at least one level)."""
+    from osgeo import gdal, gdal_array
+
+    rows, cols, bands = image.array.shape
+    gdal_type = gdal_array.NumericTypeCodeToGDALTypeCode(image.array.dtype)
+    if gdal_type is None:
+        raise QgsProcessingException(f"Images of type {image.array.dtype} cannot be written.")
+    top = 255 if image.array.dtype == np.uint8 else \
+        np.iinfo(image.array.dtype).max if np.issubdtype(image.array.dtype, np.integer) else 1
+    mem = gdal.GetDriverByName("MEM").Create("", cols, rows, bands + 1, gdal_type)
+    mem.SetGeoTransform(tuple(image.geotransform))
+    mem.SetProjection(work_crs.toWkt())
+    for b in range(bands):
+        mem.GetRasterBand(b + 1).WriteArray(image.array[:, :, b])
+    mem.GetRasterBand(bands + 1).WriteArray(np.where(alpha > 0, top, 0).astype(image.array.dtype))
+    mem.GetRasterBand(bands + 1).SetColorInterpretation(gdal.GCI_AlphaBand)
+    if bands >= 3:
+        for b, ci in enumerate((gdal.GCI_RedBand, gdal.GCI_GreenBand, gdal.GCI_BlueBand)):
+            mem.GetRasterBand(b + 1).SetColorInterpretation(ci)
+    if target_crs.isValid() and target_crs != work_crs:
+        mem = gdal.Warp("", mem, options=gdal.WarpOptions(
+            format="MEM", dstSRS=crs_text(target_crs), srcAlpha=True, dstAlpha=True,
+            resampleAlg="bilinear", multithread=False))
+    creation = ["TILED=YES", "COMPRESS=DEFLATE", "ALPHA=YES", "BIGTIFF=IF_SAFER"]
+    if bands >= 3:
+        creation.append("PHOTOMETRIC=RGB")
+    out = gdal.Translate(str(path), mem, options=gdal.TranslateOptions(
+        format="GTiff", creationOptions=creation))
+    if out is None:
+        raise QgsProcessingException(f"The image cannot be written to {path}: "
+                                     f"{gdal.GetLastErrorMsg() or 'unknown GDAL error'}.")
+    levels, size = [2], max(out.RasterXSize, out.RasterYSize)
+    while size / (2 * levels[-1]) >= 128:
+        levels.append(2 * levels[-1])
+    out.BuildOverviews("AVERAGE", levels)
+    out.FlushCache()
+    out = None
+
+
+def write_geotiff(path: str, dem, crs_wkt: str, what: str = "The raster") -> None:
+    """Write a DemGrid as a single-band float32 GeoTIFF (NaN = no data) with GDAL; ``what``
+    names it in messages ('The generator image', 'The relief')."""
     from osgeo import gdal
 
     rows, cols = dem.array.shape
     driver = gdal.GetDriverByName("GTiff")
     ds = driver.Create(str(path), cols, rows, 1, gdal.GDT_Float32, options=["COMPRESS=DEFLATE"])
     if ds is None:
-        raise QgsProcessingException(f"The relief cannot be written to {path}: "
+        raise QgsProcessingException(f"{what} cannot be written to {path}: "
                                      f"{gdal.GetLastErrorMsg() or 'unknown GDAL error'}.")
     ds.SetGeoTransform(tuple(dem.geotransform))
     ds.SetProjection(crs_wkt)

@@ -24,7 +24,15 @@ ALGORITHMS = (
      "synthesis"),
     ("synthesize_roads_gan", "SynthesizeRoadsGan", "Synthesize roads (StreetGAN)", "synthesis"),
     ("raster_roads_to_vector", "RasterRoadsToVector", "Road raster to vector graph", "analysis"),
-    ("synthesize_buildings", "SynthesizeBuildings", "Synthesize buildings", "synthesis"),
+    ("synthesize_building_attributes", "SynthesizeBuildingAttributes",
+     "Synthesize building attributes (by example)", "synthesis"),
+    ("place_library_buildings", "PlaceLibraryBuildings",
+     "Place library buildings on parcels (best fit)", "synthesis"),
+    ("synthesize_part_buildings", "SynthesizePartBuildings", "Synthesize buildings from parts",
+     "synthesis"),
+    # deprecated (hidden in the toolbox): the three above behind one METHOD, for old models
+    ("synthesize_buildings", "SynthesizeBuildings",
+     "Synthesize buildings (deprecated: choose the method)", "synthesis"),
     ("synthesize_roads_random_walk", "SynthesizeRoadsRandomWalk",
      "Synthesize roads by random walks (intersection points)", "synthesis"),
     ("synthesize_footprints", "SynthesizeFootprints", "Synthesize building footprints",
@@ -32,10 +40,13 @@ ALGORITHMS = (
     ("split_domain", "SplitDomain", "Split domain into streets and parcels (Yang 2013)",
      "synthesis"),
     ("synthesize_roads", "SynthesizeRoads", "Synthesize roads (choose the method)", "synthesis"),
+    ("synthesize_aerial_image", "SynthesizeAerialImage",
+     "Synthesize aerial image of parcels (Aliaga et al. 2008)", "synthesis"),
     ("install_dependencies", "InstallDependencies", "Install Python dependencies", "setup"),
 )
 
 
 def algorithm_id(module: str) -> str:
-    """The algorithm id of a module: its name without underscores (DESIGN's contract)."""
+    """The algorithm id of a module: its name without underscores (docs/ARCHITECTURE.md,
+    "The toolbox contract")."""
     return module.replace("_", "")

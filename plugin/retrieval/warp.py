@@ -33,7 +33,7 @@ Perez, P., Gangnet, M., Blake, A. Poisson image editing. ACM TOG 22(3), 2003.
 """
 from __future__ import annotations
 
-from typing import Optional, Sequence, Tuple
+from typing import Optional, Sequence
 
 import numpy as np
 import shapely
@@ -45,7 +45,7 @@ from ..core import coordinates
 from ..core.progress import InputError
 
 __all__ = ["mean_value_coordinates", "warp_points", "warp_geometries", "sample_grid_warped",
-           "poisson_blend", "grid_cell_centres"]
+           "poisson_blend"]
 
 #: Relative tolerance under which a point counts as lying on a polygon edge or vertex.
 _ON_EDGE = 1e-10
@@ -186,13 +186,6 @@ def warp_geometries(geoms: Sequence, source: np.ndarray, target: np.ndarray,
         geoms = shapely.segmentize(geoms, max_segment)
     src, dst = _polygon_array(source), _polygon_array(target)
     return coordinates.transform(geoms, lambda xy, _: warp_points(xy, src, dst))
-
-
-def grid_cell_centres(geotransform, shape) -> Tuple[np.ndarray, np.ndarray]:
-    """x (cols,) and y (rows,) coordinates of the cell centres of a north-up grid."""
-    x0, dx, _, y0, _, dy = geotransform
-    rows, cols = shape
-    return x0 + dx * (np.arange(cols) + 0.5), y0 + dy * (np.arange(rows) + 0.5)
 
 
 def sample_grid_warped(cells_xy: np.ndarray, query: np.ndarray, example: np.ndarray,

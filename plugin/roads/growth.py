@@ -20,10 +20,16 @@ network from seed segments with a priority queue of road *proposals*:
 
 The network grows in two stages (sec. 4.2): major roads over the whole boundary, then the
 quarters, the faces of the major network (sec. 4.2.4), are filled with minor roads. Scharl
-closes the outskirts with a bulged convex hull (sec. 4.2.5) so that minor roads also reach
-the city edge; here the boundary itself plays that role: the quarters are the faces of the
-major roads together with the boundary's rings, so the outskirts (the boundary minus the
-major faces) become quarters too, split where major roads reach the boundary. Each quarter
+closes the outskirts with a *bulged convex hull* (sec. 4.2.5) so that minor roads also
+reach the city edge: when no boundary is given (growth is then bounded by the DEM's or the
+density map's extent, or around the sketched roads), the convex hull of the major nodes
+has each side split into four with the three new nodes pushed away from its barycentre by
+a random amount (:func:`bulged_hull`), the quarters are the faces of the major roads
+closed by that outline, and the outline is dropped once they are filled. With a boundary,
+the boundary itself plays that role: the quarters are the faces of the major roads
+together with the boundary's rings, so the outskirts (the boundary minus the major faces)
+become quarters too, split where major roads reach the boundary. At the end, dead-end
+roads are removed (Fig. 4.12; ``remove_dead_ends``). Each quarter
 gets a seed street at its barycentre (sec. 4.2.1); places left farther than
 ``GAP_FACTOR`` segment lengths from every road get further seeds (Scharl's random fallback
 seeds, scored by their distance to the roads).
@@ -58,13 +64,15 @@ import pandas as pd
 import shapely
 
 from ..core.progress import InputError, Progress, ensure
-from ..network.blocks import minimum_rectangles, planar_faces
+from ..core.geometry import minimum_rectangles
+from ..network.blocks import planar_faces
 from ..network.street_graph import clean_network
 from ..retrieval.shape_context import DemGrid
 
 __all__ = [
     "PATTERNS", "MAJOR", "MINOR", "ROAD_CLASSES", "MIN_ANGLE", "MAX_DEGREE", "GAP_FACTOR",
-    "GrowthSettings", "GrowthResult", "grow_roads", "segment_slopes", "chord_slopes",
+    "GrowthSettings", "GrowthResult", "grow_roads", "bulged_hull", "remove_dead_ends",
+    "segment_slopes", "chord_slopes",
     "network_statistics", "mask_polygons",
 ]
 
@@ -135,6 +143,10 @@ class GrowthSettings:
         Grow major roads; False keeps only the sketched major roads (artist control).
     fill_quarters : bool
         Fill the quarters with minor roads.
+    remove_dead_ends : bool
+        Remove dead-end roads at the end of growth (Scharl Fig. 4.12: "the final street
+        network with ... dead end roads removed"): grown edges with a free end are pruned
+        until every grown street ends at a junction; sketched roads are kept.
     """
 
     major_pattern: str = "grid"
@@ -153,6 +165,7 @@ class GrowthSettings:
     minor_width: float = 8.0
     grow_major: bool = True
     fill_quarters: bool = True
+    remove_dead_ends: bool = True
 
     def validated(self) -> "GrowthSettings":
         """The settings, or :class:`InputError` naming the first absurd value."""
@@ -1056,8 +1069,10 @@ def grow_roads(boundary, *, settings: Optional[GrowthSettings] = None, major_roa
 
     Parameters
     ----------
-    boundary : Polygon / MultiPolygon or array of them, metric CRS
-        The city region (Scharl's mask, sec. 4.2.3): every road lies inside it.
+    boundary : Polygon / MultiPolygon or array of them, metric CRS, optional
+        The city region (Scharl's mask, sec. 4.2.3): every road lies inside it. None:
+        roads grow inside the DEM's (or density map's, or the sketch's) extent and the
+        outskirts are closed by the bulged convex hull of the major nodes (sec. 4.2.5).
     settings : GrowthSettings
         Patterns, lengths, angles, probabilities, distances, slope limit, cap.
     major_roads : array of LineString, optional
@@ -1100,7 +1115,12 @@ def grow_roads(boundary, *, settings: Optional[GrowthSettings] = None, major_roa
     progress = ensure(progress)
     s = (settings or GrowthSettings()).validated()
     rng = np.random.default_rng(seed)
-    area = _as_area(boundary, "boundary", required=True)
+    dem = _as_grid(dem, "DEM")
+    dens = _as_grid(density, "density map")
+    area = _as_area(boundary, "boundary", required=boundary is not None)
+    hull_quarters = area is None
+    if area is None:
+        area = _growth_extent(dem, dens, major_roads, s)
     obst = _as_area(obstacles, "obstacles", required=False)
     free = area if obst is None else shapely.difference(area, obst)
     if free.is_empty or free.area < 1e-6 * area.area:
@@ -1110,8 +1130,6 @@ def grow_roads(boundary, *, settings: Optional[GrowthSettings] = None, major_roa
     if extent[0] < 0.3 * shortest:
         raise InputError(f"the boundary ({extent[0]:.1f} m across) is too small for one "
                          f"segment of {0.3 * shortest:g} m (30 % of the shortest segment length)")
-    dem = _as_grid(dem, "DEM")
-    dens = _as_grid(density, "density map")
     if center is None:
         c = area.centroid
         center = (c.x, c.y) if area.covers(c) else area.representative_point().coords[0]
@@ -1137,7 +1155,12 @@ def grow_roads(boundary, *, settings: Optional[GrowthSettings] = None, major_roa
         progress.step(0.35)
 
         # ---- stage 2: quarters (faces of the major network + outskirts), minor roads
-        quarters = _quarters(g, area, free, s) if s.fill_quarters else []
+        hull = None
+        if hull_quarters and s.fill_quarters:
+            hull = bulged_hull(g.xy[np.unique(np.r_[g.su[:g.n_segs], g.sv[:g.n_segs]])],
+                               rng, area)
+        quarters = _quarters(g, area if hull is None else hull, free, s) \
+            if s.fill_quarters else []
         minor_pattern = PATTERNS.index(s.minor_pattern)
         axes = _grid_axes(quarters) if len(quarters) else []
         tols = shapely.buffer(np.asarray(quarters, dtype=object), _MASK_TOLERANCE,
@@ -1156,12 +1179,16 @@ def grow_roads(boundary, *, settings: Optional[GrowthSettings] = None, major_roa
         raise InputError(f"no road could be grown: the free part of the boundary is too small, "
                          f"too steep or too fragmented for segments of {shortest:g} m")
     result = _finish(g)
+    n_dead = 0
+    if s.remove_dead_ends:
+        result, n_dead = remove_dead_ends(result)
     progress.step(1.0)
     result.stats.update({
         "segments": g.n_grown, "major_segments": g.grown[MAJOR],
         "minor_segments": g.grown[MINOR], "sketched_segments": n_sketch,
         "proposals": g.proposals, "rejected": dict(sorted(g.rejected.items())),
         "quarters": len(quarters), "seeds": g.seeds, "capped": g.capped,
+        "dead_ends_removed": n_dead, "bulged_hull": hull is not None,
         "seconds": time.perf_counter() - t_start,
     })
     progress.info(
@@ -1169,6 +1196,90 @@ def grow_roads(boundary, *, settings: Optional[GrowthSettings] = None, major_roa
         f"{g.proposals} proposals in {len(quarters)} quarters"
         + (f"; the cap of {s.max_segments} segments was reached" if g.capped else "") + ".")
     return result
+
+
+def _growth_extent(dem, dens, major_roads, s: GrowthSettings):
+    """Where roads may grow when no boundary is given: the DEM's extent, else the density
+    map's, else the sketched major roads' envelope grown by a major segment length."""
+    for grid in (dem, dens):
+        if grid is not None:
+            return shapely.box(*_grid_bounds(grid))
+    if major_roads is not None and len(np.atleast_1d(np.asarray(major_roads, dtype=object))):
+        lines = np.atleast_1d(np.asarray(major_roads, dtype=object))
+        return shapely.envelope(shapely.buffer(shapely.union_all(lines), s.major_length))
+    raise InputError("no boundary: give a boundary polygon, or a DEM, a density map or "
+                     "sketched major roads whose extent bounds the growth")
+
+
+def _grid_bounds(grid: DemGrid):
+    rows, cols = grid.array.shape
+    x0, dx, _, y0, _, dy = grid.geotransform
+    xs, ys = (x0, x0 + cols * dx), (y0, y0 + rows * dy)
+    return min(xs), min(ys), max(xs), max(ys)
+
+
+def bulged_hull(points: np.ndarray, rng: np.random.Generator, clip=None,
+                bulge: float = 0.25):
+    """Scharl's bulged convex hull of the major nodes (sec. 4.2.5).
+
+    "Each line segment of the convex hull is subdivided into 4 new segments, creating 3
+    new nodes. Each of these nodes is displaced away from [the barycentre] C by a random
+    value, forming an irregular, not necessarily convex city outline." The displacement
+    is uniform in [0, ``bulge``] x the side's length; the outline is clipped to ``clip``.
+
+    Returns a Polygon, or None when the points span no area.
+    """
+    pts = np.asarray(points, dtype=float).reshape(-1, 2)
+    if len(pts) < 3:
+        return None
+    hull = shapely.convex_hull(shapely.multipoints(pts))
+    if shapely.get_type_id(hull) != 3 or hull.area <= 0:
+        return None
+    ring = shapely.get_coordinates(shapely.geometry.polygon.orient(hull).exterior)
+    c = np.asarray(hull.centroid.coords[0])
+    out = []
+    for a, b in zip(ring[:-1], ring[1:]):
+        out.append(a)
+        length = float(np.hypot(*(b - a)))
+        for f in (0.25, 0.5, 0.75):
+            p = a + f * (b - a)
+            away = p - c
+            away /= max(float(np.hypot(*away)), 1e-12)
+            out.append(p + away * rng.uniform(0.0, bulge) * length)
+    poly = shapely.make_valid(shapely.Polygon(np.vstack([out, out[:1]])))
+    poly = shapely.union_all([q for q in shapely.get_parts(poly) if shapely.get_type_id(q) == 3])
+    if clip is not None:
+        poly = shapely.intersection(poly, clip)
+    parts = [q for q in shapely.get_parts(poly) if shapely.get_type_id(q) == 3]
+    return max(parts, key=lambda q: q.area) if parts else None
+
+
+def remove_dead_ends(result: "GrowthResult"):
+    """Prune grown dead-end roads (Scharl Fig. 4.12): edges with an end of degree 1 are
+    removed until none is left; sketched roads stay. Nothing is pruned when that would
+    remove every grown edge (a network that is all tree). Returns (result, edges removed).
+    """
+    geoms = result.geometry
+    if len(geoms) == 0:
+        return result, 0
+    ends = np.vstack([shapely.get_coordinates(shapely.get_point(geoms, 0)),
+                      shapely.get_coordinates(shapely.get_point(geoms, -1))])
+    _, node = np.unique(np.round(ends, 6), axis=0, return_inverse=True)
+    node = node.ravel()
+    u, v = node[:len(geoms)], node[len(geoms):]
+    keep = np.ones(len(geoms), dtype=bool)
+    sketched = result.pattern == "sketch"
+    while True:
+        deg = np.bincount(np.r_[u[keep], v[keep]], minlength=node.max() + 1)
+        dead = keep & ~sketched & ((deg[u] == 1) | (deg[v] == 1))
+        if not dead.any():
+            break
+        keep &= ~dead
+    if not (keep & ~sketched).any():
+        return result, 0
+    n = int((~keep).sum())
+    return GrowthResult(geoms[keep], result.level[keep], result.pattern[keep],
+                        result.width[keep], result.stats), n
 
 
 # --------------------------------------------------------------------------- stage helpers

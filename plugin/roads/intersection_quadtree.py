@@ -43,6 +43,7 @@ import shapely
 from scipy import stats
 from scipy.spatial import cKDTree
 
+from ..core.geometry import minimum_rectangle_corners
 from ..core.progress import InputError
 
 __all__ = ["REQUIRED_FIELDS", "PointSet", "points_from_table", "points_from_roads",
@@ -285,12 +286,9 @@ def build_quadtree(points: PointSet, min_points: int = 8, min_area: float = 2500
     if n == 0:
         raise InputError("no intersection points")
     hull = shapely.multipoints(xy)
-    rect = shapely.oriented_envelope(hull)
-    angle = 0.0
-    if shapely.get_type_id(rect) == 3:
-        c = shapely.get_coordinates(rect)[:4]
-        e = c[1] - c[0]
-        angle = float(np.arctan2(e[1], e[0]))
+    c = minimum_rectangle_corners([hull])[0]
+    e = c[1] - c[0]
+    angle = float(np.arctan2(e[1], e[0])) if np.isfinite(e).all() and e.any() else 0.0
     rot = _rotation(-angle)
     local = xy @ rot.T
     lo, hi = local.min(axis=0) - 1e-6, local.max(axis=0) + 1e-6

@@ -223,8 +223,8 @@ def _read_buildings(spec: str, work_crs: str):
 
 
 def _read_roads(spec: str, work_crs: str):
-    """Road lines (drivable classes when OSM) and the arterials among them (the rule of
-    urbansynth:synthesizebuildings: level 0, else the arterial OSM classes)."""
+    """Road lines (drivable classes when OSM) and the arterials among them, by the rule of
+    the building tools (:func:`street_graph.drivable_and_arterial`)."""
     from ..network import street_graph as roads
 
     src = distributed.parse_source(spec)
@@ -232,16 +232,11 @@ def _read_roads(spec: str, work_crs: str):
     df = df[df.geometry.notna()]
     if len(df) == 0 or not set(shapely.get_type_id(df.geometry.values).tolist()) <= {1, 5}:
         raise InputError(f"{src}: roads must be a non-empty line layer")
-    if "highway" in df.columns and df.highway.isin(roads.DRIVABLE_CLASSES).any():
-        df = df[df.highway.isin(roads.DRIVABLE_CLASSES)]
-    if "level" in df.columns:
-        art = (pd.to_numeric(df["level"], errors="coerce") == 0).to_numpy()
-    elif "highway" in df.columns:
-        art = df.highway.isin(roads.ARTERIAL_CLASSES).to_numpy()
-    else:
-        art = np.zeros(len(df), dtype=bool)
+    keep, art = roads.drivable_and_arterial(
+        df["highway"].to_numpy(dtype=object) if "highway" in df.columns else None,
+        df["level"].to_numpy(dtype=object) if "level" in df.columns else None, len(df))
     g = distributed._to_metric(df, work_crs)
-    return g, g[art]
+    return g[keep], g[art]
 
 
 def _attributes(args) -> dict:

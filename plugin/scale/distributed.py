@@ -48,7 +48,6 @@ Hartmann, S., thesis ch. 5.1 / 5.2 (footprints per block); Dask distributed,
 """
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -59,16 +58,17 @@ import pandas as pd
 import shapely
 
 from ..buildings import footprints
+from ..core import crs as crs_rule
+from ..core.ids import ids_or_numbers
 from ..core.progress import InputError, Progress, ensure
 
 __all__ = ["Source", "parse_source", "metric_crs", "read_layer", "BlockTable", "read_blocks",
            "read_lines", "morton_keys", "spatial_partitions", "RoadIndex", "FootprintJob",
            "footprints_serial", "footprints_distributed", "write_footprints",
-           "same_footprints", "gan_generate_distributed", "gan_synthesize_distributed",
+           "gan_generate_distributed", "gan_synthesize_distributed",
            "read_area", "write_lines", "AttributeJob", "read_footprints", "halo_partitions",
            "attributes_serial", "attributes_distributed"]
 
-WEB_MERCATOR = {3857, 900913, 3785, 102100, 102113}
 
 
 # --------------------------------------------------------------------------- sources
@@ -106,19 +106,22 @@ def _pyproj_crs(crs):
 
 
 def metric_crs(crs, bounds_lonlat) -> str:
-    """The CRS the engine works in, by the plugin's rule (:func:`qgis_io.metric_crs`):
-    a projected CRS in metres as is, except Web Mercator; otherwise the UTM zone of the
-    data's centre. ``bounds_lonlat``: (xmin, ymin, xmax, ymax) in degrees."""
-    c = _pyproj_crs(crs) if crs is not None else None
-    if c is not None and c.is_projected and c.to_epsg() not in WEB_MERCATOR and \
-            c.axis_info and all(a.unit_name in ("metre", "meter") for a in c.axis_info[:2]):
-        return c.to_wkt()
-    lon = (bounds_lonlat[0] + bounds_lonlat[2]) / 2.0
-    lat = (bounds_lonlat[1] + bounds_lonlat[3]) / 2.0
-    if not (math.isfinite(lon) and math.isfinite(lat)):
-        raise InputError("cannot find a metric CRS for the data: its extent is not finite")
-    zone = int((lon + 180.0) // 6.0) % 60 + 1
-    return f"EPSG:{32600 + zone if lat >= 0 else 32700 + zone}"
+    """The CRS the engine works in for a layer in ``crs`` (a pyproj CRS or anything it
+    reads), by the plugin's rule :func:`core.crs.working_crs`: the CRS itself (as WKT) when
+    it is projected in metres and not Web Mercator, else the UTM zone of the data's centre.
+    ``bounds_lonlat``: (xmin, ymin, xmax, ymax) in degrees. A layer without a CRS is refused
+    (its units are unknown: a guess would give silently wrong sizes)."""
+    if crs is None:
+        raise InputError("the layer has no coordinate reference system (CRS), so its units "
+                         "are unknown: assign its CRS and run again")
+    c = _pyproj_crs(crs)
+    authority = c.to_authority()
+    metres = c.is_projected and bool(c.axis_info) and \
+        all(a.unit_name in ("metre", "meter") for a in c.axis_info[:2])
+    centre = ((bounds_lonlat[0] + bounds_lonlat[2]) / 2.0,
+              (bounds_lonlat[1] + bounds_lonlat[3]) / 2.0)
+    code = crs_rule.working_crs(":".join(authority) if authority else None, metres, centre)
+    return c.to_wkt() if code is None else code
 
 
 def read_layer(source: Source, fids: Optional[Sequence[int]] = None, columns=None):
@@ -179,8 +182,7 @@ class BlockTable:
 def _block_ids(df) -> np.ndarray:
     """The layer's block_id when it is a unique whole number per block, else 1..n (the
     rule of urbansynth:synthesizefootprints)."""
-    ids = footprints.output_block_ids(df["block_id"]) if "block_id" in df.columns else None
-    return np.arange(1, len(df) + 1, dtype=np.int64) if ids is None else ids
+    return ids_or_numbers(df["block_id"] if "block_id" in df.columns else None, len(df))
 
 
 def _polygon_table(source: str, df, ids: np.ndarray, work_crs) -> "BlockTable":
@@ -424,25 +426,6 @@ def write_footprints(path: str, result: footprints.FootprintResult, work_crs: st
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     gdf.to_file(path, layer=layer, driver="GPKG", engine="pyogrio")
     return len(gdf)
-
-
-def same_footprints(a: footprints.FootprintResult, b: footprints.FootprintResult,
-                    tol: float = 0.0) -> Optional[str]:
-    """None when two results hold the same footprints in the same order (WKB-equal, or
-    coordinates within ``tol``) with the same attributes; else what differs."""
-    if len(a.geometry) != len(b.geometry):
-        return f"{len(a.geometry)} vs {len(b.geometry)} footprints"
-    ga, gb = np.asarray(a.geometry, dtype=object), np.asarray(b.geometry, dtype=object)
-    same = shapely.to_wkb(ga) == shapely.to_wkb(gb) if tol == 0 else \
-        shapely.equals_exact(ga, gb, tolerance=tol)
-    if not np.all(same):
-        return f"{int((~np.asarray(same)).sum())} footprints differ in geometry"
-    ta, tb = a.table.reset_index(drop=True), b.table.reset_index(drop=True)
-    try:
-        pd.testing.assert_frame_equal(ta, tb, check_dtype=False)
-    except AssertionError as exc:
-        return f"attributes differ: {exc}"
-    return None
 
 
 # --------------------------------------------------------------------------- StreetGAN tiles

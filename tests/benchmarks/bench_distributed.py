@@ -51,6 +51,7 @@ from urban_synthesis.plugin.retrieval import database  # noqa: E402
 from urban_synthesis.plugin.scale import distributed  # noqa: E402
 from urban_synthesis.plugin.buildings import footprints  # noqa: E402
 from urban_synthesis.plugin.network import street_graph as roads  # noqa: E402
+from helpers import same_footprints  # noqa: E402
 
 TILES = 10
 GAN_SIDES_KM = (3, 12)
@@ -128,7 +129,7 @@ def main():
                     blocks=len(b), footprints=len(res.geometry), seconds=td,
                     blocks_per_s=len(b) / td, speedup=ts / td,
                     block_seconds=float(res.blocks.seconds.sum()),
-                    equal_to_serial=distributed.same_footprints(serial, res) is None)
+                    equal_to_serial=same_footprints(serial, res) is None)
             print(f"  {method} done, load average {os.getloadavg()[0]:.2f}", flush=True)
         results["runs"] = rows
         results["gan"] = bench_gan()

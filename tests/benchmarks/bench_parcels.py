@@ -17,8 +17,17 @@ Villagepark. p_n counts parcels per km² of the blocks (Yang: of the whole regio
 included; our density is per km² of block land, so it is higher for the same parcels).
 
 Time per block is the best of several runs of :func:`parcels.subdivide_blocks` (shrinking
-included) on Bubeneč (7 blocks) and on Helsinki's 54 blocks. Writes
-``tests/benchmarks/results/parcels.json``.
+included) on Bubeneč (7 blocks) and on Helsinki's 54 blocks.
+
+Liechtenstein (issue 19, part 4): ``voronoi-obb`` (Aliaga et al. 2008, sec. 3.1.2) with the
+default settings on the real blocks of each of the eleven municipalities (OSM admin_level
+8; blocks of the whole country's drivable OSM streets by the network engine, a block
+belonging to the town its inner point lies in), never tuned on: lots narrower than the
+minimum width (the short side of the minimum bounding rectangle) and without street access
+must both be zero; beside them the median width and area, the share of lots more than ten
+times longer than wide, and the numbers of the method before this change (commit 98b3624,
+the same blocks and seed). CPU and wall seconds per town (a shared machine: wall time is
+noisy). Writes ``tests/benchmarks/results/parcels.json``.
 """
 from __future__ import annotations
 
@@ -31,8 +40,9 @@ from pathlib import Path
 import shapely
 
 ROOT = Path(__file__).resolve().parents[2]
-if str(ROOT / "build" / "plugins") not in sys.path:
-    sys.path.insert(0, str(ROOT / "build" / "plugins"))
+for _path in (ROOT / "build" / "plugins", ROOT / "tests"):
+    if str(_path) not in sys.path:
+        sys.path.insert(0, str(_path))
 
 from urban_synthesis.plugin.network import blocks  # noqa: E402
 from urban_synthesis.plugin.measure import metrics  # noqa: E402
@@ -40,7 +50,7 @@ from urban_synthesis.plugin.parcels import subdivision as parcels  # noqa: E402
 from urban_synthesis.plugin.network import street_graph as roads  # noqa: E402
 
 __all__ = ["YANG_TABLE1", "YANG_FIG12_UNDESIRABLE", "bubenec_inputs", "yang_metrics",
-           "bench_parcels"]
+           "bench_towns", "bench_parcels"]
 
 #: Yang et al. 2013, Table 1: p_n (per km²), p_angle (°), p_area per region and method.
 YANG_TABLE1 = {
@@ -54,12 +64,27 @@ YANG_TABLE1 = {
 #: Yang et al. 2013, Fig. 12 (Salisbury): number of undesirable parcels.
 YANG_FIG12_UNDESIRABLE = {"CE1": 119, "Map": 138, "CE2": 57, "Our": 48}
 
+#: voronoi-obb before issue 19 (commit 98b3624) on the same blocks, seed 1, defaults:
+#: town -> (lots, median width m, lots under 8 m, lots without street access).
+BEFORE_ISSUE_19 = {
+    "Triesen": (3772, 5.2, 2469, 0), "Schellenberg": (550, 4.1, 389, 0),
+    "Gamprin": (8429, 0.8, 8300, 6562), "Triesenberg": (4998, 3.7, 4042, 187),
+    "Eschen": (4156, 4.7, 3157, 294), "Ruggell": (3880, 1.5, 3484, 1806),
+    "Mauren": (4907, 3.2, 4160, 854), "Schaan": (3907, 6.9, 2674, 570),
+    "Balzers": (3750, 5.9, 2478, 378), "Planken": (6152, 0.9, 6034, 5522),
+    "Vaduz": (6798, 2.5, 5467, 709),
+}
+
 RUNS = [  # label, method, settings
     ("recursive (defaults)", "recursive", {}),
     ("recursive, max 500 m²", "recursive", {"max_area": 500}),
     ("recursive, max 500 m², irregularity 1", "recursive", {"max_area": 500, "irregularity": 1.0}),
     ("skeleton (defaults)", "skeleton", {}),
     ("skeleton, max 500 m²", "skeleton", {"max_area": 500}),
+    ("voronoi-obb (defaults, 486 m²)", "voronoi-obb", {}),
+    ("voronoi-obb, cadastre areas", "voronoi-obb", {"options": "cadastre"}),
+    ("voronoi-obb, cadastre areas, its limits (3 m, 50 m²)", "voronoi-obb",
+     {"options": "cadastre", "min_width": 3.0, "min_area": 50.0}),
 ]
 
 
@@ -110,10 +135,15 @@ def bench_parcels(seed: int = 1) -> dict:
     rows = [dict(label="Bubeneč cadastre (real parcels in the blocks)", method="cadastre",
                  **yang_metrics(real, area))]
     for label, method, kwargs in RUNS:
+        if kwargs.get("options") == "cadastre":
+            kwargs = dict(kwargs, options={"parcel_areas": shapely.area(real)})
         settings = parcels.SubdivisionSettings(**kwargs)
         seconds, result = _best(lambda: parcels.subdivide_blocks(
             extraction.geometry, method, settings, seed=seed, roads=streets))
-        rows.append(dict(label=label, method=method, settings=kwargs,
+        _, width, _ = blocks.minimum_rectangles(result.geometry)
+        rows.append(dict(label=label, method=method,
+                         settings={k: v for k, v in kwargs.items() if k != "options"},
+                         under_min_width=int((width < settings.min_width).sum()),
                          ms_per_block=1000 * seconds / n_blocks,
                          with_access_share=float(result.table.has_street_access.mean()),
                          over_max_area=result.stats["n_over_max_area"],
@@ -128,6 +158,7 @@ def bench_parcels(seed: int = 1) -> dict:
                             "valid": bool(shapely.is_valid(result.geometry).all()),
                             "with_access_share": float(result.table.has_street_access.mean())}
     return {"machine": {"python": platform.python_version(), "platform": platform.platform()},
+            "liechtenstein": bench_towns(seed),
             "bubenec": {"n_blocks": n_blocks, "blocks_km2": shapely.area(area) / 1e6,
                         "rows": rows},
             "helsinki": helsinki,
@@ -136,19 +167,70 @@ def bench_parcels(seed: int = 1) -> dict:
             "yang2013_fig12_undesirable_salisbury": YANG_FIG12_UNDESIRABLE}
 
 
+def bench_towns(seed: int = 1, method: str = "voronoi-obb") -> list:
+    """One row per Liechtenstein municipality; see the module doc."""
+    import numpy as np
+
+    from helpers import liechtenstein_town_blocks, liechtenstein_towns
+
+    settings = parcels.SubdivisionSettings()
+    rows = []
+    for town in liechtenstein_towns():
+        streets, town_blocks = liechtenstein_town_blocks(town)
+        t0, c0 = time.perf_counter(), time.process_time()
+        result = parcels.subdivide_blocks(town_blocks, method, settings, seed=seed,
+                                          roads=streets)
+        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+        length, width, _ = blocks.minimum_rectangles(result.geometry)
+        rows.append({
+            "town": town, "n_blocks": len(town_blocks), "n_lots": len(result.geometry),
+            "median_width_m": float(np.median(width)),
+            "under_min_width": int((width < settings.min_width).sum()),
+            "without_access": int((~result.table.has_street_access).sum()),
+            "longer_than_10x_share": float(np.mean(length > 10 * width)),
+            "median_area_m2": float(np.median(result.table.area_m2)),
+            "valid": bool(shapely.is_valid(result.geometry).all()),
+            "cpu_s": cpu, "wall_s": wall,
+            "before_issue_19": dict(zip(("n_lots", "median_width_m", "under_min_width",
+                                         "without_access"), BEFORE_ISSUE_19.get(town, ()))),
+        })
+    return rows
+
+
 def _print(result: dict) -> None:
+    towns = result["liechtenstein"]
+    print("Liechtenstein towns, voronoi-obb, defaults (min width 8 m, lot width 18 m -> "
+          "486 m²); before = commit 98b3624\n")
+    head = (f"{'town':13s} {'blocks':>6s} {'lots':>5s} {'med. width':>10s} {'< 8 m':>6s} "
+            f"{'no access':>9s} {'>10:1':>6s} {'med. m²':>7s} {'cpu s':>6s} {'wall s':>6s}"
+            f" | {'before: lots':>12s} {'med. width':>10s} {'< 8 m':>6s} {'no access':>9s}")
+    print(head)
+    print("-" * len(head))
+    for r in towns:
+        b = r["before_issue_19"]
+        print(f"{r['town']:13s} {r['n_blocks']:6d} {r['n_lots']:5d} {r['median_width_m']:10.1f} "
+              f"{r['under_min_width']:6d} {r['without_access']:9d} "
+              f"{100 * r['longer_than_10x_share']:5.1f}% {r['median_area_m2']:7.0f} "
+              f"{r['cpu_s']:6.2f} {r['wall_s']:6.2f} | {b.get('n_lots', 0):12d} "
+              f"{b.get('median_width_m', 0):10.1f} {b.get('under_min_width', 0):6d} "
+              f"{b.get('without_access', 0):9d}")
+    print(f"goal: zero lots under 8 m and zero without access in every town -> "
+          f"{sum(r['under_min_width'] for r in towns)} and "
+          f"{sum(r['without_access'] for r in towns)}\n")
     b = result["bubenec"]
     print(f"Bubeneč: {b['n_blocks']} blocks, {b['blocks_km2']:.4f} km² of block land; "
           "Yang 2013 parcel metrics (p_n per km² of blocks)\n")
-    head = f"{'':46s} {'parcels':>7s} {'p_n/km²':>8s} {'p_angle':>7s} {'p_area':>6s} " \
-           f"{'undesirable':>14s} {'ms/block':>8s}"
+    head = f"{'':52s} {'parcels':>7s} {'p_n/km²':>8s} {'p_angle':>7s} {'p_area':>6s} " \
+           f"{'undesirable':>14s} {'ms/block':>8s} {'< min w':>7s} {'access':>6s}"
     print(head)
     print("-" * len(head))
     for r in b["rows"]:
         ms = f"{r['ms_per_block']:8.1f}" if "ms_per_block" in r else f"{'':8s}"
-        print(f"{r['label']:46s} {r['count']:7.0f} {r['p_n_per_km2']:8.0f} {r['p_angle']:7.2f} "
+        extra = f" {r['under_min_width']:7d} {100 * r['with_access_share']:5.0f}%" \
+            if "under_min_width" in r else ""
+        print(f"{r['label']:52s} {r['count']:7.0f} {r['p_n_per_km2']:8.0f} {r['p_angle']:7.2f} "
               f"{r['p_area']:6.3f} {r['undesirable_count']:5.0f} ({r['undesirable_share']:4.1f} %) "
-              f"{ms}")
+              f"{ms}{extra}")
     print("\nYang et al. 2013, Table 1 (p_n per km² of the region; undesirable: Fig. 12)")
     for (region, method), (p_n, p_angle, p_area) in YANG_TABLE1.items():
         if method == "CE2":
@@ -156,7 +238,7 @@ def _print(result: dict) -> None:
         bad = YANG_FIG12_UNDESIRABLE.get(method) if region == "Salisbury" else None
         label = f"{region} {method}" + (" (real)" if method == "Map" else " (CityEngine)"
                                         if method == "CE1" else "")
-        print(f"{label:46s} {'':7s} {p_n:8.0f} {p_angle:7.2f} {p_area:6.3f} "
+        print(f"{label:52s} {'':7s} {p_n:8.0f} {p_angle:7.2f} {p_area:6.3f} "
               f"{'' if bad is None else f'{bad:5d}':>14s}")
     h = result["helsinki"]
     print(f"\nHelsinki ({h['n_blocks']} blocks): " + ", ".join(

@@ -1,0 +1,70 @@
+"""The working-CRS rule: which metric CRS the engine works in for a layer.
+
+Every algorithm works in a local metric CRS and writes its results back in the input CRS
+(docs/ARCHITECTURE.md, "Data flow"). A projected CRS in metres is used as it is, except
+Web Mercator, whose scale error (1.5x at 50 degrees latitude) would make every length and
+area wrong; anything else (geographic degrees, feet, Web Mercator) is replaced by the UTM
+zone of the data's centre. Both the QGIS adapter (``qgis_glue.qgis_io``) and the QGIS-free
+Dask runner (``scale.distributed``) decide with :func:`working_crs`, each describing its
+CRS object in the plain terms below.
+
+Examples
+--------
+>>> working_crs("EPSG:4326", projected_in_metres=False, centre_lonlat=(24.94, 60.17))
+'EPSG:32635'
+>>> working_crs("EPSG:3857", projected_in_metres=True, centre_lonlat=(14.4, 50.1))
+'EPSG:32633'
+>>> working_crs("EPSG:32633", projected_in_metres=True, centre_lonlat=(14.4, 50.1)) is None
+True
+>>> utm_zone(-70.6, -33.4)
+'EPSG:32719'
+"""
+from __future__ import annotations
+
+import math
+from typing import Callable, Optional, Tuple, Union
+
+from .progress import InputError
+
+__all__ = ["WEB_MERCATOR", "is_web_mercator", "utm_zone", "working_crs"]
+
+#: Authority ids of Web Mercator (kept out of the working CRS: its scale error).
+WEB_MERCATOR = frozenset({"EPSG:3857", "EPSG:900913", "EPSG:3785", "EPSG:102100",
+                          "EPSG:102113", "ESRI:102100", "ESRI:102113"})
+
+LonLat = Tuple[float, float]
+
+
+def is_web_mercator(authid: Optional[str]) -> bool:
+    """Whether an authority id (``'EPSG:3857'``) names Web Mercator."""
+    return bool(authid) and str(authid).upper() in WEB_MERCATOR
+
+
+def utm_zone(lon: float, lat: float) -> str:
+    """The authority id of the UTM zone (WGS 84) holding a point given in degrees."""
+    if not (math.isfinite(lon) and math.isfinite(lat)):
+        raise InputError("cannot find a metric CRS for the data: its extent is not finite")
+    zone = int((lon + 180.0) // 6.0) % 60 + 1
+    return f"EPSG:{32600 + zone if lat >= 0 else 32700 + zone}"
+
+
+def working_crs(authid: Optional[str], projected_in_metres: bool,
+                centre_lonlat: Union[LonLat, Callable[[], LonLat]]) -> Optional[str]:
+    """The metric CRS the engine works in for data in a CRS.
+
+    Parameters
+    ----------
+    authid : the CRS's authority id ('EPSG:3857'), or None when it has none
+    projected_in_metres : whether the CRS is projected with metre units
+    centre_lonlat : the data's centre in degrees (lon, lat), or a function returning it
+        (called only when the CRS is replaced)
+
+    Returns
+    -------
+    None when the CRS itself is the working CRS, else the authority id of the UTM zone of
+    the data's centre.
+    """
+    if projected_in_metres and not is_web_mercator(authid):
+        return None
+    lon, lat = centre_lonlat() if callable(centre_lonlat) else centre_lonlat
+    return utm_zone(float(lon), float(lat))

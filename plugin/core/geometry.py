@@ -1,0 +1,247 @@
+"""Small geometry and array helpers that several stages use (one home for each).
+
+- :func:`minimum_rectangles`, :func:`minimum_rectangle_corners`: minimum-area bounding
+  rectangles by vectorised rotating calipers (block shape metrics, parcel cuts, the OBB
+  axis of the Voronoi parcels, template frames, grid directions of road growth);
+- :func:`largest_polygons`: the largest polygon part of each (repaired) geometry;
+- :func:`substrings`: stretches of lines between arc lengths;
+- :func:`unit`: unit vectors; :func:`group_starts` / :func:`group_ends`: runs of equal keys.
+
+shapely's ``oriented_envelope`` loops over geometries in Python on GEOS 3.11 and gives no
+side lengths or directions; ``shapely.ops.substring`` works on one line at a time: these
+are the vectorised forms the engine needs in its hot loops.
+"""
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+import shapely
+
+__all__ = ["group_starts", "group_ends", "unit", "substrings", "largest_polygons",
+           "minimum_rectangles", "minimum_rectangle_corners"]
+
+
+# --------------------------------------------------------------------------- arrays
+
+def group_starts(keys: np.ndarray) -> np.ndarray:
+    """True where a run of equal values in ``keys`` begins.
+
+    >>> group_starts(np.array([1, 1, 2, 3, 3])).tolist()
+    [True, False, True, True, False]
+    """
+    out = np.ones(len(keys), dtype=bool)
+    np.not_equal(keys[1:], keys[:-1], out=out[1:])
+    return out
+
+
+def group_ends(keys: np.ndarray) -> np.ndarray:
+    """True where a run of equal values in ``keys`` ends.
+
+    >>> group_ends(np.array([1, 1, 2, 3, 3])).tolist()
+    [False, True, True, False, True]
+    """
+    out = np.ones(len(keys), dtype=bool)
+    np.not_equal(keys[1:], keys[:-1], out=out[:-1])
+    return out
+
+
+def unit(v: np.ndarray) -> np.ndarray:
+    """Vectors (last axis) scaled to length 1; zero vectors stay zero.
+
+    >>> unit(np.array([3.0, 4.0])).tolist(), unit(np.array([[0.0, 2.0], [0.0, 0.0]])).tolist()
+    ([0.6, 0.8], [[0.0, 1.0], [0.0, 0.0]])
+    """
+    v = np.asarray(v, dtype=np.float64)
+    n = np.hypot(v[..., 0], v[..., 1])
+    return v / np.where(n > 0, n, 1.0)[..., None]
+
+
+# --------------------------------------------------------------------------- lines
+
+def substrings(lines: Sequence, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The stretch of each line from arc length ``a`` to ``b`` (a < b), with the interior
+    vertices, vectorised over all lines (one line may be repeated for many stretches).
+
+    >>> line = shapely.LineString([(0, 0), (10, 0), (10, 10)])
+    >>> [g.wkt for g in substrings([line, line], np.array([5.0, 0.0]), np.array([15.0, 2.0]))]
+    ['LINESTRING (5 0, 10 0, 10 5)', 'LINESTRING (0 0, 2 0)']
+    """
+    lines = np.asarray(lines, dtype=object)
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    coords, idx = shapely.get_coordinates(lines, return_index=True)
+    seg = np.r_[0.0, np.hypot(*np.diff(coords, axis=0).T)]
+    first = np.r_[True, idx[1:] != idx[:-1]]
+    seg[first] = 0.0
+    cum = np.cumsum(seg)
+    cum -= cum[np.flatnonzero(first)][idx]
+    inner = (cum > a[idx] + 1e-9) & (cum < b[idx] - 1e-9)
+    pa = shapely.get_coordinates(shapely.line_interpolate_point(lines, a))
+    pb = shapely.get_coordinates(shapely.line_interpolate_point(lines, b))
+    n = len(lines)
+    all_xy = np.vstack([pa, coords[inner], pb])
+    all_line = np.r_[np.arange(n), idx[inner], np.arange(n)]
+    all_pos = np.r_[a, cum[inner], b]
+    order = np.lexsort((all_pos, all_line))
+    return shapely.linestrings(all_xy[order], indices=all_line[order])
+
+
+# --------------------------------------------------------------------------- polygons
+
+def largest_polygons(geoms: Sequence) -> np.ndarray:
+    """Valid single polygons: the largest polygon part of each geometry after
+    ``make_valid`` (None where there is none).
+
+    >>> bow = shapely.from_wkt("POLYGON ((0 0, 4 4, 4 0, 0 4, 0 0))")  # a bow tie
+    >>> [round(g.area, 6) for g in largest_polygons([bow])]
+    [4.0]
+    >>> largest_polygons([shapely.LineString([(0, 0), (1, 1)])]).tolist()
+    [None]
+    """
+    geoms = shapely.make_valid(np.asarray(geoms, dtype=object))
+    parts, idx = shapely.get_parts(geoms, return_index=True)
+    # collections inside collections (make_valid of touching parts): flatten once more
+    nested = shapely.get_type_id(parts) == 7
+    if nested.any():
+        inner, j = shapely.get_parts(parts[nested], return_index=True)
+        parts = np.concatenate([parts[~nested], inner])
+        idx = np.concatenate([idx[~nested], idx[nested][j]])
+    poly = shapely.get_type_id(parts) == 3
+    parts, idx = parts[poly], idx[poly]
+    out = np.full(len(geoms), None, dtype=object)
+    if len(parts):
+        area = shapely.area(parts)
+        order = np.lexsort((-area, idx))
+        first = order[group_starts(idx[order])]
+        out[idx[first]] = parts[first]
+    return out
+
+
+def _calipers(polygons: np.ndarray):
+    """Per polygon with an areal convex hull, the best hull edge of the rotating calipers.
+
+    Returns (ok, u, s_lo, s_hi, t_lo, t_hi): ``ok`` marks the polygons with an areal hull;
+    for those, the unit direction ``u`` of the edge the rectangle stands on and the
+    rectangle's extent along ``u`` (s) and along its left normal (t).
+    """
+    hulls = shapely.convex_hull(polygons)
+    ok = shapely.get_type_id(hulls) == 3  # degenerate hulls (points, lines) have no area
+    empty = np.zeros(0)
+    if not ok.any():
+        return ok, np.zeros((0, 2)), empty, empty, empty, empty
+    rings = shapely.get_exterior_ring(hulls[ok])
+    # the search below needs counter-clockwise rings (GEOS returns clockwise hulls)
+    rings = np.where(shapely.is_ccw(rings), rings, shapely.reverse(rings))
+    coords, idx = shapely.get_coordinates(rings, return_index=True)
+    # vertex i starts edge i; the ring repeats its first vertex at its end
+    e0 = np.flatnonzero(idx[1:] == idx[:-1])
+    v = coords[e0]
+    hull = idx[e0]
+    d = coords[e0 + 1] - v
+    alpha = np.arctan2(d[:, 1], d[:, 0])
+    start = group_starts(hull)
+    first_of = np.flatnonzero(start)            # first edge of each hull
+    n_edges = np.diff(np.append(first_of, len(hull)))
+    # edge angles relative to the first edge of their hull: increasing in [0, 2 pi)
+    rel = np.mod(alpha - alpha[first_of][hull], 2 * np.pi)
+    rel[start] = 0.0
+    key = hull * 8.0 + rel
+
+    def support(turn):
+        """Index of the vertex extreme in direction (edge angle + turn - pi/2)."""
+        target = hull * 8.0 + np.mod(rel + turn, 2 * np.pi)
+        i = np.searchsorted(key, target, side="left")
+        end = first_of[hull] + n_edges[hull]
+        return np.where(i >= end, first_of[hull], i)
+
+    u = d / np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-300)[:, None]
+    hi_along, lo_along, far = support(np.pi / 2), support(1.5 * np.pi), support(np.pi)
+    along = np.einsum("ij,ij->i", v[hi_along] - v[lo_along], u)
+    w = v[far] - v
+    across = u[:, 0] * w[:, 1] - u[:, 1] * w[:, 0]
+    order = np.lexsort((along * across, hull))
+    best = order[group_starts(hull[order])]
+    ub = u[best]
+    normal = np.column_stack([-ub[:, 1], ub[:, 0]])
+    s_lo = np.einsum("ij,ij->i", v[lo_along[best]], ub)
+    t_lo = np.einsum("ij,ij->i", v[best], normal)
+    return ok, ub, s_lo, s_lo + along[best], t_lo, t_lo + across[best]
+
+
+def minimum_rectangles(polygons: Sequence):
+    """Minimum-area bounding rectangles of polygons, vectorised rotating calipers.
+
+    The minimum-area rectangle has a side on an edge of the convex hull (Freeman &
+    Shapira 1975). For every hull edge the three other sides touch the hull at its support
+    vertices in the edge's directions; on a convex polygon walked counter-clockwise, the
+    edge angles increase through one turn, so each support vertex is found by a binary
+    search over the hull's edge angles (all edges of all polygons at once).
+
+    Parameters
+    ----------
+    polygons : array of Polygon
+
+    Returns
+    -------
+    length, width : float arrays
+        Longer and shorter side of the rectangle (m); 0 for degenerate polygons.
+    angle : float array
+        Direction of the longer side in degrees, in [0, 180) counter-clockwise from east.
+
+    References
+    ----------
+    Freeman, H. and Shapira, R. (1975) Determining the minimum-area encasing rectangle for
+    an arbitrary closed curve. Communications of the ACM 18(7).
+
+    Examples
+    --------
+    >>> rect = shapely.affinity.rotate(shapely.box(0, 0, 40, 10), 30, origin=(0, 0))
+    >>> [round(float(v[0]), 6) for v in minimum_rectangles([rect])]
+    [40.0, 10.0, 30.0]
+    """
+    polygons = np.asarray(polygons, dtype=object)
+    n = len(polygons)
+    length, width, angle = np.zeros(n), np.zeros(n), np.zeros(n)
+    if n == 0:
+        return length, width, angle
+    ok, u, s_lo, s_hi, t_lo, t_hi = _calipers(polygons)
+    if not ok.any():
+        return length, width, angle
+    a, b = s_hi - s_lo, t_hi - t_lo
+    dir_long = np.where((a >= b)[:, None], u, np.column_stack([-u[:, 1], u[:, 0]]))
+    length[ok] = np.maximum(a, b)
+    width[ok] = np.minimum(a, b)
+    angle[ok] = np.degrees(np.arctan2(dir_long[:, 1], dir_long[:, 0])) % 180.0
+    return length, width, angle
+
+
+def minimum_rectangle_corners(polygons: Sequence) -> np.ndarray:
+    """Corners (n, 4, 2) of the minimum-area bounding rectangles (counter-clockwise), by
+    the calipers of :func:`minimum_rectangles`. A polygon whose hull has no area (all
+    points on a line) gets the rectangle of zero width along that line; an empty one NaN.
+
+    >>> c = minimum_rectangle_corners([shapely.box(0, 0, 4, 2)])[0]
+    >>> sorted(map(tuple, np.round(c, 9) + 0.0))
+    [(0.0, 0.0), (0.0, 2.0), (4.0, 0.0), (4.0, 2.0)]
+    """
+    polygons = np.asarray(polygons, dtype=object)
+    out = np.full((len(polygons), 4, 2), np.nan)
+    if len(polygons) == 0:
+        return out
+    ok, u, s_lo, s_hi, t_lo, t_hi = _calipers(polygons)
+    if ok.any():
+        nrm = np.column_stack([-u[:, 1], u[:, 0]])
+        corner = [(s_lo, t_lo), (s_hi, t_lo), (s_hi, t_hi), (s_lo, t_hi)]
+        out[ok] = np.stack([s[:, None] * u + t[:, None] * nrm for s, t in corner], axis=1)
+    for i in np.flatnonzero(~ok):
+        xy = shapely.get_coordinates(polygons[i])
+        if len(xy) == 0:
+            continue
+        # a segment or a point: its two extreme points along the line, as a flat rectangle
+        d = xy - xy[0]
+        direction = unit(d[int(np.argmax(np.hypot(d[:, 0], d[:, 1])))])
+        s = d @ direction
+        lo, hi = xy[int(np.argmin(s))], xy[int(np.argmax(s))]
+        out[i] = [lo, hi, hi, lo]
+    return out

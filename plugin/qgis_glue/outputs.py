@@ -1,0 +1,307 @@
+"""Nothing lost, nothing half-written: how every urbansynth run (and the shipped model)
+handles its output files.
+
+- An output that is also an input (the same file, or the same layer of a GeoPackage) is
+  refused before anything is written: the README promises inputs are never modified.
+- Every file output is written under a temporary name -- a hidden staging folder next to
+  the destination, ``.urbansynth-run-XXXX/<the file's own name>``, so that GeoPackage
+  layer names and shapefile sidecars come out right -- and moved into place only when the
+  whole run succeeded. A failed or canceled run leaves the destinations as they were (an
+  existing file stays untouched) and removes its staging folder. A layer written into an
+  existing GeoPackage (``ogr:dbname=... table=...``) is staged in a GeoPackage of its own
+  and copied into the target file on success.
+- Outputs that are no files (memory layers, database connections) and QGIS's own
+  temporary outputs (the Processing temporary folder) are written as they are.
+
+Used by ``processing_algorithms.common.AlgorithmBase`` (every algorithm) and by
+``provider.ShippedModel`` (the district model: its outputs appear only when every step
+succeeded). No engine code is involved.
+"""
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Dict, List, Optional
+
+from qgis.core import (
+    QgsProcessingException,
+    QgsProcessingOutputLayerDefinition,
+    QgsProcessingParameterFeatureSink,
+    QgsProcessingParameterFileDestination,
+    QgsProcessingParameterFolderDestination,
+    QgsProcessingParameterRasterDestination,
+    QgsProcessingParameterVectorDestination,
+    QgsProcessingUtils,
+    QgsProperty,
+    QgsProviderRegistry,
+)
+
+__all__ = ["STAGING_PREFIX", "OutputStaging", "same_file_error"]
+
+#: Name prefix of the staging folders (hidden: a file manager does not show them).
+STAGING_PREFIX = ".urbansynth-run-"
+
+_OGR_URI = re.compile(r"^ogr:dbname='(?P<path>(?:[^']|'')*)'\s+table=\"(?P<table>[^\"]+)\"")
+
+
+@dataclass
+class _Staged:
+    name: str            # the destination parameter
+    final: str           # the destination as given (path or ogr: URI)
+    final_path: Path     # its file
+    table: Optional[str]  # the GeoPackage layer for ogr: URIs, else None
+    staging: Path        # the staging folder
+    temp: str            # the destination the algorithm writes to
+    temp_path: Path      # its file
+
+
+@dataclass
+class _Input:
+    name: str
+    path: Path
+    layer: Optional[str]
+
+
+def _destination(alg, definition, parameters, context) -> Optional[str]:
+    """The destination of an output parameter as a path or URI, None when not requested."""
+    value = parameters.get(definition.name())
+    if value is None or value == "":
+        return None
+    if isinstance(definition, (QgsProcessingParameterFileDestination,
+                               QgsProcessingParameterFolderDestination)):
+        return alg.parameterAsFileOutput(parameters, definition.name(), context) or None
+    return alg.parameterAsOutputLayer(parameters, definition.name(), context) or None
+
+
+def _file_of(destination: str):
+    """(file path, GeoPackage table or None) of a destination, None when it is no file."""
+    match = _OGR_URI.match(destination)
+    if match:
+        return Path(match.group("path").replace("''", "'")), match.group("table")
+    if re.match(r"^[a-z]+:", destination) and not re.match(r"^[A-Za-z]:[\\/]", destination):
+        return None                          # memory:, postgres:, spatialite: ...
+    return Path(destination.split("|")[0]), None
+
+
+def _is_temporary(path: Path) -> bool:
+    try:
+        temp = Path(QgsProcessingUtils.tempFolder()).resolve()
+        return temp == path.resolve().parent or temp in path.resolve().parents
+    except OSError:
+        return False
+
+
+def _inputs(alg, parameters, context) -> List[_Input]:
+    """The files (and GeoPackage layers) the run reads."""
+    out = []
+    for definition in alg.parameterDefinitions():
+        name = definition.name()
+        if definition.isDestination() or parameters.get(name) in (None, ""):
+            continue
+        kind = definition.type()
+        try:
+            if kind in ("source", "vector"):
+                layer = alg.parameterAsVectorLayer(parameters, name, context)
+            elif kind == "raster":
+                layer = alg.parameterAsRasterLayer(parameters, name, context)
+            elif kind == "file":
+                path = alg.parameterAsFile(parameters, name, context)
+                if path:
+                    out.append(_Input(name, Path(path), None))
+                continue
+            else:
+                continue
+        except Exception:  # noqa: BLE001 - an unreadable input is reported where it is read
+            continue
+        if layer is None:
+            continue
+        parts = QgsProviderRegistry.instance().decodeUri(layer.providerType(), layer.source())
+        if parts.get("path"):
+            out.append(_Input(name, Path(parts["path"]), parts.get("layerName") or None))
+    return out
+
+
+def _same(a: Path, b: Path) -> bool:
+    try:
+        return a.exists() and b.exists() and os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def same_file_error(alg, parameters, context) -> Optional[str]:
+    """The message when an output would overwrite an input, else None (checked before
+    anything is written: in the dialog, on the command line and when the run starts)."""
+    inputs = _inputs(alg, parameters, context)
+    if not inputs:
+        return None
+    for definition in alg.destinationParameterDefinitions():
+        destination = _destination(alg, definition, parameters, context)
+        target = _file_of(destination) if destination else None
+        if target is None:
+            continue
+        path, table = target
+        for source in inputs:
+            if not (_same(path, source.path) or path.resolve() == source.path.resolve()):
+                continue
+            if table is not None and source.layer is not None and table != source.layer:
+                continue                     # another layer of the same GeoPackage
+            what = f"layer '{table}' of " if table else ""
+            return (f"Output {definition.description()} ({definition.name()}) would "
+                    f"overwrite {what}the input {source.name} ({source.path}): inputs are "
+                    "never modified; choose another output file.")
+    return None
+
+
+class OutputStaging:
+    """The file outputs of one run, written to staging folders and moved into place by
+    :meth:`commit`, or removed by :meth:`discard`."""
+
+    def __init__(self, alg, parameters: dict, context):
+        self.alg = alg
+        self.parameters = parameters
+        self.context = context
+        self.staged: List[_Staged] = []
+        self._made_dirs: List[Path] = []
+
+    def prepare(self) -> dict:
+        """Refuse an output that is an input; return the parameters with every file
+        output redirected into its staging folder."""
+        message = same_file_error(self.alg, self.parameters, self.context)
+        if message:
+            raise QgsProcessingException(message)
+        staged_parameters = dict(self.parameters)
+        try:
+            for definition in self.alg.destinationParameterDefinitions():
+                self._stage(definition, staged_parameters)
+        except BaseException:
+            self.discard()
+            raise
+        return staged_parameters
+
+    def _stage(self, definition, staged_parameters):
+        destination = _destination(self.alg, definition, self.parameters, self.context)
+        target = _file_of(destination) if destination else None
+        if target is None or isinstance(definition, QgsProcessingParameterFolderDestination):
+            return
+        path, table = target
+        if _is_temporary(path):
+            return
+        folder = path.parent
+        self._make_folder(folder, definition)
+        try:
+            staging = Path(tempfile.mkdtemp(prefix=STAGING_PREFIX, dir=folder))
+        except OSError as exc:
+            raise QgsProcessingException(
+                f"Output {definition.description()} ({definition.name()}) cannot be written "
+                f"to the folder {folder}: {exc.strerror or exc}.") from exc
+        temp_path = staging / path.name
+        if table is not None:
+            temp = destination.replace(_OGR_URI.match(destination).group("path"),
+                                       str(temp_path).replace("'", "''"), 1)
+        else:
+            temp = str(temp_path)
+        self.staged.append(_Staged(definition.name(), destination, path, table, staging,
+                                   temp, temp_path))
+        staged_parameters[definition.name()] = self._redirect(
+            self.parameters[definition.name()], definition, temp)
+
+    def _make_folder(self, folder: Path, definition):
+        missing = []
+        probe = folder
+        while not probe.exists() and probe != probe.parent:
+            missing.append(probe)
+            probe = probe.parent
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise QgsProcessingException(
+                f"Output {definition.description()} ({definition.name()}): the folder "
+                f"{folder} cannot be created: {exc.strerror or exc}.") from exc
+        self._made_dirs.extend(missing)
+
+    @staticmethod
+    def _redirect(value, definition, temp: str):
+        """The parameter value with its destination replaced (keeping the layer name and
+        options a QgsProcessingOutputLayerDefinition carries)."""
+        if isinstance(value, QgsProcessingOutputLayerDefinition):
+            copy = QgsProcessingOutputLayerDefinition(value)
+            copy.sink = QgsProperty.fromValue(temp)
+            return copy
+        if isinstance(definition, (QgsProcessingParameterFeatureSink,
+                                   QgsProcessingParameterVectorDestination,
+                                   QgsProcessingParameterRasterDestination)):
+            return QgsProcessingOutputLayerDefinition(temp)
+        return temp
+
+    # --------------------------------------------------------------- end of the run
+
+    def commit(self, results: Dict) -> Dict:
+        """Move every staged output into place; the results and the layers QGIS loads on
+        completion then name the final destinations."""
+        try:
+            for item in self.staged:
+                self._move(item)
+        finally:
+            self._remove_staging()
+        renames = {item.temp: item.final for item in self.staged}
+        renames.update({str(item.temp_path): str(item.final_path) for item in self.staged})
+        out = {k: self._renamed(v, renames) for k, v in results.items()}
+        layers = self.context.layersToLoadOnCompletion()
+        if any(self._renamed(k, renames) != k for k in layers):
+            self.context.setLayersToLoadOnCompletion(
+                {self._renamed(k, renames): v for k, v in layers.items()})
+        return out
+
+    @staticmethod
+    def _renamed(value, renames):
+        if not isinstance(value, str):
+            return value
+        if value in renames:
+            return renames[value]
+        for old, new in renames.items():
+            if old in value:
+                return value.replace(old, new)
+        return value
+
+    def _move(self, item: _Staged):
+        written = sorted(p for p in item.staging.iterdir() if p.is_file())
+        if not written:
+            return                           # the output was not written (optional)
+        if item.table is not None and item.final_path.exists():
+            self._copy_layer(item)
+            return
+        for path in written:
+            os.replace(path, item.final_path.parent / path.name)
+
+    @staticmethod
+    def _copy_layer(item: _Staged):
+        """A layer staged in a GeoPackage of its own, copied into the target GeoPackage
+        (replacing a layer of that name)."""
+        from osgeo import gdal
+
+        options = gdal.VectorTranslateOptions(
+            format="GPKG", accessMode="overwrite", layers=[item.table], layerName=item.table)
+        result = gdal.VectorTranslate(str(item.final_path), str(item.temp_path),
+                                      options=options)
+        if result is None:
+            raise QgsProcessingException(
+                f"Output {item.name}: the layer '{item.table}' could not be written into "
+                f"{item.final_path}: {gdal.GetLastErrorMsg() or 'unknown GDAL error'}.")
+        result = None
+
+    def discard(self):
+        """Remove everything written (the destinations stay as they were)."""
+        self._remove_staging()
+        for folder in self._made_dirs:
+            try:
+                folder.rmdir()               # only the folders this run created, if empty
+            except OSError:
+                pass
+
+    def _remove_staging(self):
+        for item in self.staged:
+            shutil.rmtree(item.staging, ignore_errors=True)

@@ -1,0 +1,238 @@
+"""urbansynth:synthesizebuildingattributes - heights, levels, types and roofs of footprints
+copied from similar example buildings (Hartmann thesis ch. 6)."""
+import numpy as np
+from qgis.core import (
+    QgsProcessing,
+    QgsProcessingException,
+    QgsProcessingParameterEnum,
+    QgsProcessingParameterFeatureSink,
+    QgsProcessingParameterFeatureSource,
+    QgsProcessingParameterField,
+    QgsProcessingParameterNumber,
+    QgsWkbTypes,
+)
+
+from ..plugin.buildings import attribute_transfer as transfer
+from ..plugin.buildings import attributes as building_attributes
+from ..plugin.qgis_glue import qgis_io
+from .common import AlgorithmBase
+
+
+
+class SynthesizeBuildingAttributes(AlgorithmBase):
+    GROUP_ID = "synthesis"
+    FOOTPRINTS = "FOOTPRINTS"
+    EXAMPLE_BUILDINGS = "EXAMPLE_BUILDINGS"
+    HEIGHT_FIELD = "HEIGHT_FIELD"
+    LEVELS_FIELD = "LEVELS_FIELD"
+    ROADS = "ROADS"
+    EXAMPLE_ROADS = "EXAMPLE_ROADS"
+    BLOCKS = "BLOCKS"
+    K_NEIGHBOURS = "K_NEIGHBOURS"
+    CHOICE = "CHOICE"
+    MIN_HEIGHT = "MIN_HEIGHT"
+    MAX_HEIGHT = "MAX_HEIGHT"
+    TARGET_FAR = "TARGET_FAR"
+    STOREY_HEIGHT = "STOREY_HEIGHT"
+    SEED = "SEED"
+    OUTPUT = "OUTPUT"
+
+    CHOICES = (("medoid", "Most typical of the k (lowest error)"),
+               ("random", "Random among the k (keeps the example's spread)"))
+
+    def name(self):
+        return "synthesizebuildingattributes"
+
+    def displayName(self):  # noqa: N802
+        return "Synthesize building attributes (by example)"
+
+    def shortHelpString(self):  # noqa: N802
+        return (
+            "Every footprint (synthesised or real) gets height_m, levels, building_type and "
+            "roof_shape copied from the most similar example building (Hartmann thesis, "
+            "ch. 6): similar in shape, area, footprint coverage and grain around it, heights "
+            "of the example buildings nearby and, when both road layers are given, distance "
+            "to roads and arterials. Heights are kept in a range and levels scaled to a "
+            "target floor-area ratio per block or district.\n\n"
+            "Output: the footprints with their own fields plus those, source_id (the "
+            "example's feature id) and similarity, in the footprints' CRS, styled by height."
+        )
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        poly = [QgsProcessing.TypeVectorPolygon]
+        line = [QgsProcessing.TypeVectorLine]
+        self.add(QgsProcessingParameterFeatureSource(self.FOOTPRINTS, "Footprints", poly),
+                 "Building footprints to attribute, e.g. from 'Synthesize footprints' or a "
+                 "real layer with missing heights.")
+        self.add(QgsProcessingParameterFeatureSource(
+            self.EXAMPLE_BUILDINGS, "Example buildings", poly),
+            "Buildings with heights or levels: an OSM multipolygons layer (height, "
+            "building:levels, building, roof:shape tags; polygons without 'building' are "
+            "skipped), a cadastre layer, or the buildings output of 'Extract city blocks'.")
+        for name, label, text in (
+                (self.HEIGHT_FIELD, "Example height field (cadastre)",
+                 "A numeric field with heights in metres; wins over OSM tags and height_m."),
+                (self.LEVELS_FIELD, "Example levels field (cadastre)",
+                 "A numeric field with the number of storeys; wins over OSM tags and levels.")):
+            self.add(QgsProcessingParameterField(
+                name, label, parentLayerParameterName=self.EXAMPLE_BUILDINGS,
+                type=QgsProcessingParameterField.Numeric, optional=True), text, advanced=True)
+        self.add(QgsProcessingParameterFeatureSource(
+            self.ROADS, "Roads around the footprints", line, optional=True),
+            "With Example roads, the distance to roads and to arterials (level 0, or OSM "
+            "motorway..secondary) becomes a feature.")
+        self.add(QgsProcessingParameterFeatureSource(
+            self.EXAMPLE_ROADS, "Example roads", line, optional=True),
+            "Street centrelines around the example buildings (with Roads).")
+        self.add(QgsProcessingParameterFeatureSource(
+            self.BLOCKS, "Blocks for the floor-area ratio", poly, optional=True),
+            "With a target FAR: the FAR is met per block (a footprint belongs to the block "
+            "holding it). Without blocks it is met for the whole district (the convex hull "
+            "of the footprints).")
+        self.add(QgsProcessingParameterNumber(
+            self.K_NEIGHBOURS, "Candidates per footprint (k)",
+            QgsProcessingParameterNumber.Integer, defaultValue=9, minValue=1, maxValue=100),
+            "The k most similar example buildings are candidates; 1 copies the most similar.")
+        self.add(QgsProcessingParameterEnum(
+            self.CHOICE, "Choice among the candidates", options=[c[1] for c in self.CHOICES],
+            defaultValue=0),
+            "Most typical: the candidate with the median height (weighted by similarity). "
+            "Random: drawn with weights falling off with the feature distance (seeded).")
+        self.add(QgsProcessingParameterNumber(
+            self.MIN_HEIGHT, "Minimum height (m)", QgsProcessingParameterNumber.Double,
+            defaultValue=0.0, minValue=0.0, maxValue=1000.0),
+            "Heights below are raised to it (levels follow).")
+        self.add(QgsProcessingParameterNumber(
+            self.MAX_HEIGHT, "Maximum height (m)", QgsProcessingParameterNumber.Double,
+            defaultValue=300.0, minValue=0.1, maxValue=1000.0),
+            "Heights above are lowered to it (levels follow).")
+        self.add(QgsProcessingParameterNumber(
+            self.TARGET_FAR, "Target floor-area ratio (0 = none)",
+            QgsProcessingParameterNumber.Double, defaultValue=0.0, minValue=0.0, maxValue=100.0),
+            "Floor area (footprint x levels) / ground area, met by scaling levels per block "
+            "(with Blocks) or for the district.")
+        self.add(QgsProcessingParameterNumber(
+            self.STOREY_HEIGHT, "Storey height (m)", QgsProcessingParameterNumber.Double,
+            defaultValue=building_attributes.STOREY_HEIGHT, minValue=0.5, maxValue=20.0),
+            "Metres per storey for examples with only a height or only levels.", advanced=True)
+        self.add_seed("The same seed gives the same result (random choice among the "
+                      "candidates).")
+        self.add(QgsProcessingParameterFeatureSink(
+            self.OUTPUT, "Buildings with attributes", QgsProcessing.TypeVectorPolygon),
+            "Footprints with height_m, levels, building_type, roof_shape, source_id and "
+            "similarity.")
+
+    # ----------------------------------------------------------------------- run
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        far = self.number(parameters, self.TARGET_FAR, context)
+        lo = self.number(parameters, self.MIN_HEIGHT, context)
+        hi = self.number(parameters, self.MAX_HEIGHT, context)
+        if hi <= lo:
+            raise QgsProcessingException(f"The maximum height ({hi:g} m) must be larger than "
+                                         f"the minimum height ({lo:g} m).")
+        footprints = qgis_io.read_source(self, parameters, self.FOOTPRINTS, context, feedback,
+                                         kind="polygons")
+        crs = footprints.crs
+        examples, attrs = self._examples(parameters, context, feedback, crs)
+        feedback.setProgress(10)
+        road_lines, arterials = self.roads_and_arterials(parameters, self.ROADS, context,
+                                                         feedback, crs)
+        ex_lines, ex_arterials = self.roads_and_arterials(parameters, self.EXAMPLE_ROADS,
+                                                          context, feedback, crs)
+        if (road_lines is None) != (ex_lines is None):
+            feedback.pushInfo("Road distances are used only with both Roads and Example roads.")
+        blocks = None
+        if self.given(parameters, self.BLOCKS):
+            blocks = qgis_io.read_source(self, parameters, self.BLOCKS, context, feedback,
+                                         kind="polygons", target_crs=crs).geometry
+        result = qgis_io.run_engine(
+            examples.name, transfer.transfer_attributes, footprints.geometry, examples.geometry,
+            attrs, example_ids=examples.fids, roads=road_lines, arterials=arterials,
+            example_roads=ex_lines, example_arterials=ex_arterials,
+            k=self.number(parameters, self.K_NEIGHBOURS, context),
+            seed=self.seed(parameters, context), min_height=lo, max_height=hi,
+            target_far=far if far > 0 else None, blocks=blocks,
+            storey_height=self.number(parameters, self.STOREY_HEIGHT, context),
+            choice_mode=self.CHOICES[self.parameterAsEnum(parameters, self.CHOICE, context)][0],
+            progress=qgis_io.progress_for(feedback, 15, 85))
+        self._log(result.stats, lo, hi, far, feedback)
+        # the input's own fields first, then the new ones (replacing same-named fields)
+        own = qgis_io.carried_fields(
+            self.parameterAsSource(parameters, self.FOOTPRINTS, context).fields(),
+            [n for n, _ in transfer.OUTPUT_FIELDS])
+        table = result.table.copy()
+        for n, _ in own:
+            if n in footprints.attributes:
+                table[n] = footprints.attributes[n].to_numpy(dtype=object)
+        dest = qgis_io.write_sink(self, parameters, self.OUTPUT, context, footprints.geometry,
+                                  table, own + transfer.OUTPUT_FIELDS, QgsWkbTypes.MultiPolygon,
+                                  footprints.source_crs, crs, feedback)
+        qgis_io.style_output(context, dest, "buildings_by_height.qml")
+        feedback.setProgress(100)
+        return {self.OUTPUT: dest}
+
+    def _examples(self, parameters, context, feedback, crs):
+        """The example buildings (only those with a 'building' value when the layer has
+        that field) and their attributes (height, levels, type, roof)."""
+        hf = self.parameterAsString(parameters, self.HEIGHT_FIELD, context)
+        lf = self.parameterAsString(parameters, self.LEVELS_FIELD, context)
+        frame = qgis_io.read_source(
+            self, parameters, self.EXAMPLE_BUILDINGS, context, feedback, kind="polygons",
+            target_crs=crs, fields=["building", "other_tags", "height_m", "levels",
+                                    "building_type", hf, lf, *building_attributes.TAG_FIELDS],
+            required_fields=[f for f in (hf, lf) if f])
+        if "building" in frame.attributes:
+            value = frame.attributes["building"].to_numpy(dtype=object)
+            keep = np.array([v is not None and str(v).strip() not in ("", "no") for v in value])
+            if not keep.any():
+                raise QgsProcessingException(f"Layer {frame.name} has no polygon with a "
+                                             "'building' value.")
+            if not keep.all():
+                feedback.pushInfo(f"{frame.name}: {int((~keep).sum())} polygons without a "
+                                  "'building' value skipped.")
+                frame = qgis_io.subset(frame, keep)
+        a = frame.attributes
+        height = a[hf] if hf else (a["height_m"] if "height_m" in a else None)
+        levels = a[lf] if lf else (a["levels"] if "levels" in a else None)
+        attrs = qgis_io.run_engine(
+            frame.name, building_attributes.building_attributes, len(frame),
+            building=qgis_io.field_values(frame, "building"),
+            other_tags=qgis_io.field_values(frame, "other_tags"),
+            tags={k: a[k].to_numpy(dtype=object) for k in building_attributes.TAG_FIELDS if k in a},
+            height=None if height is None else height.to_numpy(dtype=object),
+            levels=None if levels is None else levels.to_numpy(dtype=object),
+            storey_height=self.number(parameters, self.STOREY_HEIGHT, context))
+        if "building_type" in a and "building" not in a:
+            attrs["building_type"] = a["building_type"].to_numpy(dtype=object)
+        n_h = int(np.isfinite(attrs["height_m"].to_numpy(dtype=float)).sum())
+        feedback.pushInfo(f"{frame.name}: {n_h} of {len(frame)} example buildings have a "
+                          "height or levels.")
+        if n_h == 0:
+            feedback.reportError(
+                f"Layer {frame.name}: no example building has a height or a number of levels "
+                "(OSM height / building:levels, height_m / levels, or the height field): only "
+                "types and roof shapes are transferred, heights and levels stay empty.",
+                fatalError=False)
+        return frame, attrs
+
+    @staticmethod
+    def _log(s, lo, hi, far, feedback):
+        if s["no_heights"]:
+            feedback.reportError(
+                f"No example building has a height or a number of levels: the "
+                f"{s['n_footprints']} footprints get types and roofs from "
+                f"{s['n_donors']} example buildings, and their heights stay empty.",
+                fatalError=False)
+        else:
+            feedback.pushInfo(f"{s['n_footprints']} footprints attributed, "
+                              f"{s['n_with_height']} with a height, from {s['n_donors']} "
+                              f"example buildings with a height (features: {s['features']}).")
+        if s["n_clipped"]:
+            feedback.pushInfo(f"{s['n_clipped']} heights clipped into {lo:g}..{hi:g} m.")
+        if far > 0:
+            feedback.pushInfo(f"Floor-area ratio {s['far_min']:.2f}..{s['far_max']:.2f} "
+                              f"(target {far:g}).")
+            if s.get("n_outside_blocks"):
+                feedback.pushInfo(f"{s['n_outside_blocks']} footprints lie in no block and "
+                                  "keep their levels.")
