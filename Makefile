@@ -94,9 +94,10 @@ clean:
 	rm -rf build out .pytest_cache
 
 # StreetGAN training (thesis ch. 4.2), CPU by default; torch lives in build/train-venv only.
-# Rasterise the example networks, train both shipped generators, export ONNX + model cards.
+# Rasterise the example networks, train the shipped generators, export ONNX + model cards.
 TRAIN_PY := build/train-venv/bin/python
 GAN_EPOCHS ?= 18
+TOWNS_EPOCHS ?= 5
 $(TRAIN_PY): requirements-train.txt
 	/usr/bin/python3 -m venv build/train-venv
 	$(TRAIN_PY) -m pip install -q -r requirements-train.txt
@@ -111,4 +112,10 @@ train-gan: setup $(TRAIN_PY)
 	  resources/models/streetgan_grid --epochs $(GAN_EPOCHS) --patch 161 --batch 4 --name streetgan_grid \
 	  --title "Grid (growroads network)" --min-dead-end 120
 	mv resources/models/streetgan_*_untrained.onnx build/streetgan/
+	# Helsinki + the Liechtenstein towns but the held-out ones: a CPU fine-tune of the Helsinki
+	# generator (see resources/models/streetgan_towns.json for the run that is shipped)
+	nice -n 15 $(TRAIN_PY) tools/streetgan/train.py build/streetgan/helsinki.npz build/streetgan/li_*.npz \
+	  resources/models/streetgan_towns --init-onnx resources/models/streetgan_helsinki.onnx \
+	  --epochs $(TOWNS_EPOCHS) --patch 161 --batch 8 --lr 0.0002 --name streetgan_towns --no-untrained \
+	  --title "Helsinki and eight Liechtenstein towns (real OSM roads)" --held-out Triesen,Eschen,Mauren
 	QT_QPA_PLATFORM=offscreen $(PY) tests/benchmarks/bench_gan.py --cards

@@ -3,7 +3,6 @@ METHOD (the district model uses it so that the method is a model parameter)."""
 from collections import namedtuple
 
 import numpy as np
-import pandas as pd
 import shapely
 from qgis.core import (
     QgsFeature,
@@ -17,11 +16,10 @@ from qgis.core import (
     QgsProcessingParameterFile,
     QgsProcessingParameterRasterLayer,
     QgsVectorLayer,
-    QgsWkbTypes,
 )
 
 from ..plugin.qgis_glue import qgis_io
-from ..plugin.roads import given_roads, streetgan
+from ..plugin.roads import streetgan
 from .common import AlgorithmBase
 
 #: One METHOD: its label and the algorithm that runs it (None: run here). New methods are
@@ -32,12 +30,11 @@ METHODS = (
            "urbansynth:synthesizeroadsfromfragments"),
     Method("growth", "Procedural growth, grid major and organic minor roads (Scharl 2010)",
            "urbansynth:growroads"),
-    Method("gan", "StreetGAN generator trained on Helsinki (Hartmann thesis ch. 4.2)", None),
+    Method("gan", "StreetGAN generator trained on real towns (Hartmann thesis ch. 4.2)",
+           "urbansynth:synthesizeroadsgan"),
 )
-#: The shipped StreetGAN generator the 'gan' method uses.
-GAN_MODEL = "streetgan_helsinki"
-ROAD_FIELDS = [("edge_id", "int"), ("level", "int"), ("road_class", "str"),
-               ("length_m", "float")]
+#: The shipped StreetGAN generator the 'gan' method uses (Helsinki + 8 Liechtenstein towns).
+GAN_MODEL = "streetgan_towns"
 
 
 class SynthesizeRoads(AlgorithmBase):
@@ -66,11 +63,10 @@ class SynthesizeRoads(AlgorithmBase):
             "- Fragments: the faces of the ARTERIALS are filled level by level with warped "
             "fragments of the example (FRAGMENT_DB, or a database built here from "
             "EXAMPLE_ROADS).\n"
-            "- Procedural growth: grid major and organic minor roads grow inside the BOUNDARY "
-            "from the ARTERIALS (the example is not used).\n"
-            "- StreetGAN: the Helsinki generator paints the BOUNDARY; its streets are cut back "
-            "from a 15 m corridor around the arterials, carried on to them and noded with "
-            "them (the example is not used).\n\n"
+            "- Procedural growth: grid major roads and organic minor roads grow inside the "
+            "BOUNDARY from the ARTERIALS (the example is not used).\n"
+            "- StreetGAN: a generator trained on real towns fills the BOUNDARY; the ARTERIALS "
+            "are kept and the generated streets join them.\n\n"
             "Without a BOUNDARY, the convex hull of the arterials is the district. Each method "
             "is also a tool of its own with every option; this one uses their defaults."
         )
@@ -137,8 +133,6 @@ class SynthesizeRoads(AlgorithmBase):
                 raise QgsProcessingException(
                     f"The arterials {arterials.name} lie on one line: their convex hull has no "
                     "area. Give a District boundary (BOUNDARY).")
-        if method.key == "gan":
-            return self._gan(parameters, context, feedback, arterials, area, seed)
         return self._child_method(parameters, context, feedback, method, arterials, area, seed)
 
     def _child_method(self, parameters, context, feedback, method, arterials, area, seed):
@@ -168,6 +162,14 @@ class SynthesizeRoads(AlgorithmBase):
         if method.key == "fragments":
             params = {"ARTERIALS": parameters[self.ARTERIALS], "BOUNDARY": boundary,
                       "FRAGMENT_DB": fragment_db, "DEM": dem, "SEED": seed}
+        elif method.key == "gan":
+            models = streetgan.shipped_models()  # the MODEL enum lists them by name
+            if GAN_MODEL not in models:
+                raise QgsProcessingException(
+                    f"The StreetGAN model '{GAN_MODEL}' is missing from resources/models "
+                    "(reinstall the plugin).")
+            params = {"TARGET": boundary, "SEED": seed, "MODEL": models.index(GAN_MODEL),
+                      "GIVEN_ROADS": parameters[self.ARTERIALS]}
         else:
             params = {"BOUNDARY": boundary, "MAJOR_ROADS": parameters[self.ARTERIALS],
                       "DEM": dem, "SEED": seed}
@@ -192,29 +194,3 @@ class SynthesizeRoads(AlgorithmBase):
         layer.dataProvider().addFeatures([feature])
         context.temporaryLayerStore().addMapLayer(layer)
         return layer.id()
-
-    def _gan(self, parameters, context, feedback, arterials, area, seed):
-        """StreetGAN over the district, joined to the arterials (thesis ch. 4.2)."""
-        models = streetgan.shipped_models()
-        if GAN_MODEL not in models:
-            raise QgsProcessingException(
-                f"The StreetGAN model '{GAN_MODEL}' is missing from resources/models "
-                "(reinstall the plugin).")
-        gen = qgis_io.run_engine(f"Model '{GAN_MODEL}'", streetgan.load_model, GAN_MODEL)
-        result = qgis_io.run_engine(
-            "The district", streetgan.synthesize, [area], gen, seed=seed,
-            progress=qgis_io.progress_for(feedback, 5, 85))
-        lines, level = qgis_io.run_engine(
-            arterials.name, given_roads.join_given_roads, result.geometry, result.level,
-            arterials.geometry)
-        feedback.pushInfo(f"{len(result.geometry)} generated streets; joined to "
-                          f"{len(arterials)} arterials: {len(lines)} road edges.")
-        table = pd.DataFrame({"edge_id": np.arange(1, len(lines) + 1), "level": level,
-                              "road_class": np.where(level == 0, "arterial", "local"),
-                              "length_m": shapely.length(lines) if len(lines) else []})
-        dest = qgis_io.write_sink(self, parameters, self.OUTPUT, context, lines, table,
-                                  ROAD_FIELDS, QgsWkbTypes.LineString, arterials.source_crs,
-                                  arterials.crs, feedback)
-        qgis_io.style_output(context, dest, "roads_by_level.qml")
-        feedback.setProgress(100)
-        return {self.OUTPUT: dest}

@@ -18,11 +18,14 @@ from qgis.core import (
     QgsWkbTypes,
 )
 
+from ..plugin.network import street_graph as roads
 from ..plugin.qgis_glue import qgis_io
 from ..plugin.retrieval.shape_context import DemGrid
 from ..plugin.roads import streetgan
-from .common import AlgorithmBase
+from .common import AlgorithmBase, drivable_lines
 
+#: The shipped generator used unless another is chosen: trained on the most towns.
+DEFAULT_MODEL = "streetgan_towns"
 ROAD_FIELDS = [("edge_id", "int"), ("level", "int"), ("road_class", "str"), ("length_m", "float"),
                ("model", "str"), ("seed", "int")]
 
@@ -31,6 +34,7 @@ class SynthesizeRoadsGan(AlgorithmBase):
     GROUP_ID = "synthesis"
     TARGET = "TARGET"
     EXTENT = "EXTENT"
+    GIVEN_ROADS = "GIVEN_ROADS"
     MODEL = "MODEL"
     MODEL_FILE = "MODEL_FILE"
     SEED = "SEED"
@@ -64,10 +68,17 @@ class SynthesizeRoadsGan(AlgorithmBase):
             "Models: the shipped generators (each has a model card in resources/models saying "
             "what it was trained on), or any .onnx generator with its card (.json of the same "
             "name) next to it, as written by tools/streetgan/train.py.\n\n"
+            "GIVEN_ROADS (e.g. the district's arterials) are respected and kept: nothing is "
+            "generated in their corridor, generated streets that reach them end on them (T "
+            "junctions, crossings from both sides; motorways and trunks get none), junction "
+            "clusters of the skeleton merge so that crossings stay 4-way, everything is noded "
+            "and pieces that reach no given road are joined by a short connector or dropped: "
+            "one network whose every crossing is a junction.\n\n"
             "Output: planar roads clipped to the target with level (0 = longest continuous "
-            "streets), length_m, model and seed, in the target's CRS; optionally the "
-            "generator's image as a GeoTIFF in the working metric CRS. The same seed gives the "
-            "same network."
+            "streets, or the given roads), length_m, model and seed, in the target's CRS (the "
+            "given roads whole, split at the new junctions, road_class 'given'); optionally "
+            "the generator's image as a GeoTIFF in the working metric CRS. The same seed "
+            "gives the same network."
         )
 
     def initAlgorithm(self, config=None):  # noqa: N802
@@ -78,8 +89,16 @@ class SynthesizeRoadsGan(AlgorithmBase):
         self.add(QgsProcessingParameterExtent(self.EXTENT, "Target extent (optional)",
                                               optional=True),
             "A rectangle to fill with roads when no target polygon is given.")
+        self.add(QgsProcessingParameterFeatureSource(
+            self.GIVEN_ROADS, "Given roads (kept; optional)", [QgsProcessing.TypeVectorLine],
+            optional=True),
+            "Roads the new network must respect and connect to (arterials, existing roads): "
+            "kept in the output, no generated street in their corridor, new streets end on "
+            "them. An OSM 'lines' layer is filtered to drivable classes.")
+        default = self.models.index(DEFAULT_MODEL) if DEFAULT_MODEL in self.models else 0
         self.add(QgsProcessingParameterEnum(
-            self.MODEL, "Model", options=self.models or ["(no model shipped)"], defaultValue=0),
+            self.MODEL, "Model", options=self.models or ["(no model shipped)"],
+            defaultValue=default),
             "A shipped generator: " + "; ".join(self._describe(m) for m in self.models) + ".")
         self.add(QgsProcessingParameterFile(
             self.MODEL_FILE, "Model file (.onnx, optional)", extension="onnx", optional=True),
@@ -166,22 +185,41 @@ class SynthesizeRoadsGan(AlgorithmBase):
         gen = qgis_io.run_engine(f"Model '{Path(str(model)).name}'", streetgan.load_model, model)
         feedback.pushInfo(f"Model {gen.name}: {gen.card.get('title', '')}, "
                           f"{gen.cell_size:g} m per pixel.")
+        given, given_class = None, None
+        frame = qgis_io.read_source(self, parameters, self.GIVEN_ROADS, context, feedback,
+                                    kind="lines", target_crs=work, optional=True,
+                                    fields=["highway", "other_tags"])
+        if frame is not None:
+            frame, given_class = drivable_lines(frame, None, set(roads.DRIVABLE_CLASSES),
+                                                feedback)
+            given = frame.geometry
         feedback.setProgress(5)
         result = qgis_io.run_engine(
             f"Target {label}", streetgan.synthesize, geoms, gen, seed=seed,
             cell_size=cell or None, max_gap=max_gap, min_dead_end=min_dead,
             from_edge=self.parameterAsBoolean(parameters, self.FROM_EDGE, context),
-            progress=qgis_io.progress_for(feedback, 5, 90))
+            progress=qgis_io.progress_for(feedback, 5, 90), given=given,
+            given_class=given_class)
         s = result.stats
+        n_new = int((~result.given).sum())
         feedback.pushInfo(f"Generated {s['pixels'][0]} x {s['pixels'][1]} px in "
                           f"{s['generate_s']:.2f} s; graph in {s['vectorize_s']:.2f} s; "
-                          f"{len(result.geometry)} road edges.")
-        if len(result.geometry) == 0:
+                          f"{n_new} new road edges, {s.get('junctions_merged', 0)} skeleton "
+                          "junctions merged into crossings.")
+        if given is not None:
+            feedback.pushInfo(
+                f"Given roads kept ({int(result.given.sum())} pieces); "
+                f"{s['n_joined_to_drawn_roads'] + s['n_attached']} new streets end on them; "
+                f"{s['n_joined']} pieces joined by a connector, {s['n_dropped_edges']} edges "
+                f"of pieces that reach no road dropped; {s['n_components']} connected "
+                "component(s).")
+        if n_new == 0:
             feedback.reportError("The generator drew no road inside the target: try another "
                                  "seed or a larger target.")
         table = pd.DataFrame({
             "edge_id": np.arange(len(result.geometry)), "level": result.level,
-            "road_class": np.where(result.level == 0, "arterial", "local"),
+            "road_class": np.where(result.given, "given",
+                                   np.where(result.level == 0, "arterial", "local")),
             "length_m": shapely.length(result.geometry) if len(result.geometry) else [],
             "model": gen.name, "seed": seed})
         dest = qgis_io.write_sink(self, parameters, self.OUTPUT, context, result.geometry, table,

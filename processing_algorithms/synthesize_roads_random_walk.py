@@ -57,14 +57,23 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
             "them, their tortuosity and the mean and variance of the distance and turn angle "
             "between consecutive intersections. They are organised in an adaptive quadtree and "
             "copied into the TARGET polygons (in place where the example covers the target, "
-            "else tiled). Streets are random walks, level by level: each step goes to a point "
-            "drawn by a Gaussian on (distance, angle) from the base point's statistics, never "
-            "to a point of another level, a point with all its connections (at most 4) or "
-            "across a street. Segments are bent to the example's tortuosity.\n\n"
+            "else tiled, then patches of its built-up parts); what copies leave empty is "
+            "filled with points drawn from the quadtree leaves' densities and level "
+            "probabilities. Streets are random walks, level by level: each step goes to a "
+            "point drawn by a Gaussian on (distance, angle) from the base point's statistics, "
+            "never to a point of another level, a point with all its connections (at most 4) "
+            "or across a street. Stubs close until the dead-end share is the example's, and "
+            "every piece is joined to the rest (or to the existing roads) or dropped: the "
+            "result is one network whose every crossing is a junction. Segments take the "
+            "shapes of the example's street segments (with roads as the example: the same "
+            "tortuosity and bends), else parabolas of the points' tortuosity.\n\n"
             "EXISTING_ROADS: their dead ends at the target continue into the new streets "
-            "(expand). EXAMPLE_B with BLEND (0 = only the example, 1 = only B) or a blend "
-            "field on the targets mixes two styles. Output: planar roads with level (0 = "
-            "most important) in the target's CRS; optionally the points used."
+            "(expand), and new streets meet them at junctions spaced like the example's "
+            "intersections along its arterials. EXAMPLE_B with BLEND (0 = only the example, "
+            "1 = only B) or a blend field on the targets mixes two styles: a share BLEND of "
+            "the area takes B's point layout and every point's street statistics are "
+            "interpolated by BLEND. Output: planar roads with level (0 = most important) in "
+            "the target's CRS; optionally the points used."
         )
 
     def initAlgorithm(self, config=None):  # noqa: N802
@@ -79,8 +88,9 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
         self.add(QgsProcessingParameterFeatureSource(
             self.EXISTING_ROADS, "Existing roads (expand)", [QgsProcessing.TypeVectorLine],
             optional=True),
-            "Roads around the target to expand from: their dead ends at the target "
-            "continue into the new streets, and no new street crosses them.")
+            "Roads in or around the target to expand from (e.g. its arterials): their dead "
+            "ends at the target continue into the new streets, new streets meet them only at "
+            "junctions, and the result is one network with them.")
         self.add(QgsProcessingParameterFeatureSource(
             self.EXAMPLE_B, "Second example (blend)", types, optional=True),
             "Points or roads of a second city; its style is blended with the example's.")
@@ -88,8 +98,10 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
             self.BLEND, "Blend weight of the second example (0-1)",
             QgsProcessingParameterNumber.Double, defaultValue=0.5, minValue=0.0, maxValue=1.0),
             "0 keeps only the example's points, 1 only the second example's; in between, "
-            "densities, level mixes and street statistics are interpolated. Used only with "
-            "a second example.")
+            "densities and level mixes follow the share of the area each example's layout "
+            "takes, and every point's street distances, turn angles (means and variances), "
+            "tortuosity and parcel area are interpolated by the weight. Used only with a "
+            "second example.")
         self.add(QgsProcessingParameterField(
             self.BLEND_FIELD, "Blend weight field (on the targets)",
             parentLayerParameterName=self.TARGET, type=QgsProcessingParameterField.Numeric,
@@ -121,7 +133,8 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT, "Synthesized roads", QgsProcessing.TypeVectorLine),
             "New road segments with level, length_m, tortuosity and origin ('walk'; 'seam' "
-            "joins to existing roads; 'close' extra steps closing stubs).")
+            "joins to existing roads; 'close' steps closing stubs; 'cross' crossing streets "
+            "completed; 'join' steps joining pieces of the network).")
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT_INTERSECTIONS, "Intersection points used", QgsProcessing.TypeVectorPoint,
             optional=True, createByDefault=False),
@@ -156,21 +169,25 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
             xy = shapely.get_coordinates(geoms)
             points = qgis_io.run_engine(frame.name, intersection_quadtree.points_from_table,
                                         xy, frame.attributes, index)
-            feedback.pushInfo(f"{frame.name}: {len(points)} attributed intersection points.")
+            shapes = None
+            feedback.pushInfo(f"{frame.name}: {len(points)} attributed intersection points "
+                              "(no street shapes: segments bend as parabolas of the points' "
+                              "tortuosity).")
         elif kinds <= {1, 5}:
             frame, road_class = drivable_lines(frame, None, set(roads.DRIVABLE_CLASSES),
                                                feedback)
-            points = qgis_io.run_engine(frame.name, self._points_from_roads, frame.geometry,
-                                        road_class, index)
-            feedback.pushInfo(f"{frame.name}: {len(points)} intersection points computed "
-                              "from the roads.")
+            points, shapes = qgis_io.run_engine(frame.name, self._points_from_roads,
+                                                frame.geometry, road_class, index)
+            feedback.pushInfo(f"{frame.name}: {len(points)} intersection points and "
+                              f"{len(shapes)} street segment shapes (mean tortuosity "
+                              f"{shapes.mean_tortuosity():.3f}) computed from the roads.")
         else:
             raise QgsProcessingException(f"Layer {frame.name} has polygons; intersection "
                                          "points or road lines are needed.")
         if len(points) < 3:
             raise QgsProcessingException(f"Layer {frame.name}: {len(points)} intersection "
                                          "points are too few to learn a street style from.")
-        return frame, points
+        return frame, points, shapes
 
     def _bound(self, target, *examples):
         """The points the target receives (its area at the densest example's intersections
@@ -185,7 +202,9 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
 
     @staticmethod
     def _points_from_roads(lines, road_class, index):
-        return intersection_quadtree.points_from_roads(lines, road_class, example=index)[0]
+        points, graph, h = intersection_quadtree.points_from_roads(lines, road_class,
+                                                                  example=index)
+        return points, random_walk.street_shapes(graph, h.edge_level)
 
     def _blend(self, parameters, context, target, field):
         beta = self.number(parameters, self.BLEND, context)
@@ -220,13 +239,13 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
             min_angle=self.number(parameters, self.MIN_ANGLE, context))
         placement = self.PLACEMENTS[self.parameterAsEnum(parameters, self.PLACEMENT, context)]
         feedback.setProgress(5)
-        _, points = self._read_example(parameters, self.EXAMPLE, context, feedback, target.crs,
-                                       target.geometry, 0)
-        points_b = None
+        _, points, shapes = self._read_example(parameters, self.EXAMPLE, context, feedback,
+                                               target.crs, target.geometry, 0)
+        points_b, shapes_b = None, None
         blend = 0.0
         if parameters.get(self.EXAMPLE_B) not in (None, ""):
-            _, points_b = self._read_example(parameters, self.EXAMPLE_B, context, feedback,
-                                             target.crs, target.geometry, 1)
+            _, points_b, shapes_b = self._read_example(parameters, self.EXAMPLE_B, context,
+                                                       feedback, target.crs, target.geometry, 1)
             blend = self._blend(parameters, context, target, field)
         elif field:
             feedback.pushInfo("The blend weight field is ignored: there is no second example.")
@@ -242,17 +261,26 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
         result = qgis_io.run_engine(
             target.name, random_walk.synthesize, points, target.geometry, existing_lines,
             points_b, blend, seed, settings, placement,
-            progress=qgis_io.progress_for(feedback, 15, 90))
+            progress=qgis_io.progress_for(feedback, 15, 90), shapes=shapes, shapes_b=shapes_b)
         st = result.stats
         feedback.pushInfo(
-            f"{st['n_points']} points placed (quadtree leaves: "
+            f"{st['n_points']} points placed ({st['n_points_generated']} drawn from the "
+            f"quadtree model; quadtree leaves: "
             f"{', '.join(str(n) for n in st['quadtree_leaves'])}); {st['n_points_connected']} "
             f"connected by {st['n_edges']} segments on {st['n_levels']} levels; "
-            f"{st['n_dead_ends']} dead ends ({100 * st['dead_end_share']:.0f} %).")
+            f"{st['n_dead_ends']} dead ends ({100 * st['dead_end_share']:.0f} %, the "
+            f"example's {100 * st['example_dead_end_share']:.0f} %).")
+        feedback.pushInfo(
+            f"One network: {st['n_closed']} stubs closed, {st['n_crossings_made']} crossing "
+            f"streets completed, {st['n_joins'] + st['n_join_splits']} pieces joined "
+            f"({st['n_join_splits']} by a new junction on a street), "
+            f"{st['n_dropped_edges']} segments of pieces that could not be joined dropped. "
+            f"Mean tortuosity {st['mean_tortuosity']:.3f} (example "
+            f"{st['example_mean_tortuosity']:.3f}).")
         if "n_seam_ends" in st:
             feedback.pushInfo(f"Existing roads: {st['n_seam_ends_connected']} of "
                               f"{st['n_seam_ends']} dead ends at the target joined the new "
-                              "streets.")
+                              f"streets; {st['n_road_junctions']} junctions on them.")
         results = {}
         results[self.OUTPUT] = qgis_io.write_sink(
             self, parameters, self.OUTPUT, context, result.geometry, result.table,

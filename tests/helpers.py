@@ -211,3 +211,21 @@ def same_footprints(a, b, tol: float = 0.0):
     except AssertionError as exc:
         return f"attributes differ: {exc}"
     return None
+
+
+# ------------------------------------------ Liechtenstein towns (leave-one-town-out checks)
+
+def liechtenstein_town(name):
+    """A town of ``tools/liechtenstein.py`` as a leave-one-town-out case, in UTM 32N: dict
+    with ``area`` (its outline), ``real`` (its drivable streets), ``given`` + ``given_class``
+    (its level-0 roads, from the hierarchy of the whole country) and ``example`` +
+    ``example_class`` (the streets of all other towns)."""
+    import sys
+
+    from conftest import ROOT
+
+    if str(ROOT / "tools") not in sys.path:
+        sys.path.insert(0, str(ROOT / "tools"))
+    import liechtenstein
+
+    return liechtenstein.leave_one_out(name)

@@ -142,3 +142,32 @@ def test_qgis_process_on_bubenec(tmp_path):
     assert info["features"] > 10 and "3857" in info["crs"]
     assert set(FIELDS) <= set(info["fields"])
     assert tif.exists()
+
+
+def test_given_roads_on_a_town(qgis_processing):
+    """A Liechtenstein town's outline with its level-0 roads as GIVEN_ROADS (geographic
+    layers in, metric working CRS): the given roads come back whole (road_class 'given'),
+    the generated streets join them, every contact is a junction, one network."""
+    from helpers import liechtenstein_town
+    from urban_synthesis.plugin.network import invariants
+
+    case = liechtenstein_town("Eschen")
+    given = memory_layer("LineString", shapely.to_wkt(case["given"]), "EPSG:32632",
+                         "&field=highway:string", [[c] for c in case["given_class"]],
+                         name="arterials")
+    out = qgis_processing.run(GAN, {
+        "TARGET": memory_layer("Polygon", [case["area"].wkt], "EPSG:32632"),
+        "GIVEN_ROADS": given, "MODEL": streetgan.shipped_models().index("streetgan_helsinki"),
+        "SEED": 3, "OUTPUT": "memory:"})
+    rows, geoms = layer_features(out["OUTPUT"])
+    is_given = np.array([r["road_class"] == "given" for r in rows])
+    assert shapely.length(geoms[is_given]).sum() == pytest.approx(
+        shapely.length(case["given"]).sum(), rel=1e-6)
+    assert all(r["level"] == 0 for r, g in zip(rows, is_given) if g)
+    check = invariants.check_network(geoms[~is_given], case["given"], case["given_class"],
+                                     case["area"])
+    v = check.violations()
+    v.pop("dead_end_share")
+    assert sum(v.values()) == 0, check.summary()
+    assert check.floating_pieces == 0
+    assert_planar(geoms)

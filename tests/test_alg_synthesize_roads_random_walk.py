@@ -46,12 +46,16 @@ def test_copy_and_reconnect_intersection_points(qgis_processing, helsinki_points
     assert levels == {0, 1, 2, 3}
     np.testing.assert_allclose([r["length_m"] for r in rows], shapely.length(geoms), rtol=1e-6)
     assert all(r["tortuosity"] >= 1.0 - 1e-9 for r in rows)
-    # in place: every example point once, at its own place
+    # in place: every example point once, at its own place (plus junctions made on
+    # streets when pieces were joined: generated = 1)
     p_rows, p_geoms = layer_features(out["OUTPUT_INTERSECTIONS"])
-    assert len(p_rows) == helsinki_points.featureCount()
-    assert sorted(r["source_id"] for r in p_rows) == list(range(len(p_rows)))
+    copied = [r for r in p_rows if r["generated"] == 0]
+    assert len(copied) == helsinki_points.featureCount()
+    assert sorted(r["source_id"] for r in copied) == list(range(len(copied)))
     assert shapely.within(p_geoms, shapely.from_wkt(_hull_wkt(helsinki_graph, 200))).all()
-    assert all(r["connections"] <= min(4, r["degree"]) for r in p_rows)
+    # at most 4 connections; more than the example's only where a stub was closed
+    assert all(r["connections"] <= 4 for r in p_rows)
+    assert np.mean([r["connections"] <= r["degree"] for r in copied]) > 0.9
     # the blocks chain into the voronoi-obb parcels (sec. 3.1.2)
     b_rows, b_geoms = layer_features(out["OUTPUT_BLOCKS"])
     assert len(b_rows) > 10 and shapely.is_valid(b_geoms).all()
@@ -90,7 +94,8 @@ def test_expand_roads_into_a_hole(qgis_processing, helsinki_graph):
     assert len(rows) > 10
     assert_planar(np.concatenate([geoms, outside]))
     p_rows, _ = layer_features(out["OUTPUT_INTERSECTIONS"])
-    assert {r["example"] for r in p_rows} == {0, -1}
+    # example points, existing-road nodes and junction slots on the existing roads
+    assert {0, -1} <= {r["example"] for r in p_rows} <= {0, -1, -2}
     # seam ends: existing dead ends on the hole's outline; most got a new street
     ends = np.concatenate([shapely.get_coordinates(shapely.get_point(outside, i)) for i in (0, -1)])
     on_hole = shapely.distance(hole.boundary, shapely.points(ends)) < 1e-3
@@ -99,8 +104,9 @@ def test_expand_roads_into_a_hole(qgis_processing, helsinki_graph):
     joined = shapely.distance(shapely.multipoints(new_ends), shapely.points(ends[on_hole])) < 0.01
     assert on_hole.sum() >= 10
     assert joined.mean() >= 0.5
-    # new streets stay in the hole (bends included) apart from the seam joins
-    assert shapely.within(geoms, hole.buffer(1.0)).mean() > 0.95
+    # new streets stay in the hole: a bend near its outline may bulge out a little
+    outside = shapely.length(shapely.difference(geoms, hole.buffer(1.0))).sum()
+    assert outside < 0.03 * shapely.length(geoms).sum()
 
 
 def test_blend_field_by_target_polygon(qgis_processing):
@@ -163,3 +169,32 @@ def test_qgis_process_run(tmp_path):
     info = pyogrio.read_info(out)
     assert info["features"] > 30
     assert {"level", "length_m", "tortuosity", "origin"} <= set(info["fields"])
+
+
+def _lines_layer(lines, classes, name, crs="EPSG:32632"):
+    return memory_layer("LineString", shapely.to_wkt(lines), crs, "&field=highway:string",
+                        [[c] for c in classes], name=name)
+
+
+def test_town_never_seen_is_one_network(qgis_processing):
+    """Leave-one-town-out through QGIS: Mauren's outline and level-0 roads, the other
+    Liechtenstein towns' streets as the example: one network with the given roads, every
+    contact a junction, nothing along a given road, the example's dead-end share."""
+    from helpers import liechtenstein_town
+    from urban_synthesis.plugin.network import invariants
+
+    case = liechtenstein_town("Mauren")
+    out = qgis_processing.run(ALG, {
+        "EXAMPLE": _lines_layer(case["example"], case["example_class"], "other towns"),
+        "TARGET": memory_layer("Polygon", [case["area"].wkt], "EPSG:32632"),
+        "EXISTING_ROADS": _lines_layer(case["given"], case["given_class"], "arterials"),
+        "SEED": 5, "OUTPUT": "memory:"})
+    rows, geoms = layer_features(out["OUTPUT"])
+    # the example's dead-end share as the algorithm sees it (it knows no study area of the
+    # example: the clip ends of the other towns count)
+    share = invariants.dead_end_share(case["example"])
+    check = invariants.check_network(geoms, case["given"], case["given_class"], case["area"],
+                                     example_dead_end_share=share)
+    assert check.ok, check.summary()
+    assert check.floating_pieces == 0 and len(rows) > 50
+    assert {"walk", "join"} & {r["origin"] for r in rows}

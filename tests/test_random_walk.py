@@ -5,9 +5,10 @@ import pandas as pd
 import pytest
 import shapely
 
-from helpers import assert_planar, bubenec, helsinki_roads
+from helpers import assert_planar, bubenec, helsinki_roads, liechtenstein_town
 from urban_synthesis.plugin.roads import intersection_quadtree as iq
 from urban_synthesis.plugin.measure import metrics
+from urban_synthesis.plugin.network import invariants
 from urban_synthesis.plugin.roads import random_walk as rw
 from urban_synthesis.plugin.core.progress import InputError
 
@@ -30,9 +31,11 @@ def _grid_points(n=5, spacing=100.0, levels=(0, 1), jitter=0.0, seed=0):
 
 
 def _edge_set(result):
+    """Edges by the example ids of their points (junctions made on streets by joins have no
+    example id and are left out)."""
     src = result.points.source
     return {tuple(sorted((src[a], src[b]))) for a, b in
-            zip(result.table.node_from, result.table.node_to)}
+            zip(result.table.node_from, result.table.node_to) if src[a] >= 0 and src[b] >= 0}
 
 
 @pytest.fixture(scope="module")
@@ -92,9 +95,12 @@ def test_grid_is_reconnected_planar_within_capacity():
     square = shapely.box(-10, -10, 510, 510)
     res = rw.synthesize(pts, square, seed=3, in_place=True)
     got = _edge_set(res)
-    assert len(got & edges) / len(edges) > 0.85
+    # most grid edges come back; a crossing street completed onto a street (a new T) splits
+    # an edge now and then
+    assert len(got & edges) / len(edges) > 0.75
     assert_planar(res.geometry)
-    assert len(got) == len(res.table)  # no duplicate edges
+    pairs = {tuple(sorted(e)) for e in zip(res.table.node_from, res.table.node_to)}
+    assert len(pairs) == len(res.table)  # no duplicate edges
     deg = np.bincount(np.r_[res.table.node_from, res.table.node_to], minlength=len(res.points))
     assert (deg <= np.minimum(res.points.degree, 4)).all()
     # streets of level 0 and 1 both exist; tortuosity 1 gives straight segments
@@ -103,31 +109,45 @@ def test_grid_is_reconnected_planar_within_capacity():
 
 
 def test_wrong_level_is_never_connected():
-    """Two interleaved grids of level 0 and level 1 points, one street each: every
-    segment joins two points of its own level."""
+    """Two interleaved grids of level 0 and level 1 points, one street each: every street
+    segment joins two points of its own level; only the joins that make one network of the
+    two (the completed REPEAT) link the levels, and they do."""
     a, _ = _grid_points(n=5, levels=(0, -1))
     b, _ = _grid_points(n=5, levels=(1, -1))
     b = b.moved([50.0, 50.0])
     b.example[:] = 1
     pts = iq.PointSet.concat([a, b])
     res = rw.synthesize(pts, shapely.box(-10, -10, 500, 500), seed=1, in_place=True)
-    lv = res.points.level[:, 0]
-    assert len(res.table) > 20
-    assert (lv[res.table.node_from] == res.table.level).all()
-    assert (lv[res.table.node_to] == res.table.level).all()
+    lv = res.points.level
+    t = res.table[res.table.origin != "join"]
+    assert len(t) > 20
+    for end in ("node_from", "node_to"):
+        assert ((lv[t[end]] == t.level.to_numpy()[:, None]).any(axis=1)).all()
+    assert (res.table.origin == "join").sum() >= 1
+    check = invariants.check_network(res.geometry)
+    assert check.n_components == 1 and check.ok
     assert_planar(res.geometry)
 
 
 def test_existing_road_is_not_crossed():
-    """An existing road through the middle (its ends far off the target: no seam): no new
-    street crosses it or touches it away from a node."""
+    """An existing road through the middle (its ends far off the target: no seam): new
+    streets meet it only with an end point, at the junction slots placed along it, from
+    both sides, and form one network with it."""
     pts, _ = _grid_points(n=6, jitter=1.0)
     road = shapely.LineString([(-400, 260), (900, 240)])
     res = rw.synthesize(pts, shapely.box(-10, -10, 510, 510), existing_lines=[road], seed=2,
                         in_place=True)
     assert res.stats["n_seam_ends"] == 0
     assert len(res.table) > 20
-    assert not shapely.intersects(res.geometry, road).any()
+    touching = res.geometry[shapely.intersects(res.geometry, road)]
+    assert len(touching) >= 2
+    ends = shapely.union_all(shapely.boundary(touching))
+    assert shapely.covers(ends.buffer(1e-6), shapely.intersection(touching, road)).all()
+    side = np.sign(shapely.get_coordinates(shapely.centroid(touching))[:, 1] - 250.0)
+    assert set(side) == {-1.0, 1.0}
+    assert res.stats["n_road_junctions"] >= 2
+    check = invariants.check_network(res.geometry, [road])
+    assert check.violations()["crossings_given"] == 0 and check.floating_pieces == 0
     assert_planar(np.concatenate([res.geometry, [road]]))
 
 
@@ -160,8 +180,10 @@ def test_copy_and_reconnect_helsinki(helsinki):
     res = rw.synthesize(pts, hull, seed=1, in_place=True)
     original = {tuple(sorted(e)) for e in zip(graph.u, graph.v)}
     got = _edge_set(res)
-    assert len(got & original) / len(original) > 0.5
-    assert len(got & original) / len(got) > 0.65
+    # recall a little under the paper's look (the REPEAT's joins and completions connect
+    # some points otherwise), precision high
+    assert len(got & original) / len(original) > 0.45
+    assert len(got & original) / len(got) > 0.75
     assert_planar(res.geometry)
     m_orig = metrics.compute_layout_metrics(roads=graph.geometry, area=hull)
     m_syn = metrics.compute_layout_metrics(roads=res.geometry, area=hull)
@@ -241,7 +263,7 @@ def test_blocks_and_dual_graph():
     # adjacent blocks share a street edge
     shared = shapely.length(shapely.intersection(shapely.boundary(blocks[dual[:, 0]]),
                                                  shapely.boundary(blocks[dual[:, 1]])))
-    assert (shared > 50).all()
+    assert (shared > 20).all()
     # the blocks of the synthesis: faces on new streets, with their block-graph degree
     faces, table = rw.block_table(res)
     assert len(faces) == len(blocks) and list(table.block_id) == list(range(1, len(faces) + 1))
@@ -255,5 +277,120 @@ def test_thousand_points_connect_planar(helsinki):
     side = 3900.0  # Helsinki's points tiled over 15 km²: about 1,000 points
     square = shapely.box(*(c - side / 2), *(c + side / 2))
     res = rw.synthesize(pts, square, seed=5, in_place=False)
-    assert 800 < res.stats["n_points"] < 1300
+    # the example's density per area near its streets (a raster of discs), filled in
+    want = iq.example_density(pts) * square.area
+    assert 0.85 * want < res.stats["n_points"] <= want + 1
     assert_planar(res.geometry)
+    check = invariants.check_network(res.geometry)
+    assert check.n_components == 1 and check.ok
+
+
+# --------------------------------------------------------------------------- the model
+
+def test_generated_points_follow_leaf_density_and_level_probabilities():
+    """One uniform leaf (a jittered grid, levels 0 / 1 at 30 / 70 %): points drawn into a
+    region of another shape have the leaf's density and level probabilities."""
+    rng = np.random.default_rng(4)
+    x, y = np.meshgrid(np.arange(16) * 60.0, np.arange(16) * 60.0)
+    xy = np.column_stack([x.ravel(), y.ravel()]) + rng.normal(0, 3, (256, 2))
+    level = np.where(rng.random(256) < 0.3, 0, 1)
+    table = pd.DataFrame({"level_a": level, "dist_mean_a": 60.0, "dist_var_a": 36.0})
+    pts = iq.points_from_table(xy, table)
+    qt = iq.build_quadtree(pts, min_points=8)
+    assert len(qt.leaves) == 1
+    region = shapely.Point(3000, 0).buffer(700)    # a disc away from the example
+    got = iq.generate_points(pts, qt, region, np.random.default_rng(1))
+    assert got.generated.all()
+    assert shapely.contains_xy(region, got.xy[:, 0], got.xy[:, 1]).all()
+    assert len(got) == pytest.approx(qt.leaves[0].density * region.area, rel=0.05)
+    share0 = (got.level[:, 0] == 0).mean()
+    assert share0 == pytest.approx(qt.leaves[0].level_prob[0], abs=0.05)
+    # stratified: no two points closer than a tenth of the lattice spacing is rare
+    d, _ = __import__("scipy.spatial", fromlist=["cKDTree"]).cKDTree(got.xy).query(got.xy, k=2)
+    assert np.mean(d[:, 1] < 6.0) < 0.05
+
+
+def test_blend_interpolates_point_attributes():
+    """Constant blends of a 100 m grid (A) and a 200 m grid (B): every kept point's street
+    distances are (1 - w) own + w the other's, so BLEND 0.25 / 0.5 / 0.75 move the mean
+    street distance monotonically from A's to B's (sec. 4.2 'interpolate')."""
+    a, _ = _grid_points(n=11, spacing=100.0)
+    b, _ = _grid_points(n=6, spacing=200.0)
+    b.example[:] = 1
+    means = []
+    for beta in (0.0, 0.25, 0.5, 0.75, 1.0):
+        mixed = iq.blend_points(a, b, beta, np.random.default_rng(2))
+        from_a = mixed.example == 0
+        if 0 < beta < 1:
+            np.testing.assert_allclose(mixed.dist_mean[from_a, 0], 100 + beta * 100)
+            np.testing.assert_allclose(mixed.dist_mean[~from_a, 0], 200 - (1 - beta) * 100)
+            # variances interpolate as variances
+            np.testing.assert_allclose(mixed.dist_sd[from_a, 0] ** 2,
+                                       (1 - beta) * a.dist_sd[0, 0] ** 2
+                                       + beta * b.dist_sd[0, 0] ** 2)
+        means.append(mixed.dist_mean[:, 0].mean())
+    assert np.all(np.diff(means) > 0) and means[0] == 100 and means[-1] == 200
+
+
+def test_street_shapes_round_trip(helsinki):
+    """Normalised example shapes mapped back onto their own chords give the example's
+    segments (within the 0.2 % simplification) and keep their tortuosity."""
+    pts, graph, h = helsinki
+    shapes = rw.street_shapes(graph, h.edge_level)
+    assert len(shapes) > 0.9 * graph.n_edges
+    keep = (np.linalg.norm(graph.nodes[graph.v] - graph.nodes[graph.u], axis=1) > 1.0) & \
+        (graph.u != graph.v)
+    a, b = graph.nodes[graph.u[keep]], graph.nodes[graph.v[keep]]
+    back = rw._shape_lines(shapes, np.arange(len(shapes)), a, b, np.ones(len(shapes)))
+    err = shapely.hausdorff_distance(back, graph.geometry[keep])
+    assert (err <= 0.0021 * shapes.chord + 1e-6).all()
+    np.testing.assert_allclose(shapely.length(back) / shapes.chord, shapes.tortuosity,
+                               rtol=0.01)
+
+
+@pytest.fixture(scope="module")
+def eschen():
+    return liechtenstein_town("Eschen")
+
+
+def _eschen_run(case, seed):
+    pts, graph, h = iq.points_from_roads(case["example"], case["example_class"])
+    shapes = rw.street_shapes(graph, h.edge_level)
+    # the example's dead-end share inside its towns (its clip ends are no dead ends)
+    share = invariants.dead_end_share(case["example"], case["example_area"])
+    res = rw.synthesize(pts, case["area"], case["given"], seed=seed, shapes=shapes,
+                        dead_end_share=share)
+    return pts, shapes, res
+
+
+def test_one_network_on_a_town_never_seen(eschen):
+    """Leave-one-town-out on real data: Eschen's level-0 roads and outline, the other
+    Liechtenstein towns as the example. One network with the given roads, every contact a
+    junction, no street along a given road, junctions on the given roads, the example's
+    dead-end share (±30 %) and mean tortuosity (±2 %)."""
+    pts, shapes, res = _eschen_run(eschen, 1)
+    share = invariants.dead_end_share(eschen["example"], eschen["example_area"])
+    check = invariants.check_network(res.geometry, eschen["given"], eschen["given_class"],
+                                     eschen["area"], example_dead_end_share=share)
+    assert check.ok, check.summary()
+    assert check.floating_pieces == 0
+    assert res.stats["n_road_junctions"] >= 5
+    assert res.stats["mean_tortuosity"] == pytest.approx(shapes.mean_tortuosity(), rel=0.02)
+    # streets bend like the example's: its tortuosity distribution, more often bent (where a
+    # bend does not fit, the lost tortuosity is made up by bending other segments)
+    tort = res.table.tortuosity.to_numpy()
+    assert metrics.two_sample(tort, shapes.tortuosity)["ks_stat"] < 0.35
+    assert np.quantile(tort, 0.9) == pytest.approx(np.quantile(shapes.tortuosity, 0.9),
+                                                   rel=0.05)
+    # points fill the outline (the model fills what copies leave empty)
+    assert res.stats["n_points_generated"] > 0
+    inside = shapely.contains_xy(eschen["area"], res.points.xy[:, 0], res.points.xy[:, 1])
+    assert inside[res.points.example >= 0].all()
+
+
+def test_same_seed_same_network(eschen):
+    g1 = _eschen_run(eschen, 3)[2].geometry
+    g2 = _eschen_run(eschen, 3)[2].geometry
+    g3 = _eschen_run(eschen, 4)[2].geometry
+    assert len(g1) == len(g2) and shapely.equals_exact(g1, g2, 0.0).all()
+    assert len(g3) != len(g1) or not shapely.equals_exact(g1, g3, 0.0).all()

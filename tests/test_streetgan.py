@@ -140,3 +140,40 @@ def test_helsinki_model_against_helsinki(models):
     d_gen = metrics.two_sample(gen.distribution("blocks", "area"), real.distribution("blocks", "area"))
     d_base = metrics.two_sample(base.distribution("blocks", "area"), real.distribution("blocks", "area"))
     assert d_gen["wasserstein_norm"] < d_base["wasserstein_norm"]
+
+
+def test_given_roads_are_kept_and_joined(models):
+    """An arterial through the target and a motorway along one edge: the arterial is kept
+    whole, generated streets end on it (junctions from both sides) and never run in its
+    corridor, the motorway gets no junction, and the result is one network whose every
+    contact is a junction."""
+    from urban_synthesis.plugin.network import invariants
+
+    target = shapely.box(0, 0, 1500, 1200)
+    arterial = shapely.LineString([(-100, 610), (700, 560), (1600, 640)])
+    motorway = shapely.LineString([(-100, 40), (1600, 60)])
+    res = streetgan.synthesize(target, models["streetgan_helsinki"], seed=2,
+                               given=[arterial, motorway], given_class=["primary", "motorway"])
+    kept = shapely.union_all(res.geometry[res.given])
+    assert kept.length == pytest.approx(arterial.length + motorway.length, rel=1e-9)
+    new = res.geometry[~res.given]
+    check = invariants.check_network(new, [arterial, motorway], ["primary", "motorway"],
+                                     target)
+    v = check.violations()
+    v.pop("dead_end_share")
+    assert sum(v.values()) == 0, check.summary()
+    assert check.floating_pieces == 0
+    # streets end on the arterial (at least 6 junctions), from both sides
+    ends = shapely.points(shapely.get_coordinates(shapely.boundary(new)))
+    assert shapely.dwithin(arterial, ends, 1e-6).sum() >= 6
+    near = new[shapely.dwithin(new, arterial, 1e-6)]
+    mid = shapely.get_coordinates(shapely.line_interpolate_point(near, 0.5, normalized=True))
+    sides = np.sign(mid[:, 1] - np.interp(mid[:, 0], [-100, 700, 1600], [610, 560, 640]))
+    assert set(sides) == {-1.0, 1.0}
+    assert not shapely.dwithin(motorway, new, 1.0).any()
+    assert (res.level[res.given] == 0).all() and (res.level[~res.given] >= 1).all()
+    # the same seed gives the same network
+    again = streetgan.synthesize(target, models["streetgan_helsinki"], seed=2,
+                                 given=[arterial, motorway], given_class=["primary", "motorway"])
+    assert len(again.geometry) == len(res.geometry)
+    assert shapely.equals_exact(again.geometry, res.geometry, 0.0).all()

@@ -13,12 +13,17 @@ them). This module
   uniformly distributed points (a chi-square test on its four quadrants), or reaches a
   minimum area or point count; each leaf stores its point density and the relative
   probability of each hierarchy level;
-- places copies of an example's points into a target polygon of any shape, leaf by leaf
-  (join / expand, sec. 4.2, :func:`place_points`), and blends two examples with a constant
-  or spatially varying weight (:func:`blend_points`): a smooth random field gives a share
-  beta of the area to B's points and the rest to A's, so that the expected point density,
-  level mix and street statistics at every location are the beta-weighted combination of
-  the two examples' leaves there, while each patch keeps its example's street pattern.
+- places copies of an example's points into a target polygon of any shape (join /
+  expand, sec. 4.2, :func:`place_points`) and fills what the copies leave empty with new
+  points drawn from the leaves' model (:func:`generate_points`: each patch of the area
+  takes a built-up leaf, points at its density, levels from its level probabilities,
+  street statistics from its points of that level; sec. 4.1 "parametrically producing
+  attributed intersection points");
+- blends two examples with a constant or spatially varying weight (:func:`blend_points`):
+  a smooth random field gives a share beta of the area to B's point layout and the rest
+  to A's, and every point's street statistics (distances, angles, their variances,
+  tortuosity, parcel area) are interpolated by beta between its own and the other
+  example's there (sec. 4.2: a constant blend "interpolates" between the styles).
 
 Nothing here imports QGIS.
 
@@ -42,7 +47,9 @@ from ..core.geometry import minimum_rectangle_corners
 from ..core.progress import InputError
 
 __all__ = ["REQUIRED_FIELDS", "PointSet", "points_from_table", "points_from_roads",
-           "Leaf", "QuadTree", "build_quadtree", "place_points", "blend_points"]
+           "Leaf", "QuadTree", "build_quadtree", "place_points", "generate_points",
+           "blend_points", "BLENDED_ATTRIBUTES", "copy_patches", "built_up_leaves",
+           "example_density", "interpolate_attributes"]
 
 #: Attribute columns a point layer must have (street a; street b is optional per point).
 REQUIRED_FIELDS = ("level_a", "dist_mean_a")
@@ -62,8 +69,11 @@ class PointSet:
     tortuosity, dist_mean, dist_sd, angle_mean, angle_sd : (n, 2) float per slot
     degree : (n,) int, connections of the point in its example (the walk's capacity, <= 4)
     area : (n,) float, mean parcel (else block) area around the point (m², NaN unknown)
-    source : (n,) int, index of the point in its example (for provenance / evidence)
+    source : (n,) int, index of the point in its example (for provenance / evidence); for
+        a generated point, the example point it took its attributes from
     example : (n,) int, which example the point comes from (0 = A, 1 = B, -1 = existing)
+    generated : (n,) bool, drawn from the quadtree model (:func:`generate_points`) rather
+        than copied from the example
     """
 
     xy: np.ndarray
@@ -77,12 +87,19 @@ class PointSet:
     area: np.ndarray
     source: np.ndarray
     example: np.ndarray
+    generated: Optional[np.ndarray] = None
+
+    def __post_init__(self):
+        if self.generated is None:
+            self.generated = np.zeros(len(self.xy), dtype=bool)
 
     def __len__(self) -> int:
         return len(self.xy)
 
     def take(self, idx) -> "PointSet":
         idx = np.asarray(idx)
+        if idx.dtype != bool:
+            idx = idx.astype(np.int64)
         return PointSet(**{k: getattr(self, k)[idx] for k in self.__dataclass_fields__})
 
     def moved(self, offset) -> "PointSet":
@@ -333,8 +350,10 @@ def _as_target(target) -> shapely.Geometry:
 
 
 def place_points(points: PointSet, quadtree: QuadTree, target, rng: np.random.Generator,
-                 in_place: Optional[bool] = None, n_offsets: int = 6) -> PointSet:
-    """Copies of the example's points that cover ``target`` (join / expand, sec. 4.2).
+                 in_place: Optional[bool] = None, n_offsets: int = 6,
+                 fill: Optional[bool] = None, patches: bool = True) -> PointSet:
+    """Copies of the example's points that cover ``target`` (join / expand, sec. 4.2), and
+    points drawn from the quadtree model where the copies leave the target empty.
 
     The example is tiled over the target by translation (its bounding box repeated); the
     quadtree leaves are the atomic units: a leaf copy is used when it overlaps the target,
@@ -348,8 +367,19 @@ def place_points(points: PointSet, quadtree: QuadTree, target, rng: np.random.Ge
         ``n_offsets``² shifts of the tiling (ties: the most central); None: in place unless
         a shift puts over 25 % more points into the target (a target beside or inside a
         hole of the example gets shifted copies).
+    fill : bool, optional
+        Fill the parts of the target farther than :data:`FILL_GAP` x the example's median
+        street distance from every copied point with points of :func:`generate_points`
+        (a target of another shape than the example, or an example with parks, water or
+        empty margins). Default: fill unless ``in_place`` is True (the copy-and-reconnect
+        of fig. 8 keeps exactly the example's points).
+    patches : bool
+        Fill first with patches of the example's built-up layout (:func:`copy_patches`),
+        then with the quadtree model where gaps remain; False: the model only.
     """
     area = _as_target(target)
+    if fill is None:
+        fill = in_place is not True
     xy = points.xy
     x0, y0 = xy.min(axis=0)
     x1, y1 = xy.max(axis=0)
@@ -400,12 +430,273 @@ def place_points(points: PointSet, quadtree: QuadTree, target, rng: np.random.Ge
         # automatic: in place unless a shift brings clearly more points into the target
         if in_place is False or shifted_key[0] > 1.25 * in_place_count:
             best = shifted
-    if not best:
+    if not best and not fill:
         raise InputError("no example point falls into the target: the target is smaller than "
                          "the example's street spacing")
-    placed = PointSet.concat([points.take(idx).moved(shift) for idx, shift in best])
+    placed = PointSet.concat([points.take(idx).moved(shift) for idx, shift in best]) \
+        if best else points.take(np.zeros(0, dtype=np.int64))
     # only copies of different tiles can stack at a seam
-    return _thin(placed, 0.3) if len(best) > 1 else placed
+    placed = _thin(placed, 0.3) if len(best) > 1 else placed
+    if not fill:
+        return placed
+    reach = FILL_GAP * gap
+    parts = [placed]
+
+    cache = {}
+
+    def uncovered(xy):
+        """Locations farther than ``reach`` from every point placed so far."""
+        n = sum(len(p) for p in parts)
+        if not n:
+            return np.ones(len(xy), dtype=bool)
+        if cache.get("n") != n:
+            cache["n"], cache["tree"] = n, cKDTree(np.concatenate([p.xy for p in parts]))
+        return cache["tree"].query(xy, distance_upper_bound=reach)[0] > reach
+
+    if patches:
+        # patches of the example's built-up point layout first (streets stay aligned) ...
+        parts.append(copy_patches(points, quadtree, area, rng, accept=uncovered))
+    # ... then the quadtree model where they leave gaps
+    parts.append(generate_points(points, quadtree, area, rng, accept=uncovered))
+    out = PointSet.concat(parts)
+    out = _thin(out, 0.3)
+    # copies of built-up windows are denser than the example as a whole (its edges and
+    # gaps count too): keep the example's density per area near its streets
+    want = example_density(points) * area.area
+    if len(out) > want > 0:
+        out = out.take(np.sort(rng.permutation(len(out))[:int(round(want))]))
+    if not len(out):
+        raise InputError("no example point falls into the target: the target is smaller than "
+                         "the example's street spacing")
+    return out
+
+
+def example_density(points: PointSet) -> float:
+    """Points per m² of the example's street area: the union of discs of one median street
+    distance around its points (the built area an outline of the example would hold)."""
+    if not len(points):
+        return 0.0
+    gap = float(np.median(points.dist_mean[:, 0]))
+    step = gap / 4.0
+    lo, hi = points.xy.min(axis=0) - gap, points.xy.max(axis=0) + gap
+    n_cells = np.prod(np.ceil((hi - lo) / step))
+    if n_cells > 4e6:  # a huge example: a coarser raster
+        step = float(np.sqrt(np.prod(hi - lo) / 4e6))
+    gx, gy = np.meshgrid(np.arange(lo[0], hi[0], step) + step / 2,
+                         np.arange(lo[1], hi[1], step) + step / 2)
+    near = cKDTree(points.xy).query(np.column_stack([gx.ravel(), gy.ravel()]),
+                                    distance_upper_bound=gap)[0] <= gap
+    area = near.sum() * step * step  # a raster of the union of the discs
+    return len(points) / area if area > 0 else 0.0
+
+
+#: Parts of the target farther than this x the example's median street distance from every
+#: copied point are filled by :func:`generate_points`.
+FILL_GAP = 0.75
+
+
+def _cells(region, side: float, rng) -> np.ndarray:
+    """Square cells of ``side`` m at a random offset that meet ``region``."""
+    x0, y0, x1, y1 = region.bounds
+    off = rng.uniform(0.0, side, 2)
+    cx = np.arange(np.floor((x0 - off[0]) / side), np.ceil((x1 - off[0]) / side)) * side \
+        + off[0]
+    cy = np.arange(np.floor((y0 - off[1]) / side), np.ceil((y1 - off[1]) / side)) * side \
+        + off[1]
+    if not len(cx) or not len(cy):
+        return np.empty(0, dtype=object)
+    gx, gy = np.meshgrid(cx, cy)
+    cells = shapely.box(gx, gy, gx + side, gy + side).ravel()
+    return cells[shapely.intersects(cells, region)]
+
+
+def copy_patches(points: PointSet, quadtree: QuadTree, region, rng: np.random.Generator,
+                 side: Optional[float] = None, tries: int = 6,
+                 accept: Optional[callable] = None) -> PointSet:
+    """Copies of square windows of the example's built-up layout that tile ``region``.
+
+    The paste of sec. 4.2 ("copies of their attributed intersection points placed next to
+    each other") for a region of any shape: the region is cut into squares of ``side`` m
+    (default 5 median street distances); each square takes the points of a window of the
+    same size centred on a uniform random location of the built-up leaves
+    (:func:`built_up_leaves`), translated; a window with fewer points than half the
+    leaves' mean density predicts is redrawn up to ``tries`` times (it fell on a park or
+    the edge of the example). ``accept(xy) -> bool`` keeps only some locations (the holes
+    left by earlier copies); a square where it keeps under a third of the area is skipped.
+    """
+    region = _as_target(region)
+    use = built_up_leaves(quadtree)
+    if not len(use):
+        return points.take([])
+    area = np.array([quadtree.leaves[k].polygon.area for k in use])
+    dens = float(sum(len(quadtree.leaves[k].index) for k in use) / area.sum())
+    gap = float(np.median(points.dist_mean[:, 0]))
+    side = side or 5.0 * gap
+    tree = cKDTree(points.xy)
+    shapely.prepare(region)
+    idx_all, shift_all = [], []
+    probe = (np.stack(np.meshgrid(np.linspace(-0.4, 0.4, 5), np.linspace(-0.4, 0.4, 5)),
+                      axis=-1).reshape(-1, 2)) * side
+    for cell in _cells(region, side, rng):
+        b = cell.bounds
+        c = np.array([(b[0] + b[2]) / 2.0, (b[1] + b[3]) / 2.0])
+        if accept is not None:
+            pr = c + probe
+            ok = shapely.contains_xy(region, pr[:, 0], pr[:, 1])
+            if not ok.any() or accept(pr[ok]).sum() < len(pr) / 3.0:
+                continue
+
+        def part_contains(m):
+            inside = (m[:, 0] >= b[0]) & (m[:, 0] < b[2]) & (m[:, 1] >= b[1]) & (m[:, 1] < b[3])
+            inside &= shapely.contains_xy(region, m[:, 0], m[:, 1])
+            if accept is not None and inside.any():
+                inside[inside] = accept(m[inside])
+            return inside
+
+        best = None
+        for _ in range(tries):
+            # a uniform location of the built-up area (not a point: that would favour the
+            # densest leaves)
+            leaf = quadtree.leaves[int(use[rng.choice(len(use), p=area / area.sum())])]
+            lb = leaf.polygon
+            ring = shapely.get_coordinates(lb)[:4]
+            u, v = rng.random(2)
+            centre = ring[0] + u * (ring[1] - ring[0]) + v * (ring[3] - ring[0])
+            idx = np.asarray(tree.query_ball_point(centre, side / 2.0, p=np.inf), dtype=np.int64)
+            moved = points.xy[idx] + (c - centre)
+            inside = part_contains(moved)
+            if best is None or inside.sum() > best[0].sum():
+                best = (inside, idx, c - centre)
+            if len(idx) >= 0.5 * dens * side * side:
+                break
+        inside, idx, shift = best
+        if inside.any():
+            idx_all.append(idx[inside])
+            shift_all.append(np.repeat(shift[None, :], inside.sum(), axis=0))
+    if not idx_all:
+        return points.take([])
+    out = points.take(np.concatenate(idx_all))
+    out.xy = out.xy + np.concatenate(shift_all)
+    return out
+
+
+#: Leaves with at least this share of the median leaf density model built-up area.
+BUILT_UP_SHARE = 0.1
+
+
+def built_up_leaves(quadtree: QuadTree, min_share: Optional[float] = None) -> np.ndarray:
+    """Indices of the leaves that model built-up area: at least 3 points and at least
+    ``min_share`` of the median density of such leaves (parks, water and the empty margins
+    of an extract are sparse leaves)."""
+    min_share = BUILT_UP_SHARE if min_share is None else min_share
+    n = np.array([len(lf.index) for lf in quadtree.leaves])
+    dens = np.array([lf.density for lf in quadtree.leaves])
+    ok = n >= 3
+    if not ok.any():
+        ok = n >= 1
+    if not ok.any():
+        return np.zeros(0, dtype=np.int64)
+    return np.flatnonzero(ok & (dens >= min_share * np.median(dens[ok])))
+
+
+def generate_points(points: PointSet, quadtree: QuadTree, region, rng: np.random.Generator,
+                    patch: Optional[float] = None, leaves: Optional[np.ndarray] = None,
+                    level_prob: Optional[callable] = None,
+                    accept: Optional[callable] = None) -> PointSet:
+    """New attributed points in ``region`` drawn from the example's quadtree leaves.
+
+    Sec. 4.1: each leaf is "a set of points of approximately uniform spatial distribution"
+    that stores "the relative probability of each hierarchy level", which "enables
+    parametrically producing attributed intersection points". Here the region is cut into
+    square patches of about one leaf's size; each patch takes one built-up leaf
+    (:func:`built_up_leaves`, drawn with probability proportional to its points) and gets
+
+    - points at the leaf's density, one uniform point per cell of a lattice of spacing
+      ``1 / sqrt(density)`` (stratified sampling: the density of the leaf exactly, evenly
+      spread as intersections are, never two on one spot);
+    - a hierarchy level per point drawn from the leaf's level probabilities (or
+      ``level_prob(leaf_index, xy) -> (n, n_levels)`` probabilities, for a blend);
+    - the street statistics of a random point of the leaf whose streets have that level
+      (so that the two streets' attributes stay a consistent pair).
+
+    Parameters
+    ----------
+    points, quadtree : the example and its quadtree (:func:`build_quadtree`)
+    region : Polygon / MultiPolygon to fill
+    rng : numpy Generator
+    patch : side (m) of the patches; default the median side of the built-up leaves,
+        within 3 .. 12 median street distances
+    leaves : leaf indices to draw from (default :func:`built_up_leaves`)
+    accept : function (n, 2) locations -> bool, optional: only these locations get points
+        (the holes left by copies)
+
+    Returns
+    -------
+    PointSet with ``generated`` True (``source`` = the example point that gave the
+    attributes).
+
+    References
+    ----------
+    Aliaga, Vanegas, Benes 2008, sec. 4.1 (adaptive quadtree, uniform leaves, level
+    probabilities) and 4.2 (expand: points placed next to an existing layout).
+    """
+    region = _as_target(region)
+    use = built_up_leaves(quadtree) if leaves is None else np.asarray(leaves, dtype=np.int64)
+    empty = points.take(np.zeros(0, dtype=np.int64))
+    if len(use) == 0:
+        return empty
+    count = np.array([len(quadtree.leaves[k].index) for k in use], dtype=float)
+    weight = count / count.sum()
+    gap = float(np.median(points.dist_mean[:, 0]))
+    if patch is None:
+        sides = [np.sqrt(quadtree.leaves[k].polygon.area) for k in use]
+        patch = float(np.clip(np.median(sides), 3.0 * gap, 12.0 * gap))
+    shapely.prepare(region)
+    cells = _cells(region, patch, rng)
+    xy_all, donor_all = [], []
+    for cell in cells:
+        k = int(use[rng.choice(len(use), p=weight)])
+        leaf = quadtree.leaves[k]
+        step = 1.0 / np.sqrt(max(leaf.density, 1e-12))
+        b = cell.bounds
+        gx = np.arange(b[0], b[2], step)
+        gy = np.arange(b[1], b[3], step)
+        if not len(gx) or not len(gy):
+            continue
+        lx, ly = np.meshgrid(gx, gy)
+        xy = np.column_stack([lx.ravel(), ly.ravel()]) + rng.uniform(0.0, step, (lx.size, 2))
+        inside = (xy[:, 0] < b[2]) & (xy[:, 1] < b[3])
+        inside[inside] = shapely.contains_xy(region, xy[inside, 0], xy[inside, 1])
+        if accept is not None and inside.any():
+            inside[inside] = accept(xy[inside])
+        xy = xy[inside]
+        if not len(xy):
+            continue
+        prob = np.asarray(leaf.level_prob, dtype=float)
+        if level_prob is not None:
+            prob = np.asarray(level_prob(k, xy), dtype=float)
+        prob = np.broadcast_to(prob, (len(xy), len(prob))) if prob.ndim == 1 else prob
+        lv_of = points.level[leaf.index]
+        # levels this leaf's points can give; a draw of another level is redrawn among them
+        avail = np.array([(lv_of == lv).any() for lv in range(prob.shape[1])])
+        prob = np.where(avail[None, :], prob, 0.0)
+        total = prob.sum(axis=1, keepdims=True)
+        prob = np.where(total > 0, prob / np.maximum(total, 1e-300), avail / avail.sum())
+        levels = (rng.random(len(xy))[:, None] > np.cumsum(prob, axis=1)).sum(axis=1)
+        levels = np.minimum(levels, prob.shape[1] - 1)
+        donor = np.empty(len(xy), dtype=np.int64)
+        for lv in np.unique(levels):
+            pool = leaf.index[(lv_of == lv).any(axis=1)]
+            sel = levels == lv
+            donor[sel] = pool[rng.integers(0, len(pool), sel.sum())]
+        xy_all.append(xy)
+        donor_all.append(donor)
+    if not xy_all:
+        return empty
+    out = points.take(np.concatenate(donor_all))
+    out.xy = np.concatenate(xy_all)
+    out.generated = np.ones(len(out), dtype=bool)
+    return out
 
 
 def _thin(points: PointSet, share: float, order=None) -> PointSet:
@@ -445,6 +736,58 @@ def _smooth_uniform(xy, scale, rng, n_waves: int = 48) -> np.ndarray:
     return stats.norm.cdf(field)
 
 
+#: Point attributes a blend interpolates (sec. 3.1.1 (ii)-(iv)): street distances and turn
+#: angles (means and variances), tortuosity and parcel area.
+BLENDED_ATTRIBUTES = ("dist_mean", "dist_var", "angle_mean", "angle_var", "tortuosity",
+                      "parcel_area")
+
+
+def _nearest_same_level(own: PointSet, other: PointSet) -> np.ndarray:
+    """Index into ``other`` of the nearest point whose street a has the level of each point
+    of ``own`` (the nearest point of any level where ``other`` has none of that level)."""
+    out = cKDTree(other.xy).query(own.xy)[1]
+    for lv in np.unique(own.level[:, 0]):
+        pool = np.flatnonzero(other.level[:, 0] == lv)
+        sel = own.level[:, 0] == lv
+        if len(pool) and sel.any():
+            out[sel] = pool[cKDTree(other.xy[pool]).query(own.xy[sel])[1]]
+    return out
+
+
+def interpolate_attributes(own: PointSet, other: PointSet, weight) -> PointSet:
+    """``own``'s points with their :data:`BLENDED_ATTRIBUTES` moved towards those of the
+    nearest point of ``other`` with the same street level: (1 - w) own + w other, variances
+    interpolated as variances; street b takes the other point's street b where it has one,
+    else its street a. Levels, degrees and positions stay ``own``'s.
+
+    weight : float or (n,) array in [0, 1], the share of ``other``'s style at each point.
+    """
+    if not len(own) or not len(other):
+        return own
+    w = np.broadcast_to(np.asarray(weight, dtype=float), (len(own),))[:, None]
+    j = _nearest_same_level(own, other)
+    src = other.take(j)
+    slot_b_ok = src.level[:, 1] >= 0
+    out = own.take(np.arange(len(own)))
+
+    def other_slots(values):
+        v = values.copy()
+        v[:, 1] = np.where(slot_b_ok, values[:, 1], values[:, 0])
+        return v
+
+    out.dist_mean = (1 - w) * own.dist_mean + w * other_slots(src.dist_mean)
+    out.dist_sd = np.sqrt((1 - w) * own.dist_sd ** 2 + w * other_slots(src.dist_sd) ** 2)
+    out.angle_mean = (1 - w) * own.angle_mean + w * other_slots(src.angle_mean)
+    out.angle_sd = np.sqrt((1 - w) * own.angle_sd ** 2 + w * other_slots(src.angle_sd) ** 2)
+    out.tortuosity = (1 - w) * own.tortuosity + w * other_slots(src.tortuosity)
+    w1 = w[:, 0]
+    both = np.isfinite(own.area) & np.isfinite(src.area)
+    out.area = np.where(both, (1 - w1) * np.where(both, own.area, 0.0)
+                        + w1 * np.where(both, src.area, 0.0),
+                        np.where(np.isfinite(own.area), own.area, src.area))
+    return out
+
+
 def blend_points(a: PointSet, b: PointSet, beta: Union[float, np.ndarray, callable],
                  rng: np.random.Generator, patch: float = 5.0) -> PointSet:
     """Blend two point sets placed over the same target (sec. 4.2, figs. 10-12).
@@ -453,12 +796,17 @@ def blend_points(a: PointSet, b: PointSet, beta: Union[float, np.ndarray, callab
         (a spatially varying blend, e.g. north-south as in fig. 10).
     patch : correlation length of the mixing field, in mean street distances.
 
-    A smooth random field u(x), uniform on [0, 1], decides at every location which example
-    speaks: A's points where u >= beta(x), B's where u < beta(x). A share beta of the area
-    takes B's points, so the expected point density, level mix and street statistics at
-    every location are the beta-weighted combination of both examples' quadtree leaves
-    there, while each patch keeps the consistent street pattern of its example (mixing the
-    points one by one would break the streets of both). Points closer than 0.3 x the mean
+    Positions: a smooth random field u(x), uniform on [0, 1], decides at every location
+    whose point layout is used: A's points where u >= beta(x), B's where u < beta(x), so a
+    share beta of the area takes B's layout (point density and level mix move linearly with
+    beta) while each patch keeps a consistent layout of intersections (mixing the points
+    one by one would break the streets of both). Attributes: every kept point's street
+    statistics are interpolated by the blend weight between its own and those of the
+    nearest point of the other example with the same level
+    (:func:`interpolate_attributes`): an A point takes (1 - beta) of its own and beta of B's,
+    a B point beta of its own and (1 - beta) of A's, so that streets everywhere get
+    distances, angles, their variances, tortuosity and parcel sizes between the two
+    examples ("interpolate between the styles", sec. 4.2). Points closer than 0.3 x the mean
     street distance to a kept point (at patch seams) are thinned.
     """
     def weights(xy):
@@ -474,9 +822,11 @@ def blend_points(a: PointSet, b: PointSet, beta: Union[float, np.ndarray, callab
     both = np.vstack([a.xy, b.xy])
     u = _smooth_uniform(both, scale, rng)
     w = weights(both)
-    keep_a = u[:len(a)] >= w[:len(a)]
-    keep_b = u[len(a):] < w[len(a):]
-    mixed = PointSet.concat([a.take(np.flatnonzero(keep_a)), b.take(np.flatnonzero(keep_b))])
+    keep_a = np.flatnonzero(u[:len(a)] >= w[:len(a)])
+    keep_b = np.flatnonzero(u[len(a):] < w[len(a):])
+    part_a = interpolate_attributes(a.take(keep_a), b, w[:len(a)][keep_a])
+    part_b = interpolate_attributes(b.take(keep_b), a, 1.0 - w[len(a):][keep_b])
+    mixed = PointSet.concat([part_a, part_b])
     if len(mixed) == 0:
         raise InputError("the blend keeps no point")
     # random priority at the seams, so that thinning favours neither example

@@ -14,15 +14,38 @@ would cross or touch an existing segment (an STRtree over the segments, rebuilt 
 plus a vectorised test against the latest segments) or pass over another point (no new
 intersections), and for a step closer than a minimum angle to a street already at either
 end. A walk ends where every p is zero; new walks start from free street slots until none
-can start. Each segment then becomes a polyline bent to the tortuosity of its end points'
-streets (fig. 5c); bends that would cross another street are straightened, so the result
-is planar.
+can start.
 
-Expand (sec. 4.2): the nodes of existing roads join the point set; the dead ends of the
-existing network at the target ("seam ends") continue their streets into the new points
-first, and seam ends still open at the end connect to the nearest free point of any level.
-Blocks are the faces of the result, and the block graph (the dual, sec. 3.1.2) is kept for
-parcels (:func:`blocks_and_dual`).
+The paper's REPEAT ("until no new street segments are added") is completed so that the
+result is one network (:func:`connect_points`):
+
+- streets that stopped short of the connections their point had in the example close with
+  one more step to the nearest free point, until the dead-end share is the example's;
+- every connected piece that reaches neither the given roads nor (without given roads) the
+  largest piece is joined to the nearest other piece by a clear step to one of its points,
+  or, where no point is in reach, by a step onto the nearest visible street, which is split
+  there (a new T junction: a crossing becomes a junction, never a bare crossing); a piece
+  that can be joined neither way is dropped (rejected), so no floating piece is left.
+
+Each segment then becomes a polyline (fig. 5c). With the example's streets at hand
+(:func:`street_shapes`), the shape is that of an example segment of the same level and a
+similar chord length and tortuosity, scaled onto the new chord and mirrored at random, so
+that the new streets bend like the example's: the same tortuosity and turn distribution.
+Without them (an example given as points only), a parabola of the points' tortuosity
+attribute. Shapes that would cross another street are redrawn, then straightened, so the
+result stays planar.
+
+Given roads (expand, sec. 4.2): the nodes of existing roads join the point set; the dead
+ends of the existing network at the target ("seam ends") continue their streets into the
+new points first, and seam ends still open at the end connect to the nearest free point of
+any level. Along the given roads inside the target, junction slots are placed at the
+spacing of the example's level-0 streets (its intersections along its arterials): a new
+street may end there (a T) or cross there (a 4-way junction), never anywhere else on a
+given road. The given roads play the example's level 0: new points of level 0 become the
+next level.
+
+Blocks are the faces of the result, and the block graph (the dual, sec. 3.1.2) is kept
+for parcels (:func:`blocks_and_dual`).
 
 Nothing here imports QGIS.
 
@@ -33,6 +56,7 @@ Aliaga, D. G., Vanegas, C. A., Benes, B. (2008). Interactive example-based urban
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from typing import List, Optional
@@ -40,13 +64,17 @@ from typing import List, Optional
 import numpy as np
 import pandas as pd
 import shapely
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from ..core import coordinates
 from ..core.progress import InputError, Progress, ensure
 from . import intersection_quadtree as iq
 
-__all__ = ["WalkSettings", "Synthesis", "connect_points", "synthesize", "blocks_and_dual",
-           "block_table", "ROAD_FIELDS", "POINT_FIELDS", "BLOCK_FIELDS"]
+__all__ = ["WalkSettings", "Synthesis", "StreetShapes", "street_shapes", "connect_points",
+           "synthesize", "blocks_and_dual", "block_table", "dead_end_share_of",
+           "ROAD_FIELDS", "POINT_FIELDS", "BLOCK_FIELDS"]
 
 ROAD_FIELDS = [("edge_id", "int"), ("level", "int"), ("length_m", "float"),
                ("tortuosity", "float"), ("origin", "str"), ("node_from", "int"),
@@ -56,13 +84,15 @@ POINT_FIELDS = [("node_id", "int"), ("degree", "int"), ("example", "int"), ("sou
                 ("tortuosity_b", "float"), ("dist_mean_a", "float"), ("dist_var_a", "float"),
                 ("dist_mean_b", "float"), ("dist_var_b", "float"), ("angle_mean_a", "float"),
                 ("angle_var_a", "float"), ("angle_mean_b", "float"), ("angle_var_b", "float"),
-                ("parcel_area", "float"), ("connections", "int")]
+                ("parcel_area", "float"), ("connections", "int"), ("generated", "int")]
 
 BLOCK_FIELDS = [("block_id", "int"), ("area_m2", "float"), ("neighbours", "int"),
                 ("parcel_area", "float")]
 
-_BATCH = 64      # segments checked one by one before the STRtree is rebuilt
+_BATCH = 64      # recent segments tested directly before the STRtree is rebuilt (at least)
 _TOUCH = 0.5     # m: a step closer than this to another segment touches it
+#: example == -1: a node of the given roads; -2: a junction slot placed on a given road
+EXISTING, ROAD_SLOT = -1, -2
 
 
 @dataclass(frozen=True)
@@ -76,13 +106,20 @@ class WalkSettings:
     clearance : a step may not pass closer than clearance x its length (at least
         ``min_clearance`` m) to another point: streets cross only at intersection points
     max_capacity : connections of a point (the paper's 4)
-    max_sagitta : the bend of a tortuous segment is at most this share of its chord
+    max_sagitta : the bend of a parabolic segment (examples without street shapes) is at
+        most this share of its chord
     seam_distance : m; dead ends of existing roads this close to the target are seam ends
         (None: a quarter of the example's median street distance)
-    close_ends : after the walks, a point whose street stopped short of the connections
-        it had in its example (one connection of at least two) makes one more step to the
-        nearest free point of its level, without the turn-angle term (not in the paper:
-        its walks leave such stubs)
+    close_ends : after the walks, points whose street stopped short of the connections they
+        had in the example make one more step to the nearest free point, until the share of
+        dead ends is the example's (not in the paper: its walks leave such stubs)
+    join_pieces : join every piece of the network to the given roads (or to the largest
+        piece) and drop what cannot be joined (the paper's REPEAT, completed)
+    road_slots : place junction slots along the given roads at the spacing of the
+        example's level-0 streets (else new streets meet given roads only at their nodes)
+    join_reach : joins look this many of the point's mean street distances far
+    shape_retries : a street shape that crosses another street is redrawn this often before
+        the segment is straightened
     """
 
     threshold: float = 0.05
@@ -91,23 +128,37 @@ class WalkSettings:
     clearance: float = 0.08
     min_clearance: float = 2.0
     max_capacity: int = 4
-    max_sagitta: float = 0.12
+    max_sagitta: float = 0.25
     seam_distance: Optional[float] = None
     close_ends: bool = True
+    join_pieces: bool = True
+    road_slots: bool = True
+    join_reach: float = 3.0
+    shape_retries: int = 3
 
     def validate(self) -> "WalkSettings":
         checks = (("threshold", 0.0, 1.0), ("reach_sd", 0.1, 10.0), ("min_angle", 0.0, 89.0),
                   ("clearance", 0.0, 0.5), ("min_clearance", 0.0, 1000.0),
-                  ("max_sagitta", 0.0, 0.5))
+                  ("max_sagitta", 0.0, 0.5), ("join_reach", 0.5, 20.0))
         for name, lo, hi in checks:
             v = getattr(self, name)
             if v is None or not math.isfinite(v) or not lo <= v <= hi:
                 raise InputError(f"{name} must be in [{lo:g}, {hi:g}] (got {v})")
         if not 1 <= self.max_capacity <= 8:
             raise InputError("max_capacity must be in 1..8")
+        if not 0 <= self.shape_retries <= 20:
+            raise InputError("shape_retries must be in 0..20")
         if self.seam_distance is not None and not (self.seam_distance >= 0):
             raise InputError("the seam distance must not be negative")
         return self
+
+
+def dead_end_share_of(points: iq.PointSet) -> float:
+    """Share of dead ends (degree 1) among the example points of degree != 2 (the share of
+    the example network, whose nodes are its intersections and street ends)."""
+    deg = points.degree[points.example >= 0]
+    n = int((deg != 2).sum())
+    return float((deg == 1).sum() / n) if n else 0.0
 
 
 class _Walker:
@@ -128,18 +179,26 @@ class _Walker:
         self.adj = [set() for _ in range(len(pts))]
         self.dirs = dirs
         self.edges: List[tuple] = []
+        self.edge_alive: List[bool] = []
         self._mark = np.zeros(len(pts), dtype=bool)  # scratch mask of a point's neighbours
         # segments: coordinates of all, an STRtree over the first n_tree, and the newest
-        # (at most _BATCH) as a small geometry array tested directly
+        # (at most _BATCH) as a small geometry array tested directly; a split segment is
+        # dead (its two halves are added as new segments)
         seg0 = np.asarray(seg0, dtype=float).reshape(-1, 4)
         self._coords = np.zeros((len(seg0) + 4 * len(pts) + 16, 4))
         self._coords[:len(seg0)] = seg0
+        self._alive = np.ones(len(self._coords), dtype=bool)
+        self._seg_edge = np.full(len(self._coords), -1, dtype=np.int64)  # -1: given road
+        self._seg_start = np.full(len(self._coords), -1, dtype=np.int64)  # the edge's a
+        self._seg_level = np.full(len(self._coords), -1, dtype=np.int64)  # the edge's level
+        self._edge_seg: List[int] = []
         self.n_seg = len(seg0)
-        self._recent = np.empty(_BATCH, dtype=object)
+        self._recent = np.empty(len(self._coords), dtype=object)
         self.n_tree = 0
         self.tree = None
         self._rebuild()
         self.cos_min = math.cos(math.radians(settings.min_angle))
+        self.area = None  # the target: junctions made on streets stay inside it
 
     # -- segment index ---------------------------------------------------------------
 
@@ -149,38 +208,114 @@ class _Walker:
             s = self._coords[:self.n_tree]
             self.tree = shapely.STRtree(shapely.linestrings(s.reshape(-1, 2, 2)))
 
-    def _add_segment(self, p, q):
+    def _add_segment(self, p, q, edge=-1):
         if self.n_seg == len(self._coords):
-            self._coords = np.vstack([self._coords, np.zeros_like(self._coords)])
+            grow = len(self._coords)
+            self._coords = np.vstack([self._coords, np.zeros((grow, 4))])
+            self._alive = np.r_[self._alive, np.ones(grow, dtype=bool)]
+            self._seg_edge = np.r_[self._seg_edge, np.full(grow, -1, dtype=np.int64)]
+            self._seg_start = np.r_[self._seg_start, np.full(grow, -1, dtype=np.int64)]
+            self._seg_level = np.r_[self._seg_level, np.full(grow, -1, dtype=np.int64)]
+            self._recent = np.r_[self._recent, np.empty(grow, dtype=object)]
         self._coords[self.n_seg] = (p[0], p[1], q[0], q[1])
+        self._seg_edge[self.n_seg] = edge
+        if edge >= 0:
+            self._edge_seg.append(self.n_seg)
+            self._seg_start[self.n_seg] = self.edges[edge][0]
+            self._seg_level[self.n_seg] = self.edges[edge][4]
         self._recent[self.n_seg - self.n_tree] = shapely.LineString([p, q])
         self.n_seg += 1
-        if self.n_seg - self.n_tree >= _BATCH:
+        # the tree is rebuilt when the recent segments reach _BATCH or 3 sqrt(n): the
+        # rebuilds cost O(n^1.5 log n) in all, the direct tests O(sqrt(n)) per step
+        if self.n_seg - self.n_tree >= max(_BATCH, 3.0 * math.sqrt(self.n_tree)):
             self._rebuild()
 
-    def _clear(self, v, j):
-        """Whether the step v -> j keeps clear of every segment except at a shared end."""
-        line = shapely.LineString([self.xy[v], self.xy[j]])
+    def _hits(self, geom, distance):
+        """Indices of the live segments within ``distance`` of a geometry."""
         hits = []
         if self.tree is not None and self.n_tree:
-            hits.append(self.tree.query(line, predicate="dwithin", distance=_TOUCH))
+            hits.append(self.tree.query(geom, predicate="dwithin", distance=distance))
         n_recent = self.n_seg - self.n_tree
         if n_recent:
-            near = shapely.dwithin(self._recent[:n_recent], line, _TOUCH)
+            near = shapely.dwithin(self._recent[:n_recent], geom, distance)
             hits.append(np.flatnonzero(near) + self.n_tree)
         if not hits:
-            return True
+            return np.zeros(0, dtype=np.int64)
         hit = np.concatenate(hits)
+        return hit[self._alive[hit]]
+
+    def _clear(self, v, j, q=None):
+        """Whether the step v -> j (or to the location q) keeps clear of every segment
+        except at a shared end."""
+        p = self.xy[v]
+        q = self.xy[j] if q is None else q
+        hit = self._hits(shapely.LineString([p, q]), _TOUCH)
         if len(hit) == 0:
             return True
         ends = self._coords[hit].reshape(-1, 2, 2)
-        p, q = self.xy[v], self.xy[j]
         # a segment that shares an end with the step meets it there (angles are checked apart)
         shared = ((np.abs(ends - p).sum(axis=2) < 1e-6)
                   | (np.abs(ends - q).sum(axis=2) < 1e-6)).any(axis=1)
         return bool(shared.all())
 
+    # -- growing the point set (junctions made on a street by a join) ----------------------
+
+    def _add_point(self, xy, like: int, level, through_dirs, on_given: bool):
+        """A new point at ``xy`` with the attributes of point ``like``; street a (``level``)
+        passes through it along ``through_dirs`` (two unit vectors), street b is free for
+        one connection (a T junction). Returns its index."""
+        new = self.p.take([like])
+        new.xy = np.asarray(xy, dtype=float).reshape(1, 2)
+        new.level = np.array([[level, level]])
+        new.example = np.array([ROAD_SLOT if on_given else max(int(self.p.example[like]), 0)])
+        new.generated = np.array([True])
+        new.source = np.array([-1])  # made by a join, not from the example
+        new.degree = np.array([3])
+        self.p = iq.PointSet.concat([self.p, new])
+        self.xy = self.p.xy
+        self.cap = np.r_[self.cap, 3]
+        self.cnt = np.vstack([self.cnt, [[2, 1]]])
+        self.slot_dir = np.concatenate([self.slot_dir, np.zeros((1, 2, 2))])
+        self.deg = np.r_[self.deg, 2]
+        self.used = np.vstack([self.used, [[True, False]]])
+        self.adj.append(set())
+        self.dirs.append([np.asarray(d, dtype=float) for d in through_dirs])
+        self._mark = np.r_[self._mark, False]
+        return len(self.p) - 1
+
+    def split_segment(self, seg: int, xy, like: int) -> int:
+        """Split a live segment at ``xy`` (a point on it): a new junction point, the two
+        halves as segments (and edges, for a walk edge). Returns the new point's index."""
+        c = self._coords[seg]
+        p, q = c[:2].copy(), c[2:].copy()
+        d = (q - p) / max(np.linalg.norm(q - p), 1e-9)
+        e = int(self._seg_edge[seg])
+        level = self.edges[e][4] if e >= 0 else int(self.p.level[like, 0])
+        k = self._add_point(xy, like, level, [d, -d], on_given=e < 0)
+        self._alive[seg] = False
+        if e >= 0:
+            a, sa, b, sb, h, origin = self.edges[e]
+            self.edge_alive[e] = False
+            self.adj[a].discard(b)
+            self.adj[b].discard(a)
+            for u, w, su, sw in ((a, k, sa, 0), (k, b, 0, sb)):
+                self.edges.append((u, su, w, sw, h, origin))
+                self.edge_alive.append(True)
+                self.adj[u].add(w)
+                self.adj[w].add(u)
+                self._add_segment(self.xy[u], self.xy[w], len(self.edges) - 1)
+        else:
+            self._add_segment(p, self.xy[k], -1)
+            self._add_segment(self.xy[k], q, -1)
+        return k
+
     # -- one step --------------------------------------------------------------------
+
+    def _angles_ok(self, v, j, unit):
+        """Streets leave v and j at least min_angle apart from the streets already there."""
+        if self.dirs[v] and (np.asarray(self.dirs[v]) @ unit).max() >= self.cos_min:
+            return False
+        return not (self.dirs[j] and (np.asarray(self.dirs[j]) @ -unit).max() >= self.cos_min)
 
     def _feasible(self, v, j, unit, dist, vec, nb):
         """The constraints of a step v -> j that need its neighbourhood (fig. 5a iv)."""
@@ -191,7 +326,8 @@ class _Walker:
         if len(others):
             rel = self.xy[others] - self.xy[v]
             u = np.clip(rel @ unit / max(dist, 1e-9), 0.0, 1.0)
-            near = np.linalg.norm(rel - u[:, None] * vec[None, :], axis=1)
+            off = rel - u[:, None] * vec[None, :]
+            near = np.sqrt((off * off).sum(axis=1))
             if (near < max(self.s.clearance * dist, self.s.min_clearance)).any():
                 return False
         return self._clear(v, j)
@@ -201,19 +337,27 @@ class _Walker:
         p = self.p
         mu, sd = p.dist_mean[v, slot], p.dist_sd[v, slot]
         reach = mu + self.s.reach_sd * sd
-        nb = np.asarray(self.kd.query_ball_point(self.xy[v], reach), dtype=np.int64)
-        nb = nb[nb != v]
+        nb = np.asarray(self.kd.query_ball_point(self.xy[v], reach, return_sorted=False),
+                        dtype=np.int64)
+        nb = np.sort(nb[nb != v])  # sorted: the same draw whatever the tree's order
         if len(nb) == 0:
             return None
         lv, cnt = p.level[nb], self.cnt[nb]
-        # seam joins connect two hierarchies ranked apart: there any level may join
+        # seam joins connect two hierarchies ranked apart: there any level may join; other
+        # steps keep to their street's level (sec. 3.1.1)
         slot_ok = (lv >= 0) & (cnt < 2) if relaxed == "seam" else (lv == h) & (cnt < 2)
-        # a seam join may give a point more connections than its example had (up to 4)
+        # there a point may get more connections than its example had (up to 4)
         cap = np.where(self.p.example[nb] >= 0, self.s.max_capacity, self.cap[nb]) \
-            if relaxed == "seam" else self.cap[nb]
+            if relaxed else self.cap[nb]
         free = (self.deg[nb] < cap) & slot_ok.any(axis=1)
         if self.adj[v]:
-            linked = list(self.adj[v])
+            linked = set(self.adj[v])
+            if relaxed:
+                # a closing step makes no triangle (a face of three streets: a sliver
+                # block the example's streets would not close)
+                for u in self.adj[v]:
+                    linked |= self.adj[u]
+            linked = list(linked)
             self._mark[linked] = True
             free &= ~self._mark[nb]
             self._mark[linked] = False
@@ -221,12 +365,24 @@ class _Walker:
             return None
         cand, cslots = nb[free], slot_ok[free]
         vec = self.xy[cand] - self.xy[v]
-        d = np.linalg.norm(vec, axis=1)
+        d = np.sqrt((vec * vec).sum(axis=1))
         unit = vec / np.maximum(d, 1e-9)[:, None]
         logp = -0.5 * ((d - mu) / sd) ** 2
         if prev_dir is not None and not relaxed:
             alpha = np.degrees(np.arccos(np.clip(unit @ prev_dir, -1.0, 1.0)))
             logp -= 0.5 * ((alpha - p.angle_mean[v, slot]) / p.angle_sd[v, slot]) ** 2
+        w_angle = 0.0
+        if relaxed == "close" and prev_dir is not None:
+            # a stub goes on about straight (its street's turn statistics, twice as wide)
+            alpha = np.degrees(np.arccos(np.clip(unit @ prev_dir, -1.0, 1.0)))
+            w_angle = -0.5 * ((alpha - p.angle_mean[v, slot]) / (2 * p.angle_sd[v, slot])) ** 2
+        elif relaxed == "cross" and self.dirs[v]:
+            # a crossing street leaves across the street through v (the example's 90 degrees
+            # give or take 30)
+            through = np.asarray(self.dirs[v])
+            across = np.abs(unit @ through.T).max(axis=1)
+            alpha = np.degrees(np.arcsin(np.clip(across, 0.0, 1.0)))
+            w_angle = -0.5 * (alpha / 30.0) ** 2
         prob = np.exp(logp)
         good = prob >= self.s.threshold
         # streets leave a point at least min_angle apart (at v and at the target)
@@ -235,7 +391,7 @@ class _Walker:
             good &= (unit @ dv.T).max(axis=1) < self.cos_min
         if not good.any():
             return None
-        w = prob if not relaxed else np.exp(-0.5 * (d / mu) ** 2)
+        w = prob if not relaxed else np.exp(-0.5 * (d / mu) ** 2 + w_angle)
         w = np.where(good, w, 0.0)
         # draw by the transition probabilities; the costlier constraints are checked on the
         # drawn point only, and a point that fails them gets p = 0 and the draw is repeated
@@ -266,8 +422,8 @@ class _Walker:
             self.slot_dir[a, sa] = -d
         if self.cnt[b, sb] == 0:
             self.slot_dir[b, sb] = d
-        self.cnt[a, sa] += 1
-        self.cnt[b, sb] += 1
+        self.cnt[a, sa] = min(self.cnt[a, sa] + 1, 2)
+        self.cnt[b, sb] = min(self.cnt[b, sb] + 1, 2)
         self.used[a, sa] = self.used[b, sb] = True
         self.deg[a] += 1
         self.deg[b] += 1
@@ -276,7 +432,8 @@ class _Walker:
         self.dirs[a].append(d)
         self.dirs[b].append(-d)
         self.edges.append((a, sa, b, sb, h, origin))
-        self._add_segment(self.xy[a], self.xy[b])
+        self.edge_alive.append(True)
+        self._add_segment(self.xy[a], self.xy[b], len(self.edges) - 1)
 
     def extend(self, cur, cs, h, relaxed=False, origin="walk"):
         added = 0
@@ -302,22 +459,257 @@ class _Walker:
             n += self.extend(start, slot, h)
         return n
 
+    # -- the REPEAT: one network --------------------------------------------------------
+
+    def live_edges(self) -> np.ndarray:
+        alive = np.asarray(self.edge_alive, dtype=bool)
+        e = np.array([(a, b) for a, _, b, _, _, _ in self.edges], dtype=np.int64).reshape(-1, 2)
+        return e[alive]
+
+    def pieces(self, anchors: np.ndarray):
+        """Component label per point (edges of the walk; all ``anchors`` in one component),
+        and the label of the network the others must join (the anchors', else the
+        largest piece's)."""
+        n = len(self.p)
+        e = self.live_edges()
+        rows = [e[:, 0]]
+        cols = [e[:, 1]]
+        if len(anchors) > 1:
+            rows.append(anchors[:-1])
+            cols.append(anchors[1:])
+        r, c = np.concatenate(rows), np.concatenate(cols)
+        adj = coo_matrix((np.ones(len(r)), (r, c)), shape=(n, n))
+        _, label = connected_components(adj, directed=False)
+        if len(anchors):
+            main = label[anchors[0]]
+        else:
+            on = self.deg > 0
+            main = np.bincount(label[on]).argmax() if on.any() else -1
+        return label, main
+
+    def _free_slot(self, v):
+        """The street slot of v that can take one more connection (the emptier one)."""
+        c = self.cnt[v]
+        ok = (self.p.level[v] >= 0) & (c < 2)
+        if not ok.any():
+            return None
+        return int(np.flatnonzero(ok)[np.argmin(c[ok])])
+
+    def _join_by_point(self, members, root, tree, pool, reach):
+        """The shortest clear step from a point of ``members`` to a connected point of
+        another piece (``root(points)`` gives each point's piece; ``tree`` indexes the
+        candidate points ``pool``). Returns the joined point, or -1."""
+        cap = self.s.max_capacity
+        ok = members[self.deg[members] < cap]
+        if not len(ok) or tree is None:
+            return -1
+        k = min(12, len(pool))
+        dist, idx = tree.query(self.xy[ok], k=k, distance_upper_bound=reach)
+        dist, idx = dist.reshape(len(ok), k), idx.reshape(len(ok), k)
+        own = root(ok[:1])[0]
+        for flat in np.argsort(dist, axis=None):
+            i, j = np.unravel_index(flat, dist.shape)
+            if not np.isfinite(dist[i, j]):
+                break
+            v, u = ok[i], pool[idx[i, j]]
+            if self.deg[u] == 0 or self.deg[u] >= cap or root(np.array([u]))[0] == own:
+                continue
+            if self.area is not None and self.p.example[u] < 0 and \
+                    not shapely.contains_xy(self.area, *self.xy[u]):
+                continue  # a node of the given roads outside the target takes no street
+            vec = self.xy[u] - self.xy[v]
+            d = float(np.linalg.norm(vec))
+            if d < 1e-6:
+                continue
+            unit = vec / d
+            sv, su = self._free_slot(v), self._free_slot(u)
+            if sv is None or su is None or not self._angles_ok(v, u, unit):
+                continue
+            nb = np.asarray(self.kd.query_ball_point(self.xy[v], d + 1.0), dtype=np.int64)
+            nb = nb[(nb != v) & (nb < len(self.p))]
+            if not self._feasible(v, u, unit, d, vec, nb):
+                continue
+            self.add_edge(v, sv, u, su, int(self.p.level[v, sv]), "join")
+            return int(u)
+        return -1
+
+    def _join_by_split(self, members, root, reach, origin="join", level=None):
+        """A clear step from a point of ``members`` onto the nearest street of another piece
+        (or a given road), split there: a new T junction. ``root(points)`` gives each
+        point's piece; None: any street not at the point (closing a dead end). Returns
+        (the new junction, the street's end point (-1 for a given road)), or None."""
+        cap = self.s.max_capacity
+        best = None
+        for v in members[self.deg[members] < cap]:
+            sv = self._free_slot(v)
+            if sv is None:
+                continue
+            pv = self.xy[v]
+            hit = self._hits(shapely.Point(pv), reach)
+            if not len(hit):
+                continue
+            seg = self._coords[hit]
+            e = self._seg_edge[hit]
+            if root is None:  # any street that does not end at v
+                ends = seg.reshape(-1, 2, 2)
+                keep = ~(np.abs(ends - pv).sum(axis=2) < 1e-6).any(axis=1)
+                if level is not None:  # of that level (or a given road)
+                    keep &= (e < 0) | (self._seg_level[hit] == level)
+            else:  # another piece's street, or a given road (never v's piece)
+                end_pt = self._seg_start[hit]
+                keep = end_pt < 0
+                if (end_pt >= 0).any():
+                    keep[end_pt >= 0] = root(end_pt[end_pt >= 0]) != root(np.array([v]))[0]
+            if not keep.any():
+                continue
+            seg, hit = seg[keep], hit[keep]
+            p0, p1 = seg[:, :2], seg[:, 2:]
+            dvec = p1 - p0
+            ll = np.maximum((dvec ** 2).sum(axis=1), 1e-12)
+            t = np.clip(((pv - p0) * dvec).sum(axis=1) / ll, 0.0, 1.0)
+            # stay off the segment's ends by a quarter street gap (a point there joins)
+            margin = np.minimum(0.25 * self.p.dist_mean[v, sv], 0.4 * np.sqrt(ll)) / np.sqrt(ll)
+            t = np.clip(t, margin, 1.0 - margin)
+            q = p0 + t[:, None] * dvec
+            d = np.linalg.norm(q - pv, axis=1)
+            for i in np.argsort(d):
+                if best is not None and d[i] >= best[0]:
+                    break
+                if d[i] < 1.0:
+                    continue
+                if self.area is not None and not shapely.contains_xy(self.area, *q[i]):
+                    continue
+                unit = (q[i] - pv) / d[i]
+                along = dvec[i] / np.sqrt(ll[i])
+                # the new street meets the split street at least min_angle from it
+                if abs(unit @ along) >= self.cos_min:
+                    continue
+                if self.dirs[v] and (np.asarray(self.dirs[v]) @ unit).max() >= self.cos_min:
+                    continue
+                if not self._clear_except(v, q[i], hit[i]):
+                    continue
+                best = (d[i], v, sv, hit[i], q[i])
+                break
+        if best is None:
+            return None
+        _, v, sv, seg, q = best
+        e = int(self._seg_edge[seg])
+        end = self._edge_end(e) if e >= 0 else -1
+        k = self.split_segment(seg, q, end if end >= 0 else v)
+        self.add_edge(v, sv, k, 1, int(self.p.level[v, sv]), origin)
+        return k, end
+
+    def _edge_end(self, e):
+        return self.edges[e][0]
+
+    def _clear_except(self, v, q, seg):
+        """Whether the step v -> q keeps clear of every live segment but ``seg`` (which it
+        ends on) and those sharing v."""
+        p = self.xy[v]
+        hit = self._hits(shapely.LineString([p, q]), _TOUCH)
+        hit = hit[hit != seg]
+        if not len(hit):
+            return True
+        ends = self._coords[hit].reshape(-1, 2, 2)
+        shared = (np.abs(ends - p).sum(axis=2) < 1e-6).any(axis=1)
+        return bool(shared.all())
+
+    def drop_piece(self, members):
+        """Remove the walk edges of a piece that cannot be joined (rejected)."""
+        inside = np.zeros(len(self.p), dtype=bool)
+        inside[members] = True
+        ends = np.array([(a, b) for a, _, b, _, _, _ in self.edges], dtype=np.int64)
+        alive = np.asarray(self.edge_alive, dtype=bool)
+        gone = np.flatnonzero(alive & (inside[ends[:, 0]] | inside[ends[:, 1]]))
+        for e in gone:
+            self.edge_alive[e] = False
+        self._alive[np.asarray(self._edge_seg, dtype=np.int64)[gone]] = False
+        self.deg[members] = 0
+        return len(gone)
+
+    def join_pieces(self, anchors, progress=None):
+        """Join every piece to the anchors' network (or the largest piece); drop what
+        cannot be joined. Returns counts. The pieces are found once and merged with a
+        union-find as joins are made."""
+        joined = split = dropped = 0
+        label, main = self.pieces(anchors)
+        if main < 0:
+            return {"n_joins": 0, "n_join_splits": 0, "n_dropped_edges": 0}
+        parent = np.arange(label.max() + 1)
+
+        def find(x):
+            x = np.asarray(x)
+            r = parent[x]
+            while (parent[r] != r).any():
+                r = parent[r]
+            parent[x] = r  # path compression for the queried ones
+            return r
+
+        def root(points):
+            return find(label[points])
+
+        on = self.deg > 0
+        labs, sizes = np.unique(label[on], return_counts=True)
+        order = labs[np.lexsort((labs, sizes))]
+        cap = self.s.max_capacity
+        pool = np.flatnonzero(on & (self.deg < cap))
+        tree = cKDTree(self.xy[pool]) if len(pool) else None
+        by_label = {}
+        idx = np.flatnonzero(on)
+        srt = idx[np.argsort(label[idx], kind="stable")]
+        bounds = np.searchsorted(label[srt], labs)
+        for i, lab in enumerate(labs):
+            end = bounds[i + 1] if i + 1 < len(labs) else len(srt)
+            by_label[lab] = srt[bounds[i]:end]
+        for lab in order:
+            if find(lab) == find(main):
+                continue
+            members = by_label[lab]
+            members = members[self.deg[members] > 0]
+            if not len(members):
+                continue
+            reach = self.s.join_reach * float(np.median(self.p.dist_mean[members, 0]))
+            u = self._join_by_point(members, root, tree, pool, reach)
+            if u >= 0:
+                parent[find(lab)] = find(label[u])
+                joined += 1
+                continue
+            r = self._join_by_split(members, root, reach)
+            if r is not None:
+                k, end = r
+                other = find(label[end]) if end >= 0 else find(main)
+                label = np.r_[label, other]
+                parent[find(lab)] = other
+                split += 1
+                continue
+            # rejected: this piece and the pieces that joined it so far
+            gone = [x for x in labs if find(x) == find(lab)]
+            members = np.concatenate([by_label[x] for x in gone])
+            dropped += self.drop_piece(members[self.deg[members] > 0])
+        return {"n_joins": joined, "n_join_splits": split, "n_dropped_edges": dropped}
+
 
 def connect_points(points: iq.PointSet, rng: np.random.Generator,
                    settings: Optional[WalkSettings] = None, existing=None,
+                   dead_end_share: Optional[float] = None, area=None,
                    progress: Optional[Progress] = None):
-    """Connect attributed points by random walks, level by level (fig. 3).
+    """Connect attributed points by random walks, level by level (fig. 3), into one network.
 
     Parameters
     ----------
-    points : PointSet (new points first; existing-road nodes have ``example`` == -1)
+    points : PointSet (new points first; given-road nodes and junction slots have
+        ``example`` < 0)
     existing : dict, optional, from :func:`_existing_state`: capacities, slot counts and
-        directions of the existing nodes and the existing segments (crossing constraints).
+        directions of the existing points and the existing segments (crossing constraints).
+    dead_end_share : float, optional
+        Close stubs until the dead-end share of the new points is at most this (default:
+        the example's, :func:`dead_end_share_of`).
 
     Returns
     -------
-    edges : (m, 6) object array rows (a, slot_a, b, slot_b, level, origin)
-    walker : the final state (degrees, slot counts)
+    edges : (m, 6) object array rows (a, slot_a, b, slot_b, level, origin) of the live edges
+    walker : the final state (points, which may have grown by junctions made on streets;
+        degrees, slot counts, counts of joins in ``walker.stats``)
     """
     progress = ensure(progress)
     s = (settings or WalkSettings()).validate()
@@ -343,6 +735,9 @@ def connect_points(points: iq.PointSet, rng: np.random.Generator,
         seg0 = existing["segments"]
         seam[ex[existing["seam"]]] = True
     w = _Walker(points, s, rng, cap, cnt, slot_dir, dirs, seg0)
+    if area is not None:
+        w.area = shapely.buffer(area, 1.0)
+        shapely.prepare(w.area)
     if existing is not None:
         w.deg[existing["index"]] = existing["degree"]
     levels = np.unique(points.level[points.level >= 0])
@@ -353,7 +748,7 @@ def connect_points(points: iq.PointSet, rng: np.random.Generator,
         fresh = rng.permutation(np.flatnonzero(~seam & has.any(axis=1)))
         for i, v in enumerate(np.concatenate([seam_starts, fresh])):
             if i % 200 == 0:
-                progress.step((k + i / max(len(fresh), 1)) / (len(levels) + 1))
+                progress.step(0.8 * (k + i / max(len(fresh), 1)) / (len(levels) + 1))
             for slot in (0, 1):
                 if points.level[v, slot] != h or w.deg[v] >= w.cap[v]:
                     continue
@@ -362,27 +757,209 @@ def connect_points(points: iq.PointSet, rng: np.random.Generator,
                 end = w.cnt[v, slot] == 1 and (seam[v] or not w.used[v, slot])
                 if w.cnt[v, slot] == 0 or end:
                     w.walk(v, slot, h)
+    progress.step(0.7)
     # seam ends still open: the nearest free point of any level (connect to the old network)
     for v in np.flatnonzero(seam):
         for slot in (0, 1):
             if points.level[v, slot] >= 0 and w.cnt[v, slot] == 1 and w.deg[v] < w.cap[v]:
                 w.extend(v, slot, points.level[v, slot], relaxed="seam", origin="seam")
+    is_new = points.example >= 0
+    n_crossed = 0
+    if s.close_ends:
+        # points a street passes whose crossing street never came (degree 2 where the
+        # example had 3 or 4): the crossing street leaves with one step to a free point, so
+        # that the point is the junction it was
+        # (and 3 where it had 4: the crossing street went on only one way)
+        through = rng.permutation(np.flatnonzero((w.deg[:n] >= 2) & (w.deg[:n] < w.cap[:n])
+                                                 & is_new))
+        for v in through:
+            for slot in (1, 0):
+                h = points.level[v, slot]
+                if h < 0 or w.deg[v] >= w.cap[v] or w.cnt[v, slot] >= 2:
+                    continue
+                added = w.extend(v, slot, h, relaxed="cross", origin="cross")
+                if not added:  # no free point in reach: a T onto the nearest street
+                    reach = points.dist_mean[v, slot] + s.reach_sd * points.dist_sd[v, slot]
+                    added = int(w._join_by_split(np.array([v]), None, reach, "cross",
+                                                 level=h) is not None)
+                n_crossed += added
+    progress.step(0.8)
+    w.stats = {"n_crossings_made": int(n_crossed), "n_joins": 0, "n_join_splits": 0,
+               "n_dropped_edges": 0}
+    if s.join_pieces:
+        anchors = np.flatnonzero(points.example < 0) if existing is not None else \
+            np.zeros(0, dtype=np.int64)
+        w.stats.update(w.join_pieces(anchors))
+    progress.step(0.9)
+    # closing stubs last: it only adds connections, so the network stays one piece
+    target = dead_end_share_of(points) if dead_end_share is None else float(dead_end_share)
+    n_closed = 0
     if s.close_ends:
         # streets that stopped short of what their point had in the example (deg 1 < cap):
-        # one more step to the nearest free point of the same level, turn angle ignored
-        for v in np.flatnonzero((w.deg == 1) & (w.cap > 1) & (points.example >= 0)):
-            slot = int(np.argmax(w.cnt[v] == 1))
-            if w.cnt[v, slot] == 1:
-                w.extend(v, slot, points.level[v, slot], relaxed="close", origin="close")
+        # one more step to the nearest free point of any level, turn angle ignored, until
+        # the dead-end share of the new points is the example's
+        # first the stubs, then (if the share is still above the example's) points that
+        # were dead ends in the example too: copies near the edges of an example clipped to
+        # a study area, whose clip ends are no dead ends of the town
+        stubs = np.concatenate([
+            rng.permutation(np.flatnonzero((w.deg[:n] == 1) & (w.cap[:n] > 1) & is_new)),
+            rng.permutation(np.flatnonzero((w.deg[:n] == 1) & (w.cap[:n] == 1) & is_new))])
+        n_dead = int(((w.deg[:n] == 1) & is_new).sum())
+        n_ends = int((is_new & (w.deg[:n] > 0) & (w.deg[:n] != 2)).sum())
+        for v in stubs:
+            if not n_ends or n_dead / n_ends <= target:
+                break
+            if w.deg[v] != 1:
+                continue
+            was_end = w.cap[v] == 1
+            if was_end:  # the street may go on from here: one more connection on slot a
+                w.cap[v], w.cnt[v, 0] = 2, 1
+                slot = 0
+            else:
+                slot = int(np.argmax(w.cnt[v] == 1))
+            if w.cnt[v, slot] != 1:
+                continue
+            added = w.extend(v, slot, points.level[v, slot], relaxed="close", origin="close")
+            if not added:  # no free point in reach: a T onto the nearest street
+                reach = points.dist_mean[v, slot] + s.reach_sd * points.dist_sd[v, slot]
+                added = int(w._join_by_split(np.array([v]), None, reach, "close",
+                                             level=points.level[v, slot]) is not None)
+            if not added and was_end:
+                w.cap[v], w.cnt[v, 0] = 1, 2
+            if added:
+                n_closed += 1
+                # v is no dead end; its partner (a free point of degree 0 -> 1, or a street
+                # end 1 -> 2, or a junction) changes the counts too
+                a, _, b, _, _, _ = w.edges[-1]
+                u = b if a == v else a
+                for p_, before in ((v, 1), (u, int(w.deg[u]) - 1)):
+                    if p_ >= n or not is_new[p_]:
+                        continue
+                    after = int(w.deg[p_])
+                    n_dead += int(after == 1) - int(before == 1)
+                    n_ends += int(after > 0 and after != 2) - int(before > 0 and before != 2)
+    w.stats["n_closed"] = int(n_closed)
     progress.step(1.0)
-    edges = np.array(w.edges, dtype=object).reshape(-1, 6)
+    alive = np.asarray(w.edge_alive, dtype=bool)
+    edges = np.array(w.edges, dtype=object).reshape(-1, 6)[alive]
     return edges, w
 
 
 # --------------------------------------------------------------------------- geometry
 
+@dataclass
+class StreetShapes:
+    """Shapes of an example's street segments (between intersection points), in a frame
+    where each chord runs from (0, 0) to (1, 0) (fig. 5c: the poly-line of a segment).
+
+    geometry : array of normalised LineStrings
+    chord : (m,) chord length of each segment (m)
+    tortuosity : (m,) length / chord
+    level : (m,) hierarchy level of each segment's street
+    """
+
+    geometry: np.ndarray
+    chord: np.ndarray
+    tortuosity: np.ndarray
+    level: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.geometry)
+
+    def mean_tortuosity(self) -> float:
+        return float(self.tortuosity.mean()) if len(self) else 1.0
+
+
+def street_shapes(graph, edge_level, simplify: float = 0.002) -> StreetShapes:
+    """The segments of an example road graph as normalised shapes (:class:`StreetShapes`).
+
+    Parameters
+    ----------
+    graph : plugin.network.street_graph.RoadGraph (edges between intersections and ends,
+        as :func:`intersection_quadtree.points_from_roads` makes it)
+    edge_level : int per edge, its street's level (``Hierarchy.edge_level``)
+    simplify : Douglas-Peucker tolerance in chord lengths (0.2 % of the chord)
+    """
+    geoms = np.asarray(graph.geometry, dtype=object)
+    level = np.asarray(edge_level, dtype=np.int64)
+    a = graph.nodes[graph.u]
+    b = graph.nodes[graph.v]
+    chord = np.linalg.norm(b - a, axis=1)
+    length = shapely.length(geoms)
+    keep = (chord > 1.0) & (graph.u != graph.v)
+    geoms, level, a, b, chord, length = (x[keep] for x in (geoms, level, a, b, chord, length))
+    if not len(geoms):
+        return StreetShapes(np.empty(0, dtype=object), np.zeros(0), np.zeros(0),
+                            np.zeros(0, dtype=np.int64))
+    d = (b - a) / chord[:, None]
+
+    def to_frame(xy, index):
+        rel = xy - a[index]
+        return np.column_stack([(rel * d[index]).sum(axis=1),
+                                rel[:, 0] * -d[index, 1] + rel[:, 1] * d[index, 0]]) \
+            / chord[index, None]
+
+    norm = coordinates.transform(geoms, to_frame)
+    norm = shapely.simplify(norm, simplify)
+    return StreetShapes(norm, chord, np.maximum(length / chord, 1.0), level)
+
+
+def _pick_shapes(shapes: StreetShapes, chord, level, tortuosity, rng, k: int = 24,
+                 quantile=None):
+    """For each new segment, one of the ``k`` example segments of its level nearest in
+    chord length: the one at the quantile of the segment's tortuosity attribute among all
+    new segments (quantile matching: curvier streets get the curvier of the candidates,
+    and the tortuosity distribution of the library is kept, mean included), or at the
+    given ``quantile``; -1 when the library is empty."""
+    out = np.full(len(chord), -1, dtype=np.int64)
+    if not len(shapes):
+        return out
+    if quantile is None:
+        tortuosity = np.asarray(tortuosity, dtype=float)
+        # quantile of each segment's attribute, ties broken at random: uniform on (0, 1)
+        order = np.lexsort((rng.random(len(chord)), tortuosity))
+        quant = np.empty(len(chord))
+        quant[order] = (np.arange(len(chord)) + rng.random(len(chord))) / max(len(chord), 1)
+    else:
+        quant = np.asarray(quantile, dtype=float)
+    logc = np.log(np.maximum(shapes.chord, 1.0))
+    for lv in np.unique(level):
+        sel = np.flatnonzero(level == lv)
+        pool = np.flatnonzero(shapes.level == lv)
+        if len(pool) < k:
+            pool = np.arange(len(shapes))
+        kk = min(k, len(pool))
+        _, idx = cKDTree(logc[pool, None]).query(np.log(np.maximum(chord[sel], 1.0))[:, None],
+                                                 k=kk)
+        idx = pool[np.asarray(idx).reshape(len(sel), kk)]
+        ranked = np.take_along_axis(idx, np.argsort(shapes.tortuosity[idx], axis=1), axis=1)
+        pos = np.minimum((quant[sel] * kk).astype(np.int64), kk - 1)
+        out[sel] = ranked[np.arange(len(sel)), pos]
+    return out
+
+
+def _shape_lines(shapes: StreetShapes, pick, a_xy, b_xy, mirror):
+    """The picked normalised shapes mapped onto the chords a -> b (mirrored where
+    ``mirror`` is -1), with end points exactly a and b."""
+    chord = b_xy - a_xy
+    normal = np.column_stack([-chord[:, 1], chord[:, 0]]) * mirror[:, None]
+    base = shapes.geometry[pick]
+
+    def onto(xy, index):
+        return a_xy[index] + xy[:, :1] * chord[index] + xy[:, 1:2] * normal[index]
+
+    lines = coordinates.transform(base, onto)
+    coords, index = shapely.get_coordinates(lines, return_index=True)
+    first = np.r_[True, index[1:] != index[:-1]]
+    last = np.r_[index[1:] != index[:-1], True]
+    coords[first] = a_xy
+    coords[last] = b_xy
+    return shapely.linestrings(coords, indices=index)
+
+
 def _bend(a, b, tortuosity, max_sagitta, sign, n=9):
-    """A parabolic arc from a to b whose length / chord is about ``tortuosity`` (fig. 5c)."""
+    """A parabolic arc from a to b whose length / chord is about ``tortuosity`` (fig. 5c),
+    for examples given as points (no street shapes)."""
     chord = b - a
     length = float(np.linalg.norm(chord))
     t = np.linspace(0.0, 1.0, n)
@@ -394,31 +971,190 @@ def _bend(a, b, tortuosity, max_sagitta, sign, n=9):
     return shapely.LineString(pts)
 
 
-def _straighten_crossings(lines, straight, others):
-    """Replace bent lines that meet another line anywhere but at shared end points by their
-    chords (the chords are planar by construction)."""
-    lines = lines.copy()
-    others = np.asarray(others, dtype=object)
-    for _ in range(5):
-        bent = np.flatnonzero(shapely.get_num_coordinates(lines) > 2)
-        if len(bent) == 0:
-            return lines
-        allg = np.concatenate([lines, others]) if len(others) else lines
+def _conflicts(lines, others, subset=None, tree=None, area=None, chord_inside=None,
+               corridor=None, chord_in_corridor=None):
+    """Indices of the bent lines (of ``subset``, default all) that meet another line (or a
+    given line) anywhere but at shared end points, and of the lines they meet. ``tree``:
+    an STRtree of ``lines`` + ``others`` whose envelopes are still valid (optional). With
+    ``area`` (prepared), bent lines whose chord lies in it (``chord_inside``) but that
+    bulge out of it conflict too; with ``corridor`` (the given roads' corridors, prepared),
+    bent lines that run in it over 10 m longer than their chord does
+    (``chord_in_corridor``) double a given road and conflict too."""
+    if subset is None:  # chords never cross each other: only bent lines can
+        cand = np.arange(len(lines))
+        bent = cand[shapely.get_num_coordinates(lines[cand]) > 2]
+    else:  # changed lines, bent or not (a new chord can cut an unchanged bend)
+        bent = np.unique(np.asarray(subset, dtype=np.int64))
+    if len(bent) == 0:
+        return np.zeros(0, dtype=np.int64)
+    out_of_area = np.zeros(0, dtype=np.int64)
+    if area is not None:
+        check = bent[chord_inside[bent]]
+        out_of_area = check[~shapely.within(lines[check], area)]
+    if corridor is not None:
+        check = bent[shapely.intersects(corridor, lines[bent])]
+        if len(check):
+            with np.errstate(invalid="ignore"):
+                run = shapely.length(shapely.intersection(lines[check], corridor))
+            out_of_area = np.r_[out_of_area, check[run > chord_in_corridor[check] + 10.0]]
+    allg = np.concatenate([lines, others]) if len(others) else lines
+    if tree is None:
         tree = shapely.STRtree(allg)
-        a, b = tree.query(lines[bent], predicate="intersects")
-        a = bent[a]
-        sel = a != b
-        a, b = a[sel], b[sel]
-        if len(a) == 0:
-            return lines
-        # only boundary meets boundary: interiors and interior-boundary contacts are empty
-        ok = shapely.relate_pattern(lines[a], allg[b], "FF*F*****")
-        if ok.all():
-            return lines
-        other = b[~ok]
-        fix = np.unique(np.concatenate([a[~ok], other[other < len(lines)]]))
-        lines[fix] = straight[fix]
+    a, b = tree.query(lines[bent], predicate="intersects")
+    a = bent[a]
+    sel = a != b
+    a, b = a[sel], b[sel]
+    if len(a) == 0:
+        return np.unique(out_of_area)
+    # only boundary meets boundary: interiors and interior-boundary contacts are empty
+    ok = shapely.relate_pattern(lines[a], allg[b], "FF*F*****")
+    other = b[~ok]
+    return np.unique(np.concatenate([a[~ok], other[other < len(lines)], out_of_area]))
+
+
+def _draw_geometry(xy, a, b, level, tort, shapes, settings, rng, others, area=None):
+    """Polylines of the segments a -> b: example shapes (redrawn where they would cross),
+    else parabolas; lines that still cross are straightened (chords are planar)."""
+    straight = shapely.linestrings(np.stack([xy[a], xy[b]], axis=1))
+    n = len(a)
+    if shapes is not None and len(shapes):
+        chord = np.linalg.norm(xy[b] - xy[a], axis=1)
+
+        def draw(idx):
+            pick = _pick_shapes(shapes, chord[idx], level[idx], tort[idx], rng)
+            mirror = rng.choice([-1.0, 1.0], size=len(idx))
+            return _shape_lines(shapes, pick, xy[a[idx]], xy[b[idx]], mirror)
+
+        lines = draw(np.arange(n)) if n else straight.copy()
+        drawn_t = shapely.length(lines) / np.maximum(chord, 1e-9)
+        # the mean the segments should keep: the example's (the drawn shapes have it
+        # up to the chord lengths of the new segments)
+        drawn_mean = shapes.mean_tortuosity()
+    else:
+        sign = rng.choice([-1.0, 1.0], size=n)
+        lines = np.array([_bend(xy[i], xy[j], t, settings.max_sagitta, sg)
+                          for i, j, t, sg in zip(a, b, tort, sign)], dtype=object)
+
+        def draw(idx):
+            return np.array([_bend(xy[a[i]], xy[b[i]], tort[i], settings.max_sagitta,
+                                   rng.choice([-1.0, 1.0])) for i in idx], dtype=object)
+    others = np.asarray(others, dtype=object)
+    n_redrawn = 0
+    inside = None
+    if area is not None:  # a bend may not bulge out of the target where its chord is in
+        area = shapely.buffer(area, 1.0)
+        shapely.prepare(area)
+        inside = shapely.within(straight, area)
+    corridor, chord_run = None, None
+    if len(others):  # no bend may run along a given road (the invariants' corridor)
+        from ..network.invariants import CORRIDOR_HALF_WIDTH
+
+        corridor = shapely.union_all(shapely.buffer(others, CORRIDOR_HALF_WIDTH, quad_segs=4))
+        shapely.prepare(corridor)
+        with np.errstate(invalid="ignore"):
+            chord_run = shapely.length(shapely.intersection(straight, corridor))
+    conflicts = functools.partial(_conflicts, area=area, chord_inside=inside,
+                                  corridor=corridor, chord_in_corridor=chord_run)
+    bad = conflicts(lines, others)
+    # the changed lines are checked again (against all): a line that did not change and
+    # crossed nothing cannot cross anything now but a changed line
+    for _ in range(settings.shape_retries):
+        if not len(bad):
+            break
+        lines[bad] = draw(bad)
+        n_redrawn += len(bad)
+        bad = conflicts(lines, others, subset=bad)
+    # then flatter versions of the last shape (its offsets from the chord scaled down),
+    # then the chord itself
+    for scale in (0.6, 0.3, 0.0, 0.0, 0.0):
+        if not len(bad):
+            break
+        lines[bad] = _flatten(lines[bad], xy[a[bad]], xy[b[bad]], scale) if scale > 0 \
+            else straight[bad]
+        bad = conflicts(lines, others, subset=bad)
+    if shapes is not None and len(shapes) and n:
+        lines = _restore_tortuosity(lines, straight, chord, level, drawn_mean, shapes, xy, a, b,
+                                    others, rng, conflicts, drawn_t)
+    return lines, straight, n_redrawn
+
+
+def _restore_tortuosity(lines, straight, chord, level, target, shapes, xy, a, b, others, rng,
+                        conflicts=_conflicts, drawn=None, rounds: int = 20,
+                        tolerance: float = 0.002):
+    """Make up the tortuosity lost to flattened shapes: segments that lost their bend
+    (``drawn``: the tortuosity first drawn), then bent segments flatter than the target, get
+    a curvier shape of their level and chord (the upper half of the quantiles of
+    :func:`_pick_shapes`, below the example's 95th percentile) where it fits without
+    crossing, until the mean tortuosity is the target (the example's mean over its
+    segments)."""
+    lines = lines.copy()
+    ll = np.maximum(chord, 1e-9)
+    stuck = drawn is None
+    for _ in range(rounds):
+        t = shapely.length(lines) / ll
+        deficit = target * len(lines) - t.sum()
+        if deficit <= tolerance * len(lines):
+            break
+        # the segments that lost their bend first (the shape distribution stays the
+        # example's), then any segment flatter than the target
+        low = np.flatnonzero(t < drawn - 1e-6) if not stuck else np.zeros(0, int)
+        if not len(low):
+            # segments drawn straight stay straight (a grid's streets keep their bearings)
+            low = np.flatnonzero((t < target) & (drawn > 1.005)) if drawn is not None \
+                else np.flatnonzero(t < target)
+        if not len(low):
+            break
+        prop_idx = rng.permutation(low)[:max(1, min(len(low), int(np.ceil(4 * deficit
+                                                                          / 0.05))))]
+        pick = _pick_shapes(shapes, chord[prop_idx], level[prop_idx], None, rng,
+                            quantile=0.5 + 0.5 * rng.random(len(prop_idx)))
+        cand = _shape_lines(shapes, pick, xy[a[prop_idx]], xy[b[prop_idx]],
+                            rng.choice([-1.0, 1.0], size=len(prop_idx)))
+        gain = shapely.length(cand) / ll[prop_idx] - t[prop_idx]
+        # not the rare hairpins of the example's tail (above its 95th percentile)
+        gain[shapely.length(cand) / ll[prop_idx] > np.quantile(shapes.tortuosity, 0.95)] = 0.0
+        # take the gains in order until the deficit is met
+        order = np.argsort(-gain)
+        keep = order[(gain[order] > 0) & (np.cumsum(np.maximum(gain[order], 0)) <= deficit
+                                          + gain[order].clip(0))]
+        if not len(keep):
+            continue
+        # accept the proposals that cross nothing; a rejected one keeps its old shape, which
+        # the accepted ones are checked against again, until none is left to reject
+        take = prop_idx[keep]
+        shape = cand[keep]
+        while len(take):
+            trial = lines.copy()
+            trial[take] = shape
+            bad = set(conflicts(trial, others, subset=take).tolist())
+            ok = np.array([i not in bad for i in take], dtype=bool)
+            if ok.all():
+                lines = trial
+                break
+            take, shape = take[ok], shape[ok]
+        # no flattened segment takes a bend any more: the other segments may
+        stuck = stuck or len(take) < 0.1 * len(prop_idx)
     return lines
+
+
+def _flatten(lines, a_xy, b_xy, scale):
+    """Lines with their offsets from the chord a -> b scaled by ``scale`` (same ends)."""
+    chord = b_xy - a_xy
+
+    def towards_chord(xy, index):
+        rel = xy - a_xy[index]
+        ll = np.maximum((chord[index] ** 2).sum(axis=1), 1e-12)
+        t = (rel * chord[index]).sum(axis=1) / ll
+        foot = a_xy[index] + t[:, None] * chord[index]
+        return foot + scale * (xy - foot)
+
+    out = coordinates.transform(lines, towards_chord)
+    coords, index = shapely.get_coordinates(out, return_index=True)
+    first = np.r_[True, index[1:] != index[:-1]]
+    last = np.r_[index[1:] != index[:-1], True]
+    coords[first] = a_xy
+    coords[last] = b_xy
+    return shapely.linestrings(coords, indices=index)
 
 
 # --------------------------------------------------------------------------- synthesis
@@ -428,10 +1164,11 @@ class Synthesis:
     """Result of :func:`synthesize`.
 
     geometry, table : the new road segments (:data:`ROAD_FIELDS`)
-    points, point_table : the attributed points used (:data:`POINT_FIELDS`); existing-road
-        nodes have example == -1
-    stats : counts (points, edges, dead ends, seam ends connected ...)
+    points, point_table : the attributed points used (:data:`POINT_FIELDS`); given-road
+        nodes have example == -1, junction slots on given roads -2
+    stats : counts (points, edges, dead ends, seam ends connected, joins ...)
     quadtrees : the quadtree of each example
+    existing_lines : the given roads as used (noded, cleaned), or None
     """
 
     geometry: np.ndarray
@@ -443,8 +1180,58 @@ class Synthesis:
     existing_lines: Optional[np.ndarray] = None
 
 
-def _existing_state(lines, area, offset: int, seam_distance: float):
-    """Existing roads as points (their nodes) and constraints (their segments)."""
+def _road_slot_points(graph, example: iq.PointSet, area, rng, min_gap_share=0.4):
+    """Junction slots along the given roads inside the target (see the module docstring).
+
+    Gaps along each given street are drawn from the example's distances between
+    intersections along its level-0 streets (N(mu_d, sigma_d) of a random level-0 point,
+    at least ``min_gap_share`` mu_d); each slot takes street b's statistics, degree and
+    level from a random example point on a level-0 street that has a crossing street.
+
+    Returns (xy (k, 2), donor index into ``example`` (k,), edge index (k,), distance along
+    the edge (k,)).
+    """
+    lv0 = int(example.level[:, 0][example.level[:, 0] >= 0].min()) \
+        if (example.level[:, 0] >= 0).any() else 0
+    on_art = np.flatnonzero((example.level[:, 0] == lv0) & (example.level[:, 1] >= 0)
+                            & (example.degree >= 3))
+    on_lv0 = np.flatnonzero(example.level[:, 0] == lv0)
+    empty = (np.zeros((0, 2)), np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0))
+    if not len(on_art) or not len(on_lv0):
+        return empty
+    xy, donor, edge, dist = [], [], [], []
+    shapely.prepare(area)
+    node_xy = graph.nodes
+    for e in range(graph.n_edges):
+        g = graph.geometry[e]
+        if not shapely.intersects(area, g):
+            continue
+        length = g.length
+        t = 0.0
+        k = int(on_lv0[rng.integers(len(on_lv0))])
+        mu, sd = example.dist_mean[k, 0], example.dist_sd[k, 0]
+        t = rng.uniform(0.0, mu)
+        while t < length:
+            xy_t = np.asarray(shapely.line_interpolate_point(g, t).coords[0])
+            near_node = min(np.linalg.norm(node_xy[graph.u[e]] - xy_t),
+                            np.linalg.norm(node_xy[graph.v[e]] - xy_t))
+            if near_node >= min_gap_share * mu and shapely.contains_xy(area, *xy_t):
+                xy.append(xy_t)
+                donor.append(int(on_art[rng.integers(len(on_art))]))
+                edge.append(e)
+                dist.append(t)
+            k = int(on_lv0[rng.integers(len(on_lv0))])
+            mu, sd = example.dist_mean[k, 0], example.dist_sd[k, 0]
+            t += max(rng.normal(mu, sd), min_gap_share * mu)
+    if not xy:
+        return empty
+    return np.array(xy), np.array(donor), np.array(edge), np.array(dist)
+
+
+def _existing_state(lines, area, offset: int, seam_distance: float, example=None, rng=None,
+                    slots: bool = True):
+    """Existing roads as points (their nodes and junction slots) and constraints (their
+    segments)."""
     from ..network import hierarchy
     from ..network import street_graph as roads
 
@@ -460,7 +1247,7 @@ def _existing_state(lines, area, offset: int, seam_distance: float):
         graph.nodes[hit] = raw[near[hit]]
     h = hierarchy.road_hierarchy(graph)
     table = hierarchy.intersection_attributes(graph, h.streets, h.street_level)
-    pts = iq.points_from_table(graph.nodes, table, example=-1)
+    pts = iq.points_from_table(graph.nodes, table, example=EXISTING)
     node = pts.source  # node ids kept
     deg = graph.degree[node]
     n = len(pts)
@@ -495,16 +1282,64 @@ def _existing_state(lines, area, offset: int, seam_distance: float):
     coords[first] = graph.nodes[graph.u]
     coords[last] = graph.nodes[graph.v]
     graph.geometry = shapely.linestrings(coords, indices=idx)
-    same = idx[1:] == idx[:-1]
-    segs = np.hstack([coords[:-1][same], coords[1:][same]])
-    return pts, {"index": np.arange(n) + offset, "cap": cap, "cnt": cnt, "slot_dir": slot_dir,
-                 "dirs": dirs, "segments": segs, "seam": seam, "degree": deg}, graph
+    # junction slots along the given roads: split the segments there
+    s_xy, s_donor, s_edge, s_dist = (np.zeros((0, 2)), np.zeros(0, np.int64),
+                                     np.zeros(0, np.int64), np.zeros(0))
+    if slots and example is not None:
+        s_xy, s_donor, s_edge, s_dist = _road_slot_points(graph, example, area, rng)
+    if len(s_xy):
+        # distance of each vertex along its line (cumulative, exact for loops too)
+        step = np.r_[0.0, np.linalg.norm(np.diff(coords, axis=0), axis=1)]
+        step[first] = 0.0
+        cum = np.cumsum(step)
+        vdist = cum - cum[first][np.cumsum(first) - 1]
+        key = np.r_[idx, s_edge]
+        along = np.r_[vdist, s_dist]
+        allxy = np.vstack([coords, s_xy])
+        # vertices in order along each line; a slot sits between its neighbours
+        order = np.lexsort((np.r_[np.arange(len(idx)), np.full(len(s_edge), -1)], along, key))
+        seg_xy, seg_idx = allxy[order], key[order]
+    else:
+        seg_xy, seg_idx = coords, idx
+    same = seg_idx[1:] == seg_idx[:-1]
+    segs = np.hstack([seg_xy[:-1][same], seg_xy[1:][same]])
+    segs = segs[np.abs(segs[:, :2] - segs[:, 2:]).sum(axis=1) > 1e-9]
+    state = {"cap": cap, "cnt": cnt, "slot_dir": slot_dir, "dirs": dirs, "seam": seam,
+             "degree": deg}
+    if len(s_xy):
+        sp = example.take(s_donor)
+        sp.xy = s_xy
+        sp.example = np.full(len(s_xy), ROAD_SLOT, dtype=np.int64)
+        sp.generated = np.ones(len(s_xy), dtype=bool)
+        road_level = h.edge_level[s_edge]
+        sp.level = np.column_stack([road_level, np.maximum(sp.level[:, 1], road_level + 1)])
+        k = len(s_xy)
+        s_cap = np.clip(sp.degree, 3, 4)
+        s_cnt = np.column_stack([np.full(k, 2), 2 - (s_cap - 2)])
+        s_dirs = []
+        for e, t in zip(s_edge, s_dist):
+            g = graph.geometry[e]
+            a_ = np.asarray(shapely.line_interpolate_point(g, max(t - 5.0, 0.0)).coords[0])
+            b_ = np.asarray(shapely.line_interpolate_point(g, min(t + 5.0, g.length)).coords[0])
+            d = (b_ - a_) / max(np.linalg.norm(b_ - a_), 1e-9)
+            s_dirs.append([d, -d])
+        pts = iq.PointSet.concat([pts, sp])
+        state = {"cap": np.r_[cap, s_cap], "cnt": np.vstack([cnt, s_cnt]),
+                 "slot_dir": np.concatenate([slot_dir, np.zeros((k, 2, 2))]),
+                 "dirs": dirs + s_dirs, "seam": np.r_[seam, np.zeros(k, dtype=bool)],
+                 "degree": np.r_[deg, np.full(k, 2)]}
+    state["index"] = np.arange(len(pts)) + offset
+    state["segments"] = segs
+    state["n_slots"] = len(s_xy)
+    return pts, state, graph
 
 
 def synthesize(example: iq.PointSet, target, existing_lines=None,
                example_b: Optional[iq.PointSet] = None, blend=0.0, seed: int = 0,
                settings: Optional[WalkSettings] = None, in_place: Optional[bool] = None,
-               progress: Optional[Progress] = None) -> Synthesis:
+               progress: Optional[Progress] = None, shapes: Optional[StreetShapes] = None,
+               shapes_b: Optional[StreetShapes] = None,
+               dead_end_share: Optional[float] = None) -> Synthesis:
     """Join / expand / blend (sec. 4.2): place example points in ``target`` and connect them.
 
     Parameters
@@ -515,6 +1350,12 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
     blend : weight of example B, a number in [0, 1] or a function of (n, 2) locations
     seed : int >= 0; the same seed gives the same network
     in_place : see :func:`intersection_quadtree.place_points`
+    shapes, shapes_b : StreetShapes of the examples (:func:`street_shapes`), optional: the
+        new segments bend like them; without, parabolas of the points' tortuosity
+    dead_end_share : the example's share of dead ends, optional; default the share among
+        the example's points (:func:`dead_end_share_of`), which counts the ends of an
+        example clipped to a study area as dead ends too: pass the share measured inside
+        the example's area (``invariants.dead_end_share(lines, area)``) when it is known
 
     Raises
     ------
@@ -536,7 +1377,18 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
         pts_b.example = np.ones(len(pts_b), dtype=np.int64)
         pts.example = np.zeros(len(pts), dtype=np.int64)
         pts = iq.blend_points(pts, pts_b, blend, rng)
+        if shapes is not None and shapes_b is not None:
+            beta = float(np.mean(blend(pts.xy))) if callable(blend) else float(blend)
+            shapes = _blend_shapes(shapes, shapes_b, beta, rng)
+        elif shapes_b is not None or shapes is not None:
+            shapes = None  # one example without shapes: parabolas for both
     progress.step(0.1)
+    # the dead-end share to close stubs down to: the example's (a blend: the mix)
+    target_share = dead_end_share_of(example) if dead_end_share is None else \
+        float(dead_end_share)
+    if example_b is not None and dead_end_share is None:
+        beta = float(np.mean(blend(pts.xy))) if callable(blend) else float(blend)
+        target_share = (1 - beta) * target_share + beta * dead_end_share_of(example_b)
     n_new = len(pts)
     existing = None
     ex_lines = None
@@ -547,13 +1399,19 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
         ex_lines = np.asarray(existing_lines, dtype=object)
         d = shapely.distance(shapely.union_all(ex_lines), shapely.points(pts.xy))
         pts = pts.take(np.flatnonzero(d >= 0.3 * pts.dist_mean[:, 0]))
+        # the given roads are the example's arterials (level 0): new streets rank below
+        low = int(example.level[example.level >= 0].min())
+        pts.level = np.where(pts.level == low, low + 1, pts.level)
         n_new = len(pts)
-        ex_pts, existing, graph = _existing_state(ex_lines, area, n_new, seam_d)
+        ex_pts, existing, graph = _existing_state(ex_lines, area, n_new, seam_d, example, rng,
+                                                  settings.road_slots)
         ex_lines = graph.geometry
         pts = iq.PointSet.concat([pts, ex_pts])
     if n_new == 0:
         raise InputError("no example point is left in the target")
-    edges, w = connect_points(pts, rng, settings, existing, progress=progress.sub(0.1, 0.85))
+    edges, w = connect_points(pts, rng, settings, existing, dead_end_share=target_share,
+                              area=area, progress=progress.sub(0.1, 0.85))
+    pts = w.p
     if len(edges) == 0:
         raise InputError("no street could be made: the points are too far apart for their "
                          "street statistics")
@@ -562,16 +1420,12 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
     level = edges[:, 4].astype(np.int64)
     origin = edges[:, 5].astype(object)
     tort = 0.5 * (pts.tortuosity[a, sa] + pts.tortuosity[b, sb])
-    sign = rng.choice([-1.0, 1.0], size=len(a))
-    straight = shapely.linestrings(np.stack([pts.xy[a], pts.xy[b]], axis=1))
-    bent = np.array([_bend(pts.xy[i], pts.xy[j], t, settings.max_sagitta, sg)
-                     for i, j, t, sg in zip(a, b, tort, sign)], dtype=object)
-    lines = _straighten_crossings(bent, straight, ex_lines if ex_lines is not None
-                                  else np.empty(0, dtype=object))
+    lines, straight, n_redrawn = _draw_geometry(
+        pts.xy, a, b, level, tort, shapes, settings, rng,
+        ex_lines if ex_lines is not None else np.empty(0, dtype=object), area)
     progress.step(0.95)
     length = shapely.length(lines)
     chord = shapely.length(straight)
-    # node ids of the output: new points keep their index; points without a street go
     used = np.zeros(len(pts), dtype=bool)
     used[a] = used[b] = True
     table = pd.DataFrame({
@@ -580,24 +1434,65 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
         "node_from": a, "node_to": b})
     ptab = pts.table()
     ptab.insert(0, "node_id", np.arange(len(pts)))
-    ptab["connections"] = w.deg
+    deg = np.bincount(np.r_[a, b], minlength=len(pts))
+    if existing is not None:  # connections of given-road points include their own roads
+        ex = existing["index"]
+        deg[ex] += existing["degree"]
+        made = np.arange(n_new + len(ex), len(pts))  # junctions made by joins
+        deg[made[pts.example[made] == ROAD_SLOT]] += 2
+    ptab["connections"] = deg
+    ptab["generated"] = pts.generated.astype(np.int64)
     is_new = pts.example >= 0
-    dead = is_new & (w.deg == 1)
+    dead = is_new & (deg == 1)
+    n_on = int((used & is_new & (deg != 2)).sum())
     stats = {
-        "n_points": int(n_new), "n_points_connected": int((used & is_new).sum()),
+        "n_points": int(n_new), "n_points_generated": int(pts.generated[:n_new].sum()),
+        "n_points_connected": int((used & is_new).sum()),
         "n_edges": len(lines), "n_dead_ends": int(dead.sum()),
-        "dead_end_share": float(dead.sum() / max((used & is_new).sum(), 1)),
-        "n_straightened": int((shapely.length(lines) <= chord + 1e-9).sum()),
+        "dead_end_share": float(dead.sum() / max(n_on, 1)),
+        "example_dead_end_share": float(target_share),
+        "n_straight": int((shapely.get_num_coordinates(lines) == 2).sum()),
+        "n_redrawn": int(n_redrawn),
+        "mean_tortuosity": float(np.mean(length / np.maximum(chord, 1e-9))),
+        "example_mean_tortuosity": float(shapes.mean_tortuosity()) if shapes is not None
+        else float(np.mean(example.tortuosity[:, 0])),
         "n_levels": int(len(np.unique(level))),
         "quadtree_leaves": [len(q.leaves) for q in quadtrees],
+        "n_closed": w.stats["n_closed"], "n_crossings_made": w.stats["n_crossings_made"],
+        "n_joins": w.stats["n_joins"],
+        "n_join_splits": w.stats["n_join_splits"],
+        "n_dropped_edges": w.stats["n_dropped_edges"],
     }
     if existing is not None:
         seam_idx = existing["index"][existing["seam"]]
         stats["n_seam_ends"] = int(len(seam_idx))
         stats["n_seam_ends_connected"] = int((w.deg[seam_idx] >= 2).sum())
         stats["n_seam_joins_relaxed"] = int((origin == "seam").sum())
+        slot_idx = np.flatnonzero(pts.example == ROAD_SLOT)
+        stats["n_road_junctions"] = int(used[slot_idx].sum())
     progress.step(1.0)
     return Synthesis(lines, table, pts, ptab, stats, quadtrees, ex_lines)
+
+
+def _blend_shapes(a: StreetShapes, b: StreetShapes, beta: float, rng) -> StreetShapes:
+    """A shape library with a share ``beta`` of B's shapes (a spatially varying blend gives
+    its mean weight): segments then bend like a beta-mixture of both examples'."""
+    n = max(len(a), len(b))
+    take_b = rng.random(n) < beta
+    ia = rng.integers(0, len(a), n) if len(a) else np.zeros(n, np.int64)
+    ib = rng.integers(0, len(b), n) if len(b) else np.zeros(n, np.int64)
+    if not len(b):
+        take_b[:] = False
+    if not len(a):
+        take_b[:] = True
+
+    def pick(field_):
+        return np.where(take_b, getattr(b, field_)[ib] if len(b) else 0,
+                        getattr(a, field_)[ia] if len(a) else 0)
+
+    geometry = np.where(take_b, b.geometry[ib] if len(b) else None,
+                        a.geometry[ia] if len(a) else None)
+    return StreetShapes(geometry, pick("chord"), pick("tortuosity"), pick("level"))
 
 
 def blocks_and_dual(lines, extra_lines=None, min_area: float = 50.0):
@@ -651,6 +1546,16 @@ def block_table(result: Synthesis, min_area: float = 50.0):
         cnt = np.bincount(fi[ok], minlength=len(faces))
         tot = np.bincount(fi[ok], vals[ok], minlength=len(faces))
         area_attr = np.where(cnt > 0, tot / np.maximum(cnt, 1), np.nan)
+        # a block with no value on its outline (its corners are dead ends or junctions made
+        # by joins): the mean of the 4 nearest points that have one
+        miss = ~np.isfinite(area_attr)
+        has = np.flatnonzero(np.isfinite(result.points.area))
+        if miss.any() and len(has):
+            k = min(4, len(has))
+            _, near = cKDTree(result.points.xy[has]).query(
+                shapely.get_coordinates(shapely.point_on_surface(faces[miss])), k=k)
+            area_attr[miss] = result.points.area[has[np.asarray(near).reshape(-1, k)]].mean(
+                axis=1)
     table = pd.DataFrame({"block_id": np.arange(1, len(faces) + 1), "area_m2": shapely.area(faces),
                           "neighbours": neighbours, "parcel_area": area_attr})
     return faces, table

@@ -41,7 +41,7 @@ import shapely
 from ..core.progress import InputError, Progress, ensure
 
 __all__ = ["rasterize_lines", "raster_to_graph", "RasterGraph", "road_mask", "skeleton", "pixel_graph",
-           "chains", "smooth_chain", "CELL_SIZE", "LINE_WIDTH_PX"]
+           "chains", "smooth_chain", "merge_junction_clusters", "CELL_SIZE", "LINE_WIDTH_PX"]
 
 #: Thesis values: 3 m per pixel, 15 px wide roads.
 CELL_SIZE = 3.0
@@ -332,6 +332,58 @@ def _prune_dead_ends(graph, min_length: float, allowance=None, max_rounds: int =
     return graph, removed
 
 
+def merge_junction_clusters(graph, distance: float):
+    """Contract the short edges between junctions (both ends of degree >= 3) of a street
+    graph: each cluster of junctions joined by edges of ``distance`` m or less becomes one
+    node at their mean, the edges that ended there end there, the edges inside it go.
+
+    Thinning a crossing of two wide roads seldom gives one 4-way skeleton pixel: it gives
+    two 3-way nodes a few pixels apart (or a tiny loop), so the graph of a raster has almost
+    no degree-4 junctions although the image shows crossings. This is the merge that
+    OSMnx's ``consolidate_intersections`` makes for real networks, on the skeleton graph.
+
+    Returns a new clean graph (``street_graph.clean_network``: moved ends that now cross a
+    street are noded there, degree-2 chains merged) and the number of nodes merged away.
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    from ..network.street_graph import clean_network
+
+    if graph is None or graph.n_edges == 0 or distance <= 0:
+        return graph, 0
+    deg = graph.degree
+    short = (graph.length <= distance) & (deg[graph.u] >= 3) & (deg[graph.v] >= 3) \
+        & (graph.u != graph.v)
+    if not short.any():
+        return graph, 0
+    n = len(graph.nodes)
+    adj = coo_matrix((np.ones(short.sum()), (graph.u[short], graph.v[short])), shape=(n, n))
+    _, label = connected_components(adj, directed=False)
+    size = np.bincount(label, minlength=n)
+    centre = np.column_stack([np.bincount(label, graph.nodes[:, 0], minlength=n),
+                              np.bincount(label, graph.nodes[:, 1], minlength=n)]) \
+        / np.maximum(size, 1)[:, None]
+    new_xy = centre[label]
+    keep = label[graph.u] != label[graph.v]   # edges inside a cluster go
+    keep |= (graph.u == graph.v) & (size[label[graph.u]] == 1)  # loops of single nodes stay
+    geoms = graph.geometry[keep]
+    u, v = graph.u[keep], graph.v[keep]
+    coords, index = shapely.get_coordinates(geoms, return_index=True)
+    first = np.r_[True, index[1:] != index[:-1]]
+    last = np.r_[index[1:] != index[:-1], True]
+    coords[first] = new_xy[u]
+    coords[last] = new_xy[v]
+    lines = shapely.linestrings(coords, indices=index)
+    lines = lines[shapely.length(lines) > 0]
+    merged = int(n - len(np.unique(label[np.r_[graph.u, graph.v]]))) - \
+        int(n - len(np.unique(np.r_[graph.u, graph.v])))
+    if not len(lines):
+        return graph, 0
+    out = clean_network(lines, snap_tolerance=0.5, min_dangle_length=0.0, merge_degree2=True)
+    return out, max(merged, 0)
+
+
 def _join_gaps(lines: np.ndarray, max_gap: float) -> np.ndarray:
     """Extend each dead end straight ahead by up to ``max_gap`` to the first road it meets:
     the generator often stops a street a few pixels short of the next one."""
@@ -374,6 +426,7 @@ def raster_to_graph(image: np.ndarray, geotransform=(0.0, 1.0, 0.0, 0.0, 0.0, -1
                     threshold: float = 127.0, erosions: int = 1, dilations: int = 5,
                     smoothing: int = 5, simplify: float = 3.0, min_dead_end: float = 25.0,
                     max_gap: float = 0.0, from_edge: bool = True,
+                    merge_junctions: float = 0.0,
                     progress: Optional[Progress] = None) -> RasterGraph:
     """Extract a clean planar road graph from a road raster (thesis ch. 4.2.4).
 
@@ -394,6 +447,8 @@ def raster_to_graph(image: np.ndarray, geotransform=(0.0, 1.0, 0.0, 0.0, 0.0, -1
         25 m but stick out of the road by less. False: the thesis's skeleton lengths.
     max_gap : extend dead ends straight ahead by up to this to meet a road (0: off,
         the thesis's method)
+    merge_junctions : junctions joined by an edge this short (map units) become one node
+        (:func:`merge_junction_clusters`; 0: off, the thesis's method)
     progress : Progress, optional
 
     Returns
@@ -467,6 +522,8 @@ def raster_to_graph(image: np.ndarray, geotransform=(0.0, 1.0, 0.0, 0.0, 0.0, -1
             return half[r, c]
         graph, stats["dead_ends_removed"] = _prune_dead_ends(
             graph, min_dead_end, half_width if from_edge else None)
+        if merge_junctions > 0 and graph.n_edges:
+            graph, stats["junctions_merged"] = merge_junction_clusters(graph, merge_junctions)
         if graph.n_edges:
             graph.geometry[:] = shapely.simplify(graph.geometry, simplify) if simplify \
                 else graph.geometry

@@ -15,6 +15,23 @@ up-convolutions; m = 25 -> 769 px). This module runs it with onnxruntime (no PyT
   :data:`TILE_MARGIN` cells stitch without seams: the result equals the one-pass image;
 - :func:`synthesize` covers a target area at the model's cell size (3 m), extracts the road
   graph (:func:`plugin.roads.raster_graph.raster_to_graph`) and clips it to the target.
+
+Given roads (the arterials of a district; the thesis's "future work": "the urban planner
+might also incorporate existing objects", ch. 4.2.8) are respected and kept:
+
+- the generator's image is blanked in the corridor of every given road (half a rasterised
+  road width plus the invariant checker's corridor, :data:`GIVEN_CORRIDOR`), so that no
+  generated street runs along or over a given road;
+- after vectorising, junction clusters are merged (two 3-way skeleton nodes a few pixels
+  apart are one crossing of the image, :func:`raster_graph.merge_junction_clusters`);
+- every generated dead end that points at a given road within reach of the corridor is
+  extended straight onto it (a T junction; from both sides a crossing), except onto
+  motorways and trunks, which are crossed only at their own junctions;
+- all lines are noded together (every contact is a junction), and generated pieces that
+  reach neither a given road nor (without given roads) the largest piece are joined by
+  the shortest clear connector within :data:`JOIN_DISTANCE` road widths, or dropped;
+- the given roads are returned whole (split at the new junctions), level 0; the generated
+  streets rank below them.
 """
 from __future__ import annotations
 
@@ -28,6 +45,7 @@ from typing import Optional
 
 import numpy as np
 import shapely
+import shapely.ops
 
 from ..core.paths import RESOURCES
 from ..core.progress import InputError, Progress, ensure
@@ -35,7 +53,7 @@ from . import raster_graph
 
 __all__ = ["MODELS_DIR", "Generator", "shipped_models", "load_model", "noise", "noise_size",
            "generate", "synthesize", "StreetGanResult", "SCALE", "TILE_MARGIN", "tile_plan",
-           "TileWindow"]
+           "TileWindow", "attach_to_given", "GIVEN_CORRIDOR", "JOIN_DISTANCE"]
 
 MODELS_DIR = RESOURCES / "models"
 #: pixels per noise cell (five stride-2 layers)
@@ -44,6 +62,11 @@ SCALE = 32
 DEFAULT_MIN_DEAD_END = 25.0
 #: noise cells of context added around each tile; the generator's reach is < 2 cells
 TILE_MARGIN = 3
+#: m beyond half a rasterised road width in which generation is blanked along a given road
+#: (the invariant checker's corridor: no generated street may run there)
+GIVEN_CORRIDOR = 8.0
+#: floating generated pieces are joined by connectors up to this many road widths long
+JOIN_DISTANCE = 2.0
 
 
 def shipped_models() -> list:
@@ -256,8 +279,12 @@ class StreetGanResult:
 
     Attributes
     ----------
-    geometry : ndarray of LineString, planar street edges clipped to the target (metric CRS)
-    level : int array, stream-order level from street continuity (0 = the longest streets)
+    geometry : ndarray of LineString, planar street edges: the generated streets clipped to
+        the target and, when roads were given, the given roads (whole, split at the new
+        junctions) (metric CRS)
+    level : int array, stream-order level from street continuity (0 = the longest streets;
+        with given roads, 0 = the given roads and the generated streets from 1)
+    given : bool array, the edge is (a piece of) a given road
     image : (rows, cols) float32 grey values 0 .. 255 of the generator
     geotransform : GDAL geotransform of ``image``
     stats : dict with timings (``generate_s``, ``vectorize_s``), sizes and counts
@@ -268,13 +295,19 @@ class StreetGanResult:
     image: np.ndarray
     geotransform: tuple
     stats: dict = field(default_factory=dict)
+    given: Optional[np.ndarray] = None
+
+    def __post_init__(self):
+        if self.given is None:
+            self.given = np.zeros(len(self.geometry), dtype=bool)
 
 
 def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
                margin: float = 96.0, max_gap: float = 0.0, min_dead_end: Optional[float] = None,
                from_edge: bool = True,
                tile: Optional[int] = 24, levels: bool = True,
-               progress: Optional[Progress] = None, generate_fn=None) -> StreetGanResult:
+               progress: Optional[Progress] = None, generate_fn=None, given=None,
+               given_class=None, merge_junctions: Optional[float] = None) -> StreetGanResult:
     """Generate a road network over a target polygon (thesis ch. 4.2).
 
     Parameters
@@ -292,6 +325,11 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
     levels : derive a ``level`` per edge from street continuity (plugin.network.hierarchy)
     generate_fn : replaces :func:`generate` (same signature and result), e.g. to run the
         tiles on a Dask cluster (plugin.scale.distributed)
+    given : array of LineString, optional, roads to respect and keep (see the module
+        docstring); ``given_class`` their OSM highway classes (motorways and trunks get no
+        new junctions)
+    merge_junctions : m; junctions closer than this merge into one (default half a
+        rasterised road width; 0: the thesis's graph)
     """
     progress = ensure(progress)
     gen = model if isinstance(model, Generator) else load_model(model)
@@ -309,37 +347,332 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
     if rows * cols > 60_000_000:
         raise InputError(f"the target needs {rows} x {cols} pixels at {cell:g} m: more than "
                          "60 million; use a larger cell size or a smaller target")
+    given_lines, given_cls = _given(given, given_class)
     t = time.perf_counter()
     image = (generate_fn or generate)(gen, rows, cols, seed, tile, progress.sub(0.0, 0.5))
     t_gen = time.perf_counter() - t
     gt = (x0, cell, 0.0, y1, 0.0, -cell)
     t = time.perf_counter()
     scale = cell / gen.cell_size  # lengths in the model's pixels stay the thesis's
+    width = float(gen.card.get("line_width_px", raster_graph.LINE_WIDTH_PX)) * cell
     if min_dead_end is None:
         min_dead_end = float(gen.card.get("postprocess", {}).get("min_dead_end_m",
                                                                  DEFAULT_MIN_DEAD_END))
+    merge = 0.5 * width if merge_junctions is None else float(merge_junctions)
+    corridor = 0.5 * width + GIVEN_CORRIDOR
+    open_given = given_lines[_open_roads(given_cls)] if len(given_lines) else given_lines
+    if len(given_lines):
+        # no generated road in a given road's corridor; the given roads that take junctions
+        # are drawn in, so that generated streets that reach them join them in the skeleton
+        image = _blank_corridors(image, gt, given_lines, corridor)
+        if len(open_given):
+            drawn, _ = raster_graph.rasterize_lines(
+                open_given, cell_size=cell, width_px=int(round(width / cell)),
+                bounds=(gt[0], gt[3] + gt[5] * image.shape[0], gt[0] + gt[1] * image.shape[1],
+                        gt[3]))
+            drawn = drawn[:image.shape[0], :image.shape[1]]
+            image[:drawn.shape[0], :drawn.shape[1]] = np.maximum(
+                image[:drawn.shape[0], :drawn.shape[1]], drawn.astype(np.float32))
     rg = raster_graph.raster_to_graph(image, gt, simplify=3.0 * scale,
                                       min_dead_end=min_dead_end * scale, max_gap=max_gap * scale,
-                                      from_edge=from_edge,
+                                      from_edge=from_edge, merge_junctions=merge,
                                       progress=progress.sub(0.5, 0.85))
     lines = rg.geometry
+    n_cut = 0
+    if len(lines) and len(open_given):
+        # the skeleton of the drawn roads goes; streets that reached them end on them
+        lines, n_cut = _cut_at_given(lines, open_given, 0.5 * width)
     if len(lines):
         with np.errstate(invalid="ignore"):
             clipped = shapely.intersection(lines, area)
         parts = shapely.get_parts(clipped)
         parts = shapely.get_parts(shapely.line_merge(parts)) if len(parts) else parts
         lines = parts[(shapely.get_type_id(parts) == 1) & (shapely.length(parts) > 1e-6)]
+    lines, is_given, attach = attach_to_given(lines, given_lines, given_cls, area,
+                                              reach=corridor + 0.75 * width,
+                                              join_distance=JOIN_DISTANCE * width)
     t_vec = time.perf_counter() - t
     level = np.zeros(len(lines), dtype=np.int64)
     if levels and len(lines):
         from ..network.hierarchy import road_hierarchy
         from ..network.street_graph import clean_network
 
-        graph = clean_network(lines, snap_tolerance=0.5, min_dangle_length=0.0)
-        lines = graph.geometry
-        level = np.asarray(road_hierarchy(graph, method="topological").edge_level, dtype=np.int64)
+        new = ~is_given
+        level = np.zeros(len(lines), dtype=np.int64)
+        if new.any():
+            graph = clean_network(lines[new], snap_tolerance=0.0, min_dangle_length=0.0,
+                                  merge_degree2=False)
+            # levels of the generated streets (0 = their longest), ranked below given roads
+            lv = np.asarray(road_hierarchy(graph, method="topological").edge_level)
+            # back onto the lines (cleaning kept the noded lines as they were)
+            idx = shapely.STRtree(graph.geometry).query(
+                shapely.line_interpolate_point(lines[new], 0.5, normalized=True),
+                predicate="dwithin", distance=1e-6)
+            got = np.zeros(new.sum(), dtype=np.int64)
+            got[idx[0]] = lv[idx[1]]
+            level[new] = got + (1 if is_given.any() else 0)
     progress.step(1.0)
     stats = dict(rg.stats, pixels=[rows, cols], cell_size_m=cell, generate_s=round(t_gen, 4),
                  vectorize_s=round(t_vec, 4), area_km2=area.area / 1e6, model=gen.name,
-                 seed=int(seed), edges_clipped=int(len(lines)))
-    return StreetGanResult(np.asarray(lines, dtype=object), level, image, gt, stats)
+                 seed=int(seed), edges_clipped=int((~is_given).sum()),
+                 n_joined_to_drawn_roads=int(n_cut), **attach)
+    return StreetGanResult(np.asarray(lines, dtype=object), level, image, gt, stats, is_given)
+
+
+def _given(given, given_class):
+    """Single-part given lines and their classes."""
+    if given is None:
+        return np.empty(0, dtype=object), np.empty(0, dtype=object)
+    arr = np.asarray(given, dtype=object).ravel()
+    cls = np.asarray(given_class if given_class is not None else [None] * len(arr),
+                     dtype=object).ravel()
+    if len(cls) != len(arr):
+        raise InputError(f"{len(cls)} road classes for {len(arr)} given roads")
+    ok = ~(shapely.is_missing(arr) | shapely.is_empty(arr))
+    arr, cls = arr[ok], cls[ok]
+    if len(arr) and not np.isin(shapely.get_type_id(arr), (1, 5)).all():
+        raise InputError("the given roads must be lines")
+    parts, src = shapely.get_parts(arr, return_index=True)
+    keep = shapely.length(parts) > 0
+    return shapely.force_2d(parts[keep]), cls[src[keep]]
+
+
+def _open_roads(given_class) -> np.ndarray:
+    """Given roads that may take new junctions (not motorways / trunks)."""
+    from ..network import invariants
+
+    cls = np.array([str(c) for c in given_class], dtype=object)
+    return ~np.isin(cls, invariants.CONTROLLED_ACCESS)
+
+
+def _cut_at_given(lines, given, half_width):
+    """Generated lines outside the drawn given roads (a band of ``half_width`` m), each end
+    that stopped at the band continued straight onto the nearest point of the given road.
+    Returns (lines, number of such junctions)."""
+    band = shapely.union_all(shapely.buffer(given, half_width, quad_segs=8))
+    with np.errstate(invalid="ignore"):
+        outside = shapely.get_parts(shapely.difference(lines, band))
+    outside = outside[(shapely.get_type_id(outside) == 1) & (shapely.length(outside) > 1e-6)]
+    if not len(outside):
+        return outside, 0
+    edge = shapely.boundary(band)
+    ends = np.vstack([shapely.get_coordinates(shapely.get_point(outside, 0)),
+                      shapely.get_coordinates(shapely.get_point(outside, -1))])
+    pts = shapely.points(ends)
+    on_band = shapely.dwithin(edge, pts, 1e-3)
+    pts_on = pts[on_band]
+    if not len(pts_on):
+        return outside, 0
+    gi = shapely.STRtree(given).nearest(pts_on)
+    foot = shapely.get_point(shapely.shortest_line(pts_on, given[gi]), 1)
+    conn = shapely.linestrings(np.stack([shapely.get_coordinates(pts_on),
+                                         shapely.get_coordinates(foot)], axis=1))
+    conn = conn[shapely.length(conn) > 1e-6]
+    # one connector per end point (two lines ending at one point need one)
+    _, first = np.unique(np.round(shapely.get_coordinates(shapely.get_point(conn, 0)), 6),
+                         axis=0, return_index=True)
+    conn = conn[np.sort(first)]
+    return np.concatenate([outside, conn]), len(conn)
+
+
+def _blank_corridors(image, gt, lines, corridor):
+    """The image with every pixel within ``corridor`` m of a given road set to 0 (black)."""
+    import cv2
+
+    cell = abs(gt[1])
+    mask, _ = raster_graph.rasterize_lines(lines, cell_size=cell, width_px=1,
+                                           bounds=(gt[0], gt[3] + gt[5] * image.shape[0],
+                                                   gt[0] + gt[1] * image.shape[1], gt[3]))
+    mask = mask[:image.shape[0], :image.shape[1]]
+    if mask.shape != image.shape:
+        pad = np.zeros(image.shape, np.uint8)
+        pad[:mask.shape[0], :mask.shape[1]] = mask
+        mask = pad
+    dist = cv2.distanceTransform(np.where(mask > 0, 0, 255).astype(np.uint8), cv2.DIST_L2, 5)
+    out = np.array(image, dtype=np.float32, copy=True)
+    out[dist * cell <= corridor] = 0.0
+    return out
+
+
+def _end_directions(lines, probe: float = 10.0):
+    """Start and end points of lines and the direction each end points to (outwards, from
+    the line's last ``probe`` m)."""
+    length = shapely.length(lines)
+    p0 = shapely.get_coordinates(shapely.get_point(lines, 0))
+    p1 = shapely.get_coordinates(shapely.get_point(lines, -1))
+    q0 = shapely.get_coordinates(shapely.line_interpolate_point(lines, np.minimum(probe,
+                                                                                  length / 2)))
+    q1 = shapely.get_coordinates(shapely.line_interpolate_point(
+        lines, np.maximum(length - probe, length / 2)))
+    d0, d1 = p0 - q0, p1 - q1
+    d0 /= np.maximum(np.linalg.norm(d0, axis=1), 1e-9)[:, None]
+    d1 /= np.maximum(np.linalg.norm(d1, axis=1), 1e-9)[:, None]
+    return np.vstack([p0, p1]), np.vstack([d0, d1])
+
+
+def _noded_with_given(new, given):
+    """New lines noded among themselves and the given roads split where new lines end on
+    them (the given roads are not noded with each other: a bridge stays a bridge).
+    Returns (lines, is_given)."""
+    new = np.asarray(new, dtype=object)
+    given = np.asarray(given, dtype=object)
+    if len(new):
+        new = shapely.get_parts(shapely.node(shapely.multilinestrings(new)))
+        new = new[shapely.length(new) > 1e-6]
+    pieces = []
+    if len(given):
+        ends = shapely.points(np.unique(np.round(shapely.get_coordinates(
+            shapely.boundary(new)), 9), axis=0)) if len(new) else np.empty(0, dtype=object)
+        tree = shapely.STRtree(ends) if len(ends) else None
+        for g in given:
+            hit = tree.query(g, predicate="dwithin", distance=1e-6) if tree is not None else []
+            if len(hit):
+                with np.errstate(invalid="ignore"):
+                    t = np.unique(shapely.line_locate_point(g, ends[hit]))
+                t = t[(t > 1e-6) & (t < g.length - 1e-6)]
+                cuts = np.r_[0.0, t, g.length]
+                pieces.extend(shapely.ops.substring(g, c0, c1)
+                              for c0, c1 in zip(cuts[:-1], cuts[1:]) if c1 - c0 > 1e-9)
+            else:
+                pieces.append(g)
+    pieces = np.asarray(pieces, dtype=object)
+    return np.concatenate([new, pieces]), np.r_[np.zeros(len(new), bool),
+                                                 np.ones(len(pieces), bool)]
+
+
+def attach_to_given(lines, given, given_class=None, area=None, reach: float = 60.0,
+                    join_distance: float = 90.0, max_angle: float = 60.0):
+    """Generated streets joined to the given roads and to each other: one noded network.
+
+    Parameters
+    ----------
+    lines : array of LineString, the generated streets
+    given : array of LineString, the given roads (kept whole)
+    given_class : OSM classes of the given roads (motorway / trunk: no new junctions)
+    area : Polygon, optional; dead ends on its boundary are clip ends (not extended)
+    reach : m; a dead end this close to a given road, pointing at it (within ``max_angle``
+        degrees), is extended straight onto it
+    join_distance : m; the longest connector that joins a floating piece
+
+    Returns
+    -------
+    lines : the noded network (generated pieces and given pieces)
+    is_given : bool per line
+    stats : dict (n_attached, n_joined, n_dropped_edges, n_components)
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    from ..network import invariants
+
+    lines = np.asarray(lines, dtype=object)
+    given = np.asarray(given, dtype=object)
+    stats = {"n_attached": 0, "n_joined": 0, "n_dropped_edges": 0}
+    if not len(lines):
+        return given.copy(), np.ones(len(given), dtype=bool), dict(stats, n_components=int(
+            len(given) > 0))
+    connectors = []
+    cls = np.asarray(given_class if given_class is not None else [None] * len(given),
+                     dtype=object)
+    closed = given[~_open_roads(cls)] if len(given) else given
+    if len(given):
+        targets = given[_open_roads(cls)]
+        if len(targets):
+            ends, dirs = _end_directions(lines)
+            # dead ends: end points no other line touches
+            tree = shapely.STRtree(lines)
+            pts = shapely.points(ends)
+            e_i, l_i = tree.query(pts, predicate="dwithin", distance=0.5)
+            touches = np.bincount(e_i, minlength=len(ends))
+            dead = touches <= 1
+            if area is not None:
+                dead &= ~shapely.dwithin(shapely.boundary(area), pts, 1.0)
+            gtree = shapely.STRtree(targets)
+            cand = np.flatnonzero(dead)
+            if len(cand):
+                gi = gtree.nearest(pts[cand])
+                near = shapely.get_coordinates(shapely.get_point(
+                    shapely.shortest_line(pts[cand], targets[gi]), 1))
+                vec = near - ends[cand]
+                dist = np.linalg.norm(vec, axis=1)
+                cosang = (vec * dirs[cand]).sum(axis=1) / np.maximum(dist, 1e-9)
+                ok = (dist <= reach) & (dist > 1e-6) & (cosang >= np.cos(np.radians(max_angle)))
+                conn = shapely.linestrings(np.stack([ends[cand[ok]], near[ok]], axis=1))
+                # a connector may not cross another generated street (it would end there)
+                if len(conn):
+                    ci, li = tree.query(conn, predicate="intersects")
+                    own = np.zeros(len(ci), dtype=bool)
+                    touch_start = shapely.dwithin(lines[li], shapely.points(ends[cand[ok]][ci]),
+                                                  0.5)
+                    own |= touch_start
+                    bad = np.zeros(len(conn), dtype=bool)
+                    bad[ci[~own]] = True
+                    conn = conn[~bad]
+                connectors.extend(conn.tolist())
+                stats["n_attached"] = len(conn)
+    noded, is_given = _noded_with_given(
+        np.concatenate([lines, np.asarray(connectors, dtype=object)]), given)
+    n = len(noded)
+
+    def components(geoms):
+        # lines joined where they meet (everything is noded: a contact is a junction)
+        tree = shapely.STRtree(geoms)
+        a, b = tree.query(geoms, predicate="intersects")
+        adj = coo_matrix((np.ones(len(a)), (a, b)), shape=(len(geoms), len(geoms)))
+        return connected_components(adj, directed=False)[1]
+
+    label = components(noded)
+    if is_given.any():
+        main = set(np.unique(label[is_given]).tolist())
+    else:
+        main = {int(np.bincount(label, weights=shapely.length(noded)).argmax())}
+    floating = [x for x in np.unique(label) if x not in main]
+    if floating:
+        main_geom = noded[np.isin(label, list(main))]
+        if len(closed):  # motorways and trunks take no connector
+            main_geom = main_geom[~shapely.covers(
+                shapely.union_all(shapely.buffer(closed, 0.01)), main_geom)]
+        if not len(main_geom):
+            main_geom = noded[np.isin(label, list(main))][:0]
+        mtree = shapely.STRtree(main_geom) if len(main_geom) else None
+        add, drop = [], np.zeros(n, dtype=bool)
+        for lab in floating:
+            members = noded[label == lab]
+            if mtree is None:
+                drop |= label == lab
+                continue
+            ends = shapely.get_coordinates(shapely.boundary(members))
+            if not len(ends):
+                ends = shapely.get_coordinates(members)
+            p = shapely.points(ends)
+            gi = mtree.nearest(p)
+            seg = shapely.shortest_line(p, main_geom[gi])
+            dl = shapely.length(seg)
+            order = np.argsort(dl)
+            done = False
+            for k in order[:5]:
+                if dl[k] > join_distance:
+                    break
+                if dl[k] < 1e-6:
+                    done = True
+                    break
+                crossing = mtree.query(seg[k], predicate="intersects")
+                blocked = len(closed) and shapely.intersects(seg[k], closed).any()
+                if len(crossing) <= 1 and not blocked and \
+                        not shapely.crosses(seg[k], members).any():
+                    add.append(seg[k])
+                    done = True
+                    break
+            if done:
+                stats["n_joined"] += 1
+            else:
+                drop |= label == lab
+        stats["n_dropped_edges"] = int(drop.sum())
+        noded = noded[~drop]
+        is_given = is_given[~drop]
+        if add:
+            noded, is_given = _noded_with_given(
+                np.concatenate([noded[~is_given], np.asarray(add, dtype=object)]),
+                noded[is_given])
+    stats["n_components"] = int(len(np.unique(components(noded)))) if len(noded) else 0
+    return noded, is_given, stats

@@ -12,6 +12,13 @@ untrained generator and (d) a random-noise image. Every network is clipped to th
 window (the training network's extent less 30 m); dead ends on the window's edge are cut
 streets, not dead ends, and are not counted.
 
+For a model whose card names held-out towns (``streetgan_towns``: Liechtenstein towns it
+never saw), each held-out town instead: its outline as the target, its level-0 roads given
+(kept, joined), 3 seeds, the 16 statistics of the fidelity issue (issue 15) as relative
+errors against the town's real drivable streets, beside the ceiling: the real network
+itself rasterised and sent through the same post-processing (what the raster pipeline
+alone loses), and the network invariants of every run.
+
 Performance: a 769 x 769 image (z of 25 x 25 x 100) with onnxruntime, raster -> graph of
 that image, and a whole synthesis per km². Prints tables, writes
 tests/benchmarks/results/gan.json and docs/streetgan.png; ``--cards`` also stores the
@@ -160,21 +167,132 @@ def evaluate_model(name: str, figures: dict) -> dict:
             "seeds": list(SEEDS), "rows": rows}
 
 
+#: The statistics of the fidelity issue (issue 15): (kind, name) scalars and (kind, name,
+#: percentile) of distributions, with short labels.
+FIDELITY_STATS = (
+    ("roads", "intersections_per_km2", None, "intersections/km²"),
+    ("roads", "dead_ends_per_km2", None, "dead ends/km²"),
+    ("roads", "street_length_km_per_km2", None, "km/km²"),
+    ("roads", "dead_end_share", None, "degree-1 share"),
+    ("roads", "degree3_share", None, "degree-3 share"),
+    ("roads", "degree4_share", None, "degree-4 share"),
+    ("roads", "segment_length", 10, "segment p10"),
+    ("roads", "segment_length", 50, "segment median"),
+    ("roads", "segment_length", 90, "segment p90"),
+    ("roads", "orientation_entropy", None, "orientation entropy"),
+    ("blocks", "blocks_per_km2", None, "blocks/km²"),
+    ("blocks", "area", 10, "block area p10"),
+    ("blocks", "area", 50, "block area median"),
+    ("blocks", "area", 90, "block area p90"),
+    ("blocks", "compactness", 50, "compactness median"),
+    ("blocks", "aspect_ratio", 50, "aspect ratio median"),
+)
+
+
+def fidelity_values(lines, area) -> np.ndarray:
+    """The :data:`FIDELITY_STATS` of the network ``lines`` clipped to ``area`` (nodes within
+    1 m of its outline are clip ends, not dead ends)."""
+    lines = np.asarray(lines, dtype=object)
+    with np.errstate(invalid="ignore"):
+        parts = shapely.get_parts(shapely.intersection(lines, area))
+    parts = parts[(shapely.get_type_id(parts) == 1) & (shapely.length(parts) > 0.01)]
+    m = metrics.compute_layout_metrics(roads=parts, area=area, edge_distance=1.0)
+    out = []
+    for kind, name, pct, _ in FIDELITY_STATS:
+        if not m.has(kind, name):
+            out.append(0.0 if pct is None else np.nan)
+        elif pct is None:
+            out.append(m.scalar(kind, name))
+        else:
+            d = m.distribution(kind, name)
+            out.append(float(np.percentile(d, pct)) if len(d) else np.nan)
+    return np.array(out, dtype=float)
+
+
+def _relative_errors(values, real):
+    with np.errstate(invalid="ignore", divide="ignore"):
+        err = np.abs(values - real) / np.abs(real)
+    return np.where(np.isfinite(values), np.where(np.isfinite(err), err, 0.0), 1.0)
+
+
+def _li():
+    sys.path.insert(0, str(ROOT / "tools"))
+    import liechtenstein
+
+    return liechtenstein
+
+
+def evaluate_held_out(name: str, figures: dict) -> dict:
+    """The towns a model never saw (its card's ``training_data.held_out``): the fidelity
+    statistics of the model and of the raster round trip of the real network (the
+    ceiling), relative errors against the real town, and the invariants."""
+    from urban_synthesis.plugin.network import invariants
+
+    li = _li()
+    gen = streetgan.load_model(name)
+    towns = {}
+    for town in gen.card["training_data"]["held_out"]:
+        case = li.leave_one_out(town)
+        area, given, cls = case["area"], case["given"], case["given_class"]
+        real = fidelity_values(case["real"], area)
+
+        def real_raster(model, rows, cols, seed, tile, progress, case=case):
+            x0, _, _, y1 = case["area"].bounds
+            x0, y1 = x0 - 96.0, y1 + 96.0
+            img, _ = raster_graph.rasterize_lines(np.concatenate([case["real"], case["given"]]),
+                                                  3.0, 15, bounds=(x0, y1 - rows * 3.0,
+                                                                   x0 + cols * 3.0, y1))
+            return img[:rows, :cols].astype(np.float32)
+
+        rows = {}
+        for label, kw in (("real -> raster -> graph (ceiling)", dict(generate_fn=real_raster)),
+                          (name, {})):
+            vals, viols, comps = [], [], []
+            seeds = SEEDS if not kw else (1,)
+            for seed in seeds:
+                res = streetgan.synthesize(area, gen, seed=seed, given=given, given_class=cls,
+                                           **kw)
+                new = res.geometry[~res.given]
+                vals.append(fidelity_values(np.concatenate([new, given]), area))
+                check = invariants.check_network(new, given, cls, area)
+                v = check.violations()
+                v.pop("dead_end_share")
+                viols.append(int(sum(v.values())))
+                comps.append(check.floating_pieces)
+                if label == name and seed == SEEDS[0]:
+                    figures[f"{name}:{town}"] = dict(real=case["real"], given=given, area=area,
+                                                     sample=res, title=town)
+            v = np.nanmean(vals, axis=0)
+            err = _relative_errors(v, real)
+            rows[label] = {"values": [round(float(x), 4) for x in v],
+                           "relative_errors": [round(float(x), 3) for x in err],
+                           "median_relative_error": round(float(np.median(err)), 3),
+                           "violations": viols, "floating_pieces": comps}
+        towns[town] = {"area_km2": round(area.area / 1e6, 2),
+                       "real": [round(float(x), 4) for x in real], "rows": rows}
+    return {"model": name, "title": gen.card.get("title"), "against": "towns never seen in "
+            "training (leave-one-town-out), their level-0 roads given",
+            "statistics": [lab for *_, lab in FIDELITY_STATS], "seeds": list(SEEDS),
+            "towns": towns}
+
+
 def performance(name: str) -> dict:
     gen = streetgan.load_model(name)
     z = streetgan.noise(25, 25, gen.channels, np.random.default_rng(0))
     gen.run(z)  # warm-up (session initialisation)
-    t_gen = []
+    t_gen, c_gen = [], []
     for _ in range(5):
-        t = time.perf_counter()
+        t, c = time.perf_counter(), time.process_time()
         img = gen.run(z)
         t_gen.append(time.perf_counter() - t)
+        c_gen.append(time.process_time() - c)
     gt = (0.0, 3.0, 0.0, 769 * 3.0, 0.0, -3.0)
-    t_rg, stats = [], None
+    t_rg, c_rg, stats = [], [], None
     for _ in range(3):
-        t = time.perf_counter()
-        r = raster_graph.raster_to_graph(img, gt)
+        t, c = time.perf_counter(), time.process_time()
+        r = raster_graph.raster_to_graph(img, gt, merge_junctions=22.5)
         t_rg.append(time.perf_counter() - t)
+        c_rg.append(time.process_time() - c)
         stats = r.stats
     target = shapely.box(0, 0, 2000, 2000)
     t = time.perf_counter()
@@ -182,7 +300,9 @@ def performance(name: str) -> dict:
     t_total = time.perf_counter() - t
     return {"model": name, "image_px": list(img.shape), "image_km2": round((769 * 3.0) ** 2 / 1e6, 2),
             "generate_769_s": round(float(np.median(t_gen)), 3),
+            "generate_769_cpu_s": round(float(np.median(c_gen)), 3),
             "raster_to_graph_769_s": round(float(np.median(t_rg)), 3),
+            "raster_to_graph_769_cpu_s": round(float(np.median(c_rg)), 3),
             "raster_to_graph_steps_s": stats["seconds"],
             "synthesis_4km2_s": round(t_total, 2),
             "synthesis_s_per_km2": round(t_total / 4.0, 3),
@@ -223,14 +343,53 @@ def picture(figures: dict, path: Path) -> None:
     fig.savefig(path, dpi=90)
 
 
+def held_out_picture(figures: dict, path: Path) -> None:
+    """Per held-out town: the real streets | the model's network (given roads in red).
+    Data (c) OpenStreetMap contributors, ODbL."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    n = len(figures)
+    if not n:
+        return
+    fig, axes = plt.subplots(n, 2, figsize=(9, 4.5 * n), squeeze=False)
+    for row, (key, f) in zip(axes, figures.items()):
+        res = f["sample"]
+        for ax, lines, title in ((row[0], f["real"], f"{f['title']}: real streets"),
+                                 (row[1], res.geometry[~res.given],
+                                  f"{f['title']}: {key.split(':')[0]} (seed 1, never seen)")):
+            for g in shapely.get_parts(np.asarray(lines, dtype=object)):
+                c = shapely.get_coordinates(g)
+                ax.plot(c[:, 0], c[:, 1], color="k", lw=0.7)
+            for g in f["given"]:
+                c = shapely.get_coordinates(g)
+                ax.plot(c[:, 0], c[:, 1], color="r", lw=1.4)
+            c = shapely.get_coordinates(f["area"].exterior)
+            ax.plot(c[:, 0], c[:, 1], color="0.6", lw=0.6, ls="--")
+            ax.set_title(title, fontsize=9)
+            ax.set_aspect("equal")
+            ax.set_xticks([])
+            ax.set_yticks([])
+    fig.text(0.01, 0.003, "Data (c) OpenStreetMap contributors, ODbL", fontsize=7)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=80)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--cards", action="store_true", help="store the evaluation in the model cards")
     args = ap.parse_args()
     models = streetgan.shipped_models()
-    figures, evidence, perf = {}, [], []
+    figures, evidence, perf, held, held_figures = {}, [], [], [], {}
     for name in models:
-        evidence.append(evaluate_model(name, figures))
+        card = streetgan.load_model(name).card
+        if card.get("training_data", {}).get("held_out"):
+            held.append(evaluate_held_out(name, held_figures))
+        else:
+            evidence.append(evaluate_model(name, figures))
         perf.append(performance(name))
     cols = ("networks", "blocks", "area_w", "area_ks", "compactness_w", "compactness_ks",
             "aspect_ratio_w", "aspect_ratio_ks", "dead_ends_per_km2", "dead_end_ratio")
@@ -239,28 +398,52 @@ def main() -> None:
         print(f"{'network':40s} " + " ".join(f"{c[:14]:>14s}" for c in cols))
         for label, row in ev["rows"].items():
             print(f"{label:40s} " + " ".join(f"{row.get(c, ''):>14}" for c in cols))
+    for ev in held:
+        print(f"\n{ev['model']} ({ev['title']}) on {ev['against']}, seeds {ev['seeds']}")
+        for town, t in ev["towns"].items():
+            print(f"  {town} ({t['area_km2']} km²)")
+            print(f"    {'statistic':22s} {'real':>10s} " + " ".join(
+                f"{lab[:24]:>24s}" for lab in t["rows"]))
+            for i, stat in enumerate(ev["statistics"]):
+                print(f"    {stat:22s} {t['real'][i]:10.4g} " + " ".join(
+                    f"{r['values'][i]:11.4g} ({r['relative_errors'][i]:5.2f})    "
+                    for r in t["rows"].values()))
+            for lab, r in t["rows"].items():
+                print(f"    {lab}: median relative error {r['median_relative_error']:.3f}; "
+                      f"invariant violations {r['violations']}, floating pieces "
+                      f"{r['floating_pieces']}")
     print("\nperformance (2-core CPU, onnxruntime)     thesis (Titan X / 1 core)")
     for p in perf:
-        print(f"{p['model']:22s} generate 769x769 {p['generate_769_s']:.3f} s  (thesis "
-              f"{THESIS['generate_769_s']} s); raster->graph {p['raster_to_graph_769_s']:.3f} s "
-              f"(thesis {THESIS['raster_to_graph_s']} s); synthesis {p['synthesis_s_per_km2']:.3f} s/km²")
+        print(f"{p['model']:22s} generate 769x769 {p['generate_769_s']:.3f} s wall, "
+              f"{p['generate_769_cpu_s']:.3f} s CPU (thesis {THESIS['generate_769_s']} s); "
+              f"raster->graph {p['raster_to_graph_769_s']:.3f} s wall, "
+              f"{p['raster_to_graph_769_cpu_s']:.3f} s CPU (thesis "
+              f"{THESIS['raster_to_graph_s']} s); synthesis {p['synthesis_s_per_km2']:.3f} s/km²")
     load = os.getloadavg()
     print(f"(load average {load[0]:.1f} on {os.cpu_count()} cores while measuring: the machine "
           "is shared, so these are upper bounds)")
     out = {"machine": platform.processor() or platform.machine(), "cpu_count": os.cpu_count(),
            "load_average": [round(x, 2) for x in load], "thesis": THESIS,
-           "evidence": evidence, "performance": perf}
+           "evidence": evidence, "held_out": held, "performance": perf}
     res_dir = ROOT / "tests" / "benchmarks" / "results"
     res_dir.mkdir(parents=True, exist_ok=True)
     (res_dir / "gan.json").write_text(json.dumps(out, indent=1))
     picture(figures, ROOT / "docs" / "streetgan.png")
+    held_out_picture(held_figures, ROOT / "docs" / "streetgan_towns.png")
     if args.cards:
-        for ev, p in zip(evidence, perf):
+        by_model = {p["model"]: p for p in perf}
+        for ev in evidence:
             path = streetgan.MODELS_DIR / f"{ev['model']}.json"
             card = json.loads(path.read_text())
-            card["evaluation"] = {"against": "the training network, same window", **ev, "performance": p}
+            card["evaluation"] = {"against": "the training network, same window", **ev,
+                                  "performance": by_model[ev["model"]]}
             path.write_text(json.dumps(card, indent=1))
-    print(f"\nwrote {res_dir / 'gan.json'} and docs/streetgan.png")
+        for ev in held:
+            path = streetgan.MODELS_DIR / f"{ev['model']}.json"
+            card = json.loads(path.read_text())
+            card["evaluation"] = {**ev, "performance": by_model[ev["model"]]}
+            path.write_text(json.dumps(card, indent=1))
+    print(f"\nwrote {res_dir / 'gan.json'}, docs/streetgan.png and docs/streetgan_towns.png")
 
 
 if __name__ == "__main__":

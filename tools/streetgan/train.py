@@ -77,14 +77,26 @@ def init_weights(m):
         nn.init.zeros_(m.bias)
 
 
-def patches(image: np.ndarray, n: int, size: int, rng: np.random.Generator) -> torch.Tensor:
-    """n random size x size patches in [-1, 1], each turned by one of the 8 symmetries."""
-    rows, cols = image.shape
+def patch_corners(inside: np.ndarray, size: int, min_inside: float = 0.5) -> np.ndarray:
+    """Top-left corners (row, col) of the size x size windows of an image with at least
+    ``min_inside`` of their pixels inside the mapped area (an integral image)."""
+    s = np.pad(np.cumsum(np.cumsum(inside.astype(np.int64), 0), 1), ((1, 0), (1, 0)))
+    rows, cols = inside.shape
+    if rows < size or cols < size:
+        return np.zeros((0, 2), np.int64)
+    tot = s[size:, size:] - s[:-size, size:] - s[size:, :-size] + s[:-size, :-size]
+    return np.argwhere(tot >= min_inside * size * size)
+
+
+def patches(images, corners, n: int, size: int, rng: np.random.Generator) -> torch.Tensor:
+    """n random size x size patches in [-1, 1], each turned by one of the 8 symmetries;
+    an image is drawn with probability proportional to its number of usable windows."""
+    counts = np.array([len(c) for c in corners], dtype=float)
     out = np.empty((n, 1, size, size), np.float32)
     for k in range(n):
-        r = rng.integers(0, rows - size + 1)
-        c = rng.integers(0, cols - size + 1)
-        p = image[r:r + size, c:c + size]
+        i = int(rng.choice(len(images), p=counts / counts.sum()))
+        r, c = corners[i][rng.integers(0, len(corners[i]))]
+        p = images[i][r:r + size, c:c + size]
         t = rng.integers(0, 8)
         p = np.rot90(p, t % 4)
         out[k, 0] = p.T if t >= 4 else p
@@ -140,7 +152,8 @@ def save(g, args, meta, m, history, t0) -> Path:
         "upsampling_layers": LAYERS, "scale": 2 ** LAYERS,
         "generator_filters": [args.filters * 2 ** (LAYERS - 2 - i) for i in range(LAYERS - 1)],
         "generator_parameters": int(sum(p.numel() for p in g.parameters())),
-        "training": {"patch_px": args.patch, "noise_m": m, "batch": args.batch,
+        "training": {"initialised_from": args.init_onnx.name if args.init_onnx else None,
+                     "patch_px": args.patch, "noise_m": m, "batch": args.batch,
                      "epochs": len(history), "iterations_per_epoch": args.iterations,
                      "iterations": len(history) * args.iterations, "lr": args.lr,
                      "betas": [0.5, 0.999], "weight_decay": 1e-5, "seed": args.seed,
@@ -157,7 +170,10 @@ def save(g, args, meta, m, history, t0) -> Path:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description="Train a StreetGAN generator (thesis ch. 4.2)")
-    ap.add_argument("data", type=Path, help="npz from tools/streetgan/prepare.py")
+    ap.add_argument("data", type=Path, nargs="+",
+                    help="npz files from tools/streetgan/prepare.py (patches from all)")
+    ap.add_argument("--held-out", default="",
+                    help="comma-separated names of networks kept out of training (card)")
     ap.add_argument("out", type=Path, help="output path without suffix")
     ap.add_argument("--epochs", type=int, default=12)
     ap.add_argument("--iterations", type=int, default=100, help="iterations per epoch (thesis 100)")
@@ -170,6 +186,10 @@ def main() -> None:
     ap.add_argument("--name", default=None)
     ap.add_argument("--title", default="")
     ap.add_argument("--no-untrained", action="store_true")
+    ap.add_argument("--init-onnx", type=Path, default=None,
+                    help="start the generator from this exported model (a fine-tune)")
+    ap.add_argument("--snapshots", type=Path, default=None,
+                    help="also keep every epoch's generator as <dir>/epoch_<n>.onnx (+ card)")
     ap.add_argument("--min-dead-end", type=float, default=25.0,
                     help="dead ends this short (m) are pruned by default for this model "
                          "(thesis 25; choose on validation seeds)")
@@ -182,14 +202,44 @@ def main() -> None:
     torch.use_deterministic_algorithms(True)
     rng = np.random.default_rng(args.seed)
     zgen = torch.Generator().manual_seed(args.seed)
-    data = np.load(args.data, allow_pickle=True)
-    image = data["image"]
-    meta = json.loads(args.data.with_suffix(".json").read_text())
+    images, corners, metas = [], [], []
+    for path in args.data:
+        data = np.load(path, allow_pickle=True)
+        inside = data["inside"] if "inside" in data else np.ones_like(data["image"])
+        c = patch_corners(inside, args.patch)
+        if not len(c):
+            ap.error(f"{path}: no {args.patch} px window lies inside its mapped area")
+        images.append(data["image"])
+        corners.append(c)
+        meta = json.loads(path.with_suffix(".json").read_text())
+        meta["patch_windows"] = int(len(c))
+        metas.append(meta)
+    meta = metas[0] if len(metas) == 1 else {
+        "name": "+".join(m_["name"] for m_ in metas), "networks": metas,
+        "source": " | ".join(m_["source"] for m_ in metas),
+        "cell_size_m": metas[0]["cell_size_m"], "line_width_px": metas[0]["line_width_px"],
+        "length_km": round(sum(m_["length_km"] for m_ in metas), 2),
+        "sampling": "image drawn with probability proportional to its windows of the patch "
+                    "size that lie at least half inside the mapped area",
+        "held_out": [t for t in args.held_out.split(",") if t]}
     m = (args.patch - 1) // 32 + 1
 
     g, d = generator(args.filters), discriminator(args.filters)
     g.apply(init_weights)
     d.apply(init_weights)
+    if args.init_onnx:
+        # fine-tune: the generator's weights from an exported model of the same shape (its
+        # ONNX initialisers carry the state-dict names); the discriminator starts afresh
+        import onnx
+        from onnx import numpy_helper
+
+        init = {i.name: torch.from_numpy(numpy_helper.to_array(i).copy())
+                for i in onnx.load(str(args.init_onnx)).graph.initializer}
+        missing = [k for k in g.state_dict() if k not in init and "num_batches" not in k]
+        if missing:
+            ap.error(f"{args.init_onnx} is not a generator with {args.filters} base filters "
+                     f"(missing {', '.join(missing[:3])})")
+        g.load_state_dict(init, strict=False)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     if not args.no_untrained:
         raw = args.out.with_name(args.out.name + "_untrained.onnx")
@@ -202,7 +252,7 @@ def main() -> None:
     for epoch in range(args.epochs):
         ld_sum = lg_sum = 0.0
         for it in range(args.iterations):
-            real = patches(image, args.batch, args.patch, rng)
+            real = patches(images, corners, args.batch, args.patch, rng)
             fake = g(noise(args.batch, m, zgen))
             # discriminator: -1/2 E log D(x) - 1/2 E log(1 - D(G(z)))
             out_r, out_f = d(real), d(fake.detach())
@@ -223,6 +273,11 @@ def main() -> None:
                         "seconds": round(time.time() - t0, 1)})
         print(json.dumps(history[-1]), flush=True)
         onnx_path = save(g, args, meta, m, history, t0)
+        if args.snapshots:
+            args.snapshots.mkdir(parents=True, exist_ok=True)
+            for suffix in (".onnx", ".json"):
+                dest = args.snapshots / f"epoch_{epoch + 1}{suffix}"
+                dest.write_bytes(onnx_path.with_suffix(suffix).read_bytes())
     print(f"wrote {onnx_path} ({onnx_path.stat().st_size / 1e6:.1f} MB)")
 
 
