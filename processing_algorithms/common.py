@@ -104,7 +104,7 @@ def _guarded(run):
         message = self.declaration_error(parameters, context)
         if message:
             raise QgsProcessingException(message)
-        staging = outputs.OutputStaging(self, parameters, context)
+        staging = outputs.OutputStaging(self, parameters, context, feedback)
         staged = staging.prepare()
         try:
             results = run(self, staged, context, feedback)

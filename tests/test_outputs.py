@@ -76,3 +76,47 @@ def test_command_line_refuses_output_onto_input(tmp_path):
         "INPUT": f"{src}|layername=streets", "OUTPUT": str(src)})
     assert code != 0 and "would overwrite" in err and "Traceback" not in err, err
     assert _sha(src) == before
+
+
+def test_outputs_open_styled_in_a_new_project(qgis_processing, tmp_path):
+    """The shipped style travels with the file: a GeoPackage layer's default style in
+    layer_styles, a shapefile's sidecar .qml; a fresh layer of the file is styled."""
+    from qgis.core import QgsVectorLayer
+
+    gpkg, shp = tmp_path / "roads.gpkg", tmp_path / "points.shp"
+    qgis_processing.run(ALG, {"INPUT": bubenec_layer("streets"), "OUTPUT": str(gpkg),
+                              "OUTPUT_INTERSECTIONS": str(shp)})
+    roads = QgsVectorLayer(str(gpkg), "roads", "ogr")
+    assert roads.renderer().type() == "categorizedSymbol"
+    assert roads.renderer().classAttribute() == "level"
+    assert shp.with_suffix(".qml").exists()
+    points = QgsVectorLayer(str(shp), "points", "ogr")
+    plain = QgsVectorLayer(str(shp), "plain", "ogr",
+                           QgsVectorLayer.LayerOptions(loadDefaultStyle=False))
+    styled_colour = points.renderer().symbol().color().name()
+    assert styled_colour != plain.renderer().symbol().color().name() or \
+        points.renderer().symbol().size() != plain.renderer().symbol().size()
+    # the run's style requests are consumed
+    from urban_synthesis.plugin.qgis_glue import qgis_io
+
+    assert not [k for k in qgis_io.STYLE_REQUESTS if str(tmp_path) in k]
+
+
+def test_loaded_outputs_stack_buildings_above_parcels(qgis_processing, tmp_path):
+    """Outputs loaded on completion are placed by kind, whatever their file names: roads
+    over buildings over blocks over parcels."""
+    from qgis.core import QgsProject
+
+    project = QgsProject.instance()
+    project.removeAllMapLayers()
+    blocks = tmp_path / "z_blocks.gpkg"
+    qgis_processing.runAndLoadResults("urbansynth:extractblocks", {
+        "ROADS": bubenec_layer("streets"), "BUILDINGS": bubenec_layer("buildings"),
+        "OUTPUT": str(blocks), "OUTPUT_BUILDINGS": str(tmp_path / "a_buildings.gpkg")})
+    qgis_processing.runAndLoadResults(ALG, {"INPUT": bubenec_layer("streets"),
+                                            "OUTPUT": str(tmp_path / "m_roads.gpkg")})
+    order = [node.layer().source().split("|")[0].rsplit("/", 1)[-1]
+             for node in project.layerTreeRoot().findLayers()]
+    project.removeAllMapLayers()
+    assert order.index("m_roads.gpkg") < order.index("a_buildings.gpkg") \
+        < order.index("z_blocks.gpkg"), order

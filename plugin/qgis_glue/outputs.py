@@ -162,8 +162,9 @@ class OutputStaging:
     """The file outputs of one run, written to staging folders and moved into place by
     :meth:`commit`, or removed by :meth:`discard`."""
 
-    def __init__(self, alg, parameters: dict, context):
+    def __init__(self, alg, parameters: dict, context, feedback=None):
         self.alg = alg
+        self.feedback = feedback
         self.parameters = parameters
         self.context = context
         self.staged: List[_Staged] = []
@@ -253,7 +254,18 @@ class OutputStaging:
         renames.update({str(item.temp_path): str(item.final_path) for item in self.staged})
         out = {k: self._renamed(v, renames) for k, v in results.items()}
         self._rename_layers_to_load(renames)
+        self._store_styles(renames)
         return out
+
+    def _store_styles(self, renames):
+        """Every styled output keeps its style in the file (GeoPackage default style or a
+        sidecar .qml), so that it opens styled in a new project."""
+        for key in [k for k in qgis_io.STYLE_REQUESTS if self._renamed(k, renames) != k]:
+            qml = qgis_io.STYLE_REQUESTS.pop(key)
+            final = self._renamed(key, renames)
+            warning = qgis_io.save_style_with_layer(final, qml)
+            if warning and self.feedback is not None:
+                self.feedback.pushWarning(f"Output {final}: {warning}.")
 
     def _rename_layers_to_load(self, renames):
         """The layers QGIS loads on completion keyed by their final destinations, each with
@@ -320,6 +332,9 @@ class OutputStaging:
     def discard(self):
         """Remove everything written (the destinations stay as they were)."""
         self._remove_staging()
+        for key in [k for k in qgis_io.STYLE_REQUESTS
+                    if any(str(item.staging) in k for item in self.staged)]:
+            qgis_io.STYLE_REQUESTS.pop(key, None)
         for folder in self._made_dirs:
             try:
                 folder.rmdir()               # only the folders this run created, if empty
