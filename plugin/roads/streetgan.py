@@ -563,7 +563,6 @@ def attach_to_given(lines, given, given_class=None, area=None, reach: float = 60
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
-    from ..network import invariants
 
     lines = np.asarray(lines, dtype=object)
     given = np.asarray(given, dtype=object)
