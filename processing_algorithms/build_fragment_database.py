@@ -61,7 +61,7 @@ class BuildFragmentDatabase(AlgorithmBase):
             optional=True),
             "Integer street level (0 = arterial, larger = more local); 'level' when left empty.")
         self.add(QgsProcessingParameterRasterLayer(
-            self.DEM, "Elevation model (optional)", optional=True),
+            self.DEM, "Elevation model", optional=True),
             "A DEM in any CRS: adds the relief change, mean slope, slope descriptors and a "
             "relief patch to every fragment (thesis ch. 4.1, terrain term).")
         self.add(QgsProcessingParameterNumber(

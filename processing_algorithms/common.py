@@ -14,6 +14,7 @@ from qgis.core import (
     QgsProcessingParameterField,
     QgsProcessingParameterNumber,
 )
+from qgis.PyQt.QtCore import QCoreApplication
 from qgis.PyQt.QtGui import QIcon
 
 from ..plugin.core.ids import whole_ids
@@ -21,6 +22,7 @@ from ..plugin.core.progress import Canceled, InputError
 from ..plugin.network import blocks as block_rules
 from ..plugin.network import street_graph
 from ..plugin.qgis_glue import outputs, qgis_io
+from ..plugin.qgis_glue import toolbox
 from ..plugin.qgis_glue.toolbox import GROUPS
 
 ICON = Path(__file__).resolve().parent.parent / "resources" / "icons" / "urbansynth.svg"
@@ -137,7 +139,7 @@ class AlgorithmBase(QgsProcessingAlgorithm):
             cls.processAlgorithm = _guarded(run)
 
     def group(self):
-        return GROUPS[self.GROUP_ID]
+        return self.tr(GROUPS[self.GROUP_ID])
 
     def groupId(self):  # noqa: N802
         return self.GROUP_ID
@@ -149,7 +151,15 @@ class AlgorithmBase(QgsProcessingAlgorithm):
         return QIcon(str(ICON))
 
     def helpUrl(self):  # noqa: N802
-        return "https://github.com/urbansynth/urban_synthesis#toolbox-reference-provider-urbansynth"
+        return toolbox.help_url(self.name())
+
+    def tags(self):
+        return [self.tr(tag) for tag in toolbox.TAGS.get(self.name(), ())]
+
+    @staticmethod
+    def tr(text: str) -> str:
+        """The text in the user's language where a translation is installed."""
+        return QCoreApplication.translate("UrbanSynthesis", text)
 
     @staticmethod
     def given(parameters, name: str) -> bool:

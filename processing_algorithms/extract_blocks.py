@@ -77,12 +77,12 @@ class ExtractBlocks(AlgorithmBase):
             "Only lines of these classes bound blocks (footways and service roads would cut "
             "blocks into courtyards). Leave empty to use every line.", advanced=True)
         self.add(QgsProcessingParameterFeatureSource(
-            self.BUILDINGS, "Building footprints (optional)", [QgsProcessing.TypeVectorPolygon],
+            self.BUILDINGS, "Building footprints", [QgsProcessing.TypeVectorPolygon],
             optional=True),
             "Footprints, e.g. the 'multipolygons' layer of an .osm.pbf file (only features with "
             "a 'building' value are used) or a cadastre building layer.")
         self.add(QgsProcessingParameterFeatureSource(
-            self.PARCELS, "Parcels (optional)", [QgsProcessing.TypeVectorPolygon],
+            self.PARCELS, "Parcels", [QgsProcessing.TypeVectorPolygon],
             optional=True),
             "Cadastre parcels; each gets the block_id of the block holding most of it.")
         self.add(QgsProcessingParameterNumber(

@@ -117,7 +117,7 @@ class ExtractRoadHierarchy(AlgorithmBase):
             "Two edges continue one street through an intersection if they deflect less than this.",
             advanced=True)
         self.add(QgsProcessingParameterFeatureSource(
-            self.PARCELS, "Parcels (optional)", [QgsProcessing.TypeVectorPolygon], optional=True),
+            self.PARCELS, "Parcels", [QgsProcessing.TypeVectorPolygon], optional=True),
             "Cadastre parcels: when given, intersections get the mean parcel area nearby "
             "(Aliaga's a(v)); otherwise only the mean block area.")
         self.add(QgsProcessingParameterNumber(

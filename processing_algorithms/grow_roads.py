@@ -91,7 +91,7 @@ class GrowRoads(AlgorithmBase):
             "major roads (one major segment length beyond their extent) and the outskirts are "
             "closed by Scharl's bulged convex hull of the major nodes (sec. 4.2.5).")
         self.add(QgsProcessingParameterFeatureSource(
-            self.MAJOR_ROADS, "Sketched major roads (optional)", [QgsProcessing.TypeVectorLine],
+            self.MAJOR_ROADS, "Sketched major roads", [QgsProcessing.TypeVectorLine],
             optional=True),
             "Major roads drawn by hand: clipped to the boundary and kept as they are (level 0, "
             "pattern 'sketch'); growth continues from their dead ends and branches off them.")
@@ -113,7 +113,7 @@ class GrowRoads(AlgorithmBase):
             "Pattern inside the quarters; a grid quarter takes the direction of its own "
             "minimum bounding rectangle.")
         self.add(QgsProcessingParameterPoint(
-            self.CENTER, "Centre of the radial pattern (optional)", optional=True),
+            self.CENTER, "Centre of the radial pattern", optional=True),
             "Spokes and rings of the radial pattern are around this point; default: the "
             "boundary's centroid.")
         self.add(QgsProcessingParameterNumber(
@@ -170,7 +170,7 @@ class GrowRoads(AlgorithmBase):
             "Safety cap: growth stops after this many segments (quarters nearest the centre "
             "are filled first).", advanced=True)
         self.add(QgsProcessingParameterRasterLayer(
-            self.DEM, "Elevation model (optional)", optional=True),
+            self.DEM, "Elevation model", optional=True),
             "A DEM in any CRS, resampled bilinearly to the boundary's working CRS: grown "
             "segments steeper than the maximum slope turn (by up to 45°) or are dropped. "
             "Areas without heights count as flat.")
@@ -179,16 +179,16 @@ class GrowRoads(AlgorithmBase):
             defaultValue=100 * d.max_slope, minValue=0.1, maxValue=100.0),
             "Steepest grade of a grown segment along its length, with a DEM.")
         self.add(QgsProcessingParameterFeatureSource(
-            self.OBSTACLES, "Obstacles (optional)", [QgsProcessing.TypeVectorPolygon],
+            self.OBSTACLES, "Obstacles", [QgsProcessing.TypeVectorPolygon],
             optional=True),
             "Water, parks, protected land: no grown road enters them; streets are shortened "
             "or turn away.")
         self.add(QgsProcessingParameterRasterLayer(
-            self.OBSTACLE_RASTER, "Obstacle raster (optional)", optional=True),
+            self.OBSTACLE_RASTER, "Obstacle raster", optional=True),
             "A raster in any CRS whose cells with a value above 0 are obstacles (a water or "
             "land-use mask); used together with the obstacle polygons.")
         self.add(QgsProcessingParameterRasterLayer(
-            self.DENSITY, "Population density (optional)", optional=True),
+            self.DENSITY, "Population density", optional=True),
             "Any density raster (normalised by its maximum): the first seed goes to the "
             "densest place near the centre, major roads head for population, and growth, "
             "branching and block size follow density; nothing grows where it is 0.")

@@ -8,7 +8,7 @@ from qgis.core import (QgsProcessingAlgorithm, QgsProcessingException,
                        QgsProcessingOutputString, QgsProcessingParameterBoolean)
 from qgis.PyQt.QtGui import QIcon
 
-from ..plugin.qgis_glue import dependencies
+from ..plugin.qgis_glue import dependencies, toolbox
 
 ICON = Path(__file__).resolve().parent.parent / "resources" / "icons" / "urbansynth.svg"
 
@@ -33,7 +33,10 @@ class InstallDependencies(QgsProcessingAlgorithm):
         return QIcon(str(ICON))
 
     def tags(self):
-        return ["install", "dependencies", "pip", "shapely", "packages", "setup"]
+        return list(toolbox.TAGS[self.name()])
+
+    def helpUrl(self):  # noqa: N802
+        return toolbox.help_url(self.name())
 
     def createInstance(self):  # noqa: N802
         return type(self)()

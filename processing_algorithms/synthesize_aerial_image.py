@@ -58,7 +58,7 @@ class SynthesizeAerialImage(AlgorithmBase):
             "The parcels to render, e.g. the output of 'Subdivide blocks into parcels'. The "
             "image is in their CRS.")
         self.add(QgsProcessingParameterFeatureSource(
-            self.ROADS, "New roads (optional)", [QgsProcessing.TypeVectorLine], optional=True),
+            self.ROADS, "New roads", [QgsProcessing.TypeVectorLine], optional=True),
             "Centrelines of the new streets: painted from the example's roads, and used to "
             "find each parcel's street side (without them: the outline of all parcels).")
         self.add(QgsProcessingParameterRasterLayer(
@@ -70,7 +70,7 @@ class SynthesizeAerialImage(AlgorithmBase):
             "The example's parcels (a cadastre) or blocks on the image; those not wholly on "
             "the image are not used.")
         self.add(QgsProcessingParameterFeatureSource(
-            self.EXAMPLE_ROADS, "Example roads (optional)", [QgsProcessing.TypeVectorLine],
+            self.EXAMPLE_ROADS, "Example roads", [QgsProcessing.TypeVectorLine],
             optional=True),
             "Centrelines of the example's streets on the image: their pixels paint the new "
             "roads, and they give each example parcel's street side.")

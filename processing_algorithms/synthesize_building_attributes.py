@@ -48,7 +48,7 @@ class SynthesizeBuildingAttributes(AlgorithmBase):
 
     def shortHelpString(self):  # noqa: N802
         return (
-            "Every footprint (synthesised or real) gets height_m, levels, building_type and "
+            "Every footprint (synthesized or real) gets height_m, levels, building_type and "
             "roof_shape copied from the most similar example building (Hartmann thesis, "
             "ch. 6): similar in shape, area, footprint coverage and grain around it, heights "
             "of the example buildings nearby and, when both road layers are given, distance "

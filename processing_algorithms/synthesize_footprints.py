@@ -83,11 +83,11 @@ class SynthesizeFootprints(AlgorithmBase):
             self.BLOCK_DB, "Block database", extension="gpkg"),
             "A GeoPackage written by 'Build block database' (database 1).")
         self.add(QgsProcessingParameterFile(
-            self.BLOCK_DB_2, "Second block database (optional)", extension="gpkg",
+            self.BLOCK_DB_2, "Second block database", extension="gpkg",
             optional=True),
             "Another city's block database (database 2), to mix two styles.")
         self.add(QgsProcessingParameterFeatureSource(
-            self.STYLE, "Style polygons (optional)", [QgsProcessing.TypeVectorPolygon],
+            self.STYLE, "Style polygons", [QgsProcessing.TypeVectorPolygon],
             optional=True),
             "Polygons saying which database to use where (a block uses the polygon holding a "
             "point inside it; database 1 elsewhere). Without them each block takes the best "

@@ -56,9 +56,9 @@ class SynthesizeRoads(AlgorithmBase):
 
     def shortHelpString(self):  # noqa: N802
         return (
-            "Synthesises the streets of a district with the method chosen by METHOD, from one "
+            "Synthesizes the streets of a district with the method chosen by METHOD, from one "
             "set of inputs, so that a Processing model can switch methods with a parameter "
-            "(the shipped model 'Synthesise a district like an example' does). Every method "
+            "(the shipped model 'Synthesize a district like an example' does). Every method "
             "keeps the ARTERIALS and connects the new streets to them.\n\n"
             "- Fragments: the faces of the ARTERIALS are filled level by level with warped "
             "fragments of the example (FRAGMENT_DB, or a database built here from "
@@ -100,7 +100,7 @@ class SynthesizeRoads(AlgorithmBase):
             "Fragments and growth take the terrain into account (slope term, maximum slope).")
         self.add_seed("The same seed and inputs give the same network.")
         self.add(QgsProcessingParameterFeatureSink(
-            self.OUTPUT, "Synthesised roads", QgsProcessing.TypeVectorLine),
+            self.OUTPUT, "Synthesized roads", QgsProcessing.TypeVectorLine),
             "The new road network with level (0 = arterial), styled by level.")
 
     def input_error(self, parameters, context):

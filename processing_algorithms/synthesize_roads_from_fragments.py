@@ -87,7 +87,7 @@ class SynthesizeRoadsFromFragments(AlgorithmBase):
             "Sketched arterials, or the level 0 roads of a real city: lines that close faces to "
             "fill. They are noded and cleaned first.")
         self.add(QgsProcessingParameterFeatureSource(
-            self.BOUNDARY, "Target boundary (optional)", [QgsProcessing.TypeVectorPolygon],
+            self.BOUNDARY, "Target boundary", [QgsProcessing.TypeVectorPolygon],
             optional=True),
             "The area to fill (e.g. a town's outline): closes the faces the arterials leave "
             "open. Without it only the faces the arterials close are filled.")
@@ -108,15 +108,15 @@ class SynthesizeRoadsFromFragments(AlgorithmBase):
             self.FRAGMENT_DB, "Fragment database", extension="gpkg"),
             "A GeoPackage written by 'Build fragment database' (database 1).")
         self.add(QgsProcessingParameterFile(
-            self.FRAGMENT_DB_2, "Second fragment database (optional)", extension="gpkg",
+            self.FRAGMENT_DB_2, "Second fragment database", extension="gpkg",
             optional=True),
             "Another city's fragment database (database 2), to mix two styles.")
         self.add(QgsProcessingParameterRasterLayer(
-            self.DEM, "Elevation model (optional)", optional=True),
+            self.DEM, "Elevation model", optional=True),
             "The desired terrain: adds the slope term to the retrieval and is the base of "
             "OUTPUT_DEM.")
         self.add(QgsProcessingParameterFeatureSource(
-            self.STYLE, "Style polygons (optional)", [QgsProcessing.TypeVectorPolygon],
+            self.STYLE, "Style polygons", [QgsProcessing.TypeVectorPolygon],
             optional=True),
             "Polygons saying which database to use where (a face uses the polygon holding a "
             "point inside it; database 1 elsewhere).")
@@ -131,9 +131,9 @@ class SynthesizeRoadsFromFragments(AlgorithmBase):
             maxValue=synthesis_fragments.MAX_N_BEST),
             "1 always takes the best-matching fragment; larger values add variety.")
         self.add(QgsProcessingParameterNumber(
-            self.MAX_LEVEL, "Deepest street level (optional)", QgsProcessingParameterNumber.Integer,
+            self.MAX_LEVEL, "Deepest street level", QgsProcessingParameterNumber.Integer,
             optional=True, minValue=1, maxValue=synthesis_fragments.MAX_LEVELS),
-            "Stop after synthesising streets of this level (default: as deep as the databases go).")
+            "Stop after synthesizing streets of this level (default: as deep as the databases go).")
         self.add_seed(
             "The same seed with the same inputs gives the same network.")
         self.add(QgsProcessingParameterNumber(
@@ -214,9 +214,7 @@ class SynthesizeRoadsFromFragments(AlgorithmBase):
             style_polygons=style_polys, style_database=style_db, n_best=n_best, seed=seed,
             max_level=max_level, gamma=gamma, names=names, boundary=boundary,
             fill=self.parameterAsBool(parameters, self.FILL, context),
-            fill_quantile=qgis_io.check_number(
-                self.parameterAsDouble(parameters, self.FILL_QUANTILE, context),
-                self.FILL_QUANTILE, 50.0, 100.0),
+            fill_quantile=self.number(parameters, self.FILL_QUANTILE, context),
             progress=qgis_io.progress_for(feedback, 12, 92))
         q = result.queries
         n_inserted = int((q.outcome == "fragment").sum())

@@ -83,14 +83,14 @@ class SynthesizeRoadsGan(AlgorithmBase):
 
     def initAlgorithm(self, config=None):  # noqa: N802
         self.add(QgsProcessingParameterFeatureSource(
-            self.TARGET, "Target polygon(s) (optional)", [QgsProcessing.TypeVectorPolygon],
+            self.TARGET, "Target polygon(s)", [QgsProcessing.TypeVectorPolygon],
             optional=True),
             "Area to fill with roads; several polygons are merged. Give this or an extent.")
-        self.add(QgsProcessingParameterExtent(self.EXTENT, "Target extent (optional)",
+        self.add(QgsProcessingParameterExtent(self.EXTENT, "Target extent",
                                               optional=True),
             "A rectangle to fill with roads when no target polygon is given.")
         self.add(QgsProcessingParameterFeatureSource(
-            self.GIVEN_ROADS, "Given roads (kept; optional)", [QgsProcessing.TypeVectorLine],
+            self.GIVEN_ROADS, "Given roads (kept)", [QgsProcessing.TypeVectorLine],
             optional=True),
             "Roads the new network must respect and connect to (arterials, existing roads): "
             "kept in the output, no generated street in their corridor, new streets end on "

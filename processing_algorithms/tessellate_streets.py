@@ -82,7 +82,7 @@ class TessellateStreets(AlgorithmBase):
     def initAlgorithm(self, config=None):  # noqa: N802
         self.add(QgsProcessingParameterFeatureSource(
             self.ROADS, "Road centre lines", [QgsProcessing.TypeVectorLine]),
-            "Any line layer (OSM lines, grown or synthesised roads, a road shapefile). Lines "
+            "Any line layer (OSM lines, grown or synthesized roads, a road shapefile). Lines "
             "are noded at crossings (not across bridges and tunnels) and joined through "
             "nodes of degree 2.")
         self.add(QgsProcessingParameterField(
@@ -106,7 +106,7 @@ class TessellateStreets(AlgorithmBase):
             defaultValue=street_surfaces.DEFAULT_WIDTH, minValue=0.5, maxValue=200.0),
             "Width of lines with neither a width nor a known class or level.")
         self.add(QgsProcessingParameterRasterLayer(
-            self.DEM, "Elevation model (optional)", optional=True),
+            self.DEM, "Elevation model", optional=True),
             "A DEM in any CRS, resampled bilinearly to the working CRS: outputs get Z, "
             "junctions the terrain's tangent plane, and slopes are measured.")
         self.add(QgsProcessingParameterNumber(

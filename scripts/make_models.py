@@ -24,10 +24,10 @@ ROOT = Path(__file__).resolve().parent.parent
 OUT = ROOT / "resources" / "models"
 
 DISTRICT_HELP = (
-    "Synthesises a whole district in the style of an example city, in one run.\n\n"
+    "Synthesizes a whole district in the style of an example city, in one run.\n\n"
     "From the example's roads and buildings it extracts the road hierarchy, the blocks with "
     "their buildings and a block database. Then, inside the ARTERIALS sketch (and BOUNDARY), "
-    "it synthesises the streets with the method chosen by ROAD_METHOD, makes the blocks, "
+    "it synthesizes the streets with the method chosen by ROAD_METHOD, makes the blocks, "
     "subdivides them into parcels with street access, fills the blocks with footprints from "
     "the example's blocks (FOOTPRINT_METHOD transfer or resynthesis), gives the footprints "
     "heights, levels and types like the example's buildings, turns the streets into surface "
@@ -83,7 +83,7 @@ def district_model() -> QgsProcessingModelAlgorithm:
     model.setHelpContent({"ALG_DESC": DISTRICT_HELP, "ALG_CREATOR": "Urban Synthesis",
                           "ALG_VERSION": "1",
                           # the toolbox name (plugin/qgis_glue/provider.py ShippedModel)
-                          "DISPLAY_NAME": "Synthesise a district like an example"})
+                          "DISPLAY_NAME": "Synthesize a district like an example"})
     p = Source.fromModelParameter
     out = Source.fromChildOutput
     fixed = Source.fromStaticValue
@@ -129,7 +129,7 @@ def district_model() -> QgsProcessingModelAlgorithm:
     _child(model, "block_db", "urbansynth:buildblockdatabase", "Example block database",
            {"BLOCKS": out("example_blocks", "OUTPUT"),
             "BUILDINGS": out("example_blocks", "OUTPUT_BUILDINGS")}, x=300, y=200)
-    _child(model, "roads", "urbansynth:synthesizeroads", "Synthesise the streets",
+    _child(model, "roads", "urbansynth:synthesizeroads", "Synthesize the streets",
            {"METHOD": p("ROAD_METHOD"), "EXAMPLE_ROADS": out("hierarchy", "OUTPUT"),
             "ARTERIALS": p("ARTERIALS"), "BOUNDARY": p("BOUNDARY"), "DEM": p("DEM"),
             "SEED": p("SEED")},

@@ -19,9 +19,15 @@ from conftest import BUBENEC, HELSINKI
 CANCEL_AFTER_S = 0.5
 
 
-def canceling_feedback(after: float = CANCEL_AFTER_S):
-    """A QgsProcessingFeedback that cancels itself ``after`` seconds once started, and
-    records the wall and processor clocks at that moment."""
+#: Progress (%) at which the run is canceled if the timer has not fired yet: a fast machine
+#: cannot finish a run before the cancel.
+CANCEL_AT_PROGRESS = 40.0
+
+
+def canceling_feedback(after: float = CANCEL_AFTER_S, at_progress: float = CANCEL_AT_PROGRESS):
+    """A QgsProcessingFeedback that cancels itself ``after`` seconds once started or when the
+    run reports ``at_progress`` %, whichever comes first, and records the wall and processor
+    clocks at that moment."""
     from qgis.core import QgsProcessingFeedback
 
     class Canceling(QgsProcessingFeedback):
@@ -29,10 +35,19 @@ def canceling_feedback(after: float = CANCEL_AFTER_S):
             super().__init__()
             self.cpu_at_cancel = self.wall_at_cancel = None
             self.timer = threading.Timer(after, self._cancel)
+            self._lock = threading.Lock()
+
+        def setProgress(self, progress):  # noqa: N802 (QGIS API)
+            super().setProgress(progress)
+            if progress >= at_progress:
+                self._cancel()
 
         def _cancel(self):
-            self.cpu_at_cancel = time.process_time()
-            self.wall_at_cancel = time.monotonic()
+            with self._lock:
+                if self.cpu_at_cancel is not None:
+                    return
+                self.cpu_at_cancel = time.process_time()
+                self.wall_at_cancel = time.monotonic()
             self.cancel()
 
     return Canceling()

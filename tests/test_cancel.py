@@ -29,7 +29,7 @@ def test_cancel_stops_within_a_second(qgis_processing, heavy, tmp_path, alg_id):
         result = cancel_runs.cancel_run(qgis_processing, alg_id, heavy, tmp_path / "again")
         print(f"{alg_id}: {first:.2f} s after the first cancel, {result['cpu_s']} s after "
               "the second")
-    assert not result["finished"], f"{alg_id} finished within 0.5 s: give it a heavier input"
+    assert not result["finished"], f"{alg_id} finished before the cancel: give it a heavier input"
     assert result["message"] is not None and "Canceled" in result["message"], result
     assert "Traceback" not in result["message"], result["message"]
     assert not result["written"], f"a canceled run left {result['written']}"

@@ -46,11 +46,16 @@ class Progress:
 
     def step(self, fraction: float) -> None:
         """Report progress and raise :class:`Canceled` if the user asked to stop."""
-        if self._is_canceled is not None and self._is_canceled():
-            raise Canceled("Canceled by the user.")
+        self.check()
         if self._report is not None:
             f = min(max(fraction, 0.0), 1.0)
             self._report(self.start + f * (self.end - self.start))
+
+    def check(self) -> None:
+        """Raise :class:`Canceled` if the user asked to stop (no progress report): for
+        loops whose share of the work is unknown, e.g. a backtracking search."""
+        if self._is_canceled is not None and self._is_canceled():
+            raise Canceled("Canceled by the user.")
 
     def info(self, message: str) -> None:
         if self._log is not None:

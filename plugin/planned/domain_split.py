@@ -471,6 +471,7 @@ class _Search:
         """(leaves, street lines, fallback area) of a region."""
         s = self.s
         L, W = s.parcel_length, s.parcel_width
+        self.progress.check()
         self.n_regions += 1
         if self.n_regions > s.max_regions or shapely.area(region) < 0.5 * L * W:
             name = "skeleton" if shapely.area(region) >= 0.5 * L * W else "park"
@@ -484,6 +485,7 @@ class _Search:
         best = None
         tries = 0
         for street, children in self.sp.candidates(region, ends):
+            self.progress.check()
             t0 = time.perf_counter()
             inner0 = self.time_abandoned
             saved = self.counts.copy()

@@ -15,7 +15,7 @@ from qgis.PyQt.QtGui import QIcon
 
 from ..core.paths import RESOURCES
 from . import dependencies, outputs
-from .toolbox import ALGORITHMS, GROUPS, algorithm_id
+from .toolbox import ALGORITHMS, GROUPS, TAGS, algorithm_id, help_url
 
 ICON = RESOURCES / "icons" / "urbansynth.svg"
 
@@ -104,6 +104,12 @@ class UnavailableAlgorithm(QgsProcessingAlgorithm):
 
     def shortHelpString(self):  # noqa: N802
         return dependencies.missing_message(self._missing)
+
+    def helpUrl(self):  # noqa: N802
+        return help_url(self.name())
+
+    def tags(self):
+        return list(TAGS.get(self.name(), ()))
 
     def createInstance(self):  # noqa: N802
         return UnavailableAlgorithm(self._module, self._display, self._group_id, self._missing)

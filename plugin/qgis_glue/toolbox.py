@@ -50,3 +50,40 @@ def algorithm_id(module: str) -> str:
     """The algorithm id of a module: its name without underscores (docs/ARCHITECTURE.md,
     "The toolbox contract")."""
     return module.replace("_", "")
+
+
+#: Search words of every algorithm (the toolbox's search matches them besides the name).
+TAGS = {
+    "extractroadhierarchy": ("roads", "streets", "hierarchy", "arterials", "osm",
+                             "intersections", "network"),
+    "extractblocks": ("blocks", "city blocks", "faces", "buildings", "parcels", "polygonize"),
+    "buildblockdatabase": ("example", "database", "blocks", "footprints", "buildings"),
+    "buildfragmentdatabase": ("example", "database", "roads", "fragments", "streets"),
+    "layoutmetrics": ("metrics", "statistics", "compare", "report", "fidelity", "validation"),
+    "growroads": ("roads", "procedural", "grid", "organic", "radial", "growth", "streets"),
+    "subdivideparcels": ("parcels", "lots", "plots", "subdivision", "cadastre", "blocks"),
+    "synthesizeroadsfromfragments": ("roads", "streets", "example", "fragments", "synthesis"),
+    "tessellatestreets": ("streets", "surfaces", "junctions", "3d", "mesh", "polygons"),
+    "synthesizeroadsgan": ("roads", "streets", "gan", "neural network", "generator", "synthesis"),
+    "rasterroadstovector": ("raster", "roads", "vectorize", "skeleton", "graph"),
+    "synthesizebuildingattributes": ("buildings", "height", "levels", "floors", "roof",
+                                     "attributes", "far", "example"),
+    "placelibrarybuildings": ("buildings", "library", "best fit", "parcels", "placement"),
+    "synthesizepartbuildings": ("buildings", "parts", "skeleton", "facade", "floor area"),
+    "synthesizebuildings": ("buildings", "attributes", "parts", "deprecated"),
+    "synthesizeroadsrandomwalk": ("roads", "streets", "random walk", "intersections",
+                                  "example", "expand"),
+    "synthesizefootprints": ("buildings", "footprints", "example", "blocks", "synthesis"),
+    "splitdomain": ("planned", "layout", "streets", "parcels", "templates", "district"),
+    "synthesizeroads": ("roads", "streets", "synthesis", "district"),
+    "synthesizeaerialimage": ("aerial", "image", "imagery", "orthophoto", "raster", "parcels"),
+    "installdependencies": ("install", "pip", "packages", "dependencies", "setup"),
+}
+
+#: The README's address; each algorithm's help opens its section of the toolbox reference
+#: (``#alg-<name>``, written by scripts/make_toolbox_reference.py).
+HOMEPAGE = "https://github.com/urbansynth/urban_synthesis"
+
+
+def help_url(name: str) -> str:
+    return f"{HOMEPAGE}#alg-{name}"

@@ -1,0 +1,50 @@
+"""The README's parameter reference is what the code registers, every tool's help opens its
+entry, and the toolbox speaks one way (no doubled "optional", one spelling, search tags)."""
+import importlib.util
+import re
+
+from conftest import ROOT
+
+
+def _script():
+    spec = importlib.util.spec_from_file_location(
+        "make_toolbox_reference", ROOT / "scripts" / "make_toolbox_reference.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_readme_reference_is_the_registered_parameters(qgis_processing):
+    script = _script()
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    expected = script.render(readme, script.reference(script.algorithms()))
+    assert readme == expected, ("README.md's parameter reference differs from the code: run "
+                                "`.venv/bin/python scripts/make_toolbox_reference.py`")
+
+
+def test_every_help_button_opens_its_entry(qgis_processing):
+    from qgis.core import QgsApplication
+
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    anchors = set(re.findall(r'<a id="([^"]+)"></a>', readme))
+    for alg in QgsApplication.processingRegistry().providerById("urbansynth").algorithms():
+        if alg.name() == "synthesizedistrict" or "deprecated" in alg.displayName():
+            continue
+        assert alg.helpUrl().split("#")[1] in anchors, alg.name()
+
+
+def test_toolbox_manners(qgis_processing):
+    from qgis.core import QgsApplication, QgsProcessingParameterDefinition
+
+    for alg in QgsApplication.processingRegistry().providerById("urbansynth").algorithms():
+        texts = [alg.displayName(), alg.shortHelpString() or ""]
+        if alg.name() != "synthesizedistrict":
+            assert len(alg.tags()) >= 3, alg.name()
+        for p in alg.parameterDefinitions():
+            # QGIS appends "[optional]" itself
+            if p.flags() & QgsProcessingParameterDefinition.FlagOptional:
+                assert "optional" not in p.description().lower(), (alg.name(), p.name())
+            texts += [p.description(), p.help() or ""]
+        for text in texts:
+            # one spelling: American -ize (as the algorithm ids)
+            assert not re.search(r"\b[Ss]ynthesis(e|ed|es|ing)\b", text), (alg.name(), text)
