@@ -101,7 +101,7 @@ class SynthesizeRoadsGan(AlgorithmBase):
             defaultValue=default),
             "A shipped generator: " + "; ".join(self._describe(m) for m in self.models) + ".")
         self.add(QgsProcessingParameterFile(
-            self.MODEL_FILE, "Model file (.onnx, optional)", extension="onnx", optional=True),
+            self.MODEL_FILE, "Model file (.onnx)", extension="onnx", optional=True),
             "A generator exported by tools/streetgan/train.py, with its model card "
             "(<name>.json) next to it; used instead of the shipped model when given.")
         self.add_seed(
