@@ -97,9 +97,9 @@ def test_outputs_open_styled_in_a_new_project(qgis_processing, tmp_path):
     assert styled_colour != plain.renderer().symbol().color().name() or \
         points.renderer().symbol().size() != plain.renderer().symbol().size()
     # the run's style requests are consumed
-    from urban_synthesis.plugin.qgis_glue import qgis_io
+    from urban_synthesis.plugin.qgis_glue import styles
 
-    assert not [k for k in qgis_io.STYLE_REQUESTS if str(tmp_path) in k]
+    assert not [k for k in styles.STYLE_REQUESTS if str(tmp_path) in k]
 
 
 def test_loaded_outputs_stack_buildings_above_parcels(qgis_processing, tmp_path):

@@ -40,7 +40,7 @@ from qgis.core import (
     QgsProviderRegistry,
 )
 
-from . import qgis_io
+from . import styles
 
 __all__ = ["STAGING_PREFIX", "OutputStaging", "same_file_error"]
 
@@ -260,10 +260,10 @@ class OutputStaging:
     def _store_styles(self, renames):
         """Every styled output keeps its style in the file (GeoPackage default style or a
         sidecar .qml), so that it opens styled in a new project."""
-        for key in [k for k in qgis_io.STYLE_REQUESTS if self._renamed(k, renames) != k]:
-            qml = qgis_io.STYLE_REQUESTS.pop(key)
+        for key in [k for k in styles.STYLE_REQUESTS if self._renamed(k, renames) != k]:
+            qml = styles.STYLE_REQUESTS.pop(key)
             final = self._renamed(key, renames)
-            warning = qgis_io.save_style_with_layer(final, qml)
+            warning = styles.save_style_with_layer(final, qml)
             if warning and self.feedback is not None:
                 self.feedback.pushWarning(f"Output {final}: {warning}.")
 
@@ -276,7 +276,7 @@ class OutputStaging:
         layers = self.context.layersToLoadOnCompletion()
         if all(self._renamed(k, renames) == k for k in layers):
             return
-        rebuilt, styles = {}, {}
+        rebuilt, kept_styles = {}, {}
         # a staged layer comes after any entry QGIS already holds for its final path: its
         # details and style win
         for key, details in sorted(layers.items(),
@@ -286,11 +286,11 @@ class OutputStaging:
                 details.name, details.project, details.outputName, details.layerTypeHint)
             fresh.forceName = details.forceName
             rebuilt[final] = fresh
-            styles[final] = qgis_io.attached_style(details) or styles.get(final)
+            kept_styles[final] = styles.attached_style(details) or kept_styles.get(final)
         self.context.setLayersToLoadOnCompletion(rebuilt)
-        for final, qml in styles.items():
+        for final, qml in kept_styles.items():
             if qml:
-                qgis_io.attach_style(self.context, final, qml)
+                styles.attach_style(self.context, final, qml)
 
     @staticmethod
     def _renamed(value, renames):
@@ -332,9 +332,9 @@ class OutputStaging:
     def discard(self):
         """Remove everything written (the destinations stay as they were)."""
         self._remove_staging()
-        for key in [k for k in qgis_io.STYLE_REQUESTS
+        for key in [k for k in styles.STYLE_REQUESTS
                     if any(str(item.staging) in k for item in self.staged)]:
-            qgis_io.STYLE_REQUESTS.pop(key, None)
+            styles.STYLE_REQUESTS.pop(key, None)
         for folder in self._made_dirs:
             try:
                 folder.rmdir()               # only the folders this run created, if empty

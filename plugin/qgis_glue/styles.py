@@ -1,0 +1,116 @@
+"""Shipped QML styles on outputs: applied when QGIS loads an output, stored in the file
+itself (GeoPackage default style, or a sidecar .qml) once the run's outputs are in place, and
+a place in the layer list by kind. QGIS only: the provider imports it without the engine's
+packages.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+from qgis.core import QgsProject
+
+from ..core.paths import RESOURCES
+
+STYLES = RESOURCES / "styles"
+_POST_PROCESSORS = []  # QGIS does not own Python post-processors: keep them alive
+
+
+#: output destination -> shipped style file, until the run's outputs are in place
+#: (:meth:`qgis_glue.outputs.OutputStaging.commit` stores them with the files)
+STYLE_REQUESTS: dict = {}
+
+
+def style_output(context, dest_id: Optional[str], qml_name: str) -> None:
+    """Style an output with a shipped QML style: when QGIS loads it on completion, and in
+    the file itself once the run's outputs are in place (:func:`save_style_with_layer`), so
+    that it opens styled in any project."""
+    qml = STYLES / qml_name
+    if not dest_id or not qml.exists():
+        return
+    STYLE_REQUESTS[dest_id] = str(qml)
+    if context.willLoadLayerOnCompletion(dest_id):
+        attach_style(context, dest_id, str(qml))
+
+
+def save_style_with_layer(destination: str, qml: str) -> Optional[str]:
+    """Store ``qml`` with the written layer as its default style: in the GeoPackage's
+    ``layer_styles`` table, or as the sidecar ``.qml`` QGIS reads for other files. Returns
+    a warning, or None when the style was stored."""
+    from qgis.core import QgsVectorLayer
+
+    layer = QgsVectorLayer(destination, "output", "ogr")
+    if not layer.isValid():
+        return f"the output {destination} could not be opened to store its style"
+    message, ok = layer.loadNamedStyle(qml)
+    if not ok:
+        return f"the style {qml} could not be read: {message}"
+    if layer.dataProvider().storageType() == "GPKG":
+        error = layer.saveStyleToDatabase(layer.name(), "Urban Synthesis default style",
+                                          True, "")
+        return f"the style could not be stored in {destination}: {error}" if error else None
+    message, ok = layer.saveNamedStyle(str(Path(destination.split("|")[0]).with_suffix(".qml")))
+    return None if ok else f"the style could not be saved next to {destination}: {message}"
+
+
+#: Where a styled output goes in the layer list, top first (points over lines over
+#: buildings over areas): a later output is placed among the plugin's layers by this.
+STACK = ("intersections.qml", "junctions.qml", "roads_by_level.qml", "buildings_by_height.qml",
+         "street_surfaces.qml", "blocks.qml", "parcels_by_quality.qml")
+_STACK_PROPERTY = "urban_synthesis/stack"
+
+
+def attach_style(context, dest_id: str, qml: str) -> None:
+    """Give the layer QGIS loads on completion for ``dest_id`` the style file ``qml`` and
+    its place in the layer list (:data:`STACK`)."""
+    from qgis.core import QgsProcessingLayerPostProcessorInterface
+
+    class _Styler(QgsProcessingLayerPostProcessorInterface):
+        def postProcessLayer(self, layer, ctx, feedback):  # noqa: N802
+            if layer is not None and layer.isValid():
+                layer.loadNamedStyle(qml)
+                layer.triggerRepaint()
+                _stack(layer, ctx.project() or QgsProject.instance(), Path(qml).name)
+
+    styler = _Styler()
+    styler.qml = qml
+    _POST_PROCESSORS.append(styler)
+    context.layerToLoadOnCompletionDetails(dest_id).setPostProcessor(styler)
+
+
+def _stack(layer, project, style: str) -> None:
+    """Move the layer's node above the plugin's layers that belong below it (QGIS 3.22
+    adds loaded outputs in the order of their file names: parcels would hide buildings)."""
+    if project is None or style not in STACK:
+        return
+    rank = STACK.index(style)
+    layer.setCustomProperty(_STACK_PROPERTY, rank)
+    node = project.layerTreeRoot().findLayer(layer.id())
+    if node is None or node.parent() is None:
+        return
+    root = node.parent()                 # the project's root, or Processing's results group
+    others = [n for n in root.children() if n is not node]
+
+    def rank_of(other):
+        value = other.layer().customProperty(_STACK_PROPERTY) \
+            if hasattr(other, "layer") and other.layer() is not None else None
+        return None if value is None else int(value)
+
+    ranks = [rank_of(n) for n in others]
+    below = [i for i, r in enumerate(ranks) if r is not None and r > rank]
+    above = [i for i, r in enumerate(ranks) if r is not None and r <= rank]
+    if below:                            # right above the first layer that belongs below
+        where = root.children().index(others[below[0]])
+    elif above:                          # right below the last layer that belongs above
+        where = root.children().index(others[above[-1]]) + 1
+    else:
+        return
+    # the copy goes in before the original leaves: a layer that leaves the layer tree
+    # leaves the project
+    root.insertChildNode(where, node.clone())
+    root.removeChildNode(node)
+
+
+def attached_style(details) -> Optional[str]:
+    """The style file :func:`attach_style` gave these layer details, if any."""
+    return getattr(details.postProcessor(), "qml", None)
