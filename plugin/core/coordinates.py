@@ -56,7 +56,17 @@ def rigid(geoms: Sequence, rotation: np.ndarray, translation: np.ndarray) -> np.
     """``R x + t`` on every vertex (one 2 x 2 rotation, one translation)."""
     r = np.asarray(rotation, dtype=np.float64)
     t = np.asarray(translation, dtype=np.float64)
-    return transform(geoms, lambda xy, _: xy @ r.T + t)
+    return transform(geoms, lambda xy, _: apply_affine(xy, r, t))
+
+
+def apply_affine(xy: np.ndarray, matrix: np.ndarray, translation) -> np.ndarray:
+    """``M x + t`` for (n, 2) points, written out: a BLAS product of (n, 2) by (2, 2)
+    rounds differently under different processor kernels; this is the same on all."""
+    xy = np.asarray(xy, dtype=np.float64)
+    m = np.asarray(matrix, dtype=np.float64)
+    t = np.asarray(translation, dtype=np.float64)
+    return np.column_stack([m[0, 0] * xy[..., 0] + m[0, 1] * xy[..., 1] + t[0],
+                            m[1, 0] * xy[..., 0] + m[1, 1] * xy[..., 1] + t[1]])
 
 
 def rotate(geoms: Sequence, angles, centres) -> np.ndarray:

@@ -46,6 +46,7 @@ import numpy as np
 import shapely
 
 from ..core import coordinates
+from ..core.coordinates import apply_affine
 from ..core.progress import InputError
 
 __all__ = [
@@ -806,21 +807,28 @@ def rigid_align(src: np.ndarray, dst: np.ndarray,
         raise InputError("rigid alignment needs two equal (p, 2) arrays of points")
     w = np.ones(len(src)) if weights is None else np.asarray(weights, dtype=np.float64)
     w = w / w.sum()
-    ms = w @ src
-    md = w @ dst
-    h = (src - ms).T @ ((dst - md) * w[:, None])
-    u, _, vt = np.linalg.svd(h)
-    d = np.sign(np.linalg.det(vt.T @ u.T)) or 1.0
-    r = vt.T @ np.diag([1.0, d]) @ u.T
-    t = md - r @ ms
-    res = src @ r.T + t - dst
-    rms = float(np.sqrt(w @ (res * res).sum(1)))
+    # the 2D Kabsch solution in closed form (the SVD's rotation is atan2 of the weighted
+    # cross and dot sums): element-wise sums, no BLAS or LAPACK call, so the same bits on
+    # every processor kernel
+    ms = (w[:, None] * src).sum(axis=0)
+    md = (w[:, None] * dst).sum(axis=0)
+    a, b = src - ms, dst - md
+    cross = float((w * (a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])).sum())
+    dot = float((w * (a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1])).sum())
+    theta = np.arctan2(cross, dot)
+    c, s = np.cos(theta), np.sin(theta)
+    r = np.array([[c, -s], [s, c]])
+    t = md - np.array([c * ms[0] - s * ms[1], s * ms[0] + c * ms[1]])
+    res = apply_rigid(src, r, t) - dst
+    rms = float(np.sqrt((w * (res * res).sum(1)).sum()))
     return r, t, rms
 
 
 def apply_rigid(xy: np.ndarray, rotation: np.ndarray, translation: np.ndarray) -> np.ndarray:
     """``R x + t`` for points of shape (..., 2)."""
-    return np.asarray(xy, dtype=np.float64) @ np.asarray(rotation).T + np.asarray(translation)
+    xy = np.asarray(xy, dtype=np.float64)
+    flat = apply_affine(xy.reshape(-1, 2), rotation, translation)
+    return flat.reshape(xy.shape)
 
 
 def transform_geometries(geoms: Sequence, rotation: np.ndarray,

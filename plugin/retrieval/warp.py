@@ -160,7 +160,19 @@ def warp_points(points: np.ndarray, source: np.ndarray, target: np.ndarray) -> n
     pts = np.asarray(points, dtype=np.float64)
     if pts.size == 0:
         return pts.reshape(-1, 2).copy()
-    return (mean_value_coordinates(pts.reshape(-1, 2), src) @ dst).reshape(pts.shape)
+    weights = mean_value_coordinates(pts.reshape(-1, 2), src)
+    return blas_free_product(weights, dst).reshape(pts.shape)
+
+
+def blas_free_product(a: np.ndarray, b: np.ndarray, chunk: int = 2048) -> np.ndarray:
+    """``a @ b`` for (n, k) x (k, 2) without BLAS: a BLAS product rounds differently under
+    different processor kernels (OPENBLAS_CORETYPE), and a last-bit difference in a warped
+    vertex can flip a later decision (a rejected fragment, a face above a threshold). Done
+    as an element-wise product and a sum, in chunks of rows (memory n x k x 2)."""
+    out = np.empty((a.shape[0], b.shape[1]), dtype=np.float64)
+    for i in range(0, a.shape[0], chunk):
+        out[i:i + chunk] = (a[i:i + chunk, :, None] * b[None, :, :]).sum(axis=1)
+    return out
 
 
 def warp_geometries(geoms: Sequence, source: np.ndarray, target: np.ndarray,
