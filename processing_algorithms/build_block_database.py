@@ -47,10 +47,10 @@ class BuildBlockDatabase(AlgorithmBase):
 
     def initAlgorithm(self, config=None):  # noqa: N802
         self.add(QgsProcessingParameterFeatureSource(
-            self.BLOCKS, "Blocks", [QgsProcessing.TypeVectorPolygon]),
+            self.BLOCKS, "Blocks", [QgsProcessing.SourceType.TypeVectorPolygon]),
             "City block polygons, e.g. the blocks output of 'Extract blocks'.")
         self.add(QgsProcessingParameterFeatureSource(
-            self.BUILDINGS, "Buildings", [QgsProcessing.TypeVectorPolygon]),
+            self.BUILDINGS, "Buildings", [QgsProcessing.SourceType.TypeVectorPolygon]),
             "Building footprints, e.g. the buildings output of 'Extract blocks' (with block_id, "
             "height_m, levels, building_type).")
         self.add(QgsProcessingParameterString(

@@ -52,12 +52,12 @@ class BuildFragmentDatabase(AlgorithmBase):
 
     def initAlgorithm(self, config=None):  # noqa: N802
         self.add(QgsProcessingParameterFeatureSource(
-            self.ROADS, "Roads with levels", [QgsProcessing.TypeVectorLine]),
+            self.ROADS, "Roads with levels", [QgsProcessing.SourceType.TypeVectorLine]),
             "Street lines with a hierarchy level per line (0 = arterial), e.g. the output of "
             "'Extract road hierarchy'.")
         self.add(QgsProcessingParameterField(
             self.LEVEL_FIELD, "Level field", defaultValue="level",
-            parentLayerParameterName=self.ROADS, type=QgsProcessingParameterField.Numeric,
+            parentLayerParameterName=self.ROADS, type=QgsProcessingParameterField.DataType.Numeric,
             optional=True),
             "Integer street level (0 = arterial, larger = more local); 'level' when left empty.")
         self.add(QgsProcessingParameterRasterLayer(
@@ -65,17 +65,17 @@ class BuildFragmentDatabase(AlgorithmBase):
             "A DEM in any CRS: adds the relief change, mean slope, slope descriptors and a "
             "relief patch to every fragment (thesis ch. 4.1, terrain term).")
         self.add(QgsProcessingParameterNumber(
-            self.MIN_AREA, "Minimum fragment area (m²)", QgsProcessingParameterNumber.Double,
+            self.MIN_AREA, "Minimum fragment area (m²)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=blocks.MIN_BLOCK_AREA, minValue=0.0, maxValue=1e6),
             "Faces smaller than this are junction islands and road slivers, not fragments.",
             advanced=True)
         self.add(QgsProcessingParameterNumber(
-            self.MIN_WIDTH, "Minimum fragment width (m)", QgsProcessingParameterNumber.Double,
+            self.MIN_WIDTH, "Minimum fragment width (m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=blocks.MIN_BLOCK_WIDTH, minValue=0.0, maxValue=1000.0),
             "Faces whose mean width 2·area/perimeter is under this are strips between dual "
             "carriageways, not fragments.", advanced=True)
         self.add(QgsProcessingParameterNumber(
-            self.DEM_CELL_SIZE, "DEM cell size (m)", QgsProcessingParameterNumber.Double,
+            self.DEM_CELL_SIZE, "DEM cell size (m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=fragments.RELIEF_CELL_SIZE, minValue=0.5, maxValue=100.0),
             "The DEM is resampled to this cell size in the working CRS; relief patches use it.",
             advanced=True)

@@ -50,7 +50,7 @@ def number_error(definition, value):
     typed once. QGIS itself checks ranges only in the dialog, and says no more than
     'Incorrect parameter value' on the command line."""
     label = f"{definition.description()} ({definition.name()})"
-    integer = definition.dataType() == QgsProcessingParameterNumber.Integer
+    integer = definition.dataType() == QgsProcessingParameterNumber.Type.Integer
     lo, hi = definition.minimum(), definition.maximum()
     if value is None or not math.isfinite(value):
         return f"{label} must be a finite number, not {value}."
@@ -193,7 +193,7 @@ class AlgorithmBase(QgsProcessingAlgorithm):
         for definition in self.parameterDefinitions():
             name = definition.name()
             if not self.given(parameters, name):
-                if not (definition.flags() & QgsProcessingParameterDefinition.FlagOptional) \
+                if not (definition.flags() & QgsProcessingParameterDefinition.Flag.FlagOptional) \
                         and not definition.isDestination() and definition.defaultValue() is None:
                     return f"{definition.description()} ({name}) is needed."
                 continue
@@ -221,8 +221,8 @@ class AlgorithmBase(QgsProcessingAlgorithm):
     def _field_message(self, parameters, definition, context):
         """A Numeric or String field parameter naming a field of another type."""
         wanted = definition.dataType()
-        if wanted not in (QgsProcessingParameterField.Numeric,
-                          QgsProcessingParameterField.String):
+        if wanted not in (QgsProcessingParameterField.DataType.Numeric,
+                          QgsProcessingParameterField.DataType.String):
             return None
         parent = definition.parentLayerParameterName()
         try:
@@ -238,7 +238,7 @@ class AlgorithmBase(QgsProcessingAlgorithm):
                 continue  # a missing field is reported where the layer is read
             field = fields.at(index)
             numeric = field.isNumeric()
-            if wanted == QgsProcessingParameterField.Numeric and not numeric:
+            if wanted == QgsProcessingParameterField.DataType.Numeric and not numeric:
                 return (f"{definition.description()} ({definition.name()}): field '{name}' of "
                         f"{qgis_io.layer_name(self, parameters, parent, context)} holds "
                         f"{field.typeName() or 'text'} values; a numeric field is needed.")
@@ -250,7 +250,7 @@ class AlgorithmBase(QgsProcessingAlgorithm):
         optional parameter without default that was not given."""
         definition = self.parameterDefinition(name)
         if not self.given(parameters, name) and definition.defaultValue() is None:
-            if definition.flags() & QgsProcessingParameterDefinition.FlagOptional:
+            if definition.flags() & QgsProcessingParameterDefinition.Flag.FlagOptional:
                 return None
         message = self._number_message(parameters, definition, context) \
             if self.given(parameters, name) else None
@@ -258,7 +258,7 @@ class AlgorithmBase(QgsProcessingAlgorithm):
         message = message or number_error(definition, value)
         if message:
             raise QgsProcessingException(message)
-        if definition.dataType() == QgsProcessingParameterNumber.Integer:
+        if definition.dataType() == QgsProcessingParameterNumber.Type.Integer:
             return int(round(value))
         return float(value)
 
@@ -273,7 +273,7 @@ class AlgorithmBase(QgsProcessingAlgorithm):
     def add_seed(self, help_text: str, name: str = "SEED", advanced: bool = False):
         """The random seed parameter: a whole number 0 .. 2^31 - 1, default 1."""
         self.add(QgsProcessingParameterNumber(
-            name, "Random seed", QgsProcessingParameterNumber.Integer, defaultValue=1,
+            name, "Random seed", QgsProcessingParameterNumber.Type.Integer, defaultValue=1,
             minValue=0, maxValue=MAX_SEED), help_text, advanced=advanced)
 
     def seed(self, parameters, context, name: str = "SEED") -> int:
@@ -383,7 +383,7 @@ class AlgorithmBase(QgsProcessingAlgorithm):
         """Add a parameter with its help text (shown in the dialog and in qgis_process help)."""
         parameter.setHelp(help_text)
         if advanced:
-            parameter.setFlags(parameter.flags() | QgsProcessingParameterDefinition.FlagAdvanced)
+            parameter.setFlags(parameter.flags() | QgsProcessingParameterDefinition.Flag.FlagAdvanced)
         if parameter.isDestination():
             self.addParameter(parameter, createOutput=True)
         else:

@@ -63,7 +63,7 @@ class ExtractBlocks(AlgorithmBase):
 
     def initAlgorithm(self, config=None):  # noqa: N802
         self.add(QgsProcessingParameterFeatureSource(
-            self.ROADS, "Road lines", [QgsProcessing.TypeVectorLine]),
+            self.ROADS, "Road lines", [QgsProcessing.SourceType.TypeVectorLine]),
             "Any road line layer: the output of 'Extract road hierarchy', the 'lines' layer of "
             "an .osm.pbf file, or a cadastre street layer.")
         self.add(QgsProcessingParameterField(
@@ -77,53 +77,53 @@ class ExtractBlocks(AlgorithmBase):
             "Only lines of these classes bound blocks (footways and service roads would cut "
             "blocks into courtyards). Leave empty to use every line.", advanced=True)
         self.add(QgsProcessingParameterFeatureSource(
-            self.BUILDINGS, "Building footprints", [QgsProcessing.TypeVectorPolygon],
+            self.BUILDINGS, "Building footprints", [QgsProcessing.SourceType.TypeVectorPolygon],
             optional=True),
             "Footprints, e.g. the 'multipolygons' layer of an .osm.pbf file (only features with "
             "a 'building' value are used) or a cadastre building layer.")
         self.add(QgsProcessingParameterFeatureSource(
-            self.PARCELS, "Parcels", [QgsProcessing.TypeVectorPolygon],
+            self.PARCELS, "Parcels", [QgsProcessing.SourceType.TypeVectorPolygon],
             optional=True),
             "Cadastre parcels; each gets the block_id of the block holding most of it.")
         self.add(QgsProcessingParameterNumber(
-            self.MIN_BLOCK_AREA, "Minimum block area (m²)", QgsProcessingParameterNumber.Double,
+            self.MIN_BLOCK_AREA, "Minimum block area (m²)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=blocks.MIN_BLOCK_AREA, minValue=0.0, maxValue=1e7),
             "Faces smaller than this are traffic islands or junction artefacts, not blocks.",
             advanced=True)
         self.add(QgsProcessingParameterNumber(
             self.MIN_BLOCK_WIDTH, "Minimum mean block width (m)",
-            QgsProcessingParameterNumber.Double, defaultValue=blocks.MIN_BLOCK_WIDTH,
+            QgsProcessingParameterNumber.Type.Double, defaultValue=blocks.MIN_BLOCK_WIDTH,
             minValue=0.0, maxValue=1000.0),
             "Faces whose mean width (2 x area / perimeter) is under this are slivers between "
             "dual carriageways or slip roads.", advanced=True)
         self.add(QgsProcessingParameterNumber(
-            self.STOREY_HEIGHT, "Storey height (m)", QgsProcessingParameterNumber.Double,
+            self.STOREY_HEIGHT, "Storey height (m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=building_attributes.STOREY_HEIGHT, minValue=0.5, maxValue=20.0),
             "Metres per storey: heights are estimated from levels (and levels from heights) "
             "with it when a building has only one of them.", advanced=True)
         self.add(QgsProcessingParameterField(
             self.HEIGHT_FIELD, "Building height field (cadastre)",
-            parentLayerParameterName=self.BUILDINGS, type=QgsProcessingParameterField.Numeric,
+            parentLayerParameterName=self.BUILDINGS, type=QgsProcessingParameterField.DataType.Numeric,
             optional=True),
             "A field with the building height in metres; it wins over OSM height tags.",
             advanced=True)
         self.add(QgsProcessingParameterField(
             self.LEVELS_FIELD, "Number of storeys field (cadastre)",
-            parentLayerParameterName=self.BUILDINGS, type=QgsProcessingParameterField.Numeric,
+            parentLayerParameterName=self.BUILDINGS, type=QgsProcessingParameterField.DataType.Numeric,
             optional=True),
             "A field with the number of storeys; it wins over OSM building:levels.",
             advanced=True)
         self.add(QgsProcessingParameterFeatureSink(
-            self.OUTPUT, "City blocks", QgsProcessing.TypeVectorPolygon),
+            self.OUTPUT, "City blocks", QgsProcessing.SourceType.TypeVectorPolygon),
             "Block polygons with block_id, area_m2, perimeter_m, compactness, aspect_ratio, "
             "n_dead_ends, n_buildings, building_coverage, n_parcels.")
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT_BUILDINGS, "Buildings with blocks and attributes",
-            QgsProcessing.TypeVectorPolygon, optional=True, createByDefault=True),
+            QgsProcessing.SourceType.TypeVectorPolygon, optional=True, createByDefault=True),
             "The footprints with their fields plus block_id, in_block, height_m, "
             "height_estimated, levels, building_type and the raw tag values.")
         self.add(QgsProcessingParameterFeatureSink(
-            self.OUTPUT_PARCELS, "Parcels with blocks", QgsProcessing.TypeVectorPolygon,
+            self.OUTPUT_PARCELS, "Parcels with blocks", QgsProcessing.SourceType.TypeVectorPolygon,
             optional=True, createByDefault=True),
             "The parcels with their fields plus block_id and in_block.")
 
@@ -151,7 +151,7 @@ class ExtractBlocks(AlgorithmBase):
         results = {}
         results[self.OUTPUT] = qgis_io.write_sink(
             self, parameters, self.OUTPUT, context, result.geometry, result.table,
-            blocks.BLOCK_FIELDS, QgsWkbTypes.Polygon, frame.source_crs, frame.crs, feedback)
+            blocks.BLOCK_FIELDS, QgsWkbTypes.Type.Polygon, frame.source_crs, frame.crs, feedback)
         qgis_io.style_output(context, results[self.OUTPUT], "blocks.qml")
         feedback.setProgress(80)
         if buildings is not None:
@@ -227,7 +227,7 @@ class ExtractBlocks(AlgorithmBase):
         out["source_fid"] = frame.fids
         out["area_m2"] = shapely.area(frame.geometry)
         return qgis_io.write_sink(self, parameters, name, context, frame.geometry, out,
-                                  carried + fields, QgsWkbTypes.MultiPolygon, frame.source_crs,
+                                  carried + fields, QgsWkbTypes.Type.MultiPolygon, frame.source_crs,
                                   frame.crs, feedback)
 
     @staticmethod
@@ -253,7 +253,7 @@ def _text(value):
         try:
             from qgis.PyQt.QtCore import Qt
 
-            return to_string(Qt.ISODate)
+            return to_string(Qt.DateFormat.ISODate)
         except TypeError:
             return to_string()
     return str(value)

@@ -74,7 +74,7 @@ class ExtractRoadHierarchy(AlgorithmBase):
 
     def initAlgorithm(self, config=None):  # noqa: N802
         self.add(QgsProcessingParameterFeatureSource(
-            self.INPUT, "Road lines", [QgsProcessing.TypeVectorLine]),
+            self.INPUT, "Road lines", [QgsProcessing.SourceType.TypeVectorLine]),
             "Any line layer: the 'lines' layer of an .osm.pbf file, a cadastre or road shapefile.")
         self.add(QgsProcessingParameterField(
             self.CLASS_FIELD, "Road class field", defaultValue="highway",
@@ -98,37 +98,37 @@ class ExtractRoadHierarchy(AlgorithmBase):
             "Road classes taken as arterials (level 0) by the OSM-class method.", advanced=True)
         self.add(QgsProcessingParameterNumber(
             self.ARTERIAL_SHARE, "Arterial share of street length (topological)",
-            QgsProcessingParameterNumber.Double, defaultValue=0.1, minValue=0.001, maxValue=1.0),
+            QgsProcessingParameterNumber.Type.Double, defaultValue=0.1, minValue=0.001, maxValue=1.0),
             "Share of the total street length taken as arterials when they are chosen "
             "topologically (Aliaga et al.: 'a small percentage of the longest streets').",
             advanced=True)
         self.add(QgsProcessingParameterNumber(
-            self.SNAP_TOLERANCE, "Node snapping tolerance (m)", QgsProcessingParameterNumber.Double,
+            self.SNAP_TOLERANCE, "Node snapping tolerance (m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=1.0, minValue=0.0, maxValue=50.0),
             "Intersections closer than this are merged; duplicate edges within it are dropped.",
             advanced=True)
         self.add(QgsProcessingParameterNumber(
-            self.MIN_DANGLE_LENGTH, "Minimum dead-end length (m)", QgsProcessingParameterNumber.Double,
+            self.MIN_DANGLE_LENGTH, "Minimum dead-end length (m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=5.0, minValue=0.0, maxValue=500.0),
             "Dead-end edges shorter than this are removed as digitising slivers.", advanced=True)
         self.add(QgsProcessingParameterNumber(
             self.MAX_DEFLECTION, "Maximum deflection of a continuous street (degrees)",
-            QgsProcessingParameterNumber.Double, defaultValue=45.0, minValue=0.0, maxValue=90.0),
+            QgsProcessingParameterNumber.Type.Double, defaultValue=45.0, minValue=0.0, maxValue=90.0),
             "Two edges continue one street through an intersection if they deflect less than this.",
             advanced=True)
         self.add(QgsProcessingParameterFeatureSource(
-            self.PARCELS, "Parcels", [QgsProcessing.TypeVectorPolygon], optional=True),
+            self.PARCELS, "Parcels", [QgsProcessing.SourceType.TypeVectorPolygon], optional=True),
             "Cadastre parcels: when given, intersections get the mean parcel area nearby "
             "(Aliaga's a(v)); otherwise only the mean block area.")
         self.add(QgsProcessingParameterNumber(
-            self.PARCEL_RADIUS, "Parcel search radius (m)", QgsProcessingParameterNumber.Double,
+            self.PARCEL_RADIUS, "Parcel search radius (m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=100.0, minValue=1.0, maxValue=5000.0),
             "Parcels within this distance of an intersection count as nearby.", advanced=True)
         self.add(QgsProcessingParameterFeatureSink(
-            self.OUTPUT, "Road hierarchy", QgsProcessing.TypeVectorLine),
+            self.OUTPUT, "Road hierarchy", QgsProcessing.SourceType.TypeVectorLine),
             "Cleaned road edges with level (0 = arterial), road_class, length_m, street_id.")
         self.add(QgsProcessingParameterFeatureSink(
-            self.OUTPUT_INTERSECTIONS, "Intersections", QgsProcessing.TypeVectorPoint,
+            self.OUTPUT_INTERSECTIONS, "Intersections", QgsProcessing.SourceType.TypeVectorPoint,
             optional=True, createByDefault=True),
             "Intersection and street-end points with the Aliaga et al. 2008 attributes.")
 
@@ -173,7 +173,7 @@ class ExtractRoadHierarchy(AlgorithmBase):
         results = {}
         results[self.OUTPUT] = qgis_io.write_sink(
             self, parameters, self.OUTPUT, context, graph.geometry, h.roads_table(), ROAD_FIELDS,
-            QgsWkbTypes.LineString, frame.source_crs, frame.crs, feedback)
+            QgsWkbTypes.Type.LineString, frame.source_crs, frame.crs, feedback)
         qgis_io.style_output(context, results[self.OUTPUT], "roads_by_level.qml")
         feedback.setProgress(85)
         if self.OUTPUT_INTERSECTIONS in parameters and parameters[self.OUTPUT_INTERSECTIONS] is not None:
@@ -182,7 +182,7 @@ class ExtractRoadHierarchy(AlgorithmBase):
             points = shapely.points(graph.nodes)
             results[self.OUTPUT_INTERSECTIONS] = qgis_io.write_sink(
                 self, parameters, self.OUTPUT_INTERSECTIONS, context, points, table,
-                INTERSECTION_FIELDS, QgsWkbTypes.Point, frame.source_crs, frame.crs, feedback)
+                INTERSECTION_FIELDS, QgsWkbTypes.Type.Point, frame.source_crs, frame.crs, feedback)
             qgis_io.style_output(context, results[self.OUTPUT_INTERSECTIONS], "intersections.qml")
         feedback.setProgress(100)
         return results

@@ -85,13 +85,13 @@ class GrowRoads(AlgorithmBase):
         d = growth.GrowthSettings()
         patterns = ["Organic", "Grid", "Radial"]
         self.add(QgsProcessingParameterFeatureSource(
-            self.BOUNDARY, "Boundary", [QgsProcessing.TypeVectorPolygon], optional=True),
+            self.BOUNDARY, "Boundary", [QgsProcessing.SourceType.TypeVectorPolygon], optional=True),
             "Polygon(s) of the city region: every road is grown inside them (Scharl's mask). "
             "Several features are merged. Without a boundary, roads grow around the sketched "
             "major roads (one major segment length beyond their extent) and the outskirts are "
             "closed by Scharl's bulged convex hull of the major nodes (sec. 4.2.5).")
         self.add(QgsProcessingParameterFeatureSource(
-            self.MAJOR_ROADS, "Sketched major roads", [QgsProcessing.TypeVectorLine],
+            self.MAJOR_ROADS, "Sketched major roads", [QgsProcessing.SourceType.TypeVectorLine],
             optional=True),
             "Major roads drawn by hand: clipped to the boundary and kept as they are (level 0, "
             "pattern 'sketch'); growth continues from their dead ends and branches off them.")
@@ -118,54 +118,54 @@ class GrowRoads(AlgorithmBase):
             "boundary's centroid.")
         self.add(QgsProcessingParameterNumber(
             self.MAJOR_SEGMENT_LENGTH, "Major segment length (m)",
-            QgsProcessingParameterNumber.Double, defaultValue=d.major_length, minValue=5.0,
+            QgsProcessingParameterNumber.Type.Double, defaultValue=d.major_length, minValue=5.0,
             maxValue=10000.0),
             "Nominal length of one major road segment: about the side of a quarter.")
         self.add(QgsProcessingParameterNumber(
             self.MINOR_SEGMENT_LENGTH, "Minor segment length (m)",
-            QgsProcessingParameterNumber.Double, defaultValue=d.minor_length, minValue=5.0,
+            QgsProcessingParameterNumber.Type.Double, defaultValue=d.minor_length, minValue=5.0,
             maxValue=10000.0),
             "Nominal length of one minor road segment: about the side of a city block.")
         self.add(QgsProcessingParameterNumber(
             self.LENGTH_DEVIATION, "Segment length deviation (%)",
-            QgsProcessingParameterNumber.Double, defaultValue=100 * d.length_deviation,
+            QgsProcessingParameterNumber.Type.Double, defaultValue=100 * d.length_deviation,
             minValue=0.0, maxValue=90.0),
             "Each segment is the nominal length ± up to this share (a fifth of it for grids, "
             "whose blocks stay regular).", advanced=True)
         self.add(QgsProcessingParameterNumber(
             self.ANGLE_DEVIATION, "Angle deviation (degrees)",
-            QgsProcessingParameterNumber.Double, defaultValue=d.angle_deviation, minValue=0.0,
+            QgsProcessingParameterNumber.Type.Double, defaultValue=d.angle_deviation, minValue=0.0,
             maxValue=90.0),
             "Largest random turn of an organic street per segment, and of an organic branch "
             "away from 90°. Grid streets deviate at most a tenth of it (2° at most); radial "
             "streets are re-oriented exactly.")
         self.add(QgsProcessingParameterNumber(
             self.BRANCH_PROBABILITY, "Branch probability",
-            QgsProcessingParameterNumber.Double, defaultValue=d.branch_probability,
+            QgsProcessingParameterNumber.Type.Double, defaultValue=d.branch_probability,
             minValue=0.0, maxValue=1.0),
             "Chance that a new street branches off each side of a street end.")
         self.add(QgsProcessingParameterNumber(
-            self.SNAP_DISTANCE, "Snapping distance (m)", QgsProcessingParameterNumber.Double,
+            self.SNAP_DISTANCE, "Snapping distance (m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=d.snap_distance, minValue=0.0, maxValue=5000.0),
             "A street end this close to a junction snaps to it, and to a road this close "
             "ahead is extended to it; must be under half the shorter segment length.",
             advanced=True)
         self.add(QgsProcessingParameterNumber(
             self.MIN_STREET_DISTANCE, "Minimum street distance (m)",
-            QgsProcessingParameterNumber.Double, defaultValue=d.min_street_distance,
+            QgsProcessingParameterNumber.Type.Double, defaultValue=d.min_street_distance,
             minValue=0.0, maxValue=5000.0),
             "Near-parallel streets closer than this are duplicates: the newer one is dropped.",
             advanced=True)
         self.add(QgsProcessingParameterNumber(
-            self.MAJOR_WIDTH, "Major road width (m)", QgsProcessingParameterNumber.Double,
+            self.MAJOR_WIDTH, "Major road width (m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=d.major_width, minValue=0.0, maxValue=200.0),
             "Written to width_m of major roads (used by street surfaces).", advanced=True)
         self.add(QgsProcessingParameterNumber(
-            self.MINOR_WIDTH, "Minor road width (m)", QgsProcessingParameterNumber.Double,
+            self.MINOR_WIDTH, "Minor road width (m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=d.minor_width, minValue=0.0, maxValue=200.0),
             "Written to width_m of minor roads.", advanced=True)
         self.add(QgsProcessingParameterNumber(
-            self.MAX_SEGMENTS, "Maximum number of segments", QgsProcessingParameterNumber.Integer,
+            self.MAX_SEGMENTS, "Maximum number of segments", QgsProcessingParameterNumber.Type.Integer,
             defaultValue=d.max_segments, minValue=1, maxValue=1000000),
             "Safety cap: growth stops after this many segments (quarters nearest the centre "
             "are filled first).", advanced=True)
@@ -175,11 +175,11 @@ class GrowRoads(AlgorithmBase):
             "segments steeper than the maximum slope turn (by up to 45°) or are dropped. "
             "Areas without heights count as flat.")
         self.add(QgsProcessingParameterNumber(
-            self.MAX_SLOPE, "Maximum slope (%)", QgsProcessingParameterNumber.Double,
+            self.MAX_SLOPE, "Maximum slope (%)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=100 * d.max_slope, minValue=0.1, maxValue=100.0),
             "Steepest grade of a grown segment along its length, with a DEM.")
         self.add(QgsProcessingParameterFeatureSource(
-            self.OBSTACLES, "Obstacles", [QgsProcessing.TypeVectorPolygon],
+            self.OBSTACLES, "Obstacles", [QgsProcessing.SourceType.TypeVectorPolygon],
             optional=True),
             "Water, parks, protected land: no grown road enters them; streets are shortened "
             "or turn away.")
@@ -195,7 +195,7 @@ class GrowRoads(AlgorithmBase):
         self.add_seed(
             "The same seed and inputs give the same network.")
         self.add(QgsProcessingParameterFeatureSink(
-            self.OUTPUT, "Grown roads", QgsProcessing.TypeVectorLine),
+            self.OUTPUT, "Grown roads", QgsProcessing.SourceType.TypeVectorLine),
             "Roads with level (0 major, 1 minor), road_class, pattern, width_m, length_m.")
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
@@ -317,7 +317,7 @@ class GrowRoads(AlgorithmBase):
         table = result.table()
         table.insert(0, "edge_id", np.arange(1, len(table) + 1))
         dest = qgis_io.write_sink(self, parameters, self.OUTPUT, context, result.geometry, table,
-                                  ROAD_FIELDS, QgsWkbTypes.LineString, frame.source_crs, crs,
+                                  ROAD_FIELDS, QgsWkbTypes.Type.LineString, frame.source_crs, crs,
                                   feedback)
         qgis_io.style_output(context, dest, "roads_by_level.qml")
         feedback.setProgress(100)

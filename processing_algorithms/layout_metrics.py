@@ -83,7 +83,7 @@ class LayoutMetrics(AlgorithmBase):
         )
 
     def initAlgorithm(self, config=None):  # noqa: N802
-        line, poly = [QgsProcessing.TypeVectorLine], [QgsProcessing.TypeVectorPolygon]
+        line, poly = [QgsProcessing.SourceType.TypeVectorLine], [QgsProcessing.SourceType.TypeVectorPolygon]
         self.add(QgsProcessingParameterFeatureSource(
             self.ROADS, "Roads", line, optional=True),
             "Road centrelines of the layout to measure (e.g. a synthesis, or the output of "
@@ -119,7 +119,7 @@ class LayoutMetrics(AlgorithmBase):
             "Polygon(s) for the densities of the example. Default: the convex hull of the "
             "example layers.", advanced=True)
         self.add(QgsProcessingParameterNumber(
-            self.ROAD_HALF_WIDTH, "Road half-width (m)", QgsProcessingParameterNumber.Double,
+            self.ROAD_HALF_WIDTH, "Road half-width (m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=3.0, minValue=0.0, maxValue=100.0),
             "The road surface is the centrelines buffered by this on each side; footprints "
             "must not overlap it, and setbacks are measured from its edge.", advanced=True)
@@ -141,28 +141,28 @@ class LayoutMetrics(AlgorithmBase):
             "drivable: no footways, paths, cycleways, service roads or tracks. Off: every line "
             "counts, and the log says how many non-drivable lines are counted.")
         self.add(QgsProcessingParameterNumber(
-            self.MIN_BLOCK_AREA, "Smallest block (m²)", QgsProcessingParameterNumber.Double,
+            self.MIN_BLOCK_AREA, "Smallest block (m²)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=400.0, minValue=0.0, maxValue=1e6),
             "Faces of the road graph smaller than this are traffic islands, not blocks (as in "
             "Extract blocks); the log counts them. 0 keeps every face.")
         self.add(QgsProcessingParameterNumber(
-            self.MIN_BLOCK_WIDTH, "Thinnest block (m)", QgsProcessingParameterNumber.Double,
+            self.MIN_BLOCK_WIDTH, "Thinnest block (m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=8.0, minValue=0.0, maxValue=1000.0),
             "Faces whose mean width 2·area/perimeter is under this are slivers between dual "
             "carriageways; the log counts them. 0 keeps every face.")
         self.add(QgsProcessingParameterNumber(
             self.EDGE_DISTANCE, "Clip ends at the study-area edge (m)",
-            QgsProcessingParameterNumber.Double, defaultValue=0.0, minValue=0.0, maxValue=1000.0),
+            QgsProcessingParameterNumber.Type.Double, defaultValue=0.0, minValue=0.0, maxValue=1000.0),
             "Nodes closer than this to the study area's boundary are not counted in densities "
             "and shares (the cut ends of a clipped network are not dead ends). 0 counts every "
             "node inside the area or on its boundary.", advanced=True)
         self.add(QgsProcessingParameterNumber(
-            self.SNAP_TOLERANCE, "Node snapping (m)", QgsProcessingParameterNumber.Double,
+            self.SNAP_TOLERANCE, "Node snapping (m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=0.5, minValue=0.0, maxValue=10.0),
             "Road nodes closer than this are one node, and edges between the same nodes this "
             "close are one street. 0 counts exactly what noding the lines gives.", advanced=True)
         self.add(QgsProcessingParameterFeatureSink(
-            self.OUTPUT, "Layout metrics table", QgsProcessing.TypeVector),
+            self.OUTPUT, "Layout metrics table", QgsProcessing.SourceType.TypeVector),
             "One row per measure: kind, metric, statistic, unit, candidate and example values, "
             "relative difference, Wasserstein distance (raw and divided by the example's "
             "standard deviation), Kolmogorov-Smirnov statistic and p-value, sample sizes.")
@@ -282,7 +282,7 @@ class LayoutMetrics(AlgorithmBase):
         results[self.OUTPUT] = qgis_io.write_sink(
             self, parameters, self.OUTPUT, context,
             np.array([shapely.Point()] * len(table), dtype=object), table,
-            list(metrics.COMPARISON_COLUMNS), QgsWkbTypes.NoGeometry,
+            list(metrics.COMPARISON_COLUMNS), QgsWkbTypes.Type.NoGeometry,
             QgsCoordinateReferenceSystem(), QgsCoordinateReferenceSystem(), feedback)
         feedback.setProgress(85)
 

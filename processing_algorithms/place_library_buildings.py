@@ -50,12 +50,12 @@ class PlaceLibraryBuildings(AlgorithmBase):
         )
 
     def initAlgorithm(self, config=None):  # noqa: N802
-        poly = [QgsProcessing.TypeVectorPolygon]
+        poly = [QgsProcessing.SourceType.TypeVectorPolygon]
         self.add(QgsProcessingParameterFeatureSource(self.PARCELS, "Parcels", poly),
                  "Parcels, e.g. from 'Subdivide blocks into parcels' (parcel_id is kept) or "
                  "a cadastre.")
         self.add(QgsProcessingParameterFeatureSource(
-            self.ROADS, "Roads", [QgsProcessing.TypeVectorLine]),
+            self.ROADS, "Roads", [QgsProcessing.SourceType.TypeVectorLine]),
             "Street centrelines: which parcel and building sides face a street.")
         self.add(QgsProcessingParameterFeatureSource(
             self.BUILDING_LIBRARY, "Building library", poly, optional=True),
@@ -63,16 +63,16 @@ class PlaceLibraryBuildings(AlgorithmBase):
             "comma-separated edge indices of the exterior ring (edge i runs from vertex i to "
             "i+1). Empty: the built-in library of twelve buildings.")
         self.add(QgsProcessingParameterNumber(
-            self.MIN_SETBACK, "Minimum setback (m)", QgsProcessingParameterNumber.Double,
+            self.MIN_SETBACK, "Minimum setback (m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=bestfit.DEFAULT_SETBACK, minValue=0.0, maxValue=100.0),
             "Distance kept between a building and its parcel's street sides.")
         self.add(QgsProcessingParameterNumber(
-            self.STREET_REACH, "Street reach (m)", QgsProcessingParameterNumber.Double,
+            self.STREET_REACH, "Street reach (m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=bestfit.DEFAULT_REACH, minValue=0.1, maxValue=1000.0),
             "A side faces a street when a ray this long cast perpendicular from its centre "
             "hits a road centreline (setback plus half a street).", advanced=True)
         self.add(QgsProcessingParameterNumber(
-            self.MAX_ANGLE, "Maximum angle to the street (°)", QgsProcessingParameterNumber.Double,
+            self.MAX_ANGLE, "Maximum angle to the street (°)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=bestfit.MAX_ANGLE, minValue=0.0, maxValue=90.0),
             "A facing side is at most this far from parallel to the street (Scharl: 30°).",
             advanced=True)
@@ -82,12 +82,12 @@ class PlaceLibraryBuildings(AlgorithmBase):
             "lowest corner (base_z, sunk_m; footprints get Z) and parcels steeper than the "
             "maximum parcel slope stay empty.")
         self.add(QgsProcessingParameterNumber(
-            self.MAX_PARCEL_SLOPE, "Maximum parcel slope (%)", QgsProcessingParameterNumber.Double,
+            self.MAX_PARCEL_SLOPE, "Maximum parcel slope (%)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=100 * bestfit.DEFAULT_MAX_PARCEL_SLOPE, minValue=0.0, maxValue=1000.0),
             "With an elevation model: parcels whose fitted terrain plane is steeper than this "
             "get no building (Scharl's maxParcelSlope).")
         self.add(QgsProcessingParameterFeatureSink(
-            self.OUTPUT, "Placed buildings", QgsProcessing.TypeVectorPolygon),
+            self.OUTPUT, "Placed buildings", QgsProcessing.SourceType.TypeVectorPolygon),
             "Placed library buildings with source_id, rotation, offset_x/y, parcel_id and the "
             "library's attributes.")
 
@@ -124,7 +124,7 @@ class PlaceLibraryBuildings(AlgorithmBase):
         has_z = len(result.geometry) and bool(shapely.has_z(result.geometry).any())
         dest = qgis_io.write_sink(self, parameters, self.OUTPUT, context, result.geometry,
                                   result.table, bestfit.PLACEMENT_FIELDS + extra,
-                                  QgsWkbTypes.PolygonZ if has_z else QgsWkbTypes.Polygon,
+                                  QgsWkbTypes.Type.PolygonZ if has_z else QgsWkbTypes.Type.Polygon,
                                   parcels.source_crs, crs, feedback)
         qgis_io.style_output(context, dest, "buildings_by_height.qml")
         feedback.setProgress(100)

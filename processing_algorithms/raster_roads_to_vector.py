@@ -61,19 +61,19 @@ class RasterRoadsToVector(AlgorithmBase):
                                             parentLayerParameterName=self.INPUT, optional=True),
                  "The band holding the road values (default 1).")
         self.add(QgsProcessingParameterNumber(
-            self.THRESHOLD, "Threshold", QgsProcessingParameterNumber.Double, defaultValue=127.0),
+            self.THRESHOLD, "Threshold", QgsProcessingParameterNumber.Type.Double, defaultValue=127.0),
             "Pixels above this value are road (thesis: 127 of 0 .. 255; use 0 for a 0/1 mask).")
         self.add(QgsProcessingParameterNumber(
             self.SIMPLIFY, "Simplification tolerance (map units)",
-            QgsProcessingParameterNumber.Double, defaultValue=3.0, minValue=0.0, maxValue=1000.0),
+            QgsProcessingParameterNumber.Type.Double, defaultValue=3.0, minValue=0.0, maxValue=1000.0),
             "Douglas-Peucker tolerance (thesis: 3 m).")
         self.add(QgsProcessingParameterNumber(
             self.MIN_DEAD_END, "Shortest dead end kept (map units)",
-            QgsProcessingParameterNumber.Double, defaultValue=25.0, minValue=0.0,
+            QgsProcessingParameterNumber.Type.Double, defaultValue=25.0, minValue=0.0,
             maxValue=10000.0),
             "Dead-end chains this long or shorter are removed (thesis: 25 m).")
         self.add(QgsProcessingParameterNumber(
-            self.MAX_GAP, "Close gaps up to (map units)", QgsProcessingParameterNumber.Double,
+            self.MAX_GAP, "Close gaps up to (map units)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=0.0, minValue=0.0, maxValue=1000.0),
             "Extend dead ends straight ahead by up to this to meet a road (0 = off, as in the "
             "thesis).", advanced=True)
@@ -83,7 +83,7 @@ class RasterRoadsToVector(AlgorithmBase):
             "road's end (removes skeleton spurs of wide roads, keeps side streets). "
             "Unchecked: the thesis's skeleton length.", advanced=True)
         self.add(QgsProcessingParameterFeatureSink(
-            self.OUTPUT, "Road graph", QgsProcessing.TypeVectorLine),
+            self.OUTPUT, "Road graph", QgsProcessing.SourceType.TypeVectorLine),
             "Planar road edges between junctions and dead ends.")
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
@@ -161,7 +161,7 @@ class RasterRoadsToVector(AlgorithmBase):
                               "length_m": shapely.length(result.geometry) if n else [],
                               "node_from": g.u if n else [], "node_to": g.v if n else []})
         dest = qgis_io.write_sink(self, parameters, self.OUTPUT, context, result.geometry, table,
-                                  FIELDS, QgsWkbTypes.LineString, layer.crs(), layer.crs(),
+                                  FIELDS, QgsWkbTypes.Type.LineString, layer.crs(), layer.crs(),
                                   feedback)
         feedback.setProgress(100)
         return {self.OUTPUT: dest}

@@ -79,13 +79,13 @@ class SplitDomain(AlgorithmBase):
 
     def initAlgorithm(self, config=None):  # noqa: N802
         self.add(QgsProcessingParameterFeatureSource(
-            self.REGION, "Region", [QgsProcessing.TypeVectorPolygon]),
+            self.REGION, "Region", [QgsProcessing.SourceType.TypeVectorPolygon]),
             "Polygon(s) to lay out (holes allowed). Their outlines are taken as streets.")
         self.add(QgsProcessingParameterFeatureSource(
-            self.KEY_ROADS, "Key roads (kept)", [QgsProcessing.TypeVectorLine], optional=True),
+            self.KEY_ROADS, "Key roads (kept)", [QgsProcessing.SourceType.TypeVectorLine], optional=True),
             "Main roads the design must keep; the parts inside the region split it.")
         self.add(QgsProcessingParameterFeatureSource(
-            self.KEY_AREAS, "Key areas (parks, school, lake)", [QgsProcessing.TypeVectorPolygon],
+            self.KEY_AREAS, "Key areas (parks, school, lake)", [QgsProcessing.SourceType.TypeVectorPolygon],
             optional=True),
             "Areas left out of the layout and kept as parcels of their own land use.")
         self.add(QgsProcessingParameterField(
@@ -99,25 +99,25 @@ class SplitDomain(AlgorithmBase):
             "be used. Ignored when a template layer is given.")
         self.add(QgsProcessingParameterFeatureSource(
             self.TEMPLATE_LAYER, "Template layer (drawn templates)",
-            [QgsProcessing.TypeVectorPolygon], optional=True),
+            [QgsProcessing.SourceType.TypeVectorPolygon], optional=True),
             "User templates drawn in QGIS: one polygon per parcel or area, a text field "
             "'template' (the template each belongs to) and 'label' with the paper's labels: "
             "R parcel, P or A park / area, S for a spike. Rows of parcels are recognised "
             "from the drawing (one row: strip, two rows: double strip).", advanced=True)
         self.add(QgsProcessingParameterNumber(
-            self.PARCEL_LENGTH, "Parcel length (depth, m)", QgsProcessingParameterNumber.Double,
+            self.PARCEL_LENGTH, "Parcel length (depth, m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=30.0, minValue=1.0, maxValue=1000.0),
             "Depth of a parcel from its street (the paper: 30 m).")
         self.add(QgsProcessingParameterNumber(
-            self.PARCEL_WIDTH, "Parcel width (frontage, m)", QgsProcessingParameterNumber.Double,
+            self.PARCEL_WIDTH, "Parcel width (frontage, m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=18.0, minValue=1.0, maxValue=1000.0),
             "Width of a parcel along its street (the paper: 18 m).")
         self.add(QgsProcessingParameterNumber(
-            self.STREET_WIDTH, "Street width (m)", QgsProcessingParameterNumber.Double,
+            self.STREET_WIDTH, "Street width (m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=15.0, minValue=1.0, maxValue=200.0),
             "Full width of every street (the paper: 15 m); parcels stop at its edge.")
         self.add(QgsProcessingParameterNumber(
-            self.VARIATIONS, "Variations", QgsProcessingParameterNumber.Integer,
+            self.VARIATIONS, "Variations", QgsProcessingParameterNumber.Type.Integer,
             defaultValue=1, minValue=1, maxValue=100),
             "Number of layouts to make (field 'variation' in every output).")
         self.add_seed(
@@ -143,15 +143,15 @@ class SplitDomain(AlgorithmBase):
             "and its wedges become pocket parks; a misshapen lot smaller than a parcel becomes "
             "a pocket park. The parks still count in the metrics.", advanced=True)
         self.add(QgsProcessingParameterFeatureSink(
-            self.OUTPUT_ROADS, "Streets", QgsProcessing.TypeVectorLine),
+            self.OUTPUT_ROADS, "Streets", QgsProcessing.SourceType.TypeVectorLine),
             "Street centre lines, noded at every junction, with level (0 key road, 1 region "
             "outline, 2 split street, 3 cul-de-sac), kind, variation and length_m.")
         self.add(QgsProcessingParameterFeatureSink(
-            self.OUTPUT_PARCELS, "Parcels", QgsProcessing.TypeVectorPolygon),
+            self.OUTPUT_PARCELS, "Parcels", QgsProcessing.SourceType.TypeVectorPolygon),
             "Parcels with variation, land_use, template, area_m2, frontage_m, "
             "has_street_access, p_angle, p_area and undesirable, styled by quality.")
         self.add(QgsProcessingParameterFeatureSink(
-            self.OUTPUT_METRICS, "Layout metrics (Table 1)", QgsProcessing.TypeVector,
+            self.OUTPUT_METRICS, "Layout metrics (Table 1)", QgsProcessing.SourceType.TypeVector,
             optional=True),
             "One row per variation: land use (l_s, l_r, l_p, l_o %), blocks (b_n per km², "
             "b_max, b_avg, b_min m), streets (s_l km/km², s_i, s_d per km²), parcels "
@@ -243,18 +243,18 @@ class SplitDomain(AlgorithmBase):
         results = {}
         results[self.OUTPUT_ROADS] = qgis_io.write_sink(
             self, parameters, self.OUTPUT_ROADS, context, road_geoms, road_table,
-            domain_split.ROAD_FIELDS, QgsWkbTypes.LineString, region.source_crs, crs, feedback)
+            domain_split.ROAD_FIELDS, QgsWkbTypes.Type.LineString, region.source_crs, crs, feedback)
         qgis_io.style_output(context, results[self.OUTPUT_ROADS], "roads_by_level.qml")
         results[self.OUTPUT_PARCELS] = qgis_io.write_sink(
             self, parameters, self.OUTPUT_PARCELS, context, parcel_geoms, parcel_table,
-            domain_split.PARCEL_FIELDS, QgsWkbTypes.MultiPolygon, region.source_crs, crs,
+            domain_split.PARCEL_FIELDS, QgsWkbTypes.Type.MultiPolygon, region.source_crs, crs,
             feedback)
         qgis_io.style_output(context, results[self.OUTPUT_PARCELS], "parcels_by_quality.qml")
         metrics_table = pd.DataFrame(rows)
         results[self.OUTPUT_METRICS] = qgis_io.write_sink(
             self, parameters, self.OUTPUT_METRICS, context,
             np.array([shapely.Point()] * len(metrics_table), dtype=object), metrics_table,
-            domain_split.METRIC_FIELDS, QgsWkbTypes.NoGeometry,
+            domain_split.METRIC_FIELDS, QgsWkbTypes.Type.NoGeometry,
             QgsCoordinateReferenceSystem(), QgsCoordinateReferenceSystem(), feedback)
         feedback.setProgress(100)
         return results

@@ -72,11 +72,11 @@ class SubdivideParcels(AlgorithmBase):
         # built: methods registered later are appended, so enum indices stay valid
         self.method_keys = list(parcels.method_names())
         self.add(QgsProcessingParameterFeatureSource(
-            self.BLOCKS, "Blocks", [QgsProcessing.TypeVectorPolygon], optional=True),
+            self.BLOCKS, "Blocks", [QgsProcessing.SourceType.TypeVectorPolygon], optional=True),
             "Block polygons outlined by street centrelines, e.g. the output of 'Extract city "
             "blocks' (its block_id is kept). Give either Blocks or Roads.")
         self.add(QgsProcessingParameterFeatureSource(
-            self.ROADS, "Roads (instead of blocks)", [QgsProcessing.TypeVectorLine],
+            self.ROADS, "Roads (instead of blocks)", [QgsProcessing.SourceType.TypeVectorLine],
             optional=True),
             "Road centrelines: blocks are extracted from them as 'Extract city blocks' does "
             "(OSM lines are filtered to drivable 'highway' classes; a layer without that field "
@@ -84,7 +84,7 @@ class SubdivideParcels(AlgorithmBase):
             "Give either Blocks or Roads.")
         self.add(QgsProcessingParameterField(
             self.STREET_WIDTH_FIELD, "Street width field (on roads)",
-            parentLayerParameterName=self.ROADS, type=QgsProcessingParameterField.Numeric,
+            parentLayerParameterName=self.ROADS, type=QgsProcessingParameterField.DataType.Numeric,
             optional=True),
             "Full street width in metres per road line; roads with an empty value use the "
             "street width below. Only with Roads.")
@@ -99,24 +99,24 @@ class SubdivideParcels(AlgorithmBase):
             "parcel size from the blocks' parcel_area field (e.g. the blocks of 'Synthesize "
             "roads (random walk)'), else lot width² x 1.5 (Aliaga et al. 2008, sec. 3.1.2).")
         self.add(QgsProcessingParameterNumber(
-            self.MAX_AREA, "Maximum parcel area (m²)", QgsProcessingParameterNumber.Double,
+            self.MAX_AREA, "Maximum parcel area (m²)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=parcels.DEFAULT_MAX_AREA, minValue=1.0, maxValue=self.MAX_AREA_LIMIT),
             "Recursive: lots larger than this are split again. Skeleton: lots are made "
             "narrower than the lot width to stay under it (never under the minimum width).")
         self.add(QgsProcessingParameterNumber(
-            self.LOT_WIDTH, "Lot width along the street (m)", QgsProcessingParameterNumber.Double,
+            self.LOT_WIDTH, "Lot width along the street (m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=parcels.DEFAULT_LOT_WIDTH, minValue=0.1, maxValue=self.MAX_WIDTH_LIMIT),
             "Skeleton: target frontage of a parcel (Yang et al. 2013 aim at 18 m). Voronoi along "
             "the OBB axis: sets the mean parcel area (lot width² x 1.5) of blocks without a "
             "parcel_area.")
         self.add(QgsProcessingParameterNumber(
-            self.IRREGULARITY, "Irregularity (0-1)", QgsProcessingParameterNumber.Double,
+            self.IRREGULARITY, "Irregularity (0-1)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=parcels.DEFAULT_IRREGULARITY, minValue=0.0, maxValue=1.0),
             "0 gives regular lots. Recursive: cuts move up to 25 % of the lot length off the "
             "middle and turn up to 15° off the perpendicular at 1. Skeleton: cuts move up to "
             "40 % of a lot width at 1.")
         self.add(QgsProcessingParameterNumber(
-            self.STREET_WIDTH, "Street width (m)", QgsProcessingParameterNumber.Double,
+            self.STREET_WIDTH, "Street width (m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=parcels.DEFAULT_STREET_WIDTH, minValue=0.0,
             maxValue=self.MAX_WIDTH_LIMIT),
             "Full width of the streets (blocks shrink by half of it on every side); with "
@@ -131,18 +131,18 @@ class SubdivideParcels(AlgorithmBase):
             "The same seed gives the same parcels; each block draws its own random numbers, "
             "so a block's parcels do not change when other blocks are added.")
         self.add(QgsProcessingParameterNumber(
-            self.MIN_AREA, "Minimum parcel area (m²)", QgsProcessingParameterNumber.Double,
+            self.MIN_AREA, "Minimum parcel area (m²)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=parcels.DEFAULT_MIN_AREA, minValue=0.0, maxValue=self.MAX_AREA_LIMIT),
             "No cut makes a parcel smaller; smaller skeleton pieces merge into a neighbour; "
             "pieces of shrunk blocks smaller than this get no parcel.", advanced=True)
         self.add(QgsProcessingParameterNumber(
-            self.MIN_WIDTH, "Minimum parcel width (m)", QgsProcessingParameterNumber.Double,
+            self.MIN_WIDTH, "Minimum parcel width (m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=parcels.DEFAULT_MIN_WIDTH, minValue=0.0,
             maxValue=self.MAX_WIDTH_LIMIT),
             "No cut makes a parcel narrower (the short side of its minimum bounding "
             "rectangle).", advanced=True)
         self.add(QgsProcessingParameterFeatureSink(
-            self.OUTPUT, "Parcels", QgsProcessing.TypeVectorPolygon),
+            self.OUTPUT, "Parcels", QgsProcessing.SourceType.TypeVectorPolygon),
             "Parcels with parcel_id, block_id, area_m2, frontage_m, has_street_access, "
             "p_angle, p_area, undesirable and method, styled by Yang's quality.")
 
@@ -204,7 +204,7 @@ class SubdivideParcels(AlgorithmBase):
                 "than the minimum parcel area (lower the street width or the minimum area).")
         dest = qgis_io.write_sink(
             self, parameters, self.OUTPUT, context, result.geometry, result.table,
-            parcels.PARCEL_FIELDS, QgsWkbTypes.Polygon, frame.source_crs, frame.crs, feedback)
+            parcels.PARCEL_FIELDS, QgsWkbTypes.Type.Polygon, frame.source_crs, frame.crs, feedback)
         qgis_io.style_output(context, dest, "parcels_by_quality.qml")
         feedback.setProgress(100)
         return {self.OUTPUT: dest}

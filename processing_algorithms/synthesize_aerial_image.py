@@ -54,11 +54,11 @@ class SynthesizeAerialImage(AlgorithmBase):
 
     def initAlgorithm(self, config=None):  # noqa: N802
         self.add(QgsProcessingParameterFeatureSource(
-            self.PARCELS, "New parcels", [QgsProcessing.TypeVectorPolygon]),
+            self.PARCELS, "New parcels", [QgsProcessing.SourceType.TypeVectorPolygon]),
             "The parcels to render, e.g. the output of 'Subdivide blocks into parcels'. The "
             "image is in their CRS.")
         self.add(QgsProcessingParameterFeatureSource(
-            self.ROADS, "New roads", [QgsProcessing.TypeVectorLine], optional=True),
+            self.ROADS, "New roads", [QgsProcessing.SourceType.TypeVectorLine], optional=True),
             "Centrelines of the new streets: painted from the example's roads, and used to "
             "find each parcel's street side (without them: the outline of all parcels).")
         self.add(QgsProcessingParameterRasterLayer(
@@ -66,36 +66,36 @@ class SynthesizeAerialImage(AlgorithmBase):
             "A georeferenced aerial or satellite image of the example (RGB, grey or more "
             "bands, any CRS); read at its own resolution over the example parcels.")
         self.add(QgsProcessingParameterFeatureSource(
-            self.EXAMPLE_PARCELS, "Example parcels (or blocks)", [QgsProcessing.TypeVectorPolygon]),
+            self.EXAMPLE_PARCELS, "Example parcels (or blocks)", [QgsProcessing.SourceType.TypeVectorPolygon]),
             "The example's parcels (a cadastre) or blocks on the image; those not wholly on "
             "the image are not used.")
         self.add(QgsProcessingParameterFeatureSource(
-            self.EXAMPLE_ROADS, "Example roads", [QgsProcessing.TypeVectorLine],
+            self.EXAMPLE_ROADS, "Example roads", [QgsProcessing.SourceType.TypeVectorLine],
             optional=True),
             "Centrelines of the example's streets on the image: their pixels paint the new "
             "roads, and they give each example parcel's street side.")
         self.add(QgsProcessingParameterNumber(
-            self.PIXEL_SIZE, "Pixel size (m)", QgsProcessingParameterNumber.Double,
+            self.PIXEL_SIZE, "Pixel size (m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=0.5, minValue=0.01, maxValue=100.0),
             "Ground size of an output pixel.")
         self.add(QgsProcessingParameterNumber(
-            self.ROAD_WIDTH, "New road width (m)", QgsProcessingParameterNumber.Double,
+            self.ROAD_WIDTH, "New road width (m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=12.0, minValue=0.0, maxValue=200.0),
             "Full width of the painted new roads (0: roads are not painted).")
         self.add(QgsProcessingParameterNumber(
-            self.EXAMPLE_ROAD_WIDTH, "Example road width (m)", QgsProcessingParameterNumber.Double,
+            self.EXAMPLE_ROAD_WIDTH, "Example road width (m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=8.0, minValue=0.1, maxValue=200.0),
             "Full width of the example's roads on the image.")
         self.add_seed(
             "Among the nearly best example parcels one is drawn per parcel (against "
             "repetition), and an example road per new road: the same seed, the same image.")
         self.add(QgsProcessingParameterNumber(
-            self.MAX_STRETCH, "Largest stretch", QgsProcessingParameterNumber.Double,
+            self.MAX_STRETCH, "Largest stretch", QgsProcessingParameterNumber.Type.Double,
             defaultValue=2.0, minValue=1.0, maxValue=100.0),
             "An example parcel is a good match when neither side of its bounding box must be "
             "stretched or shrunk by more than this factor.", advanced=True)
         self.add(QgsProcessingParameterNumber(
-            self.SCANLINES, "Scanlines per parcel (s)", QgsProcessingParameterNumber.Integer,
+            self.SCANLINES, "Scanlines per parcel (s)", QgsProcessingParameterNumber.Type.Integer,
             defaultValue=32, minValue=2, maxValue=1000),
             "The paper's s: scanlines across each parcel's main axis that carry the warp.",
             advanced=True)

@@ -59,8 +59,8 @@ class SynthesizeBuildingAttributes(AlgorithmBase):
         )
 
     def initAlgorithm(self, config=None):  # noqa: N802
-        poly = [QgsProcessing.TypeVectorPolygon]
-        line = [QgsProcessing.TypeVectorLine]
+        poly = [QgsProcessing.SourceType.TypeVectorPolygon]
+        line = [QgsProcessing.SourceType.TypeVectorLine]
         self.add(QgsProcessingParameterFeatureSource(self.FOOTPRINTS, "Footprints", poly),
                  "Building footprints to attribute, e.g. from 'Synthesize footprints' or a "
                  "real layer with missing heights.")
@@ -76,7 +76,7 @@ class SynthesizeBuildingAttributes(AlgorithmBase):
                  "A numeric field with the number of storeys; wins over OSM tags and levels.")):
             self.add(QgsProcessingParameterField(
                 name, label, parentLayerParameterName=self.EXAMPLE_BUILDINGS,
-                type=QgsProcessingParameterField.Numeric, optional=True), text, advanced=True)
+                type=QgsProcessingParameterField.DataType.Numeric, optional=True), text, advanced=True)
         self.add(QgsProcessingParameterFeatureSource(
             self.ROADS, "Roads around the footprints", line, optional=True),
             "With Example roads, the distance to roads and to arterials (level 0, or OSM "
@@ -91,7 +91,7 @@ class SynthesizeBuildingAttributes(AlgorithmBase):
             "of the footprints).")
         self.add(QgsProcessingParameterNumber(
             self.K_NEIGHBOURS, "Candidates per footprint (k)",
-            QgsProcessingParameterNumber.Integer, defaultValue=9, minValue=1, maxValue=100),
+            QgsProcessingParameterNumber.Type.Integer, defaultValue=9, minValue=1, maxValue=100),
             "The k most similar example buildings are candidates; 1 copies the most similar.")
         self.add(QgsProcessingParameterEnum(
             self.CHOICE, "Choice among the candidates", options=[c[1] for c in self.CHOICES],
@@ -99,26 +99,26 @@ class SynthesizeBuildingAttributes(AlgorithmBase):
             "Most typical: the candidate with the median height (weighted by similarity). "
             "Random: drawn with weights falling off with the feature distance (seeded).")
         self.add(QgsProcessingParameterNumber(
-            self.MIN_HEIGHT, "Minimum height (m)", QgsProcessingParameterNumber.Double,
+            self.MIN_HEIGHT, "Minimum height (m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=0.0, minValue=0.0, maxValue=1000.0),
             "Heights below are raised to it (levels follow).")
         self.add(QgsProcessingParameterNumber(
-            self.MAX_HEIGHT, "Maximum height (m)", QgsProcessingParameterNumber.Double,
+            self.MAX_HEIGHT, "Maximum height (m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=300.0, minValue=0.1, maxValue=1000.0),
             "Heights above are lowered to it (levels follow).")
         self.add(QgsProcessingParameterNumber(
             self.TARGET_FAR, "Target floor-area ratio (0 = none)",
-            QgsProcessingParameterNumber.Double, defaultValue=0.0, minValue=0.0, maxValue=100.0),
+            QgsProcessingParameterNumber.Type.Double, defaultValue=0.0, minValue=0.0, maxValue=100.0),
             "Floor area (footprint x levels) / ground area, met by scaling levels per block "
             "(with Blocks) or for the district.")
         self.add(QgsProcessingParameterNumber(
-            self.STOREY_HEIGHT, "Storey height (m)", QgsProcessingParameterNumber.Double,
+            self.STOREY_HEIGHT, "Storey height (m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=building_attributes.STOREY_HEIGHT, minValue=0.5, maxValue=20.0),
             "Metres per storey for examples with only a height or only levels.", advanced=True)
         self.add_seed("The same seed gives the same result (random choice among the "
                       "candidates).")
         self.add(QgsProcessingParameterFeatureSink(
-            self.OUTPUT, "Buildings with attributes", QgsProcessing.TypeVectorPolygon),
+            self.OUTPUT, "Buildings with attributes", QgsProcessing.SourceType.TypeVectorPolygon),
             "Footprints with height_m, levels, building_type, roof_shape, source_id and "
             "similarity.")
 
@@ -166,7 +166,7 @@ class SynthesizeBuildingAttributes(AlgorithmBase):
             if n in footprints.attributes:
                 table[n] = footprints.attributes[n].to_numpy(dtype=object)
         dest = qgis_io.write_sink(self, parameters, self.OUTPUT, context, footprints.geometry,
-                                  table, own + transfer.OUTPUT_FIELDS, QgsWkbTypes.MultiPolygon,
+                                  table, own + transfer.OUTPUT_FIELDS, QgsWkbTypes.Type.MultiPolygon,
                                   footprints.source_crs, crs, feedback)
         qgis_io.style_output(context, dest, "buildings_by_height.qml")
         feedback.setProgress(100)

@@ -40,7 +40,7 @@ class SynthesizeBuildings(AlgorithmBase):
         return "Synthesize buildings (deprecated: choose the method)"
 
     def flags(self):
-        return super().flags() | QgsProcessingAlgorithm.FlagDeprecated
+        return super().flags() | QgsProcessingAlgorithm.Flag.FlagDeprecated
 
     def shortHelpString(self):  # noqa: N802
         return ("Deprecated: runs one of 'Synthesize building attributes (by example)' "
@@ -63,7 +63,7 @@ class SynthesizeBuildings(AlgorithmBase):
                     continue
                 copy = definition.clone()
                 if not copy.isDestination():
-                    copy.setFlags(copy.flags() | QgsProcessingParameterDefinition.FlagOptional)
+                    copy.setFlags(copy.flags() | QgsProcessingParameterDefinition.Flag.FlagOptional)
                 self.addParameter(copy, createOutput=copy.isDestination())
 
     def _method(self, parameters, context):

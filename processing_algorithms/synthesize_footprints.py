@@ -71,11 +71,11 @@ class SynthesizeFootprints(AlgorithmBase):
 
     def initAlgorithm(self, config=None):  # noqa: N802
         self.add(QgsProcessingParameterFeatureSource(
-            self.BLOCKS, "Blocks", [QgsProcessing.TypeVectorPolygon], optional=True),
+            self.BLOCKS, "Blocks", [QgsProcessing.SourceType.TypeVectorPolygon], optional=True),
             "Target block polygons outlined by street centrelines, e.g. the output of "
             "'Extract city blocks' (its block_id is kept). Give either Blocks or Roads.")
         self.add(QgsProcessingParameterFeatureSource(
-            self.ROADS, "Roads (instead of blocks)", [QgsProcessing.TypeVectorLine],
+            self.ROADS, "Roads (instead of blocks)", [QgsProcessing.SourceType.TypeVectorLine],
             optional=True),
             "Road centrelines: blocks are extracted from them as 'Extract city blocks' does, "
             "and dead-end streets inside a block stay free of buildings too.")
@@ -87,14 +87,14 @@ class SynthesizeFootprints(AlgorithmBase):
             optional=True),
             "Another city's block database (database 2), to mix two styles.")
         self.add(QgsProcessingParameterFeatureSource(
-            self.STYLE, "Style polygons", [QgsProcessing.TypeVectorPolygon],
+            self.STYLE, "Style polygons", [QgsProcessing.SourceType.TypeVectorPolygon],
             optional=True),
             "Polygons saying which database to use where (a block uses the polygon holding a "
             "point inside it; database 1 elsewhere). Without them each block takes the best "
             "match of all databases.")
         self.add(QgsProcessingParameterField(
             self.STYLE_FIELD, "Style field (database number)", defaultValue="database",
-            parentLayerParameterName=self.STYLE, type=QgsProcessingParameterField.Numeric,
+            parentLayerParameterName=self.STYLE, type=QgsProcessingParameterField.DataType.Numeric,
             optional=True),
             "Integer field of the style polygons: 1 = the first database, 2 = the second.")
         self.add(QgsProcessingParameterEnum(
@@ -104,12 +104,12 @@ class SynthesizeFootprints(AlgorithmBase):
             "each street from the example's buildings, so it adapts to blocks of a "
             "different size.")
         self.add(QgsProcessingParameterNumber(
-            self.STREET_WIDTH, "Street width (m)", QgsProcessingParameterNumber.Double,
+            self.STREET_WIDTH, "Street width (m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=footprints.STREET_WIDTH, minValue=0.0, maxValue=self.MAX_WIDTH),
             "Full width of the road surface: no footprint comes closer than half of it to a "
             "centreline (block boundary). 0 builds up to the block outline.")
         self.add(QgsProcessingParameterNumber(
-            self.SETBACK, "Setback (m)", QgsProcessingParameterNumber.Double,
+            self.SETBACK, "Setback (m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=0.0, minValue=0.0, maxValue=self.MAX_WIDTH),
             "Extra distance between the road surface and the footprints.")
         self.add_seed(
@@ -117,18 +117,18 @@ class SynthesizeFootprints(AlgorithmBase):
             "seed gives the same footprints, block by block.")
         self.add(QgsProcessingParameterNumber(
             self.N_BEST, "Random choice among the N best matches",
-            QgsProcessingParameterNumber.Integer, defaultValue=1, minValue=1,
+            QgsProcessingParameterNumber.Type.Integer, defaultValue=1, minValue=1,
             maxValue=self.MAX_N_BEST),
             "1 always takes the best-matching example block; larger values add variety.",
             advanced=True)
         self.add(QgsProcessingParameterNumber(
             self.MIN_EXAMPLE_BUILDINGS, "Minimum footprints of an example block",
-            QgsProcessingParameterNumber.Integer, defaultValue=1, minValue=0, maxValue=10000),
+            QgsProcessingParameterNumber.Type.Integer, defaultValue=1, minValue=0, maxValue=10000),
             "Example blocks with fewer footprints are never retrieved (in an OSM extract, "
             "empty blocks are mostly artefacts of the clip). 0 lets empty blocks stay empty.",
             advanced=True)
         self.add(QgsProcessingParameterFeatureSink(
-            self.OUTPUT, "Footprints", QgsProcessing.TypeVectorPolygon),
+            self.OUTPUT, "Footprints", QgsProcessing.SourceType.TypeVectorPolygon),
             "Footprints with block_id, height_m, levels, building_type, source_block, "
             "source_building, database, method and placement, styled by height.")
         self.addOutput(QgsProcessingOutputNumber(self.N_FOOTPRINTS, "Number of footprints"))
@@ -170,7 +170,7 @@ class SynthesizeFootprints(AlgorithmBase):
         self._log(result, method, feedback)
         dest = qgis_io.write_sink(
             self, parameters, self.OUTPUT, context, result.geometry, result.table,
-            footprints.OUTPUT_FIELDS, QgsWkbTypes.Polygon, frame.source_crs, frame.crs,
+            footprints.OUTPUT_FIELDS, QgsWkbTypes.Type.Polygon, frame.source_crs, frame.crs,
             feedback)
         qgis_io.style_output(context, dest, "buildings_by_height.qml")
         feedback.setProgress(100)

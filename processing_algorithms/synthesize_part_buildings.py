@@ -67,9 +67,9 @@ class SynthesizePartBuildings(AlgorithmBase):
         )
 
     def initAlgorithm(self, config=None):  # noqa: N802
-        poly = [QgsProcessing.TypeVectorPolygon]
+        poly = [QgsProcessing.SourceType.TypeVectorPolygon]
         self.add(QgsProcessingParameterFeatureSource(
-            self.SKELETON, "Skeletons", [QgsProcessing.TypeVectorLine] + poly),
+            self.SKELETON, "Skeletons", [QgsProcessing.SourceType.TypeVectorLine] + poly),
             "One building per feature. A line is the street-side facade line: parts extend "
             "away from the street, on the side opposite to a 'front' field (left / right of "
             "the line's direction; default right), with end parts at its ends and corner parts "
@@ -104,7 +104,7 @@ class SynthesizePartBuildings(AlgorithmBase):
             self.BLOCKS, "Blocks (sites)", poly, optional=True),
             "A building's site is the block holding most of its skeleton (without blocks: "
             "the skeleton polygon itself); FAR constraints refer to it.")
-        number = QgsProcessingParameterNumber.Double
+        number = QgsProcessingParameterNumber.Type.Double
         for name, label, default, lo, hi, text, advanced in (
                 (self.TARGET_FAR, "Target floor-area ratio (0 = none)", 0.0, 0.0, 100.0,
                  "Every building's exact FAR on its site.", False),
@@ -130,7 +130,7 @@ class SynthesizePartBuildings(AlgorithmBase):
             "(the built-in terrace parts have doors and balconies).", advanced=True)
         self.add(QgsProcessingParameterNumber(
             self.K_SOLUTIONS, "Solutions per building (k best)",
-            QgsProcessingParameterNumber.Integer, defaultValue=1, minValue=1, maxValue=50),
+            QgsProcessingParameterNumber.Type.Integer, defaultValue=1, minValue=1, maxValue=50),
             "The k cheapest distinct part sequences (cost: cross-section disagreement between "
             "neighbours), all written with solution = 1..k in order of cost.")
         for name, label, default, lo, hi, text in (
@@ -146,7 +146,7 @@ class SynthesizePartBuildings(AlgorithmBase):
             self.add(QgsProcessingParameterNumber(name, label, number, defaultValue=default,
                                                   minValue=lo, maxValue=hi), text, True)
         self.add(QgsProcessingParameterFeatureSink(
-            self.OUTPUT, "Building parts", QgsProcessing.TypeVectorPolygon),
+            self.OUTPUT, "Building parts", QgsProcessing.SourceType.TypeVectorPolygon),
             "One PolygonZ per part with building_id, solution, base_m, top_m, height_m, "
             "levels and floor_area_m2.")
 
@@ -214,7 +214,7 @@ class SynthesizePartBuildings(AlgorithmBase):
             "solutions.")
         # PolygonZ at each part's base (QGIS 3D: extrude by height_m)
         dest = qgis_io.write_sink(self, parameters, self.OUTPUT, context, result.geometry,
-                                  table, part_buildings.OUTPUT_FIELDS, QgsWkbTypes.MultiPolygonZ,
+                                  table, part_buildings.OUTPUT_FIELDS, QgsWkbTypes.Type.MultiPolygonZ,
                                   frame.source_crs, frame.crs, feedback)
         qgis_io.style_output(context, dest, "buildings_by_height.qml")
         feedback.setProgress(100)
@@ -246,7 +246,7 @@ class SynthesizePartBuildings(AlgorithmBase):
         feature id each belongs to and its street side."""
         source = self.parameterAsSource(parameters, self.SKELETON, context)
         gtype = QgsWkbTypes.geometryType(source.wkbType()) if source is not None else None
-        kind = "polygons" if gtype == QgsWkbTypes.PolygonGeometry else "lines"
+        kind = "polygons" if gtype == QgsWkbTypes.GeometryType.PolygonGeometry else "lines"
         frame = qgis_io.read_source(self, parameters, self.SKELETON, context, feedback,
                                     kind=kind, fields=["front"])
         geoms = frame.geometry

@@ -77,16 +77,16 @@ class SynthesizeRoads(AlgorithmBase):
             "Which road synthesis runs: fragments (example-based, thesis ch. 4.1), "
             "procedural growth (Scharl 2010) or the StreetGAN generator (thesis ch. 4.2).")
         self.add(QgsProcessingParameterFeatureSource(
-            self.EXAMPLE_ROADS, "Example roads with levels", [QgsProcessing.TypeVectorLine],
+            self.EXAMPLE_ROADS, "Example roads with levels", [QgsProcessing.SourceType.TypeVectorLine],
             optional=True),
             "Fragments only: the example city's roads as written by 'Extract road hierarchy' "
             "(field level), from which the fragment database is built when no FRAGMENT_DB "
             "is given.")
         self.add(QgsProcessingParameterFeatureSource(
-            self.ARTERIALS, "Arterial roads of the district", [QgsProcessing.TypeVectorLine]),
+            self.ARTERIALS, "Arterial roads of the district", [QgsProcessing.SourceType.TypeVectorLine]),
             "Sketched or real arterials: they are kept and the new streets connect to them.")
         self.add(QgsProcessingParameterFeatureSource(
-            self.BOUNDARY, "District boundary", [QgsProcessing.TypeVectorPolygon],
+            self.BOUNDARY, "District boundary", [QgsProcessing.SourceType.TypeVectorPolygon],
             optional=True),
             "Polygon(s) the district fills (all methods; fragments close the faces the "
             "arterials leave open with it). Default: the convex hull "
@@ -100,7 +100,7 @@ class SynthesizeRoads(AlgorithmBase):
             "Fragments and growth take the terrain into account (slope term, maximum slope).")
         self.add_seed("The same seed and inputs give the same network.")
         self.add(QgsProcessingParameterFeatureSink(
-            self.OUTPUT, "Synthesized roads", QgsProcessing.TypeVectorLine),
+            self.OUTPUT, "Synthesized roads", QgsProcessing.SourceType.TypeVectorLine),
             "The new road network with level (0 = arterial), styled by level.")
 
     def input_error(self, parameters, context):

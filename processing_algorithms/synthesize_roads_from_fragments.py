@@ -83,11 +83,11 @@ class SynthesizeRoadsFromFragments(AlgorithmBase):
 
     def initAlgorithm(self, config=None):  # noqa: N802
         self.add(QgsProcessingParameterFeatureSource(
-            self.ARTERIALS, "Arterial roads", [QgsProcessing.TypeVectorLine]),
+            self.ARTERIALS, "Arterial roads", [QgsProcessing.SourceType.TypeVectorLine]),
             "Sketched arterials, or the level 0 roads of a real city: lines that close faces to "
             "fill. They are noded and cleaned first.")
         self.add(QgsProcessingParameterFeatureSource(
-            self.BOUNDARY, "Target boundary", [QgsProcessing.TypeVectorPolygon],
+            self.BOUNDARY, "Target boundary", [QgsProcessing.SourceType.TypeVectorPolygon],
             optional=True),
             "The area to fill (e.g. a town's outline): closes the faces the arterials leave "
             "open. Without it only the faces the arterials close are filled.")
@@ -99,7 +99,7 @@ class SynthesizeRoadsFromFragments(AlgorithmBase):
             advanced=True)
         self.add(QgsProcessingParameterNumber(
             self.FILL_QUANTILE, "Largest empty face (quantile of the example's block areas, %)",
-            QgsProcessingParameterNumber.Double, defaultValue=90.0, minValue=50.0,
+            QgsProcessingParameterNumber.Type.Double, defaultValue=90.0, minValue=50.0,
             maxValue=100.0),
             "Faces larger than this quantile of the example's block areas are filled (90: the "
             "p90). A city whose large blocks are parks or yards (Helsinki) keeps them empty "
@@ -116,37 +116,37 @@ class SynthesizeRoadsFromFragments(AlgorithmBase):
             "The desired terrain: adds the slope term to the retrieval and is the base of "
             "OUTPUT_DEM.")
         self.add(QgsProcessingParameterFeatureSource(
-            self.STYLE, "Style polygons", [QgsProcessing.TypeVectorPolygon],
+            self.STYLE, "Style polygons", [QgsProcessing.SourceType.TypeVectorPolygon],
             optional=True),
             "Polygons saying which database to use where (a face uses the polygon holding a "
             "point inside it; database 1 elsewhere).")
         self.add(QgsProcessingParameterField(
             self.STYLE_FIELD, "Style field (database number)", defaultValue="database",
-            parentLayerParameterName=self.STYLE, type=QgsProcessingParameterField.Numeric,
+            parentLayerParameterName=self.STYLE, type=QgsProcessingParameterField.DataType.Numeric,
             optional=True),
             "Integer field of the style polygons: 1 = the first database, 2 = the second.")
         self.add(QgsProcessingParameterNumber(
             self.N_BEST, "Random choice among the N best matches",
-            QgsProcessingParameterNumber.Integer, defaultValue=3, minValue=1,
+            QgsProcessingParameterNumber.Type.Integer, defaultValue=3, minValue=1,
             maxValue=synthesis_fragments.MAX_N_BEST),
             "1 always takes the best-matching fragment; larger values add variety.")
         self.add(QgsProcessingParameterNumber(
-            self.MAX_LEVEL, "Deepest street level", QgsProcessingParameterNumber.Integer,
+            self.MAX_LEVEL, "Deepest street level", QgsProcessingParameterNumber.Type.Integer,
             optional=True, minValue=1, maxValue=synthesis_fragments.MAX_LEVELS),
             "Stop after synthesizing streets of this level (default: as deep as the databases go).")
         self.add_seed(
             "The same seed with the same inputs gives the same network.")
         self.add(QgsProcessingParameterNumber(
-            self.GAMMA, "Shape weight gamma", QgsProcessingParameterNumber.Double,
+            self.GAMMA, "Shape weight gamma", QgsProcessingParameterNumber.Type.Double,
             defaultValue=0.5, minValue=0.0, maxValue=1.0),
             "Weight of the shape cost against the slope cost (thesis eq. 4.2); 1 ignores the "
             "terrain.", advanced=True)
         self.add(QgsProcessingParameterNumber(
-            self.DEM_CELL_SIZE, "DEM cell size (m)", QgsProcessingParameterNumber.Double,
+            self.DEM_CELL_SIZE, "DEM cell size (m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=5.0, minValue=0.5, maxValue=100.0),
             "The DEM is resampled to this cell size in the metric working CRS.", advanced=True)
         self.add(QgsProcessingParameterFeatureSink(
-            self.OUTPUT, "Synthesized roads", QgsProcessing.TypeVectorLine),
+            self.OUTPUT, "Synthesized roads", QgsProcessing.SourceType.TypeVectorLine),
             "The road network with level, source_fragment and database per edge.")
         dem_out = QgsProcessingParameterRasterDestination(
             self.OUTPUT_DEM, "Synthesized relief", optional=True, createByDefault=False)
@@ -228,7 +228,7 @@ class SynthesizeRoadsFromFragments(AlgorithmBase):
 
         dest = qgis_io.write_sink(self, parameters, self.OUTPUT, context, result.geometry,
                                   result.table, synthesis_fragments.EDGE_FIELDS,
-                                  QgsWkbTypes.LineString, frame.source_crs, frame.crs, feedback)
+                                  QgsWkbTypes.Type.LineString, frame.source_crs, frame.crs, feedback)
         qgis_io.style_output(context, dest, "roads_by_level.qml")
         outputs = {self.OUTPUT: dest, self.N_EDGES: len(result.geometry),
                    self.N_INSERTED: n_inserted}

@@ -83,14 +83,14 @@ class SynthesizeRoadsGan(AlgorithmBase):
 
     def initAlgorithm(self, config=None):  # noqa: N802
         self.add(QgsProcessingParameterFeatureSource(
-            self.TARGET, "Target polygon(s)", [QgsProcessing.TypeVectorPolygon],
+            self.TARGET, "Target polygon(s)", [QgsProcessing.SourceType.TypeVectorPolygon],
             optional=True),
             "Area to fill with roads; several polygons are merged. Give this or an extent.")
         self.add(QgsProcessingParameterExtent(self.EXTENT, "Target extent",
                                               optional=True),
             "A rectangle to fill with roads when no target polygon is given.")
         self.add(QgsProcessingParameterFeatureSource(
-            self.GIVEN_ROADS, "Given roads (kept)", [QgsProcessing.TypeVectorLine],
+            self.GIVEN_ROADS, "Given roads (kept)", [QgsProcessing.SourceType.TypeVectorLine],
             optional=True),
             "Roads the new network must respect and connect to (arterials, existing roads): "
             "kept in the output, no generated street in their corridor, new streets end on "
@@ -107,18 +107,18 @@ class SynthesizeRoadsGan(AlgorithmBase):
         self.add_seed(
             "Seed of the noise field: the same seed and target give the same network.")
         self.add(QgsProcessingParameterNumber(
-            self.CELL_SIZE, "Cell size (m, 0 = the model's)", QgsProcessingParameterNumber.Double,
+            self.CELL_SIZE, "Cell size (m, 0 = the model's)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=0.0, minValue=0.0, maxValue=100.0),
             "Metres per generated pixel. The models learnt 3 m per pixel; another value scales "
             "the whole network (blocks get larger or smaller).", advanced=True)
         self.add(QgsProcessingParameterNumber(
-            self.MIN_DEAD_END, "Shortest dead end kept (m)", QgsProcessingParameterNumber.Double,
+            self.MIN_DEAD_END, "Shortest dead end kept (m)", QgsProcessingParameterNumber.Type.Double,
             optional=True, minValue=0.0, maxValue=1000.0),
             "Dead-end streets this long or shorter are removed. Empty: the model's value from "
             "its card (the thesis's 25 m; 120 m for the grid model, whose example has no dead "
             "ends).", advanced=True)
         self.add(QgsProcessingParameterNumber(
-            self.MAX_GAP, "Close gaps up to (m)", QgsProcessingParameterNumber.Double,
+            self.MAX_GAP, "Close gaps up to (m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=0.0, minValue=0.0, maxValue=500.0),
             "A dead end that stops this close before another road is extended straight to "
             "it (0 = off, as in the thesis).", advanced=True)
@@ -128,7 +128,7 @@ class SynthesizeRoadsGan(AlgorithmBase):
             "road's end (removes the skeleton spurs of wide generated roads, keeps side "
             "streets). Unchecked: the thesis's skeleton length.", advanced=True)
         self.add(QgsProcessingParameterFeatureSink(
-            self.OUTPUT, "StreetGAN roads", QgsProcessing.TypeVectorLine),
+            self.OUTPUT, "StreetGAN roads", QgsProcessing.SourceType.TypeVectorLine),
             "Roads with edge_id, level, road_class, length_m, model, seed.")
         self.add(QgsProcessingParameterRasterDestination(
             self.OUTPUT_RASTER, "Generator image", optional=True, createByDefault=False),
@@ -223,7 +223,7 @@ class SynthesizeRoadsGan(AlgorithmBase):
             "length_m": shapely.length(result.geometry) if len(result.geometry) else [],
             "model": gen.name, "seed": seed})
         dest = qgis_io.write_sink(self, parameters, self.OUTPUT, context, result.geometry, table,
-                                  ROAD_FIELDS, QgsWkbTypes.LineString, out_crs, work, feedback)
+                                  ROAD_FIELDS, QgsWkbTypes.Type.LineString, out_crs, work, feedback)
         qgis_io.style_output(context, dest, "roads_by_level.qml")
         outputs = {self.OUTPUT: dest}
         raster = self.parameterAsOutputLayer(parameters, self.OUTPUT_RASTER, context)

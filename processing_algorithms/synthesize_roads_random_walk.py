@@ -77,16 +77,16 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
         )
 
     def initAlgorithm(self, config=None):  # noqa: N802
-        types = [QgsProcessing.TypeVectorPoint, QgsProcessing.TypeVectorLine]
+        types = [QgsProcessing.SourceType.TypeVectorPoint, QgsProcessing.SourceType.TypeVectorLine]
         self.add(QgsProcessingParameterFeatureSource(self.EXAMPLE, "Example", types),
                  "Intersection points of 'Extract road hierarchy' (with level_a, dist_mean_a, "
                  "...) or example roads (an OSM 'lines' layer is filtered to drivable classes) "
                  "from which the points are computed.")
         self.add(QgsProcessingParameterFeatureSource(
-            self.TARGET, "Target area", [QgsProcessing.TypeVectorPolygon]),
+            self.TARGET, "Target area", [QgsProcessing.SourceType.TypeVectorPolygon]),
             "Polygon(s) where the new streets go; the output is in this layer's CRS.")
         self.add(QgsProcessingParameterFeatureSource(
-            self.EXISTING_ROADS, "Existing roads (expand)", [QgsProcessing.TypeVectorLine],
+            self.EXISTING_ROADS, "Existing roads (expand)", [QgsProcessing.SourceType.TypeVectorLine],
             optional=True),
             "Roads in or around the target to expand from (e.g. its arterials): their dead "
             "ends at the target continue into the new streets, new streets meet them only at "
@@ -96,7 +96,7 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
             "Points or roads of a second city; its style is blended with the example's.")
         self.add(QgsProcessingParameterNumber(
             self.BLEND, "Blend weight of the second example (0-1)",
-            QgsProcessingParameterNumber.Double, defaultValue=0.5, minValue=0.0, maxValue=1.0),
+            QgsProcessingParameterNumber.Type.Double, defaultValue=0.5, minValue=0.0, maxValue=1.0),
             "0 keeps only the example's points, 1 only the second example's; in between, "
             "densities and level mixes follow the share of the area each example's layout "
             "takes, and every point's street distances, turn angles (means and variances), "
@@ -104,7 +104,7 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
             "second example.")
         self.add(QgsProcessingParameterField(
             self.BLEND_FIELD, "Blend weight field (on the targets)",
-            parentLayerParameterName=self.TARGET, type=QgsProcessingParameterField.Numeric,
+            parentLayerParameterName=self.TARGET, type=QgsProcessingParameterField.DataType.Numeric,
             optional=True),
             "A 0-1 weight per target polygon for a spatially varying blend; empty values use "
             "the blend weight above.")
@@ -119,29 +119,29 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
             advanced=True)
         self.add(QgsProcessingParameterNumber(
             self.THRESHOLD, "Transition probability threshold",
-            QgsProcessingParameterNumber.Double,
+            QgsProcessingParameterNumber.Type.Double,
             defaultValue=random_walk.WalkSettings.threshold, minValue=0.0, maxValue=1.0),
             "Steps less probable than this (the Gaussian's peak is 1) are never taken: higher "
             "values keep streets closer to the example's spacing and turns, with more dead "
             "ends.", advanced=True)
         self.add(QgsProcessingParameterNumber(
             self.MIN_ANGLE, "Minimum angle between streets (degrees)",
-            QgsProcessingParameterNumber.Double,
+            QgsProcessingParameterNumber.Type.Double,
             defaultValue=random_walk.WalkSettings.min_angle, minValue=0.0, maxValue=89.0),
             "No two streets leave an intersection closer in direction than this.",
             advanced=True)
         self.add(QgsProcessingParameterFeatureSink(
-            self.OUTPUT, "Synthesized roads", QgsProcessing.TypeVectorLine),
+            self.OUTPUT, "Synthesized roads", QgsProcessing.SourceType.TypeVectorLine),
             "New road segments with level, length_m, tortuosity and origin ('walk'; 'seam' "
             "joins to existing roads; 'close' steps closing stubs; 'cross' crossing streets "
             "completed; 'join' steps joining pieces of the network).")
         self.add(QgsProcessingParameterFeatureSink(
-            self.OUTPUT_INTERSECTIONS, "Intersection points used", QgsProcessing.TypeVectorPoint,
+            self.OUTPUT_INTERSECTIONS, "Intersection points used", QgsProcessing.SourceType.TypeVectorPoint,
             optional=True, createByDefault=False),
             "The attributed points placed in the target (example 0 = first, 1 = second, "
             "-1 = existing roads) with the connections they got.")
         self.add(QgsProcessingParameterFeatureSink(
-            self.OUTPUT_BLOCKS, "Blocks", QgsProcessing.TypeVectorPolygon, optional=True,
+            self.OUTPUT_BLOCKS, "Blocks", QgsProcessing.SourceType.TypeVectorPolygon, optional=True,
             createByDefault=False),
             "The faces the new streets close (block_id, area_m2, neighbours in the block "
             "graph, parcel_area: the mean parcel or block area of the example points on "
@@ -284,21 +284,21 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
         results = {}
         results[self.OUTPUT] = qgis_io.write_sink(
             self, parameters, self.OUTPUT, context, result.geometry, result.table,
-            random_walk.ROAD_FIELDS, QgsWkbTypes.LineString, target.source_crs, target.crs,
+            random_walk.ROAD_FIELDS, QgsWkbTypes.Type.LineString, target.source_crs, target.crs,
             feedback)
         qgis_io.style_output(context, results[self.OUTPUT], "roads_by_level.qml")
         if parameters.get(self.OUTPUT_INTERSECTIONS) is not None:
             results[self.OUTPUT_INTERSECTIONS] = qgis_io.write_sink(
                 self, parameters, self.OUTPUT_INTERSECTIONS, context,
                 shapely.points(result.points.xy), result.point_table, random_walk.POINT_FIELDS,
-                QgsWkbTypes.Point, target.source_crs, target.crs, feedback)
+                QgsWkbTypes.Type.Point, target.source_crs, target.crs, feedback)
             qgis_io.style_output(context, results[self.OUTPUT_INTERSECTIONS], "intersections.qml")
         if parameters.get(self.OUTPUT_BLOCKS) is not None:
             faces, table = random_walk.block_table(result)
             feedback.pushInfo(f"{len(faces)} blocks closed by the new streets.")
             results[self.OUTPUT_BLOCKS] = qgis_io.write_sink(
                 self, parameters, self.OUTPUT_BLOCKS, context, faces, table,
-                random_walk.BLOCK_FIELDS, QgsWkbTypes.Polygon, target.source_crs, target.crs,
+                random_walk.BLOCK_FIELDS, QgsWkbTypes.Type.Polygon, target.source_crs, target.crs,
                 feedback)
             qgis_io.style_output(context, results[self.OUTPUT_BLOCKS], "blocks.qml")
         feedback.setProgress(100)

@@ -81,7 +81,7 @@ class TessellateStreets(AlgorithmBase):
 
     def initAlgorithm(self, config=None):  # noqa: N802
         self.add(QgsProcessingParameterFeatureSource(
-            self.ROADS, "Road centre lines", [QgsProcessing.TypeVectorLine]),
+            self.ROADS, "Road centre lines", [QgsProcessing.SourceType.TypeVectorLine]),
             "Any line layer (OSM lines, grown or synthesized roads, a road shapefile). Lines "
             "are noded at crossings (not across bridges and tunnels) and joined through "
             "nodes of degree 2.")
@@ -102,7 +102,7 @@ class TessellateStreets(AlgorithmBase):
             "Only lines of these classes are kept when the layer has the class field.",
             advanced=True)
         self.add(QgsProcessingParameterNumber(
-            self.DEFAULT_WIDTH, "Default width (m)", QgsProcessingParameterNumber.Double,
+            self.DEFAULT_WIDTH, "Default width (m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=street_surfaces.DEFAULT_WIDTH, minValue=0.5, maxValue=200.0),
             "Width of lines with neither a width nor a known class or level.")
         self.add(QgsProcessingParameterRasterLayer(
@@ -111,7 +111,7 @@ class TessellateStreets(AlgorithmBase):
             "junctions the terrain's tangent plane, and slopes are measured.")
         self.add(QgsProcessingParameterNumber(
             self.MERGE_DISTANCE, "Junction merge distance (m)",
-            QgsProcessingParameterNumber.Double, defaultValue=3.0, minValue=0.0,
+            QgsProcessingParameterNumber.Type.Double, defaultValue=3.0, minValue=0.0,
             maxValue=100.0),
             "Junction centres closer than this are merged into one junction at their "
             "centroid; the short streets between them vanish into it.")
@@ -123,43 +123,43 @@ class TessellateStreets(AlgorithmBase):
             "connecting line, which keeps the streets where they are.", advanced=True)
         self.add(QgsProcessingParameterNumber(
             self.MAX_LONGITUDINAL_SLOPE, "Maximum longitudinal slope (%)",
-            QgsProcessingParameterNumber.Double, defaultValue=12.0, minValue=0.0,
+            QgsProcessingParameterNumber.Type.Double, defaultValue=12.0, minValue=0.0,
             maxValue=100.0),
             "Streets and junctions steeper than this along a street are flagged "
             "(too_steep_long), with a DEM.")
         self.add(QgsProcessingParameterNumber(
             self.MAX_LATERAL_SLOPE, "Maximum lateral slope (%)",
-            QgsProcessingParameterNumber.Double, defaultValue=8.0, minValue=0.0,
+            QgsProcessingParameterNumber.Type.Double, defaultValue=8.0, minValue=0.0,
             maxValue=100.0),
             "Streets and junctions steeper than this across a street are flagged "
             "(too_steep_lat), with a DEM.")
         self.add(QgsProcessingParameterNumber(
             self.SNAP_TOLERANCE, "Node snapping tolerance (m)",
-            QgsProcessingParameterNumber.Double, defaultValue=1.0, minValue=0.0,
+            QgsProcessingParameterNumber.Type.Double, defaultValue=1.0, minValue=0.0,
             maxValue=50.0),
             "Line ends closer than this are joined when the network is noded.", advanced=True)
         self.add(QgsProcessingParameterNumber(
-            self.MESH_SPACING, "Mesh station spacing (m)", QgsProcessingParameterNumber.Double,
+            self.MESH_SPACING, "Mesh station spacing (m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=5.0, minValue=0.5, maxValue=100.0, optional=True),
             "Distance between the cross-sections of a street in the 3D mesh.", advanced=True)
         self.add(QgsProcessingParameterNumber(
             self.Z_OFFSET, "Mesh lift above the terrain (m)",
-            QgsProcessingParameterNumber.Double, defaultValue=0.1, minValue=0.0,
+            QgsProcessingParameterNumber.Type.Double, defaultValue=0.1, minValue=0.0,
             maxValue=10.0, optional=True),
             "The mesh is lifted this much above the draped height (Scharl: against "
             "z-fighting with the terrain); side faces close the gap.", advanced=True)
         self.add(QgsProcessingParameterFeatureSink(
-            self.OUTPUT_SURFACES, "Street surfaces", QgsProcessing.TypeVectorPolygon),
+            self.OUTPUT_SURFACES, "Street surfaces", QgsProcessing.SourceType.TypeVectorPolygon),
             "One polygon per street segment between junctions: segment_id, edge_id, "
             "from_junction, to_junction, road_class, z_layer, width_m, length_m, area_m2; "
             "with a DEM slope_long_pct, slope_lat_pct, too_steep_long, too_steep_lat.")
         self.add(QgsProcessingParameterFeatureSink(
-            self.OUTPUT_JUNCTIONS, "Junctions", QgsProcessing.TypeVectorPolygon,
+            self.OUTPUT_JUNCTIONS, "Junctions", QgsProcessing.SourceType.TypeVectorPolygon,
             optional=True, createByDefault=True),
             "One polygon per junction: junction_id (= from/to_junction of the surfaces), "
             "degree, merged_nodes, z_layer, area_m2; with a DEM z_centre and slopes.")
         self.add(QgsProcessingParameterFeatureSink(
-            self.OUTPUT_MESH, "3D street mesh (triangles)", QgsProcessing.TypeVectorPolygon,
+            self.OUTPUT_MESH, "3D street mesh (triangles)", QgsProcessing.SourceType.TypeVectorPolygon,
             optional=True, createByDefault=False),
             "One MultiPolygon Z of triangles per street surface and junction: mesh_id, kind "
             "(street / junction), source_id (segment_id / junction_id), triangles, "
@@ -237,7 +237,7 @@ class TessellateStreets(AlgorithmBase):
                                          f"and {n_lat} steeper than {max_lat:g} % across.")
 
         # PolygonZ with a DEM (write_sink keeps z through the reprojection)
-        wkb = QgsWkbTypes.MultiPolygonZ if dem is not None else QgsWkbTypes.MultiPolygon
+        wkb = QgsWkbTypes.Type.MultiPolygonZ if dem is not None else QgsWkbTypes.Type.MultiPolygon
         results = {}
         tin_path = self.parameterAsFileOutput(parameters, self.OUTPUT_TIN, context) \
             if parameters.get(self.OUTPUT_TIN) else ""
@@ -253,7 +253,7 @@ class TessellateStreets(AlgorithmBase):
             if parameters.get(self.OUTPUT_MESH) is not None:
                 results[self.OUTPUT_MESH] = qgis_io.write_sink(
                     self, parameters, self.OUTPUT_MESH, context, geoms, t,
-                    street_mesh.MESH_FIELDS, QgsWkbTypes.MultiPolygonZ, frame.source_crs,
+                    street_mesh.MESH_FIELDS, QgsWkbTypes.Type.MultiPolygonZ, frame.source_crs,
                     frame.source_crs, feedback)
             if tin_path:
                 qgis_io.run_engine(tin_path, street_mesh.write_tin_geopackage, tin_path,

@@ -63,7 +63,7 @@ def _child(model, child_id, alg_id, description, sources, outputs=(), x=0.0, y=0
     for param in definition.parameterDefinitions():
         if param.name() in sources or param.isDestination():
             continue
-        if not (param.flags() & QgsProcessingParameterDefinition.FlagOptional):
+        if not (param.flags() & QgsProcessingParameterDefinition.Flag.FlagOptional):
             sources[param.name()] = Source.fromStaticValue(param.defaultValue())
     for name, source in sources.items():
         child.addParameterSources(name, [source])
@@ -88,18 +88,18 @@ def district_model() -> QgsProcessingModelAlgorithm:
     out = Source.fromChildOutput
     fixed = Source.fromStaticValue
     _param(model, QgsProcessingParameterFeatureSource(
-        "EXAMPLE_ROADS", "Example roads", [QgsProcessing.TypeVectorLine]),
+        "EXAMPLE_ROADS", "Example roads", [QgsProcessing.SourceType.TypeVectorLine]),
         "The example city's road lines (OSM lines with highway, or any road layer).", 0, 0)
     _param(model, QgsProcessingParameterFeatureSource(
-        "EXAMPLE_BUILDINGS", "Example buildings", [QgsProcessing.TypeVectorPolygon]),
+        "EXAMPLE_BUILDINGS", "Example buildings", [QgsProcessing.SourceType.TypeVectorPolygon]),
         "The example city's building footprints (OSM multipolygons with building, or a "
         "cadastre layer).", 0, 80)
     _param(model, QgsProcessingParameterFeatureSource(
-        "ARTERIALS", "Arterial roads of the new district", [QgsProcessing.TypeVectorLine]),
+        "ARTERIALS", "Arterial roads of the new district", [QgsProcessing.SourceType.TypeVectorLine]),
         "A sketch of the new district's main roads (they are kept; the streets fill them).",
         0, 160)
     _param(model, QgsProcessingParameterFeatureSource(
-        "BOUNDARY", "District boundary", [QgsProcessing.TypeVectorPolygon], optional=True),
+        "BOUNDARY", "District boundary", [QgsProcessing.SourceType.TypeVectorPolygon], optional=True),
         "Polygon the district fills (every road method; fragments close the faces the "
         "arterials leave open with it); default the arterials' hull.",
         0, 240)
@@ -117,7 +117,7 @@ def district_model() -> QgsProcessingModelAlgorithm:
                  "Guided re-synthesis (thesis ch. 5.2)"], defaultValue=0),
         "How the blocks are filled with building footprints.", 0, 480)
     _param(model, QgsProcessingParameterNumber(
-        "SEED", "Random seed", QgsProcessingParameterNumber.Integer, defaultValue=1,
+        "SEED", "Random seed", QgsProcessingParameterNumber.Type.Integer, defaultValue=1,
         minValue=0, maxValue=2 ** 31 - 1),
         "The same seed and inputs give the same district.", 0, 560)
 

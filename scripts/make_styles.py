@@ -85,7 +85,7 @@ def buildings_3d():
         material.setAmbient(QColor(colour).darker(160))
         sym.setMaterial(material)
         props = sym.dataDefinedProperties()
-        props.setProperty(QgsAbstract3DSymbol.PropertyExtrusionHeight,
+        props.setProperty(QgsAbstract3DSymbol.Property.PropertyExtrusionHeight,
                           QgsProperty.fromExpression('coalesce("height_m", 3)'))
         sym.setDataDefinedProperties(props)
         return sym

@@ -45,7 +45,7 @@ def _kind(p) -> str:
         lo, hi = p.minimum(), p.maximum()
         rng = [] if lo <= -1e300 else [f"≥ {lo:g}"]
         rng += [] if hi >= 1e300 else [f"≤ {hi:g}"]
-        integer = p.dataType() == QgsProcessingParameterNumber.Integer
+        integer = p.dataType() == QgsProcessingParameterNumber.Type.Integer
         return ("integer" if integer else "number") + (f" ({', '.join(rng)})" if rng else "")
     if isinstance(p, QgsProcessingParameterEnum):
         return "enum: " + "; ".join(f"{i} {o}" for i, o in enumerate(p.options()))
@@ -66,8 +66,8 @@ def reference(algorithms) -> str:
         out.append("| parameter | kind | default | meaning |")
         out.append("|---|---|---|---|")
         for p in alg.parameterDefinitions():
-            optional = bool(p.flags() & QgsProcessingParameterDefinition.FlagOptional)
-            advanced = bool(p.flags() & QgsProcessingParameterDefinition.FlagAdvanced)
+            optional = bool(p.flags() & QgsProcessingParameterDefinition.Flag.FlagOptional)
+            advanced = bool(p.flags() & QgsProcessingParameterDefinition.Flag.FlagAdvanced)
             tags = ", ".join(t for t, on in (("optional", optional), ("advanced", advanced)) if on)
             name = f"`{p.name()}`" + (f" ({tags})" if tags else "")
             out.append(f"| {name} | {_cell(_kind(p))} | {_default(p)} | "
@@ -84,7 +84,7 @@ def algorithms():
 
     order = [algorithm_id(module) for module, *_ in ALGORITHMS]
     shown = [a for a in provider.algorithms() if a.name() in order
-             and not (a.flags() & QgsProcessingAlgorithm.FlagHideFromToolbox)]
+             and not (a.flags() & QgsProcessingAlgorithm.Flag.FlagHideFromToolbox)]
     return sorted(shown, key=lambda a: order.index(a.name()))
 
 

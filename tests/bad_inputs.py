@@ -409,7 +409,7 @@ def _number_cases(alg_id, definition):
     from qgis.core import QgsProcessingParameterNumber
 
     name, lo, hi = definition.name(), definition.minimum(), definition.maximum()
-    integer = definition.dataType() == QgsProcessingParameterNumber.Integer
+    integer = definition.dataType() == QgsProcessingParameterNumber.Type.Integer
     cases = []
     if hi < 1e300:
         cases.append(("above", hi + max(1.0, abs(hi)), r"out of range: allowed"))

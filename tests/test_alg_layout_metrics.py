@@ -23,7 +23,7 @@ def test_helsinki_against_bubenec(qgis_processing, tmp_path):
         "EXAMPLE_BUILDINGS": bubenec_layer("buildings"),
         "OUTPUT": "memory:", "OUTPUT_HTML": str(html)})
     table = out["OUTPUT"]
-    assert table.wkbType() == QgsWkbTypes.NoGeometry
+    assert table.wkbType() == QgsWkbTypes.Type.NoGeometry
     rows = layer_rows(table)
     assert {r["kind"] for r in rows} == {"layout", "invariants", "roads", "blocks", "parcels",
                                         "buildings"}

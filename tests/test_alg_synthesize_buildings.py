@@ -143,7 +143,7 @@ def test_best_fit_on_a_slope(qgis_processing, tmp_path):
                                         "DEM": str(path), "MAX_PARCEL_SLOPE": 25,
                                         "OUTPUT": "memory:"})
     layer = out["OUTPUT"]
-    assert layer.wkbType() == QgsWkbTypes.PolygonZ
+    assert layer.wkbType() == QgsWkbTypes.Type.PolygonZ
     rows_, geoms = layer_features(layer)
     assert len(rows_) == 1 and rows_[0]["parcel_id"] == 1
     r = rows_[0]
@@ -236,7 +236,7 @@ def test_deprecated_tool(qgis_processing):
     from qgis.core import QgsApplication, QgsProcessingAlgorithm, QgsProcessingException
 
     alg = QgsApplication.processingRegistry().algorithmById(DEPRECATED)
-    assert alg.flags() & QgsProcessingAlgorithm.FlagDeprecated
+    assert alg.flags() & QgsProcessingAlgorithm.Flag.FlagDeprecated
     params = {"PARCELS": bubenec_layer("plots"), "ROADS": bubenec_layer("streets")}
     old = layer_features(qgis_processing.run(DEPRECATED, dict(params, METHOD=1,
                                                               OUTPUT="memory:"))["OUTPUT"])

@@ -116,8 +116,8 @@ def test_degree_5_and_6_on_an_inclined_plane(qgis_processing, stars, tmp_path):
     from qgis.core import QgsWkbTypes
 
     surf, junc = out["OUTPUT_SURFACES"], out["OUTPUT_JUNCTIONS"]
-    assert surf.wkbType() == QgsWkbTypes.MultiPolygonZ
-    assert junc.wkbType() == QgsWkbTypes.MultiPolygonZ
+    assert surf.wkbType() == QgsWkbTypes.Type.MultiPolygonZ
+    assert junc.wkbType() == QgsWkbTypes.Type.MultiPolygonZ
     rows, sg = layer_features(surf)
     jrows, jg = layer_features(junc)
     assert sorted(r["degree"] for r in jrows) == [5, 6]
@@ -228,7 +228,7 @@ def test_3d_mesh_on_an_inclined_plane(qgis_processing, stars, tmp_path):
                                     "OUTPUT_JUNCTIONS": "memory:", "OUTPUT_MESH": "memory:",
                                     "OUTPUT_TIN": str(tin)})
     mesh = out["OUTPUT_MESH"]
-    assert mesh.wkbType() == QgsWkbTypes.MultiPolygonZ
+    assert mesh.wkbType() == QgsWkbTypes.Type.MultiPolygonZ
     rows, geoms = layer_features(mesh)
     assert len(rows) == 11 + 2 and {r["kind"] for r in rows} == {"street", "junction"}
     tris = shapely.get_parts(geoms)
@@ -257,7 +257,7 @@ def test_3d_mesh_on_an_inclined_plane(qgis_processing, stars, tmp_path):
     assert vertical[side].all() and not vertical[up].any()
     layer = QgsVectorLayer(f"{tin}|layername=street_mesh", "tin", "ogr")
     assert layer.isValid() and layer.featureCount() == len(rows)
-    assert layer.wkbType() == QgsWkbTypes.MultiPolygonZ      # how QGIS 3.22 reads a TIN
+    assert layer.wkbType() == QgsWkbTypes.Type.MultiPolygonZ      # how QGIS 3.22 reads a TIN
     from osgeo import ogr
 
     ds = ogr.Open(str(tin))

@@ -58,7 +58,7 @@ def test_provider_and_every_algorithm_registered(desktop, qgis_processing):
     assert result["algorithms"] == expected
     # deprecated tools stay runnable by id but out of the toolbox
     shown = sorted(a.id() for a in algorithms
-                   if not a.flags() & QgsProcessingAlgorithm.FlagHideFromToolbox)
+                   if not a.flags() & QgsProcessingAlgorithm.Flag.FlagHideFromToolbox)
     assert result["toolbox_algorithms"] == shown and len(shown) >= len(expected) - 1
     assert result["algorithm_problems"] == {}  # icon, help and help on every parameter
     assert result["dialog_errors"] == {}

@@ -14,9 +14,9 @@ def build_model():
 
     model = QgsProcessingModelAlgorithm("Example databases from OSM", "urbansynth tests")
     model.addModelParameter(QgsProcessingParameterFeatureSource(
-        "roads", "Roads", [QgsProcessing.TypeVectorLine]), QgsProcessingModelParameter("roads"))
+        "roads", "Roads", [QgsProcessing.SourceType.TypeVectorLine]), QgsProcessingModelParameter("roads"))
     model.addModelParameter(QgsProcessingParameterFeatureSource(
-        "buildings", "Buildings", [QgsProcessing.TypeVectorPolygon]),
+        "buildings", "Buildings", [QgsProcessing.SourceType.TypeVectorPolygon]),
         QgsProcessingModelParameter("buildings"))
 
     def child(alg_id, child_id, sources, outputs):

@@ -42,7 +42,7 @@ def test_toolbox_manners(qgis_processing):
             assert len(alg.tags()) >= 3, alg.name()
         for p in alg.parameterDefinitions():
             # QGIS appends "[optional]" itself
-            if p.flags() & QgsProcessingParameterDefinition.FlagOptional:
+            if p.flags() & QgsProcessingParameterDefinition.Flag.FlagOptional:
                 assert "optional" not in p.description().lower(), (alg.name(), p.name())
             texts += [p.description(), p.help() or ""]
         for text in texts:

@@ -31,7 +31,7 @@ class UrbanSynthesisPlugin:
         missing = dependencies.missing_packages()
         if missing:
             self.iface.messageBar().pushMessage(
-                "Urban Synthesis", dependencies.missing_message(missing), Qgis.Warning, 0)
+                "Urban Synthesis", dependencies.missing_message(missing), Qgis.MessageLevel.Warning, 0)
 
     def open_installer(self):
         import processing

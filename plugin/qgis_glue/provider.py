@@ -147,7 +147,7 @@ class UrbanSynthesisProvider(QgsProcessingProvider):
         missing = dependencies.missing_packages()
         if missing:
             QgsMessageLog.logMessage(dependencies.missing_message(missing), "Urban Synthesis",
-                                     Qgis.Warning)
+                                     Qgis.MessageLevel.Warning)
         package = __package__.split(".")[0] + ".processing_algorithms"
         for module_name, class_name, display_name, group_id in ALGORITHMS:
             try:
@@ -159,7 +159,7 @@ class UrbanSynthesisProvider(QgsProcessingProvider):
             except Exception as error:  # noqa: BLE001 (any other failure is reported)
                 QgsMessageLog.logMessage(
                     f"Urban Synthesis: algorithm {module_name} not loaded: {error!r}",
-                    "Processing", Qgis.Critical)
+                    "Processing", Qgis.MessageLevel.Critical)
         # A model's steps are looked up in the registry, where this provider's algorithms
         # are only once it is registered: the models are loaded by a refresh right after.
         registry = QgsApplication.processingRegistry()
@@ -187,4 +187,4 @@ class UrbanSynthesisProvider(QgsProcessingProvider):
                 self.addAlgorithm(model)
             else:
                 QgsMessageLog.logMessage(f"Urban Synthesis: model {path.name} could not be read",
-                                         "Processing", Qgis.Critical)
+                                         "Processing", Qgis.MessageLevel.Critical)

@@ -41,10 +41,10 @@ from ..core import crs as crs_rule
 from . import styles
 from ..core.progress import Canceled, InputError, Progress
 
-_GEOM_NAMES = {QgsWkbTypes.PointGeometry: "points", QgsWkbTypes.LineGeometry: "lines",
-               QgsWkbTypes.PolygonGeometry: "polygons"}
-_KIND_TO_GEOMTYPE = {"points": QgsWkbTypes.PointGeometry, "lines": QgsWkbTypes.LineGeometry,
-                     "polygons": QgsWkbTypes.PolygonGeometry}
+_GEOM_NAMES = {QgsWkbTypes.GeometryType.PointGeometry: "points", QgsWkbTypes.GeometryType.LineGeometry: "lines",
+               QgsWkbTypes.GeometryType.PolygonGeometry: "polygons"}
+_KIND_TO_GEOMTYPE = {"points": QgsWkbTypes.GeometryType.PointGeometry, "lines": QgsWkbTypes.GeometryType.LineGeometry,
+                     "polygons": QgsWkbTypes.GeometryType.PolygonGeometry}
 
 
 class ProcessingCanceled(QgsProcessingException):
@@ -83,7 +83,7 @@ def working_crs(crs: QgsCoordinateReferenceSystem, extent_in_crs: QgsRectangle,
         return centre.x(), centre.y()
 
     projected_in_metres = (crs.isValid() and not crs.isGeographic()
-                           and crs.mapUnits() == QgsUnitTypes.DistanceMeters)
+                           and crs.mapUnits() == QgsUnitTypes.DistanceUnit.DistanceMeters)
     try:
         code = crs_rule.working_crs(crs.authid(), projected_in_metres, centre_lonlat)
     except InputError as exc:
@@ -208,7 +208,7 @@ def read_source(alg, parameters, name: str, context, feedback,
     p0, p1 = progress_range
     step = (p1 - p0) / total if total and total > 0 else 0
     # invalid geometries are repaired below (and counted), not rejected by the context's check
-    features = source.getFeatures(request, QgsProcessingFeatureSource.FlagSkipGeometryValidityChecks)
+    features = source.getFeatures(request, QgsProcessingFeatureSource.Flag.FlagSkipGeometryValidityChecks)
     for i, feature in enumerate(features):
         if i % 256 == 0:
             stop_if_canceled(feedback)
@@ -298,7 +298,7 @@ def _py(value):
 
 def crs_text(crs: QgsCoordinateReferenceSystem) -> str:
     """A CRS as text for PROJ/GDAL and for databases: the authority id, else the WKT."""
-    return crs.authid() or crs.toWkt(QgsCoordinateReferenceSystem.WKT_PREFERRED)
+    return crs.authid() or crs.toWkt(QgsCoordinateReferenceSystem.WktVariant.WKT_PREFERRED)
 
 
 def _transform(geoms: np.ndarray, src, dst, context, label: str = "The data") -> np.ndarray:
@@ -350,20 +350,20 @@ def reproject(geoms: np.ndarray, src, dst, context, label: str = "The data") -> 
 
 # --------------------------------------------------------------------------- sinks
 
-_QVARIANT = {"int": QVariant.LongLong, "float": QVariant.Double, "str": QVariant.String,
-             "bool": QVariant.Bool}
+_QVARIANT = {"int": QVariant.Type.LongLong, "float": QVariant.Type.Double, "str": QVariant.Type.String,
+             "bool": QVariant.Type.Bool}
 
 
-_INT_TYPES = (QVariant.Int, QVariant.LongLong, QVariant.UInt, QVariant.ULongLong)
+_INT_TYPES = (QVariant.Type.Int, QVariant.Type.LongLong, QVariant.Type.UInt, QVariant.Type.ULongLong)
 
 
 def field_kind(field: QgsField) -> str:
     """A QGIS field's type in the terms of :func:`make_fields`: int, float, bool or str."""
     if field.type() in _INT_TYPES:
         return "int"
-    if field.type() == QVariant.Double:
+    if field.type() == QVariant.Type.Double:
         return "float"
-    return "bool" if field.type() == QVariant.Bool else "str"
+    return "bool" if field.type() == QVariant.Type.Bool else "str"
 
 
 def carried_fields(fields: QgsFields, reserved=()) -> List[tuple]:
@@ -419,7 +419,7 @@ def write_sink(alg, parameters, name: str, context, geoms: np.ndarray, table: pd
         f.setGeometry(g)
         f.setAttributes(list(rows[i]))
         features.append(f)
-    if not sink.addFeatures(features, QgsFeatureSink.FastInsert):
+    if not sink.addFeatures(features, QgsFeatureSink.Flag.FastInsert):
         raise QgsProcessingException(f"Could not write the output {name}: {sink.lastError()}")
     return dest_id
 
