@@ -122,7 +122,11 @@ def _dialog_errors(alg_ids):
 def _run_and_load(result, work, helsinki):
     """Helsinki roads, blocks and buildings made and loaded as a user would from the dialog."""
     import processing
+    from processing.core.ProcessingConfig import ProcessingConfig
 
+    # Helsinki's OSM polygons include invalid ones and QGIS stops on them by default: the
+    # user answers the plugin's message by choosing "Do not filter" (the plugin repairs)
+    ProcessingConfig.setSettingValue(ProcessingConfig.FILTER_INVALID_GEOMETRIES, 0)
     roads = os.path.join(work, "roads.gpkg")
     blocks = os.path.join(work, "blocks.gpkg")
     buildings = os.path.join(work, "buildings.gpkg")

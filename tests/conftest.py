@@ -53,6 +53,12 @@ def qgis_processing(qgis_app):
     from qgis.core import QgsApplication
 
     Processing.initialize()
+    from processing.core.ProcessingConfig import ProcessingConfig
+
+    # OSM layers hold invalid polygons; QGIS's default setting stops on them. The suite runs
+    # as a user who chose "Do not filter" (the plugin repairs them); tests of the other two
+    # choices set them on their inputs (tests/test_invalid_geometries.py).
+    ProcessingConfig.setSettingValue(ProcessingConfig.FILTER_INVALID_GEOMETRIES, 0)
     from urban_synthesis.plugin.qgis_glue.provider import UrbanSynthesisProvider
 
     provider = UrbanSynthesisProvider()

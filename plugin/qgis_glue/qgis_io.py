@@ -154,8 +154,10 @@ def read_source(alg, parameters, name: str, context, feedback,
     Raises a QgsProcessingException naming the layer for: a missing layer, the wrong geometry
     type, missing fields, no features with geometry. ``fields`` limits the attributes read
     to those named (the ones that exist): reading every attribute of a wide OSM layer costs
-    more than the algorithms themselves. Null geometries are skipped and invalid
-    ones repaired (``make_valid``), both with a count in the log. The source is never modified.
+    more than the algorithms themselves. Null geometries are skipped; invalid ones stop the
+    run or are skipped as Processing's invalid features filtering says
+    (:func:`invalid_geometry_rule`), and with "do not filter" they are repaired
+    (``make_valid``), with a count in the log. The source is never modified.
     """
     source = alg.parameterAsSource(parameters, name, context)
     label = layer_name(alg, parameters, name, context)
@@ -207,7 +209,8 @@ def read_source(alg, parameters, name: str, context, feedback,
     total = source.featureCount()
     p0, p1 = progress_range
     step = (p1 - p0) / total if total and total > 0 else 0
-    # invalid geometries are repaired below (and counted), not rejected by the context's check
+    # the context's check is applied below, on every feature at once (a message that names
+    # the layer and the feature; "do not filter" repairs instead)
     features = source.getFeatures(request, QgsProcessingFeatureSource.Flag.FlagSkipGeometryValidityChecks)
     for i, feature in enumerate(features):
         if i % 256 == 0:
@@ -227,6 +230,9 @@ def read_source(alg, parameters, name: str, context, feedback,
             f"Layer {label} is empty: it has no features with a geometry"
             + (f" ({n_null} null geometries skipped)." if n_null else "."))
     geoms = shapely.from_wkb(np.array(wkbs, dtype=object), on_invalid="ignore")
+    if kind in ("polygons", "lines"):
+        geoms, rows, fids = _apply_invalid_rule(
+            invalid_geometry_rule(parameters, name, context), geoms, rows, fids, label, feedback)
     unreadable = np.flatnonzero(shapely.is_missing(geoms))
     if len(unreadable):
         # GEOS refuses some OSM geometries outright (rings of < 4 points): let QGIS repair them
@@ -274,6 +280,47 @@ def read_source(alg, parameters, name: str, context, feedback,
                 raise QgsProcessingException(f"Layer {label} has no valid geometry.")
     attrs = pd.DataFrame([[_py(v) for v in r] for r in rows], columns=field_names)
     return Frame(geoms, attrs, np.asarray(fids), src_crs, target_crs, label)
+
+
+def invalid_geometry_rule(parameters, name: str, context) -> int:
+    """What to do with an input's invalid geometries: the input's own setting (the
+    dialog's per-input "Invalid feature filtering") or Processing's (Settings > Options >
+    Processing > General). A QgsFeatureRequest.InvalidGeometryCheck value."""
+    from qgis.core import QgsProcessingFeatureSourceDefinition
+
+    value = parameters.get(name)
+    if isinstance(value, QgsProcessingFeatureSourceDefinition) and \
+            value.flags & QgsProcessingFeatureSourceDefinition.Flag.FlagOverrideDefaultGeometryCheck:
+        return int(value.geometryCheck)
+    return int(context.invalidGeometryCheck())
+
+
+def _apply_invalid_rule(rule: int, geoms, rows, fids, label: str, feedback):
+    """Stop on or skip invalid geometries as the rule says; "do not filter" leaves them to
+    the repair of :func:`read_source` (``make_valid``, counted in the log)."""
+    if rule == QgsFeatureRequest.InvalidGeometryCheck.GeometryNoCheck:
+        return geoms, rows, fids
+    invalid = shapely.is_missing(geoms) | ~shapely.is_valid(geoms)
+    if not invalid.any():
+        return geoms, rows, fids
+    if rule == QgsFeatureRequest.InvalidGeometryCheck.GeometryAbortOnInvalid:
+        first = int(np.flatnonzero(invalid)[0])
+        reason = "unreadable" if shapely.is_missing(geoms[first]) else \
+            shapely.is_valid_reason(geoms[first])
+        raise QgsProcessingException(
+            f"Layer {label}: feature {fids[first]} has an invalid geometry ({reason}; "
+            f"{int(invalid.sum())} in all). Repair them (Processing 'Fix geometries'), or set "
+            "Settings > Options > Processing > General > Invalid features filtering (or this "
+            "input's own setting in the dialog) to 'Do not filter', and Urban Synthesis "
+            "repairs them, or to 'Skip' to leave them out.")
+    keep = ~invalid
+    if feedback is not None:
+        feedback.pushInfo(f"{label}: {int(invalid.sum())} features with an invalid geometry "
+                          "skipped (Processing's invalid features filtering).")
+    if not keep.any():
+        raise QgsProcessingException(f"Layer {label} has no valid geometry.")
+    return (geoms[keep], [r for r, k in zip(rows, keep) if k],
+            [f for f, k in zip(fids, keep) if k])
 
 
 def _keep_dimension(geom, kind):
