@@ -14,11 +14,13 @@ from qgis.core import (
     QgsProcessingParameterFeatureSink,
     QgsProcessingParameterFeatureSource,
     QgsProcessingParameterFile,
+    QgsProcessingParameterNumber,
     QgsProcessingParameterRasterLayer,
     QgsVectorLayer,
 )
 
 from ..plugin.qgis_glue import qgis_io
+from ..plugin.roads import from_fragments as synthesis_fragments
 from ..plugin.roads import streetgan
 from .common import AlgorithmBase
 
@@ -46,6 +48,7 @@ class SynthesizeRoads(AlgorithmBase):
     FRAGMENT_DB = "FRAGMENT_DB"
     DEM = "DEM"
     SEED = "SEED"
+    FILL_QUANTILE = "FILL_QUANTILE"
     OUTPUT = "OUTPUT"
 
     def name(self):
@@ -98,6 +101,13 @@ class SynthesizeRoads(AlgorithmBase):
         self.add(QgsProcessingParameterRasterLayer(
             self.DEM, "Terrain (DEM)", optional=True),
             "Fragments and growth take the terrain into account (slope term, maximum slope).")
+        self.add(QgsProcessingParameterNumber(
+            self.FILL_QUANTILE, "Largest empty face (quantile of the example's block areas, %)",
+            QgsProcessingParameterNumber.Type.Double,
+            defaultValue=synthesis_fragments.FILL_QUANTILE, minValue=50.0, maxValue=100.0),
+            "Fragments only: faces larger than this quantile of the example's block areas are "
+            "filled with streets. An example whose largest blocks are parks or yards (central "
+            "Helsinki) keeps them with a higher value (98).", advanced=True)
         self.add_seed("The same seed and inputs give the same network.")
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT, "Synthesized roads", QgsProcessing.SourceType.TypeVectorLine),
@@ -161,7 +171,8 @@ class SynthesizeRoads(AlgorithmBase):
             boundary = self._hull_layer(area, arterials, context)
         if method.key == "fragments":
             params = {"ARTERIALS": parameters[self.ARTERIALS], "BOUNDARY": boundary,
-                      "FRAGMENT_DB": fragment_db, "DEM": dem, "SEED": seed}
+                      "FRAGMENT_DB": fragment_db, "DEM": dem, "SEED": seed,
+                      "FILL_QUANTILE": self.number(parameters, self.FILL_QUANTILE, context)}
         elif method.key == "gan":
             models = streetgan.shipped_models()  # the MODEL enum lists them by name
             if GAN_MODEL not in models:

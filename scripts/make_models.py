@@ -109,13 +109,21 @@ def district_model() -> QgsProcessingModelAlgorithm:
         "ROAD_METHOD", "Road synthesis method",
         options=["Fragments of the example (thesis ch. 4.1)",
                  "Procedural growth (Scharl 2010)",
-                 "StreetGAN trained on Helsinki (thesis ch. 4.2)"], defaultValue=0),
+                 "StreetGAN trained on real towns (thesis ch. 4.2)"], defaultValue=0),
         "How the streets are made (see 'Synthesize roads (choose the method)').", 0, 400)
     _param(model, QgsProcessingParameterEnum(
         "FOOTPRINT_METHOD", "Footprint method",
         options=["Transfer of the most similar example block (thesis ch. 5.1)",
                  "Guided re-synthesis (thesis ch. 5.2)"], defaultValue=0),
         "How the blocks are filled with building footprints.", 0, 480)
+    fill = QgsProcessingParameterNumber(
+        "FILL_QUANTILE", "Largest empty face (quantile of the example's block areas, %)",
+        QgsProcessingParameterNumber.Type.Double, defaultValue=90.0, minValue=50.0,
+        maxValue=100.0)
+    fill.setFlags(fill.flags() | QgsProcessingParameterDefinition.Flag.FlagAdvanced)
+    _param(model, fill, "Fragments: faces larger than this quantile of the example's block "
+           "areas get streets. An example whose largest blocks are parks or yards (central "
+           "Helsinki) keeps them with a higher value (98).", 0, 520)
     _param(model, QgsProcessingParameterNumber(
         "SEED", "Random seed", QgsProcessingParameterNumber.Type.Integer, defaultValue=1,
         minValue=0, maxValue=2 ** 31 - 1),
@@ -132,7 +140,7 @@ def district_model() -> QgsProcessingModelAlgorithm:
     _child(model, "roads", "urbansynth:synthesizeroads", "Synthesize the streets",
            {"METHOD": p("ROAD_METHOD"), "EXAMPLE_ROADS": out("hierarchy", "OUTPUT"),
             "ARTERIALS": p("ARTERIALS"), "BOUNDARY": p("BOUNDARY"), "DEM": p("DEM"),
-            "SEED": p("SEED")},
+            "SEED": p("SEED"), "FILL_QUANTILE": p("FILL_QUANTILE")},
            outputs=(("OUTPUT", "ROADS", "Roads"),), x=600, y=0)
     _child(model, "blocks", "urbansynth:extractblocks", "Blocks of the new district",
            {"ROADS": out("roads", "OUTPUT")}, outputs=(("OUTPUT", "BLOCKS", "Blocks"),), x=600, y=100)
