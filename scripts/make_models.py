@@ -11,6 +11,9 @@ import sys
 from pathlib import Path
 
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+# a fixed hash seed: Qt writes XML attributes in hash order, so the file changes only when
+# the model does
+os.environ.setdefault("QT_HASH_SEED", "0")
 from qgis.core import (  # noqa: E402
     QgsApplication, QgsProcessing, QgsProcessingModelAlgorithm, QgsProcessingModelChildAlgorithm,
     QgsProcessingModelChildParameterSource as Source, QgsProcessingModelOutput,

@@ -43,13 +43,13 @@ def test_stop_names_the_layer_and_the_feature(qgis_processing):
 
     with pytest.raises(QgsProcessingException, match=r"houses.*feature \d+ has an invalid "
                                                      r"geometry \(Self-intersection"):
-        _run(qgis_processing, QgsFeatureRequest.GeometryAbortOnInvalid)
+        _run(qgis_processing, QgsFeatureRequest.InvalidGeometryCheck.GeometryAbortOnInvalid)
 
 
 def test_skip_leaves_the_invalid_feature_out(qgis_processing):
     from qgis.core import QgsFeatureRequest
 
-    layer, log = _run(qgis_processing, QgsFeatureRequest.GeometrySkipInvalid)
+    layer, log = _run(qgis_processing, QgsFeatureRequest.InvalidGeometryCheck.GeometrySkipInvalid)
     assert layer.featureCount() == 9
     assert "1 features with an invalid geometry skipped" in log
 
@@ -57,7 +57,7 @@ def test_skip_leaves_the_invalid_feature_out(qgis_processing):
 def test_do_not_filter_repairs(qgis_processing):
     from qgis.core import QgsFeatureRequest
 
-    layer, log = _run(qgis_processing, QgsFeatureRequest.GeometryNoCheck)
+    layer, log = _run(qgis_processing, QgsFeatureRequest.InvalidGeometryCheck.GeometryNoCheck)
     assert layer.featureCount() == 10
     assert "1 invalid geometries repaired" in log
     assert all(f.geometry().isGeosValid() for f in layer.getFeatures())
@@ -69,13 +69,13 @@ def test_the_inputs_own_setting_wins(qgis_processing):
     _, buildings = _roads_and_buildings()
     definition = QgsProcessingFeatureSourceDefinition(
         buildings.id(), False, -1,
-        QgsProcessingFeatureSourceDefinition.FlagOverrideDefaultGeometryCheck,
-        QgsFeatureRequest.GeometrySkipInvalid)
+        QgsProcessingFeatureSourceDefinition.Flag.FlagOverrideDefaultGeometryCheck,
+        QgsFeatureRequest.InvalidGeometryCheck.GeometrySkipInvalid)
     from qgis.core import QgsProject
 
     QgsProject.instance().addMapLayer(buildings)
     try:
-        layer, log = _run(qgis_processing, QgsFeatureRequest.GeometryAbortOnInvalid,
+        layer, log = _run(qgis_processing, QgsFeatureRequest.InvalidGeometryCheck.GeometryAbortOnInvalid,
                           definition)
     finally:
         QgsProject.instance().removeMapLayer(buildings.id())
