@@ -4,7 +4,7 @@ from functools import lru_cache
 import numpy as np
 import shapely
 
-from conftest import BUBENEC, HELSINKI, LIECHTENSTEIN
+from conftest import BUBENEC, HELSINKI, LIECHTENSTEIN, ROOT
 
 
 @lru_cache(maxsize=1)
@@ -229,3 +229,13 @@ def liechtenstein_town(name):
     import liechtenstein
 
     return liechtenstein.leave_one_out(name)
+
+
+def load_script(name: str):
+    """A script of scripts/ (not a package) imported as a module."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(name, ROOT / "scripts" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module

@@ -4,23 +4,19 @@ scripts/run_desktop_check.py starts ``qgis`` with scripts/desktop_check.py as th
 script; inside QGIS it checks the provider, the toolbox, every algorithm dialog, loads styled
 Helsinki outputs, collects the message log and saves a screenshot (out/desktop.png).
 """
-import importlib.util
 import shutil
 
 import numpy as np
 import pytest
 
 from conftest import ROOT
+from helpers import load_script
 
 PNG = ROOT / "out"
 
 
 def _launcher():
-    spec = importlib.util.spec_from_file_location(
-        "run_desktop_check", ROOT / "scripts" / "run_desktop_check.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script("run_desktop_check")
 
 
 @pytest.fixture(scope="module")

@@ -1,17 +1,13 @@
 """The README's parameter reference is what the code registers, every tool's help opens its
 entry, and the toolbox speaks one way (no doubled "optional", one spelling, search tags)."""
-import importlib.util
 import re
 
 from conftest import ROOT
+from helpers import load_script
 
 
 def _script():
-    spec = importlib.util.spec_from_file_location(
-        "make_toolbox_reference", ROOT / "scripts" / "make_toolbox_reference.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script("make_toolbox_reference")
 
 
 def test_readme_reference_is_the_registered_parameters(qgis_processing):
