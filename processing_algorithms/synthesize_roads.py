@@ -24,7 +24,7 @@ from ..plugin.roads import from_fragments as synthesis_fragments
 from ..plugin.roads import streetgan
 from .common import AlgorithmBase
 
-#: One METHOD: its label and the algorithm that runs it (None: run here). New methods are
+#: One METHOD: its label and the algorithm that runs it. New methods are
 #: appended (the enum index is what models and command lines store).
 Method = namedtuple("Method", "key label algorithm")
 METHODS = (
@@ -164,8 +164,7 @@ class SynthesizeRoads(AlgorithmBase):
                               {"ROADS": parameters[self.EXAMPLE_ROADS], "DEM": dem,
                                "OUTPUT": QgsProcessing.TEMPORARY_OUTPUT})["OUTPUT"]
             steps.setCurrentStep(1)
-        # fragment synthesis and growth fill the district: the boundary given, or the
-        # arterials' convex hull
+        # every method fills the district: the boundary given, or the arterials' convex hull
         boundary = parameters.get(self.BOUNDARY)
         if not self.given(parameters, self.BOUNDARY):
             boundary = self._hull_layer(area, arterials, context)
