@@ -948,7 +948,12 @@ def _shape_lines(shapes: StreetShapes, pick, a_xy, b_xy, mirror):
     def onto(xy, index):
         return a_xy[index] + xy[:, :1] * chord[index] + xy[:, 1:2] * normal[index]
 
-    lines = coordinates.transform(base, onto)
+    return _pinned(coordinates.transform(base, onto), a_xy, b_xy)
+
+
+def _pinned(lines, a_xy, b_xy):
+    """The lines with their first and last vertices set exactly to a and b (a transform's
+    round-off would leave them a hair off the points they join)."""
     coords, index = shapely.get_coordinates(lines, return_index=True)
     first = np.r_[True, index[1:] != index[:-1]]
     last = np.r_[index[1:] != index[:-1], True]
@@ -1148,13 +1153,7 @@ def _flatten(lines, a_xy, b_xy, scale):
         foot = a_xy[index] + t[:, None] * chord[index]
         return foot + scale * (xy - foot)
 
-    out = coordinates.transform(lines, towards_chord)
-    coords, index = shapely.get_coordinates(out, return_index=True)
-    first = np.r_[True, index[1:] != index[:-1]]
-    last = np.r_[index[1:] != index[:-1], True]
-    coords[first] = a_xy
-    coords[last] = b_xy
-    return shapely.linestrings(coords, indices=index)
+    return _pinned(coordinates.transform(lines, towards_chord), a_xy, b_xy)
 
 
 # --------------------------------------------------------------------------- synthesis
