@@ -71,20 +71,21 @@ TUNED_ON = ("Schaan", "Eschen", "Helsinki")
 QUICK_TOWNS = ("Vaduz", "Mauren", "Helsinki")
 METHOD_ORDER = ("fragments", "random_walk", "streetgan", "growroads", "splitdomain")
 BASELINES = ("grid", "chords", "delaunay")
-#: Towns in the training data of the shipped StreetGAN models (their model cards): a
-#: model is only measured on towns it never saw.
-GAN_TRAINED_ON = {
-    "streetgan_towns": ("Helsinki", "Balzers", "Gamprin", "Planken", "Ruggell", "Schaan",
-                        "Schellenberg", "Triesenberg", "Vaduz"),
-    "streetgan_helsinki": ("Helsinki",),
-}
+def gan_trained_on(model: str) -> set:
+    """The towns in a shipped StreetGAN model's training data, read from its model card
+    (``training_data``: one network, or ``networks`` such as 'li_vaduz' or 'helsinki')."""
+    from urban_synthesis.plugin.roads import streetgan
+
+    data = json.loads((streetgan.MODELS_DIR / f"{model}.json").read_text())["training_data"]
+    names = [n["name"] for n in data.get("networks", [])] or [data["name"]]
+    return {n.removeprefix("li_").capitalize() for n in names}
 
 
 def gan_model_for(town: str):
     """The shipped StreetGAN model for a target: the towns model (the one synthesizeroads
     uses) where it never saw the town, else the Helsinki model, else None."""
     for name in ("streetgan_towns", "streetgan_helsinki"):
-        if town not in GAN_TRAINED_ON[name]:
+        if town not in gan_trained_on(name):
             return name
     return None
 
@@ -320,7 +321,7 @@ def summary(results: dict) -> str:
             model = r["runs"][0].get("model") if r.get("runs") else None
             if m == "fragments" and name in TUNED_ON:
                 continue
-            if model and name in GAN_TRAINED_ON.get(model, ()):
+            if model and name in gan_trained_on(model):
                 continue
             row = rows.setdefault(m, {"err": [], "wins": {b: [] for b in BASELINES},
                                       "viol": [], "towns": []})
