@@ -320,7 +320,9 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
         so that the image border does not leave stubs inside the target
     max_gap, min_dead_end, from_edge : see :func:`plugin.roads.raster_graph.raster_to_graph`;
         ``min_dead_end`` None takes the model card's ``postprocess.min_dead_end_m``
-        (chosen on validation seeds when the model was made), else the thesis's 25 m
+        (chosen on validation seeds when the model was made), else the thesis's 25 m;
+        the road mask's erosions and dilations are the card's ``postprocess.erosions`` /
+        ``dilations`` (else the thesis's 1 and 5, made for 15 px lines)
     tile : noise cells per tile (None: one pass)
     levels : derive a ``level`` per edge from street continuity (plugin.network.hierarchy)
     generate_fn : replaces :func:`generate` (same signature and result), e.g. to run the
@@ -355,9 +357,9 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
     t = time.perf_counter()
     scale = cell / gen.cell_size  # lengths in the model's pixels stay the thesis's
     width = float(gen.card.get("line_width_px", raster_graph.LINE_WIDTH_PX)) * cell
+    post = gen.card.get("postprocess", {})
     if min_dead_end is None:
-        min_dead_end = float(gen.card.get("postprocess", {}).get("min_dead_end_m",
-                                                                 DEFAULT_MIN_DEAD_END))
+        min_dead_end = float(post.get("min_dead_end_m", DEFAULT_MIN_DEAD_END))
     merge = 0.5 * width if merge_junctions is None else float(merge_junctions)
     corridor = 0.5 * width + GIVEN_CORRIDOR
     open_given = given_lines[_open_roads(given_cls)] if len(given_lines) else given_lines
@@ -373,7 +375,10 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
             drawn = drawn[:image.shape[0], :image.shape[1]]
             image[:drawn.shape[0], :drawn.shape[1]] = np.maximum(
                 image[:drawn.shape[0], :drawn.shape[1]], drawn.astype(np.float32))
-    rg = raster_graph.raster_to_graph(image, gt, simplify=3.0 * scale,
+    # the mask's morphology suits the line width the model drew (thesis: 1 and 5 for 15 px)
+    rg = raster_graph.raster_to_graph(image, gt, erosions=int(post.get("erosions", 1)),
+                                      dilations=int(post.get("dilations", 5)),
+                                      simplify=3.0 * scale,
                                       min_dead_end=min_dead_end * scale, max_gap=max_gap * scale,
                                       from_edge=from_edge, merge_junctions=merge,
                                       progress=progress.sub(0.5, 0.85))

