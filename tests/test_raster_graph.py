@@ -70,6 +70,52 @@ def test_chains_split_at_junctions_and_keep_rings():
     assert len(ring) == 1 and ring[0][0] == ring[0][-1] and len(ring[0]) == 5
 
 
+def _walked_chains(n, a, b):
+    """Reference for rg.chains: the plain walk from each end or junction (by index) along
+    each edge (by neighbour index), then the rings from their lowest node."""
+    nbrs = [[] for _ in range(n)]
+    for x, y in zip(a.tolist(), b.tolist()):
+        nbrs[x].append(y)
+        nbrs[y].append(x)
+    nbrs = [sorted(v) for v in nbrs]
+    seen, out = set(), []
+
+    def walk(prev, cur):
+        path = [prev]
+        while len(nbrs[cur]) == 2 and cur not in seen:
+            seen.add(cur)
+            path.append(cur)
+            prev, cur = cur, [x for x in nbrs[cur] if x != prev][0]
+        return path + [cur]
+
+    for s in range(n):
+        if len(nbrs[s]) != 2:
+            for t in nbrs[s]:
+                if len(nbrs[t]) == 2 and t not in seen or len(nbrs[t]) != 2 and s < t:
+                    out.append(walk(s, t))
+    for s in range(n):
+        if len(nbrs[s]) == 2 and s not in seen:
+            seen.add(s)
+            out.append(walk(s, nbrs[s][0]))
+    return out
+
+
+def test_chains_in_walking_order_on_random_graphs():
+    """The vectorised chains give the walk's chains, order and direction, on random sparse
+    graphs (junctions side by side, loops back to one junction, rings, isolated nodes)."""
+    for seed in range(300):
+        rng = np.random.default_rng(seed)
+        n = int(rng.integers(1, 30))
+        e = rng.integers(0, n, (int(rng.integers(0, 2 * n)), 2))
+        e = np.unique(np.sort(e[e[:, 0] != e[:, 1]], axis=1), axis=0).reshape(-1, 2)
+        ring = np.arange(n, n + 4)
+        e = rng.permutation(np.r_[e, np.c_[ring, np.roll(ring, -1)]])  # plus a ring alone
+        flip = rng.random(len(e)) < 0.5
+        a, b = np.where(flip, e[:, 1], e[:, 0]), np.where(flip, e[:, 0], e[:, 1])
+        assert [list(map(int, c)) for c in rg.chains(n + 4, a, b)] == _walked_chains(n + 4, a, b)
+    assert rg.chains(3, np.zeros(0, int), np.zeros(0, int)) == []
+
+
 def test_smoothing_keeps_ends_and_straight_lines():
     zig = np.column_stack([np.arange(11.0), np.r_[0, 1] .repeat(1).tolist() * 5 + [0]])
     s = rg.smooth_chain(zig, 5)

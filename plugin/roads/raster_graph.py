@@ -248,44 +248,99 @@ def pixel_graph(skel: np.ndarray):
 
 def chains(n: int, a: np.ndarray, b: np.ndarray, progress: Optional[Progress] = None) -> list:
     """Split a graph into chains whose end nodes have degree != 2 (and closed rings of
-    degree-2 nodes, which start and end at the same node). Returns lists of node indices."""
-    from scipy.sparse import csr_matrix
+    degree-2 nodes, which start and end at the same node). Returns lists of node indices.
 
+    The order is that of a walk from each end or junction in turn (by index) along each of
+    its edges (by neighbour index), then the rings from their lowest node."""
     progress = ensure(progress)
+    progress.step(0.0)
+    nodes, offsets = _chain_nodes(n, a, b)
+    progress.step(1.0)
+    return [c.tolist() for c in np.split(nodes, offsets[1:-1])] if len(offsets) > 1 else []
+
+
+def _chain_nodes(n: int, a: np.ndarray, b: np.ndarray):
+    """The chains of :func:`chains` (same order, same direction) as one array of node
+    indices and the offsets of the chains in it (n_chains + 1, the last is its length).
+
+    Without a Python loop per node (a walk from each junction was most of the raster-to-
+    graph time): the runs of degree-2 nodes are the connected components of their subgraph;
+    one breadth-first search from a virtual root joined to the node where each run is
+    entered puts every run's nodes in walking order (a run is a path)."""
+    from scipy.sparse import csr_matrix
+    from scipy.sparse.csgraph import breadth_first_order, connected_components
 
     adj = csr_matrix((np.ones(2 * len(a), np.int8), (np.r_[a, b], np.r_[b, a])), shape=(n, n))
-    indptr, nbrs = adj.indptr, adj.indices
+    indptr, nbrs = adj.indptr.astype(np.int64), adj.indices.astype(np.int64)
     deg = np.diff(indptr)
-    visited = np.zeros(n, bool)  # interior (degree-2) nodes already on a chain
-    out = []
+    row = np.repeat(np.arange(n), deg)  # the node each adjacency entry leaves
+    inner = deg == 2
+    in_run = inner[row] & inner[nbrs]
+    _, label = connected_components(csr_matrix(
+        (np.ones(int(in_run.sum()), np.int8), (row[in_run], nbrs[in_run])), shape=(n, n)),
+        directed=False)
 
-    def walk(start, nxt):
-        path, prev, cur = [start], start, nxt
-        while deg[cur] == 2 and not visited[cur]:
-            visited[cur] = True
-            path.append(cur)
-            x, y = nbrs[indptr[cur]:indptr[cur + 1]]
-            prev, cur = cur, (y if x == prev else x)
-            if cur == start and deg[start] == 2:  # closed ring
-                break
-        path.append(cur)
-        return path
+    # The walk's order: the adjacency entries that leave an end or a junction, in turn; a
+    # run is walked from the first entry that reaches it, and two ends or junctions side by
+    # side make a one-edge chain (once, from the lower index) ...
+    from_end = ~inner[row]
+    reach = np.flatnonzero(from_end & inner[nbrs])
+    _, first = np.unique(label[nbrs[reach]], return_index=True)
+    run_entry = reach[first]
+    pair = np.flatnonzero(from_end & ~inner[nbrs] & (row < nbrs))
+    # ... then the rings without a junction, by their lowest node, walked from it towards
+    # its first neighbour: cutting the edge back to the lowest node makes the ring a path
+    inner_nodes = np.flatnonzero(inner)
+    walked = np.zeros(n, bool)
+    walked[label[nbrs[run_entry]]] = True
+    _, lowest = np.unique(label[inner_nodes], return_index=True)
+    ring_start = np.sort(inner_nodes[lowest])
+    ring_start = ring_start[~walked[label[ring_start]]]
+    ring_back = nbrs[indptr[ring_start] + 1]
 
-    starts = np.flatnonzero(deg != 2)
-    for k, s in enumerate(starts):
-        if k % 512 == 0:
-            progress.step(0.9 * k / len(starts))
-        for t in nbrs[indptr[s]:indptr[s + 1]]:
-            if deg[t] == 2:
-                if not visited[t]:
-                    out.append(walk(s, t))
-            elif s < t:  # two junctions / ends side by side: a one-edge chain, once
-                out.append([s, t])
-    for s in np.flatnonzero((deg == 2) & ~visited):  # rings without any junction
-        if not visited[s]:
-            visited[s] = True
-            out.append(walk(s, nbrs[indptr[s]]))
-    return out
+    # chains by walk order: key = adjacency entry, rings after all entries
+    n_run, n_pair, n_ring = len(run_entry), len(pair), len(ring_start)
+    key = np.r_[run_entry, pair, len(nbrs) + np.arange(n_ring)]
+    rank = np.empty(len(key), np.int64)
+    rank[np.argsort(key)] = np.arange(len(key))
+    run_rank, pair_rank, ring_rank = np.split(rank, [n_run, n_run + n_pair])
+    entry_node = np.r_[nbrs[run_entry], ring_start]  # first degree-2 node of a run or ring
+    entry_rank = np.r_[run_rank, ring_rank]
+    chain_of_label = np.full(n, -1, np.int64)
+    chain_of_label[label[entry_node]] = entry_rank
+
+    # run nodes in walking order: breadth-first from a root (node n) joined to each entry
+    cut = np.isin(row * n + nbrs, np.r_[ring_start * n + ring_back, ring_back * n + ring_start])
+    keep = in_run & ~cut
+    bfs = csr_matrix((np.ones(int(keep.sum()) + len(entry_node), np.int8),
+                      (np.r_[row[keep], np.full(len(entry_node), n)], np.r_[nbrs[keep], entry_node])),
+                     shape=(n + 1, n + 1))
+    order = breadth_first_order(bfs, n, directed=True, return_predecessors=False)[1:]
+    chain = chain_of_label[label[order]]
+    by_chain = np.argsort(chain, kind="stable")
+    order, chain = order[by_chain], chain[by_chain]
+
+    # chain = [start] + run + [end]: a run between ends or junctions has both, a ring only
+    # ends at its first node, a one-edge chain has no run
+    n_chain = len(key)
+    run_size = np.bincount(chain, minlength=n_chain)
+    has_head = np.ones(n_chain, bool)
+    has_head[ring_rank] = False
+    offsets = np.r_[0, np.cumsum(run_size + has_head + 1)]
+    nodes = np.empty(offsets[-1], np.int64)
+    head = np.empty(n_chain, np.int64)
+    head[run_rank], head[pair_rank] = row[run_entry], row[pair]
+    nodes[offsets[:-1][has_head]] = head[has_head]
+    first_in_chain = np.r_[0, np.cumsum(run_size)[:-1]]
+    nodes[offsets[chain] + has_head[chain] + np.arange(len(order)) - first_in_chain[chain]] = order
+    tail = offsets[1:] - 1
+    nodes[tail[pair_rank]] = nbrs[pair]
+    nodes[tail[ring_rank]] = ring_start
+    # a run leaves its last node by the neighbour it did not come from
+    last, before = nodes[tail[run_rank] - 1], nodes[tail[run_rank] - 2]
+    x, y = nbrs[indptr[last]], nbrs[indptr[last] + 1]
+    nodes[tail[run_rank]] = np.where(x == before, y, x)
+    return nodes, offsets
 
 
 def smooth_chain(points: np.ndarray, iterations: int = 5) -> np.ndarray:
@@ -296,6 +351,20 @@ def smooth_chain(points: np.ndarray, iterations: int = 5) -> np.ndarray:
         return p
     for _ in range(iterations):
         p[1:-1] = 0.25 * p[:-2] + 0.5 * p[1:-1] + 0.25 * p[2:]
+    return p
+
+
+def _smooth_chains(points: np.ndarray, offsets: np.ndarray, iterations: int = 5) -> np.ndarray:
+    """:func:`smooth_chain` on all chains at once (``points`` of all chains one after the
+    other, chain k at ``offsets[k]:offsets[k + 1]``): the same arithmetic in the same
+    order, so the same floats, with the first and last point of every chain fixed."""
+    p = np.asarray(points, dtype=np.float64).copy()
+    fixed = np.zeros(len(p), bool)
+    fixed[offsets[:-1]] = True
+    fixed[offsets[1:] - 1] = True
+    moves = ~fixed[1:-1, None]
+    for _ in range(iterations):
+        p[1:-1] = np.where(moves, 0.25 * p[:-2] + 0.5 * p[1:-1] + 0.25 * p[2:], p[1:-1])
     return p
 
 
@@ -477,25 +546,19 @@ def raster_to_graph(image: np.ndarray, geotransform=(0.0, 1.0, 0.0, 0.0, 0.0, -1
     t = time.perf_counter()
     rc, a, b, stats["artefact_edges"] = pixel_graph(skel)
     stats["skeleton_pixels"] = len(rc)
-    paths = chains(len(rc), a, b, progress.sub(0.2, 0.4)) if len(rc) else []
+    progress.step(0.2)
+    nodes, offsets = _chain_nodes(len(rc), a, b) if len(rc) else (np.empty(0, np.int64), np.zeros(1, np.int64))
     times["graph"] = time.perf_counter() - t
     progress.step(0.4)
 
     t = time.perf_counter()
-    stats["chains"] = len(paths)
-    lines = []
-    for k, path in enumerate(paths):
-        if k % 1024 == 0:
-            progress.step(0.4 + 0.15 * k / len(paths))
-        if len(path) < 2:
-            continue
-        p = rc[np.asarray(path)]
+    stats["chains"] = len(offsets) - 1
+    if len(nodes):
+        p = rc[nodes]
         # pixel centres -> map coordinates
         xy = np.column_stack([gt[0] + (p[:, 1] + 0.5) * gt[1], gt[3] + (p[:, 0] + 0.5) * gt[5]])
-        lines.append(smooth_chain(xy, smoothing))
-    if lines:
-        geoms = shapely.linestrings(np.concatenate(lines),
-                                    indices=np.repeat(np.arange(len(lines)), [len(x) for x in lines]))
+        geoms = shapely.linestrings(_smooth_chains(xy, offsets, smoothing),
+                                    indices=np.repeat(np.arange(len(offsets) - 1), np.diff(offsets)))
     else:
         geoms = np.empty(0, dtype=object)
     if len(geoms):
