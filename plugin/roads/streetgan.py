@@ -161,6 +161,10 @@ def load_model(model, threads: int = 0, card: Optional[dict] = None) -> Generato
         raise InputError("onnxruntime is not installed: pip install -r requirements.txt") from exc
     opts = ort.SessionOptions()
     opts.log_severity_level = 3
+    # idle worker threads sleep instead of spinning: the same output, and on a shared
+    # 2-core machine the 769 px image took 0.18 s wall / 0.16 s CPU with spinning, 0.11 s /
+    # 0.10 s without (the spinning threads took the core the work needed)
+    opts.add_session_config_entry("session.intra_op.allow_spinning", "0")
     if threads:
         opts.intra_op_num_threads = int(threads)
     try:
