@@ -10,9 +10,9 @@ goes to a target point v_j drawn with the transition probability
 segment, with the statistics of the base point's street); steps under a threshold are
 ignored. p is zero for a point that no street of the walk's level passes (wrong level),
 for a saturated point (its example's number of connections, at most 4), for a step that
-would cross or touch an existing segment (an STRtree over the segments, rebuilt in batches,
-plus a vectorised test against the latest segments) or pass over another point (no new
-intersections), and for a step closer than a minimum angle to a street already at either
+would cross or touch an existing segment (a grid of cells over the segments, which grows
+with the walk, and an exact test of the segments in the step's cells) or pass over another
+point (no new intersections), and for a step closer than a minimum angle to a street already at either
 end. A walk ends where every p is zero; new walks start from free street slots until none
 can start.
 
@@ -89,7 +89,6 @@ POINT_FIELDS = [("node_id", "int"), ("degree", "int"), ("example", "int"), ("sou
 BLOCK_FIELDS = [("block_id", "int"), ("area_m2", "float"), ("neighbours", "int"),
                 ("parcel_area", "float")]
 
-_BATCH = 64      # recent segments tested directly before the STRtree is rebuilt (at least)
 _TOUCH = 0.5     # m: a step closer than this to another segment touches it
 #: example == -1: a node of the given roads; -2: a junction slot placed on a given road
 EXISTING, ROAD_SLOT = -1, -2
@@ -161,88 +160,141 @@ def dead_end_share_of(points: iq.PointSet) -> float:
     return float((deg == 1).sum() / n) if n else 0.0
 
 
+def _reserve(rows: np.ndarray, size: int) -> np.ndarray:
+    """``rows`` with room for at least ``size`` rows (doubled when full), its rows kept:
+    appending one row at a time costs O(1) amortised, not a copy of all."""
+    if len(rows) >= size:
+        return rows
+    out = np.zeros((max(size, 2 * len(rows)),) + rows.shape[1:], dtype=rows.dtype)
+    out[:len(rows)] = rows
+    return out
+
+
+class _SegmentGrid:
+    """Segment ids in square cells (a dict of cell -> list of ids), each segment listed in
+    every cell its bounding box touches: the segments whose bounding boxes meet a box are
+    among those listed in the cells the box touches. A segment is added in O(cells), so the
+    index grows with the walk (an STRtree would have to be rebuilt)."""
+
+    def __init__(self, cell: float):
+        self.cell = float(cell)
+        self.cells = {}
+
+    def _span(self, xmin, ymin, xmax, ymax):
+        c = self.cell
+        return (range(math.floor(xmin / c), math.floor(xmax / c) + 1),
+                range(math.floor(ymin / c), math.floor(ymax / c) + 1))
+
+    def add(self, i: int, x0, y0, x1, y1):
+        cols, rows = self._span(min(x0, x1), min(y0, y1), max(x0, x1), max(y0, y1))
+        cells = self.cells
+        for ix in cols:
+            for iy in rows:
+                cells.setdefault((ix, iy), []).append(i)
+
+    def near(self, xmin, ymin, xmax, ymax) -> np.ndarray:
+        """Ids listed in the cells the box touches, ascending, each once."""
+        cols, rows = self._span(xmin, ymin, xmax, ymax)
+        get = self.cells.get
+        found = []
+        for ix in cols:
+            for iy in rows:
+                ids = get((ix, iy))
+                if ids:
+                    found.extend(ids)
+        return np.unique(np.array(found, dtype=np.int64))
+
+
 class _Walker:
-    """State of the street generation: slot counts, capacities, segments, edges."""
+    """State of the street generation: slot counts, capacities, segments, edges.
+
+    Per point and per segment state lives in arrays with spare rows (:func:`_reserve`);
+    the public arrays (``p``, ``xy``, ``cap``, ``cnt``, ``deg`` ...) are views of their
+    first rows, renewed when points are added."""
+
+    _POINT_ARRAYS = ("cap", "cnt", "slot_dir", "deg", "used", "_mark")
 
     def __init__(self, pts: iq.PointSet, settings: WalkSettings, rng, cap, cnt, slot_dir,
                  dirs, seg0):
-        self.p = pts
         self.s = settings
         self.rng = rng
-        self.xy = pts.xy
         self.kd = cKDTree(pts.xy)
-        self.cap = cap
-        self.cnt = cnt
-        self.slot_dir = slot_dir
-        self.deg = np.zeros(len(pts), dtype=np.int64)
-        self.used = np.zeros((len(pts), 2), dtype=bool)  # slots with a segment of theirs
+        self._pts_rows = pts  # the point attributes, with spare rows once points are added
+        self._point_rows = {
+            "cap": np.asarray(cap), "cnt": np.asarray(cnt), "slot_dir": np.asarray(slot_dir),
+            "deg": np.zeros(len(pts), dtype=np.int64),
+            "used": np.zeros((len(pts), 2), dtype=bool),  # slots with a segment of theirs
+            "_mark": np.zeros(len(pts), dtype=bool)}  # scratch mask of a point's neighbours
+        self._show_points(len(pts))
         self.adj = [set() for _ in range(len(pts))]
         self.dirs = dirs
+        # edges: (a, slot_a, b, slot_b, level, origin) tuples, and their end points, segment
+        # and liveness as arrays (a piece's edges are found at once when it is dropped)
         self.edges: List[tuple] = []
-        self.edge_alive: List[bool] = []
-        self._mark = np.zeros(len(pts), dtype=bool)  # scratch mask of a point's neighbours
-        # segments: coordinates of all, an STRtree over the first n_tree, and the newest
-        # (at most _BATCH) as a small geometry array tested directly; a split segment is
-        # dead (its two halves are added as new segments)
+        self._edge_ends = np.zeros((2 * len(pts) + 16, 2), dtype=np.int64)
+        self._edge_seg = np.zeros(len(self._edge_ends), dtype=np.int64)
+        self._edge_alive = np.zeros(len(self._edge_ends), dtype=bool)
+        # segments: coordinates, geometries and owners of all, in a grid of cells about a
+        # street gap wide; a split segment is dead (its two halves are added as new ones)
         seg0 = np.asarray(seg0, dtype=float).reshape(-1, 4)
-        self._coords = np.zeros((len(seg0) + 4 * len(pts) + 16, 4))
-        self._coords[:len(seg0)] = seg0
-        self._alive = np.ones(len(self._coords), dtype=bool)
-        self._seg_edge = np.full(len(self._coords), -1, dtype=np.int64)  # -1: given road
-        self._seg_start = np.full(len(self._coords), -1, dtype=np.int64)  # the edge's a
-        self._seg_level = np.full(len(self._coords), -1, dtype=np.int64)  # the edge's level
-        self._edge_seg: List[int] = []
-        self.n_seg = len(seg0)
-        self._recent = np.empty(len(self._coords), dtype=object)
-        self.n_tree = 0
-        self.tree = None
-        self._rebuild()
+        size = len(seg0) + 4 * len(pts) + 16
+        self._coords = np.zeros((size, 4))
+        self._geoms = np.empty(size, dtype=object)
+        self._alive = np.zeros(size, dtype=bool)
+        self._seg_edge = np.full(size, -1, dtype=np.int64)  # -1: given road
+        self._seg_start = np.full(size, -1, dtype=np.int64)  # the edge's a
+        self._seg_level = np.full(size, -1, dtype=np.int64)  # the edge's level
+        gaps = pts.dist_mean[:, 0][np.isfinite(pts.dist_mean[:, 0])]
+        self._grid = _SegmentGrid(max(float(np.median(gaps)) if len(gaps) else 100.0, 10.0))
+        self.n_seg = 0
+        for p0x, p0y, p1x, p1y in seg0:
+            self._add_segment((p0x, p0y), (p1x, p1y))
         self.cos_min = math.cos(math.radians(settings.min_angle))
         self.area = None  # the target: junctions made on streets stay inside it
 
+    def _show_points(self, n: int):
+        """Point views onto the first ``n`` rows of the point arrays."""
+        rows = self._pts_rows
+        self.p = iq.PointSet(**{k: getattr(rows, k)[:n] for k in iq.PointSet.__dataclass_fields__})
+        self.xy = self.p.xy
+        for name, a in self._point_rows.items():
+            setattr(self, name, a[:n])
+
+    @property
+    def edge_alive(self) -> np.ndarray:
+        return self._edge_alive[:len(self.edges)]
+
     # -- segment index ---------------------------------------------------------------
 
-    def _rebuild(self):
-        self.n_tree = self.n_seg
-        if self.n_tree:
-            s = self._coords[:self.n_tree]
-            self.tree = shapely.STRtree(shapely.linestrings(s.reshape(-1, 2, 2)))
-
     def _add_segment(self, p, q, edge=-1):
-        if self.n_seg == len(self._coords):
-            grow = len(self._coords)
-            self._coords = np.vstack([self._coords, np.zeros((grow, 4))])
-            self._alive = np.r_[self._alive, np.ones(grow, dtype=bool)]
-            self._seg_edge = np.r_[self._seg_edge, np.full(grow, -1, dtype=np.int64)]
-            self._seg_start = np.r_[self._seg_start, np.full(grow, -1, dtype=np.int64)]
-            self._seg_level = np.r_[self._seg_level, np.full(grow, -1, dtype=np.int64)]
-            self._recent = np.r_[self._recent, np.empty(grow, dtype=object)]
-        self._coords[self.n_seg] = (p[0], p[1], q[0], q[1])
-        self._seg_edge[self.n_seg] = edge
+        i = self.n_seg
+        if i == len(self._coords):
+            self._coords, self._geoms, self._alive, self._seg_edge, self._seg_start, \
+                self._seg_level = (_reserve(a, i + 1) for a in (
+                    self._coords, self._geoms, self._alive, self._seg_edge, self._seg_start,
+                    self._seg_level))
+        self._coords[i] = (p[0], p[1], q[0], q[1])
+        self._geoms[i] = shapely.LineString([p, q])
+        self._alive[i] = True
+        self._seg_edge[i] = edge
         if edge >= 0:
-            self._edge_seg.append(self.n_seg)
-            self._seg_start[self.n_seg] = self.edges[edge][0]
-            self._seg_level[self.n_seg] = self.edges[edge][4]
-        self._recent[self.n_seg - self.n_tree] = shapely.LineString([p, q])
+            self._edge_seg[edge] = i
+            self._seg_start[i] = self.edges[edge][0]
+            self._seg_level[i] = self.edges[edge][4]
+        else:
+            self._seg_start[i] = self._seg_level[i] = -1
+        self._grid.add(i, p[0], p[1], q[0], q[1])
         self.n_seg += 1
-        # the tree is rebuilt when the recent segments reach _BATCH or 3 sqrt(n): the
-        # rebuilds cost O(n^1.5 log n) in all, the direct tests O(sqrt(n)) per step
-        if self.n_seg - self.n_tree >= max(_BATCH, 3.0 * math.sqrt(self.n_tree)):
-            self._rebuild()
 
     def _hits(self, geom, distance):
-        """Indices of the live segments within ``distance`` of a geometry."""
-        hits = []
-        if self.tree is not None and self.n_tree:
-            hits.append(self.tree.query(geom, predicate="dwithin", distance=distance))
-        n_recent = self.n_seg - self.n_tree
-        if n_recent:
-            near = shapely.dwithin(self._recent[:n_recent], geom, distance)
-            hits.append(np.flatnonzero(near) + self.n_tree)
-        if not hits:
-            return np.zeros(0, dtype=np.int64)
-        hit = np.concatenate(hits)
-        return hit[self._alive[hit]]
+        """Indices of the live segments within ``distance`` of a geometry (ascending)."""
+        xmin, ymin, xmax, ymax = shapely.bounds(geom)
+        pad = distance + 1e-3  # the box of everything within distance, and a hair more
+        near = self._grid.near(xmin - pad, ymin - pad, xmax + pad, ymax + pad)
+        near = near[self._alive[near]]
+        if not len(near):
+            return near
+        return near[shapely.dwithin(self._geoms[near], geom, distance)]
 
     def _clear(self, v, j, q=None):
         """Whether the step v -> j (or to the location q) keeps clear of every segment
@@ -264,24 +316,40 @@ class _Walker:
         """A new point at ``xy`` with the attributes of point ``like``; street a (``level``)
         passes through it along ``through_dirs`` (two unit vectors), street b is free for
         one connection (a T junction). Returns its index."""
-        new = self.p.take([like])
-        new.xy = np.asarray(xy, dtype=float).reshape(1, 2)
-        new.level = np.array([[level, level]])
-        new.example = np.array([ROAD_SLOT if on_given else max(int(self.p.example[like]), 0)])
-        new.generated = np.array([True])
-        new.source = np.array([-1])  # made by a join, not from the example
-        new.degree = np.array([3])
-        self.p = iq.PointSet.concat([self.p, new])
-        self.xy = self.p.xy
-        self.cap = np.r_[self.cap, 3]
-        self.cnt = np.vstack([self.cnt, [[2, 1]]])
-        self.slot_dir = np.concatenate([self.slot_dir, np.zeros((1, 2, 2))])
-        self.deg = np.r_[self.deg, 2]
-        self.used = np.vstack([self.used, [[True, False]]])
+        k = len(self.p)
+        rows = self._pts_rows
+        if k == len(rows):
+            rows = iq.PointSet(**{f: _reserve(getattr(rows, f), k + 1)
+                                  for f in iq.PointSet.__dataclass_fields__})
+            self._pts_rows = rows
+            self._point_rows = {name: _reserve(a, k + 1) for name, a in self._point_rows.items()}
+        for f in iq.PointSet.__dataclass_fields__:
+            a = getattr(rows, f)
+            a[k] = a[like]
+        rows.xy[k] = np.asarray(xy, dtype=float).reshape(2)
+        rows.level[k] = level
+        rows.example[k] = ROAD_SLOT if on_given else max(int(rows.example[like]), 0)
+        rows.generated[k] = True
+        rows.source[k] = -1  # made by a join, not from the example
+        rows.degree[k] = 3
+        for name, value in (("cap", 3), ("cnt", (2, 1)), ("slot_dir", 0.0), ("deg", 2),
+                            ("used", (True, False)), ("_mark", False)):
+            self._point_rows[name][k] = value
+        self._show_points(k + 1)
         self.adj.append(set())
         self.dirs.append([np.asarray(d, dtype=float) for d in through_dirs])
-        self._mark = np.r_[self._mark, False]
-        return len(self.p) - 1
+        return k
+
+    def _new_edge(self, a, sa, b, sb, h, origin):
+        """Record the edge a -> b and add its segment."""
+        e = len(self.edges)
+        if e == len(self._edge_ends):
+            self._edge_ends, self._edge_seg, self._edge_alive = (
+                _reserve(x, e + 1) for x in (self._edge_ends, self._edge_seg, self._edge_alive))
+        self.edges.append((a, sa, b, sb, h, origin))
+        self._edge_ends[e] = (a, b)
+        self._edge_alive[e] = True
+        self._add_segment(self.xy[a], self.xy[b], e)
 
     def split_segment(self, seg: int, xy, like: int) -> int:
         """Split a live segment at ``xy`` (a point on it): a new junction point, the two
@@ -299,11 +367,9 @@ class _Walker:
             self.adj[a].discard(b)
             self.adj[b].discard(a)
             for u, w, su, sw in ((a, k, sa, 0), (k, b, 0, sb)):
-                self.edges.append((u, su, w, sw, h, origin))
-                self.edge_alive.append(True)
+                self._new_edge(u, su, w, sw, h, origin)
                 self.adj[u].add(w)
                 self.adj[w].add(u)
-                self._add_segment(self.xy[u], self.xy[w], len(self.edges) - 1)
         else:
             self._add_segment(p, self.xy[k], -1)
             self._add_segment(self.xy[k], q, -1)
@@ -431,9 +497,7 @@ class _Walker:
         self.adj[b].add(a)
         self.dirs[a].append(d)
         self.dirs[b].append(-d)
-        self.edges.append((a, sa, b, sb, h, origin))
-        self.edge_alive.append(True)
-        self._add_segment(self.xy[a], self.xy[b], len(self.edges) - 1)
+        self._new_edge(a, sa, b, sb, h, origin)
 
     def extend(self, cur, cs, h, relaxed=False, origin="walk"):
         added = 0
@@ -462,9 +526,7 @@ class _Walker:
     # -- the REPEAT: one network --------------------------------------------------------
 
     def live_edges(self) -> np.ndarray:
-        alive = np.asarray(self.edge_alive, dtype=bool)
-        e = np.array([(a, b) for a, _, b, _, _, _ in self.edges], dtype=np.int64).reshape(-1, 2)
-        return e[alive]
+        return self._edge_ends[:len(self.edges)][self.edge_alive]
 
     def pieces(self, anchors: np.ndarray):
         """Component label per point (edges of the walk; all ``anchors`` in one component),
@@ -618,12 +680,10 @@ class _Walker:
         """Remove the walk edges of a piece that cannot be joined (rejected)."""
         inside = np.zeros(len(self.p), dtype=bool)
         inside[members] = True
-        ends = np.array([(a, b) for a, _, b, _, _, _ in self.edges], dtype=np.int64)
-        alive = np.asarray(self.edge_alive, dtype=bool)
-        gone = np.flatnonzero(alive & (inside[ends[:, 0]] | inside[ends[:, 1]]))
-        for e in gone:
-            self.edge_alive[e] = False
-        self._alive[np.asarray(self._edge_seg, dtype=np.int64)[gone]] = False
+        ends = self._edge_ends[:len(self.edges)]
+        gone = np.flatnonzero(self.edge_alive & (inside[ends[:, 0]] | inside[ends[:, 1]]))
+        self.edge_alive[gone] = False
+        self._alive[self._edge_seg[gone]] = False
         self.deg[members] = 0
         return len(gone)
 
@@ -683,7 +743,7 @@ class _Walker:
                 split += 1
                 continue
             # rejected: this piece and the pieces that joined it so far
-            gone = [x for x in labs if find(x) == find(lab)]
+            gone = labs[find(labs) == find(lab)]
             members = np.concatenate([by_label[x] for x in gone])
             dropped += self.drop_piece(members[self.deg[members] > 0])
         return {"n_joins": joined, "n_join_splits": split, "n_dropped_edges": dropped}
