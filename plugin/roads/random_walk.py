@@ -1308,16 +1308,19 @@ def _restore_tortuosity(lines, straight, chord, level, target, shapes, xy, a, b,
         # accept the proposals that cross nothing; a rejected one keeps its old shape, which
         # the accepted ones are checked against again, until none is left to reject
         take = prop_idx[keep]
-        shape = cand[keep]
+        trial = lines.copy()
+        trial[take] = cand[keep]
+        check = take  # the lines whose pairs are tested
         while len(take):
-            trial = lines.copy()
-            trial[take] = shape
-            bad = set(conflicts(trial, others, subset=take).tolist())
-            ok = np.array([i not in bad for i in take], dtype=bool)
+            ok = ~np.isin(take, conflicts(trial, others, subset=check))
             if ok.all():
                 lines = trial
                 break
-            take, shape = take[ok], shape[ok]
+            # the rejected keep their old shapes: only their pairs with the proposals left
+            # are new (the other pairs were tested and stay as they were)
+            check = take[~ok]
+            trial[check] = lines[check]
+            take = take[ok]
         # no flattened segment takes a bend any more: the other segments may
         stuck = stuck or len(take) < 0.1 * len(prop_idx)
     return lines
