@@ -516,20 +516,23 @@ class _Walker:
             return False
         return not (self.dirs[j] and (np.asarray(self.dirs[j]) @ -unit).max() >= self.cos_min)
 
-    def _feasible(self, v, j, unit, dist, vec, nb, rel=None):
+    def _feasible(self, v, j, unit, dist, vec, nb, rel=None, at=None):
         """The constraints of a step v -> j that need its neighbourhood (fig. 5a iv);
-        ``rel``: the offsets of ``nb`` from v, where known."""
-        if self.dirs[j] and (np.asarray(self.dirs[j]) @ -unit).max() >= self.cos_min:
-            return False
+        ``rel``: the offsets of ``nb`` from v, and ``at``: j's place in ``nb``, where
+        known."""
+        ux, uy = unit.tolist()
+        for dx, dy in self.dirs[j]:  # a street at j within min_angle of the step
+            if dx * -ux + dy * -uy >= self.cos_min:
+                return False
         # no step passes over another point: streets cross only at intersection points
         if rel is None:
             rel = self.xy[nb] - self.xy[v]
-        u = np.clip(rel @ unit / max(dist, 1e-9), 0.0, 1.0)
+        u = np.minimum(np.maximum(rel @ unit / max(dist, 1e-9), 0.0), 1.0)
         off = rel - u[:, None] * vec
-        near = np.sqrt((off * off).sum(axis=1)) < max(self.s.clearance * dist,
-                                                      self.s.min_clearance)
-        near[nb == j] = False  # j is the step's end
-        if near.any():
+        near = np.sqrt(np.add.reduce(off * off, axis=1)) < max(self.s.clearance * dist,
+                                                               self.s.min_clearance)
+        near[nb == j if at is None else at] = False  # j is the step's end
+        if np.count_nonzero(near):
             return False
         return self._clear(v, j)
 
@@ -584,14 +587,14 @@ class _Walker:
         # drawn point only, and a point that fails them gets p = 0 and the draw is repeated
         # (the same distribution as checking all first)
         while True:
-            cum = np.cumsum(w)
+            cum = w.cumsum()
             total = cum[-1]
             if total <= 0:
                 return None
-            k = int(np.searchsorted(cum, self.rng.random() * total, side="right"))
+            k = int(cum.searchsorted(self.rng.random() * total, side="right"))
             if k == len(w):  # the draw rounded up to the total: the last weighted point
                 k = int(np.flatnonzero(w)[-1])
-            if self._feasible(v, nb[k], unit[k], d[k], vec[k], nb, rel=vec):
+            if self._feasible(v, nb[k], unit[k], d[k], vec[k], nb, rel=vec, at=k):
                 break
             w[k] = 0.0
         j = nb[k]
@@ -1125,7 +1128,18 @@ def _shape_lines(shapes: StreetShapes, pick, a_xy, b_xy, mirror):
     def onto(xy, index):
         return a_xy[index] + xy[:, :1] * chord[index] + xy[:, 1:2] * normal[index]
 
-    return _pinned(coordinates.transform(base, onto), a_xy, b_xy)
+    return _pinned(_map_vertices(base, onto), a_xy, b_xy)
+
+
+def _map_vertices(lines, fn):
+    """The lines with every vertex mapped by ``fn(xy, index)`` (``index``: the line of
+    each vertex). For maps made of elementwise arithmetic only, as here: equal vertices
+    stay equal without the distinct-vertex pass of :func:`coordinates.transform` (which
+    guards against BLAS products), and the result is the same."""
+    coords, index = shapely.get_coordinates(lines, return_index=True)
+    if not len(coords):
+        return np.asarray(lines, dtype=object).copy()
+    return shapely.set_coordinates(np.asarray(lines, dtype=object).copy(), fn(coords, index))
 
 
 def _pinned(lines, a_xy, b_xy):
@@ -1337,7 +1351,7 @@ def _flatten(lines, a_xy, b_xy, scale):
         foot = a_xy[index] + t[:, None] * chord[index]
         return foot + scale * (xy - foot)
 
-    return _pinned(coordinates.transform(lines, towards_chord), a_xy, b_xy)
+    return _pinned(_map_vertices(lines, towards_chord), a_xy, b_xy)
 
 
 # --------------------------------------------------------------------------- synthesis
