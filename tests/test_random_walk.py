@@ -170,6 +170,72 @@ def test_transition_probability_prefers_mean_distance_and_angle():
     assert set(picks) == {2}
 
 
+
+def _random_segment_pairs(rng, n, distance):
+    """Pairs of segments at UTM-sized coordinates: random ones, and the hard cases of a gap
+    test (a shared end, an end on the other segment, collinear beyond an end, parallel
+    right at, a hair inside and a hair outside the distance)."""
+    base = np.array([385000.0, 6672000.0])
+    a = base + rng.uniform(0, 200, (n, 2))
+    b = a + rng.normal(0, 60, (n, 2))
+    c = base + rng.uniform(0, 200, (n, 2))
+    d = c + rng.normal(0, 60, (n, 2))
+    k = n // 8
+    along = (b - a) / np.linalg.norm(b - a, axis=1)[:, None]
+    normal = along[:, ::-1] * [-1.0, 1.0]
+    c[:k] = a[:k]  # a shared end
+    c[k:2 * k] = a[k:2 * k] + 0.3 * (b[k:2 * k] - a[k:2 * k])  # an end on the other
+    s = slice(2 * k, 3 * k)  # collinear beyond b
+    c[s], d[s] = b[s] + 0.1 * (b[s] - a[s]), b[s] + 0.6 * (b[s] - a[s])
+    for i, off in enumerate((0.0, 2e-6, -2e-6, 1e-9)):  # parallel about the distance away
+        s = slice((3 + i) * k, (4 + i) * k)
+        c[s] = a[s] + (distance + off) * normal[s] + 0.2 * (b[s] - a[s])
+        d[s] = b[s] + (distance + off) * normal[s] + 0.3 * (b[s] - a[s])
+    return a, b, c, d
+
+
+@pytest.mark.parametrize("distance", [0.5, 7.0])
+def test_float_segment_gap_gives_geos_answer(distance):
+    """A step's clearance test in floats answers as GEOS (dwithin) wherever it answers, and
+    leaves the pairs right at the distance to GEOS."""
+    a, b, c, d = _random_segment_pairs(np.random.default_rng(3), 4000, distance)
+    geos = shapely.dwithin(shapely.linestrings(np.stack([a, b], axis=1)),
+                           shapely.linestrings(np.stack([c, d], axis=1)), distance)
+    got = [rw._segments_within(*p, *q, *r, *t, distance) for p, q, r, t in zip(a, b, c, d)]
+    answered = np.array([g is not None for g in got])
+    assert np.array_equal(np.array([bool(g) for g in got])[answered], geos[answered])
+    assert geos[:1000].all()  # shared ends and ends on the other touch
+    # left to GEOS: those at the distance (and collinear ones), not the others
+    k = 500
+    assert answered[:2 * k].all() and answered[4 * k:6 * k].all() and answered[7 * k:].all()
+    assert not answered[3 * k:4 * k].any() and not answered[6 * k:7 * k].any()
+
+
+def test_walker_clearance_matches_brute_force():
+    """The walker's segment grid and float tests find what testing every segment with GEOS
+    finds: a step is clear unless a segment not sharing its ends comes within _TOUCH."""
+    rng = np.random.default_rng(5)
+    pts, _ = _grid_points(n=6, spacing=80.0)
+    a, b, c, d = _random_segment_pairs(rng, 400, rw._TOUCH)
+    shift = np.array([385000.0, 6672000.0])
+    segs = np.hstack([a - shift, b - shift])[:40]  # given roads over the grid's square
+    w = rw._Walker(pts, rw.WalkSettings(), rng, np.full(len(pts), 4),
+                   np.zeros((len(pts), 2), dtype=np.int64), np.zeros((len(pts), 2, 2)),
+                   [[] for _ in range(len(pts))], segs)
+    lines = shapely.linestrings(segs.reshape(-1, 2, 2))
+    steps = np.hstack([c - shift, d - shift])
+    steps[:40, :2] = segs[:, 2:]  # steps that start where a road ends
+    clear = []
+    for p, q in zip(steps[:, :2], steps[:, 2:]):
+        hit = np.flatnonzero(shapely.dwithin(lines, shapely.LineString([p, q]), rw._TOUCH))
+        ends = segs[hit].reshape(-1, 2, 2)
+        shared = ((np.abs(ends - p).sum(axis=2) < 1e-6)
+                  | (np.abs(ends - q).sum(axis=2) < 1e-6)).any(axis=1)
+        clear.append(bool(shared.all()))
+        assert w._clear_of(p, q) == clear[-1]
+    assert 0.05 < np.mean(clear) < 0.95
+
+
 # --------------------------------------------------------------------------- evidence
 
 def test_copy_and_reconnect_helsinki(helsinki):

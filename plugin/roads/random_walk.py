@@ -10,9 +10,9 @@ goes to a target point v_j drawn with the transition probability
 segment, with the statistics of the base point's street); steps under a threshold are
 ignored. p is zero for a point that no street of the walk's level passes (wrong level),
 for a saturated point (its example's number of connections, at most 4), for a step that
-would cross or touch an existing segment (an STRtree over the segments, rebuilt in batches,
-plus a vectorised test against the latest segments) or pass over another point (no new
-intersections), and for a step closer than a minimum angle to a street already at either
+would cross or touch an existing segment (a grid of cells over the segments, which grows
+with the walk, and an exact test of the segments in the step's cells) or pass over another
+point (no new intersections), and for a step closer than a minimum angle to a street already at either
 end. A walk ends where every p is zero; new walks start from free street slots until none
 can start.
 
@@ -57,6 +57,7 @@ Aliaga, D. G., Vanegas, C. A., Benes, B. (2008). Interactive example-based urban
 from __future__ import annotations
 
 import functools
+import itertools
 import math
 from dataclasses import dataclass, field
 from typing import List, Optional
@@ -89,7 +90,6 @@ POINT_FIELDS = [("node_id", "int"), ("degree", "int"), ("example", "int"), ("sou
 BLOCK_FIELDS = [("block_id", "int"), ("area_m2", "float"), ("neighbours", "int"),
                 ("parcel_area", "float")]
 
-_BATCH = 64      # recent segments tested directly before the STRtree is rebuilt (at least)
 _TOUCH = 0.5     # m: a step closer than this to another segment touches it
 #: example == -1: a node of the given roads; -2: a junction slot placed on a given road
 EXISTING, ROAD_SLOT = -1, -2
@@ -161,102 +161,287 @@ def dead_end_share_of(points: iq.PointSet) -> float:
     return float((deg == 1).sum() / n) if n else 0.0
 
 
+def _reserve(rows: np.ndarray, size: int) -> np.ndarray:
+    """``rows`` with room for at least ``size`` rows (doubled when full), its rows kept:
+    appending one row at a time costs O(1) amortised, not a copy of all."""
+    if len(rows) >= size:
+        return rows
+    out = np.zeros((max(size, 2 * len(rows)),) + rows.shape[1:], dtype=rows.dtype)
+    out[:len(rows)] = rows
+    return out
+
+
+def _point_gap(px, py, ax, ay, bx, by):
+    """Distance from the point p to the segment ab (floats)."""
+    ux, uy = bx - ax, by - ay
+    ll = ux * ux + uy * uy
+    t = ((px - ax) * ux + (py - ay) * uy) / ll if ll > 0 else 0.0
+    t = 0.0 if t < 0.0 else 1.0 if t > 1.0 else t
+    dx, dy = px - ax - t * ux, py - ay - t * uy
+    return math.sqrt(dx * dx + dy * dy)
+
+
+def _segments_within(ax, ay, bx, by, cx, cy, dx, dy, distance):
+    """Whether the segments ab and cd come within ``distance`` of each other (floats), or
+    None where the float arithmetic cannot tell (the gap within a micrometre of the
+    distance, or an end almost on the other's line): GEOS decides those."""
+    o1 = (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
+    o2 = (bx - ax) * (dy - ay) - (by - ay) * (dx - ax)
+    o3 = (dx - cx) * (ay - cy) - (dy - cy) * (ax - cx)
+    o4 = (dx - cx) * (by - cy) - (dy - cy) * (bx - cx)
+    if ((o1 < 0 < o2) or (o2 < 0 < o1)) and ((o3 < 0 < o4) or (o4 < 0 < o3)):
+        return True  # they cross
+    gap = min(_point_gap(ax, ay, cx, cy, dx, dy), _point_gap(bx, by, cx, cy, dx, dy),
+              _point_gap(cx, cy, ax, ay, bx, by), _point_gap(dx, dy, ax, ay, bx, by))
+    if abs(gap - distance) <= 1e-6:
+        return None
+    if gap <= distance:
+        return True
+    scale = 1e-9 * (abs(bx - ax) + abs(by - ay) + abs(dx - cx) + abs(dy - cy)) ** 2
+    if min(abs(o1), abs(o2), abs(o3), abs(o4)) <= scale:
+        return None
+    return False
+
+
+class _SegmentGrid:
+    """Segment ids in square cells (a dict of cell -> list of ids), each segment listed in
+    every cell its bounding box touches: the segments whose bounding boxes meet a box are
+    among those listed in the cells the box touches. A segment is added or removed in
+    O(cells), so the index follows the walk (an STRtree would have to be rebuilt)."""
+
+    def __init__(self, cell: float):
+        self.cell = float(cell)
+        self.cells = {}
+
+    def _keys(self, xmin, ymin, xmax, ymax):
+        c = self.cell
+        return [(ix, iy) for ix in range(math.floor(xmin / c), math.floor(xmax / c) + 1)
+                for iy in range(math.floor(ymin / c), math.floor(ymax / c) + 1)]
+
+    def add(self, i: int, box):
+        cells = self.cells
+        for key in self._keys(*box):
+            cells.setdefault(key, []).append(i)
+
+    def remove(self, i: int, box):
+        for key in self._keys(*box):
+            self.cells[key].remove(i)
+
+    def near(self, xmin, ymin, xmax, ymax) -> set:
+        """Ids listed in the cells the box touches."""
+        get = self.cells.get
+        found = set()
+        for key in self._keys(xmin, ymin, xmax, ymax):
+            ids = get(key)
+            if ids:
+                found.update(ids)
+        return found
+
+
 class _Walker:
-    """State of the street generation: slot counts, capacities, segments, edges."""
+    """State of the street generation: slot counts, capacities, segments, edges.
+
+    Per point and per segment state lives in arrays with spare rows (:func:`_reserve`);
+    the public arrays (``p``, ``xy``, ``cap``, ``cnt``, ``deg`` ...) are views of their
+    first rows, renewed when points are added."""
 
     def __init__(self, pts: iq.PointSet, settings: WalkSettings, rng, cap, cnt, slot_dir,
                  dirs, seg0):
-        self.p = pts
         self.s = settings
         self.rng = rng
-        self.xy = pts.xy
         self.kd = cKDTree(pts.xy)
-        self.cap = cap
-        self.cnt = cnt
-        self.slot_dir = slot_dir
-        self.deg = np.zeros(len(pts), dtype=np.int64)
-        self.used = np.zeros((len(pts), 2), dtype=bool)  # slots with a segment of theirs
+        self._pts_rows = pts  # the point attributes, with spare rows once points are added
+        self._point_rows = {
+            "cap": np.asarray(cap), "cnt": np.asarray(cnt), "slot_dir": np.asarray(slot_dir),
+            "deg": np.zeros(len(pts), dtype=np.int64),
+            "used": np.zeros((len(pts), 2), dtype=bool),  # slots with a segment of theirs
+            "_mark": np.zeros(len(pts), dtype=bool)}  # scratch mask of a point's neighbours
+        self._show_points(len(pts))
         self.adj = [set() for _ in range(len(pts))]
         self.dirs = dirs
+        # edges: (a, slot_a, b, slot_b, level, origin) tuples, and their end points, segment
+        # and liveness as arrays (a piece's edges are found at once when it is dropped)
         self.edges: List[tuple] = []
-        self.edge_alive: List[bool] = []
-        self._mark = np.zeros(len(pts), dtype=bool)  # scratch mask of a point's neighbours
-        # segments: coordinates of all, an STRtree over the first n_tree, and the newest
-        # (at most _BATCH) as a small geometry array tested directly; a split segment is
-        # dead (its two halves are added as new segments)
+        self._edge_ends = np.zeros((2 * len(pts) + 16, 2), dtype=np.int64)
+        self._edge_seg = np.zeros(len(self._edge_ends), dtype=np.int64)
+        self._edge_alive = np.zeros(len(self._edge_ends), dtype=bool)
+        # segments: coordinates (an array, and tuples for the tests of one step), owners
+        # and geometries (made when an exact test needs them) of all, the live ones in a
+        # grid of cells about a street gap wide; a split segment is dead (its two halves
+        # are added as new ones)
         seg0 = np.asarray(seg0, dtype=float).reshape(-1, 4)
-        self._coords = np.zeros((len(seg0) + 4 * len(pts) + 16, 4))
-        self._coords[:len(seg0)] = seg0
-        self._alive = np.ones(len(self._coords), dtype=bool)
-        self._seg_edge = np.full(len(self._coords), -1, dtype=np.int64)  # -1: given road
-        self._seg_start = np.full(len(self._coords), -1, dtype=np.int64)  # the edge's a
-        self._seg_level = np.full(len(self._coords), -1, dtype=np.int64)  # the edge's level
-        self._edge_seg: List[int] = []
-        self.n_seg = len(seg0)
-        self._recent = np.empty(len(self._coords), dtype=object)
-        self.n_tree = 0
-        self.tree = None
-        self._rebuild()
+        size = len(seg0) + 4 * len(pts) + 16
+        self._coords = np.zeros((size, 4))
+        self._ends: List[tuple] = []
+        self._geoms = np.empty(size, dtype=object)
+        self._seg_edge = np.full(size, -1, dtype=np.int64)  # -1: given road
+        self._seg_start = np.full(size, -1, dtype=np.int64)  # the edge's a
+        self._seg_level = np.full(size, -1, dtype=np.int64)  # the edge's level
+        gaps = pts.dist_mean[:, 0][np.isfinite(pts.dist_mean[:, 0])]
+        self._grid = _SegmentGrid(max(float(np.median(gaps)) if len(gaps) else 100.0, 10.0))
+        self.n_seg = 0
+        for p0x, p0y, p1x, p1y in seg0:
+            self._add_segment((p0x, p0y), (p1x, p1y))
         self.cos_min = math.cos(math.radians(settings.min_angle))
         self.area = None  # the target: junctions made on streets stay inside it
+        self._neighbourhoods(pts)
+
+    def _neighbourhoods(self, pts: iq.PointSet):
+        """For every point and street slot, the other points within the slot's reach
+        (ascending), their offsets, distances and directions, and the distance terms of the
+        step's weights: computed for all at once (the points stay where they are), where a
+        step would compute them for each."""
+        reach = pts.dist_mean + self.s.reach_sd * pts.dist_sd
+        rows = np.flatnonzero((np.isfinite(reach) & (pts.level >= 0)).ravel())  # 2 v + slot
+        owner = rows // 2
+        balls = self.kd.query_ball_point(pts.xy[owner], reach.ravel()[rows],
+                                         return_sorted=True)
+        count = np.fromiter(map(len, balls), dtype=np.int64, count=len(balls))
+        nb = np.fromiter(itertools.chain.from_iterable(balls), dtype=np.int64,
+                         count=int(count.sum()))
+        row_of = np.repeat(np.arange(len(rows)), count)
+        keep = nb != owner[row_of]
+        nb, row_of = nb[keep], row_of[keep]
+        start = np.full(2 * len(pts), -1, dtype=np.int64)  # -1: not computed
+        start[rows] = np.searchsorted(row_of, np.arange(len(rows)))
+        stop = np.full(2 * len(pts), -1, dtype=np.int64)
+        stop[rows] = np.searchsorted(row_of, np.arange(len(rows)), side="right")
+        self._nb_start, self._nb_stop = start.tolist(), stop.tolist()
+        mu = pts.dist_mean.ravel()[rows][row_of]
+        sd = pts.dist_sd.ravel()[rows][row_of]
+        vec = pts.xy[nb] - pts.xy[owner[row_of]]
+        d = np.sqrt((vec * vec).sum(axis=1))
+        unit = vec / np.maximum(d, 1e-9)[:, None]
+        self._nb = (nb, vec, d, unit, -0.5 * ((d - mu) / sd) ** 2, -0.5 * (d / mu) ** 2)
+
+    def _neighbourhood(self, v, slot):
+        """(points, offsets, distances, unit vectors, log transition weight of the distance,
+        log weight of a relaxed step's distance) of the points within reach of v's slot."""
+        r = 2 * v + slot
+        if r < len(self._nb_stop) and self._nb_start[r] >= 0:
+            lo, hi = self._nb_start[r], self._nb_stop[r]
+            return tuple(a[lo:hi] for a in self._nb)
+        mu, sd = self.p.dist_mean[v, slot], self.p.dist_sd[v, slot]
+        reach = mu + self.s.reach_sd * sd
+        nb = np.asarray(self.kd.query_ball_point(self.xy[v], reach, return_sorted=False),
+                        dtype=np.int64)
+        nb = np.sort(nb[nb != v])
+        vec = self.xy[nb] - self.xy[v]
+        d = np.sqrt((vec * vec).sum(axis=1))
+        unit = vec / np.maximum(d, 1e-9)[:, None]
+        return nb, vec, d, unit, -0.5 * ((d - mu) / sd) ** 2, -0.5 * (d / mu) ** 2
+
+    def _show_points(self, n: int):
+        """Point views onto the first ``n`` rows of the point arrays."""
+        rows = self._pts_rows
+        self.p = iq.PointSet(**{k: getattr(rows, k)[:n] for k in iq.PointSet.__dataclass_fields__})
+        self.xy = self.p.xy
+        for name, a in self._point_rows.items():
+            setattr(self, name, a[:n])
+
+    @property
+    def edge_alive(self) -> np.ndarray:
+        return self._edge_alive[:len(self.edges)]
 
     # -- segment index ---------------------------------------------------------------
 
-    def _rebuild(self):
-        self.n_tree = self.n_seg
-        if self.n_tree:
-            s = self._coords[:self.n_tree]
-            self.tree = shapely.STRtree(shapely.linestrings(s.reshape(-1, 2, 2)))
-
     def _add_segment(self, p, q, edge=-1):
-        if self.n_seg == len(self._coords):
-            grow = len(self._coords)
-            self._coords = np.vstack([self._coords, np.zeros((grow, 4))])
-            self._alive = np.r_[self._alive, np.ones(grow, dtype=bool)]
-            self._seg_edge = np.r_[self._seg_edge, np.full(grow, -1, dtype=np.int64)]
-            self._seg_start = np.r_[self._seg_start, np.full(grow, -1, dtype=np.int64)]
-            self._seg_level = np.r_[self._seg_level, np.full(grow, -1, dtype=np.int64)]
-            self._recent = np.r_[self._recent, np.empty(grow, dtype=object)]
-        self._coords[self.n_seg] = (p[0], p[1], q[0], q[1])
-        self._seg_edge[self.n_seg] = edge
+        i = self.n_seg
+        if i == len(self._coords):
+            self._coords, self._geoms, self._seg_edge, self._seg_start, self._seg_level = (
+                _reserve(a, i + 1) for a in (self._coords, self._geoms, self._seg_edge,
+                                             self._seg_start, self._seg_level))
+        ends = (float(p[0]), float(p[1]), float(q[0]), float(q[1]))
+        self._coords[i] = ends
+        self._ends.append(ends)
+        self._seg_edge[i] = edge
         if edge >= 0:
-            self._edge_seg.append(self.n_seg)
-            self._seg_start[self.n_seg] = self.edges[edge][0]
-            self._seg_level[self.n_seg] = self.edges[edge][4]
-        self._recent[self.n_seg - self.n_tree] = shapely.LineString([p, q])
+            self._edge_seg[edge] = i
+            self._seg_start[i] = self.edges[edge][0]
+            self._seg_level[i] = self.edges[edge][4]
+        else:
+            self._seg_start[i] = self._seg_level[i] = -1
+        self._grid.add(i, self._box(i))
         self.n_seg += 1
-        # the tree is rebuilt when the recent segments reach _BATCH or 3 sqrt(n): the
-        # rebuilds cost O(n^1.5 log n) in all, the direct tests O(sqrt(n)) per step
-        if self.n_seg - self.n_tree >= max(_BATCH, 3.0 * math.sqrt(self.n_tree)):
-            self._rebuild()
 
-    def _hits(self, geom, distance):
-        """Indices of the live segments within ``distance`` of a geometry."""
-        hits = []
-        if self.tree is not None and self.n_tree:
-            hits.append(self.tree.query(geom, predicate="dwithin", distance=distance))
-        n_recent = self.n_seg - self.n_tree
-        if n_recent:
-            near = shapely.dwithin(self._recent[:n_recent], geom, distance)
-            hits.append(np.flatnonzero(near) + self.n_tree)
-        if not hits:
-            return np.zeros(0, dtype=np.int64)
-        hit = np.concatenate(hits)
-        return hit[self._alive[hit]]
+    def _box(self, i):
+        x0, y0, x1, y1 = self._ends[i]
+        return min(x0, x1), min(y0, y1), max(x0, x1), max(y0, y1)
+
+    def _kill_segment(self, i):
+        """A segment split or dropped: out of the grid, so no test meets it any more."""
+        self._grid.remove(i, self._box(i))
+
+    def _geometries(self, ids):
+        """The segments' LineStrings (made on first use)."""
+        ids = np.asarray(ids, dtype=np.int64)
+        g = self._geoms[ids]
+        new = ids[[x is None for x in g]]
+        if len(new):
+            self._geoms[new] = shapely.linestrings(self._coords[new].reshape(-1, 2, 2))
+            g = self._geoms[ids]
+        return g
+
+    def _near_point(self, xy, distance):
+        """Indices of the live segments within ``distance`` of the point ``xy``
+        (ascending)."""
+        x, y = float(xy[0]), float(xy[1])
+        pad = distance + 1e-3  # the box of everything within distance, and a hair more
+        ids = np.array(sorted(self._grid.near(x - pad, y - pad, x + pad, y + pad)),
+                       dtype=np.int64)
+        if not len(ids):
+            return ids
+        c = self._coords[ids]
+        a, u = c[:, :2], c[:, 2:] - c[:, :2]
+        ll = (u * u).sum(axis=1)
+        t = np.clip(((xy - a) * u).sum(axis=1) / np.where(ll > 0, ll, 1.0), 0.0, 1.0)
+        off = xy - a - t[:, None] * u
+        gap = np.sqrt((off * off).sum(axis=1))
+        near = gap <= distance
+        # GEOS decides where the floats cannot tell (the gap within a micrometre)
+        unsure = np.flatnonzero(np.abs(gap - distance) <= 1e-6)
+        if len(unsure):
+            near[unsure] = shapely.dwithin(self._geometries(ids[unsure]), shapely.Point(xy),
+                                           distance)
+        return ids[near]
+
+    def _clear_of(self, p, q, q_is_end=True, skip=-1):
+        """Whether the step p -> q keeps _TOUCH clear of every live segment but ``skip``,
+        except for those sharing its end p (or q, where ``q_is_end``): they meet it there,
+        and the angles there are checked apart. Segments are ruled out by their ends and
+        boxes first, then tested in floats (:func:`_segments_within`); GEOS decides where
+        the floats cannot (the same answers as GEOS for all, at a fraction of the cost of
+        its calls for a few segments)."""
+        px, py, qx, qy = float(p[0]), float(p[1]), float(q[0]), float(q[1])
+        pad = _TOUCH + 1e-3
+        xmin, ymin = min(px, qx) - pad, min(py, qy) - pad
+        xmax, ymax = max(px, qx) + pad, max(py, qy) + pad
+        ends = self._ends
+        close = []
+        for i in self._grid.near(xmin, ymin, xmax, ymax):
+            x0, y0, x1, y1 = ends[i]
+            if (i == skip or abs(x0 - px) + abs(y0 - py) < 1e-6
+                    or abs(x1 - px) + abs(y1 - py) < 1e-6
+                    or (q_is_end and (abs(x0 - qx) + abs(y0 - qy) < 1e-6
+                                      or abs(x1 - qx) + abs(y1 - qy) < 1e-6))):
+                continue
+            if max(x0, x1) < xmin or min(x0, x1) > xmax or max(y0, y1) < ymin \
+                    or min(y0, y1) > ymax:
+                continue  # its box is farther than _TOUCH
+            near = _segments_within(px, py, qx, qy, x0, y0, x1, y1, _TOUCH)
+            if near:
+                return False
+            if near is None:
+                close.append(i)
+        if not close:
+            return True
+        step = shapely.LineString([p, q])
+        return not shapely.dwithin(self._geometries(close), step, _TOUCH).any()
 
     def _clear(self, v, j, q=None):
         """Whether the step v -> j (or to the location q) keeps clear of every segment
         except at a shared end."""
-        p = self.xy[v]
-        q = self.xy[j] if q is None else q
-        hit = self._hits(shapely.LineString([p, q]), _TOUCH)
-        if len(hit) == 0:
-            return True
-        ends = self._coords[hit].reshape(-1, 2, 2)
-        # a segment that shares an end with the step meets it there (angles are checked apart)
-        shared = ((np.abs(ends - p).sum(axis=2) < 1e-6)
-                  | (np.abs(ends - q).sum(axis=2) < 1e-6)).any(axis=1)
-        return bool(shared.all())
+        return self._clear_of(self.xy[v], self.xy[j] if q is None else q)
 
     # -- growing the point set (junctions made on a street by a join) ----------------------
 
@@ -264,24 +449,40 @@ class _Walker:
         """A new point at ``xy`` with the attributes of point ``like``; street a (``level``)
         passes through it along ``through_dirs`` (two unit vectors), street b is free for
         one connection (a T junction). Returns its index."""
-        new = self.p.take([like])
-        new.xy = np.asarray(xy, dtype=float).reshape(1, 2)
-        new.level = np.array([[level, level]])
-        new.example = np.array([ROAD_SLOT if on_given else max(int(self.p.example[like]), 0)])
-        new.generated = np.array([True])
-        new.source = np.array([-1])  # made by a join, not from the example
-        new.degree = np.array([3])
-        self.p = iq.PointSet.concat([self.p, new])
-        self.xy = self.p.xy
-        self.cap = np.r_[self.cap, 3]
-        self.cnt = np.vstack([self.cnt, [[2, 1]]])
-        self.slot_dir = np.concatenate([self.slot_dir, np.zeros((1, 2, 2))])
-        self.deg = np.r_[self.deg, 2]
-        self.used = np.vstack([self.used, [[True, False]]])
+        k = len(self.p)
+        rows = self._pts_rows
+        if k == len(rows):
+            rows = iq.PointSet(**{f: _reserve(getattr(rows, f), k + 1)
+                                  for f in iq.PointSet.__dataclass_fields__})
+            self._pts_rows = rows
+            self._point_rows = {name: _reserve(a, k + 1) for name, a in self._point_rows.items()}
+        for f in iq.PointSet.__dataclass_fields__:
+            a = getattr(rows, f)
+            a[k] = a[like]
+        rows.xy[k] = np.asarray(xy, dtype=float).reshape(2)
+        rows.level[k] = level
+        rows.example[k] = ROAD_SLOT if on_given else max(int(rows.example[like]), 0)
+        rows.generated[k] = True
+        rows.source[k] = -1  # made by a join, not from the example
+        rows.degree[k] = 3
+        for name, value in (("cap", 3), ("cnt", (2, 1)), ("slot_dir", 0.0), ("deg", 2),
+                            ("used", (True, False)), ("_mark", False)):
+            self._point_rows[name][k] = value
+        self._show_points(k + 1)
         self.adj.append(set())
         self.dirs.append([np.asarray(d, dtype=float) for d in through_dirs])
-        self._mark = np.r_[self._mark, False]
-        return len(self.p) - 1
+        return k
+
+    def _new_edge(self, a, sa, b, sb, h, origin):
+        """Record the edge a -> b and add its segment."""
+        e = len(self.edges)
+        if e == len(self._edge_ends):
+            self._edge_ends, self._edge_seg, self._edge_alive = (
+                _reserve(x, e + 1) for x in (self._edge_ends, self._edge_seg, self._edge_alive))
+        self.edges.append((a, sa, b, sb, h, origin))
+        self._edge_ends[e] = (a, b)
+        self._edge_alive[e] = True
+        self._add_segment(self.xy[a], self.xy[b], e)
 
     def split_segment(self, seg: int, xy, like: int) -> int:
         """Split a live segment at ``xy`` (a point on it): a new junction point, the two
@@ -292,18 +493,16 @@ class _Walker:
         e = int(self._seg_edge[seg])
         level = self.edges[e][4] if e >= 0 else int(self.p.level[like, 0])
         k = self._add_point(xy, like, level, [d, -d], on_given=e < 0)
-        self._alive[seg] = False
+        self._kill_segment(seg)
         if e >= 0:
             a, sa, b, sb, h, origin = self.edges[e]
             self.edge_alive[e] = False
             self.adj[a].discard(b)
             self.adj[b].discard(a)
             for u, w, su, sw in ((a, k, sa, 0), (k, b, 0, sb)):
-                self.edges.append((u, su, w, sw, h, origin))
-                self.edge_alive.append(True)
+                self._new_edge(u, su, w, sw, h, origin)
                 self.adj[u].add(w)
                 self.adj[w].add(u)
-                self._add_segment(self.xy[u], self.xy[w], len(self.edges) - 1)
         else:
             self._add_segment(p, self.xy[k], -1)
             self._add_segment(self.xy[k], q, -1)
@@ -317,39 +516,40 @@ class _Walker:
             return False
         return not (self.dirs[j] and (np.asarray(self.dirs[j]) @ -unit).max() >= self.cos_min)
 
-    def _feasible(self, v, j, unit, dist, vec, nb):
-        """The constraints of a step v -> j that need its neighbourhood (fig. 5a iv)."""
-        if self.dirs[j] and (np.asarray(self.dirs[j]) @ -unit).max() >= self.cos_min:
-            return False
-        # no step passes over another point: streets cross only at intersection points
-        others = nb[nb != j]
-        if len(others):
-            rel = self.xy[others] - self.xy[v]
-            u = np.clip(rel @ unit / max(dist, 1e-9), 0.0, 1.0)
-            off = rel - u[:, None] * vec[None, :]
-            near = np.sqrt((off * off).sum(axis=1))
-            if (near < max(self.s.clearance * dist, self.s.min_clearance)).any():
+    def _feasible(self, v, j, unit, dist, vec, nb, rel=None, at=None):
+        """The constraints of a step v -> j that need its neighbourhood (fig. 5a iv);
+        ``rel``: the offsets of ``nb`` from v, and ``at``: j's place in ``nb``, where
+        known."""
+        ux, uy = unit.tolist()
+        for dx, dy in self.dirs[j]:  # a street at j within min_angle of the step
+            if dx * -ux + dy * -uy >= self.cos_min:
                 return False
+        # no step passes over another point: streets cross only at intersection points
+        if rel is None:
+            rel = self.xy[nb] - self.xy[v]
+        u = np.minimum(np.maximum(rel @ unit / max(dist, 1e-9), 0.0), 1.0)
+        off = rel - u[:, None] * vec
+        near = np.sqrt(np.add.reduce(off * off, axis=1)) < max(self.s.clearance * dist,
+                                                               self.s.min_clearance)
+        near[nb == j if at is None else at] = False  # j is the step's end
+        if np.count_nonzero(near):
+            return False
         return self._clear(v, j)
 
     def step(self, v, slot, h, prev_dir, relaxed=False):
         """The next point of a walk from v (street slot ``slot``, level h), or None."""
         p = self.p
-        mu, sd = p.dist_mean[v, slot], p.dist_sd[v, slot]
-        reach = mu + self.s.reach_sd * sd
-        nb = np.asarray(self.kd.query_ball_point(self.xy[v], reach, return_sorted=False),
-                        dtype=np.int64)
-        nb = np.sort(nb[nb != v])  # sorted: the same draw whatever the tree's order
+        nb, vec, d, unit, logp, log_relaxed = self._neighbourhood(v, slot)
         if len(nb) == 0:
             return None
-        lv, cnt = p.level[nb], self.cnt[nb]
+        lv = p.level[nb]
         # seam joins connect two hierarchies ranked apart: there any level may join; other
         # steps keep to their street's level (sec. 3.1.1)
-        slot_ok = (lv >= 0) & (cnt < 2) if relaxed == "seam" else (lv == h) & (cnt < 2)
+        slot_ok = ((lv >= 0) if relaxed == "seam" else (lv == h)) & (self.cnt[nb] < 2)
         # there a point may get more connections than its example had (up to 4)
-        cap = np.where(self.p.example[nb] >= 0, self.s.max_capacity, self.cap[nb]) \
+        cap = np.where(p.example[nb] >= 0, self.s.max_capacity, self.cap[nb]) \
             if relaxed else self.cap[nb]
-        free = (self.deg[nb] < cap) & slot_ok.any(axis=1)
+        free = (self.deg[nb] < cap) & (slot_ok[:, 0] | slot_ok[:, 1])
         if self.adj[v]:
             linked = set(self.adj[v])
             if relaxed:
@@ -361,16 +561,10 @@ class _Walker:
             self._mark[linked] = True
             free &= ~self._mark[nb]
             self._mark[linked] = False
-        if not free.any():
-            return None
-        cand, cslots = nb[free], slot_ok[free]
-        vec = self.xy[cand] - self.xy[v]
-        d = np.sqrt((vec * vec).sum(axis=1))
-        unit = vec / np.maximum(d, 1e-9)[:, None]
-        logp = -0.5 * ((d - mu) / sd) ** 2
+        # the weights of all neighbours, zero for those that may not be joined
         if prev_dir is not None and not relaxed:
             alpha = np.degrees(np.arccos(np.clip(unit @ prev_dir, -1.0, 1.0)))
-            logp -= 0.5 * ((alpha - p.angle_mean[v, slot]) / p.angle_sd[v, slot]) ** 2
+            logp = logp - 0.5 * ((alpha - p.angle_mean[v, slot]) / p.angle_sd[v, slot]) ** 2
         w_angle = 0.0
         if relaxed == "close" and prev_dir is not None:
             # a stub goes on about straight (its street's turn statistics, twice as wide)
@@ -384,29 +578,27 @@ class _Walker:
             alpha = np.degrees(np.arcsin(np.clip(across, 0.0, 1.0)))
             w_angle = -0.5 * (alpha / 30.0) ** 2
         prob = np.exp(logp)
-        good = prob >= self.s.threshold
+        good = free & (prob >= self.s.threshold)
         # streets leave a point at least min_angle apart (at v and at the target)
         if self.dirs[v]:
-            dv = np.asarray(self.dirs[v])
-            good &= (unit @ dv.T).max(axis=1) < self.cos_min
-        if not good.any():
-            return None
-        w = prob if not relaxed else np.exp(-0.5 * (d / mu) ** 2 + w_angle)
-        w = np.where(good, w, 0.0)
+            good &= (unit @ np.asarray(self.dirs[v]).T).max(axis=1) < self.cos_min
+        w = np.where(good, prob if not relaxed else np.exp(log_relaxed + w_angle), 0.0)
         # draw by the transition probabilities; the costlier constraints are checked on the
         # drawn point only, and a point that fails them gets p = 0 and the draw is repeated
         # (the same distribution as checking all first)
         while True:
-            total = w.sum()
+            cum = w.cumsum()
+            total = cum[-1]
             if total <= 0:
                 return None
-            k = int(np.searchsorted(np.cumsum(w), self.rng.random() * total, side="right"))
-            k = min(k, len(w) - 1)
-            if self._feasible(v, cand[k], unit[k], d[k], vec[k], nb):
+            k = int(cum.searchsorted(self.rng.random() * total, side="right"))
+            if k == len(w):  # the draw rounded up to the total: the last weighted point
+                k = int(np.flatnonzero(w)[-1])
+            if self._feasible(v, nb[k], unit[k], d[k], vec[k], nb, rel=vec, at=k):
                 break
             w[k] = 0.0
-        j = cand[k]
-        s_ok = cslots[k]
+        j = nb[k]
+        s_ok = slot_ok[k]
         c = self.cnt[j]
         # a fresh slot continues the street; a half-used one joins another street's end
         if s_ok[0] and s_ok[1]:
@@ -417,7 +609,7 @@ class _Walker:
 
     def add_edge(self, a, sa, b, sb, h, origin):
         d = self.xy[b] - self.xy[a]
-        d = d / max(np.linalg.norm(d), 1e-9)
+        d = d / max(math.sqrt(d[0] * d[0] + d[1] * d[1]), 1e-9)
         if self.cnt[a, sa] == 0:
             self.slot_dir[a, sa] = -d
         if self.cnt[b, sb] == 0:
@@ -431,9 +623,7 @@ class _Walker:
         self.adj[b].add(a)
         self.dirs[a].append(d)
         self.dirs[b].append(-d)
-        self.edges.append((a, sa, b, sb, h, origin))
-        self.edge_alive.append(True)
-        self._add_segment(self.xy[a], self.xy[b], len(self.edges) - 1)
+        self._new_edge(a, sa, b, sb, h, origin)
 
     def extend(self, cur, cs, h, relaxed=False, origin="walk"):
         added = 0
@@ -462,9 +652,7 @@ class _Walker:
     # -- the REPEAT: one network --------------------------------------------------------
 
     def live_edges(self) -> np.ndarray:
-        alive = np.asarray(self.edge_alive, dtype=bool)
-        e = np.array([(a, b) for a, _, b, _, _, _ in self.edges], dtype=np.int64).reshape(-1, 2)
-        return e[alive]
+        return self._edge_ends[:len(self.edges)][self.edge_alive]
 
     def pieces(self, anchors: np.ndarray):
         """Component label per point (edges of the walk; all ``anchors`` in one component),
@@ -545,7 +733,7 @@ class _Walker:
             if sv is None:
                 continue
             pv = self.xy[v]
-            hit = self._hits(shapely.Point(pv), reach)
+            hit = self._near_point(pv, reach)
             if not len(hit):
                 continue
             seg = self._coords[hit]
@@ -572,12 +760,10 @@ class _Walker:
             t = np.clip(t, margin, 1.0 - margin)
             q = p0 + t[:, None] * dvec
             d = np.linalg.norm(q - pv, axis=1)
-            for i in np.argsort(d):
+            for i in np.argsort(d, kind="stable"):  # ties: the older segment
                 if best is not None and d[i] >= best[0]:
                     break
                 if d[i] < 1.0:
-                    continue
-                if self.area is not None and not shapely.contains_xy(self.area, *q[i]):
                     continue
                 unit = (q[i] - pv) / d[i]
                 along = dvec[i] / np.sqrt(ll[i])
@@ -585,6 +771,8 @@ class _Walker:
                 if abs(unit @ along) >= self.cos_min:
                     continue
                 if self.dirs[v] and (np.asarray(self.dirs[v]) @ unit).max() >= self.cos_min:
+                    continue
+                if self.area is not None and not shapely.contains_xy(self.area, *q[i]):
                     continue
                 if not self._clear_except(v, q[i], hit[i]):
                     continue
@@ -605,25 +793,17 @@ class _Walker:
     def _clear_except(self, v, q, seg):
         """Whether the step v -> q keeps clear of every live segment but ``seg`` (which it
         ends on) and those sharing v."""
-        p = self.xy[v]
-        hit = self._hits(shapely.LineString([p, q]), _TOUCH)
-        hit = hit[hit != seg]
-        if not len(hit):
-            return True
-        ends = self._coords[hit].reshape(-1, 2, 2)
-        shared = (np.abs(ends - p).sum(axis=2) < 1e-6).any(axis=1)
-        return bool(shared.all())
+        return self._clear_of(self.xy[v], q, q_is_end=False, skip=seg)
 
     def drop_piece(self, members):
         """Remove the walk edges of a piece that cannot be joined (rejected)."""
         inside = np.zeros(len(self.p), dtype=bool)
         inside[members] = True
-        ends = np.array([(a, b) for a, _, b, _, _, _ in self.edges], dtype=np.int64)
-        alive = np.asarray(self.edge_alive, dtype=bool)
-        gone = np.flatnonzero(alive & (inside[ends[:, 0]] | inside[ends[:, 1]]))
-        for e in gone:
-            self.edge_alive[e] = False
-        self._alive[np.asarray(self._edge_seg, dtype=np.int64)[gone]] = False
+        ends = self._edge_ends[:len(self.edges)]
+        gone = np.flatnonzero(self.edge_alive & (inside[ends[:, 0]] | inside[ends[:, 1]]))
+        self.edge_alive[gone] = False
+        for seg in self._edge_seg[gone].tolist():
+            self._kill_segment(seg)
         self.deg[members] = 0
         return len(gone)
 
@@ -683,7 +863,7 @@ class _Walker:
                 split += 1
                 continue
             # rejected: this piece and the pieces that joined it so far
-            gone = [x for x in labs if find(x) == find(lab)]
+            gone = labs[find(labs) == find(lab)]
             members = np.concatenate([by_label[x] for x in gone])
             dropped += self.drop_piece(members[self.deg[members] > 0])
         return {"n_joins": joined, "n_join_splits": split, "n_dropped_edges": dropped}
@@ -948,7 +1128,18 @@ def _shape_lines(shapes: StreetShapes, pick, a_xy, b_xy, mirror):
     def onto(xy, index):
         return a_xy[index] + xy[:, :1] * chord[index] + xy[:, 1:2] * normal[index]
 
-    return _pinned(coordinates.transform(base, onto), a_xy, b_xy)
+    return _pinned(_map_vertices(base, onto), a_xy, b_xy)
+
+
+def _map_vertices(lines, fn):
+    """The lines with every vertex mapped by ``fn(xy, index)`` (``index``: the line of
+    each vertex). For maps made of elementwise arithmetic only, as here: equal vertices
+    stay equal without the distinct-vertex pass of :func:`coordinates.transform` (which
+    guards against BLAS products), and the result is the same."""
+    coords, index = shapely.get_coordinates(lines, return_index=True)
+    if not len(coords):
+        return np.asarray(lines, dtype=object).copy()
+    return shapely.set_coordinates(np.asarray(lines, dtype=object).copy(), fn(coords, index))
 
 
 def _pinned(lines, a_xy, b_xy):
@@ -995,7 +1186,7 @@ def _conflicts(lines, others, subset=None, tree=None, area=None, chord_inside=No
     out_of_area = np.zeros(0, dtype=np.int64)
     if area is not None:
         check = bent[chord_inside[bent]]
-        out_of_area = check[~shapely.within(lines[check], area)]
+        out_of_area = check[~shapely.contains(area, lines[check])]  # area is prepared
     if corridor is not None:
         check = bent[shapely.intersects(corridor, lines[bent])]
         if len(check):
@@ -1007,7 +1198,11 @@ def _conflicts(lines, others, subset=None, tree=None, area=None, chord_inside=No
         tree = shapely.STRtree(allg)
     a, b = tree.query(lines[bent], predicate="intersects")
     a = bent[a]
-    sel = a != b
+    # a pair of two queried lines is found twice: its relation is tested once (the pattern
+    # is symmetric, and both lines of a bad pair are reported)
+    queried = np.zeros(len(allg), dtype=bool)
+    queried[bent] = True
+    sel = (a < b) | ((a > b) & ~queried[b])
     a, b = a[sel], b[sel]
     if len(a) == 0:
         return np.unique(out_of_area)
@@ -1049,7 +1244,7 @@ def _draw_geometry(xy, a, b, level, tort, shapes, settings, rng, others, area=No
     if area is not None:  # a bend may not bulge out of the target where its chord is in
         area = shapely.buffer(area, 1.0)
         shapely.prepare(area)
-        inside = shapely.within(straight, area)
+        inside = shapely.contains(area, straight)  # prepared: faster than within
     corridor, chord_run = None, None
     if len(others):  # no bend may run along a given road (the invariants' corridor)
         from ..network.invariants import CORRIDOR_HALF_WIDTH
@@ -1127,16 +1322,19 @@ def _restore_tortuosity(lines, straight, chord, level, target, shapes, xy, a, b,
         # accept the proposals that cross nothing; a rejected one keeps its old shape, which
         # the accepted ones are checked against again, until none is left to reject
         take = prop_idx[keep]
-        shape = cand[keep]
+        trial = lines.copy()
+        trial[take] = cand[keep]
+        check = take  # the lines whose pairs are tested
         while len(take):
-            trial = lines.copy()
-            trial[take] = shape
-            bad = set(conflicts(trial, others, subset=take).tolist())
-            ok = np.array([i not in bad for i in take], dtype=bool)
+            ok = ~np.isin(take, conflicts(trial, others, subset=check))
             if ok.all():
                 lines = trial
                 break
-            take, shape = take[ok], shape[ok]
+            # the rejected keep their old shapes: only their pairs with the proposals left
+            # are new (the other pairs were tested and stay as they were)
+            check = take[~ok]
+            trial[check] = lines[check]
+            take = take[ok]
         # no flattened segment takes a bend any more: the other segments may
         stuck = stuck or len(take) < 0.1 * len(prop_idx)
     return lines
@@ -1153,7 +1351,7 @@ def _flatten(lines, a_xy, b_xy, scale):
         foot = a_xy[index] + t[:, None] * chord[index]
         return foot + scale * (xy - foot)
 
-    return _pinned(coordinates.transform(lines, towards_chord), a_xy, b_xy)
+    return _pinned(_map_vertices(lines, towards_chord), a_xy, b_xy)
 
 
 # --------------------------------------------------------------------------- synthesis
