@@ -133,7 +133,7 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT, "Synthesized roads", QgsProcessing.SourceType.TypeVectorLine),
             "New road segments with level, length_m, tortuosity and origin ('walk'; 'seam' "
-            "joins to existing roads; 'close' steps closing stubs; 'cross' crossing streets "
+            "joins to existing roads; 'close' steps closing stubs; 'dead_end' streets to the example's street ends no walk reached; 'cross' crossing streets "
             "completed; 'join' steps joining pieces of the network).")
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT_INTERSECTIONS, "Intersection points used", QgsProcessing.SourceType.TypeVectorPoint,

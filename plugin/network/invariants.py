@@ -60,7 +60,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from ..core.progress import InputError, Progress, ensure
-from .street_graph import clean_network
+from .street_graph import JUNCTION_TOLERANCE, clean_network
 
 __all__ = [
     "JUNCTION_TOLERANCE", "CORRIDOR_HALF_WIDTH", "MIN_DUPLICATE_LENGTH", "JUNCTION_RADIUS",
@@ -70,8 +70,6 @@ __all__ = [
     "check_network",
 ]
 
-#: Points closer than this (m) are one point: a street end this close to a line touches it.
-JUNCTION_TOLERANCE = 1e-3
 #: Half-width (m) of the corridor of a given road in which no synthesised street may run.
 CORRIDOR_HALF_WIDTH = 8.0
 #: A synthesised piece inside a corridor longer than this (m) doubles the given road.

@@ -34,7 +34,7 @@ from ..core.progress import InputError, Progress, ensure
 __all__ = [
     "DRIVABLE_CLASSES", "ARTERIAL_CLASSES", "CLASS_RANK", "RoadGraph",
     "drivable_and_arterial", "parse_other_tags", "vertical_layer", "class_rank",
-    "clean_network", "graph_from_lines",
+    "clean_network", "graph_from_lines", "snap_ends_onto_lines", "JUNCTION_TOLERANCE",
 ]
 
 #: OSM highway classes kept by default: what cars drive on and what forms city blocks.
@@ -53,6 +53,10 @@ _RANKED = ("motorway", "trunk", "primary", "secondary", "tertiary", "unclassifie
 #: Importance rank of a class (0 = most important); links rank with their class.
 CLASS_RANK = {c: i for i, c in enumerate(_RANKED)}
 UNKNOWN_RANK = len(_RANKED)
+
+#: Points closer than this (m) are one point: a street end this close to a line meets it
+#: (a junction), in the network cleaning and in the invariant checks alike.
+JUNCTION_TOLERANCE = 1e-3
 
 _TAG_RE = re.compile(r'"((?:[^"\\]|\\.)*)"=>"((?:[^"\\]|\\.)*)"')
 _YES = {"yes", "true", "1", "viaduct", "covered", "building_passage", "culvert", "boardwalk"}
@@ -233,6 +237,50 @@ def _split_at_vertices(geoms: np.ndarray, split_mask_fn):
 
 # --------------------------------------------------------------------------- main API
 
+def snap_ends_onto_lines(geometry: Sequence, new: Optional[Sequence] = None,
+                         tolerance: float = JUNCTION_TOLERANCE) -> np.ndarray:
+    """Make every line end that lies on another line (up to ``tolerance``) a vertex of it.
+
+    An end point put onto a line by interpolation lies on it only up to round-off
+    (1e-9 m .. 1e-4 m), and a street may pass a junction at a micrometre; noding would leave
+    the end dangling next to the edge (a dead end and a lost junction), or the street
+    crossing the junction without meeting it. GEOS snapping inserts the points as vertices,
+    so that both lines share them exactly. With ``new`` (a mask), only pairs with a new
+    line take part (the rest is already noded).
+
+    >>> a = shapely.LineString([(0, 0), (10, 0)]); b = shapely.LineString([(5, 5), (5, 1e-5)])
+    >>> len(shapely.get_parts(shapely.node(shapely.multilinestrings([a, b]))))
+    2
+    >>> snapped = snap_ends_onto_lines([a, b])
+    >>> len(shapely.get_parts(shapely.node(shapely.multilinestrings(snapped))))
+    3
+    """
+    geometry = np.asarray(geometry, dtype=object).copy()
+    n = len(geometry)
+    new = np.ones(n, dtype=bool) if new is None else np.asarray(new, dtype=bool)
+    if n < 2 or not new.any():
+        return geometry
+    ends = np.concatenate([shapely.get_point(geometry, 0), shapely.get_point(geometry, -1)])
+    owner = np.r_[np.arange(n), np.arange(n)]
+    e_i, l_i = shapely.STRtree(geometry).query(ends, predicate="dwithin", distance=tolerance)
+    keep = (owner[e_i] != l_i) & (new[owner[e_i]] | new[l_i])
+    e_i, l_i = e_i[keep], l_i[keep]
+    if not len(e_i):
+        return geometry
+    # an end already on a vertex of the line needs nothing
+    on_vertex = shapely.dwithin(ends[e_i], shapely.extract_unique_points(geometry[l_i]), 1e-9)
+    e_i, l_i = e_i[~on_vertex], l_i[~on_vertex]
+    if not len(e_i):
+        return geometry
+    order = np.argsort(l_i, kind="stable")
+    e_i, l_i = e_i[order], l_i[order]
+    lines, first = np.unique(l_i, return_index=True)
+    group = np.repeat(np.arange(len(lines)), np.diff(np.r_[first, len(l_i)]))
+    pts = shapely.multipoints(shapely.get_coordinates(ends[e_i]), indices=group)
+    geometry[lines] = shapely.snap(geometry[lines], pts, tolerance)
+    return geometry
+
+
 def clean_network(geometries: Sequence, road_class: Optional[Sequence] = None,
                   name: Optional[Sequence] = None, z_layer: Optional[Sequence] = None,
                   snap_tolerance: float = 1.0, min_dangle_length: float = 5.0,
@@ -246,7 +294,9 @@ def clean_network(geometries: Sequence, road_class: Optional[Sequence] = None,
     road_class, name, z_layer : per-line attributes (optional)
     snap_tolerance : float
         Nodes closer than this (metres) are merged; duplicates are edges with the same
-        end nodes whose Hausdorff distance is under it.
+        end nodes whose Hausdorff distance is under it. Above 0, a line end within
+        :data:`JUNCTION_TOLERANCE` of another line also joins it (a junction, not a dead
+        end beside the line); 0 is the plain noding of the lines as they are.
     min_dangle_length : float
         Dead-end edges shorter than this are removed (dangling slivers of OSM digitising).
     merge_degree2 : bool
@@ -291,7 +341,11 @@ def clean_network(geometries: Sequence, road_class: Optional[Sequence] = None,
     layers = np.unique(zl[part_src])
     for k, layer in enumerate(layers):
         sel = np.flatnonzero(zl[part_src] == layer)
-        noded = shapely.get_parts(shapely.node(shapely.multilinestrings(parts[sel])))
+        # an end within a millimetre of another line is a junction, as for the invariants
+        # (snapping off, 0: the plain noding count)
+        layer_parts = snap_ends_onto_lines(parts[sel], tolerance=min(
+            JUNCTION_TOLERANCE, snap_tolerance)) if snap_tolerance > 0 else parts[sel]
+        noded = shapely.get_parts(shapely.node(shapely.multilinestrings(layer_parts)))
         noded = noded[shapely.length(noded) > 0]
         pieces_all.append(noded)
         src_all.append(_attach_attributes(noded, parts[sel], part_src[sel], rank[part_src[sel]]))

@@ -557,42 +557,6 @@ class _Inserter:
 
 # --------------------------------------------------------------------------- network
 
-def _snap_onto(geometry: np.ndarray, new: np.ndarray, tolerance: float = 1e-3) -> np.ndarray:
-    """Make every line end that lies on another line (up to ``tolerance``) a vertex of it.
-
-    An end point put onto a boundary by interpolation lies on it only up to round-off
-    (1e-9 m), and a warped street may pass a junction at a micrometre; noding would leave
-    the end dangling next to the edge, or the street crossing the junction without
-    meeting it (a crossing without a junction, :mod:`plugin.network.invariants`). GEOS
-    snapping inserts the points as vertices, so that both lines share them exactly. Only
-    pairs with a new line take part (the old network is already noded).
-    """
-    geometry = np.asarray(geometry, dtype=object).copy()
-    new = np.asarray(new, dtype=bool)
-    if not new.any() or new.all() and len(geometry) < 2:
-        return geometry
-    n = len(geometry)
-    ends = np.concatenate([shapely.get_point(geometry, 0), shapely.get_point(geometry, -1)])
-    owner = np.r_[np.arange(n), np.arange(n)]
-    e_i, l_i = shapely.STRtree(geometry).query(ends, predicate="dwithin", distance=tolerance)
-    keep = (owner[e_i] != l_i) & (new[owner[e_i]] | new[l_i])
-    e_i, l_i = e_i[keep], l_i[keep]
-    if not len(e_i):
-        return geometry
-    # an end already on a vertex of the line needs nothing
-    on_vertex = shapely.dwithin(ends[e_i], shapely.extract_unique_points(geometry[l_i]), 1e-9)
-    e_i, l_i = e_i[~on_vertex], l_i[~on_vertex]
-    if not len(e_i):
-        return geometry
-    order = np.argsort(l_i, kind="stable")
-    e_i, l_i = e_i[order], l_i[order]
-    lines, first = np.unique(l_i, return_index=True)
-    group = np.repeat(np.arange(len(lines)), np.diff(np.r_[first, len(l_i)]))
-    pts = shapely.multipoints(shapely.get_coordinates(ends[e_i]), indices=group)
-    geometry[lines] = shapely.snap(geometry[lines], pts, tolerance)
-    return geometry
-
-
 def _renode(geometry: np.ndarray, level: np.ndarray, attrs: Dict[str, np.ndarray],
             new_level: int, min_dangle: float):
     """One planar network from existing edges and new streets, attributes carried over.
@@ -602,7 +566,7 @@ def _renode(geometry: np.ndarray, level: np.ndarray, attrs: Dict[str, np.ndarray
     ``min_dangle`` and merges chains through degree-2 nodes whose two edges share level and
     source.
     """
-    geometry = _snap_onto(geometry, level == new_level)
+    geometry = _roads.snap_ends_onto_lines(geometry, level == new_level)
     try:
         noded = shapely.node(shapely.multilinestrings(geometry))
     except shapely.errors.GEOSException:

@@ -20,7 +20,9 @@ The paper's REPEAT ("until no new street segments are added") is completed so th
 result is one network (:func:`connect_points`):
 
 - streets that stopped short of the connections their point had in the example close with
-  one more step to the nearest free point, until the dead-end share is the example's;
+  one more step to the nearest free point, until the dead-end share is the example's; where
+  it is below (the example's street ends that no walk reached), such an end gets its
+  street, one step onto the nearest street (a T);
 - every connected piece that reaches neither the given roads nor (without given roads) the
   largest piece is joined to the nearest other piece by a clear step to one of its points,
   or, where no point is in reach, by a step onto the nearest visible street, which is split
@@ -973,21 +975,30 @@ def connect_points(points: iq.PointSet, rng: np.random.Generator,
     progress.step(0.9)
     # closing stubs last: it only adds connections, so the network stays one piece
     target = dead_end_share_of(points) if dead_end_share is None else float(dead_end_share)
+
+    def share_now() -> float:
+        """Dead ends among the nodes of degree != 2 as the network will be measured: every
+        point the walker holds, the junctions its joins made included (not the given
+        roads' own nodes, whose roads are not counted here)."""
+        m = len(w.p)
+        deg = w.deg[:m]
+        counted = (deg > 0) & (deg != 2) & (w.p.example[:m] != EXISTING)
+        k = int(counted.sum())
+        return float((counted & (deg == 1)).sum() / k) if k else 0.0
+
     n_closed = 0
     if s.close_ends:
         # streets that stopped short of what their point had in the example (deg 1 < cap):
         # one more step to the nearest free point of any level, turn angle ignored, until
-        # the dead-end share of the new points is the example's
+        # the dead-end share is the example's
         # first the stubs, then (if the share is still above the example's) points that
         # were dead ends in the example too: copies near the edges of an example clipped to
         # a study area, whose clip ends are no dead ends of the town
         stubs = np.concatenate([
             rng.permutation(np.flatnonzero((w.deg[:n] == 1) & (w.cap[:n] > 1) & is_new)),
             rng.permutation(np.flatnonzero((w.deg[:n] == 1) & (w.cap[:n] == 1) & is_new))])
-        n_dead = int(((w.deg[:n] == 1) & is_new).sum())
-        n_ends = int((is_new & (w.deg[:n] > 0) & (w.deg[:n] != 2)).sum())
         for v in stubs:
-            if not n_ends or n_dead / n_ends <= target:
+            if share_now() <= target:
                 break
             if w.deg[v] != 1:
                 continue
@@ -1006,19 +1017,20 @@ def connect_points(points: iq.PointSet, rng: np.random.Generator,
                                              level=points.level[v, slot]) is not None)
             if not added and was_end:
                 w.cap[v], w.cnt[v, 0] = 1, 2
-            if added:
-                n_closed += 1
-                # v is no dead end; its partner (a free point of degree 0 -> 1, or a street
-                # end 1 -> 2, or a junction) changes the counts too
-                a, _, b, _, _, _ = w.edges[-1]
-                u = b if a == v else a
-                for p_, before in ((v, 1), (u, int(w.deg[u]) - 1)):
-                    if p_ >= n or not is_new[p_]:
-                        continue
-                    after = int(w.deg[p_])
-                    n_dead += int(after == 1) - int(before == 1)
-                    n_ends += int(after > 0 and after != 2) - int(before > 0 and before != 2)
+            n_closed += int(added)
     w.stats["n_closed"] = int(n_closed)
+    # the other way: a dead-end point of the example is only ever a walk's last step, so
+    # many stay unreached and the share falls below the example's; unreached dead-end
+    # points then get their street, one clear step onto the nearest street (a T), until
+    # the share is the example's
+    n_opened = 0
+    if s.close_ends:
+        for v in rng.permutation(np.flatnonzero((w.deg[:n] == 0) & (w.cap[:n] == 1) & is_new)):
+            if share_now() >= target:
+                break
+            reach = points.dist_mean[v, 0] + s.reach_sd * points.dist_sd[v, 0]
+            n_opened += w._join_by_split(np.array([v]), None, reach, "dead_end") is not None
+    w.stats["n_dead_ends_opened"] = int(n_opened)
     progress.step(1.0)
     alive = np.asarray(w.edge_alive, dtype=bool)
     edges = np.array(w.edges, dtype=object).reshape(-1, 6)[alive]
@@ -1656,6 +1668,7 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
         "n_levels": int(len(np.unique(level))),
         "quadtree_leaves": [len(q.leaves) for q in quadtrees],
         "n_closed": w.stats["n_closed"], "n_crossings_made": w.stats["n_crossings_made"],
+        "n_dead_ends_opened": w.stats["n_dead_ends_opened"],
         "n_joins": w.stats["n_joins"],
         "n_join_splits": w.stats["n_join_splits"],
         "n_dropped_edges": w.stats["n_dropped_edges"],
