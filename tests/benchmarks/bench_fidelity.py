@@ -411,6 +411,9 @@ def main(argv=None):
     ap.add_argument("--gan-model", default=None,
                     help="judge this StreetGAN generator (.onnx, card next to it) on the "
                          "towns it was not trained on, instead of the shipped ones")
+    ap.add_argument("--update", action="store_true",
+                    help="rerun only --methods and keep every other result of --out (no "
+                         "pictures: they show every method of one run)")
     ap.add_argument("--tables-only", action="store_true",
                     help="rewrite the tables from the JSON of an earlier run")
     args = ap.parse_args(argv)
@@ -428,6 +431,9 @@ def main(argv=None):
     towns = liechtenstein_towns() + [helsinki_town(), bubenec_town()]
     wanted = [s for s in args.towns.split(",") if s] or (list(QUICK_TOWNS) if args.quick else
                                                          [t.name for t in towns])
+    earlier = json.loads(Path(args.out).read_text()) if args.update else None
+    if earlier is not None:
+        args.no_pictures = True
     results = {"benchmark": "fidelity", "seeds": seeds, "methods": methods,
                "fill_quantile": args.fill_quantile,
                "statistics": [k for k, _ in fidelity.STATISTICS], "tuned_on": list(TUNED_ON),
@@ -482,6 +488,10 @@ def main(argv=None):
             panels[f"{best} (best baseline)"] = np.concatenate(
                 [target.given, getattr(runner, best)(seeds[0])])
             entry["best_baseline"] = best
+            if earlier is not None and target.name in earlier["targets"]:
+                kept = earlier["targets"][target.name]["methods"]
+                entry["methods"] = {m: entry["methods"].get(m, kept.get(m)) for m in
+                                    METHOD_ORDER if m in entry["methods"] or m in kept}
             results["targets"][target.name] = entry
             if not args.no_pictures:
                 sub = {m: f"median rel. error {entry['methods'][m]['score']['median_error']:.2f}"
@@ -489,6 +499,10 @@ def main(argv=None):
                 sub[f"{best} (best baseline)"] = ("median rel. error "
                                                   f"{entry['baselines'][best]['score']['median_error']:.2f}")
                 draw(target, panels, DOCS / f"fidelity_{target.name.lower()}.png", sub)
+    if earlier is not None:
+        results["methods"] = [m for m in METHOD_ORDER if m in methods
+                              or m in earlier.get("methods", [])]
+        results["targets"] = {**earlier["targets"], **results["targets"]}
     results["seconds"] = time.perf_counter() - t0
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -111,6 +111,17 @@ def distances(cand, real):
     return row
 
 
+def drawn_as(card: dict) -> dict:
+    """How a model's roads are drawn and read back: line width (px) for rasterising, and
+    the mask morphology of raster -> graph (the thesis's 15 px, 1 erosion, 5 dilations
+    unless the card says otherwise)."""
+    post = card.get("postprocess", {})
+    width = int(card.get("line_width_px", raster_graph.LINE_WIDTH_PX))
+    return {"width_px": width, "erosions": int(post.get("erosions", 1)),
+            "dilations": int(post.get("dilations", 5)),
+            "merge_junctions": 0.5 * width * float(card.get("cell_size_m", 3.0))}
+
+
 def untrained_generator(name: str, card: dict):
     paths = [d / f"{name}_untrained.onnx" for d in UNTRAINED_DIRS if (d / f"{name}_untrained.onnx").exists()]
     if not paths:
@@ -137,8 +148,10 @@ def evaluate_model(name: str, figures: dict) -> dict:
     real_o = pooled([window_metrics(shapely.transform(real_lines, lambda c: c - [wx0, wy0]), target)])
     rows = {"real (training network)": distances(real_o, real_o)}
     # (a) round trip: the training raster itself through raster -> graph
-    img, gt = raster_graph.rasterize_lines(real_lines, margin=0.0)
-    trip = raster_graph.raster_to_graph(img, gt)
+    drawn = drawn_as(card)
+    img, gt = raster_graph.rasterize_lines(real_lines, width_px=drawn["width_px"], margin=0.0)
+    trip = raster_graph.raster_to_graph(img, gt, erosions=drawn["erosions"],
+                                        dilations=drawn["dilations"])
     rows["real -> raster -> graph"] = distances(pooled([window_metrics(trip.geometry, window)]), real)
     variants = {DEFAULT: dict(model=gen, from_edge=True),
                 "StreetGAN, thesis post-processing": dict(model=gen, from_edge=False)}
@@ -158,7 +171,7 @@ def evaluate_model(name: str, figures: dict) -> dict:
     res = []
     for s in SEEDS:
         rg = raster_graph.raster_to_graph(noise_image(rr, cc, s), (-96.0, 3.0, 0.0, target.bounds[3] + 96.0, 0.0, -3.0),
-                                          )
+                                          erosions=drawn["erosions"], dilations=drawn["dilations"])
         res.append(window_metrics(rg.geometry, target))
     rows["random noise image"] = distances(pooled(res), real_o)
     figures[name] = dict(real=shapely.transform(real_lines, lambda c: c - [wx0, wy0]), target=target,
@@ -240,7 +253,8 @@ def evaluate_held_out(name: str, figures: dict) -> dict:
             x0, _, _, y1 = case["area"].bounds
             x0, y1 = x0 - 96.0, y1 + 96.0
             img, _ = raster_graph.rasterize_lines(np.concatenate([case["real"], case["given"]]),
-                                                  3.0, 15, bounds=(x0, y1 - rows * 3.0,
+                                                  3.0, drawn_as(gen.card)["width_px"],
+                                                  bounds=(x0, y1 - rows * 3.0,
                                                                    x0 + cols * 3.0, y1))
             return img[:rows, :cols].astype(np.float32)
 
@@ -278,6 +292,7 @@ def evaluate_held_out(name: str, figures: dict) -> dict:
 
 def performance(name: str) -> dict:
     gen = streetgan.load_model(name)
+    drawn = drawn_as(gen.card)
     z = streetgan.noise(25, 25, gen.channels, np.random.default_rng(0))
     gen.run(z)  # warm-up (session initialisation)
     t_gen, c_gen = [], []
@@ -290,7 +305,9 @@ def performance(name: str) -> dict:
     t_rg, c_rg, stats = [], [], None
     for _ in range(3):
         t, c = time.perf_counter(), time.process_time()
-        r = raster_graph.raster_to_graph(img, gt, merge_junctions=22.5)
+        r = raster_graph.raster_to_graph(img, gt, merge_junctions=drawn["merge_junctions"],
+                                         erosions=drawn["erosions"],
+                                         dilations=drawn["dilations"])
         t_rg.append(time.perf_counter() - t)
         c_rg.append(time.process_time() - c)
         stats = r.stats
