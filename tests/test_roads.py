@@ -68,6 +68,23 @@ def test_close_nodes_are_snapped():
     assert sorted(g.degree) == [1, 1, 1, 3]
 
 
+def test_an_end_a_rounding_error_off_a_street_is_a_junction():
+    """A street put onto another by interpolation ends 1e-5 m beside it: one T junction
+    (degrees 1, 1, 1 and 3), not a dead end beside an unbroken street; with snapping off (0)
+    the lines are noded as they are."""
+    main = LineString([(0, 0), (100, 0)])
+    side = LineString([(40, 50), (40.0, 1e-5)])
+    g = roads.clean_network([main, side], min_dangle_length=0.0, merge_degree2=False)
+    assert g.n_edges == 3 and sorted(g.degree) == [1, 1, 1, 3]
+    plain = roads.clean_network([main, side], snap_tolerance=0.0, min_dangle_length=0.0,
+                                merge_degree2=False)
+    assert plain.n_edges == 2 and sorted(plain.degree) == [1, 1, 1, 1]
+    # a centimetre off is no junction (a gap, for the undershoot checks to report)
+    apart = roads.clean_network([main, LineString([(40, 50), (40, 0.01)])],
+                                min_dangle_length=0.0, merge_degree2=False)
+    assert apart.n_edges == 2
+
+
 def test_other_tags_and_vertical_layer():
     tags = roads.parse_other_tags('"bridge"=>"yes","layer"=>"2","name:fi"=>"Katu \\"x\\""')
     assert tags == {"bridge": "yes", "layer": "2", "name:fi": 'Katu "x"'}
