@@ -180,46 +180,26 @@ def evaluate_model(name: str, figures: dict) -> dict:
             "seeds": list(SEEDS), "rows": rows}
 
 
-#: The statistics of the fidelity issue (issue 15): (kind, name) scalars and (kind, name,
-#: percentile) of distributions, with short labels.
-FIDELITY_STATS = (
-    ("roads", "intersections_per_km2", None, "intersections/km²"),
-    ("roads", "dead_ends_per_km2", None, "dead ends/km²"),
-    ("roads", "street_length_km_per_km2", None, "km/km²"),
-    ("roads", "dead_end_share", None, "degree-1 share"),
-    ("roads", "degree3_share", None, "degree-3 share"),
-    ("roads", "degree4_share", None, "degree-4 share"),
-    ("roads", "segment_length", 10, "segment p10"),
-    ("roads", "segment_length", 50, "segment median"),
-    ("roads", "segment_length", 90, "segment p90"),
-    ("roads", "orientation_entropy", None, "orientation entropy"),
-    ("blocks", "blocks_per_km2", None, "blocks/km²"),
-    ("blocks", "area", 10, "block area p10"),
-    ("blocks", "area", 50, "block area median"),
-    ("blocks", "area", 90, "block area p90"),
-    ("blocks", "compactness", 50, "compactness median"),
-    ("blocks", "aspect_ratio", 50, "aspect ratio median"),
-)
+#: Short labels of the statistics of the fidelity issue (issue 15), in the order of
+#: :data:`plugin.measure.fidelity.STATISTICS` (their one home).
+FIDELITY_LABELS = ("intersections/km²", "dead ends/km²", "km/km²", "degree-1 share",
+                   "degree-3 share", "degree-4 share", "segment p10", "segment median",
+                   "segment p90", "orientation entropy", "blocks/km²", "block area p10",
+                   "block area median", "block area p90", "compactness median",
+                   "aspect ratio median")
 
 
 def fidelity_values(lines, area) -> np.ndarray:
-    """The :data:`FIDELITY_STATS` of the network ``lines`` clipped to ``area`` (nodes within
-    1 m of its outline are clip ends, not dead ends)."""
-    lines = np.asarray(lines, dtype=object)
-    with np.errstate(invalid="ignore"):
-        parts = shapely.get_parts(shapely.intersection(lines, area))
-    parts = parts[(shapely.get_type_id(parts) == 1) & (shapely.length(parts) > 0.01)]
-    m = metrics.compute_layout_metrics(roads=parts, area=area, edge_distance=1.0)
-    out = []
-    for kind, name, pct, _ in FIDELITY_STATS:
-        if not m.has(kind, name):
-            out.append(0.0 if pct is None else np.nan)
-        elif pct is None:
-            out.append(m.scalar(kind, name))
-        else:
-            d = m.distribution(kind, name)
-            out.append(float(np.percentile(d, pct)) if len(d) else np.nan)
-    return np.array(out, dtype=float)
+    """The fidelity statistics (:func:`plugin.measure.fidelity.fidelity_statistics`) of the
+    network ``lines`` inside ``area`` as an array; NaN where no street lies inside."""
+    from urban_synthesis.plugin.core.progress import InputError
+    from urban_synthesis.plugin.measure import fidelity
+
+    try:
+        stats = fidelity.fidelity_statistics(lines, area)
+    except InputError:
+        return np.full(len(fidelity.STATISTICS), np.nan)
+    return np.array([stats[k] for k, _ in fidelity.STATISTICS], dtype=float)
 
 
 def _relative_errors(values, real):
@@ -286,8 +266,40 @@ def evaluate_held_out(name: str, figures: dict) -> dict:
                        "real": [round(float(x), 4) for x in real], "rows": rows}
     return {"model": name, "title": gen.card.get("title"), "against": "towns never seen in "
             "training (leave-one-town-out), their level-0 roads given",
-            "statistics": [lab for *_, lab in FIDELITY_STATS], "seeds": list(SEEDS),
+            "statistics": list(FIDELITY_LABELS), "seeds": list(SEEDS),
             "towns": towns}
+
+
+#: Raster representations compared by :func:`representation_ceiling`: (label, cell size m,
+#: line width px, erosions, dilations).
+REPRESENTATIONS = (("thesis: 3 m, 15 px lines, 1 erosion + 5 dilations", 3.0, 15, 1, 5),
+                   ("3 m, 5 px lines, 1 + 1", 3.0, 5, 1, 1),
+                   ("2 m, 5 px lines, 1 + 1", 2.0, 5, 1, 1))
+
+
+def representation_ceiling(towns=("Eschen", "Mauren", "Triesen")) -> dict:
+    """What the raster representation alone loses: each town's real drivable streets
+    rasterised and read back (no generator), median relative error of the 16 fidelity
+    statistics against the real network, and blocks per km², per representation."""
+    li = _li()
+    out = {"towns": list(towns), "rows": {}}
+    for label, cell, width, erosions, dilations in REPRESENTATIONS:
+        errs, blocks = [], []
+        for town in towns:
+            case = li.leave_one_out(town)
+            lines = np.concatenate([case["real"], case["given"]])
+            real = fidelity_values(lines, case["area"])
+            img, gt = raster_graph.rasterize_lines(lines, cell, width,
+                                                   bounds=case["area"].buffer(96.0).bounds)
+            rg = raster_graph.raster_to_graph(img.astype(np.float32), gt, erosions=erosions,
+                                              dilations=dilations, simplify=cell,
+                                              merge_junctions=0.5 * width * cell)
+            v = fidelity_values(rg.geometry, case["area"])
+            errs.append(round(float(np.median(_relative_errors(v, real))), 3))
+            blocks.append([round(float(real[10]), 1), round(float(v[10]), 1)])
+        out["rows"][label] = {"median_relative_error": errs,
+                              "blocks_per_km2_real_and_read_back": blocks}
+    return out
 
 
 def performance(name: str) -> dict:
@@ -408,6 +420,7 @@ def main() -> None:
         else:
             evidence.append(evaluate_model(name, figures))
         perf.append(performance(name))
+    ceiling = representation_ceiling()
     cols = ("networks", "blocks", "area_w", "area_ks", "compactness_w", "compactness_ks",
             "aspect_ratio_w", "aspect_ratio_ks", "dead_ends_per_km2", "dead_end_ratio")
     for ev in evidence:
@@ -429,6 +442,12 @@ def main() -> None:
                 print(f"    {lab}: median relative error {r['median_relative_error']:.3f}; "
                       f"invariant violations {r['violations']}, floating pieces "
                       f"{r['floating_pieces']}")
+    print(f"\nthe representation alone: real streets rasterised and read back "
+          f"({', '.join(ceiling['towns'])}), median relative error / blocks per km² "
+          "(real, read back)")
+    for label, row in ceiling["rows"].items():
+        print(f"  {label:50s} {row['median_relative_error']}  "
+              f"{row['blocks_per_km2_real_and_read_back']}")
     print("\nperformance (2-core CPU, onnxruntime)     thesis (Titan X / 1 core)")
     for p in perf:
         print(f"{p['model']:22s} generate 769x769 {p['generate_769_s']:.3f} s wall, "
@@ -441,7 +460,8 @@ def main() -> None:
           "is shared, so these are upper bounds)")
     out = {"machine": platform.processor() or platform.machine(), "cpu_count": os.cpu_count(),
            "load_average": [round(x, 2) for x in load], "thesis": THESIS,
-           "evidence": evidence, "held_out": held, "performance": perf}
+           "evidence": evidence, "held_out": held, "representation_ceiling": ceiling,
+           "performance": perf}
     res_dir = ROOT / "tests" / "benchmarks" / "results"
     res_dir.mkdir(parents=True, exist_ok=True)
     (res_dir / "gan.json").write_text(json.dumps(out, indent=1))
