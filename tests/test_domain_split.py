@@ -522,3 +522,47 @@ def test_motorways_take_no_junction_and_dangles_are_continued():
             shapely.boundary(lay.parcels[res]),
             shapely.buffer(shapely.union_all(others), S / 2 + 0.05, cap_style="flat")))
     assert (access >= 3.0).all()
+
+
+def test_a_corner_on_a_long_street_side_is_a_parcel_joint():
+    """A strip block whose long sides bend by 40° (a region corner, > CORNER_TURN) is
+    taken by a row template: a parcel joint is pinned on each bend and its cost is the
+    registration residual; a fifth corner on an end side is one the template cannot
+    take (its turn is the penalty)."""
+    t = np.radians(40)
+    bend_top = (150 - 60 * np.tan(t / 2), 60)
+    block = shapely.Polygon([(0, 0), (150, 0), (150 + 100 * np.cos(t), 100 * np.sin(t)),
+                             (150 + 100 * np.cos(t) - 60 * np.sin(t),
+                              100 * np.sin(t) + 60 * np.cos(t)), bend_top, (0, 60)])
+    ring, idx, turn = templates.region_corners(block)
+    assert len(idx) == 6                               # the two bends are corners
+    *_, penalty = templates.region_frame(block, with_penalty=True)
+    assert penalty == 0.0
+    lib = {t.name: t for t in LIB}
+    warp = templates.warp_rows(block, lib["double_strip"], L, W, None)
+    assert warp is not None and warp.energy < 0.15
+    # a parcel joint sits on each bend of the long sides: no lot straddles one
+    corners = shapely.extract_unique_points(shapely.union_all(warp.lots))
+    near = [float(shapely.distance(corners, shapely.Point(b))) for b in ((150, 0), bend_top)]
+    assert max(near) < 1e-6
+    # a notch in an end side stays a corner the template cannot take
+    notched = shapely.Polygon([(0, 0), (200, 0), (200, 60), (0, 60), (-20, 30)])
+    *_, penalty = templates.region_frame(notched, with_penalty=True)
+    assert penalty > 0.5
+
+
+def test_split_streets_meet_their_parent_at_a_node():
+    """A split street ending on an earlier split street is a junction of the noded
+    network (no false dead end) and the road mesh of the global optimisation has one
+    block per leaf (it is evaluated, not reverted for a relabelling failure)."""
+    region = shapely.Polygon([(0, 0), (520, -40), (560, 330), (20, 360)])
+    lay = domain_split.split_domain(region, templates=LIB, seed=5)
+    assert (lay.road_level == domain_split.LEVEL_SPLIT).sum() >= 3
+    assert_planar(lay.roads)
+    ends = np.vstack([shapely.get_coordinates(shapely.get_point(lay.roads, i)) for i in (0, -1)])
+    _, count = np.unique(np.round(ends, 4), axis=0, return_counts=True)
+    assert (count >= 2).all()                          # no dead end in a splitting layout
+    assert domain_split.table1(lay)["s_d"] == 0
+    opt = lay.stats["optimisation"]
+    assert opt["iterations"] >= 1 and not opt.get("relabel_failed", False)
+    assert "kept" in opt

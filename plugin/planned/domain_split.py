@@ -12,7 +12,8 @@ Pipeline of :func:`split_domain` (one layout) and :func:`split_variations` (k la
    replaced by a template when one matches: row templates are warped onto it
    (:func:`templates.warp_rows`, registration / regression) and their **warp energy**
    (registration residual per corner / parcel width, plus the turn of region corners the
-   template cannot take) is under ``energy_threshold``; edge labels must agree (a double
+   template cannot take; a corner on a long street side, up to 50°, is taken by a parcel
+   joint and costs only its residual) is under ``energy_threshold``; edge labels must agree (a double
    strip needs a street on both long sides); drawn by probability x exp(-energy / 0.1).
    Otherwise the region is split along a streamline of its cross field (:mod:`cross_field`
    with a divergence term, :mod:`streamlines`: Delaunay seeds, RK2, the four quality
@@ -57,6 +58,7 @@ import shapely
 from ..core.geometry import minimum_rectangles, unit
 from ..core.progress import InputError, Progress, ensure
 from ..measure import metrics as _metrics
+from ..network.street_graph import snap_ends_onto_lines
 from ..parcels import subdivision as _parcels
 from . import templates as _templates
 from .cross_field import cross_field
@@ -190,7 +192,7 @@ LIMITED_ACCESS = frozenset({"motorway", "motorway_link"})
 
 
 def prepare_domain(region, key_roads=None, key_areas=None, street_width: float = 15.0,
-                   key_road_classes=None, max_extension: float = 200.0,
+                   key_road_classes=None, max_extension: float = 400.0,
                    outline_streets: bool = True):
     """Work regions, the fixed street lines and the key-area polygons.
 
@@ -420,9 +422,20 @@ class _Splitter:
         inside = inside[shapely.get_type_id(inside) == 1]
         if len(inside) != 1:
             return None
-        street = inside[0]
         faces = _faces([shapely.boundary(region), ext], region)
         if len(faces) < 2:
+            return None
+        # the street is taken from the same noded arrangement as the faces (snap-rounded
+        # to NODING_GRID): the children's outlines and the street then share their
+        # vertices exactly, and a later street ending on this one meets it at a node of
+        # the noding instead of a few 1e-5 m beside it (a false dead end, and blocks that
+        # the road mesh would not separate)
+        pieces = noded([shapely.boundary(region), ext])
+        mid = shapely.line_interpolate_point(pieces, 0.5, normalized=True)
+        on_outline = shapely.dwithin(shapely.boundary(region), mid, 10 * NODING_GRID)
+        in_region = shapely.within(mid, region)
+        street = shapely.line_merge(shapely.union_all(pieces[in_region & ~on_outline]))
+        if street.geom_type != "LineString":
             return None
         _, short, _ = minimum_rectangles(faces)
         if (short < self.min_depth).any():
@@ -702,6 +715,17 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
         leaves += got_leaves
         split_lines += got_lines
         ends = np.vstack([ends, _end_dirs(got_lines)])
+    if split_lines:
+        # a split street ends on its parent's outline only up to round-off (the outline is
+        # a face of a snap-rounded arrangement, 1e-6 .. 3e-5 m off the line it came from):
+        # its end becomes a vertex of the line it meets, so that every later noding
+        # (global optimisation, road network) sees the junction (no false dead end, and
+        # the blocks of the road mesh are the leaves)
+        snapped = snap_ends_onto_lines(list(fixed) + split_lines,
+                                       np.r_[np.zeros(len(fixed), bool),
+                                             np.ones(len(split_lines), bool)])
+        fixed = np.asarray(list(snapped[:len(fixed)]), dtype=object)
+        split_lines = list(snapped[len(fixed):])
     n_done = search.n_regions
     n_backtracked = search.n_backtracks
     t_back = search.time_abandoned
@@ -737,12 +761,14 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
             for f, leaf, a in zip(fi, li, share):
                 if a > best[f]:
                     owner[f], best[f] = leaf, a
-            if len(new_faces) == len(leaves) and sorted(owner) == list(range(len(leaves))):
+            # a leaf may be two faces of the arrangement (a key road ending inside it, a
+            # street of a neighbour closing that slit): its faces are put together again
+            if (owner >= 0).all() and sorted(set(owner.tolist())) == list(range(len(leaves))):
                 # the optimisation is kept when it lowers what it is for: the distortion of
                 # the template warps (Yang sec. 6), summed over the row-template blocks
-                moved = [None] * len(leaves)
-                for face, o in zip(new_faces, owner):
-                    moved[o] = face
+                moved = [shapely.union_all(new_faces[owner == o]) for o in range(len(leaves))]
+                moved = [m if m.geom_type == "Polygon" else leaves[o][0]
+                         for o, m in enumerate(moved)]
                 before = _warp_distortion([leaf[0] for leaf in leaves], leaves, by_name, s)
                 after = _warp_distortion(moved, leaves, by_name, s)
                 opt_stats["warp_energy_before"], opt_stats["warp_energy_after"] = before, after

@@ -25,7 +25,10 @@ Template-based splitting (:func:`fit_energy`, :func:`warp_rows`):
   its registration residual, the root mean square distance between the warped parcel
   corners and each parcel's best registration in its allowed deformation class, divided
   by the parcel width, plus the turn (radians) of the region's corners that the
-  template's four corners cannot take (:func:`region_frame`). A template whose depth
+  template's four corners cannot take (:func:`region_frame`; a corner inside a long street
+  side turning by at most :data:`LONG_SIDE_BEND` is a regular boundary vertex of the
+  repeating row, taken by a pinned parcel joint, and costs only its residual). A
+  template whose depth
   range or row length (``max_columns``) the region exceeds does not match. Spikes and
   area templates keep the rectangle heuristic of :func:`fit_energy` (simplification).
   Templates with energy under a threshold are drawn with probability template
@@ -294,6 +297,9 @@ def fit_energy(region, template: Template, length: float, width: float,
 #: A vertex of a region whose outline turns by more than this (degrees) is a corner
 #: (Yang sec. 4.1, "we first detect the convex and concave corners of R").
 CORNER_TURN = 35.0
+#: A region corner inside a long side of a row template, turning by at most this
+#: (degrees), is taken by a joint between two parcels of the row (see :func:`region_frame`).
+LONG_SIDE_BEND = 50.0
 
 
 def region_corners(poly, min_turn: float = CORNER_TURN):
@@ -337,17 +343,24 @@ def region_frame(poly, with_penalty: bool = False):
     ring, idx, turn = region_corners(poly)
     order = np.argsort(-turn)                       # convex first, sharpest first
     corner_idx = sorted(int(i) for i in order[:4])
-    dropped = [i for i in idx if i not in corner_idx]
-    penalty = float(np.radians(np.abs(turn[dropped])).sum())
+    dropped = [int(i) for i in idx if i not in corner_idx]
     if len(set(corner_idx)) < 4:
         return None
     n = len(ring)
-    sides = []
+    sides, side_ids = [], []
     for a, b in zip(corner_idx, corner_idx[1:] + corner_idx[:1]):
         ids = np.arange(a, b + 1) if b > a else np.r_[np.arange(a, n), np.arange(0, b + 1)]
         sides.append(ring[ids % n])
+        side_ids.append(set((ids % n).tolist()))
     lengths = [np.hypot(*np.diff(s, axis=0).T).sum() for s in sides]
     k = 0 if lengths[0] + lengths[2] >= lengths[1] + lengths[3] else 1
+    # a dropped corner inside a long (street) side is a regular boundary vertex of the
+    # repeating parcel row: a joint between two parcels is pinned to it (warp_rows) and
+    # its cost is the parcels' registration residual; up to LONG_SIDE_BEND. Any other
+    # dropped corner is one the template cannot take: its turn is the penalty.
+    along = side_ids[k] | side_ids[(k + 2) % 4]
+    penalty = float(sum(np.radians(abs(turn[i])) for i in dropped
+                        if not (i in along and abs(turn[i]) <= LONG_SIDE_BEND)))
     c1 = sides[k]
     c2 = sides[(k + 2) % 4][::-1]
     e0 = sides[(k + 3) % 4][::-1]  # from c1's start to c2's start
