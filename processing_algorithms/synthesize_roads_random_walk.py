@@ -133,8 +133,9 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT, "Synthesized roads", QgsProcessing.SourceType.TypeVectorLine),
             "New road segments with level, length_m, tortuosity and origin ('walk'; 'seam' "
-            "joins to existing roads; 'close' steps closing stubs; 'dead_end' streets to the example's street ends no walk reached; 'cross' crossing streets "
-            "completed; 'join' steps joining pieces of the network).")
+            "joins to existing roads; 'close' steps closing stubs; 'dead_end' streets to the "
+            "example's street ends no walk reached; 'cross' crossing streets completed; "
+            "'join' steps joining pieces of the network).")
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT_INTERSECTIONS, "Intersection points used", QgsProcessing.SourceType.TypeVectorPoint,
             optional=True, createByDefault=False),
