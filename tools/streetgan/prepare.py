@@ -102,7 +102,8 @@ def main() -> None:
                     help="Liechtenstein towns left out of the training images")
     ap.add_argument("--line-width", type=int, default=WIDTH,
                     help="line width in pixels (thesis 15, i.e. 45 m: streets closer than "
-                         "that merge; 5 keeps a town's dead ends, see resources/models/streetgan.md)")
+                         "that merge; 5 keeps a town's dead ends, see "
+                         "resources/models/streetgan.md)")
     args = ap.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     held = {t for t in args.hold_out.split(",") if t}
