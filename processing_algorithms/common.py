@@ -390,6 +390,18 @@ class AlgorithmBase(QgsProcessingAlgorithm):
             self.addParameter(parameter)
 
 
+def fill_quantile_parameter(name: str = "FILL_QUANTILE") -> QgsProcessingParameterNumber:
+    """Fragment synthesis' fill quantile (one definition for the fragment tool, the road
+    method chooser and the district model): % of the example's block areas, 50 .. 100,
+    default :data:`plugin.roads.from_fragments.FILL_QUANTILE`."""
+    from ..plugin.roads.from_fragments import FILL_QUANTILE
+
+    return QgsProcessingParameterNumber(
+        name, "Largest empty face (quantile of the example's block areas, %)",
+        QgsProcessingParameterNumber.Type.Double, defaultValue=FILL_QUANTILE, minValue=50.0,
+        maxValue=100.0)
+
+
 def parse_class_list(text):
     """'primary, secondary' -> {'primary', 'secondary'}; empty -> empty set (keep all)."""
     if not text:

@@ -14,15 +14,13 @@ from qgis.core import (
     QgsProcessingParameterFeatureSink,
     QgsProcessingParameterFeatureSource,
     QgsProcessingParameterFile,
-    QgsProcessingParameterNumber,
     QgsProcessingParameterRasterLayer,
     QgsVectorLayer,
 )
 
 from ..plugin.qgis_glue import qgis_io
-from ..plugin.roads import from_fragments as synthesis_fragments
 from ..plugin.roads import streetgan
-from .common import AlgorithmBase
+from .common import AlgorithmBase, fill_quantile_parameter
 
 #: One METHOD: its label and the algorithm that runs it. New methods are
 #: appended (the enum index is what models and command lines store).
@@ -101,10 +99,7 @@ class SynthesizeRoads(AlgorithmBase):
         self.add(QgsProcessingParameterRasterLayer(
             self.DEM, "Terrain (DEM)", optional=True),
             "Fragments and growth take the terrain into account (slope term, maximum slope).")
-        self.add(QgsProcessingParameterNumber(
-            self.FILL_QUANTILE, "Largest empty face (quantile of the example's block areas, %)",
-            QgsProcessingParameterNumber.Type.Double,
-            defaultValue=synthesis_fragments.FILL_QUANTILE, minValue=50.0, maxValue=100.0),
+        self.add(fill_quantile_parameter(self.FILL_QUANTILE),
             "Fragments only: faces larger than this quantile of the example's block areas are "
             "filled with streets. An example whose largest blocks are parks or yards (central "
             "Helsinki) keeps them with a higher value (98).", advanced=True)

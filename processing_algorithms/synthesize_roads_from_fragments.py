@@ -20,7 +20,7 @@ from qgis.core import (
 from ..plugin.qgis_glue import qgis_io
 from ..plugin.retrieval import database
 from ..plugin.roads import from_fragments as synthesis_fragments
-from .common import AlgorithmBase
+from .common import AlgorithmBase, fill_quantile_parameter
 
 
 class SynthesizeRoadsFromFragments(AlgorithmBase):
@@ -97,10 +97,7 @@ class SynthesizeRoadsFromFragments(AlgorithmBase):
             "level, scaled fragments, then splits from the example's block dimensions). Off: "
             "the thesis's Function 2 alone, which keeps a face empty when its match is a block.",
             advanced=True)
-        self.add(QgsProcessingParameterNumber(
-            self.FILL_QUANTILE, "Largest empty face (quantile of the example's block areas, %)",
-            QgsProcessingParameterNumber.Type.Double, defaultValue=90.0, minValue=50.0,
-            maxValue=100.0),
+        self.add(fill_quantile_parameter(self.FILL_QUANTILE),
             "Faces larger than this quantile of the example's block areas are filled (90: the "
             "p90). A city whose large blocks are parks or yards (Helsinki) keeps them empty "
             "with a higher value.", advanced=True)

@@ -119,10 +119,9 @@ def district_model() -> QgsProcessingModelAlgorithm:
         options=["Transfer of the most similar example block (thesis ch. 5.1)",
                  "Guided re-synthesis (thesis ch. 5.2)"], defaultValue=0),
         "How the blocks are filled with building footprints.", 0, 480)
-    fill = QgsProcessingParameterNumber(
-        "FILL_QUANTILE", "Largest empty face (quantile of the example's block areas, %)",
-        QgsProcessingParameterNumber.Type.Double, defaultValue=90.0, minValue=50.0,
-        maxValue=100.0)
+    from urban_synthesis.processing_algorithms.common import fill_quantile_parameter
+
+    fill = fill_quantile_parameter()
     fill.setFlags(fill.flags() | QgsProcessingParameterDefinition.Flag.FlagAdvanced)
     _param(model, fill, "Fragments: faces larger than this quantile of the example's block "
            "areas get streets. An example whose largest blocks are parks or yards (central "
