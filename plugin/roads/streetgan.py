@@ -93,6 +93,19 @@ class Generator:
     def name(self) -> str:
         return str(self.card.get("name", self.path.stem))
 
+    @property
+    def line_width_px(self) -> int:
+        """Width (px) of the roads in the model's images (thesis: 15)."""
+        return int(self.card.get("line_width_px", raster_graph.LINE_WIDTH_PX))
+
+    @property
+    def morphology(self) -> dict:
+        """Erosions and dilations of the road mask before thinning, as the card says (the
+        thesis's 1 and 5, made for 15 px lines)."""
+        post = self.card.get("postprocess", {})
+        return {"erosions": int(post.get("erosions", 1)),
+                "dilations": int(post.get("dilations", 5))}
+
     def run(self, z: np.ndarray) -> np.ndarray:
         """Generator output for a noise field (1, channels, m_rows, m_cols) -> (rows, cols)
         grey values 0 .. 255 (road bright)."""
@@ -360,10 +373,10 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
     gt = (x0, cell, 0.0, y1, 0.0, -cell)
     t = time.perf_counter()
     scale = cell / gen.cell_size  # lengths in the model's pixels stay the thesis's
-    width = float(gen.card.get("line_width_px", raster_graph.LINE_WIDTH_PX)) * cell
-    post = gen.card.get("postprocess", {})
+    width = gen.line_width_px * cell
     if min_dead_end is None:
-        min_dead_end = float(post.get("min_dead_end_m", DEFAULT_MIN_DEAD_END))
+        min_dead_end = float(gen.card.get("postprocess", {}).get("min_dead_end_m",
+                                                                 DEFAULT_MIN_DEAD_END))
     merge = 0.5 * width if merge_junctions is None else float(merge_junctions)
     corridor = 0.5 * width + GIVEN_CORRIDOR
     open_given = given_lines[_open_roads(given_cls)] if len(given_lines) else given_lines
@@ -373,15 +386,14 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
         image = _blank_corridors(image, gt, given_lines, corridor)
         if len(open_given):
             drawn, _ = raster_graph.rasterize_lines(
-                open_given, cell_size=cell, width_px=int(round(width / cell)),
+                open_given, cell_size=cell, width_px=gen.line_width_px,
                 bounds=(gt[0], gt[3] + gt[5] * image.shape[0], gt[0] + gt[1] * image.shape[1],
                         gt[3]))
             drawn = drawn[:image.shape[0], :image.shape[1]]
             image[:drawn.shape[0], :drawn.shape[1]] = np.maximum(
                 image[:drawn.shape[0], :drawn.shape[1]], drawn.astype(np.float32))
     # the mask's morphology suits the line width the model drew (thesis: 1 and 5 for 15 px)
-    rg = raster_graph.raster_to_graph(image, gt, erosions=int(post.get("erosions", 1)),
-                                      dilations=int(post.get("dilations", 5)),
+    rg = raster_graph.raster_to_graph(image, gt, **gen.morphology,
                                       simplify=3.0 * scale,
                                       min_dead_end=min_dead_end * scale, max_gap=max_gap * scale,
                                       from_edge=from_edge, merge_junctions=merge,

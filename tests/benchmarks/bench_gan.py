@@ -111,17 +111,6 @@ def distances(cand, real):
     return row
 
 
-def drawn_as(card: dict) -> dict:
-    """How a model's roads are drawn and read back: line width (px) for rasterising, and
-    the mask morphology of raster -> graph (the thesis's 15 px, 1 erosion, 5 dilations
-    unless the card says otherwise)."""
-    post = card.get("postprocess", {})
-    width = int(card.get("line_width_px", raster_graph.LINE_WIDTH_PX))
-    return {"width_px": width, "erosions": int(post.get("erosions", 1)),
-            "dilations": int(post.get("dilations", 5)),
-            "merge_junctions": 0.5 * width * float(card.get("cell_size_m", 3.0))}
-
-
 def untrained_generator(name: str, card: dict):
     paths = [d / f"{name}_untrained.onnx" for d in UNTRAINED_DIRS if (d / f"{name}_untrained.onnx").exists()]
     if not paths:
@@ -148,10 +137,8 @@ def evaluate_model(name: str, figures: dict) -> dict:
     real_o = pooled([window_metrics(shapely.transform(real_lines, lambda c: c - [wx0, wy0]), target)])
     rows = {"real (training network)": distances(real_o, real_o)}
     # (a) round trip: the training raster itself through raster -> graph
-    drawn = drawn_as(card)
-    img, gt = raster_graph.rasterize_lines(real_lines, width_px=drawn["width_px"], margin=0.0)
-    trip = raster_graph.raster_to_graph(img, gt, erosions=drawn["erosions"],
-                                        dilations=drawn["dilations"])
+    img, gt = raster_graph.rasterize_lines(real_lines, width_px=gen.line_width_px, margin=0.0)
+    trip = raster_graph.raster_to_graph(img, gt, **gen.morphology)
     rows["real -> raster -> graph"] = distances(pooled([window_metrics(trip.geometry, window)]), real)
     variants = {DEFAULT: dict(model=gen, from_edge=True),
                 "StreetGAN, thesis post-processing": dict(model=gen, from_edge=False)}
@@ -171,7 +158,7 @@ def evaluate_model(name: str, figures: dict) -> dict:
     res = []
     for s in SEEDS:
         rg = raster_graph.raster_to_graph(noise_image(rr, cc, s), (-96.0, 3.0, 0.0, target.bounds[3] + 96.0, 0.0, -3.0),
-                                          erosions=drawn["erosions"], dilations=drawn["dilations"])
+                                          **gen.morphology)
         res.append(window_metrics(rg.geometry, target))
     rows["random noise image"] = distances(pooled(res), real_o)
     figures[name] = dict(real=shapely.transform(real_lines, lambda c: c - [wx0, wy0]), target=target,
@@ -233,7 +220,7 @@ def evaluate_held_out(name: str, figures: dict) -> dict:
             x0, _, _, y1 = case["area"].bounds
             x0, y1 = x0 - 96.0, y1 + 96.0
             img, _ = raster_graph.rasterize_lines(np.concatenate([case["real"], case["given"]]),
-                                                  3.0, drawn_as(gen.card)["width_px"],
+                                                  3.0, gen.line_width_px,
                                                   bounds=(x0, y1 - rows * 3.0,
                                                                    x0 + cols * 3.0, y1))
             return img[:rows, :cols].astype(np.float32)
@@ -304,7 +291,6 @@ def representation_ceiling(towns=("Eschen", "Mauren", "Triesen")) -> dict:
 
 def performance(name: str) -> dict:
     gen = streetgan.load_model(name)
-    drawn = drawn_as(gen.card)
     z = streetgan.noise(25, 25, gen.channels, np.random.default_rng(0))
     gen.run(z)  # warm-up (session initialisation)
     t_gen, c_gen = [], []
@@ -317,9 +303,8 @@ def performance(name: str) -> dict:
     t_rg, c_rg, stats = [], [], None
     for _ in range(3):
         t, c = time.perf_counter(), time.process_time()
-        r = raster_graph.raster_to_graph(img, gt, merge_junctions=drawn["merge_junctions"],
-                                         erosions=drawn["erosions"],
-                                         dilations=drawn["dilations"])
+        r = raster_graph.raster_to_graph(
+            img, gt, merge_junctions=0.5 * gen.line_width_px * gen.cell_size, **gen.morphology)
         t_rg.append(time.perf_counter() - t)
         c_rg.append(time.process_time() - c)
         stats = r.stats
