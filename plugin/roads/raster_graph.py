@@ -312,9 +312,9 @@ def _chain_nodes(n: int, a: np.ndarray, b: np.ndarray):
     # run nodes in walking order: breadth-first from a root (node n) joined to each entry
     cut = np.isin(row * n + nbrs, np.r_[ring_start * n + ring_back, ring_back * n + ring_start])
     keep = in_run & ~cut
-    bfs = csr_matrix((np.ones(int(keep.sum()) + len(entry_node), np.int8),
-                      (np.r_[row[keep], np.full(len(entry_node), n)], np.r_[nbrs[keep], entry_node])),
-                     shape=(n + 1, n + 1))
+    src = np.r_[row[keep], np.full(len(entry_node), n)]
+    dst = np.r_[nbrs[keep], entry_node]
+    bfs = csr_matrix((np.ones(len(src), np.int8), (src, dst)), shape=(n + 1, n + 1))
     order = breadth_first_order(bfs, n, directed=True, return_predecessors=False)[1:]
     chain = chain_of_label[label[order]]
     by_chain = np.argsort(chain, kind="stable")
@@ -346,12 +346,8 @@ def _chain_nodes(n: int, a: np.ndarray, b: np.ndarray):
 def smooth_chain(points: np.ndarray, iterations: int = 5) -> np.ndarray:
     """``iterations`` rounds of p_i <- p_(i-1)/4 + p_i/2 + p_(i+1)/4 on the interior points
     (thesis: 5); the end points stay where they are, so chains stay connected."""
-    p = np.asarray(points, dtype=np.float64).copy()
-    if len(p) < 3:
-        return p
-    for _ in range(iterations):
-        p[1:-1] = 0.25 * p[:-2] + 0.5 * p[1:-1] + 0.25 * p[2:]
-    return p
+    p = np.asarray(points, dtype=np.float64)
+    return _smooth_chains(p, np.array([0, len(p)]), iterations) if len(p) >= 3 else p.copy()
 
 
 def _smooth_chains(points: np.ndarray, offsets: np.ndarray, iterations: int = 5) -> np.ndarray:
@@ -547,7 +543,8 @@ def raster_to_graph(image: np.ndarray, geotransform=(0.0, 1.0, 0.0, 0.0, 0.0, -1
     rc, a, b, stats["artefact_edges"] = pixel_graph(skel)
     stats["skeleton_pixels"] = len(rc)
     progress.step(0.2)
-    nodes, offsets = _chain_nodes(len(rc), a, b) if len(rc) else (np.empty(0, np.int64), np.zeros(1, np.int64))
+    nodes, offsets = _chain_nodes(len(rc), a, b) if len(rc) else \
+        (np.empty(0, np.int64), np.zeros(1, np.int64))
     times["graph"] = time.perf_counter() - t
     progress.step(0.4)
 
@@ -557,8 +554,9 @@ def raster_to_graph(image: np.ndarray, geotransform=(0.0, 1.0, 0.0, 0.0, 0.0, -1
         p = rc[nodes]
         # pixel centres -> map coordinates
         xy = np.column_stack([gt[0] + (p[:, 1] + 0.5) * gt[1], gt[3] + (p[:, 0] + 0.5) * gt[5]])
+        chain_of_point = np.repeat(np.arange(len(offsets) - 1), np.diff(offsets))
         geoms = shapely.linestrings(_smooth_chains(xy, offsets, smoothing),
-                                    indices=np.repeat(np.arange(len(offsets) - 1), np.diff(offsets)))
+                                    indices=chain_of_point)
     else:
         geoms = np.empty(0, dtype=object)
     if len(geoms):
