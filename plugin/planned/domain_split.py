@@ -13,8 +13,9 @@ Pipeline of :func:`split_domain` (one layout) and :func:`split_variations` (k la
    (:func:`templates.warp_rows`, registration / regression) and their **warp energy**
    (registration residual per corner / parcel width, plus the turn of region corners the
    template cannot take; a corner on a long street side, up to 50°, is taken by a parcel
-   joint and costs only its residual) is under ``energy_threshold``; edge labels must agree (a double
-   strip needs a street on both long sides); drawn by probability x exp(-energy / 0.1).
+   joint and costs only its residual) is under ``energy_threshold``; edge labels must
+   agree (a double strip needs a street on both long sides); drawn by probability
+   x exp(-energy / 0.1).
    Otherwise the region is split along a streamline of its cross field (:mod:`cross_field`
    with a divergence term, :mod:`streamlines`: Delaunay seeds, RK2, the four quality
    terms), drawn by quality; a split whose children could hold no template is rejected,

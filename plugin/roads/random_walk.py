@@ -12,8 +12,8 @@ ignored. p is zero for a point that no street of the walk's level passes (wrong 
 for a saturated point (its example's number of connections, at most 4), for a step that
 would cross or touch an existing segment (a grid of cells over the segments, which grows
 with the walk, and an exact test of the segments in the step's cells) or pass over another
-point (no new intersections), and for a step closer than a minimum angle to a street already at either
-end. A walk ends where every p is zero; new walks start from free street slots until none
+point (no new intersections), and for a step closer than a minimum angle to a street
+already at either end. A walk ends where every p is zero; new walks start from free street slots until none
 can start.
 
 The paper's REPEAT ("until no new street segments are added") is completed so that the
@@ -812,7 +812,7 @@ class _Walker:
         self.deg[members] = 0
         return len(gone)
 
-    def join_pieces(self, anchors, progress=None):
+    def join_pieces(self, anchors):
         """Join every piece to the anchors' network (or the largest piece); drop what
         cannot be joined. Returns counts. The pieces are found once and merged with a
         union-find as joins are made."""
@@ -1288,12 +1288,12 @@ def _draw_geometry(xy, a, b, level, tort, shapes, settings, rng, others, area=No
             else straight[bad]
         bad = conflicts(lines, others, subset=bad)
     if shapes is not None and len(shapes) and n:
-        lines = _restore_tortuosity(lines, straight, chord, level, drawn_mean, shapes, xy, a, b,
-                                    others, rng, conflicts, drawn_t)
+        lines = _restore_tortuosity(lines, chord, level, drawn_mean, shapes, xy, a, b, others,
+                                    rng, conflicts, drawn_t)
     return lines, straight, n_redrawn
 
 
-def _restore_tortuosity(lines, straight, chord, level, target, shapes, xy, a, b, others, rng,
+def _restore_tortuosity(lines, chord, level, target, shapes, xy, a, b, others, rng,
                         conflicts=_conflicts, drawn=None, rounds: int = 20,
                         tolerance: float = 0.002):
     """Make up the tortuosity lost to flattened shapes: segments that lost their bend
