@@ -71,9 +71,12 @@ TUNED_ON = ("Schaan", "Eschen", "Helsinki")
 QUICK_TOWNS = ("Vaduz", "Mauren", "Helsinki")
 METHOD_ORDER = ("fragments", "random_walk", "streetgan", "growroads", "splitdomain")
 BASELINES = ("grid", "chords", "delaunay")
+
+
 def gan_trained_on(model: str) -> set:
-    """The towns in a shipped StreetGAN model's training data, read from its model card
-    (``training_data``: one network, or ``networks`` such as 'li_vaduz' or 'helsinki')."""
+    """The towns in a StreetGAN model's training data (a shipped name or an .onnx path),
+    read from its model card (``training_data``: one network, or ``networks`` such as
+    'li_vaduz' or 'helsinki')."""
     from urban_synthesis.plugin.roads import streetgan
 
     card = Path(model).with_suffix(".json") if str(model).endswith(".onnx") \
@@ -319,7 +322,8 @@ def goals(results: dict) -> str:
         tag = "tuned on" if name in TUNED_ON else "held out"
         empty = [run.get("left_empty", "–") for run in r["runs"]]
         out.append(f"| {name} ({tag}) | {r['score']['median_error']:.2f} | "
-                   f"{example_as_is(t):.2f} | {min(r['score']['wins'].values())} | {', '.join(map(str, empty))} | "
+                   f"{example_as_is(t):.2f} | {min(r['score']['wins'].values())} | "
+                   f"{', '.join(map(str, empty))} | "
                    f"{', '.join(map(str, r['n_violations']))} | {r['seconds_per_km2']:.1f} |")
     return "\n".join(out)
 
