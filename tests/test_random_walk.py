@@ -151,6 +151,25 @@ def test_existing_road_is_not_crossed():
     assert_planar(np.concatenate([res.geometry, [road]]))
 
 
+def test_streets_end_on_the_roads_as_given_not_on_their_cleaned_copy():
+    """The walk runs on a cleaned copy of the existing roads (ends closer than
+    ``ROAD_SNAP_TOLERANCE`` merged into one node, coordinates to the millimetre): a street
+    ended on the copy lay beside the road the user gave, a crossing without a junction or a
+    dead end beside it (Ruggell, seed 2: 1.2 mm). Here two roads meet with a 0.4 m gap."""
+    pts, _ = _grid_points(n=6, jitter=1.0)
+    roads = [shapely.LineString([(-400, 262), (250, 250)]),
+             shapely.LineString([(250, 250.4), (900, 238)])]
+    res = rw.synthesize(pts, shapely.box(-10, -10, 510, 510), existing_lines=roads, seed=2,
+                        in_place=True)
+    ends = shapely.points(np.concatenate([shapely.get_coordinates(
+        shapely.get_point(res.geometry, i)) for i in (0, -1)]))
+    gap = shapely.distance(ends, shapely.union_all(roads))
+    near = gap < 0.5
+    assert near.sum() >= 4
+    assert gap[near].max() < 1e-6
+    assert invariants.check_network(res.geometry, roads).ok
+
+
 def test_transition_probability_prefers_mean_distance_and_angle():
     """One base point with a street arriving from the west; candidates at the mean distance
     straight ahead win over a too-near, a too-far and a sharply turned one."""

@@ -34,7 +34,8 @@ from ..core.progress import InputError, Progress, ensure
 __all__ = [
     "DRIVABLE_CLASSES", "ARTERIAL_CLASSES", "CLASS_RANK", "RoadGraph",
     "drivable_and_arterial", "parse_other_tags", "vertical_layer", "class_rank",
-    "clean_network", "graph_from_lines", "snap_ends_onto_lines", "JUNCTION_TOLERANCE",
+    "clean_network", "graph_from_lines", "snap_ends_onto_lines", "move_ends_onto_lines",
+    "JUNCTION_TOLERANCE",
 ]
 
 #: OSM highway classes kept by default: what cars drive on and what forms city blocks.
@@ -236,6 +237,40 @@ def _split_at_vertices(geoms: np.ndarray, split_mask_fn):
 
 
 # --------------------------------------------------------------------------- main API
+
+def move_ends_onto_lines(lines: Sequence, onto: Sequence, tolerance: float) -> np.ndarray:
+    """Move every line end within ``tolerance`` of a line of ``onto`` to its nearest point on
+    that line (the lines of ``onto`` are not changed).
+
+    A street ended on a cleaned copy of the given roads (coordinates rounded to the
+    millimetre, near nodes merged) lies up to the cleaning's tolerance beside the roads the
+    user gave: a millimetre beside is a crossing or a dead end there. Ends that share a
+    point move together (they are projected the same way).
+
+    >>> road = shapely.LineString([(0, 0), (10, 0)])
+    >>> moved = move_ends_onto_lines([shapely.LineString([(5, 5), (5, -0.002)])], [road], 0.01)
+    >>> moved[0].coords[-1]
+    (5.0, 0.0)
+    """
+    lines = np.asarray(lines, dtype=object).copy()
+    onto = np.asarray(onto, dtype=object)
+    if not len(lines) or not len(onto):
+        return lines
+    coords = shapely.get_coordinates(lines)
+    count = shapely.get_num_coordinates(lines)
+    last = np.cumsum(count) - 1
+    end_at = np.r_[last - count + 1, last]
+    ends = shapely.points(coords[end_at])
+    e_i, o_i = shapely.STRtree(onto).query_nearest(ends, max_distance=tolerance,
+                                                   all_matches=False)
+    if not len(e_i):
+        return lines
+    target = onto[o_i]
+    moved = shapely.line_interpolate_point(target, shapely.line_locate_point(target, ends[e_i]))
+    coords[end_at[e_i]] = shapely.get_coordinates(moved)
+    owner = np.repeat(np.arange(len(lines)), count)
+    return shapely.linestrings(coords, indices=owner)
+
 
 def snap_ends_onto_lines(geometry: Sequence, new: Optional[Sequence] = None,
                          tolerance: float = JUNCTION_TOLERANCE) -> np.ndarray:

@@ -95,6 +95,9 @@ BLOCK_FIELDS = [("block_id", "int"), ("area_m2", "float"), ("neighbours", "int")
 _TOUCH = 0.5     # m: a step closer than this to another segment touches it
 #: example == -1: a node of the given roads; -2: a junction slot placed on a given road
 EXISTING, ROAD_SLOT = -1, -2
+#: Existing roads' nodes closer than this (m) are one junction when the walk cleans them;
+#: the new streets' ends on them are moved back onto the roads as given by up to as much.
+ROAD_SNAP_TOLERANCE = 1.0
 
 
 @dataclass(frozen=True)
@@ -1448,7 +1451,7 @@ def _existing_state(lines, area, offset: int, seam_distance: float, example=None
     from ..network import street_graph as roads
 
     lines = np.asarray(lines, dtype=object)
-    graph = roads.clean_network(lines, merge_degree2=True)
+    graph = roads.clean_network(lines, snap_tolerance=ROAD_SNAP_TOLERANCE, merge_degree2=True)
     # nodes back onto the input's own line ends (cleaning rounds them to the millimetre),
     # so that new streets end exactly where the existing roads do
     raw = shapely.get_coordinates(shapely.boundary(shapely.get_parts(lines)))
@@ -1635,6 +1638,12 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
     lines, straight, n_redrawn = _draw_geometry(
         pts.xy, a, b, level, tort, shapes, settings, rng,
         ex_lines if ex_lines is not None else np.empty(0, dtype=object), area)
+    if ex_lines is not None:
+        # onto the roads as given, not the cleaned copy the walk ran on (a millimetre off)
+        from ..network.street_graph import move_ends_onto_lines
+
+        lines = move_ends_onto_lines(lines, shapely.get_parts(existing_lines),
+                                     ROAD_SNAP_TOLERANCE)
     progress.step(0.95)
     length = shapely.length(lines)
     chord = shapely.length(straight)
