@@ -86,6 +86,17 @@ def gan_trained_on(model: str) -> set:
     return {n.removeprefix("li_").capitalize() for n in names}
 
 
+def gan_tuned_on(model: str) -> set:
+    """The towns a StreetGAN model's read-back was chosen on (its card's
+    ``postprocess.morphology_chosen_on``): not held out for that model."""
+    from urban_synthesis.plugin.roads import streetgan
+
+    card = Path(model).with_suffix(".json") if str(model).endswith(".onnx") \
+        else streetgan.MODELS_DIR / f"{model}.json"
+    return set(json.loads(card.read_text()).get("postprocess", {}).get(
+        "morphology_chosen_on", []))
+
+
 #: ``--gan-model``: a candidate generator (.onnx with its card) judged instead of the shipped
 GAN_CANDIDATES = ["streetgan_towns", "streetgan_helsinki"]
 
@@ -340,7 +351,7 @@ def summary(results: dict) -> str:
             model = r["runs"][0].get("model") if r.get("runs") else None
             if m == "fragments" and name in TUNED_ON:
                 continue
-            if model and name in gan_trained_on(model):
+            if model and name in gan_trained_on(model) | gan_tuned_on(model):
                 continue
             row = rows.setdefault(m, {"err": [], "wins": {b: [] for b in BASELINES},
                                       "viol": [], "towns": []})

@@ -261,7 +261,9 @@ def evaluate_held_out(name: str, figures: dict) -> dict:
 #: line width px, erosions, dilations).
 REPRESENTATIONS = (("thesis: 3 m, 15 px lines, 1 erosion + 5 dilations", 3.0, 15, 1, 5),
                    ("3 m, 5 px lines, 1 + 1", 3.0, 5, 1, 1),
-                   ("2 m, 5 px lines, 1 + 1", 2.0, 5, 1, 1))
+                   ("2 m, 5 px lines, 1 + 1", 2.0, 5, 1, 1),
+                   ("3 m, 15 px lines, 1 + 1 (streetgan_towns read-back)", 3.0, 15, 1, 1),
+                   ("3 m, 15 px lines, 2 + 2 (streetgan_helsinki read-back)", 3.0, 15, 2, 2))
 
 
 def representation_ceiling(towns=("Eschen", "Mauren", "Triesen")) -> dict:
