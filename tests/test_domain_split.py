@@ -524,6 +524,28 @@ def test_motorways_take_no_junction_and_dangles_are_continued():
     assert (access >= 3.0).all()
 
 
+def test_a_continued_key_road_stays_the_road_given_plus_a_new_street():
+    """A key road ending inside the region is continued; the output keeps the road as given
+    (a copy up to the noding grid) and the continuation as a street of its own that ends on
+    it. As one line, the continuation made the whole road a new street doubling the given
+    one (Mauren, Helsinki: duplicates, and crossings where rounding put it across)."""
+    from urban_synthesis.plugin.network import invariants
+
+    region = shapely.box(0, 0, 600, 400)
+    road = shapely.LineString([(-10, 201.2345678), (150.1234567, 203.7654321),
+                               (300.7654321, 197.1234567)])     # ends 300 m short of x = 600
+    lay = domain_split.split_domain(region, key_roads=[road], templates=LIB, seed=2)
+    new = invariants.new_streets(lay.roads, [road])
+    check = invariants.check_network(lay.roads[new], [road], area=region)
+    assert check.violations()["crossings_given"] == 0
+    assert check.violations()["parallel_duplicates"] == 0, check.summary()
+    copies = lay.roads[~new]
+    assert shapely.union_all(copies).length == pytest.approx(
+        shapely.intersection(road, region).length, abs=0.01)
+    continued = lay.roads[new & (lay.road_kind == "key")]
+    assert len(continued) and shapely.dwithin(continued, road.boundary.geoms[1], 1e-4).any()
+
+
 def test_a_corner_on_a_long_street_side_is_a_parcel_joint():
     """A strip block whose long sides bend by 40° (a region corner, > CORNER_TURN) is
     taken by a row template: a parcel joint is pinned on each bend and its cost is the

@@ -289,6 +289,36 @@ def _extend_dangles(lines: np.ndarray, barrier, max_extension: float) -> np.ndar
     return np.asarray(out, dtype=object)
 
 
+def _cut_continuations(roads, level, kind, key_roads, tolerance: float = 0.01):
+    """Key roads that :func:`prepare_domain` continued past their free ends, cut where the
+    given road ends: the given part stays the road the user gave, the continuation is a
+    street of its own that ends on it. As one line, the continuation made the whole road a
+    new street doubling the given one, crossing it wherever rounding put it on the other
+    side (Helsinki: 11 crossings without a junction and 4 duplicates in one layout).
+
+    Returns (roads, level, kind) arrays, the continued lines in two or three pieces.
+    """
+    given = shapely.union_all(np.asarray(key_roads, dtype=object).ravel())
+    shapely.prepare(given)
+    out, out_level, out_kind = [], [], []
+    for g, lv, k in zip(roads, level, kind):
+        xy = shapely.get_coordinates(g)
+        cuts = []
+        if k == "key" and len(xy) >= 3:
+            on = shapely.dwithin(given, shapely.points(xy), tolerance)
+            if not on[0] and on[1]:
+                cuts.append(1)
+            if not on[-1] and on[-2]:
+                cuts.append(len(xy) - 2)
+        bounds = [0] + cuts + [len(xy) - 1]
+        for i0, i1 in zip(bounds[:-1], bounds[1:]):
+            if i1 > i0:
+                out.append(shapely.LineString(xy[i0:i1 + 1]))
+                out_level.append(lv)
+                out_kind.append(k)
+    return np.asarray(out, dtype=object), np.asarray(out_level), np.asarray(out_kind, dtype=object)
+
+
 def _outline_of(barrier, line):
     """The barrier less the line itself (its own vertices touch it)."""
     with np.errstate(invalid="ignore"):
@@ -886,6 +916,9 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
     kind = [str(k) for k in fixed_kinds[is_road]] + ["split"] * len(split_lines) + \
         [k for _, k in template_roads]
     roads, level, kind, n_stubs = road_network(roads, level, kind)
+    if key_roads is not None and len(key_roads):
+        # after the noding, which merges lines through their shared ends again
+        roads, level, kind = _cut_continuations(roads, level, kind, key_roads)
     stats = {
         "n_regions": n_done, "n_splits": splitter.n_split, "n_rejected_splits": splitter.n_rejected,
         "n_backtracked": n_backtracked, "n_blocks": len(leaves),
