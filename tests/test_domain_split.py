@@ -566,3 +566,64 @@ def test_split_streets_meet_their_parent_at_a_node():
     opt = lay.stats["optimisation"]
     assert opt["iterations"] >= 1 and not opt.get("relabel_failed", False)
     assert "kept" in opt
+
+
+def _joints(leaves, lines):
+    """no_street_joints on hand-made leaves inside their bounding box (its outline a street)."""
+    s = domain_split.SplitSettings()
+    lib = {t.name: t for t in LIB}
+    splitter = domain_split._Splitter(LIB, s, np.random.default_rng(0))
+    box = shapely.box(*shapely.union_all([g for g, _ in leaves]).bounds)
+    leaves = [[g, name, {}] for g, name in leaves]
+    return domain_split.no_street_joints(leaves, lines, [box.exterior], splitter, lib, s)
+
+
+def test_no_street_joints_put_rows_back_to_back_and_end_to_end():
+    """Yang Fig. 4 edge labels: between two parcel strips the split street is dropped (the
+    rows meet at their rear lot lines), between two double strips end to end too; along a
+    double strip's long side, or past the longest row template, the street stays."""
+    rear = shapely.LineString([(0, 48), (200, 48)])
+    kept, joints = _joints([(shapely.box(0, 0, 200, 48), "parcel_strip"),
+                            (shapely.box(0, 48, 200, 96), "parcel_strip")], [rear])
+    assert kept == [] and len(joints) == 1 and shapely.hausdorff_distance(joints[0], rear) < 1e-6
+    end = shapely.LineString([(150, 0), (150, 75)])
+    kept, joints = _joints([(shapely.box(0, 0, 150, 75), "double_strip"),
+                            (shapely.box(150, 0, 300, 75), "double_strip")], [end])
+    assert kept == [] and len(joints) == 1
+    # a double strip needs a street on both long sides
+    side = shapely.LineString([(0, 75), (200, 75)])
+    kept, joints = _joints([(shapely.box(0, 0, 200, 75), "double_strip"),
+                            (shapely.box(0, 75, 200, 150), "double_strip")], [side])
+    assert joints == [] and len(kept) == 1
+    # joined, the block would be longer than the longest row (22 parcels): the street stays
+    far = shapely.LineString([(380, 0), (380, 75)])
+    kept, joints = _joints([(shapely.box(0, 0, 380, 75), "double_strip"),
+                            (shapely.box(380, 0, 760, 75), "double_strip")], [far])
+    assert joints == [] and len(kept) == 1
+
+
+def test_a_face_too_wide_for_a_double_strip_gets_rows_back_to_back_with_access():
+    """A 92 m deep face (a double strip takes at most 90 m between centre lines) is split in
+    parcel strips; two of them meet back to back: residential lots of different strips share
+    a rear lot line with no street between them, every lot keeps its street access and the
+    layout gives less land to streets than with every split street kept."""
+    region = shapely.box(0, 0, 200, 92)
+    lay = domain_split.split_domain(region, templates=LIB, seed=1)
+    t = lay.table
+    res = (t.land_use == "residential").to_numpy()
+    assert t.has_street_access[res].all() and lay.stats["n_inner_parks"] == 0
+    strips = lay.parcels[res & (t.template == "parcel_strip").to_numpy()]
+    roads = shapely.union_all(lay.roads)
+    rear = []
+    for i, a in enumerate(strips):
+        for b in strips[i + 1:]:
+            shared = shapely.intersection(shapely.boundary(a), shapely.boundary(b))
+            if shapely.length(shared) > 0.5 * W:
+                rear.append(shared)
+    # lots of one strip share only side lines, which reach the street; a shared rear lot line
+    # of two strips lies a parcel depth away from every street
+    assert any(shapely.distance(roads, r) > L for r in rear)
+    assert lay.stats["n_no_street_joints"] >= 1
+    kept = domain_split.split_domain(region, templates=LIB, seed=1,
+                                     settings=domain_split.SplitSettings(back_to_back=False))
+    assert domain_split.table1(lay)["l_s"] < domain_split.table1(kept)["l_s"] - 3
