@@ -27,6 +27,10 @@ Pipeline of :func:`split_domain` (one layout) and :func:`split_variations` (k la
    fitting, fairness and closeness on the noded street mesh, junctions sliding along the
    fixed roads, until converged; kept when it lowers the summed warp distortion of the
    row templates (what the paper optimises for), then the templates are warped again.
+   Then the **"no street" joints** (Fig. 4 edge labels, :func:`no_street_joints`, on by
+   ``back_to_back``): a split street between two row-template blocks that both keep their
+   template and street access without it is dropped (parcel strips back to back along
+   their rear lot lines, rows end to end), up to a block as long as the longest row.
 4. Parcels: lots without frontage and crumbs join their neighbours; a lot still without
    frontage is an inner green (the paper's template with a private park). The optional
    :func:`repair_lots` (off by default; not in the paper) cuts misshapen lots to the
