@@ -575,7 +575,10 @@ def _joints(leaves, lines):
     splitter = domain_split._Splitter(LIB, s, np.random.default_rng(0))
     box = shapely.box(*shapely.union_all([g for g, _ in leaves]).bounds)
     leaves = [[g, name, {}] for g, name in leaves]
-    return domain_split.no_street_joints(leaves, lines, [box.exterior], splitter, lib, s)
+    kept, joints, block = domain_split.no_street_joints(leaves, lines, [box.exterior], splitter,
+                                                        lib, s)
+    assert len(set(block.tolist())) == 2 - len(joints)  # joined leaves are one street block
+    return kept, joints
 
 
 def test_no_street_joints_put_rows_back_to_back_and_end_to_end():
@@ -624,6 +627,7 @@ def test_a_face_too_wide_for_a_double_strip_gets_rows_back_to_back_with_access()
     # of two strips lies a parcel depth away from every street
     assert any(shapely.distance(roads, r) > L for r in rear)
     assert lay.stats["n_no_street_joints"] >= 1
+    assert len(lay.street_blocks) < len(lay.blocks)  # the block metrics see the joined block
     kept = domain_split.split_domain(region, templates=LIB, seed=1,
                                      settings=domain_split.SplitSettings(back_to_back=False))
     assert domain_split.table1(lay)["l_s"] < domain_split.table1(kept)["l_s"] - 3

@@ -166,9 +166,12 @@ class Layout:
     Attributes
     ----------
     roads : ndarray of LineString; road_level, road_kind : arrays
-    blocks : ndarray of Polygon (centre-line blocks); block_template : names
+    blocks : ndarray of Polygon (centre-line blocks, one per template); block_template : names
     parcels : ndarray of Polygon; table : DataFrame (PARCEL_FIELDS)
     stats : dict (counts and the times of splitting, backtracking and optimisation)
+    street_blocks : ndarray of Polygon or None
+        The blocks between streets where they differ from ``blocks`` (blocks joined by
+        "no street" edges, :func:`no_street_joints`): what the block metrics count.
     """
 
     roads: np.ndarray
@@ -180,6 +183,7 @@ class Layout:
     table: pd.DataFrame
     domain: shapely.Geometry
     stats: dict = field(default_factory=dict)
+    street_blocks: Optional[np.ndarray] = None
 
 
 # --------------------------------------------------------------------------- input
@@ -683,13 +687,14 @@ def no_street_joints(leaves, split_lines, roads, splitter, by_name, s: SplitSett
       with the paper's parcels (sec. 7: a block too long "will take too long to walk (or
       drive) around"; Table 1, "Our": b_max 955-1,454 m).
 
-    Pairs of blocks are tried longest joint first. Returns (split street pieces kept, "no street" lines).
+    Pairs of blocks are tried longest joint first. Returns (split street pieces kept, "no street"
+    lines, street block number per leaf: leaves joined by a "no street" edge share one).
     """
     regions = np.array([leaf[0] for leaf in leaves], dtype=object)
     names = [leaf[1] for leaf in leaves]
     rows = [t for t in by_name.values() if t.kind == "rows"]
     if len(split_lines) == 0 or len(regions) < 2 or not rows:
-        return list(split_lines), []
+        return list(split_lines), [], np.arange(len(regions))
     limit = 2 * (max(t.max_columns for t in rows) * s.parcel_width + 2 * s.parcel_length
                  + s.street_width)
     roads = list(roads)
@@ -758,7 +763,8 @@ def no_street_joints(leaves, split_lines, roads, splitter, by_name, s: SplitSett
             root = find(int(adj[0]))
             for r in roots:
                 group[r] = root
-    return list(pieces[is_split & ~removed]), list(pieces[removed])
+    block = np.array([find(k) for k in range(len(regions))])
+    return list(pieces[is_split & ~removed]), list(pieces[removed]), block
 
 
 def _end_dirs(lines) -> np.ndarray:
@@ -909,10 +915,15 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
     t_opt = time.perf_counter() - t0
     # ---- "no street" joints: rows back to back or end to end where no street is needed
     n_joints = 0
+    street_blocks = None
     if s.back_to_back and split_lines:
-        split_lines, joints = no_street_joints(leaves, split_lines, fixed[fixed_kinds != "edge"],
-                                               splitter, by_name, s)
+        split_lines, joints, block_of = no_street_joints(
+            leaves, split_lines, fixed[fixed_kinds != "edge"], splitter, by_name, s)
         if joints:
+            # the blocks of the street network: leaves joined by a "no street" edge are one
+            street_blocks = np.array([shapely.union_all([leaf[0] for leaf, b in
+                                                         zip(leaves, block_of) if b == k])
+                                      for k in np.unique(block_of)], dtype=object)
             n_joints = len(joints)
             fixed = np.asarray(list(fixed) + joints, dtype=object)
             fixed_kinds = np.asarray(list(fixed_kinds) + ["edge"] * n_joints)
@@ -1036,7 +1047,8 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
     progress.step(1.0)
     return Layout(np.asarray(roads, dtype=object), np.asarray(level), np.asarray(kind, dtype=object),
                   np.array([leaf[0] for leaf in leaves], dtype=object),
-                  np.array([leaf[1] for leaf in leaves], dtype=object), geoms, table, domain, stats)
+                  np.array([leaf[1] for leaf in leaves], dtype=object), geoms, table, domain, stats,
+                  street_blocks)
 
 
 def _front_rectangle(lot, street, L: float, W: float):
@@ -1186,7 +1198,8 @@ def split_variations(region, variations: int = 1, seed: int = 0, progress=None,
 def table1(layout: Layout) -> Dict[str, float]:
     """The paper's Table 1 metrics of a layout (land use %, blocks, streets, parcels).
 
-    Land use is over the whole region; block metrics over the centre-line blocks; street
+    Land use is over the whole region; block metrics over the centre-line blocks between
+    streets (template blocks joined by a "no street" edge are one block); street
     densities over the noded road graph. The parcel metrics (p_n, p_angle, p_area,
     undesirable) count **every parcel the layout designed**, residential lots and parks
     alike (inner greens, pocket parks of the optional repair, park templates): a
@@ -1202,7 +1215,8 @@ def table1(layout: Layout) -> Dict[str, float]:
     the 170-180° deviation measured from 90°, far worse).
     """
     res = _metrics.compute_layout_metrics(
-        roads=layout.roads, blocks=layout.blocks, parcels=layout.parcels,
+        roads=layout.roads, parcels=layout.parcels,
+        blocks=layout.street_blocks if layout.street_blocks is not None else layout.blocks,
         area=layout.domain, landuse=layout.table.land_use.to_numpy())
     use = layout.table.land_use.to_numpy()
     resid = use == "residential"
