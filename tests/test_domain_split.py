@@ -147,6 +147,19 @@ def test_fit_energy_selects_by_depth():
     assert e["double_strip"] < 0.05 and e["parcel_strip"] == np.inf
 
 
+def test_double_strip_takes_rows_as_deep_as_two_strips_back_to_back():
+    """A double strip is two parcel strips back to back: its rows take the same depth
+    tolerance (up to 1.45 parcel lengths), so a 98 m face between streets is one double
+    strip, not a double and a single strip with a street between them."""
+    lib = {t.name: t for t in templates.load_library()}
+    assert lib["double_strip"].depth_scale[1] == lib["parcel_strip"].depth_scale[1]
+    net = shapely.box(0, 0, 200, 98 - S)
+    warp = templates.warp_rows(net, lib["double_strip"], L, W, None)
+    assert warp is not None and warp.energy < 0.05 and len(warp.lots) == 2 * warp.columns
+    assert templates.warp_rows(shapely.box(0, 0, 200, 2 * 1.5 * L), lib["double_strip"], L, W,
+                               None) is None
+
+
 def test_warp_tiles_a_curved_block_and_reduces_distortion():
     # a skewed, slightly curved double-strip block (already shrunk by its streets)
     bottom = [(0, 0), (60, -4), (120, -6), (180, -3)]
@@ -605,29 +618,46 @@ def test_no_street_joints_put_rows_back_to_back_and_end_to_end():
     assert joints == [] and len(kept) == 1
 
 
-def test_a_face_too_wide_for_a_double_strip_gets_rows_back_to_back_with_access():
-    """A 92 m deep face (a double strip takes at most 90 m between centre lines) is split in
-    parcel strips; two of them meet back to back: residential lots of different strips share
-    a rear lot line with no street between them, every lot keeps its street access and the
-    layout gives less land to streets than with every split street kept."""
-    region = shapely.box(0, 0, 200, 92)
-    lay = domain_split.split_domain(region, templates=LIB, seed=1)
+def _rear_lot_lines(lay, template):
+    """Shared outlines (longer than half a parcel width) of two residential lots of the
+    template that lie more than a parcel depth from every street: rear lot lines of rows
+    back to back (lots of one row share only side lines, which reach the street)."""
     t = lay.table
-    res = (t.land_use == "residential").to_numpy()
-    assert t.has_street_access[res].all() and lay.stats["n_inner_parks"] == 0
-    strips = lay.parcels[res & (t.template == "parcel_strip").to_numpy()]
+    lots = lay.parcels[((t.land_use == "residential") & (t.template == template)).to_numpy()]
     roads = shapely.union_all(lay.roads)
     rear = []
-    for i, a in enumerate(strips):
-        for b in strips[i + 1:]:
+    for i, a in enumerate(lots):
+        for b in lots[i + 1:]:
             shared = shapely.intersection(shapely.boundary(a), shapely.boundary(b))
-            if shapely.length(shared) > 0.5 * W:
+            if shapely.length(shared) > 0.5 * W and shapely.distance(roads, shared) > L:
                 rear.append(shared)
-    # lots of one strip share only side lines, which reach the street; a shared rear lot line
-    # of two strips lies a parcel depth away from every street
-    assert any(shapely.distance(roads, r) > L for r in rear)
-    assert lay.stats["n_no_street_joints"] >= 1
+    return rear
+
+
+def test_a_face_too_wide_for_the_old_double_strip_gets_rows_back_to_back():
+    """A 92 m deep face between streets (the double strip took at most 90 m, 1.25 parcel
+    lengths per row; the parcel strip 1.45) was split by a street into a double and a
+    single strip. Its two rows now meet back to back along their rear lot lines, with no
+    street between them, and every lot keeps its street access."""
+    lay = domain_split.split_domain(shapely.box(0, 0, 200, 92), templates=LIB, seed=1)
+    t = lay.table
+    assert t.has_street_access[(t.land_use == "residential").to_numpy()].all()
+    assert (lay.road_level == domain_split.LEVEL_SPLIT).sum() == 0
+    assert len(_rear_lot_lines(lay, "double_strip")) >= 3
+
+
+def test_rows_meet_end_to_end_without_a_street_and_keep_access():
+    """An L-shaped band one double strip deep: the search splits it at the corner; the
+    split streets no block needs become "no street" joints (rows end to end), the joined
+    blocks count as one street block, no dead end is made, every lot keeps its access and
+    the streets take less land than with every split street kept."""
+    band = shapely.Polygon([(0, 0), (250, 0), (250, 75), (75, 75), (75, 250), (0, 250)])
+    lay = domain_split.split_domain(band, templates=LIB, seed=1)
+    t = lay.table
+    assert t.has_street_access[(t.land_use == "residential").to_numpy()].all()
+    assert lay.stats["n_no_street_joints"] >= 1 and lay.stats["n_inner_parks"] == 0
     assert len(lay.street_blocks) < len(lay.blocks)  # the block metrics see the joined block
-    kept = domain_split.split_domain(region, templates=LIB, seed=1,
+    assert domain_split.table1(lay)["s_d"] == 0
+    kept = domain_split.split_domain(band, templates=LIB, seed=1,
                                      settings=domain_split.SplitSettings(back_to_back=False))
     assert domain_split.table1(lay)["l_s"] < domain_split.table1(kept)["l_s"] - 3
