@@ -35,6 +35,7 @@ class SplitDomain(AlgorithmBase):
     OPTIMISE = "OPTIMISE"
     REPAIR_LOTS = "REPAIR_LOTS"
     OUTLINE_STREETS = "OUTLINE_STREETS"
+    BACK_TO_BACK = "BACK_TO_BACK"
     KEY_ROAD_CLASS_FIELD = "KEY_ROAD_CLASS_FIELD"
     OUTPUT_ROADS = "OUTPUT_ROADS"
     OUTPUT_PARCELS = "OUTPUT_PARCELS"
@@ -138,6 +139,12 @@ class SplitDomain(AlgorithmBase):
             "the outline is a 'no street' edge (a town's edge against fields): parcels back "
             "onto it and no street land is kept along it.", advanced=True)
         self.add(QgsProcessingParameterBoolean(
+            self.BACK_TO_BACK, "Rows back to back where no street is needed", defaultValue=True),
+            "On: a split street between two blocks of parcel rows that both keep their "
+            "template and street access without it becomes a 'no street' edge (two parcel "
+            "strips back to back along their rear lot lines, rows end to end), up to a block "
+            "as long as the longest row. Off: every split street is kept.", advanced=True)
+        self.add(QgsProcessingParameterBoolean(
             self.REPAIR_LOTS, "Repair misshapen lots (not in the paper)", defaultValue=False),
             "Optional post-process: a misshapen lot keeps the largest rectangle on its street "
             "and its wedges become pocket parks; a misshapen lot smaller than a parcel becomes "
@@ -169,7 +176,8 @@ class SplitDomain(AlgorithmBase):
             street_width=number[self.STREET_WIDTH],
             optimise=self.parameterAsBoolean(parameters, self.OPTIMISE, context),
             repair_lots=self.parameterAsBoolean(parameters, self.REPAIR_LOTS, context),
-            outline_streets=self.parameterAsBoolean(parameters, self.OUTLINE_STREETS, context))
+            outline_streets=self.parameterAsBoolean(parameters, self.OUTLINE_STREETS, context),
+            back_to_back=self.parameterAsBoolean(parameters, self.BACK_TO_BACK, context))
         qgis_io.run_engine("Parameters", settings.validate)
 
         region = qgis_io.read_source(self, parameters, self.REGION, context, feedback,

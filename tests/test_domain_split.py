@@ -147,6 +147,19 @@ def test_fit_energy_selects_by_depth():
     assert e["double_strip"] < 0.05 and e["parcel_strip"] == np.inf
 
 
+def test_double_strip_takes_rows_as_deep_as_two_strips_back_to_back():
+    """A double strip is two parcel strips back to back: its rows take the same depth
+    tolerance (up to 1.45 parcel lengths), so a 98 m face between streets is one double
+    strip, not a double and a single strip with a street between them."""
+    lib = {t.name: t for t in templates.load_library()}
+    assert lib["double_strip"].depth_scale[1] == lib["parcel_strip"].depth_scale[1]
+    net = shapely.box(0, 0, 200, 98 - S)
+    warp = templates.warp_rows(net, lib["double_strip"], L, W, None)
+    assert warp is not None and warp.energy < 0.05 and len(warp.lots) == 2 * warp.columns
+    assert templates.warp_rows(shapely.box(0, 0, 200, 2 * 1.5 * L), lib["double_strip"], L, W,
+                               None) is None
+
+
 def test_warp_tiles_a_curved_block_and_reduces_distortion():
     # a skewed, slightly curved double-strip block (already shrunk by its streets)
     bottom = [(0, 0), (60, -4), (120, -6), (180, -3)]
@@ -588,3 +601,85 @@ def test_split_streets_meet_their_parent_at_a_node():
     opt = lay.stats["optimisation"]
     assert opt["iterations"] >= 1 and not opt.get("relabel_failed", False)
     assert "kept" in opt
+
+
+def _joints(leaves, lines):
+    """no_street_joints on hand-made leaves inside their bounding box (its outline a street)."""
+    s = domain_split.SplitSettings()
+    lib = {t.name: t for t in LIB}
+    splitter = domain_split._Splitter(LIB, s, np.random.default_rng(0))
+    box = shapely.box(*shapely.union_all([g for g, _ in leaves]).bounds)
+    leaves = [[g, name, {}] for g, name in leaves]
+    kept, joints, block = domain_split.no_street_joints(leaves, lines, [box.exterior], splitter,
+                                                        lib, s)
+    assert len(set(block.tolist())) == 2 - len(joints)  # joined leaves are one street block
+    return kept, joints
+
+
+def test_no_street_joints_put_rows_back_to_back_and_end_to_end():
+    """Yang Fig. 4 edge labels: between two parcel strips the split street is dropped (the
+    rows meet at their rear lot lines), between two double strips end to end too; along a
+    double strip's long side, or past the longest row template, the street stays."""
+    rear = shapely.LineString([(0, 48), (200, 48)])
+    kept, joints = _joints([(shapely.box(0, 0, 200, 48), "parcel_strip"),
+                            (shapely.box(0, 48, 200, 96), "parcel_strip")], [rear])
+    assert kept == [] and len(joints) == 1 and shapely.hausdorff_distance(joints[0], rear) < 1e-6
+    end = shapely.LineString([(150, 0), (150, 75)])
+    kept, joints = _joints([(shapely.box(0, 0, 150, 75), "double_strip"),
+                            (shapely.box(150, 0, 300, 75), "double_strip")], [end])
+    assert kept == [] and len(joints) == 1
+    # a double strip needs a street on both long sides
+    side = shapely.LineString([(0, 75), (200, 75)])
+    kept, joints = _joints([(shapely.box(0, 0, 200, 75), "double_strip"),
+                            (shapely.box(0, 75, 200, 150), "double_strip")], [side])
+    assert joints == [] and len(kept) == 1
+    # joined, the block would be longer than the longest row (22 parcels): the street stays
+    far = shapely.LineString([(380, 0), (380, 75)])
+    kept, joints = _joints([(shapely.box(0, 0, 380, 75), "double_strip"),
+                            (shapely.box(380, 0, 760, 75), "double_strip")], [far])
+    assert joints == [] and len(kept) == 1
+
+
+def _rear_lot_lines(lay, template):
+    """Shared outlines (longer than half a parcel width) of two residential lots of the
+    template that lie more than a parcel depth from every street: rear lot lines of rows
+    back to back (lots of one row share only side lines, which reach the street)."""
+    t = lay.table
+    lots = lay.parcels[((t.land_use == "residential") & (t.template == template)).to_numpy()]
+    roads = shapely.union_all(lay.roads)
+    rear = []
+    for i, a in enumerate(lots):
+        for b in lots[i + 1:]:
+            shared = shapely.intersection(shapely.boundary(a), shapely.boundary(b))
+            if shapely.length(shared) > 0.5 * W and shapely.distance(roads, shared) > L:
+                rear.append(shared)
+    return rear
+
+
+def test_a_face_too_wide_for_the_old_double_strip_gets_rows_back_to_back():
+    """A 92 m deep face between streets (the double strip took at most 90 m, 1.25 parcel
+    lengths per row; the parcel strip 1.45) was split by a street into a double and a
+    single strip. Its two rows now meet back to back along their rear lot lines, with no
+    street between them, and every lot keeps its street access."""
+    lay = domain_split.split_domain(shapely.box(0, 0, 200, 92), templates=LIB, seed=1)
+    t = lay.table
+    assert t.has_street_access[(t.land_use == "residential").to_numpy()].all()
+    assert (lay.road_level == domain_split.LEVEL_SPLIT).sum() == 0
+    assert len(_rear_lot_lines(lay, "double_strip")) >= 3
+
+
+def test_rows_meet_end_to_end_without_a_street_and_keep_access():
+    """An L-shaped band one double strip deep: the search splits it at the corner; the
+    split streets no block needs become "no street" joints (rows end to end), the joined
+    blocks count as one street block, no dead end is made, every lot keeps its access and
+    the streets take less land than with every split street kept."""
+    band = shapely.Polygon([(0, 0), (250, 0), (250, 75), (75, 75), (75, 250), (0, 250)])
+    lay = domain_split.split_domain(band, templates=LIB, seed=1)
+    t = lay.table
+    assert t.has_street_access[(t.land_use == "residential").to_numpy()].all()
+    assert lay.stats["n_no_street_joints"] >= 1 and lay.stats["n_inner_parks"] == 0
+    assert len(lay.street_blocks) < len(lay.blocks)  # the block metrics see the joined block
+    assert domain_split.table1(lay)["s_d"] == 0
+    kept = domain_split.split_domain(band, templates=LIB, seed=1,
+                                     settings=domain_split.SplitSettings(back_to_back=False))
+    assert domain_split.table1(lay)["l_s"] < domain_split.table1(kept)["l_s"] - 3

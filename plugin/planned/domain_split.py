@@ -27,6 +27,10 @@ Pipeline of :func:`split_domain` (one layout) and :func:`split_variations` (k la
    fitting, fairness and closeness on the noded street mesh, junctions sliding along the
    fixed roads, until converged; kept when it lowers the summed warp distortion of the
    row templates (what the paper optimises for), then the templates are warped again.
+   Then the **"no street" joints** (Fig. 4 edge labels, :func:`no_street_joints`, on by
+   ``back_to_back``): a split street between two row-template blocks that both keep their
+   template and street access without it is dropped (parcel strips back to back along
+   their rear lot lines, rows end to end), up to a block as long as the longest row.
 4. Parcels: lots without frontage and crumbs join their neighbours; a lot still without
    frontage is an inner green (the paper's template with a private park). The optional
    :func:`repair_lots` (off by default; not in the paper) cuts misshapen lots to the
@@ -67,7 +71,7 @@ from .mesh_optimisation import NODING_GRID, faces_of, noded, optimise_roads
 from .streamlines import score_streamlines, seed_points, trace_streamlines, width_fit
 
 __all__ = ["SplitSettings", "Layout", "ROAD_FIELDS", "PARCEL_FIELDS", "METRIC_FIELDS",
-           "split_domain", "split_variations", "table1", "prepare_domain"]
+           "split_domain", "split_variations", "table1", "prepare_domain", "no_street_joints"]
 
 #: Output attributes (name, type) of the roads, parcels and metrics tables.
 ROAD_FIELDS = [("road_id", "int"), ("level", "int"), ("kind", "str"), ("variation", "int"),
@@ -122,6 +126,12 @@ class SplitSettings:
         boundary condition). False labels it "no street" (Yang Fig. 4 edge labels): no
         street land is reserved along it and parcels back onto it (a town's edge against
         fields or forest).
+    back_to_back : bool
+        "No street" joints (:func:`no_street_joints`, Yang Fig. 4 edge labels): a split
+        street along which every block keeps its template and its street access without
+        it (two parcel strips back to back along their rear lot lines, or row templates
+        end to end) is dropped and becomes a "no street" edge, up to a block perimeter of
+        the longest row template. False keeps every split street.
     """
 
     parcel_length: float = 30.0
@@ -133,6 +143,7 @@ class SplitSettings:
     choice_temperature: float = 0.3
     repair_lots: bool = False
     outline_streets: bool = True
+    back_to_back: bool = True
 
     def validate(self) -> "SplitSettings":
         for name in ("parcel_length", "parcel_width", "street_width"):
@@ -155,9 +166,12 @@ class Layout:
     Attributes
     ----------
     roads : ndarray of LineString; road_level, road_kind : arrays
-    blocks : ndarray of Polygon (centre-line blocks); block_template : names
+    blocks : ndarray of Polygon (centre-line blocks, one per template); block_template : names
     parcels : ndarray of Polygon; table : DataFrame (PARCEL_FIELDS)
     stats : dict (counts and the times of splitting, backtracking and optimisation)
+    street_blocks : ndarray of Polygon or None
+        The blocks between streets where they differ from ``blocks`` (blocks joined by
+        "no street" edges, :func:`no_street_joints`): what the block metrics count.
     """
 
     roads: np.ndarray
@@ -169,6 +183,7 @@ class Layout:
     table: pd.DataFrame
     domain: shapely.Geometry
     stats: dict = field(default_factory=dict)
+    street_blocks: Optional[np.ndarray] = None
 
 
 # --------------------------------------------------------------------------- input
@@ -367,25 +382,32 @@ class _Splitter:
         out = {t.name: _templates.fit_energy(region, t, s.parcel_length, s.parcel_width,
                                              s.street_width, shape)
                for t in self.lib if t.kind != "rows"}
-        parts = _parcels._polygon_parts([net_block(region, s.street_width, self.no_street)],
-                                        1.0)
         for t in self.lib:
-            if t.kind != "rows":
-                continue
-            warp = None
-            if len(parts) == 1:
-                warp = _templates.warp_rows(parts[0], t, s.parcel_length, s.parcel_width,
-                                            None, cut=False)
-            ok = warp is not None
-            if ok and self.no_frontage is not None:
-                # edge labels (Yang Fig. 4): a double strip needs a street on both long
-                # sides, a strip on one; a side mostly along a no-street edge or a
-                # motorway is no street
-                streets = [_street_share(side, self.no_frontage, s.street_width) > 0.5
-                           for side in warp.long_sides]
-                ok = sum(streets) >= t.rows
-            out[t.name] = warp.energy if ok else math.inf
+            if t.kind == "rows":
+                out[t.name] = self.row_energy(region, t, self.no_street, self.no_frontage)
         return out
+
+    def row_energy(self, region, t, no_street, no_frontage) -> float:
+        """Warp energy of the row template ``t`` on a region whose sides along
+        ``no_street`` are "no street" edges and along ``no_frontage`` give no access
+        (inf when it does not fit or its edge labels do not agree)."""
+        s = self.s
+        parts = _parcels._polygon_parts([net_block(region, s.street_width, no_street)], 1.0)
+        if len(parts) != 1:
+            return math.inf
+        warp = _templates.warp_rows(parts[0], t, s.parcel_length, s.parcel_width, None,
+                                    cut=False)
+        if warp is None:
+            return math.inf
+        if no_frontage is not None:
+            # edge labels (Yang Fig. 4): a double strip needs a street on both long
+            # sides, a strip on one; a side mostly along a no-street edge or a
+            # motorway is no street
+            streets = [_street_share(side, no_frontage, s.street_width) > 0.5
+                       for side in warp.long_sides]
+            if sum(streets) < t.rows:
+                return math.inf
+        return warp.energy
 
     def pick_template(self, energies, exclude=()):
         by_name = {t.name: t for t in self.lib}
@@ -609,7 +631,7 @@ def road_network(roads, level, kind, stub: float = 1.0):
 def net_block(region, street_width: float, no_street=None):
     """The land of a centre-line region left for parcels: the region less half a street
     along every side that is a street. Sides on ``no_street`` lines (a region outline
-    labelled "no street") keep their land; the street bands end flat there.
+    labelled "no street") keep their land; the street bands end square there.
     """
     edge = shapely.boundary(region)
     if no_street is not None:
@@ -617,7 +639,9 @@ def net_block(region, street_width: float, no_street=None):
             edge = shapely.difference(edge, shapely.buffer(no_street, 0.01))
     if shapely.is_empty(edge):
         return region
-    zone = shapely.buffer(edge, street_width / 2, cap_style="flat", join_style="mitre")
+    # square ends: where a street side meets a "no street" edge at an obtuse corner, a
+    # flat end would leave a tooth of the block reaching the street's centre line
+    zone = shapely.buffer(edge, street_width / 2, cap_style="square", join_style="mitre")
     with np.errstate(invalid="ignore"):
         return shapely.difference(region, zone)
 
@@ -664,6 +688,113 @@ def _street_share(side, no_frontage, street_width: float) -> float:
     near = shapely.buffer(no_frontage, street_width / 2 + 1.0)
     with np.errstate(invalid="ignore"):
         return 1.0 - shapely.length(shapely.intersection(line, near)) / line.length
+
+
+def _union(*geoms):
+    """Union of the geometries that are not None (None when all are)."""
+    geoms = [g for g in geoms if g is not None]
+    return shapely.union_all(geoms) if geoms else None
+
+
+def no_street_joints(leaves, split_lines, roads, splitter, by_name, s: SplitSettings):
+    """Pieces of split streets that become "no street" edges (``SplitSettings.back_to_back``).
+
+    Yang et al. 2013 label template edges "street", "no street" or unconstrained (sec. 4.1,
+    Fig. 4): parcel rows need a street only on their front; their rear lot lines and the
+    ends of a row may meet other parcels. The split streets are noded with the fixed roads;
+    the pieces between the same two blocks are dropped together, and kept as a "no street"
+    edge between them, when
+
+    * both blocks along it are row templates (parcel strip or double strip),
+    * each of them still fits its block without the street, labels included
+      (:meth:`_Splitter.row_energy`: its lots take the street's half of the land; a
+      parcel strip needs a street on its other long side, a double strip on both: two
+      parcel strips end up back to back along their rear lot lines, row templates end to
+      end), with an energy under the threshold or no higher than before,
+    * no street is left ending there (no dead end is made), and
+    * the blocks it joins have a centre-line perimeter of at most that of the longest row
+      template: 2 (max_columns x parcel width + 2 parcel lengths + street width), 942 m
+      with the paper's parcels (sec. 7: a block too long "will take too long to walk (or
+      drive) around"; Table 1, "Our": b_max 955-1,454 m).
+
+    Pairs of blocks are tried longest joint first. Returns (split street pieces kept, "no street"
+    lines, street block number per leaf: leaves joined by a "no street" edge share one).
+    """
+    regions = np.array([leaf[0] for leaf in leaves], dtype=object)
+    names = [leaf[1] for leaf in leaves]
+    rows = [t for t in by_name.values() if t.kind == "rows"]
+    if len(split_lines) == 0 or len(regions) < 2 or not rows:
+        return list(split_lines), [], np.arange(len(regions))
+    limit = 2 * (max(t.max_columns for t in rows) * s.parcel_width + 2 * s.parcel_length
+                 + s.street_width)
+    roads = list(roads)
+    pieces = noded(roads + list(split_lines))
+    pieces = pieces[shapely.length(pieces) > 0]
+    mid = shapely.line_interpolate_point(pieces, 0.5, normalized=True)
+    is_split = ~shapely.dwithin(shapely.union_all(np.asarray(roads, dtype=object)), mid,
+                                10 * NODING_GRID) if roads else np.ones(len(pieces), bool)
+    xy = np.vstack([shapely.get_coordinates(shapely.get_point(pieces, 0)),
+                    shapely.get_coordinates(shapely.get_point(pieces, -1))])
+    _, node = np.unique(np.round(xy / NODING_GRID).astype(np.int64), axis=0,
+                        return_inverse=True)
+    node = node.ravel().reshape(2, -1).T              # (piece, end) -> node id
+    degree = np.bincount(node.ravel())
+    leaf_tree = shapely.STRtree(regions)
+    group = np.arange(len(regions))
+
+    def find(i):
+        while group[i] != i:
+            group[i] = group[group[i]]
+            i = group[i]
+        return i
+
+    no_street, no_frontage = splitter.no_street, splitter.no_frontage
+    energy = {}
+    removed = np.zeros(len(pieces), dtype=bool)
+    # the pieces between the same two row-template blocks: one candidate
+    between: Dict[tuple, list] = {}
+    for i in np.flatnonzero(is_split):
+        near = leaf_tree.query(pieces[i], predicate="dwithin", distance=0.05)
+        with np.errstate(invalid="ignore"):
+            shared = shapely.length(shapely.intersection(
+                shapely.boundary(regions[near]),
+                shapely.buffer(pieces[i], 0.05, cap_style="flat")))
+        adj = near[shared > 0.5 * shapely.length(pieces[i])]
+        if len(adj) == 2 and all(names[a] in by_name and by_name[names[a]].kind == "rows"
+                                 for a in adj):
+            between.setdefault(tuple(sorted(int(a) for a in adj)), []).append(int(i))
+    order = sorted(between, key=lambda k: -shapely.length(pieces[between[k]]).sum())
+    for pair in order:
+        ids = np.asarray(between[pair])
+        adj = np.asarray(pair)
+        left = degree.copy()
+        np.subtract.at(left, node[ids].ravel(), 1)
+        if (left[node[ids].ravel()] == 1).any():
+            continue  # a street would end there: no dead end is made
+        line = shapely.line_merge(shapely.union_all(pieces[ids]))
+        roots = {find(a) for a in adj}
+        members = [k for k in range(len(regions)) if find(k) in roots]
+        if shapely.length(shapely.boundary(shapely.union_all(regions[members]))) > limit:
+            continue
+        trial_ns, trial_nf = _union(no_street, line), _union(no_frontage, line)
+        after = {}
+        for a in adj:
+            t = by_name[names[a]]
+            if a not in energy:
+                energy[a] = splitter.row_energy(regions[a], t, no_street, no_frontage)
+            after[a] = splitter.row_energy(regions[a], t, trial_ns, trial_nf)
+            if not (after[a] < s.energy_threshold or after[a] <= energy[a]):
+                break
+        else:
+            removed[ids] = True
+            degree = left
+            no_street, no_frontage = trial_ns, trial_nf
+            energy.update(after)
+            root = find(int(adj[0]))
+            for r in roots:
+                group[r] = root
+    block = np.array([find(k) for k in range(len(regions))])
+    return list(pieces[is_split & ~removed]), list(pieces[removed]), block
 
 
 def _end_dirs(lines) -> np.ndarray:
@@ -812,6 +943,22 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
                 opt_stats["reverted"] = True
                 opt_stats["relabel_failed"] = True
     t_opt = time.perf_counter() - t0
+    # ---- "no street" joints: rows back to back or end to end where no street is needed
+    n_joints = 0
+    street_blocks = None
+    if s.back_to_back and split_lines:
+        split_lines, joints, block_of = no_street_joints(
+            leaves, split_lines, fixed[fixed_kinds != "edge"], splitter, by_name, s)
+        if joints:
+            # the blocks of the street network: leaves joined by a "no street" edge are one
+            street_blocks = np.array([shapely.union_all([leaf[0] for leaf, b in
+                                                         zip(leaves, block_of) if b == k])
+                                      for k in np.unique(block_of)], dtype=object)
+            n_joints = len(joints)
+            fixed = np.asarray(list(fixed) + joints, dtype=object)
+            fixed_kinds = np.asarray(list(fixed_kinds) + ["edge"] * n_joints)
+            splitter.no_street = _union(splitter.no_street, *joints)
+            splitter.no_frontage = _union(splitter.no_frontage, *joints)
     progress.step(0.7)
 
     # ---- templates warped onto the blocks: parcels
@@ -926,14 +1073,15 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
         "templates": dict(Counter(leaf[1] for leaf in leaves)),
         "n_parcels": int(residential.sum()),
         "n_no_access": int((residential & ~table.has_street_access.to_numpy(bool)).sum()),
-        "n_inner_parks": n_inner, "n_pocket_parks": n_pocket,
+        "n_inner_parks": n_inner, "n_pocket_parks": n_pocket, "n_no_street_joints": n_joints,
         "time_split_s": t_split, "time_backtrack_s": t_back, "time_optimise_s": t_opt,
         "optimisation": opt_stats,
     }
     progress.step(1.0)
     return Layout(np.asarray(roads, dtype=object), np.asarray(level), np.asarray(kind, dtype=object),
                   np.array([leaf[0] for leaf in leaves], dtype=object),
-                  np.array([leaf[1] for leaf in leaves], dtype=object), geoms, table, domain, stats)
+                  np.array([leaf[1] for leaf in leaves], dtype=object), geoms, table, domain, stats,
+                  street_blocks)
 
 
 def _front_rectangle(lot, street, L: float, W: float):
@@ -1083,7 +1231,8 @@ def split_variations(region, variations: int = 1, seed: int = 0, progress=None,
 def table1(layout: Layout) -> Dict[str, float]:
     """The paper's Table 1 metrics of a layout (land use %, blocks, streets, parcels).
 
-    Land use is over the whole region; block metrics over the centre-line blocks; street
+    Land use is over the whole region; block metrics over the centre-line blocks between
+    streets (template blocks joined by a "no street" edge are one block); street
     densities over the noded road graph. The parcel metrics (p_n, p_angle, p_area,
     undesirable) count **every parcel the layout designed**, residential lots and parks
     alike (inner greens, pocket parks of the optional repair, park templates): a
@@ -1099,7 +1248,8 @@ def table1(layout: Layout) -> Dict[str, float]:
     the 170-180° deviation measured from 90°, far worse).
     """
     res = _metrics.compute_layout_metrics(
-        roads=layout.roads, blocks=layout.blocks, parcels=layout.parcels,
+        roads=layout.roads, parcels=layout.parcels,
+        blocks=layout.street_blocks if layout.street_blocks is not None else layout.blocks,
         area=layout.domain, landuse=layout.table.land_use.to_numpy())
     use = layout.table.land_use.to_numpy()
     resid = use == "residential"

@@ -146,7 +146,9 @@ def default_library() -> List[Template]:
     return [
         Template("parcel_strip", "L", "rows", rows=1, probability=0.6, depth_scale=(0.8, 1.45),
                  parcels=tuple(_rect(i, 0, i + 1, 1) for i in range(4))),
-        Template("double_strip", "D", "rows", rows=2, probability=1.0, depth_scale=(0.7, 1.25),
+        # two parcel strips back to back: rows as deep as the strip's (Fig. 4 "no street"
+        # rear edges; a deeper face would otherwise need a street and a third row)
+        Template("double_strip", "D", "rows", rows=2, probability=1.0, depth_scale=(0.7, 1.45),
                  parcels=tuple(_rect(i, j, i + 1, j + 1) for i in range(4) for j in range(2))),
         Template("spike", "S", "spike", probability=0.4, depth_range=(2.6, 4.6), max_count=4,
                  parcels=tuple([_rect(0, 0, 1, 1), _rect(2, 0, 3, 1), _rect(0, 1, 1, 2),
