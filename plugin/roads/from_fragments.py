@@ -260,14 +260,19 @@ def _sliver_count(faces: np.ndarray, area: np.ndarray, perimeter: np.ndarray,
 
 def _sub_faces(polygon, streets: np.ndarray):
     """Faces of a polygon's outline cut by streets (street ends made vertices of the outline:
-    an end clipped onto it lies on it only up to round-off)."""
-    ring = shapely.get_exterior_ring(polygon)
+    an end clipped onto it lies on it only up to round-off). The outline is every ring: a
+    street from the exterior to a hole ends on the outline too; the holes are no faces."""
+    rings = shapely.get_parts(shapely.boundary(polygon))
     streets = np.asarray(streets, dtype=object)
     if len(streets):
         ends = np.concatenate([shapely.get_coordinates(shapely.get_point(streets, 0)),
                                shapely.get_coordinates(shapely.get_point(streets, -1))])
-        ring = shapely.snap(ring, shapely.multipoints(ends), 1e-6)
-    return planar_faces(np.concatenate([[ring], streets]))
+        rings = shapely.snap(rings, shapely.multipoints(ends), 1e-6)
+    faces, area, perimeter = planar_faces(np.concatenate([rings, streets]))
+    if len(rings) > 1 and len(faces):
+        inside = shapely.contains(polygon, shapely.point_on_surface(faces))
+        faces, area, perimeter = faces[inside], area[inside], perimeter[inside]
+    return faces, area, perimeter
 
 
 def procedural_split(face, min_area: float = MIN_BLOCK_AREA,
