@@ -275,18 +275,70 @@ def _sub_faces(polygon, streets: np.ndarray):
     return faces, area, perimeter
 
 
+def _corridor(face, lines=None):
+    """The corridors (the invariants' ``CORRIDOR_HALF_WIDTH``) of the streets a new street
+    in ``face`` must not run along: its outline and ``lines``, the network lines that touch
+    it (:func:`_touching`), prepared."""
+    lines = np.empty(0, dtype=object) if lines is None else np.asarray(lines, dtype=object)
+    around = np.concatenate([[shapely.boundary(face)], lines])
+    corridor = shapely.union_all(shapely.buffer(around, CORRIDOR_HALF_WIDTH, quad_segs=2))
+    shapely.prepare(corridor)
+    return corridor
+
+
+def _touching(face, tree: shapely.STRtree, lines: np.ndarray) -> np.ndarray:
+    """The network lines that touch a face: those of its outline, and those inside it that
+    its outline does not show (an arterial ending in the face, a dual carriageway whose
+    sliver is no face, a dead end of an earlier level)."""
+    return lines[tree.query(face, predicate="intersects")]
+
+
+def _doubling(pieces: np.ndarray, corridor) -> np.ndarray:
+    """Which new streets double a street in its corridor (a mask over ``pieces``).
+
+    The rule of :func:`invariants.check_network`, applied to the streets as they will be
+    measured: a stretch inside the corridor longer than ``MIN_DUPLICATE_LENGTH``, the
+    stretches of all pieces joined where they meet end to end (two pieces under the limit
+    that meet inside the corridor become one street when the network's degree-2 chains are
+    merged). A street crossing the corridor, or crossing the face near its outline at both
+    ends, is no double.
+    """
+    pieces = np.asarray(pieces, dtype=object)
+    bad = np.zeros(len(pieces), bool)
+    if not len(pieces):
+        return bad
+    with np.errstate(invalid="ignore"):
+        inside = shapely.intersection(pieces, corridor)
+    parts, owner = shapely.get_parts(inside, return_index=True)
+    keep = (shapely.get_dimensions(parts) == 1) & (shapely.length(parts) > 1e-6)
+    parts, owner = parts[keep], owner[keep]
+    if not len(parts):
+        return bad
+    runs = shapely.get_parts(shapely.line_merge(shapely.union_all(parts)))
+    long = runs[shapely.length(runs) > MIN_DUPLICATE_LENGTH]
+    if len(long):
+        r_i, p_i = shapely.STRtree(parts).query(long, predicate="intersects")
+        with np.errstate(invalid="ignore"):
+            shared = shapely.length(shapely.intersection(long[r_i], parts[p_i]))
+        bad[owner[p_i[shared > 1e-6]]] = True
+    return bad
+
+
 def procedural_split(face, min_area: float = MIN_BLOCK_AREA,
-                     min_width: float = MIN_BLOCK_WIDTH) -> np.ndarray:
+                     min_width: float = MIN_BLOCK_WIDTH, avoid=None) -> np.ndarray:
     """One street across a face: the midline across the long axis of its minimum rectangle.
 
     The line through the centre of the minimum rotated rectangle, perpendicular to its long
     side, clipped to the face (a concave face may give several pieces, each from boundary
-    to boundary). Returns no street when a resulting face would be a sliver.
+    to boundary). Returns no street when a resulting face would be a sliver; a piece that
+    would run along a street (in its corridor, :func:`_doubling`) is left out.
 
     Parameters
     ----------
     face : Polygon
     min_area, min_width : float, the block thresholds of :mod:`blocks`
+    avoid : array of LineString, optional, network lines touching the face besides its
+        outline, whose corridors the street keeps out of (:func:`_touching`)
 
     Returns
     -------
@@ -303,6 +355,8 @@ def procedural_split(face, min_area: float = MIN_BLOCK_AREA,
     line = shapely.LineString([centre - half * across, centre + half * across])
     parts = shapely.get_parts(shapely.intersection(line, face))
     parts = parts[(shapely.get_type_id(parts) == 1) & (shapely.length(parts) > 1e-6)]
+    if len(parts):
+        parts = parts[~_doubling(parts, _corridor(face, avoid))]
     if len(parts) == 0:
         return parts
     _, area, perimeter = _sub_faces(face, parts)
@@ -414,7 +468,7 @@ def close_sketch(arterials: Sequence, boundary) -> tuple:
 
 def statistical_split(face, sides: np.ndarray, rng: np.random.Generator,
                       min_area: float = MIN_BLOCK_AREA, min_width: float = MIN_BLOCK_WIDTH,
-                      tries: int = 8) -> np.ndarray:
+                      tries: int = 8, avoid=None) -> np.ndarray:
     """One street across a face, cutting off a block-sized piece (the fill's fallback).
 
     The street runs across the long axis of the face's minimum rotated rectangle, at a
@@ -422,9 +476,12 @@ def statistical_split(face, sides: np.ndarray, rng: np.random.Generator,
     the rectangles of its blocks), so that recursion leaves blocks of the example's
     dimensions; a face shorter than twice the drawn side is cut near its middle. Only the
     piece of the cut through the chosen point is kept (in a concave face a straight line
-    meets the outline many times). A cut that would leave a sliver is tried elsewhere
+    meets the outline many times), or the whole cut where that piece does not split the
+    face (a face with a hole). A cut that would leave a sliver is tried elsewhere
     (``tries`` positions: from the drawn side at both ends, then uniformly along the
-    axis); no street when every cut makes slivers.
+    axis), and so is one that runs along a street (in the corridor of the face's outline or
+    of ``avoid``, the network lines touching it: :func:`_doubling`); no street when every
+    cut fails.
     """
     m = shape_metrics([face]).iloc[0]
     length = float(m.mbr_length_m)
@@ -445,6 +502,7 @@ def statistical_split(face, sides: np.ndarray, rng: np.random.Generator,
     # slivers the outline makes on its own (a spur of the boundary) are not the cut's
     _, area0, perimeter0 = _sub_faces(face, np.empty(0, dtype=object))
     base = _sliver_count(None, area0, perimeter0, min_area, min_width)
+    corridor = _corridor(face, avoid)
     for t in positions:
         p = centre + t * along
         line = shapely.LineString([p - half * across, p + half * across])
@@ -452,13 +510,19 @@ def statistical_split(face, sides: np.ndarray, rng: np.random.Generator,
         parts = parts[(shapely.get_type_id(parts) == 1) & (shapely.length(parts) > 1e-6)]
         if not len(parts):
             continue
-        # the piece through the cut's centre (the longest where the centre is outside)
+        # the piece through the cut's centre (the longest where the centre is outside); where
+        # that one does not split the face (a face with a hole: it runs from the outline to
+        # the hole), every piece of the cut
         dist = shapely.distance(parts, shapely.Point(p))
-        parts = parts[[int(np.argmin(dist)) if dist.min() < 1e-6 else
-                       int(np.argmax(shapely.length(parts)))]]
-        _, area, perimeter = _sub_faces(face, parts)
-        if len(area) >= 2 and _sliver_count(None, area, perimeter, min_area, min_width) <= base:
-            return parts
+        one = parts[[int(np.argmin(dist)) if dist.min() < 1e-6 else
+                     int(np.argmax(shapely.length(parts)))]]
+        for cut in (one, parts) if len(parts) > 1 else (one,):
+            if _doubling(cut, corridor).any():
+                continue
+            _, area, perimeter = _sub_faces(face, cut)
+            if len(area) >= 2 and \
+                    _sliver_count(None, area, perimeter, min_area, min_width) <= base:
+                return cut
     return np.empty(0, dtype=object)
 
 
@@ -498,8 +562,10 @@ class _Inserter:
             self._example_slivers[key]
 
     def insert(self, face, q_samples: np.ndarray, ex_samples: np.ndarray, path: np.ndarray,
-               streets: np.ndarray, on_boundary, example_slivers: int):
-        """Warp, snap and clip; returns (pieces, None) or (None, reason)."""
+               streets: np.ndarray, on_boundary, example_slivers: int, avoid=None):
+        """Warp, snap and clip; returns (pieces, None) or (None, reason). ``avoid``: the
+        network lines touching the face (:func:`_touching`), whose corridors, like the
+        outline's, no street may run along."""
         src = ex_samples[path[:, 1]]
         dst = q_samples[path[:, 0]]
         r, t, _ = sc.rigid_align(src, dst)
@@ -544,11 +610,9 @@ class _Inserter:
             along = shapely.within(pieces, shapely.buffer(shapely.boundary(face), 1e-3))
             pieces = pieces[~along]
         if len(pieces):
-            # nothing that doubles a street of the query boundary in its corridor
-            corridor = shapely.buffer(shapely.boundary(face), CORRIDOR_HALF_WIDTH, quad_segs=2)
-            with np.errstate(invalid="ignore"):
-                inside = shapely.length(shapely.intersection(pieces, corridor))
-            pieces = pieces[inside <= MIN_DUPLICATE_LENGTH]
+            # nothing that doubles a street of the query boundary, or one inside the query
+            # that the boundary does not show, in its corridor
+            pieces = pieces[~_doubling(pieces, _corridor(face, avoid))]
         kept = float(shapely.length(pieces).sum()) if len(pieces) else 0.0
         if total > 0 and kept < (1 - MAX_CLIPPED_SHARE) * total:
             return None, "clipped"
@@ -715,7 +779,9 @@ def _fill_stage(geometry, level, attrs, databases, names, inserter, rng, max_blo
                     ratio = big[j].area / max(float(db.table["area_m2"].iat[row]), 1e-9)
                     options[j].append((float(ret.costs[jj, k]), i, ret, jj, int(k), ratio))
         new_geoms, new_attrs = [], []
+        tree = shapely.STRtree(geometry)
         for j, face in enumerate(big):
+            avoid = _touching(face, tree, geometry)
             progress.step((rnd + j / len(big)) / MAX_FILL_ROUNDS)
             opts = sorted(options[j], key=lambda o: o[0])
             at_scale = [o for o in opts if 1 / max_scale ** 2 <= o[5] <= max_scale ** 2]
@@ -740,7 +806,7 @@ def _fill_stage(geometry, level, attrs, databases, names, inserter, rng, max_blo
                         continue
                     got, _ = inserter.insert(face, ret.samples[jj],
                                              db.descriptors.samples[db_row], dtw, streets, on,
-                                             ex_slivers)
+                                             ex_slivers, avoid)
                     if got is None:
                         row["n_rejected"] += 1
                         continue
@@ -753,7 +819,8 @@ def _fill_stage(geometry, level, attrs, databases, names, inserter, rng, max_blo
                 if pieces is not None:
                     break
             if pieces is None:
-                split = statistical_split(face, sides, rng, min_area, min_width)
+                split = statistical_split(face, sides, rng, min_area, min_width,
+                                          avoid=avoid)
                 if len(split):
                     pieces = split
                     row.update(outcome="fill_statistics")
@@ -1075,7 +1142,9 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
         counts = dict(queries=len(faces), fragment=0, block=0, procedural=0, unsplit=0,
                       too_small=0, no_candidate=0, rejected=0)
         n_faces = len(faces)
+        tree = shapely.STRtree(geometry)
         for f, face in enumerate(faces):
+            avoid = _touching(face, tree, geometry)
             progress.step((lvl + f / n_faces) / max(deepest, 1) * 0.6)
             opts = sorted(options[f], key=lambda o: o[0])[:n_best]
             row = dict(query=query_id, level=lvl, database="", fragment_id=-1, cost=np.nan,
@@ -1103,7 +1172,7 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
                     break
                 pieces, reason = inserter.insert(face, ret.samples[j],
                                                  db.descriptors.samples[db_row], dtw,
-                                                 streets, on, ex_slivers)
+                                                 streets, on, ex_slivers, avoid)
                 if pieces is not None:
                     chosen = (o, dtw)
                     row.update(outcome="fragment")
@@ -1127,7 +1196,7 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
             elif opts and too_small == len(opts):
                 row.update(outcome="too_small")
             elif opts:
-                split = procedural_split(face, min_area, min_width)
+                split = procedural_split(face, min_area, min_width, avoid)
                 if len(split):
                     row.update(outcome="procedural")
                     new_geoms.append(split)
