@@ -56,10 +56,18 @@ import pandas as pd
 import shapely
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
+from shapely.ops import substring
 
 from ..core.progress import InputError, Progress, ensure
 from ..network import street_graph as _roads
-from ..network.invariants import CORRIDOR_HALF_WIDTH, MIN_DUPLICATE_LENGTH
+from ..network.dead_ends import steer_share
+from ..network import invariants as _invariants
+from ..network.invariants import (
+    CORRIDOR_HALF_WIDTH,
+    EDGE_DISTANCE,
+    MIN_DUPLICATE_LENGTH,
+    SNAP_TOLERANCE,
+)
 from ..network.blocks import (
     MIN_BLOCK_AREA,
     MIN_BLOCK_WIDTH,
@@ -75,7 +83,7 @@ from ..retrieval.warp import poisson_blend, warp_geometries, warp_points
 __all__ = [
     "MAX_N_BEST", "MAX_LEVELS", "EDGE_FIELDS", "Retrieval", "SynthesisResult",
     "retrieve", "synthesize", "procedural_split", "grid_streets", "example_blocks",
-    "close_sketch", "statistical_split",
+    "close_sketch", "statistical_split", "example_dead_end_share",
 ]
 
 #: Upper bound of N_BEST: beyond it the "random choice among the best" is just random.
@@ -100,6 +108,8 @@ MAX_FILL_ROUNDS = 16
 FILL_TRIES = 6
 #: Quantile of the example's block areas above which a face must not stay empty.
 FILL_QUANTILE = 90.0
+#: A dead end closes onto a street at most this far (m) when the network has too many.
+CLOSE_REACH = 2 * MIN_DANGLE
 
 
 @dataclass
@@ -277,10 +287,10 @@ def _sub_faces(polygon, streets: np.ndarray):
 
 def _corridor(face, lines=None):
     """The corridors (the invariants' ``CORRIDOR_HALF_WIDTH``) of the streets a new street
-    in ``face`` must not run along: its outline and ``lines``, the network lines that touch
-    it (:func:`_touching`), prepared."""
+    in ``face`` must not run along: its outline (none when ``face`` is None) and ``lines``,
+    the network lines that touch it (:func:`_touching`), prepared."""
     lines = np.empty(0, dtype=object) if lines is None else np.asarray(lines, dtype=object)
-    around = np.concatenate([[shapely.boundary(face)], lines])
+    around = lines if face is None else np.concatenate([[shapely.boundary(face)], lines])
     corridor = shapely.union_all(shapely.buffer(around, CORRIDOR_HALF_WIDTH, quad_segs=2))
     shapely.prepare(corridor)
     return corridor
@@ -918,6 +928,194 @@ def _link_floating(geometry, level, attrs):
     return geometry, level, attrs, len(links)
 
 
+def example_dead_end_share(databases: Sequence[FragmentDatabase]) -> float:
+    """The example's dead-end share recorded in the databases' metadata (``dead_end_share``,
+    their mean), NaN when none records it.
+
+    The fragments cannot tell it: a dead-end street outside every closed face is in no
+    fragment (Bubenec's three fragments hold none of its dead ends, whose share is 0.44).
+    """
+    values = [float(db.metadata["dead_end_share"]) for db in databases
+              if "dead_end_share" in (getattr(db, "metadata", None) or {})]
+    return float(np.mean(values)) if values else float("nan")
+
+
+def _steer_dead_ends(geometry, level, attrs, share: float, area, rng, min_dangle: float):
+    """Steer the dead-end share of the network to ``share`` (:mod:`network.dead_ends`).
+
+    Counted on the graph :func:`invariants.dead_end_share` builds (nodes of degree != 2
+    inside ``area``, away from its boundary, the arterials' nodes too); the changes are
+    made to the network's own lines. Too many dead ends: a synthesised dead end is closed by
+    the shortest straight street onto another line, at most ``CLOSE_REACH`` m, crossing
+    nothing and doubling nothing (shortest gaps first). Too few: the stem of a synthesised T
+    (the edge that leaves the through street at the largest angle) is cut short into a
+    cul-de-sac, half its length but at least ``min_dangle`` m kept, whose end is clear of
+    every other street's corridor, where the stem is no bridge of the network and its other
+    end stays a junction (T's in random order). Fill, procedural and statistical splits cut
+    faces from outline to outline, and the example's dead-end streets outside closed faces
+    are in no fragment, so the share otherwise lands wherever the chosen fragments put it
+    (0.02 for Helsinki from Bubenec, whose share is 0.44).
+
+    Returns the network and the counts (closed, opened).
+    """
+    n = len(geometry)
+    if n < 2 or not np.isfinite(share):
+        return geometry, level, attrs, (0, 0)
+    # the measured graph: nodes closer than SNAP_TOLERANCE are one, look-alikes one street
+    g = _roads.clean_network(geometry, snap_tolerance=SNAP_TOLERANCE, min_dangle_length=0.0,
+                             merge_degree2=False, duplicate_tolerance=SNAP_TOLERANCE)
+    u, v, src = np.asarray(g.u), np.asarray(g.v), np.asarray(g.source)
+    nodes = np.asarray(g.nodes)
+    m = g.n_edges
+    deg = np.bincount(np.r_[u, v], minlength=len(nodes))
+    inc_node, inc_edge = np.r_[u, v], np.r_[np.arange(m), np.arange(m)]
+    lines = np.array(geometry, dtype=object)      # the network's own lines, changed in place
+    # an edge stands for its line where it is the whole of it (ends moved by the snapping)
+    whole = np.abs(shapely.length(lines[src]) - shapely.length(g.geometry)) < 2 * SNAP_TOLERANCE
+    new = (level[src] > 0) & ~np.isin(attrs["source_fragment"][src], ("arterial", "boundary"))
+    outline = shapely.boundary(area)
+    shapely.prepare(area)
+    shapely.prepare(outline)
+
+    def counted(xy) -> np.ndarray:
+        pts = shapely.points(np.atleast_2d(xy))
+        return shapely.dwithin(area, pts, 1e-3) & ~shapely.dwithin(outline, pts, EDGE_DISTANCE)
+
+    inside = counted(nodes)
+    state = {"dead": int((inside & (deg == 1)).sum()),
+             "nodes": int((inside & (deg != 2) & (deg > 0)).sum())}
+    joins = np.ones(m, bool)       # edges joining their two nodes (a cut stem does not)
+    links: List = []
+
+    def share_now() -> float:
+        return state["dead"] / state["nodes"] if state["nodes"] else 0.0
+
+    def current():
+        return np.concatenate([lines, np.asarray(links, dtype=object)]) if links else lines
+
+    def touch(j: int, d: int):
+        """Degree of node j changes by d: the counts follow."""
+        old, now = deg[j], deg[j] + d
+        deg[j] = now
+        if inside[j]:
+            state["dead"] += int(now == 1) - int(old == 1)
+            state["nodes"] += int(now not in (0, 2)) - int(old not in (0, 2))
+
+    def end_near(line, xy) -> np.ndarray:
+        ends = shapely.get_coordinates(shapely.boundary(line))
+        return ends[int(np.argmin(np.hypot(*(ends - xy).T)))] if len(ends) else xy
+
+    # ---- closing: a dead end onto the nearest other line
+    def close_candidates():
+        tree = shapely.STRtree(lines)
+        cand = []
+        for k in np.flatnonzero(inside & (deg == 1)):
+            e = int(inc_edge[np.flatnonzero(inc_node == k)[0]])
+            if not new[e] or not whole[e]:
+                continue
+            p = shapely.Point(end_near(lines[src[e]], nodes[k]))
+            near = tree.query(p, predicate="dwithin", distance=CLOSE_REACH)
+            near = near[near != src[e]]
+            if len(near):
+                d = shapely.distance(lines[near], p)
+                cand.append((float(d.min()), int(k), e, int(near[int(np.argmin(d))])))
+        return sorted(cand)
+
+    def close(c) -> bool:
+        _, k, e, j = c
+        if deg[k] != 1:
+            return False
+        p = shapely.Point(end_near(lines[src[e]], nodes[k]))
+        link = shapely.shortest_line(p, lines[j])
+        if link.length <= 1e-6:
+            return False
+        others = current()
+        hit = others[shapely.intersects(others, link)]
+        if not shapely.covers(shapely.buffer(shapely.boundary(link), 1e-6),
+                              shapely.intersection(hit, link)).all():
+            return False   # it would cross a street
+        near = others[shapely.dwithin(others, link, CORRIDOR_HALF_WIDTH)]
+        if _doubling(np.array([link]), _corridor(None, near)).any():
+            return False
+        links.append(link)
+        touch(k, 1)
+        q = np.asarray(link.coords[-1])
+        at = np.flatnonzero(np.hypot(*(nodes - q).T) <= SNAP_TOLERANCE)
+        if len(at):
+            touch(int(at[0]), 1)
+        elif counted(q)[0]:
+            state["nodes"] += 1     # a new T on the line
+        return True
+
+    # ---- opening: the stem of a T cut short into a cul-de-sac
+    def leaving(e: int, k: int) -> np.ndarray:
+        """Unit direction of edge e leaving node k (up to 10 m along it)."""
+        line = g.geometry[e]
+        t_ = min(10.0, line.length / 2)
+        q = shapely.get_coordinates(line.interpolate(t_ if u[e] == k else line.length - t_))[0]
+        d = q - nodes[k]
+        return d / max(np.hypot(*d), 1e-12)
+
+    def open_candidates():
+        ts = np.flatnonzero(inside & (deg == 3))
+        return ts[rng.permutation(len(ts))]
+
+    def is_bridge(e: int) -> bool:
+        keep = joins.copy()
+        keep[e] = False
+        k = len(nodes)
+        adj = coo_matrix((np.ones(keep.sum()), (u[keep], v[keep])), shape=(k, k))
+        _, label = connected_components(adj, directed=False)
+        return label[u[e]] != label[v[e]]
+
+    def open_(t_) -> bool:
+        if deg[t_] != 3:
+            return False
+        es = np.unique(inc_edge[inc_node == t_])
+        es = es[joins[es]]
+        if len(es) != 3:
+            return False
+        dirs = np.array([leaving(int(e), t_) for e in es])
+        # the through pair is the most opposite pair; the stem is the edge left out of it
+        stem = int(es[int(np.argmin([dirs[1] @ dirs[2], dirs[0] @ dirs[2],
+                                     dirs[0] @ dirs[1]]))])
+        o = int(v[stem] if u[stem] == t_ else u[stem])
+        if not new[stem] or not whole[stem] or o == t_ or deg[o] < 3:
+            return False
+        line = lines[src[stem]]
+        length = line.length
+        keep_len = max(min_dangle, length / 2)
+        if length - keep_len < CORRIDOR_HALF_WIDTH:
+            return False
+        at_t = shapely.get_coordinates(shapely.get_point(line, 0))[0]
+        from_t = np.hypot(*(at_t - nodes[t_])) <= np.hypot(*(
+            shapely.get_coordinates(shapely.get_point(line, -1))[0] - nodes[t_]))
+        rest = substring(line, length - keep_len, length) if from_t else \
+            substring(line, 0, keep_len)
+        end = shapely.get_point(rest, 0 if from_t else -1)
+        others = current()
+        others = others[np.arange(len(others)) != src[stem]]
+        if shapely.dwithin(others, end, CORRIDOR_HALF_WIDTH).any() or is_bridge(stem):
+            return False
+        lines[src[stem]] = rest
+        joins[stem] = False
+        touch(t_, -1)
+        if counted(shapely.get_coordinates(end))[0]:
+            state["dead"] += 1
+            state["nodes"] += 1
+        return True
+
+    n_closed, n_opened = steer_share(share_now, share, close, close_candidates, open_,
+                                     open_candidates)
+    if not n_closed and not n_opened:
+        return geometry, level, attrs, (0, 0)
+    if links:
+        return (*_add_streets(lines, level, attrs, [np.asarray(links, dtype=object)],
+                              [("close", "", -1, len(links), -1)], int(level.max()) + 1, 0.0),
+                (n_closed, n_opened))
+    merged, s = _renode(lines, level, attrs, -1, 0.0)
+    return merged, level[s], {k: a[s] for k, a in attrs.items()}, (n_closed, n_opened)
+
 # --------------------------------------------------------------------------- relief
 
 def _relief_for_face(face, dem: DemGrid, db: FragmentDatabase, row: int, path: np.ndarray,
@@ -980,6 +1178,7 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
                min_dangle: float = MIN_DANGLE, c: int = N_CANDIDATES,
                max_scale: float = MAX_SCALE,
                boundary=None, fill: bool = True, fill_quantile: float = FILL_QUANTILE,
+               dead_end_share: Optional[float] = None,
                progress: Optional[Progress] = None) -> SynthesisResult:
     """Synthesise a street network inside sketched arterials from fragment databases.
 
@@ -1013,6 +1212,10 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
         ``max_level`` that stops the recursion early turns the fill off
     fill_quantile : float, quantile (%) of the example's block areas above which no face
         stays empty (the issue's rule: 90)
+    dead_end_share : float in [0, 1], optional, the example's dead-end share
+        (:func:`invariants.dead_end_share` on the example inside its area) to steer the
+        result's to; default the one the databases record (:func:`example_dead_end_share`),
+        no steering when none does
     progress : Progress, optional (per query fragment; raises Canceled)
 
     Returns
@@ -1035,6 +1238,10 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
     ('fill_fragment', 'fill_scaled', 'fill_statistics', 'left_empty'). At the end, pieces
     of the network not connected to the arterials (streets of faces closed only by the
     boundary) are linked to them by the shortest street that crosses nothing ('link').
+    Last, the dead-end share, counted as :func:`invariants.check_network` counts it, is
+    steered to the example's (:func:`_steer_dead_ends`: dead ends closed onto the nearest
+    street while it is above, stems of T's cut short into cul-de-sacs while it is below;
+    ``stats['dead_ends']``).
 
     Raises
     ------
@@ -1056,6 +1263,8 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
         raise InputError(f"gamma must lie in [0, 1], got {gamma}")
     if not max_scale >= 1:
         raise InputError(f"the maximum scale factor must be at least 1, got {max_scale}")
+    if dead_end_share is not None and not 0 <= dead_end_share <= 1:
+        raise InputError(f"the dead-end share must lie in [0, 1], got {dead_end_share}")
     if max_level is not None and (int(max_level) != max_level or max_level < 0):
         raise InputError(f"the maximum level must be a whole number >= 0, got {max_level}")
     if style_polygons is not None:
@@ -1251,6 +1460,17 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
     if n_links:
         progress.info(f"{n_links} street(s) added to link pieces of the network that "
                       "touched only the boundary to the arterials.")
+    if fill and max_level is None:
+        share = example_dead_end_share(databases) if dead_end_share is None else \
+            float(dead_end_share)
+        counted_in = target if target is not None else area
+        geometry, level, attrs, (n_closed, n_opened) = _steer_dead_ends(
+            geometry, level, attrs, share, counted_in, rng, min_dangle)
+        now = _invariants.dead_end_share(geometry, counted_in)
+        stats["dead_ends"] = dict(example_share=share, share=now, closed=n_closed,
+                                  opened=n_opened)
+        progress.info(f"Dead-end share {now:.2f} (example {share:.2f}): {n_closed} dead "
+                      f"end(s) closed, {n_opened} T stem(s) cut into cul-de-sacs.")
     keep = shapely.length(geometry) > 1e-6
     geometry = geometry[keep]
     table = pd.DataFrame({"level": level[keep],
