@@ -27,7 +27,11 @@ Choices the thesis leaves open, made here:
   boundary (onto an existing node when one is within ``snap_distance``); streets are
   clipped to the query; the level is then re-noded as one planar network (the boundary
   edges split where new streets meet them), new dead ends shorter than ``min_dangle`` m
-  are pruned and chains through degree-2 nodes of one source are merged.
+  are pruned and chains through degree-2 nodes of one source are merged. No new street
+  runs along a street in its corridor (the invariants' rule, :func:`_doubling`), whether
+  the street bounds the query or lies inside it (an arterial ending in the face).
+- **Dead-end share** (issue 15, not in the thesis): last, the share is steered to the
+  example's (:func:`_steer_dead_ends`, :mod:`network.dead_ends`, as the random walk does).
 - **Levels of a database**: a database's hierarchy starts at its own lowest fragment level
   (an example whose arterials close no face, like Bubenec, starts at level 1): query level
   l uses database level ``min_level + l``.
