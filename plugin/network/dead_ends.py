@@ -24,9 +24,10 @@ __all__ = ["steer_share"]
 
 def steer_share(share_now: Callable[[], float], target: float,
                 close: Callable[[object], bool], close_candidates: Callable[[], Iterable],
-                open_: Callable[[object], bool], open_candidates: Callable[[], Iterable]
-                ) -> Tuple[int, int]:
-    """Close dead ends while the share is above ``target``, then open while it is below.
+                open_: Callable[[object], bool], open_candidates: Callable[[], Iterable],
+                tolerance: float = 0.0) -> Tuple[int, int]:
+    """Close dead ends while the share is above ``target``, then open while it is below
+    (beyond ``tolerance``, relative: 0 steers to the target itself).
 
     Parameters
     ----------
@@ -38,6 +39,9 @@ def steer_share(share_now: Callable[[], float], target: float,
         from its random generator draws it at the same point of its sequence every time)
     open_ : candidate -> bool, open one dead end (True when it did)
     open_candidates : () -> iterable, where to try, in order (called once, after closing)
+    tolerance : float, relative: closing stops at ``target * (1 + tolerance)``, opening at
+        ``target * (1 - tolerance)`` (a method that changes its streets as little as the
+        rule allows steers into the band, with a margin, rather than onto its middle)
 
     Returns
     -------
@@ -54,14 +58,15 @@ def steer_share(share_now: Callable[[], float], target: float,
     >>> steer_share(share, 0.3, lambda c: False, lambda: [], open_one, lambda: range(5))
     (0, 2)
     """
+    high, low = target * (1 + tolerance), target * (1 - tolerance)
     n_closed = 0
     for c in close_candidates():
-        if share_now() <= target:
+        if share_now() <= high:
             break
         n_closed += bool(close(c))
     n_opened = 0
     for c in open_candidates():
-        if share_now() >= target:
+        if share_now() >= low:
             break
         n_opened += bool(open_(c))
     return n_closed, n_opened

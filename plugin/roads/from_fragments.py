@@ -68,6 +68,7 @@ from ..network.dead_ends import steer_share
 from ..network import invariants as _invariants
 from ..network.invariants import (
     CORRIDOR_HALF_WIDTH,
+    DEAD_END_TOLERANCE,
     EDGE_DISTANCE,
     MIN_DUPLICATE_LENGTH,
     SNAP_TOLERANCE,
@@ -944,7 +945,8 @@ def example_dead_end_share(databases: Sequence[FragmentDatabase]) -> float:
     return float(np.mean(values)) if values else float("nan")
 
 
-def _steer_dead_ends(geometry, level, attrs, share: float, area, rng, min_dangle: float):
+def _steer_dead_ends(geometry, level, attrs, share: float, area, rng, min_dangle: float,
+                     max_block: float = np.inf):
     """Steer the dead-end share of the network to ``share`` (:mod:`network.dead_ends`).
 
     Counted on the graph :func:`invariants.dead_end_share` builds (nodes of degree != 2
@@ -954,8 +956,16 @@ def _steer_dead_ends(geometry, level, attrs, share: float, area, rng, min_dangle
     nothing and doubling nothing (shortest gaps first). Too few: the stem of a synthesised T
     (the edge that leaves the through street at the largest angle) is cut short into a
     cul-de-sac, half its length but at least ``min_dangle`` m kept, whose end is clear of
-    every other street's corridor, where the stem is no bridge of the network and its other
-    end stays a junction (T's in random order). Fill, procedural and statistical splits cut
+    every other street's corridor, where the stem is no bridge of the network, its other
+    end stays a junction and the two blocks it parted make one no larger than ``max_block``
+    (the fill's threshold: a town of few large blocks would lose them); then, where no such
+    T is left, a cul-de-sac is added: from the middle of a synthesised street, square to it,
+    into the larger block beside it, as long as the block's mean width (at least
+    ``min_dangle`` m), clear of every other street's corridor (T's and streets in random
+    order, as the random walk's unreached points); last, T's whose blocks merge larger. The
+    share is steered into the invariants' band with half of it as margin (``share`` ±15 %),
+    not onto ``share``: the streets are the example's, the steering a repair that changes
+    as few as the rule allows. Fill, procedural and statistical splits cut
     faces from outline to outline, and the example's dead-end streets outside closed faces
     are in no fragment, so the share otherwise lands wherever the chosen fragments put it
     (0.02 for Helsinki from Bubenec, whose share is 0.44).
@@ -989,13 +999,15 @@ def _steer_dead_ends(geometry, level, attrs, share: float, area, rng, min_dangle
     state = {"dead": int((inside & (deg == 1)).sum()),
              "nodes": int((inside & (deg != 2) & (deg > 0)).sum())}
     joins = np.ones(m, bool)       # edges joining their two nodes (a cut stem does not)
-    links: List = []
+    links: List = []               # closing streets
+    stubs: List = []               # new cul-de-sacs
 
     def share_now() -> float:
         return state["dead"] / state["nodes"] if state["nodes"] else 0.0
 
     def current():
-        return np.concatenate([lines, np.asarray(links, dtype=object)]) if links else lines
+        added = links + stubs
+        return np.concatenate([lines, np.asarray(added, dtype=object)]) if added else lines
 
     def touch(j: int, d: int):
         """Degree of node j changes by d: the counts follow."""
@@ -1060,9 +1072,71 @@ def _steer_dead_ends(geometry, level, attrs, share: float, area, rng, min_dangle
         d = q - nodes[k]
         return d / max(np.hypot(*d), 1e-12)
 
+    # the blocks, to know what a cut merges (union-find over faces)
+    faces, f_area, f_perimeter = planar_faces(lines)
+    parent = np.arange(len(faces))
+    f_tree = shapely.STRtree(faces)
+
+    def root(f: int) -> int:
+        while parent[f] != f:
+            parent[f] = parent[parent[f]]
+            f = parent[f]
+        return f
+
+    def sides(line):
+        """The faces left and right of a line's middle (-1: none)."""
+        mid = line.interpolate(0.5, normalized=True)
+        a_, b_ = shapely.get_coordinates(line.interpolate(
+            np.clip(np.array([0.5 * line.length - 0.5, 0.5 * line.length + 0.5]), 0,
+                    line.length)))
+        d = (b_ - a_) / max(np.hypot(*(b_ - a_)), 1e-12)
+        nrm = np.array([-d[1], d[0]])
+        c = shapely.get_coordinates(mid)[0]
+        out = []
+        for q in (c + 0.5 * nrm, c - 0.5 * nrm):
+            hit = f_tree.query(shapely.Point(q), predicate="within")
+            out.append(int(hit[0]) if len(hit) else -1)
+        return out, c, nrm
+
     def open_candidates():
         ts = np.flatnonzero(inside & (deg == 3))
-        return ts[rng.permutation(len(ts))]
+        es = np.flatnonzero(new & whole & (shapely.length(g.geometry) >= 2 * min_dangle))
+        ts = ts[rng.permutation(len(ts))]
+        return [("cut", int(x), max_block) for x in ts] + \
+            [("stub", int(x), None) for x in es[rng.permutation(len(es))]] + \
+            [("cut", int(x), np.inf) for x in ts]
+
+    def stub(e: int) -> bool:
+        line = lines[src[e]]
+        if line.length < 2 * min_dangle:
+            return False
+        (fl, fr), c, nrm = sides(line)
+        cand = [(f_area[root(f)], f, s) for f, s in ((fl, 1.0), (fr, -1.0)) if f >= 0]
+        if not cand:
+            return False
+        _, f, sgn = max(cand)
+        width = 2 * f_area[f] / max(f_perimeter[f], 1e-9)
+        others = current()
+        for length in (max(width, min_dangle), max(width / 2, min_dangle)):
+            street = shapely.LineString([c, c + sgn * length * nrm])
+            end = shapely.get_point(street, -1)
+            if not shapely.contains(faces[f], street.interpolate(length - 1e-3)):
+                continue
+            hit = others[shapely.intersects(others, street)]
+            if len(hit) > 1 or shapely.dwithin(others, end, CORRIDOR_HALF_WIDTH).any():
+                continue
+            near = others[shapely.dwithin(others, street, CORRIDOR_HALF_WIDTH)]
+            tail = substring(street, CORRIDOR_HALF_WIDTH, length)
+            if _doubling(np.array([tail]), _corridor(None, near)).any():
+                continue
+            stubs.append(street)
+            if counted(c)[0]:
+                state["nodes"] += 1                      # the T
+            if counted(shapely.get_coordinates(end))[0]:
+                state["dead"] += 1
+                state["nodes"] += 1
+            return True
+        return False
 
     def is_bridge(e: int) -> bool:
         keep = joins.copy()
@@ -1072,7 +1146,11 @@ def _steer_dead_ends(geometry, level, attrs, share: float, area, rng, min_dangle
         _, label = connected_components(adj, directed=False)
         return label[u[e]] != label[v[e]]
 
-    def open_(t_) -> bool:
+    def open_(cand) -> bool:
+        kind, x, limit = cand
+        return cut(x, limit) if kind == "cut" else stub(x)
+
+    def cut(t_, limit) -> bool:
         if deg[t_] != 3:
             return False
         es = np.unique(inc_edge[inc_node == t_])
@@ -1101,6 +1179,16 @@ def _steer_dead_ends(geometry, level, attrs, share: float, area, rng, min_dangle
         others = others[np.arange(len(others)) != src[stem]]
         if shapely.dwithin(others, end, CORRIDOR_HALF_WIDTH).any() or is_bridge(stem):
             return False
+        (fl, fr), _, _ = sides(g.geometry[stem])
+        if fl < 0 or fr < 0:
+            return False
+        fl, fr = root(fl), root(fr)
+        if fl != fr:
+            if f_area[fl] + f_area[fr] > limit:
+                return False
+            parent[fr] = fl
+            f_area[fl] += f_area[fr]
+            f_perimeter[fl] += f_perimeter[fr]
         lines[src[stem]] = rest
         joins[stem] = False
         touch(t_, -1)
@@ -1109,13 +1197,17 @@ def _steer_dead_ends(geometry, level, attrs, share: float, area, rng, min_dangle
             state["nodes"] += 1
         return True
 
+    # into the invariants' band with half of it as margin: the streets are the example's,
+    # the steering a repair that changes as few as the rule allows
     n_closed, n_opened = steer_share(share_now, share, close, close_candidates, open_,
-                                     open_candidates)
+                                     open_candidates, tolerance=DEAD_END_TOLERANCE / 2)
     if not n_closed and not n_opened:
         return geometry, level, attrs, (0, 0)
-    if links:
-        return (*_add_streets(lines, level, attrs, [np.asarray(links, dtype=object)],
-                              [("close", "", -1, len(links), -1)], int(level.max()) + 1, 0.0),
+    groups = [(np.asarray(a, dtype=object), (name, "", -1, len(a), -1))
+              for a, name in ((links, "close"), (stubs, "cul-de-sac")) if a]
+    if groups:
+        return (*_add_streets(lines, level, attrs, [a for a, _ in groups],
+                              [b for _, b in groups], int(level.max()) + 1, 0.0),
                 (n_closed, n_opened))
     merged, s = _renode(lines, level, attrs, -1, 0.0)
     return merged, level[s], {k: a[s] for k, a in attrs.items()}, (n_closed, n_opened)
@@ -1468,9 +1560,15 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
         share = example_dead_end_share(databases) if dead_end_share is None else \
             float(dead_end_share)
         counted_in = target if target is not None else area
-        geometry, level, attrs, (n_closed, n_opened) = _steer_dead_ends(
-            geometry, level, attrs, share, counted_in, rng, min_dangle)
-        now = _invariants.dead_end_share(geometry, counted_in)
+        n_closed = n_opened = 0
+        for _ in range(3):   # again from the measured network where its count drifted
+            geometry, level, attrs, (closed, opened) = _steer_dead_ends(
+                geometry, level, attrs, share, counted_in, rng, min_dangle, max_block)
+            n_closed, n_opened = n_closed + closed, n_opened + opened
+            now = _invariants.dead_end_share(geometry, counted_in)
+            if not (closed or opened) or not np.isfinite(now) or \
+                    abs(now - share) <= share * DEAD_END_TOLERANCE / 2 + 1e-9:
+                break
         stats["dead_ends"] = dict(example_share=share, share=now, closed=n_closed,
                                   opened=n_opened)
         progress.info(f"Dead-end share {now:.2f} (example {share:.2f}): {n_closed} dead "
