@@ -547,3 +547,81 @@ def test_real_town_from_its_neighbours():
     synth = fidelity.fidelity_statistics(np.concatenate([target.given, new]), target.area)
     assert synth["street_length_km_per_km2"] == pytest.approx(
         real["street_length_km_per_km2"], rel=0.34)
+
+
+# --------------------------------------------------------------------------- invariants (issue 15)
+
+def test_no_cut_runs_along_a_road_inside_the_face():
+    """An arterial that ends inside a face is no part of its outline. The statistical split
+    of a 600 m x 200 m face cuts 150 m from one end (x = 150 or 450); with a dead-end road
+    3 m beside both cuts, no cut may run along it (the invariants' corridor), and neither
+    may the procedural split along the face's midline (x = 300)."""
+    from urban_synthesis.plugin.network import invariants
+
+    face = shapely.box(0, 0, 600, 200)
+    roads_inside = np.array([shapely.LineString([(x, 0), (x, 150)]) for x in (153, 447, 303)])
+    for seed in range(4):
+        cut = sf.statistical_split(face, np.array([150.0]), np.random.default_rng(seed),
+                                   avoid=roads_inside)
+        assert len(cut) == 1
+        check = invariants.check_network(cut, roads_inside)
+        assert len(check.duplicates) == 0, shapely.get_coordinates(cut)
+    assert len(sf.procedural_split(face)) == 1
+    assert len(sf.procedural_split(face, avoid=roads_inside)) == 0
+
+
+def test_dead_end_share_is_steered_both_ways(grid_db):
+    """Too many dead ends: the levelled grid rebuilt from its arterials keeps nine (share
+    0.47 inside the arterials' faces); steered to 0 they are closed onto the nearest
+    street. Too few: the open sketch filled from the grid has none; steered to 0.3 T stems
+    are cut into cul-de-sacs until the share is within the invariants' ±30 %. The network
+    stays planar and keeps every other invariant."""
+    from urban_synthesis.plugin.network import invariants
+
+    lines, levels = levelled_grid()
+    arterials = lines[levels == 0]
+    for share, closed in ((None, 0), (0.0, 9)):
+        res = sf.synthesize(arterials, [grid_db], n_best=1, seed=0, dead_end_share=share)
+        assert_valid_network(res, arterials)
+        assert res.stats["dead_ends"]["closed"] == closed
+        new = res.geometry[res.table.level.to_numpy() > 0]
+        check = invariants.check_network(new, arterials, area=res.area,
+                                         example_dead_end_share=share)
+        assert check.n_violations == 0, check.summary()
+        assert check.dead_end_share == pytest.approx(0.0 if closed else 9 / 19)
+    target = shapely.box(0, 0, 1200, 800)
+    arterial = [shapely.LineString([(-50, 420), (1250, 380)])]
+    given = shapely.get_parts(shapely.intersection(arterial[0], target))
+    for seed in range(2):
+        res = sf.synthesize(arterial, [grid_db], seed=seed, boundary=target,
+                            dead_end_share=0.3)
+        assert res.stats["dead_ends"]["opened"] > 0
+        new = res.geometry[res.table.level.to_numpy() > 0]
+        check = invariants.check_network(new, given, area=target, example_dead_end_share=0.3)
+        assert check.ok, check.summary()
+        assert_planar(res.geometry)
+
+
+def test_helsinki_from_bubenec_keeps_every_invariant():
+    """The fidelity benchmark's Helsinki run (seed 0): Helsinki's level-0 roads and
+    envelope, Bubenec's fragments, Bubenec's dead-end share (0.44). It had nine streets
+    along given roads (fragments and statistical splits beside arterials that end inside a
+    face) and a dead-end share of 0.02 (every street a cut from outline to outline); now
+    no invariant is violated."""
+    from towns import bubenec_town, helsinki_town
+    from urban_synthesis.plugin.measure import fidelity
+    from urban_synthesis.plugin.network import invariants
+    import tempfile
+    from pathlib import Path
+
+    target, example = helsinki_town(), bubenec_town()
+    share = fidelity.fidelity_statistics(example.lines, example.area)["degree1_share"]
+    with tempfile.TemporaryDirectory() as tmp:
+        db = make_db(Path(tmp) / "bubenec.gpkg", example.lines, example.level)
+        res = sf.synthesize(target.given, [db], seed=0, boundary=target.area,
+                            dead_end_share=share)
+    new = res.geometry[invariants.new_streets(res.geometry, target.given)]
+    check = invariants.check_network(new, target.given, target.given_class, target.area,
+                                     example_dead_end_share=share)
+    assert check.ok, check.summary()
+    assert res.stats["dead_ends"]["opened"] > 100

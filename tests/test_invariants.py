@@ -135,6 +135,25 @@ def test_dead_end_share_counts_inside_and_away_from_the_edge():
     assert c.dead_end_ok and c.ok
 
 
+
+def test_dead_end_share_of_pieces_meeting_below_the_millimetre():
+    """A square block in four pieces with a stem at one corner: one dead end (the stem's)
+    among two counted nodes. Two pieces of the square meet at a corner that is one node to
+    the millimetre but differs below it (a piece rounded to a millimetre grid, one not):
+    merging the chain used to keep only its first piece, the corner it lost became a dead
+    end and the share doubled."""
+    from urban_synthesis.plugin.network.street_graph import clean_network
+
+    off = 4e-4    # under half a millimetre: the same node
+    square = [L([(0, 0), (100 + off, 0)]), L([(100, 0), (100, 100)]),
+              L([(100, 100), (0, 100)]), L([(0, 100), (0, 0)])]
+    stem = [L([(0, 0), (-60, -60)])]
+    assert I.dead_end_share(square + stem) == pytest.approx(0.5)
+    g = clean_network(square + stem, snap_tolerance=0.5, min_dangle_length=0.0)
+    assert g.n_edges == 2 and shapely.length(g.geometry).sum() == pytest.approx(
+        400 + 60 * np.sqrt(2))
+
+
 def test_table_and_summary():
     c = I.check_network([L([(100, -50), (100, 50)])], ARTERIAL, example_dead_end_share=0.5)
     t = c.table()

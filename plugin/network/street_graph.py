@@ -528,7 +528,16 @@ def merge_degree2_chains(g: RoadGraph) -> RoadGraph:
         return g
     lengths = g.length
     by_comp = np.argsort(comp, kind="stable")
-    merged = shapely.line_merge(shapely.multilinestrings(g.geometry[by_comp], indices=comp[by_comp]))
+    # line_merge joins ends that are equal: put every end exactly on its node (ends that are
+    # one node to the millimetre may differ below it, and a chain that failed to merge kept
+    # only its first piece: the other pieces vanished and their node became a dead end)
+    coords, idx = shapely.get_coordinates(g.geometry, return_index=True)
+    first = np.r_[True, idx[1:] != idx[:-1]]
+    last = np.r_[idx[1:] != idx[:-1], True]
+    coords[first] = g.nodes[g.u]
+    coords[last] = g.nodes[g.v]
+    exact = shapely.linestrings(coords, indices=idx)
+    merged = shapely.line_merge(shapely.multilinestrings(exact[by_comp], indices=comp[by_comp]))
     # representative (longest) member of each component carries the attributes
     order = np.lexsort((-lengths, comp))
     rep = order[np.r_[True, comp[order][1:] != comp[order][:-1]]]

@@ -27,7 +27,11 @@ Choices the thesis leaves open, made here:
   boundary (onto an existing node when one is within ``snap_distance``); streets are
   clipped to the query; the level is then re-noded as one planar network (the boundary
   edges split where new streets meet them), new dead ends shorter than ``min_dangle`` m
-  are pruned and chains through degree-2 nodes of one source are merged.
+  are pruned and chains through degree-2 nodes of one source are merged. No new street
+  runs along a street in its corridor (the invariants' rule, :func:`_doubling`), whether
+  the street bounds the query or lies inside it (an arterial ending in the face).
+- **Dead-end share** (issue 15, not in the thesis): last, the share is steered to the
+  example's (:func:`_steer_dead_ends`, :mod:`network.dead_ends`, as the random walk does).
 - **Levels of a database**: a database's hierarchy starts at its own lowest fragment level
   (an example whose arterials close no face, like Bubenec, starts at level 1): query level
   l uses database level ``min_level + l``.
@@ -56,10 +60,19 @@ import pandas as pd
 import shapely
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
+from shapely.ops import substring
 
 from ..core.progress import InputError, Progress, ensure
 from ..network import street_graph as _roads
-from ..network.invariants import CORRIDOR_HALF_WIDTH, MIN_DUPLICATE_LENGTH
+from ..network.dead_ends import steer_share
+from ..network import invariants as _invariants
+from ..network.invariants import (
+    CORRIDOR_HALF_WIDTH,
+    DEAD_END_TOLERANCE,
+    EDGE_DISTANCE,
+    MIN_DUPLICATE_LENGTH,
+    SNAP_TOLERANCE,
+)
 from ..network.blocks import (
     MIN_BLOCK_AREA,
     MIN_BLOCK_WIDTH,
@@ -75,7 +88,7 @@ from ..retrieval.warp import poisson_blend, warp_geometries, warp_points
 __all__ = [
     "MAX_N_BEST", "MAX_LEVELS", "EDGE_FIELDS", "Retrieval", "SynthesisResult",
     "retrieve", "synthesize", "procedural_split", "grid_streets", "example_blocks",
-    "close_sketch", "statistical_split",
+    "close_sketch", "statistical_split", "example_dead_end_share",
 ]
 
 #: Upper bound of N_BEST: beyond it the "random choice among the best" is just random.
@@ -100,6 +113,8 @@ MAX_FILL_ROUNDS = 16
 FILL_TRIES = 6
 #: Quantile of the example's block areas above which a face must not stay empty.
 FILL_QUANTILE = 90.0
+#: A dead end closes onto a street at most this far (m) when the network has too many.
+CLOSE_REACH = 2 * MIN_DANGLE
 
 
 @dataclass
@@ -260,28 +275,85 @@ def _sliver_count(faces: np.ndarray, area: np.ndarray, perimeter: np.ndarray,
 
 def _sub_faces(polygon, streets: np.ndarray):
     """Faces of a polygon's outline cut by streets (street ends made vertices of the outline:
-    an end clipped onto it lies on it only up to round-off)."""
-    ring = shapely.get_exterior_ring(polygon)
+    an end clipped onto it lies on it only up to round-off). The outline is every ring: a
+    street from the exterior to a hole ends on the outline too; the holes are no faces."""
+    rings = shapely.get_parts(shapely.boundary(polygon))
     streets = np.asarray(streets, dtype=object)
     if len(streets):
         ends = np.concatenate([shapely.get_coordinates(shapely.get_point(streets, 0)),
                                shapely.get_coordinates(shapely.get_point(streets, -1))])
-        ring = shapely.snap(ring, shapely.multipoints(ends), 1e-6)
-    return planar_faces(np.concatenate([[ring], streets]))
+        rings = shapely.snap(rings, shapely.multipoints(ends), 1e-6)
+    faces, area, perimeter = planar_faces(np.concatenate([rings, streets]))
+    if len(rings) > 1 and len(faces):
+        inside = shapely.contains(polygon, shapely.point_on_surface(faces))
+        faces, area, perimeter = faces[inside], area[inside], perimeter[inside]
+    return faces, area, perimeter
+
+
+def _corridor(face, lines=None):
+    """The corridors (the invariants' ``CORRIDOR_HALF_WIDTH``) of the streets a new street
+    in ``face`` must not run along: its outline (none when ``face`` is None) and ``lines``,
+    the network lines that touch it (:func:`_touching`), prepared."""
+    lines = np.empty(0, dtype=object) if lines is None else np.asarray(lines, dtype=object)
+    around = lines if face is None else np.concatenate([[shapely.boundary(face)], lines])
+    corridor = shapely.union_all(shapely.buffer(around, CORRIDOR_HALF_WIDTH, quad_segs=2))
+    shapely.prepare(corridor)
+    return corridor
+
+
+def _touching(face, tree: shapely.STRtree, lines: np.ndarray) -> np.ndarray:
+    """The network lines that touch a face: those of its outline, and those inside it that
+    its outline does not show (an arterial ending in the face, a dual carriageway whose
+    sliver is no face, a dead end of an earlier level)."""
+    return lines[tree.query(face, predicate="intersects")]
+
+
+def _doubling(pieces: np.ndarray, corridor) -> np.ndarray:
+    """Which new streets double a street in its corridor (a mask over ``pieces``).
+
+    The rule of :func:`invariants.check_network`, applied to the streets as they will be
+    measured: a stretch inside the corridor longer than ``MIN_DUPLICATE_LENGTH``, the
+    stretches of all pieces joined where they meet end to end (two pieces under the limit
+    that meet inside the corridor become one street when the network's degree-2 chains are
+    merged). A street crossing the corridor, or crossing the face near its outline at both
+    ends, is no double.
+    """
+    pieces = np.asarray(pieces, dtype=object)
+    bad = np.zeros(len(pieces), bool)
+    if not len(pieces):
+        return bad
+    with np.errstate(invalid="ignore"):
+        inside = shapely.intersection(pieces, corridor)
+    parts, owner = shapely.get_parts(inside, return_index=True)
+    keep = (shapely.get_dimensions(parts) == 1) & (shapely.length(parts) > 1e-6)
+    parts, owner = parts[keep], owner[keep]
+    if not len(parts):
+        return bad
+    runs = shapely.get_parts(shapely.line_merge(shapely.union_all(parts)))
+    long = runs[shapely.length(runs) > MIN_DUPLICATE_LENGTH]
+    if len(long):
+        r_i, p_i = shapely.STRtree(parts).query(long, predicate="intersects")
+        with np.errstate(invalid="ignore"):
+            shared = shapely.length(shapely.intersection(long[r_i], parts[p_i]))
+        bad[owner[p_i[shared > 1e-6]]] = True
+    return bad
 
 
 def procedural_split(face, min_area: float = MIN_BLOCK_AREA,
-                     min_width: float = MIN_BLOCK_WIDTH) -> np.ndarray:
+                     min_width: float = MIN_BLOCK_WIDTH, avoid=None) -> np.ndarray:
     """One street across a face: the midline across the long axis of its minimum rectangle.
 
     The line through the centre of the minimum rotated rectangle, perpendicular to its long
     side, clipped to the face (a concave face may give several pieces, each from boundary
-    to boundary). Returns no street when a resulting face would be a sliver.
+    to boundary). Returns no street when a resulting face would be a sliver; a piece that
+    would run along a street (in its corridor, :func:`_doubling`) is left out.
 
     Parameters
     ----------
     face : Polygon
     min_area, min_width : float, the block thresholds of :mod:`blocks`
+    avoid : array of LineString, optional, network lines touching the face besides its
+        outline, whose corridors the street keeps out of (:func:`_touching`)
 
     Returns
     -------
@@ -298,6 +370,8 @@ def procedural_split(face, min_area: float = MIN_BLOCK_AREA,
     line = shapely.LineString([centre - half * across, centre + half * across])
     parts = shapely.get_parts(shapely.intersection(line, face))
     parts = parts[(shapely.get_type_id(parts) == 1) & (shapely.length(parts) > 1e-6)]
+    if len(parts):
+        parts = parts[~_doubling(parts, _corridor(face, avoid))]
     if len(parts) == 0:
         return parts
     _, area, perimeter = _sub_faces(face, parts)
@@ -409,7 +483,7 @@ def close_sketch(arterials: Sequence, boundary) -> tuple:
 
 def statistical_split(face, sides: np.ndarray, rng: np.random.Generator,
                       min_area: float = MIN_BLOCK_AREA, min_width: float = MIN_BLOCK_WIDTH,
-                      tries: int = 8) -> np.ndarray:
+                      tries: int = 8, avoid=None) -> np.ndarray:
     """One street across a face, cutting off a block-sized piece (the fill's fallback).
 
     The street runs across the long axis of the face's minimum rotated rectangle, at a
@@ -417,9 +491,12 @@ def statistical_split(face, sides: np.ndarray, rng: np.random.Generator,
     the rectangles of its blocks), so that recursion leaves blocks of the example's
     dimensions; a face shorter than twice the drawn side is cut near its middle. Only the
     piece of the cut through the chosen point is kept (in a concave face a straight line
-    meets the outline many times). A cut that would leave a sliver is tried elsewhere
+    meets the outline many times), or the whole cut where that piece does not split the
+    face (a face with a hole). A cut that would leave a sliver is tried elsewhere
     (``tries`` positions: from the drawn side at both ends, then uniformly along the
-    axis); no street when every cut makes slivers.
+    axis), and so is one that runs along a street (in the corridor of the face's outline or
+    of ``avoid``, the network lines touching it: :func:`_doubling`); no street when every
+    cut fails.
     """
     m = shape_metrics([face]).iloc[0]
     length = float(m.mbr_length_m)
@@ -440,6 +517,7 @@ def statistical_split(face, sides: np.ndarray, rng: np.random.Generator,
     # slivers the outline makes on its own (a spur of the boundary) are not the cut's
     _, area0, perimeter0 = _sub_faces(face, np.empty(0, dtype=object))
     base = _sliver_count(None, area0, perimeter0, min_area, min_width)
+    corridor = _corridor(face, avoid)
     for t in positions:
         p = centre + t * along
         line = shapely.LineString([p - half * across, p + half * across])
@@ -447,13 +525,19 @@ def statistical_split(face, sides: np.ndarray, rng: np.random.Generator,
         parts = parts[(shapely.get_type_id(parts) == 1) & (shapely.length(parts) > 1e-6)]
         if not len(parts):
             continue
-        # the piece through the cut's centre (the longest where the centre is outside)
+        # the piece through the cut's centre (the longest where the centre is outside); where
+        # that one does not split the face (a face with a hole: it runs from the outline to
+        # the hole), every piece of the cut
         dist = shapely.distance(parts, shapely.Point(p))
-        parts = parts[[int(np.argmin(dist)) if dist.min() < 1e-6 else
-                       int(np.argmax(shapely.length(parts)))]]
-        _, area, perimeter = _sub_faces(face, parts)
-        if len(area) >= 2 and _sliver_count(None, area, perimeter, min_area, min_width) <= base:
-            return parts
+        one = parts[[int(np.argmin(dist)) if dist.min() < 1e-6 else
+                     int(np.argmax(shapely.length(parts)))]]
+        for cut in (one, parts) if len(parts) > 1 else (one,):
+            if _doubling(cut, corridor).any():
+                continue
+            _, area, perimeter = _sub_faces(face, cut)
+            if len(area) >= 2 and \
+                    _sliver_count(None, area, perimeter, min_area, min_width) <= base:
+                return cut
     return np.empty(0, dtype=object)
 
 
@@ -493,8 +577,10 @@ class _Inserter:
             self._example_slivers[key]
 
     def insert(self, face, q_samples: np.ndarray, ex_samples: np.ndarray, path: np.ndarray,
-               streets: np.ndarray, on_boundary, example_slivers: int):
-        """Warp, snap and clip; returns (pieces, None) or (None, reason)."""
+               streets: np.ndarray, on_boundary, example_slivers: int, avoid=None):
+        """Warp, snap and clip; returns (pieces, None) or (None, reason). ``avoid``: the
+        network lines touching the face (:func:`_touching`), whose corridors, like the
+        outline's, no street may run along."""
         src = ex_samples[path[:, 1]]
         dst = q_samples[path[:, 0]]
         r, t, _ = sc.rigid_align(src, dst)
@@ -539,11 +625,9 @@ class _Inserter:
             along = shapely.within(pieces, shapely.buffer(shapely.boundary(face), 1e-3))
             pieces = pieces[~along]
         if len(pieces):
-            # nothing that doubles a street of the query boundary in its corridor
-            corridor = shapely.buffer(shapely.boundary(face), CORRIDOR_HALF_WIDTH, quad_segs=2)
-            with np.errstate(invalid="ignore"):
-                inside = shapely.length(shapely.intersection(pieces, corridor))
-            pieces = pieces[inside <= MIN_DUPLICATE_LENGTH]
+            # nothing that doubles a street of the query boundary, or one inside the query
+            # that the boundary does not show, in its corridor
+            pieces = pieces[~_doubling(pieces, _corridor(face, avoid))]
         kept = float(shapely.length(pieces).sum()) if len(pieces) else 0.0
         if total > 0 and kept < (1 - MAX_CLIPPED_SHARE) * total:
             return None, "clipped"
@@ -710,7 +794,9 @@ def _fill_stage(geometry, level, attrs, databases, names, inserter, rng, max_blo
                     ratio = big[j].area / max(float(db.table["area_m2"].iat[row]), 1e-9)
                     options[j].append((float(ret.costs[jj, k]), i, ret, jj, int(k), ratio))
         new_geoms, new_attrs = [], []
+        tree = shapely.STRtree(geometry)
         for j, face in enumerate(big):
+            avoid = _touching(face, tree, geometry)
             progress.step((rnd + j / len(big)) / MAX_FILL_ROUNDS)
             opts = sorted(options[j], key=lambda o: o[0])
             at_scale = [o for o in opts if 1 / max_scale ** 2 <= o[5] <= max_scale ** 2]
@@ -735,7 +821,7 @@ def _fill_stage(geometry, level, attrs, databases, names, inserter, rng, max_blo
                         continue
                     got, _ = inserter.insert(face, ret.samples[jj],
                                              db.descriptors.samples[db_row], dtw, streets, on,
-                                             ex_slivers)
+                                             ex_slivers, avoid)
                     if got is None:
                         row["n_rejected"] += 1
                         continue
@@ -748,7 +834,8 @@ def _fill_stage(geometry, level, attrs, databases, names, inserter, rng, max_blo
                 if pieces is not None:
                     break
             if pieces is None:
-                split = statistical_split(face, sides, rng, min_area, min_width)
+                split = statistical_split(face, sides, rng, min_area, min_width,
+                                          avoid=avoid)
                 if len(split):
                     pieces = split
                     row.update(outcome="fill_statistics")
@@ -846,6 +933,285 @@ def _link_floating(geometry, level, attrs):
     return geometry, level, attrs, len(links)
 
 
+def example_dead_end_share(databases: Sequence[FragmentDatabase]) -> float:
+    """The example's dead-end share recorded in the databases' metadata (``dead_end_share``,
+    their mean), NaN when none records it.
+
+    The fragments cannot tell it: a dead-end street outside every closed face is in no
+    fragment (Bubenec's three fragments hold none of its dead ends, whose share is 0.44).
+    """
+    values = [float(db.metadata["dead_end_share"]) for db in databases
+              if "dead_end_share" in (getattr(db, "metadata", None) or {})]
+    return float(np.mean(values)) if values else float("nan")
+
+
+def _steer_dead_ends(geometry, level, attrs, share: float, area, rng, min_dangle: float,
+                     max_block: float = np.inf):
+    """Steer the dead-end share of the network to ``share`` (:mod:`network.dead_ends`).
+
+    Counted on the graph :func:`invariants.dead_end_share` builds (nodes of degree != 2
+    inside ``area``, away from its boundary, the arterials' nodes too); the changes are
+    made to the network's own lines. Too many dead ends: a synthesised dead end is closed by
+    the shortest straight street onto another line, at most ``CLOSE_REACH`` m, crossing
+    nothing and doubling nothing (shortest gaps first). Too few: the stem of a synthesised T
+    (the edge that leaves the through street at the largest angle) is cut short into a
+    cul-de-sac, half its length but at least ``min_dangle`` m kept, whose end is clear of
+    every other street's corridor, where the stem is no bridge of the network, its other
+    end stays a junction and the two blocks it parted make one no larger than ``max_block``
+    (the fill's threshold: a town of few large blocks would lose them); then, where no such
+    T is left, a cul-de-sac is added: from the middle of a synthesised street, square to it,
+    into the larger block beside it, as long as the block's mean width (at least
+    ``min_dangle`` m), clear of every other street's corridor (T's and streets in random
+    order, as the random walk's unreached points); last, T's whose blocks merge larger. The
+    share is steered into the invariants' band with half of it as margin (``share`` ±15 %),
+    not onto ``share``: the streets are the example's, the steering a repair that changes
+    as few as the rule allows. Fill, procedural and statistical splits cut
+    faces from outline to outline, and the example's dead-end streets outside closed faces
+    are in no fragment, so the share otherwise lands wherever the chosen fragments put it
+    (0.02 for Helsinki from Bubenec, whose share is 0.44).
+
+    Returns the network and the counts (closed, opened).
+    """
+    n = len(geometry)
+    if n < 2 or not np.isfinite(share):
+        return geometry, level, attrs, (0, 0)
+    # the measured graph: nodes closer than SNAP_TOLERANCE are one, look-alikes one street
+    g = _roads.clean_network(geometry, snap_tolerance=SNAP_TOLERANCE, min_dangle_length=0.0,
+                             merge_degree2=False, duplicate_tolerance=SNAP_TOLERANCE)
+    u, v, src = np.asarray(g.u), np.asarray(g.v), np.asarray(g.source)
+    nodes = np.asarray(g.nodes)
+    m = g.n_edges
+    deg = np.bincount(np.r_[u, v], minlength=len(nodes))
+    inc_node, inc_edge = np.r_[u, v], np.r_[np.arange(m), np.arange(m)]
+    lines = np.array(geometry, dtype=object)      # the network's own lines, changed in place
+    # an edge stands for its line where it is the whole of it (ends moved by the snapping)
+    whole = np.abs(shapely.length(lines[src]) - shapely.length(g.geometry)) < 2 * SNAP_TOLERANCE
+    new = (level[src] > 0) & ~np.isin(attrs["source_fragment"][src], ("arterial", "boundary"))
+    outline = shapely.boundary(area)
+    shapely.prepare(area)
+    shapely.prepare(outline)
+
+    def counted(xy) -> np.ndarray:
+        pts = shapely.points(np.atleast_2d(xy))
+        return shapely.dwithin(area, pts, 1e-3) & ~shapely.dwithin(outline, pts, EDGE_DISTANCE)
+
+    inside = counted(nodes)
+    state = {"dead": int((inside & (deg == 1)).sum()),
+             "nodes": int((inside & (deg != 2) & (deg > 0)).sum())}
+    joins = np.ones(m, bool)       # edges joining their two nodes (a cut stem does not)
+    links: List = []               # closing streets
+    stubs: List = []               # new cul-de-sacs
+
+    def share_now() -> float:
+        return state["dead"] / state["nodes"] if state["nodes"] else 0.0
+
+    def current():
+        added = links + stubs
+        return np.concatenate([lines, np.asarray(added, dtype=object)]) if added else lines
+
+    def touch(j: int, d: int):
+        """Degree of node j changes by d: the counts follow."""
+        old, now = deg[j], deg[j] + d
+        deg[j] = now
+        if inside[j]:
+            state["dead"] += int(now == 1) - int(old == 1)
+            state["nodes"] += int(now not in (0, 2)) - int(old not in (0, 2))
+
+    def end_near(line, xy) -> np.ndarray:
+        ends = shapely.get_coordinates(shapely.boundary(line))
+        return ends[int(np.argmin(np.hypot(*(ends - xy).T)))] if len(ends) else xy
+
+    # ---- closing: a dead end onto the nearest other line
+    def close_candidates():
+        tree = shapely.STRtree(lines)
+        cand = []
+        for k in np.flatnonzero(inside & (deg == 1)):
+            e = int(inc_edge[np.flatnonzero(inc_node == k)[0]])
+            if not new[e] or not whole[e]:
+                continue
+            p = shapely.Point(end_near(lines[src[e]], nodes[k]))
+            near = tree.query(p, predicate="dwithin", distance=CLOSE_REACH)
+            near = near[near != src[e]]
+            if len(near):
+                d = shapely.distance(lines[near], p)
+                cand.append((float(d.min()), int(k), e, int(near[int(np.argmin(d))])))
+        return sorted(cand)
+
+    def close(c) -> bool:
+        _, k, e, j = c
+        if deg[k] != 1:
+            return False
+        p = shapely.Point(end_near(lines[src[e]], nodes[k]))
+        link = shapely.shortest_line(p, lines[j])
+        if link.length <= 1e-6:
+            return False
+        others = current()
+        hit = others[shapely.intersects(others, link)]
+        if not shapely.covers(shapely.buffer(shapely.boundary(link), 1e-6),
+                              shapely.intersection(hit, link)).all():
+            return False   # it would cross a street
+        near = others[shapely.dwithin(others, link, CORRIDOR_HALF_WIDTH)]
+        if _doubling(np.array([link]), _corridor(None, near)).any():
+            return False
+        links.append(link)
+        touch(k, 1)
+        q = np.asarray(link.coords[-1])
+        at = np.flatnonzero(np.hypot(*(nodes - q).T) <= SNAP_TOLERANCE)
+        if len(at):
+            touch(int(at[0]), 1)
+        elif counted(q)[0]:
+            state["nodes"] += 1     # a new T on the line
+        return True
+
+    # ---- opening: the stem of a T cut short into a cul-de-sac
+    def leaving(e: int, k: int) -> np.ndarray:
+        """Unit direction of edge e leaving node k (up to 10 m along it)."""
+        line = g.geometry[e]
+        t_ = min(10.0, line.length / 2)
+        q = shapely.get_coordinates(line.interpolate(t_ if u[e] == k else line.length - t_))[0]
+        d = q - nodes[k]
+        return d / max(np.hypot(*d), 1e-12)
+
+    # the blocks, to know what a cut merges (union-find over faces)
+    faces, f_area, f_perimeter = planar_faces(lines)
+    parent = np.arange(len(faces))
+    f_tree = shapely.STRtree(faces)
+
+    def root(f: int) -> int:
+        while parent[f] != f:
+            parent[f] = parent[parent[f]]
+            f = parent[f]
+        return f
+
+    def sides(line):
+        """The faces left and right of a line's middle (-1: none)."""
+        mid = line.interpolate(0.5, normalized=True)
+        a_, b_ = shapely.get_coordinates(line.interpolate(
+            np.clip(np.array([0.5 * line.length - 0.5, 0.5 * line.length + 0.5]), 0,
+                    line.length)))
+        d = (b_ - a_) / max(np.hypot(*(b_ - a_)), 1e-12)
+        nrm = np.array([-d[1], d[0]])
+        c = shapely.get_coordinates(mid)[0]
+        out = []
+        for q in (c + 0.5 * nrm, c - 0.5 * nrm):
+            hit = f_tree.query(shapely.Point(q), predicate="within")
+            out.append(int(hit[0]) if len(hit) else -1)
+        return out, c, nrm
+
+    def open_candidates():
+        ts = np.flatnonzero(inside & (deg == 3))
+        es = np.flatnonzero(new & whole & (shapely.length(g.geometry) >= 2 * min_dangle))
+        ts = ts[rng.permutation(len(ts))]
+        return [("cut", int(x), max_block) for x in ts] + \
+            [("stub", int(x), None) for x in es[rng.permutation(len(es))]] + \
+            [("cut", int(x), np.inf) for x in ts]
+
+    def stub(e: int) -> bool:
+        line = lines[src[e]]
+        if line.length < 2 * min_dangle:
+            return False
+        (fl, fr), c, nrm = sides(line)
+        cand = [(f_area[root(f)], f, s) for f, s in ((fl, 1.0), (fr, -1.0)) if f >= 0]
+        if not cand:
+            return False
+        _, f, sgn = max(cand)
+        width = 2 * f_area[f] / max(f_perimeter[f], 1e-9)
+        others = current()
+        for length in (max(width, min_dangle), max(width / 2, min_dangle)):
+            street = shapely.LineString([c, c + sgn * length * nrm])
+            end = shapely.get_point(street, -1)
+            if not shapely.contains(faces[f], street.interpolate(length - 1e-3)):
+                continue
+            hit = others[shapely.intersects(others, street)]
+            if len(hit) > 1 or shapely.dwithin(others, end, CORRIDOR_HALF_WIDTH).any():
+                continue
+            near = others[shapely.dwithin(others, street, CORRIDOR_HALF_WIDTH)]
+            tail = substring(street, CORRIDOR_HALF_WIDTH, length)
+            if _doubling(np.array([tail]), _corridor(None, near)).any():
+                continue
+            stubs.append(street)
+            if counted(c)[0]:
+                state["nodes"] += 1                      # the T
+            if counted(shapely.get_coordinates(end))[0]:
+                state["dead"] += 1
+                state["nodes"] += 1
+            return True
+        return False
+
+    def is_bridge(e: int) -> bool:
+        keep = joins.copy()
+        keep[e] = False
+        k = len(nodes)
+        adj = coo_matrix((np.ones(keep.sum()), (u[keep], v[keep])), shape=(k, k))
+        _, label = connected_components(adj, directed=False)
+        return label[u[e]] != label[v[e]]
+
+    def open_(cand) -> bool:
+        kind, x, limit = cand
+        return cut(x, limit) if kind == "cut" else stub(x)
+
+    def cut(t_, limit) -> bool:
+        if deg[t_] != 3:
+            return False
+        es = np.unique(inc_edge[inc_node == t_])
+        es = es[joins[es]]
+        if len(es) != 3:
+            return False
+        dirs = np.array([leaving(int(e), t_) for e in es])
+        # the through pair is the most opposite pair; the stem is the edge left out of it
+        stem = int(es[int(np.argmin([dirs[1] @ dirs[2], dirs[0] @ dirs[2],
+                                     dirs[0] @ dirs[1]]))])
+        o = int(v[stem] if u[stem] == t_ else u[stem])
+        if not new[stem] or not whole[stem] or o == t_ or deg[o] < 3:
+            return False
+        line = lines[src[stem]]
+        length = line.length
+        keep_len = max(min_dangle, length / 2)
+        if length - keep_len < CORRIDOR_HALF_WIDTH:
+            return False
+        at_t = shapely.get_coordinates(shapely.get_point(line, 0))[0]
+        from_t = np.hypot(*(at_t - nodes[t_])) <= np.hypot(*(
+            shapely.get_coordinates(shapely.get_point(line, -1))[0] - nodes[t_]))
+        rest = substring(line, length - keep_len, length) if from_t else \
+            substring(line, 0, keep_len)
+        end = shapely.get_point(rest, 0 if from_t else -1)
+        others = current()
+        others = others[np.arange(len(others)) != src[stem]]
+        if shapely.dwithin(others, end, CORRIDOR_HALF_WIDTH).any() or is_bridge(stem):
+            return False
+        (fl, fr), _, _ = sides(g.geometry[stem])
+        if fl < 0 or fr < 0:
+            return False
+        fl, fr = root(fl), root(fr)
+        if fl != fr:
+            if f_area[fl] + f_area[fr] > limit:
+                return False
+            parent[fr] = fl
+            f_area[fl] += f_area[fr]
+            f_perimeter[fl] += f_perimeter[fr]
+        lines[src[stem]] = rest
+        joins[stem] = False
+        touch(t_, -1)
+        if counted(shapely.get_coordinates(end))[0]:
+            state["dead"] += 1
+            state["nodes"] += 1
+        return True
+
+    # into the invariants' band with half of it as margin: the streets are the example's,
+    # the steering a repair that changes as few as the rule allows
+    n_closed, n_opened = steer_share(share_now, share, close, close_candidates, open_,
+                                     open_candidates, tolerance=DEAD_END_TOLERANCE / 2)
+    if not n_closed and not n_opened:
+        return geometry, level, attrs, (0, 0)
+    groups = [(np.asarray(a, dtype=object), (name, "", -1, len(a), -1))
+              for a, name in ((links, "close"), (stubs, "cul-de-sac")) if a]
+    if groups:
+        return (*_add_streets(lines, level, attrs, [a for a, _ in groups],
+                              [b for _, b in groups], int(level.max()) + 1, 0.0),
+                (n_closed, n_opened))
+    merged, s = _renode(lines, level, attrs, -1, 0.0)
+    return merged, level[s], {k: a[s] for k, a in attrs.items()}, (n_closed, n_opened)
+
 # --------------------------------------------------------------------------- relief
 
 def _relief_for_face(face, dem: DemGrid, db: FragmentDatabase, row: int, path: np.ndarray,
@@ -908,6 +1274,7 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
                min_dangle: float = MIN_DANGLE, c: int = N_CANDIDATES,
                max_scale: float = MAX_SCALE,
                boundary=None, fill: bool = True, fill_quantile: float = FILL_QUANTILE,
+               dead_end_share: Optional[float] = None,
                progress: Optional[Progress] = None) -> SynthesisResult:
     """Synthesise a street network inside sketched arterials from fragment databases.
 
@@ -941,6 +1308,10 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
         ``max_level`` that stops the recursion early turns the fill off
     fill_quantile : float, quantile (%) of the example's block areas above which no face
         stays empty (the issue's rule: 90)
+    dead_end_share : float in [0, 1], optional, the example's dead-end share
+        (:func:`invariants.dead_end_share` on the example inside its area) to steer the
+        result's to; default the one the databases record (:func:`example_dead_end_share`),
+        no steering when none does
     progress : Progress, optional (per query fragment; raises Canceled)
 
     Returns
@@ -963,6 +1334,10 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
     ('fill_fragment', 'fill_scaled', 'fill_statistics', 'left_empty'). At the end, pieces
     of the network not connected to the arterials (streets of faces closed only by the
     boundary) are linked to them by the shortest street that crosses nothing ('link').
+    Last, the dead-end share, counted as :func:`invariants.check_network` counts it, is
+    steered to the example's (:func:`_steer_dead_ends`: dead ends closed onto the nearest
+    street while it is above, stems of T's cut short into cul-de-sacs while it is below;
+    ``stats['dead_ends']``).
 
     Raises
     ------
@@ -984,6 +1359,8 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
         raise InputError(f"gamma must lie in [0, 1], got {gamma}")
     if not max_scale >= 1:
         raise InputError(f"the maximum scale factor must be at least 1, got {max_scale}")
+    if dead_end_share is not None and not 0 <= dead_end_share <= 1:
+        raise InputError(f"the dead-end share must lie in [0, 1], got {dead_end_share}")
     if max_level is not None and (int(max_level) != max_level or max_level < 0):
         raise InputError(f"the maximum level must be a whole number >= 0, got {max_level}")
     if style_polygons is not None:
@@ -1070,7 +1447,9 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
         counts = dict(queries=len(faces), fragment=0, block=0, procedural=0, unsplit=0,
                       too_small=0, no_candidate=0, rejected=0)
         n_faces = len(faces)
+        tree = shapely.STRtree(geometry)
         for f, face in enumerate(faces):
+            avoid = _touching(face, tree, geometry)
             progress.step((lvl + f / n_faces) / max(deepest, 1) * 0.6)
             opts = sorted(options[f], key=lambda o: o[0])[:n_best]
             row = dict(query=query_id, level=lvl, database="", fragment_id=-1, cost=np.nan,
@@ -1098,7 +1477,7 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
                     break
                 pieces, reason = inserter.insert(face, ret.samples[j],
                                                  db.descriptors.samples[db_row], dtw,
-                                                 streets, on, ex_slivers)
+                                                 streets, on, ex_slivers, avoid)
                 if pieces is not None:
                     chosen = (o, dtw)
                     row.update(outcome="fragment")
@@ -1122,7 +1501,7 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
             elif opts and too_small == len(opts):
                 row.update(outcome="too_small")
             elif opts:
-                split = procedural_split(face, min_area, min_width)
+                split = procedural_split(face, min_area, min_width, avoid)
                 if len(split):
                     row.update(outcome="procedural")
                     new_geoms.append(split)
@@ -1177,6 +1556,23 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
     if n_links:
         progress.info(f"{n_links} street(s) added to link pieces of the network that "
                       "touched only the boundary to the arterials.")
+    if fill and max_level is None:
+        share = example_dead_end_share(databases) if dead_end_share is None else \
+            float(dead_end_share)
+        counted_in = target if target is not None else area
+        n_closed = n_opened = 0
+        for _ in range(3):   # again from the measured network where its count drifted
+            geometry, level, attrs, (closed, opened) = _steer_dead_ends(
+                geometry, level, attrs, share, counted_in, rng, min_dangle, max_block)
+            n_closed, n_opened = n_closed + closed, n_opened + opened
+            now = _invariants.dead_end_share(geometry, counted_in)
+            if not (closed or opened) or not np.isfinite(now) or \
+                    abs(now - share) <= share * DEAD_END_TOLERANCE / 2 + 1e-9:
+                break
+        stats["dead_ends"] = dict(example_share=share, share=now, closed=n_closed,
+                                  opened=n_opened)
+        progress.info(f"Dead-end share {now:.2f} (example {share:.2f}): {n_closed} dead "
+                      f"end(s) closed, {n_opened} T stem(s) cut into cul-de-sacs.")
     keep = shapely.length(geometry) > 1e-6
     geometry = geometry[keep]
     table = pd.DataFrame({"level": level[keep],

@@ -73,6 +73,7 @@ from scipy.spatial import cKDTree
 
 from ..core import coordinates
 from ..core.progress import InputError, Progress, ensure
+from ..network.dead_ends import steer_share
 from . import intersection_quadtree as iq
 
 __all__ = ["WalkSettings", "Synthesis", "StreetShapes", "street_shapes", "connect_points",
@@ -1004,50 +1005,51 @@ def connect_points(points: iq.PointSet, rng: np.random.Generator,
         k = int(counted.sum())
         return float((counted & (deg == 1)).sum() / k) if k else 0.0
 
-    n_closed = 0
-    if s.close_ends:
-        # streets that stopped short of what their point had in the example (deg 1 < cap):
-        # one more step to the nearest free point of any level, turn angle ignored, until
-        # the dead-end share is the example's
+    def close(v) -> bool:
+        """Streets that stopped short of what their point had in the example (deg 1 < cap):
+        one more step to the nearest free point of any level, turn angle ignored, else a T
+        onto the nearest street."""
+        if w.deg[v] != 1:
+            return False
+        was_end = w.cap[v] == 1
+        if was_end:  # the street may go on from here: one more connection on slot a
+            w.cap[v], w.cnt[v, 0] = 2, 1
+            slot = 0
+        else:
+            slot = int(np.argmax(w.cnt[v] == 1))
+        if w.cnt[v, slot] != 1:
+            return False
+        added = w.extend(v, slot, points.level[v, slot], relaxed="close", origin="close")
+        if not added:  # no free point in reach: a T onto the nearest street
+            reach = points.dist_mean[v, slot] + s.reach_sd * points.dist_sd[v, slot]
+            added = int(w._join_by_split(np.array([v]), None, reach, "close",
+                                         level=points.level[v, slot]) is not None)
+        if not added and was_end:
+            w.cap[v], w.cnt[v, 0] = 1, 2
+        return bool(added)
+
+    def stubs():
         # first the stubs, then (if the share is still above the example's) points that
         # were dead ends in the example too: copies near the edges of an example clipped to
         # a study area, whose clip ends are no dead ends of the town
-        stubs = np.concatenate([
+        return np.concatenate([
             rng.permutation(np.flatnonzero((w.deg[:n] == 1) & (w.cap[:n] > 1) & is_new)),
             rng.permutation(np.flatnonzero((w.deg[:n] == 1) & (w.cap[:n] == 1) & is_new))])
-        for v in stubs:
-            if share_now() <= target:
-                break
-            if w.deg[v] != 1:
-                continue
-            was_end = w.cap[v] == 1
-            if was_end:  # the street may go on from here: one more connection on slot a
-                w.cap[v], w.cnt[v, 0] = 2, 1
-                slot = 0
-            else:
-                slot = int(np.argmax(w.cnt[v] == 1))
-            if w.cnt[v, slot] != 1:
-                continue
-            added = w.extend(v, slot, points.level[v, slot], relaxed="close", origin="close")
-            if not added:  # no free point in reach: a T onto the nearest street
-                reach = points.dist_mean[v, slot] + s.reach_sd * points.dist_sd[v, slot]
-                added = int(w._join_by_split(np.array([v]), None, reach, "close",
-                                             level=points.level[v, slot]) is not None)
-            if not added and was_end:
-                w.cap[v], w.cnt[v, 0] = 1, 2
-            n_closed += int(added)
-    w.stats["n_closed"] = int(n_closed)
+
     # the other way: a dead-end point of the example is only ever a walk's last step, so
     # many stay unreached and the share falls below the example's; unreached dead-end
-    # points then get their street, one clear step onto the nearest street (a T), until
-    # the share is the example's
-    n_opened = 0
-    if s.close_ends:
-        for v in rng.permutation(np.flatnonzero((w.deg[:n] == 0) & (w.cap[:n] == 1) & is_new)):
-            if share_now() >= target:
-                break
-            reach = points.dist_mean[v, 0] + s.reach_sd * points.dist_sd[v, 0]
-            n_opened += w._join_by_split(np.array([v]), None, reach, "dead_end") is not None
+    # points then get their street, one clear step onto the nearest street (a T)
+    def open_(v) -> bool:
+        reach = points.dist_mean[v, 0] + s.reach_sd * points.dist_sd[v, 0]
+        return w._join_by_split(np.array([v]), None, reach, "dead_end") is not None
+
+    def unreached():
+        return rng.permutation(np.flatnonzero((w.deg[:n] == 0) & (w.cap[:n] == 1) & is_new))
+
+    # the share is steered to the example's (network.dead_ends: one home for the rule)
+    n_closed, n_opened = steer_share(share_now, target, close, stubs, open_, unreached) \
+        if s.close_ends else (0, 0)
+    w.stats["n_closed"] = int(n_closed)
     w.stats["n_dead_ends_opened"] = int(n_opened)
     progress.step(1.0)
     alive = np.asarray(w.edge_alive, dtype=bool)

@@ -180,14 +180,18 @@ class Runner:
             return database.load_fragment_database(path)
 
         db = self.cached("fragment_db", build)
+        # the example's dead-end share as the invariants measure it: the database knows only
+        # the dead ends inside closed faces (Bubenec's three fragments know none)
         res = ff.synthesize(self.target.given, [db], seed=seed, boundary=self.target.area,
-                            fill_quantile=self.fill_quantile)
+                            fill_quantile=self.fill_quantile,
+                            dead_end_share=self.example.stats["degree1_share"])
         fill = res.stats.get("fill", {})
         self.extra = {"outcomes": {k: int(v) for k, v in
                                    res.queries.outcome.value_counts().items()},
                       "left_empty": int(fill.get("left_empty", 0)),
                       "max_block_m2": float(res.stats.get("max_block_m2", np.nan)),
-                      "links": int(res.stats.get("links", 0))}
+                      "links": int(res.stats.get("links", 0)),
+                      "dead_ends": res.stats.get("dead_ends", {})}
         return res.geometry
 
     def random_walk(self, seed: int) -> np.ndarray:
