@@ -13,7 +13,7 @@ from qgis.core import (
     QgsProcessingParameterRasterLayer,
 )
 
-from ..plugin.network import blocks, fragments
+from ..plugin.network import blocks, fragments, invariants
 from ..plugin.qgis_glue import qgis_io
 from ..plugin.retrieval import database
 from .common import AlgorithmBase
@@ -125,12 +125,19 @@ class BuildFragmentDatabase(AlgorithmBase):
         if counts["n_unassigned_streets"]:
             feedback.pushInfo(f"{counts['n_unassigned_streets']} streets of level >= 1 lie in "
                               "no closed fragment (open edges of the network) and are not stored.")
+        # the fragments hold no dead end outside a closed face: the synthesis steers its
+        # share to the example's, recorded here
+        share = invariants.dead_end_share_of_extract(lines)
+        if np.isfinite(share):
+            feedback.pushInfo(f"Dead-end share of the example: {share:.2f} (street ends on "
+                              "the convex hull of the lines are taken as an extract's edge).")
         source = f"{label} (field '{level_field}')" + (
             f", DEM '{dem_layer.name()}'" if dem_layer is not None else "")
         qgis_io.run_engine(label, database.write_fragment_database, output, frags,
                            qgis_io.crs_text(frame.crs), source=source, elevation=dem,
                            extra={"min_area_m2": min_area, "min_width_m": min_width,
-                                  "relief_cell_m": cell if dem is not None else None},
+                                  "relief_cell_m": cell if dem is not None else None,
+                                  **({"dead_end_share": share} if np.isfinite(share) else {})},
                            progress=qgis_io.progress_for(feedback, 60, 100))
         feedback.pushInfo(f"Fragment database written: {output} ({len(frags)} fragments).")
         return {self.OUTPUT: output, self.N_FRAGMENTS: len(frags)}

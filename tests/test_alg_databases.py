@@ -45,6 +45,10 @@ def test_helsinki_fragment_database(qgis_processing, helsinki_roads, tmp_path):
     assert (d.streets.level.to_numpy() == d.table.set_index("fragment_id").level.loc[
         d.streets.fragment_id].to_numpy() + 1).all()
     assert d.relief is None and d.descriptors.slopes is None
+    # the example's dead-end share, for the synthesis to steer to: Helsinki's, its extract's
+    # cut ends on the hull not counted (0.18; counted, the share would be 0.28)
+    assert 0.12 < float(d.metadata["dead_end_share"]) < 0.24
+    assert any(m.startswith("Dead-end share of the example") for m in log.messages)
     # a database fragment, moved, is retrieved as itself
     from urban_synthesis.plugin.retrieval import shape_context as sc
 

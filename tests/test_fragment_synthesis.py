@@ -604,10 +604,10 @@ def test_dead_end_share_is_steered_both_ways(grid_db):
 
 def test_helsinki_from_bubenec_keeps_every_invariant():
     """The fidelity benchmark's Helsinki run (seed 0): Helsinki's level-0 roads and
-    envelope, Bubenec's fragments, Bubenec's dead-end share (0.44). It had nine streets
-    along given roads (fragments and statistical splits beside arterials that end inside a
-    face) and a dead-end share of 0.02 (every street a cut from outline to outline); now
-    no invariant is violated."""
+    envelope, Bubenec's fragments, Bubenec's dead-end share (0.07 once its extract's cut
+    ends are not counted; 0.44 before). It had nine streets along given roads (fragments and
+    statistical splits beside arterials that end inside a face) and a dead-end share of 0.02
+    (every street a cut from outline to outline); now no invariant is violated."""
     from towns import bubenec_town, helsinki_town
     from urban_synthesis.plugin.measure import fidelity
     from urban_synthesis.plugin.network import invariants
@@ -624,4 +624,4 @@ def test_helsinki_from_bubenec_keeps_every_invariant():
     check = invariants.check_network(new, target.given, target.given_class, target.area,
                                      example_dead_end_share=share)
     assert check.ok, check.summary()
-    assert res.stats["dead_ends"]["opened"] > 100
+    assert res.stats["dead_ends"]["opened"] > 0      # the fill alone makes almost none

@@ -66,8 +66,8 @@ __all__ = [
     "JUNCTION_TOLERANCE", "CORRIDOR_HALF_WIDTH", "MIN_DUPLICATE_LENGTH", "JUNCTION_RADIUS",
     "DEAD_END_TOLERANCE", "EDGE_DISTANCE", "SNAP_TOLERANCE", "UNDERSHOOT_DISTANCE",
     "CONTROLLED_ACCESS",
-    "CHECKS", "Contacts", "NetworkCheck", "line_contacts", "dead_end_share", "new_streets",
-    "check_network",
+    "CHECKS", "Contacts", "NetworkCheck", "line_contacts", "dead_end_share",
+    "dead_end_share_of_extract", "new_streets", "check_network",
 ]
 
 #: Half-width (m) of the corridor of a given road in which no synthesised street may run.
@@ -269,6 +269,24 @@ def dead_end_share(lines: Sequence, area=None, edge_distance: float = EDGE_DISTA
             count &= ~shapely.dwithin(shapely.boundary(area), pts, edge_distance)
     n = int(count.sum())
     return float(((deg == 1) & count).sum() / n) if n else float("nan")
+
+
+def dead_end_share_of_extract(lines: Sequence) -> float:
+    """:func:`dead_end_share` of an example known only by its lines, measured inside their
+    convex hull: an example that is an extract has its streets cut at the extract's edge,
+    and those cut ends, on the hull, are no dead ends (Bubeneč: all 11 of its street ends).
+
+    A crossing cut out of a larger network, with a cul-de-sac: its four cut ends do not count.
+
+    >>> lines = [shapely.LineString([(0, 50), (100, 50)]), shapely.LineString([(50, 0), (50, 100)]),
+    ...          shapely.LineString([(75, 50), (75, 70)])]
+    >>> round(dead_end_share_of_extract(lines), 3), round(dead_end_share(lines), 3)
+    (0.333, 0.714)
+    """
+    lines, _ = _lines(lines, "roads")
+    if not len(lines):
+        return float("nan")
+    return dead_end_share(lines, shapely.convex_hull(shapely.multilinestrings(list(lines))))
 
 
 def new_streets(lines: Sequence, given: Sequence, tolerance: float = 0.01) -> np.ndarray:

@@ -938,7 +938,7 @@ def example_dead_end_share(databases: Sequence[FragmentDatabase]) -> float:
     their mean), NaN when none records it.
 
     The fragments cannot tell it: a dead-end street outside every closed face is in no
-    fragment (Bubenec's three fragments hold none of its dead ends, whose share is 0.44).
+    fragment (Bubeneč's three fragments hold none of its dead ends).
     """
     values = [float(db.metadata["dead_end_share"]) for db in databases
               if "dead_end_share" in (getattr(db, "metadata", None) or {})]
