@@ -18,8 +18,8 @@ from typing import Sequence
 import numpy as np
 import shapely
 
-__all__ = ["group_starts", "group_ends", "unit", "substrings", "largest_polygons",
-           "minimum_rectangles", "minimum_rectangle_corners"]
+__all__ = ["group_starts", "group_ends", "unit", "substrings", "pinned_ends",
+           "largest_polygons", "minimum_rectangles", "minimum_rectangle_corners"]
 
 
 # --------------------------------------------------------------------------- arrays
@@ -88,6 +88,23 @@ def substrings(lines: Sequence, a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- polygons
+
+def pinned_ends(lines: Sequence, start: np.ndarray, end: np.ndarray) -> np.ndarray:
+    """The lines with their first and last vertex set exactly to ``start`` and ``end``
+    ((n, 2) or one (2,) point): a line meets its node at one shared point only if its end is
+    the node's coordinate to the last bit (round-off of a transform, a rounding to the
+    millimetre or a merged node leave it a hair off).
+
+    >>> pinned_ends([shapely.LineString([(0, 0), (1, 1), (2, 0)])], [[0, 0.001]], [[2, 0]])[0]
+    <LINESTRING (0 0.001, 1 1, 2 0)>
+    """
+    coords, index = shapely.get_coordinates(lines, return_index=True)
+    first = np.r_[True, index[1:] != index[:-1]]
+    last = np.r_[index[1:] != index[:-1], True]
+    coords[first] = start
+    coords[last] = end
+    return shapely.linestrings(coords, indices=index)
+
 
 def largest_polygons(geoms: Sequence) -> np.ndarray:
     """Valid single polygons: the largest polygon part of each geometry after

@@ -29,6 +29,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from ..core.geometry import pinned_ends
 from ..core.progress import InputError, Progress, ensure
 
 __all__ = [
@@ -438,13 +439,8 @@ def graph_from_lines(lines: np.ndarray, road_class, name, z_layer, source,
             inv = label[inv]
             nodes = centroid
             # move the line ends onto the merged node
-            coords, idx = shapely.get_coordinates(lines, return_index=True)
-            first = np.r_[True, idx[1:] != idx[:-1]]
-            last = np.r_[idx[1:] != idx[:-1], True]
             m = len(lines)
-            coords[first] = nodes[inv[:m]]
-            coords[last] = nodes[inv[m:]]
-            lines = shapely.linestrings(coords, indices=idx)
+            lines = pinned_ends(lines, nodes[inv[:m]], nodes[inv[m:]])
     m = len(lines)
     u, v = inv[:m].astype(np.int64), inv[m:].astype(np.int64)
     # zero-length loops left by snapping
@@ -531,12 +527,7 @@ def merge_degree2_chains(g: RoadGraph) -> RoadGraph:
     # line_merge joins ends that are equal: put every end exactly on its node (ends that are
     # one node to the millimetre may differ below it, and a chain that failed to merge kept
     # only its first piece: the other pieces vanished and their node became a dead end)
-    coords, idx = shapely.get_coordinates(g.geometry, return_index=True)
-    first = np.r_[True, idx[1:] != idx[:-1]]
-    last = np.r_[idx[1:] != idx[:-1], True]
-    coords[first] = g.nodes[g.u]
-    coords[last] = g.nodes[g.v]
-    exact = shapely.linestrings(coords, indices=idx)
+    exact = pinned_ends(g.geometry, g.nodes[g.u], g.nodes[g.v])
     merged = shapely.line_merge(shapely.multilinestrings(exact[by_comp], indices=comp[by_comp]))
     # representative (longest) member of each component carries the attributes
     order = np.lexsort((-lengths, comp))

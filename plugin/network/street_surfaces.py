@@ -37,7 +37,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from ..core import coordinates
-from ..core.geometry import substrings, unit
+from ..core.geometry import pinned_ends, substrings, unit
 from ..core.progress import InputError, Progress, ensure
 from .street_graph import RoadGraph, clean_network
 
@@ -187,13 +187,7 @@ def merge_junctions(graph: RoadGraph, widths: np.ndarray, pairs: np.ndarray):
     length = graph.length
     absorbed = (u == v) & (graph.u != graph.v) & (length <= 2 * span[u] + widths)
     keep = ~absorbed
-    lines = graph.geometry[keep]
-    coords, idx = shapely.get_coordinates(lines, return_index=True)
-    first = np.r_[True, idx[1:] != idx[:-1]]
-    last = np.r_[idx[1:] != idx[:-1], True]
-    coords[first] = centre[u[keep]]
-    coords[last] = centre[v[keep]]
-    lines = shapely.linestrings(coords, indices=idx)
+    lines = pinned_ends(graph.geometry[keep], centre[u[keep]], centre[v[keep]])
     used, inv = np.unique(np.concatenate([u[keep], v[keep]]), return_inverse=True)
     m = int(keep.sum())
     g = RoadGraph(lines, inv[:m], inv[m:], graph.road_class[keep], graph.name[keep],
@@ -417,12 +411,7 @@ def _snap_ends(graph: RoadGraph) -> RoadGraph:
     """Put every line's end exactly on its node: the cleaner's node ids are rounded to the
     millimetre, and half a millimetre between a street's end and its junction centre is
     enough to twist corner points against cut points."""
-    coords, idx = shapely.get_coordinates(graph.geometry, return_index=True)
-    first = np.r_[True, idx[1:] != idx[:-1]]
-    last = np.r_[idx[1:] != idx[:-1], True]
-    coords[first] = graph.nodes[graph.u]
-    coords[last] = graph.nodes[graph.v]
-    lines = shapely.linestrings(coords, indices=idx)
+    lines = pinned_ends(graph.geometry, graph.nodes[graph.u], graph.nodes[graph.v])
     return RoadGraph(lines, graph.u, graph.v, graph.road_class, graph.name, graph.z_layer,
                      graph.nodes, graph.source)
 

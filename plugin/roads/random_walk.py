@@ -72,6 +72,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from ..core import coordinates
+from ..core.geometry import pinned_ends
 from ..core.progress import InputError, Progress, ensure
 from ..network.dead_ends import steer_share
 from . import intersection_quadtree as iq
@@ -1160,7 +1161,7 @@ def _shape_lines(shapes: StreetShapes, pick, a_xy, b_xy, mirror):
     def onto(xy, index):
         return a_xy[index] + xy[:, :1] * chord[index] + xy[:, 1:2] * normal[index]
 
-    return _pinned(_map_vertices(base, onto), a_xy, b_xy)
+    return pinned_ends(_map_vertices(base, onto), a_xy, b_xy)
 
 
 def _map_vertices(lines, fn):
@@ -1172,17 +1173,6 @@ def _map_vertices(lines, fn):
     if not len(coords):
         return np.asarray(lines, dtype=object).copy()
     return shapely.set_coordinates(np.asarray(lines, dtype=object).copy(), fn(coords, index))
-
-
-def _pinned(lines, a_xy, b_xy):
-    """The lines with their first and last vertices set exactly to a and b (a transform's
-    round-off would leave them a hair off the points they join)."""
-    coords, index = shapely.get_coordinates(lines, return_index=True)
-    first = np.r_[True, index[1:] != index[:-1]]
-    last = np.r_[index[1:] != index[:-1], True]
-    coords[first] = a_xy
-    coords[last] = b_xy
-    return shapely.linestrings(coords, indices=index)
 
 
 def _bend(a, b, tortuosity, max_sagitta, sign, n=9):
@@ -1383,7 +1373,7 @@ def _flatten(lines, a_xy, b_xy, scale):
         foot = a_xy[index] + t[:, None] * chord[index]
         return foot + scale * (xy - foot)
 
-    return _pinned(_map_vertices(lines, towards_chord), a_xy, b_xy)
+    return pinned_ends(_map_vertices(lines, towards_chord), a_xy, b_xy)
 
 
 # --------------------------------------------------------------------------- synthesis
@@ -1505,12 +1495,9 @@ def _existing_state(lines, area, offset: int, seam_distance: float, example=None
                 slot_dir[i, 0] = -v
     # the lines' end vertices exactly on their (millimetre-rounded) nodes, so that new
     # streets meet them at one shared point
+    graph.geometry = pinned_ends(graph.geometry, graph.nodes[graph.u], graph.nodes[graph.v])
     coords, idx = shapely.get_coordinates(graph.geometry, return_index=True)
     first = np.r_[True, idx[1:] != idx[:-1]]
-    last = np.r_[idx[1:] != idx[:-1], True]
-    coords[first] = graph.nodes[graph.u]
-    coords[last] = graph.nodes[graph.v]
-    graph.geometry = shapely.linestrings(coords, indices=idx)
     # junction slots along the given roads: split the segments there
     s_xy, s_donor, s_edge, s_dist = (np.zeros((0, 2)), np.zeros(0, np.int64),
                                      np.zeros(0, np.int64), np.zeros(0))

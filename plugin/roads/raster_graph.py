@@ -38,6 +38,7 @@ from typing import Optional, Sequence, Tuple
 import numpy as np
 import shapely
 
+from ..core.geometry import pinned_ends
 from ..core.progress import InputError, Progress, ensure
 
 __all__ = ["rasterize_lines", "raster_to_graph", "RasterGraph", "road_mask", "skeleton", "pixel_graph",
@@ -434,12 +435,7 @@ def merge_junction_clusters(graph, distance: float):
     keep |= (graph.u == graph.v) & (size[label[graph.u]] == 1)  # loops of single nodes stay
     geoms = graph.geometry[keep]
     u, v = graph.u[keep], graph.v[keep]
-    coords, index = shapely.get_coordinates(geoms, return_index=True)
-    first = np.r_[True, index[1:] != index[:-1]]
-    last = np.r_[index[1:] != index[:-1], True]
-    coords[first] = new_xy[u]
-    coords[last] = new_xy[v]
-    lines = shapely.linestrings(coords, indices=index)
+    lines = pinned_ends(geoms, new_xy[u], new_xy[v])
     lines = lines[shapely.length(lines) > 0]
     merged = int(n - len(np.unique(label[np.r_[graph.u, graph.v]]))) - \
         int(n - len(np.unique(np.r_[graph.u, graph.v])))
