@@ -78,7 +78,10 @@ class SynthesizeRoadsFromFragments(AlgorithmBase):
             "the relief of the inserted fragments merged into the DEM by a Poisson solve "
             "(GeoTIFF in the metric working CRS).\n\n"
             "Output: one planar road network with level (0 = arterial), source_fragment "
-            "('<database>:<fragment id>', 'arterial' or 'procedural') and database."
+            "('<database>:<fragment id>', 'arterial', 'procedural', 'statistics' for a split "
+            "from the example's block sizes, 'link' joining a piece to the arterials, 'close' "
+            "and 'cul-de-sac' where the dead-end share was steered to the example's, recorded "
+            "in the database) and database."
         )
 
     def initAlgorithm(self, config=None):  # noqa: N802

@@ -79,8 +79,8 @@ def test_helsinki_synthesis_through_processing(qgis_processing, helsinki):
     assert set(level) >= {0, 1}
     src = np.array(attrs["source_fragment"], dtype=object)
     assert set(src[level == 0]) == {"arterial"}
-    assert all(s.startswith("helsinki_fragments:") or s in ("procedural", "statistics", "link")
-               for s in src[level > 0])
+    made = ("procedural", "statistics", "link", "close", "cul-de-sac")
+    assert all(s.startswith("helsinki_fragments:") or s in made for s in src[level > 0])
     assert any(m.startswith("Level 0:") for m in log.messages)
     assert log.progress and max(log.progress) == pytest.approx(100)
     # planar in a metric CRS

@@ -1337,8 +1337,8 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
     boundary) are linked to them by the shortest street that crosses nothing ('link').
     Last, the dead-end share, counted as :func:`invariants.check_network` counts it, is
     steered to the example's (:func:`_steer_dead_ends`: dead ends closed onto the nearest
-    street while it is above, stems of T's cut short into cul-de-sacs while it is below;
-    ``stats['dead_ends']``).
+    street while it is above ('close'), cul-de-sacs added into blocks ('cul-de-sac') and
+    stems of T's cut short while it is below; ``stats['dead_ends']``).
 
     Raises
     ------
