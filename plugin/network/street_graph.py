@@ -524,10 +524,15 @@ def merge_degree2_chains(g: RoadGraph) -> RoadGraph:
         return g
     lengths = g.length
     by_comp = np.argsort(comp, kind="stable")
-    # line_merge joins ends that are equal: put every end exactly on its node (ends that are
-    # one node to the millimetre may differ below it, and a chain that failed to merge kept
-    # only its first piece: the other pieces vanished and their node became a dead end)
-    exact = pinned_ends(g.geometry, g.nodes[g.u], g.nodes[g.v])
+    # line_merge joins ends that are equal: the ends at one node (one to the millimetre) may
+    # differ below it, and a chain that failed to merge kept only its first piece (the
+    # others vanished, their node a false dead end). Every end goes onto one of its node's
+    # own end points, not the node's millimetre-rounded coordinate: ends that were equal
+    # stay exactly where they were (the plain noding count is unchanged)
+    at = np.empty_like(g.nodes)
+    at[g.v] = shapely.get_coordinates(shapely.get_point(g.geometry, -1))
+    at[g.u] = shapely.get_coordinates(shapely.get_point(g.geometry, 0))
+    exact = pinned_ends(g.geometry, at[g.u], at[g.v])
     merged = shapely.line_merge(shapely.multilinestrings(exact[by_comp], indices=comp[by_comp]))
     # representative (longest) member of each component carries the attributes
     order = np.lexsort((-lengths, comp))
