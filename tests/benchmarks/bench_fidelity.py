@@ -73,15 +73,19 @@ METHOD_ORDER = ("fragments", "random_walk", "streetgan", "growroads", "splitdoma
 BASELINES = ("grid", "chords", "delaunay")
 
 
-def gan_trained_on(model: str) -> set:
-    """The towns in a StreetGAN model's training data (a shipped name or an .onnx path),
-    read from its model card (``training_data``: one network, or ``networks`` such as
-    'li_vaduz' or 'helsinki')."""
+def _gan_card(model: str) -> dict:
+    """A StreetGAN model's card (a shipped name or an .onnx path with its card beside it)."""
     from urban_synthesis.plugin.roads import streetgan
 
     card = Path(model).with_suffix(".json") if str(model).endswith(".onnx") \
         else streetgan.MODELS_DIR / f"{model}.json"
-    data = json.loads(card.read_text())["training_data"]
+    return json.loads(card.read_text())
+
+
+def gan_trained_on(model: str) -> set:
+    """The towns in a StreetGAN model's training data, read from its model card
+    (``training_data``: one network, or ``networks`` such as 'li_vaduz' or 'helsinki')."""
+    data = _gan_card(model)["training_data"]
     names = [n["name"] for n in data.get("networks", [])] or [data["name"]]
     return {n.removeprefix("li_").capitalize() for n in names}
 
@@ -89,12 +93,7 @@ def gan_trained_on(model: str) -> set:
 def gan_tuned_on(model: str) -> set:
     """The towns a StreetGAN model's read-back was chosen on (its card's
     ``postprocess.morphology_chosen_on``): not held out for that model."""
-    from urban_synthesis.plugin.roads import streetgan
-
-    card = Path(model).with_suffix(".json") if str(model).endswith(".onnx") \
-        else streetgan.MODELS_DIR / f"{model}.json"
-    return set(json.loads(card.read_text()).get("postprocess", {}).get(
-        "morphology_chosen_on", []))
+    return set(_gan_card(model).get("postprocess", {}).get("morphology_chosen_on", []))
 
 
 #: ``--gan-model``: a candidate generator (.onnx with its card) judged instead of the shipped
