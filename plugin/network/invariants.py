@@ -66,7 +66,7 @@ __all__ = [
     "JUNCTION_TOLERANCE", "CORRIDOR_HALF_WIDTH", "MIN_DUPLICATE_LENGTH", "JUNCTION_RADIUS",
     "DEAD_END_TOLERANCE", "EDGE_DISTANCE", "SNAP_TOLERANCE", "UNDERSHOOT_DISTANCE",
     "CONTROLLED_ACCESS",
-    "CHECKS", "Contacts", "NetworkCheck", "line_contacts", "dead_end_share",
+    "CHECKS", "Contacts", "NetworkCheck", "line_contacts", "dead_end_share", "counted_nodes",
     "dead_end_share_of_extract", "new_streets", "check_network",
 ]
 
@@ -263,12 +263,20 @@ def dead_end_share(lines: Sequence, area=None, edge_distance: float = EDGE_DISTA
     deg = g.degree
     count = deg != 2
     if area is not None:
-        pts = shapely.points(g.nodes)
-        count &= shapely.dwithin(area, pts, 1e-3)      # on the boundary counts as inside
-        if edge_distance > 0:
-            count &= ~shapely.dwithin(shapely.boundary(area), pts, edge_distance)
+        count &= counted_nodes(g.nodes, area, edge_distance)
     n = int(count.sum())
     return float(((deg == 1) & count).sum() / n) if n else float("nan")
+
+
+def counted_nodes(xy: np.ndarray, area, edge_distance: float = EDGE_DISTANCE) -> np.ndarray:
+    """Which nodes (n, 2) the dead-end share counts: inside ``area`` (on its boundary, within
+    the millimetre nodes are rounded to, counts as inside) and at least ``edge_distance`` m
+    from its boundary (the ends of a network clipped to the area are not dead ends)."""
+    pts = shapely.points(np.atleast_2d(xy))
+    inside = shapely.dwithin(area, pts, 1e-3)
+    if edge_distance > 0:
+        inside &= ~shapely.dwithin(shapely.boundary(area), pts, edge_distance)
+    return inside
 
 
 def dead_end_share_of_extract(lines: Sequence) -> float:

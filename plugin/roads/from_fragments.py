@@ -69,7 +69,6 @@ from ..network import invariants as _invariants
 from ..network.invariants import (
     CORRIDOR_HALF_WIDTH,
     DEAD_END_TOLERANCE,
-    EDGE_DISTANCE,
     MIN_DUPLICATE_LENGTH,
     SNAP_TOLERANCE,
 )
@@ -988,13 +987,10 @@ def _steer_dead_ends(geometry, level, attrs, share: float, area, rng, min_dangle
     # an edge stands for its line where it is the whole of it (ends moved by the snapping)
     whole = np.abs(shapely.length(lines[src]) - shapely.length(g.geometry)) < 2 * SNAP_TOLERANCE
     new = (level[src] > 0) & ~np.isin(attrs["source_fragment"][src], ("arterial", "boundary"))
-    outline = shapely.boundary(area)
     shapely.prepare(area)
-    shapely.prepare(outline)
 
     def counted(xy) -> np.ndarray:
-        pts = shapely.points(np.atleast_2d(xy))
-        return shapely.dwithin(area, pts, 1e-3) & ~shapely.dwithin(outline, pts, EDGE_DISTANCE)
+        return _invariants.counted_nodes(xy, area)
 
     inside = counted(nodes)
     state = {"dead": int((inside & (deg == 1)).sum()),
