@@ -13,8 +13,8 @@ for a saturated point (its example's number of connections, at most 4), for a st
 would cross or touch an existing segment (a grid of cells over the segments, which grows
 with the walk, and an exact test of the segments in the step's cells) or pass over another
 point (no new intersections), and for a step closer than a minimum angle to a street
-already at either end. A walk ends where every p is zero; new walks start from free street slots until none
-can start.
+already at either end. A walk ends where every p is zero; new walks start from free street
+slots until none can start.
 
 The paper's REPEAT ("until no new street segments are added") is completed so that the
 result is one network (:func:`connect_points`):
