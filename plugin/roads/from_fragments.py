@@ -267,9 +267,15 @@ def _line_ends(lines: np.ndarray):
     return coords, idx, np.flatnonzero(first), np.flatnonzero(last)
 
 
+def _is_sliver(area: np.ndarray, perimeter: np.ndarray, min_area: float = MIN_BLOCK_AREA,
+               min_width: float = MIN_BLOCK_WIDTH) -> np.ndarray:
+    """The blocks module's sliver rule (:func:`block_faces`) on measured faces."""
+    return (area < min_area) | (2 * area < min_width * perimeter)
+
+
 def _sliver_count(faces: np.ndarray, area: np.ndarray, perimeter: np.ndarray,
                   min_area: float, min_width: float) -> int:
-    return int(((area < min_area) | (2 * area < min_width * perimeter)).sum())
+    return int(_is_sliver(area, perimeter, min_area, min_width).sum())
 
 
 def _sub_faces(polygon, streets: np.ndarray):
@@ -429,16 +435,26 @@ def example_blocks(databases: Sequence[FragmentDatabase]) -> pd.DataFrame:
 
     A block is a fragment that no street of the next level splits (``is_block``); the same
     face is a fragment of every deeper level, so faces are counted once (same area and
-    perimeter). The sides are those of the minimum rotated rectangle, recovered from
-    compactness (area / rectangle area) and aspect ratio (short / long side).
+    perimeter). The deepest level's streets split their fragments into blocks that are no
+    fragment of any level (there is no level below to hold them): those are the faces of
+    each such fragment's outline and streets, slivers dropped as in :func:`block_faces`
+    (a database of three levels knew one block of a street network with seven before).
+    The sides are those of the minimum rotated rectangle, recovered from compactness
+    (area / rectangle area) and aspect ratio (short / long side).
     """
     frames = []
     for db in databases:
         t = db.table
         if "is_block" not in t:
             continue
-        b = t[t["is_block"].astype(bool)][["area_m2", "perimeter_m", "compactness",
-                                            "aspect_ratio"]]
+        is_block = t["is_block"].to_numpy().astype(bool)
+        b = t[is_block][["area_m2", "perimeter_m", "compactness", "aspect_ratio"]]
+        deepest = np.flatnonzero(~is_block & (t["level"].to_numpy() == t["level"].max()))
+        faces = [_sub_faces(db.geometry[row], _street_lines(db, row))[0] for row in deepest]
+        if faces:
+            faces = np.concatenate(faces)
+            keep = ~_is_sliver(shapely.area(faces), shapely.length(faces))
+            b = pd.concat([b, shape_metrics(faces[keep])[list(b.columns)]], ignore_index=True)
         frames.append(b.round({"area_m2": 1, "perimeter_m": 1}).drop_duplicates(
             ["area_m2", "perimeter_m"]))
     if not frames:
@@ -448,6 +464,13 @@ def example_blocks(databases: Sequence[FragmentDatabase]) -> pd.DataFrame:
     long = np.sqrt(rect / b["aspect_ratio"].clip(lower=1e-6))
     return pd.DataFrame({"area_m2": b["area_m2"].to_numpy(), "long_m": long.to_numpy(),
                          "short_m": (long * b["aspect_ratio"]).to_numpy()})
+
+
+def _street_lines(db: FragmentDatabase, row: int) -> np.ndarray:
+    """A fragment's streets as single lines."""
+    streets = db.streets_of(int(db.ids[row]))
+    streets = shapely.get_parts(streets) if len(streets) else np.empty(0, dtype=object)
+    return streets[shapely.get_type_id(streets) == 1] if len(streets) else streets
 
 
 def close_sketch(arterials: Sequence, boundary) -> tuple:
@@ -556,10 +579,7 @@ class _Inserter:
         """Streets of a fragment, which of their ends lie on its boundary, its sliver count."""
         key = (id(db), row)
         if key not in self._example_ends:
-            fid = int(db.ids[row])
-            streets = db.streets_of(fid)
-            streets = shapely.get_parts(streets) if len(streets) else streets
-            streets = streets[shapely.get_type_id(streets) == 1] if len(streets) else streets
+            streets = _street_lines(db, row)
             if len(streets):
                 coords, _, first, last = _line_ends(streets)
                 ring = shapely.get_exterior_ring(db.geometry[row])
@@ -798,8 +818,11 @@ def _fill_stage(geometry, level, attrs, databases, names, inserter, rng, max_blo
             avoid = _touching(face, tree, geometry)
             progress.step((rnd + j / len(big)) / MAX_FILL_ROUNDS)
             opts = sorted(options[j], key=lambda o: o[0])
-            at_scale = [o for o in opts if 1 / max_scale ** 2 <= o[5] <= max_scale ** 2]
-            # larger than the query: its streets would be shrunk into it; smaller: scaled up
+            # the fill never shrinks a fragment into a face: its blocks would come out smaller
+            # than the example's (shrunk by up to MAX_SCALE, a grid's 80 m blocks became 40 m
+            # ones in faces a little over the p90 block area); a fragment smaller than the
+            # face is stretched, at most MAX_SCALE times, then scaled up at any scale
+            at_scale = [o for o in opts if 1 <= o[5] <= max_scale ** 2]
             scaled = [o for o in opts if o[5] > max_scale ** 2]
             row = dict(query=query_id, level=next_level, database="", fragment_id=-1,
                        cost=np.nan, outcome="left_empty", area_m2=float(face.area), n_rejected=0)
@@ -1323,9 +1346,11 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
     is no larger than the example's p90 block area
     (:func:`example_blocks`; ``fill_quantile`` chooses another quantile). Larger faces
     are filled, round after round, (1) with a
-    fragment of any level that holds streets and fits within ``max_scale``; else (2) with
-    the best-matching such fragment at whatever scale, which splits the face along the
-    fragment's streets (its pieces are filled in the next rounds); else (3) by a
+    fragment of any level that holds streets, no larger than the face (a fragment shrunk
+    into it would leave blocks smaller than the example's) and within ``max_scale`` of it;
+    else (2) with the best-matching smaller such fragment at whatever scale, which splits
+    the face along the fragment's streets (its pieces are filled in the next rounds);
+    else (3) by a
     statistics-driven split (:func:`statistical_split`, a street cutting off a piece of the
     example's block dimensions). ``queries.outcome`` says which way each face went
     ('fill_fragment', 'fill_scaled', 'fill_statistics', 'left_empty'). At the end, pieces
