@@ -16,7 +16,7 @@ For each target town:
   primary/secondary where present) clipped to the boundary.
 - **example**: the drivable streets of the other municipalities, each clipped to its own
   envelope (for Helsinki: Bubeneč and back). Never the target's own streets.
-- **methods** (3 seeds each; the references 1 unless ``--reference-seeds``): fragments
+- **methods** (5 seeds each; the references 1 unless ``--reference-seeds``): fragments
   (database built from the example), random walk
   (intersection points of the example, expanding the given roads), StreetGAN (the shipped
   Helsinki generator), and the non-example references growroads and splitdomain (without
@@ -418,7 +418,7 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="three towns, one seed")
     ap.add_argument("--towns", default="", help="comma-separated target names")
     ap.add_argument("--methods", default=",".join(METHOD_ORDER))
-    ap.add_argument("--seeds", type=int, default=3)
+    ap.add_argument("--seeds", type=int, default=5)
     ap.add_argument("--reference-seeds", type=int, default=1,
                     help="seeds of the non-example references growroads and splitdomain "
                          "(splitdomain takes ~40 s / km² on 2 cores)")
