@@ -75,7 +75,11 @@ class GrowRoads(AlgorithmBase):
             "snap to nearby junctions, extend to a road just ahead, are clipped to the boundary, "
             "near-parallel duplicates are dropped; with a DEM no grown segment is steeper than "
             "the maximum slope (streets turn to follow the terrain), and no road enters the "
-            "obstacles (water, parks). A density raster guides seeds and growth.\n\n"
+            "obstacles (water, parks). A density raster guides seeds and growth. Pieces of "
+            "the network that reach no sketched road (a boundary of several parts apart grows "
+            "one in each) are joined by the shortest straight road that crosses nothing and "
+            "keeps to the slope and the obstacles (pattern 'link'; it may leave the boundary, "
+            "the only road that does).\n\n"
             "Output: planar roads with level (0 major, 1 minor), road_class, pattern, width_m and "
             "length_m, one straight feature per grown segment, in the boundary's CRS. The same "
             "seed gives the same network."
@@ -86,8 +90,9 @@ class GrowRoads(AlgorithmBase):
         patterns = ["Organic", "Grid", "Radial"]
         self.add(QgsProcessingParameterFeatureSource(
             self.BOUNDARY, "Boundary", [QgsProcessing.SourceType.TypeVectorPolygon], optional=True),
-            "Polygon(s) of the city region: every road is grown inside them (Scharl's mask). "
-            "Several features are merged. Without a boundary, roads grow around the sketched "
+            "Polygon(s) of the city region: every road is grown inside them (Scharl's mask; "
+            "only a 'link' joining parts that lie apart leaves them). Several features are "
+            "merged. Without a boundary, roads grow around the sketched "
             "major roads (one major segment length beyond their extent) and the outskirts are "
             "closed by Scharl's bulged convex hull of the major nodes (sec. 4.2.5).")
         self.add(QgsProcessingParameterFeatureSource(
@@ -305,6 +310,9 @@ class GrowRoads(AlgorithmBase):
             f"{len(result.geometry)} planar edges.")
         if st.get("dead_ends_removed"):
             feedback.pushInfo(f"{st['dead_ends_removed']} dead-end edges removed at the end.")
+        if st.get("links"):
+            feedback.pushInfo(f"{st['links']} road(s) added to join pieces of the network "
+                              "that reached no sketched road (pattern 'link').")
         if st.get("bulged_hull"):
             feedback.pushInfo("No boundary: the quarters were closed by the bulged convex hull "
                               "of the major nodes.")

@@ -156,6 +156,32 @@ def test_near_parallel_duplicates_are_dropped():
     assert not (parallel & ~touching).any()
 
 
+def test_a_part_of_the_boundary_no_sketch_reaches_is_linked():
+    """Two settlements 300 m apart, a sketched road through the west one only: both grow a
+    network, the east one is joined by one straight 'link' road (the only road outside the
+    boundary), planar, one piece with the sketch. With a lake between them the link would
+    enter it: the east piece then stays unlinked rather than crossing the obstacle."""
+    from urban_synthesis.plugin.network import invariants
+
+    west, east = shapely.box(0, 0, 600, 600), shapely.box(900, 0, 1500, 600)
+    boundary = shapely.union_all([west, east])
+    sketch = np.array([shapely.LineString([(0, 300), (600, 310)])])
+    res = growth.grow_roads(boundary, major_roads=sketch, seed=2)
+    g = res.geometry
+    assert_planar(g)
+    outside = ~shapely.covers(boundary.buffer(1e-6), g)
+    assert outside.any() and (res.pattern[outside] == "link").all()
+    assert res.stats["links"] >= 1 and (res.pattern == "link").sum() >= outside.sum()
+    new = g[invariants.new_streets(g, sketch)]
+    check = invariants.check_network(new, sketch, area=boundary)
+    assert check.floating_pieces == 0 and len(check.crossings_given) == 0
+    assert shapely.intersects(g, east).sum() > 10
+    lake = shapely.box(650, -1000, 850, 1600)
+    res = growth.grow_roads(boundary, major_roads=sketch, obstacles=lake, seed=2)
+    assert not shapely.intersects(res.geometry, lake).any()
+    assert res.stats["links"] == 0 and shapely.intersects(res.geometry, east).sum() > 10
+
+
 def test_sketched_major_roads_are_kept_and_bound_quarters():
     sketch = [shapely.LineString([(-100, 500), (1100, 520)]),
               shapely.LineString([(480, -50), (520, 1050)])]

@@ -65,6 +65,7 @@ from shapely.ops import substring
 from ..core.progress import InputError, Progress, ensure
 from ..network import street_graph as _roads
 from ..network.dead_ends import steer_share
+from ..network.links import link_floating_pieces
 from ..network import invariants as _invariants
 from ..network.invariants import (
     CORRIDOR_HALF_WIDTH,
@@ -882,76 +883,19 @@ def _fill_stage(geometry, level, attrs, databases, names, inserter, rng, max_blo
 
 
 def _link_floating(geometry, level, attrs):
-    """Link the pieces of the network that do not reach an arterial to the network that does.
-
-    Each floating piece (streets of faces closed only by the boundary, whose outline is no
-    street) gets the shortest straight street from one of its nodes to the anchored network
-    that crosses no other street; pieces are linked nearest first, so a linked piece anchors
-    the next. Without arterials the largest piece anchors; a piece that no such street can
-    reach is dropped. Returns the network and the number of links.
-    """
-    n = len(geometry)
-    if n < 2:
-        return geometry, level, attrs, 0
-    g = _roads.graph_from_lines(geometry, np.full(n, None, object), np.full(n, None, object),
-                                np.zeros(n, int), np.arange(n), snap_tolerance=0.0)
-    m = len(g.nodes)
-    adj = coo_matrix((np.ones(g.n_edges), (g.u, g.v)), shape=(m, m))
-    n_comp, label = connected_components(adj, directed=False)
-    if n_comp == 1:
-        return geometry, level, attrs, 0
-    edge_comp = label[g.u]
-    src = np.asarray(g.source)
-    arterial = attrs["source_fragment"][src] == "arterial"
-    anchored = np.zeros(n_comp, bool)
-    anchored[edge_comp[arterial]] = True
-    if not anchored.any():
-        anchored[np.argmax(np.bincount(edge_comp, weights=shapely.length(g.geometry),
-                                       minlength=n_comp))] = True
-    links = []
-    lines = list(g.geometry)
-    tree_lines = np.asarray(g.geometry, dtype=object)
-    while not anchored.all():
-        anchor_lines = tree_lines[anchored[edge_comp]]
-        target = shapely.union_all(anchor_lines)
-        best = None
-        for comp in np.flatnonzero(~anchored):
-            nodes = np.unique(np.r_[g.u[edge_comp == comp], g.v[edge_comp == comp]])
-            pts = shapely.points(g.nodes[nodes])
-            d = shapely.distance(target, pts)
-            for k in np.argsort(d)[:32]:
-                if best is not None and d[k] >= best[0]:
-                    break
-                link = shapely.shortest_line(pts[k], target)
-                if link.length <= 1e-6:
-                    continue
-                others = np.asarray(lines, dtype=object)
-                hit = shapely.intersects(others, link)
-                # it may touch only the piece at its start and the anchored line at its end
-                inner = shapely.intersection(others[hit], link)
-                ends = shapely.boundary(link)
-                if shapely.covers(shapely.buffer(ends, 1e-6), inner).all():
-                    best = (float(d[k]), comp, link)
-                    break
-        if best is None:
-            break  # no piece can be linked without crossing a street
-        _, comp, link = best
-        links.append(link)
-        lines.append(link)
-        anchored[comp] = True
-    # what cannot be linked without a crossing is dropped: no floating piece is left
-    drop = ~anchored[edge_comp]
-    if drop.any():
-        keep = np.ones(len(geometry), bool)
-        keep[src[drop]] = False
+    """Link the pieces of the network that do not reach an arterial to the network that does
+    (:func:`links.link_floating_pieces`: streets of faces closed only by the boundary, whose
+    outline is no street); a piece that cannot be linked is dropped. Returns the network and
+    the number of links."""
+    links, keep = link_floating_pieces(geometry, attrs["source_fragment"] == "arterial")
+    if not keep.all():
         geometry, level = geometry[keep], level[keep]
         attrs = {k: v[keep] for k, v in attrs.items()}
-    if not links:
+    if not len(links):
         return geometry, level, attrs, 0
     new_attrs = [("link", "", -1, len(links), -1)]
     lvl = int(level.max()) + 1 if len(level) else 1
-    geometry, level, attrs = _add_streets(geometry, level, attrs,
-                                          [np.asarray(links, dtype=object)], new_attrs, lvl, 0.0)
+    geometry, level, attrs = _add_streets(geometry, level, attrs, [links], new_attrs, lvl, 0.0)
     return geometry, level, attrs, len(links)
 
 

@@ -29,7 +29,10 @@ closed by that outline, and the outline is dropped once they are filled. With a 
 the boundary itself plays that role: the quarters are the faces of the major roads
 together with the boundary's rings, so the outskirts (the boundary minus the major faces)
 become quarters too, split where major roads reach the boundary. At the end, dead-end
-roads are removed (Fig. 4.12; ``remove_dead_ends``). Each quarter
+roads are removed (Fig. 4.12; ``remove_dead_ends``), and pieces of the network that reach
+no sketched road (or, without a sketch, the longest piece) are joined to it by the shortest
+straight minor road that crosses nothing (:func:`link_pieces`; not in Scharl, whose growth
+starts from one network; a boundary of several parts apart grows a piece in each). Each quarter
 gets a seed street at its barycentre (sec. 4.2.1); places left farther than
 ``GAP_FACTOR`` segment lengths from every road get further seeds (Scharl's random fallback
 seeds, scored by their distance to the roads).
@@ -66,7 +69,8 @@ import shapely
 from ..core.progress import InputError, Progress, ensure
 from ..core.geometry import minimum_rectangles
 from ..network.blocks import planar_faces
-from ..network.street_graph import clean_network
+from ..network.links import link_floating_pieces
+from ..network.street_graph import _attach_attributes, clean_network, snap_ends_onto_lines
 from ..retrieval.shape_context import DemGrid
 
 __all__ = [
@@ -1182,13 +1186,14 @@ def grow_roads(boundary, *, settings: Optional[GrowthSettings] = None, major_roa
     n_dead = 0
     if s.remove_dead_ends:
         result, n_dead = remove_dead_ends(result)
+    result, n_links = link_pieces(result, s.minor_width, s.max_slope, dem, obst)
     progress.step(1.0)
     result.stats.update({
         "segments": g.n_grown, "major_segments": g.grown[MAJOR],
         "minor_segments": g.grown[MINOR], "sketched_segments": n_sketch,
         "proposals": g.proposals, "rejected": dict(sorted(g.rejected.items())),
         "quarters": len(quarters), "seeds": g.seeds, "capped": g.capped,
-        "dead_ends_removed": n_dead, "bulged_hull": hull is not None,
+        "dead_ends_removed": n_dead, "links": n_links, "bulged_hull": hull is not None,
         "seconds": time.perf_counter() - t_start,
     })
     progress.info(
@@ -1280,6 +1285,40 @@ def remove_dead_ends(result: "GrowthResult"):
     n = int((~keep).sum())
     return GrowthResult(geoms[keep], result.level[keep], result.pattern[keep],
                         result.width[keep], result.stats), n
+
+
+def link_pieces(result: "GrowthResult", width: float, max_slope: float = np.inf,
+                dem: Optional[DemGrid] = None, obstacles=None):
+    """Join the pieces of the network that reach no sketched road (without a sketch: the
+    longest piece) by the shortest straight road that crosses nothing, is no steeper than
+    ``max_slope`` on the DEM and enters no obstacle (:func:`links.link_floating_pieces`;
+    level minor, pattern 'link', ``width``). A piece that no such road reaches stays as it
+    is. Where the boundary's parts lie apart the link leaves the boundary: the only road
+    that does. The lines a link ends on are split there, so the edges stay noded and
+    straight. Returns (result, links added)."""
+    def buildable(link) -> bool:
+        if dem is not None and segment_slopes([link], dem)[0] > max_slope:
+            return False
+        return obstacles is None or shapely.intersection(link, obstacles).length < 1e-6
+
+    links, keep = link_floating_pieces(result.geometry, result.pattern == "sketch",
+                                       accept=buildable, drop_unlinked=False)
+    if keep.all() and not len(links):
+        return result, 0
+    geoms = np.concatenate([result.geometry[keep], links])
+    level = np.r_[result.level[keep], np.full(len(links), MINOR)]
+    pattern = np.r_[result.pattern[keep], np.full(len(links), "link", dtype=object)]
+    width_all = np.r_[result.width[keep], np.full(len(links), float(width))]
+    if len(links):
+        is_link = np.r_[np.zeros(int(keep.sum()), bool), np.ones(len(links), bool)]
+        snapped = snap_ends_onto_lines(geoms, is_link)
+        pieces = shapely.get_parts(shapely.node(shapely.multilinestrings(snapped)))
+        pieces = pieces[shapely.length(pieces) > 1e-9]
+        parent = _attach_attributes(pieces, snapped, np.arange(len(snapped)), level)
+        geoms, level, pattern, width_all = pieces, level[parent], pattern[parent], \
+            width_all[parent]
+    return GrowthResult(geoms, level, pattern.astype(object), width_all, result.stats), \
+        len(links)
 
 
 # --------------------------------------------------------------------------- stage helpers
