@@ -59,6 +59,7 @@ from typing import Dict, List, Optional, Sequence
 import numpy as np
 import pandas as pd
 import shapely
+from scipy.cluster.hierarchy import DisjointSet
 
 from ..core.geometry import minimum_rectangles, unit
 from ..core.progress import InputError, Progress, ensure
@@ -740,14 +741,10 @@ def no_street_joints(leaves, split_lines, roads, splitter, by_name, s: SplitSett
     node = node.ravel().reshape(2, -1).T              # (piece, end) -> node id
     degree = np.bincount(node.ravel())
     leaf_tree = shapely.STRtree(regions)
-    group = np.arange(len(regions))
-
-    def find(i):
-        while group[i] != i:
-            group[i] = group[group[i]]
-            i = group[i]
-        return i
-
+    joined = DisjointSet(range(len(regions)))
+    # the street block number of each set of joined leaves, at its root: a joined block keeps
+    # the number of its lower leaf's block (the street blocks are listed in number order)
+    number = np.arange(len(regions))
     no_street, no_frontage = splitter.no_street, splitter.no_frontage
     energy = {}
     removed = np.zeros(len(pieces), dtype=bool)
@@ -772,8 +769,7 @@ def no_street_joints(leaves, split_lines, roads, splitter, by_name, s: SplitSett
         if (left[node[ids].ravel()] == 1).any():
             continue  # a street would end there: no dead end is made
         line = shapely.line_merge(shapely.union_all(pieces[ids]))
-        roots = {find(a) for a in adj}
-        members = [k for k in range(len(regions)) if find(k) in roots]
+        members = sorted(joined.subset(pair[0]) | joined.subset(pair[1]))
         if shapely.length(shapely.boundary(shapely.union_all(regions[members]))) > limit:
             continue
         trial_ns, trial_nf = _union(no_street, line), _union(no_frontage, line)
@@ -790,10 +786,10 @@ def no_street_joints(leaves, split_lines, roads, splitter, by_name, s: SplitSett
             degree = left
             no_street, no_frontage = trial_ns, trial_nf
             energy.update(after)
-            root = find(int(adj[0]))
-            for r in roots:
-                group[r] = root
-    block = np.array([find(k) for k in range(len(regions))])
+            block_number = number[joined[pair[0]]]
+            joined.merge(*pair)
+            number[joined[pair[0]]] = block_number
+    block = number[[joined[k] for k in range(len(regions))]]
     return list(pieces[is_split & ~removed]), list(pieces[removed]), block
 
 

@@ -58,6 +58,7 @@ from typing import Dict, List, Optional, Sequence
 import numpy as np
 import pandas as pd
 import shapely
+from scipy.cluster.hierarchy import DisjointSet
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from shapely.ops import substring
@@ -1036,16 +1037,11 @@ def _steer_dead_ends(geometry, level, attrs, share: float, area, rng, min_dangle
         d = q - nodes[k]
         return d / max(np.hypot(*d), 1e-12)
 
-    # the blocks, to know what a cut merges (union-find over faces)
+    # the blocks, to know what a cut merges: sets of faces, each block's area at its root
     faces, f_area, f_perimeter = planar_faces(lines)
-    parent = np.arange(len(faces))
+    blocks = DisjointSet(range(len(faces)))
+    block_area = f_area.copy()
     f_tree = shapely.STRtree(faces)
-
-    def root(f: int) -> int:
-        while parent[f] != f:
-            parent[f] = parent[parent[f]]
-            f = parent[f]
-        return f
 
     def sides(line):
         """The faces left and right of a line's middle (-1: none)."""
@@ -1075,7 +1071,7 @@ def _steer_dead_ends(geometry, level, attrs, share: float, area, rng, min_dangle
         if line.length < 2 * min_dangle:
             return False
         (fl, fr), c, nrm = sides(line)
-        cand = [(f_area[root(f)], f, s) for f, s in ((fl, 1.0), (fr, -1.0)) if f >= 0]
+        cand = [(block_area[blocks[f]], f, s) for f, s in ((fl, 1.0), (fr, -1.0)) if f >= 0]
         if not cand:
             return False
         _, f, sgn = max(cand)
@@ -1146,13 +1142,13 @@ def _steer_dead_ends(geometry, level, attrs, share: float, area, rng, min_dangle
         (fl, fr), _, _ = sides(g.geometry[stem])
         if fl < 0 or fr < 0:
             return False
-        fl, fr = root(fl), root(fr)
+        fl, fr = blocks[fl], blocks[fr]
         if fl != fr:
-            if f_area[fl] + f_area[fr] > limit:
+            merged_area = block_area[fl] + block_area[fr]
+            if merged_area > limit:
                 return False
-            parent[fr] = fl
-            f_area[fl] += f_area[fr]
-            f_perimeter[fl] += f_perimeter[fr]
+            blocks.merge(fl, fr)
+            block_area[blocks[fl]] = merged_area
         lines[src[stem]] = rest
         joins[stem] = False
         touch(t_, -1)

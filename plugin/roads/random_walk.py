@@ -67,6 +67,7 @@ from typing import List, Optional
 import numpy as np
 import pandas as pd
 import shapely
+from scipy.cluster.hierarchy import DisjointSet
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
@@ -831,24 +832,16 @@ class _Walker:
 
     def join_pieces(self, anchors):
         """Join every piece to the anchors' network (or the largest piece); drop what
-        cannot be joined. Returns counts. The pieces are found once and merged with a
-        union-find as joins are made."""
+        cannot be joined. Returns counts. The pieces are found once and merged (a disjoint
+        set of their labels) as joins are made."""
         joined = split = dropped = 0
         label, main = self.pieces(anchors)
         if main < 0:
             return {"n_joins": 0, "n_join_splits": 0, "n_dropped_edges": 0}
-        parent = np.arange(label.max() + 1)
-
-        def find(x):
-            x = np.asarray(x)
-            r = parent[x]
-            while (parent[r] != r).any():
-                r = parent[r]
-            parent[x] = r  # path compression for the queried ones
-            return r
+        merged = DisjointSet(range(label.max() + 1))
 
         def root(points):
-            return find(label[points])
+            return np.array([merged[x] for x in label[points]])
 
         on = self.deg > 0
         labs, sizes = np.unique(label[on], return_counts=True)
@@ -864,7 +857,7 @@ class _Walker:
             end = bounds[i + 1] if i + 1 < len(labs) else len(srt)
             by_label[lab] = srt[bounds[i]:end]
         for lab in order:
-            if find(lab) == find(main):
+            if merged.connected(lab, main):
                 continue
             members = by_label[lab]
             members = members[self.deg[members] > 0]
@@ -873,19 +866,19 @@ class _Walker:
             reach = self.s.join_reach * float(np.median(self.p.dist_mean[members, 0]))
             u = self._join_by_point(members, root, tree, pool, reach)
             if u >= 0:
-                parent[find(lab)] = find(label[u])
+                merged.merge(lab, label[u])
                 joined += 1
                 continue
             r = self._join_by_split(members, root, reach)
             if r is not None:
                 k, end = r
-                other = find(label[end]) if end >= 0 else find(main)
+                other = label[end] if end >= 0 else main
                 label = np.r_[label, other]
-                parent[find(lab)] = other
+                merged.merge(lab, other)
                 split += 1
                 continue
             # rejected: this piece and the pieces that joined it so far
-            gone = labs[find(labs) == find(lab)]
+            gone = labs[np.isin(labs, list(merged.subset(lab)))]
             members = np.concatenate([by_label[x] for x in gone])
             dropped += self.drop_piece(members[self.deg[members] > 0])
         return {"n_joins": joined, "n_join_splits": split, "n_dropped_edges": dropped}
