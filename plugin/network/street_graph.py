@@ -35,8 +35,8 @@ from ..core.progress import InputError, Progress, ensure
 __all__ = [
     "DRIVABLE_CLASSES", "ARTERIAL_CLASSES", "CLASS_RANK", "RoadGraph",
     "drivable_and_arterial", "parse_other_tags", "vertical_layer", "class_rank",
-    "clean_network", "graph_from_lines", "snap_ends_onto_lines", "move_ends_onto_lines",
-    "JUNCTION_TOLERANCE",
+    "clean_network", "graph_from_lines", "node_lines", "snap_ends_onto_lines",
+    "move_ends_onto_lines", "JUNCTION_TOLERANCE",
 ]
 
 #: OSM highway classes kept by default: what cars drive on and what forms city blocks.
@@ -239,6 +239,26 @@ def _split_at_vertices(geoms: np.ndarray, split_mask_fn):
 
 # --------------------------------------------------------------------------- main API
 
+def node_lines(lines: Sequence) -> np.ndarray:
+    """The lines split at every crossing and shared point, overlaps dissolved: the parts of
+    ``shapely.node``.
+
+    Nearly coincident lines can defeat GEOS's floating-point noding ("noding failed to
+    converge"); they are then noded by snap-rounding on the :data:`JUNCTION_TOLERANCE` grid
+    (a unary union at that grid size), which always converges. Noding them set to that
+    precision (``shapely.set_precision``) instead still failed on most such sets (GEOS 3.11).
+
+    >>> a = shapely.LineString([(0, 0), (10, 0)]); b = shapely.LineString([(5, -5), (5, 5)])
+    >>> len(node_lines([a, b]))
+    4
+    """
+    lines = shapely.multilinestrings(lines)
+    try:
+        return shapely.get_parts(shapely.node(lines))
+    except shapely.errors.GEOSException:
+        return shapely.get_parts(shapely.union_all(lines, grid_size=JUNCTION_TOLERANCE))
+
+
 def move_ends_onto_lines(lines: Sequence, onto: Sequence, tolerance: float) -> np.ndarray:
     """Move every line end within ``tolerance`` of a line of ``onto`` to its nearest point on
     that line (the lines of ``onto`` are not changed).
@@ -381,7 +401,7 @@ def clean_network(geometries: Sequence, road_class: Optional[Sequence] = None,
         # (snapping off, 0: the plain noding count)
         layer_parts = snap_ends_onto_lines(parts[sel], tolerance=min(
             JUNCTION_TOLERANCE, snap_tolerance)) if snap_tolerance > 0 else parts[sel]
-        noded = shapely.get_parts(shapely.node(shapely.multilinestrings(layer_parts)))
+        noded = node_lines(layer_parts)
         noded = noded[shapely.length(noded) > 0]
         pieces_all.append(noded)
         src_all.append(_attach_attributes(noded, parts[sel], part_src[sel], rank[part_src[sel]]))

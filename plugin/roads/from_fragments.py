@@ -666,19 +666,13 @@ def _renode(geometry: np.ndarray, level: np.ndarray, attrs: Dict[str, np.ndarray
             new_level: int, min_dangle: float):
     """One planar network from existing edges and new streets, attributes carried over.
 
-    Nodes everything (``shapely.node``), gives each piece the attributes of its parent line
-    (the lowest level wins where lines overlap), prunes new dead ends shorter than
-    ``min_dangle`` and merges chains through degree-2 nodes whose two edges share level and
-    source.
+    Nodes everything (:func:`network.street_graph.node_lines`), gives each piece the
+    attributes of its parent line (the lowest level wins where lines overlap), prunes new dead
+    ends shorter than ``min_dangle`` and merges chains through degree-2 nodes whose two edges
+    share level and source.
     """
     geometry = _roads.snap_ends_onto_lines(geometry, level == new_level)
-    try:
-        noded = shapely.node(shapely.multilinestrings(geometry))
-    except shapely.errors.GEOSException:
-        # nearly coincident lines can defeat floating-point noding; snap-rounding on a
-        # millimetre grid always converges
-        noded = shapely.node(shapely.set_precision(shapely.multilinestrings(geometry), 1e-3))
-    pieces = shapely.get_parts(noded)
+    pieces = _roads.node_lines(geometry)
     pieces = pieces[shapely.length(pieces) > 1e-6]
     parent = _roads._attach_attributes(pieces, geometry, np.arange(len(geometry)),
                                        level.astype(np.int64))

@@ -53,7 +53,8 @@ from . import raster_graph
 
 __all__ = ["MODELS_DIR", "Generator", "shipped_models", "load_model", "noise", "noise_size",
            "generate", "synthesize", "StreetGanResult", "SCALE", "TILE_MARGIN", "tile_plan",
-           "TileWindow", "attach_to_given", "GIVEN_CORRIDOR", "JOIN_DISTANCE"]
+           "TileWindow", "attach_to_given", "GIVEN_CORRIDOR", "JOIN_DISTANCE",
+           "junction_merge_distance"]
 
 MODELS_DIR = RESOURCES / "models"
 #: pixels per noise cell (five stride-2 layers)
@@ -67,6 +68,13 @@ TILE_MARGIN = 3
 GIVEN_CORRIDOR = 8.0
 #: floating generated pieces are joined by connectors up to this many road widths long
 JOIN_DISTANCE = 2.0
+
+
+def junction_merge_distance(line_width_px: float, cell_size: float) -> float:
+    """Junctions joined by an edge this short (m) merge into one: half the width of a road
+    drawn ``line_width_px`` wide at ``cell_size`` m per pixel (two 3-way skeleton nodes that
+    close are one crossing of the image)."""
+    return 0.5 * line_width_px * cell_size
 
 
 def shipped_models() -> list:
@@ -97,6 +105,11 @@ class Generator:
     def line_width_px(self) -> int:
         """Width (px) of the roads in the model's images (thesis: 15)."""
         return int(self.card.get("line_width_px", raster_graph.LINE_WIDTH_PX))
+
+    def merge_distance(self, cell_size: Optional[float] = None) -> float:
+        """:func:`junction_merge_distance` of the model's roads at ``cell_size`` m per pixel
+        (default the model's)."""
+        return junction_merge_distance(self.line_width_px, cell_size or self.cell_size)
 
     @property
     def morphology(self) -> dict:
@@ -348,7 +361,7 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
         docstring); ``given_class`` their OSM highway classes (motorways and trunks get no
         new junctions)
     merge_junctions : m; junctions closer than this merge into one (default half a
-        rasterised road width; 0: the thesis's graph)
+        rasterised road width, :meth:`Generator.merge_distance`; 0: the thesis's graph)
     """
     progress = ensure(progress)
     gen = model if isinstance(model, Generator) else load_model(model)
@@ -377,7 +390,7 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
     if min_dead_end is None:
         min_dead_end = float(gen.card.get("postprocess", {}).get("min_dead_end_m",
                                                                  DEFAULT_MIN_DEAD_END))
-    merge = 0.5 * width if merge_junctions is None else float(merge_junctions)
+    merge = gen.merge_distance(cell) if merge_junctions is None else float(merge_junctions)
     corridor = 0.5 * width + GIVEN_CORRIDOR
     open_given = given_lines[_open_roads(given_cls)] if len(given_lines) else given_lines
     if len(given_lines):

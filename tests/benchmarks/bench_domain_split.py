@@ -29,15 +29,21 @@ Table 1 columns of every variation are computed with :func:`domain_split.table1`
 paper's CityEngine (CE1) and "Our" rows. Times per stage are wall times of the
 pipeline on this machine; it has 2 CPU cores shared with other jobs, so the CPU time of
 the process (``time.process_time``) is printed too, with the load average.
-Writes ``tests/benchmarks/results/domain_split.json``.
+Writes ``tests/benchmarks/results/domain_split.json`` (``--out``). ``--regions`` runs some of
+the regions; their results replace theirs in that file and the others' are kept.
+
+    python tests/benchmarks/bench_domain_split.py [VARIATIONS] [--regions NAME,NAME] [--out F]
 """
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import platform
+import re
 import sys
 import time
+import unicodedata
 from pathlib import Path
 
 import numpy as np
@@ -57,6 +63,10 @@ LIECHTENSTEIN = ROOT.parent.parent / "shared" / "data" / "liechtenstein-2013-08-
 if not LIECHTENSTEIN.exists():
     LIECHTENSTEIN = Path("/work/shared/data/liechtenstein-2013-08-03.osm.pbf")
 TOWNS = ("Vaduz", "Balzers", "Planken")
+#: The regions' names, in the order they run (``--regions`` takes them).
+REGIONS = ("Helsinki centre (key roads)", "Bubeneč", "Bubeneč, real streets kept") + tuple(
+    f"{t} (LI)" for t in TOWNS)
+RESULTS = ROOT / "tests" / "benchmarks" / "results" / "domain_split.json"
 DRIVABLE = ("motorway", "motorway_link", "trunk", "trunk_link", "primary", "primary_link",
             "secondary", "secondary_link", "tertiary", "unclassified", "residential",
             "living_street")
@@ -154,22 +164,56 @@ def map_row(region, lines, parcels=None):
     return row
 
 
-def run(variations: int = 3):
+def _items(text: str) -> tuple:
+    """The comma-separated items of a region name or list, compared without case, accents
+    and parenthesised notes ("bubenec" is "Bubeneč", "vaduz" is "Vaduz (LI)")."""
+    plain = unicodedata.normalize("NFKD", text).encode("ascii", "ignore").decode().casefold()
+    return tuple(" ".join(re.sub(r"\(.*?\)", "", t).split()) for t in plain.split(","))
+
+
+def select_regions(spec: str) -> list:
+    """The regions a comma-separated list names, in run order. A name may hold a comma:
+    "Bubeneč,real streets kept" is that region, "Bubeneč" alone the other."""
+    by_items = {_items(n): n for n in REGIONS}
+    items, chosen, i = _items(spec), set(), 0
+    while i < len(items):
+        if not items[i]:
+            i += 1
+            continue
+        fits = [k for k in by_items if items[i:i + len(k)] == k]
+        if not fits:
+            raise SystemExit(f"no region {items[i]!r}; the regions: {'; '.join(REGIONS)}")
+        key = max(fits, key=len)
+        chosen.add(by_items[key])
+        i += len(key)
+    return [n for n in REGIONS if n in chosen]
+
+
+def run(variations: int = 3, regions=REGIONS):
     lib = templates.load_library(subset="strips")
     settings = domain_split.SplitSettings()
-    h_region, h_key, h_lines = helsinki_region()
-    b_region, b_streets, b_plots = bubenec_region()
-    cases = [("Helsinki centre (key roads)", h_region, h_key, None, variations,
-              map_row(h_region, h_lines)),
-             ("Bubeneč", b_region, None, None, variations, map_row(b_region, b_streets, b_plots)),
-             ("Bubeneč, real streets kept", b_region, b_streets, None, variations,
-              map_row(b_region, b_streets, b_plots))]
-    for name, region, key, classes, lines in liechtenstein_towns():
-        cases.append((f"{name} (LI)", region, key, classes, 1, map_row(region, lines)))
+    cases = []
+    # each data set is read only when one of its regions runs
+    if REGIONS[0] in regions:
+        h_region, h_key, h_lines = helsinki_region()
+        cases.append((REGIONS[0], h_region, h_key, None, variations,
+                      map_row(h_region, h_lines)))
+    if REGIONS[1] in regions or REGIONS[2] in regions:
+        b_region, b_streets, b_plots = bubenec_region()
+        for name, key in ((REGIONS[1], None), (REGIONS[2], b_streets)):
+            if name in regions:
+                cases.append((name, b_region, key, None, variations,
+                              map_row(b_region, b_streets, b_plots)))
+    towns = [t for t in TOWNS if f"{t} (LI)" in regions]
+    if towns:
+        for name, region, key, classes, lines in liechtenstein_towns(towns):
+            cases.append((f"{name} (LI)", region, key, classes, 1, map_row(region, lines)))
     out = {"machine": platform.processor() or platform.machine(),
            "load_average": os.getloadavg(), "settings": settings.__dict__, "regions": []}
     for name, region, key, classes, n_var, real in cases:
         rows, walls = [], []
+        # a region's own load, as results of separate runs may share a file
+        load = os.getloadavg()
         for v in range(1, n_var + 1):
             t0, c0 = time.perf_counter(), time.process_time()
             lay = domain_split.split_domain(region, key_roads=key, key_road_classes=classes,
@@ -191,7 +235,7 @@ def run(variations: int = 3):
             rows.append(m)
             walls.append(wall)
         out["regions"].append({"region": name, "area_km2": shapely.area(region) / 1e6,
-                               "map": real, "variations": rows})
+                               "load_average": load, "map": real, "variations": rows})
     return out
 
 
@@ -201,9 +245,36 @@ def _fmt(v, c):
     return f"{v:.3f}" if c in ("p_angle", "p_area") else f"{v:.1f}"
 
 
-def main():
-    variations = int(sys.argv[1]) if len(sys.argv) > 1 else 3
-    res = run(variations)
+def merge_results(earlier: dict, new: dict) -> dict:
+    """``new``, a run of some regions, with the other regions of ``earlier`` kept (run
+    order; a region no longer run goes last)."""
+    ran = {r["region"] for r in new["regions"]}
+    order = {n: i for i, n in enumerate(REGIONS)}
+    regions = [r for r in earlier["regions"] if r["region"] not in ran] + new["regions"]
+    return dict(new, regions=sorted(regions, key=lambda r: order.get(r["region"], len(order))))
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("variations", nargs="?", type=int, default=3,
+                    help="layouts per example region (the Liechtenstein towns get one)")
+    ap.add_argument("--regions", default="",
+                    help=f"comma-separated regions to run (default all): {'; '.join(REGIONS)}; "
+                         "case, accents and the notes in brackets may be left out")
+    ap.add_argument("--out", default=str(RESULTS),
+                    help="results JSON; a run of some regions replaces only theirs in it")
+    args = ap.parse_args(argv)
+    regions = select_regions(args.regions) if args.regions else list(REGIONS)
+    path = Path(args.out)
+    earlier = None
+    if len(regions) < len(REGIONS) and path.exists():
+        earlier = json.loads(path.read_text())
+        # results of other split settings are not one table: checked before the long run
+        settings = json.loads(json.dumps(domain_split.SplitSettings().__dict__, default=float))
+        if earlier.get("settings") != settings:
+            raise SystemExit(f"{path} holds results of other split settings; run every "
+                             "region or write to another --out")
+    res = run(args.variations, regions)
     head = ["region", "row"] + COLS + ["p_count", "undes.", "undes.%", "no_access",
                                        "split s", "backtr. s", "optim. s", "total wall s",
                                        "total CPU s", "goals"]
@@ -227,10 +298,12 @@ def main():
     print("goals (issue 21): p_angle <= 3.2, p_area <= 1.06, l_s <= 30 %, repair off, parks "
           "counted; times: wall clock on a shared 2-core machine, CPU = process time")
     print(f"load average: {res['load_average']}")
-    path = ROOT / "tests" / "benchmarks" / "results" / "domain_split.json"
     path.parent.mkdir(parents=True, exist_ok=True)
     res["yang_table1"] = {f"{k[0]} {k[1]}": dict(zip(COLS, v)) for k, v in YANG.items()}
     res["yang_table2_s"] = YANG_TIMES
+    if earlier is not None:
+        res = merge_results(earlier, res)
+        print(f"kept the other {len(res['regions']) - len(regions)} regions of {path}")
     path.write_text(json.dumps(res, indent=1, default=float))
     print(f"written {path}")
 

@@ -280,9 +280,10 @@ def representation_ceiling(towns=("Eschen", "Mauren", "Triesen")) -> dict:
             real = fidelity_values(lines, case["area"])
             img, gt = raster_graph.rasterize_lines(lines, cell, width,
                                                    bounds=case["area"].buffer(96.0).bounds)
+            merge = streetgan.junction_merge_distance(width, cell)
             rg = raster_graph.raster_to_graph(img.astype(np.float32), gt, erosions=erosions,
                                               dilations=dilations, simplify=cell,
-                                              merge_junctions=0.5 * width * cell)
+                                              merge_junctions=merge)
             v = fidelity_values(rg.geometry, case["area"])
             errs.append(round(float(np.median(_relative_errors(v, real))), 3))
             blocks.append([round(float(real[10]), 1), round(float(v[10]), 1)])
@@ -306,7 +307,7 @@ def performance(name: str) -> dict:
     for _ in range(3):
         t, c = time.perf_counter(), time.process_time()
         r = raster_graph.raster_to_graph(
-            img, gt, merge_junctions=0.5 * gen.line_width_px * gen.cell_size, **gen.morphology)
+            img, gt, merge_junctions=gen.merge_distance(), **gen.morphology)
         t_rg.append(time.perf_counter() - t)
         c_rg.append(time.process_time() - c)
         stats = r.stats
