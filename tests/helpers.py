@@ -66,6 +66,18 @@ def liechtenstein_town_blocks(name):
     return streets, faces[inside]
 
 
+def nearly_coincident_streets():
+    """Three streets that run within micrometres of each other: GEOS 3.11's floating-point
+    noding of them fails ("noding failed to converge"), so every noding must fall back."""
+    return [shapely.LineString(c) for c in (
+        [(77.00735619262085, 57.556184583855725), (44.38386934590856, 30.78118255017394),
+         (43.32301592517176, 29.87454805888664), (24.19750630645411, 15.707296558780584)],
+        [(51.08000511538115, 36.50388428363308), (39.97507855416211, 27.01330872721192),
+         (34.70993543433117, 23.609118397186904)],
+        [(60.17810317831416, 35.52856130893541), (46.00965723295924, 32.17062557992293),
+         (26.786254673586992, 15.741777227304771)])]
+
+
 def assert_planar(lines, z_layer=None, tol=1e-6):
     """No two edges of the same vertical layer meet except at shared end points."""
     lines = np.asarray(lines, dtype=object)

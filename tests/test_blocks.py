@@ -8,7 +8,7 @@ from urban_synthesis.plugin.network import blocks
 from urban_synthesis.plugin.network import street_graph as roads
 from urban_synthesis.plugin.core.progress import InputError
 
-from helpers import bubenec, helsinki_roads
+from helpers import bubenec, helsinki_roads, nearly_coincident_streets
 
 
 def grid(n=3, step=100.0):
@@ -105,6 +105,18 @@ def test_only_slivers_is_an_input_error():
         blocks.extract_blocks(grid(), min_area=20_000)
     with pytest.raises(InputError, match="negative"):
         blocks.extract_blocks(grid(), min_area=-1)
+
+
+def test_faces_of_streets_whose_noding_fails():
+    """Streets that defeat GEOS's floating-point noding are snap-rounded on the millimetre
+    grid (street_graph.node_lines): the faces of that noding, bounded by the streets."""
+    lines = nearly_coincident_streets()
+    faces, area, _ = blocks.planar_faces(lines)
+    ref = shapely.get_parts(shapely.polygonize(roads.node_lines(lines)))
+    assert len(faces) == len(ref) > 0 and shapely.is_valid(faces).all()
+    assert sorted(area) == pytest.approx(sorted(shapely.area(ref)))
+    streets = shapely.buffer(shapely.union_all(lines), roads.JUNCTION_TOLERANCE)
+    assert shapely.covers(streets, shapely.boundary(faces)).all()
 
 
 def test_planar_faces_match_polygonize_with_holes_and_bridges():

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 import shapely
 
-from helpers import assert_planar
+from helpers import assert_planar, nearly_coincident_streets
 from urban_synthesis.plugin.roads import growth
 from urban_synthesis.plugin.core.progress import Canceled, InputError, Progress
 from urban_synthesis.plugin.retrieval.shape_context import DemGrid
@@ -199,6 +199,16 @@ def test_sketched_major_roads_are_kept_and_bound_quarters():
     for quarter in shapely.get_parts(shapely.polygonize(list(major) + [BOX.exterior])):
         assert shapely.intersects(minor, quarter.buffer(-1)).sum() > 5
     assert_planar(r.geometry)
+
+
+def test_sketch_whose_noding_fails_is_snap_rounded():
+    """A sketch that defeats GEOS's floating-point noding is noded on the millimetre grid:
+    a planar network that keeps the sketch to that grid."""
+    sketch = nearly_coincident_streets()
+    r = growth.grow_roads(shapely.box(0, 0, 100, 80), major_roads=sketch, seed=1)
+    assert_planar(r.geometry)
+    kept = shapely.buffer(shapely.union_all(r.geometry[r.pattern == "sketch"]), 1e-3)
+    assert shapely.covers(kept, sketch).all()
 
 
 def test_sketch_grows_major_roads_when_asked():

@@ -7,6 +7,8 @@ import shapely
 from urban_synthesis.plugin.core.progress import Canceled, InputError, Progress
 from urban_synthesis.plugin.network import invariants as I
 
+from helpers import nearly_coincident_streets
+
 L = shapely.LineString
 ARTERIAL = [L([(0, 0), (200, 0)])]
 
@@ -53,6 +55,16 @@ def test_synthesised_streets_crossing_each_other_and_themselves():
     # noded, the same streets are a planar network with no crossing
     noded = shapely.get_parts(shapely.node(shapely.multilinestrings(streets[:3])))
     assert I.check_network(noded, ARTERIAL).violations()["crossings_synthesised"] == 0
+
+
+def test_self_crossings_of_a_street_whose_noding_fails():
+    """A street that runs back along itself within micrometres (GEOS's floating-point
+    noding of it fails): it is snap-rounded, and its self-crossings lie on it."""
+    a, b, c = nearly_coincident_streets()
+    street = L(list(a.coords) + list(b.coords)[::-1] + list(c.coords))
+    check = I.check_network([street])
+    assert check.violations()["crossings_synthesised"] > 0
+    assert (shapely.distance(check.crossings_synthesised, street) <= I.JUNCTION_TOLERANCE).all()
 
 
 def test_crossing_count_agrees_with_pairwise_intersections():

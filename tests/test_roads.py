@@ -7,7 +7,7 @@ from shapely.geometry import LineString
 from urban_synthesis.plugin.network import street_graph as roads
 from urban_synthesis.plugin.core.progress import Canceled, InputError, Progress
 
-from helpers import helsinki_roads, assert_planar
+from helpers import assert_planar, helsinki_roads, nearly_coincident_streets
 
 
 def test_crossing_lines_are_noded():
@@ -91,13 +91,7 @@ def test_nearly_coincident_lines_are_noded_on_a_millimetre_grid(snap_tolerance):
     noding (GEOS 3.11: "noding failed to converge"); the cleaning nodes them by
     snap-rounding instead: a planar network that keeps every street to the cleaning's
     tolerance (near-duplicates merge within the snapping distance, else the millimetre grid)."""
-    lines = [LineString(c) for c in (
-        [(77.00735619262085, 57.556184583855725), (44.38386934590856, 30.78118255017394),
-         (43.32301592517176, 29.87454805888664), (24.19750630645411, 15.707296558780584)],
-        [(51.08000511538115, 36.50388428363308), (39.97507855416211, 27.01330872721192),
-         (34.70993543433117, 23.609118397186904)],
-        [(60.17810317831416, 35.52856130893541), (46.00965723295924, 32.17062557992293),
-         (26.786254673586992, 15.741777227304771)])]
+    lines = nearly_coincident_streets()
     g = roads.clean_network(lines, snap_tolerance=snap_tolerance, min_dangle_length=0.0,
                             merge_degree2=False)
     assert_planar(g.geometry, g.z_layer)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import shapely
 
-from helpers import assert_planar, helsinki_roads
+from helpers import assert_planar, helsinki_roads, nearly_coincident_streets
 from urban_synthesis.plugin.measure import metrics
 from urban_synthesis.plugin.roads import raster_graph
 from urban_synthesis.plugin.roads import streetgan
@@ -180,3 +180,13 @@ def test_given_roads_are_kept_and_joined(models):
                                  given=[arterial, motorway], given_class=["primary", "motorway"])
     assert len(again.geometry) == len(res.geometry)
     assert shapely.equals_exact(again.geometry, res.geometry, 0.0).all()
+
+
+def test_new_streets_whose_noding_fails_are_snap_rounded():
+    """Generated streets that defeat GEOS's floating-point noding are noded on the
+    millimetre grid: planar, every street kept to that grid."""
+    lines = nearly_coincident_streets()
+    noded, is_given = streetgan._noded_with_given(lines, [])
+    assert_planar(noded)
+    assert not is_given.any()
+    assert shapely.covers(shapely.buffer(shapely.union_all(noded), 1e-3), lines).all()

@@ -43,7 +43,7 @@ import shapely
 
 from ..core.geometry import group_ends, group_starts, largest_polygons, minimum_rectangles
 from ..core.progress import InputError, Progress, ensure
-from .street_graph import RoadGraph
+from .street_graph import RoadGraph, node_lines
 
 __all__ = [
     "MIN_BLOCK_AREA", "MIN_BLOCK_WIDTH", "MIN_SHARE", "BLOCK_FIELDS", "BlockExtraction",
@@ -122,7 +122,8 @@ def planar_faces(lines: Sequence, node: bool = True):
     ----------
     lines : array of LineString / MultiLineString, metric CRS
     node : bool
-        Node the lines first (``shapely.node``) so that they meet only at end points.
+        Node the lines first (:func:`street_graph.node_lines`) so that they meet only at
+        end points.
         Skip it only for lines known to be noded (e.g. one layer of a cleaned graph).
 
     Returns
@@ -158,7 +159,7 @@ class _Network:
         if not (shapely.get_type_id(lines) == 1).all():  # get_parts copies: only when needed
             lines = shapely.get_parts(lines)
         if node and len(lines):
-            lines = shapely.get_parts(shapely.node(shapely.multilinestrings(lines)))
+            lines = node_lines(lines)
         coords, idx = shapely.get_coordinates(lines, return_index=True)
         counts = np.bincount(idx, minlength=len(lines))
         last = np.cumsum(counts) - 1
@@ -407,8 +408,7 @@ def _planar_lines(graph: RoadGraph) -> np.ndarray:
     involved = np.zeros(len(lines), dtype=bool)
     involved[off] = True
     involved[touched] = True
-    noded = shapely.get_parts(shapely.node(shapely.multilinestrings(lines[involved])))
-    return np.concatenate([lines[~involved], noded])
+    return np.concatenate([lines[~involved], node_lines(lines[involved])])
 
 
 # --------------------------------------------------------------------------- shape

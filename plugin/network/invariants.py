@@ -60,7 +60,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from ..core.progress import InputError, Progress, ensure
-from .street_graph import JUNCTION_TOLERANCE, clean_network
+from .street_graph import JUNCTION_TOLERANCE, clean_network, node_lines
 
 __all__ = [
     "JUNCTION_TOLERANCE", "CORRIDOR_HALF_WIDTH", "MIN_DUPLICATE_LENGTH", "JUNCTION_RADIUS",
@@ -220,7 +220,14 @@ def _self_crossings(lines: np.ndarray, tolerance: float) -> np.ndarray:
     bad = lines[~shapely.is_simple(lines)] if len(lines) else lines
     if not len(bad):
         return np.empty(0, dtype=object)
-    pieces, owner = shapely.get_parts(shapely.node(bad), return_index=True)
+    try:
+        pieces, owner = shapely.get_parts(shapely.node(bad), return_index=True)
+    except shapely.errors.GEOSException:
+        # nearly coincident stretches of one line can defeat GEOS's noding: node each line
+        # on its own (node_lines snap-rounds the one that fails)
+        parts = [node_lines([line]) for line in bad]
+        pieces = np.concatenate(parts)
+        owner = np.repeat(np.arange(len(bad)), [len(p) for p in parts])
     ends = np.concatenate([shapely.get_coordinates(shapely.get_point(pieces, 0)),
                            shapely.get_coordinates(shapely.get_point(pieces, -1))])
     owner = np.r_[owner, owner]

@@ -70,7 +70,8 @@ from ..core.progress import InputError, Progress, ensure
 from ..core.geometry import minimum_rectangles
 from ..network.blocks import planar_faces
 from ..network.links import link_floating_pieces
-from ..network.street_graph import _attach_attributes, clean_network, snap_ends_onto_lines
+from ..network.street_graph import (_attach_attributes, clean_network, node_lines,
+                                    snap_ends_onto_lines)
 from ..retrieval.shape_context import DemGrid
 
 __all__ = [
@@ -1312,7 +1313,7 @@ def link_pieces(result: "GrowthResult", width: float, max_slope: float = np.inf,
     if len(links):
         is_link = np.r_[np.zeros(int(keep.sum()), bool), np.ones(len(links), bool)]
         snapped = snap_ends_onto_lines(geoms, is_link)
-        pieces = shapely.get_parts(shapely.node(shapely.multilinestrings(snapped)))
+        pieces = node_lines(snapped)
         pieces = pieces[shapely.length(pieces) > 1e-9]
         parent = _attach_attributes(pieces, snapped, np.arange(len(snapped)), level)
         geoms, level, pattern, width_all = pieces, level[parent], pattern[parent], \
@@ -1403,7 +1404,7 @@ def _insert_sketch(g: _Grower, major_roads, area) -> bool:
     parts = parts[(shapely.get_type_id(parts) == 1) & (shapely.length(parts) > 0)]
     if len(parts) == 0:
         raise InputError("no sketched major road lies inside the boundary")
-    noded = shapely.get_parts(shapely.node(shapely.multilinestrings(parts)))
+    noded = node_lines(parts)
     coords, idx = shapely.get_coordinates(noded, return_index=True)
     same = idx[1:] == idx[:-1]
     a, b = coords[:-1][same], coords[1:][same]

@@ -76,6 +76,7 @@ from ..core import coordinates
 from ..core.geometry import pinned_ends
 from ..core.progress import InputError, Progress, ensure
 from ..network.dead_ends import steer_share
+from ..network.street_graph import node_lines
 from . import intersection_quadtree as iq
 
 __all__ = ["WalkSettings", "Synthesis", "StreetShapes", "street_shapes", "connect_points",
@@ -1720,8 +1721,7 @@ def blocks_and_dual(lines, extra_lines=None, min_area: float = 50.0):
     allg = np.asarray(lines, dtype=object)
     if extra_lines is not None and len(extra_lines):
         allg = np.concatenate([allg, np.asarray(extra_lines, dtype=object)])
-    faces = shapely.get_parts(shapely.polygonize(shapely.get_parts(shapely.node(
-        shapely.multilinestrings(allg)))))
+    faces = shapely.get_parts(shapely.polygonize(node_lines(allg)))
     faces = faces[shapely.area(faces) >= min_area]
     if len(faces) < 2:
         return faces, np.zeros((0, 2), dtype=np.int64)

@@ -548,10 +548,12 @@ def _noded_with_given(new, given):
     """New lines noded among themselves and the given roads split where new lines end on
     them (the given roads are not noded with each other: a bridge stays a bridge).
     Returns (lines, is_given)."""
+    from ..network.street_graph import node_lines
+
     new = np.asarray(new, dtype=object)
     given = np.asarray(given, dtype=object)
     if len(new):
-        new = shapely.get_parts(shapely.node(shapely.multilinestrings(new)))
+        new = node_lines(new)
         new = new[shapely.length(new) > 1e-6]
     pieces = []
     if len(given):
