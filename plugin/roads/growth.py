@@ -32,8 +32,8 @@ become quarters too, split where major roads reach the boundary. At the end, dea
 roads are removed (Fig. 4.12; ``remove_dead_ends``), and pieces of the network that reach
 no sketched road (or, without a sketch, the longest piece) are joined to it by the shortest
 straight minor road that crosses nothing (:func:`link_pieces`; not in Scharl, whose growth
-starts from one network; a boundary of several parts apart grows a piece in each). Each quarter
-gets a seed street at its barycentre (sec. 4.2.1); places left farther than
+starts from one network; a boundary of several parts apart grows a piece in each). Each
+quarter gets a seed street at its barycentre (sec. 4.2.1); places left farther than
 ``GAP_FACTOR`` segment lengths from every road get further seeds (Scharl's random fallback
 seeds, scored by their distance to the roads).
 
@@ -1302,24 +1302,21 @@ def link_pieces(result: "GrowthResult", width: float, max_slope: float = np.inf,
             return False
         return obstacles is None or shapely.intersection(link, obstacles).length < 1e-6
 
-    links, keep = link_floating_pieces(result.geometry, result.pattern == "sketch",
-                                       accept=buildable, drop_unlinked=False)
-    if keep.all() and not len(links):
+    links, _ = link_floating_pieces(result.geometry, result.pattern == "sketch",
+                                    accept=buildable, drop_unlinked=False)
+    if not len(links):
         return result, 0
-    geoms = np.concatenate([result.geometry[keep], links])
-    level = np.r_[result.level[keep], np.full(len(links), MINOR)]
-    pattern = np.r_[result.pattern[keep], np.full(len(links), "link", dtype=object)]
-    width_all = np.r_[result.width[keep], np.full(len(links), float(width))]
-    if len(links):
-        is_link = np.r_[np.zeros(int(keep.sum()), bool), np.ones(len(links), bool)]
-        snapped = snap_ends_onto_lines(geoms, is_link)
-        pieces = node_lines(snapped)
-        pieces = pieces[shapely.length(pieces) > 1e-9]
-        parent = _attach_attributes(pieces, snapped, np.arange(len(snapped)), level)
-        geoms, level, pattern, width_all = pieces, level[parent], pattern[parent], \
-            width_all[parent]
-    return GrowthResult(geoms, level, pattern.astype(object), width_all, result.stats), \
-        len(links)
+    lines = np.concatenate([result.geometry, links])
+    level = np.r_[result.level, np.full(len(links), MINOR)]
+    pattern = np.r_[result.pattern, np.full(len(links), "link", dtype=object)]
+    width_all = np.r_[result.width, np.full(len(links), float(width))]
+    lines = snap_ends_onto_lines(lines, np.r_[np.zeros(len(result.geometry), bool),
+                                              np.ones(len(links), bool)])
+    pieces = node_lines(lines)
+    pieces = pieces[shapely.length(pieces) > 1e-9]
+    parent = _attach_attributes(pieces, lines, np.arange(len(lines)), level)
+    return GrowthResult(pieces, level[parent], pattern[parent].astype(object),
+                        width_all[parent], result.stats), len(links)
 
 
 # --------------------------------------------------------------------------- stage helpers
