@@ -486,3 +486,26 @@ def test_same_seed_same_network(eschen):
     g3 = _eschen_run(eschen, 4)[2].geometry
     assert len(g1) == len(g2) and shapely.equals_exact(g1, g2, 0.0).all()
     assert len(g3) != len(g1) or not shapely.equals_exact(g1, g3, 0.0).all()
+
+
+def test_no_step_runs_along_a_given_road():
+    """Triesenberg from the other Liechtenstein towns, seed 4 (the fidelity benchmark's run):
+    a straight step of 395 m ran 135 m inside a secondary road's corridor before steps were
+    checked against the given roads' corridors (the invariants' rule); now no new street
+    doubles a given road, and the network stays one piece."""
+    from towns import LI_PBF, liechtenstein_towns
+
+    if not LI_PBF.exists():
+        pytest.skip(f"{LI_PBF} is missing")
+    towns = liechtenstein_towns()
+    target = next(t for t in towns if t.name == "Triesenberg")
+    others = [t for t in towns if t.name != "Triesenberg"]
+    pts, graph, h = iq.points_from_roads(np.concatenate([t.lines for t in others]),
+                                         np.concatenate([t.road_class for t in others]))
+    res = rw.synthesize(pts, target.area, existing_lines=target.given, seed=4,
+                        in_place=False, shapes=rw.street_shapes(graph, h.edge_level))
+    g = res.geometry
+    new = g[invariants.new_streets(g, target.given)]
+    check = invariants.check_network(new, target.given, target.given_class, target.area)
+    assert len(check.duplicates) == 0 and check.floating_pieces == 0
+    assert len(check.crossings_given) == 0

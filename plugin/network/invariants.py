@@ -64,6 +64,7 @@ from .street_graph import JUNCTION_TOLERANCE, clean_network, node_lines
 
 __all__ = [
     "JUNCTION_TOLERANCE", "CORRIDOR_HALF_WIDTH", "MIN_DUPLICATE_LENGTH", "JUNCTION_RADIUS",
+    "corridor_of",
     "DEAD_END_TOLERANCE", "EDGE_DISTANCE", "SNAP_TOLERANCE", "UNDERSHOOT_DISTANCE",
     "CONTROLLED_ACCESS",
     "CHECKS", "Contacts", "NetworkCheck", "line_contacts", "dead_end_share", "counted_nodes",
@@ -304,6 +305,14 @@ def dead_end_share_of_extract(lines: Sequence) -> float:
     return dead_end_share(lines, shapely.convex_hull(shapely.multilinestrings(list(lines))))
 
 
+def corridor_of(given: Sequence, half_width: float = CORRIDOR_HALF_WIDTH):
+    """The corridors of the given roads, in which no synthesised street may run (prepared)."""
+    corridor = shapely.union_all(shapely.buffer(np.asarray(given, dtype=object), half_width,
+                                                quad_segs=4))
+    shapely.prepare(corridor)
+    return corridor
+
+
 def new_streets(lines: Sequence, given: Sequence, tolerance: float = 0.01) -> np.ndarray:
     """Which lines are not copies of the given roads (a mask).
 
@@ -532,8 +541,7 @@ def check_network(synthesised: Sequence, given: Optional[Sequence] = None,
     # parallel duplicates: long pieces inside the corridors of the given roads
     duplicates = np.empty(0, dtype=object)
     if n_s and n_g and corridor_half_width > 0:
-        corridor = shapely.union_all(shapely.buffer(giv, corridor_half_width, quad_segs=4))
-        shapely.prepare(corridor)
+        corridor = corridor_of(giv, corridor_half_width)
         hit = shapely.intersects(corridor, syn)
         if hit.any():
             with np.errstate(invalid="ignore"):

@@ -76,6 +76,7 @@ from ..core import coordinates
 from ..core.geometry import pinned_ends
 from ..core.progress import InputError, Progress, ensure
 from ..network.dead_ends import steer_share
+from ..network.invariants import MIN_DUPLICATE_LENGTH, corridor_of
 from ..network.street_graph import node_lines
 from . import intersection_quadtree as iq
 
@@ -308,6 +309,7 @@ class _Walker:
             self._add_segment((p0x, p0y), (p1x, p1y))
         self.cos_min = math.cos(math.radians(settings.min_angle))
         self.area = None  # the target: junctions made on streets stay inside it
+        self.corridor = None  # the given roads' corridors (prepared): no step runs along one
         self._neighbourhoods(pts)
 
     def _neighbourhoods(self, pts: iq.PointSet):
@@ -457,10 +459,18 @@ class _Walker:
                 return False
             if near is None:
                 close.append(i)
-        if not close:
+        step = None
+        if close:
+            step = shapely.LineString([p, q])
+            if shapely.dwithin(self._geometries(close), step, _TOUCH).any():
+                return False
+        if self.corridor is None:
             return True
-        step = shapely.LineString([p, q])
-        return not shapely.dwithin(self._geometries(close), step, _TOUCH).any()
+        # nor along a given road, in its corridor longer than the invariants allow
+        step = shapely.LineString([p, q]) if step is None else step
+        if not self.corridor.intersects(step):
+            return True
+        return shapely.intersection(step, self.corridor).length <= MIN_DUPLICATE_LENGTH
 
     def _clear(self, v, j, q=None):
         """Whether the step v -> j (or to the location q) keeps clear of every segment
@@ -934,6 +944,8 @@ def connect_points(points: iq.PointSet, rng: np.random.Generator,
     if area is not None:
         w.area = shapely.buffer(area, 1.0)
         shapely.prepare(w.area)
+    if len(seg0):
+        w.corridor = corridor_of(shapely.linestrings(seg0.reshape(-1, 2, 2)))
     if existing is not None:
         w.deg[existing["index"]] = existing["degree"]
     levels = np.unique(points.level[points.level >= 0])
@@ -1263,10 +1275,7 @@ def _draw_geometry(xy, a, b, level, tort, shapes, settings, rng, others, area=No
         inside = shapely.contains(area, straight)  # prepared: faster than within
     corridor, chord_run = None, None
     if len(others):  # no bend may run along a given road (the invariants' corridor)
-        from ..network.invariants import CORRIDOR_HALF_WIDTH
-
-        corridor = shapely.union_all(shapely.buffer(others, CORRIDOR_HALF_WIDTH, quad_segs=4))
-        shapely.prepare(corridor)
+        corridor = corridor_of(others)
         with np.errstate(invalid="ignore"):
             chord_run = shapely.length(shapely.intersection(straight, corridor))
     conflicts = functools.partial(_conflicts, area=area, chord_inside=inside,
