@@ -42,6 +42,7 @@ class SynthesizeRoadsGan(AlgorithmBase):
     MAX_GAP = "MAX_GAP"
     MIN_DEAD_END = "MIN_DEAD_END"
     FROM_EDGE = "FROM_EDGE"
+    DEAD_END_SHARE = "DEAD_END_SHARE"
     OUTPUT = "OUTPUT"
     OUTPUT_RASTER = "OUTPUT_RASTER"
 
@@ -127,6 +128,14 @@ class SynthesizeRoadsGan(AlgorithmBase):
             "Checked: a dead end's length runs from the edge of the road it leaves to the "
             "road's end (removes the skeleton spurs of wide generated roads, keeps side "
             "streets). Unchecked: the thesis's skeleton length.", advanced=True)
+        self.add(QgsProcessingParameterNumber(
+            self.DEAD_END_SHARE, "Dead-end share to steer to (0-1)",
+            QgsProcessingParameterNumber.Type.Double, optional=True, minValue=0.0, maxValue=1.0),
+            "The example's share of dead ends among the street ends and junctions (layoutmetrics' "
+            "dead_end_share of the example, e.g. 0.28 for the Liechtenstein towns): the "
+            "generated streets' share is steered into ±30 % of it by closing dead ends with "
+            "short streets, or adding cul-de-sacs and cutting T stems short. Empty: the "
+            "network as read back from the image.", advanced=True)
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT, "StreetGAN roads", QgsProcessing.SourceType.TypeVectorLine),
             "Roads with edge_id, level, road_class, length_m, model, seed.")
@@ -182,6 +191,9 @@ class SynthesizeRoadsGan(AlgorithmBase):
         min_dead = None  # the model card's value
         if parameters.get(self.MIN_DEAD_END) not in (None, ""):
             min_dead = self.number(parameters, self.MIN_DEAD_END, context)
+        share = None  # as read back
+        if parameters.get(self.DEAD_END_SHARE) not in (None, ""):
+            share = self.number(parameters, self.DEAD_END_SHARE, context)
         gen = qgis_io.run_engine(f"Model '{Path(str(model)).name}'", streetgan.load_model, model)
         feedback.pushInfo(f"Model {gen.name}: {gen.card.get('title', '')}, "
                           f"{gen.cell_size:g} m per pixel.")
@@ -199,7 +211,7 @@ class SynthesizeRoadsGan(AlgorithmBase):
             cell_size=cell or None, max_gap=max_gap, min_dead_end=min_dead,
             from_edge=self.parameterAsBoolean(parameters, self.FROM_EDGE, context),
             progress=qgis_io.progress_for(feedback, 5, 90), given=given,
-            given_class=given_class)
+            given_class=given_class, dead_end_share=share)
         s = result.stats
         n_new = int((~result.given).sum())
         feedback.pushInfo(f"Generated {s['pixels'][0]} x {s['pixels'][1]} px in "
@@ -213,6 +225,10 @@ class SynthesizeRoadsGan(AlgorithmBase):
                 f"{s['n_joined']} pieces joined by a connector, {s['n_dropped_edges']} edges "
                 f"of pieces that reach no road dropped; {s['n_components']} connected "
                 "component(s).")
+        if share is not None:
+            feedback.pushInfo(f"Dead-end share steered to {share:.2f}: "
+                              f"{s['dead_ends_closed']} dead end(s) closed, "
+                              f"{s['dead_ends_opened']} opened.")
         if n_new == 0:
             feedback.reportError("The generator drew no road inside the target: try another "
                                  "seed or a larger target.")

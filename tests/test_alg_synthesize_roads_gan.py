@@ -147,7 +147,8 @@ def test_qgis_process_on_bubenec(tmp_path):
 def test_given_roads_on_a_town(qgis_processing):
     """A Liechtenstein town's outline with its level-0 roads as GIVEN_ROADS (geographic
     layers in, metric working CRS): the given roads come back whole (road_class 'given'),
-    the generated streets join them, every contact is a junction, one network."""
+    the generated streets join them, every contact is a junction, one network; with
+    DEAD_END_SHARE the example's dead-end share too."""
     from helpers import liechtenstein_town
     from urban_synthesis.plugin.network import invariants
 
@@ -171,3 +172,14 @@ def test_given_roads_on_a_town(qgis_processing):
     assert sum(v.values()) == 0, check.summary()
     assert check.floating_pieces == 0
     assert_planar(geoms)
+    # with the example's dead-end share (the other towns') every invariant holds, that one too
+    share = invariants.dead_end_share(case["example"], case["example_area"])
+    out = qgis_processing.run(GAN, {
+        "TARGET": memory_layer("Polygon", [case["area"].wkt], "EPSG:32632"),
+        "GIVEN_ROADS": given, "MODEL": streetgan.shipped_models().index("streetgan_helsinki"),
+        "SEED": 3, "DEAD_END_SHARE": share, "OUTPUT": "memory:"})
+    rows, geoms = layer_features(out["OUTPUT"])
+    is_given = np.array([r["road_class"] == "given" for r in rows])
+    check = invariants.check_network(geoms[~is_given], case["given"], case["given_class"],
+                                     case["area"], example_dead_end_share=share)
+    assert check.ok, check.summary()

@@ -182,6 +182,31 @@ def test_given_roads_are_kept_and_joined(models):
     assert shapely.equals_exact(again.geometry, res.geometry, 0.0).all()
 
 
+def test_dead_end_share_is_steered_into_the_examples_band(models):
+    """The read-back leaves the dead-end share where the morphology puts it; with the
+    example's share given, it is steered into the invariants' band (±30 %) both ways, the
+    given roads kept whole, every other invariant kept."""
+    from urban_synthesis.plugin.network import invariants
+
+    target = shapely.box(0, 0, 1500, 1200)
+    arterial = shapely.LineString([(-100, 610), (700, 560), (1600, 640)])
+    plain = streetgan.synthesize(target, models["streetgan_helsinki"], seed=2,
+                                 given=[arterial], given_class=["primary"])
+    own = invariants.dead_end_share(plain.geometry, target)
+    for share in (0.7 * own, 1.6 * own):
+        res = streetgan.synthesize(target, models["streetgan_helsinki"], seed=2,
+                                   given=[arterial], given_class=["primary"],
+                                   dead_end_share=share)
+        kept = shapely.union_all(res.geometry[res.given])
+        assert kept.length == pytest.approx(arterial.length, rel=1e-9)
+        check = invariants.check_network(res.geometry[~res.given], [arterial], ["primary"],
+                                         target, example_dead_end_share=share)
+        assert check.ok, (share, own, check.summary())
+        assert res.stats["dead_ends_closed"] + res.stats["dead_ends_opened"] > 0
+    with pytest.raises(InputError, match="dead-end share"):
+        streetgan.synthesize(target, models["streetgan_helsinki"], dead_end_share=1.5)
+
+
 def test_new_streets_whose_noding_fails_are_snap_rounded():
     """Generated streets that defeat GEOS's floating-point noding are noded on the
     millimetre grid: planar, every street kept to that grid."""

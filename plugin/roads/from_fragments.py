@@ -89,6 +89,7 @@ from ..retrieval.warp import poisson_blend, warp_geometries, warp_points
 __all__ = [
     "MAX_N_BEST", "MAX_LEVELS", "EDGE_FIELDS", "Retrieval", "SynthesisResult",
     "retrieve", "synthesize", "procedural_split", "grid_streets", "example_blocks",
+    "steer_dead_ends",
     "close_sketch", "statistical_split", "example_dead_end_share",
 ]
 
@@ -906,6 +907,43 @@ def example_dead_end_share(databases: Sequence[FragmentDatabase]) -> float:
     return float(np.mean(values)) if values else float("nan")
 
 
+def _steer_measured(geometry, level, attrs, share: float, area, rng, min_dangle: float,
+                    max_block: float = np.inf):
+    """:func:`_steer_dead_ends`, again from the measured network (up to three rounds) where
+    its count drifted from the measure's; returns the network, (closed, opened) and the
+    measured share."""
+    n_closed = n_opened = 0
+    now = np.nan
+    for _ in range(3):
+        geometry, level, attrs, (closed, opened) = _steer_dead_ends(
+            geometry, level, attrs, share, area, rng, min_dangle, max_block)
+        n_closed, n_opened = n_closed + closed, n_opened + opened
+        now = _invariants.dead_end_share(geometry, area)
+        if not (closed or opened) or not np.isfinite(now) or \
+                abs(now - share) <= share * DEAD_END_TOLERANCE / 2 + 1e-9:
+            break
+    return geometry, level, attrs, (n_closed, n_opened), now
+
+
+def steer_dead_ends(lines, is_new, share: float, area, rng: np.random.Generator,
+                    min_dangle: float = MIN_DANGLE, max_block: float = np.inf):
+    """The fragment synthesis' dead-end steering (:func:`_steer_dead_ends`, in rounds from
+    the measured network) for any network: ``is_new`` marks the lines it may change; the
+    others are given and kept as they are. Returns (lines, is_new, (closed, opened)): the
+    network re-noded, chains of new lines through degree-2 nodes merged."""
+    lines = np.asarray(lines, dtype=object)
+    is_new = np.asarray(is_new, dtype=bool)
+    n = len(lines)
+    attrs = {"source_fragment": np.where(is_new, "new", "arterial").astype(object),
+             "database": np.full(n, "", dtype=object),
+             "fragment_id": np.full(n, -1, dtype=np.int64),
+             # given lines keep their own features: no two merge through a degree-2 node
+             "query": np.where(is_new, -1, -2 - np.arange(n)).astype(np.int64)}
+    geometry, _, attrs, counts, _ = _steer_measured(lines, is_new.astype(np.int64), attrs,
+                                                    share, area, rng, min_dangle, max_block)
+    return geometry, attrs["source_fragment"] != "arterial", counts
+
+
 def _steer_dead_ends(geometry, level, attrs, share: float, area, rng, min_dangle: float,
                      max_block: float = np.inf):
     """Steer the dead-end share of the network to ``share`` (:mod:`network.dead_ends`).
@@ -1516,15 +1554,8 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
         share = example_dead_end_share(databases) if dead_end_share is None else \
             float(dead_end_share)
         counted_in = target if target is not None else area
-        n_closed = n_opened = 0
-        for _ in range(3):   # again from the measured network where its count drifted
-            geometry, level, attrs, (closed, opened) = _steer_dead_ends(
-                geometry, level, attrs, share, counted_in, rng, min_dangle, max_block)
-            n_closed, n_opened = n_closed + closed, n_opened + opened
-            now = _invariants.dead_end_share(geometry, counted_in)
-            if not (closed or opened) or not np.isfinite(now) or \
-                    abs(now - share) <= share * DEAD_END_TOLERANCE / 2 + 1e-9:
-                break
+        geometry, level, attrs, (n_closed, n_opened), now = _steer_measured(
+            geometry, level, attrs, share, counted_in, rng, min_dangle, max_block)
         stats["dead_ends"] = dict(example_share=share, share=now, closed=n_closed,
                                   opened=n_opened)
         progress.info(f"Dead-end share {now:.2f} (example {share:.2f}): {n_closed} dead "

@@ -337,7 +337,8 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
                from_edge: bool = True,
                tile: Optional[int] = 24, levels: bool = True,
                progress: Optional[Progress] = None, generate_fn=None, given=None,
-               given_class=None, merge_junctions: Optional[float] = None) -> StreetGanResult:
+               given_class=None, merge_junctions: Optional[float] = None,
+               dead_end_share: Optional[float] = None) -> StreetGanResult:
     """Generate a road network over a target polygon (thesis ch. 4.2).
 
     Parameters
@@ -362,6 +363,11 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
         new junctions)
     merge_junctions : m; junctions closer than this merge into one (default half a
         rasterised road width, :meth:`Generator.merge_distance`; 0: the thesis's graph)
+    dead_end_share : float in [0, 1], optional, the example's dead-end share: the generated
+        streets' is steered into the invariants' band around it (the fragment synthesis'
+        rule, :func:`from_fragments.steer_dead_ends`: dead ends closed by short streets, or
+        cul-de-sacs added and T stems cut short); None: the network as read back (not in
+        the thesis: its read-back leaves the share wherever the morphology puts it)
     """
     progress = ensure(progress)
     gen = model if isinstance(model, Generator) else load_model(model)
@@ -370,6 +376,8 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
     area = shapely.make_valid(shapely.union_all(geoms)) if len(geoms) else None
     if area is None or area.is_empty or area.area <= 0:
         raise InputError("the target has no area")
+    if dead_end_share is not None and not 0 <= dead_end_share <= 1:
+        raise InputError(f"the dead-end share must lie in [0, 1], got {dead_end_share}")
     cell = float(cell_size) if cell_size else gen.cell_size
     if not (math.isfinite(cell) and cell > 0):
         raise InputError(f"the cell size must be a positive number of metres, not {cell_size}")
@@ -425,6 +433,13 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
     lines, is_given, attach = attach_to_given(lines, given_lines, given_cls, area,
                                               reach=corridor + 0.75 * width,
                                               join_distance=JOIN_DISTANCE * width)
+    steered = (0, 0)
+    if dead_end_share is not None and len(lines) > 1:
+        from .from_fragments import steer_dead_ends
+
+        lines, is_new, steered = steer_dead_ends(lines, ~is_given, float(dead_end_share),
+                                                 area, np.random.default_rng(seed))
+        is_given = ~is_new
     t_vec = time.perf_counter() - t
     level = np.zeros(len(lines), dtype=np.int64)
     if levels and len(lines):
@@ -449,7 +464,8 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
     stats = dict(rg.stats, pixels=[rows, cols], cell_size_m=cell, generate_s=round(t_gen, 4),
                  vectorize_s=round(t_vec, 4), area_km2=area.area / 1e6, model=gen.name,
                  seed=int(seed), edges_clipped=int((~is_given).sum()),
-                 n_joined_to_drawn_roads=int(n_cut), **attach)
+                 n_joined_to_drawn_roads=int(n_cut), dead_ends_closed=int(steered[0]),
+                 dead_ends_opened=int(steered[1]), **attach)
     return StreetGanResult(np.asarray(lines, dtype=object), level, image, gt, stats, is_given)
 
 

@@ -216,7 +216,8 @@ class Runner:
         model = self.cached("gan_" + name, lambda: streetgan.load_model(name))
         self.extra = {"model": name}
         return streetgan.synthesize(self.target.area, model, seed=seed, given=self.target.given,
-                                    given_class=self.target.given_class).geometry
+                                    given_class=self.target.given_class,
+                                    dead_end_share=self.example.stats["degree1_share"]).geometry
 
     def growroads(self, seed: int) -> np.ndarray:
         from urban_synthesis.plugin.roads import growth
