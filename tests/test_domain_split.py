@@ -683,3 +683,29 @@ def test_rows_meet_end_to_end_without_a_street_and_keep_access():
     kept = domain_split.split_domain(band, templates=LIB, seed=1,
                                      settings=domain_split.SplitSettings(back_to_back=False))
     assert domain_split.table1(lay)["l_s"] < domain_split.table1(kept)["l_s"] - 3
+
+
+def test_outline_beside_a_key_road_is_no_second_street():
+    """A region whose south side runs 6 m beside a key road just outside it (a settlement
+    outline drawn along its main road): that side is no street of the result (the key road
+    is), the outline's cut ends and the streets that ended there join the key road, and the
+    network keeps every invariant but the dead-end share (splitdomain makes none)."""
+    from urban_synthesis.plugin.network import invariants
+
+    region = shapely.box(0, 0, 420, 300)
+    keys = [shapely.LineString([(-60, -6), (480, -6)]),
+            shapely.LineString([(210, -6), (210, 360)])]
+    res = domain_split.split_domain([region], key_roads=keys, seed=1,
+                                    settings=domain_split.SplitSettings(optimise=False))
+    assert res.stats["n_outline_beside_key_roads"] >= 1
+    g = res.roads
+    new = g[invariants.new_streets(g, keys)]
+    check = invariants.check_network(new, keys, area=region)
+    v = check.violations()
+    v.pop("dead_end_share")
+    assert sum(v.values()) == 0, check.summary()
+    # nothing runs along the south side, and streets reach the key road from the north
+    south = shapely.LineString([(0, 0), (420, 0)]).buffer(1.0)
+    assert shapely.length(shapely.intersection(new, south)).sum() < 2 * 3.0
+    assert shapely.dwithin(new, keys[0], 1e-6).sum() >= 2
+    assert_planar(g)

@@ -59,11 +59,13 @@ from typing import Dict, List, Optional, Sequence
 import numpy as np
 import pandas as pd
 import shapely
+from shapely.ops import substring
 from scipy.cluster.hierarchy import DisjointSet
 
 from ..core.geometry import minimum_rectangles, unit
 from ..core.progress import InputError, Progress, ensure
 from ..measure import metrics as _metrics
+from ..network import invariants as _invariants
 from ..network.street_graph import snap_ends_onto_lines
 from ..parcels import subdivision as _parcels
 from . import templates as _templates
@@ -303,6 +305,81 @@ def _extend_dangles(lines: np.ndarray, barrier, max_extension: float) -> np.ndar
             xy = np.vstack([q[None], xy]) if end == 0 else np.vstack([xy, q[None]])
         out.append(shapely.LineString(xy))
     return np.asarray(out, dtype=object)
+
+
+def _outline_onto_key_roads(roads, level, kind, key_roads):
+    """The region's outline where it runs beside a key road (in its corridor for longer than
+    the invariants allow, :func:`invariants.corridor_of`: a key road just outside the region)
+    is no street of the result: the key road is the street there. The outline's cut ends and
+    the streets that ended on the dropped stretch are carried straight onto the key road (at
+    most twice the corridor's half-width, crossing no street), so that none is left dangling.
+    Returns (roads, level, kind, stretches dropped)."""
+    keys = np.asarray(key_roads, dtype=object).ravel()
+    keys = keys[~(shapely.is_missing(keys) | shapely.is_empty(keys))]
+    if not len(keys):
+        return roads, level, kind, 0
+    corridor = _invariants.corridor_of(keys)
+    out_roads, out_level, out_kind, dropped, ends = [], [], [], [], []
+    for line, lv, kd in zip(roads, level, kind):
+        along = np.empty(0, dtype=object)
+        if kd == "outline" and corridor.intersects(line):
+            with np.errstate(invalid="ignore"):
+                along = shapely.get_parts(shapely.line_merge(
+                    shapely.intersection(line, corridor)))
+            along = along[(shapely.get_dimensions(along) == 1) &
+                          (shapely.length(along) > _invariants.MIN_DUPLICATE_LENGTH)]
+        pieces = _line_without(line, along) if len(along) else [line]
+        out_roads += pieces
+        out_level += [lv] * len(pieces)
+        out_kind += [kd] * len(pieces)
+        dropped += list(along)
+        for stretch in along:   # the outline's cut ends (a ring has no ends of its own)
+            for end in (shapely.get_point(stretch, 0), shapely.get_point(stretch, -1)):
+                if line.is_ring or shapely.distance(end, shapely.boundary(line)) > 1e-6:
+                    ends.append(end)
+    if not dropped:
+        return roads, level, kind, 0
+    gone = shapely.union_all(dropped)
+    for line, kd in zip(list(out_roads), out_kind):  # streets that ended on a dropped stretch
+        if kd != "outline":
+            ends += [e for e in (shapely.get_point(line, 0), shapely.get_point(line, -1))
+                     if shapely.distance(e, gone) < 1e-6]
+    key_lines = shapely.union_all(keys)
+    reach = 2 * _invariants.CORRIDOR_HALF_WIDTH
+    for end in ends:
+        link = shapely.shortest_line(end, key_lines)
+        if link is None or not 1e-6 < link.length <= reach:
+            continue
+        drawn = np.asarray(out_roads, dtype=object)
+        crossed = shapely.intersection(drawn[shapely.intersects(drawn, link)], link)
+        if shapely.covers(shapely.buffer(shapely.boundary(link), 1e-6), crossed).all():
+            out_roads.append(link)
+            out_level.append(LEVEL_OUTLINE)
+            out_kind.append("outline")
+    return out_roads, out_level, out_kind, len(dropped)
+
+
+def _line_without(line, stretches):
+    """The pieces of ``line`` outside ``stretches`` (sub-lines of it), cut by distance along
+    it, so that the pieces end exactly where the stretches began (a ring's stretch may run
+    over its first point)."""
+    total = line.length
+    start = shapely.line_locate_point(line, shapely.get_point(stretches, 0))
+    end = shapely.line_locate_point(line, shapely.get_point(stretches, -1))
+    lo, hi = np.minimum(start, end), np.maximum(start, end)
+    wraps = np.abs((hi - lo) - shapely.length(stretches)) > \
+        1e-3 * shapely.length(stretches) + 1e-6
+    spans = []
+    for i in range(len(stretches)):
+        spans += [(hi[i], total), (0.0, lo[i])] if wraps[i] else [(lo[i], hi[i])]
+    pieces, at = [], 0.0
+    for a0, a1 in sorted(spans):
+        if a0 - at > 1e-6:
+            pieces.append(substring(line, at, a0))
+        at = max(at, a1)
+    if total - at > 1e-6:
+        pieces.append(substring(line, at, total))
+    return pieces
 
 
 def _cut_continuations(roads, level, kind, key_roads, tolerance: float = 0.01):
@@ -1058,6 +1135,9 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
         [LEVEL_SPLIT] * len(split_lines) + [LEVEL_TEMPLATE] * len(template_roads)
     kind = [str(k) for k in fixed_kinds[is_road]] + ["split"] * len(split_lines) + \
         [k for _, k in template_roads]
+    n_beside = 0
+    if key_roads is not None and len(key_roads):
+        roads, level, kind, n_beside = _outline_onto_key_roads(roads, level, kind, key_roads)
     roads, level, kind, n_stubs = road_network(roads, level, kind)
     if key_roads is not None and len(key_roads):
         # after the noding, which merges lines through their shared ends again
@@ -1066,6 +1146,7 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
         "n_regions": n_done, "n_splits": splitter.n_split, "n_rejected_splits": splitter.n_rejected,
         "n_backtracked": n_backtracked, "n_blocks": len(leaves),
         "n_no_access_rejected": splitter.n_no_access, "n_stubs_dropped": n_stubs,
+        "n_outline_beside_key_roads": n_beside,
         "templates": dict(Counter(leaf[1] for leaf in leaves)),
         "n_parcels": int(residential.sum()),
         "n_no_access": int((residential & ~table.has_street_access.to_numpy(bool)).sum()),
