@@ -59,10 +59,9 @@ from typing import Dict, List, Optional, Sequence
 import numpy as np
 import pandas as pd
 import shapely
-from shapely.ops import substring
 from scipy.cluster.hierarchy import DisjointSet
 
-from ..core.geometry import minimum_rectangles, unit
+from ..core.geometry import minimum_rectangles, substrings, unit
 from ..core.progress import InputError, Progress, ensure
 from ..measure import metrics as _metrics
 from ..network import invariants as _invariants
@@ -372,14 +371,17 @@ def _line_without(line, stretches):
     spans = []
     for i in range(len(stretches)):
         spans += [(hi[i], total), (0.0, lo[i])] if wraps[i] else [(lo[i], hi[i])]
-    pieces, at = [], 0.0
+    starts, stops, at = [], [], 0.0
     for a0, a1 in sorted(spans):
         if a0 - at > 1e-6:
-            pieces.append(substring(line, at, a0))
+            starts.append(at)
+            stops.append(a0)
         at = max(at, a1)
     if total - at > 1e-6:
-        pieces.append(substring(line, at, total))
-    return pieces
+        starts.append(at)
+        stops.append(total)
+    return list(substrings([line] * len(starts), np.array(starts), np.array(stops))) \
+        if starts else []
 
 
 def _cut_continuations(roads, level, kind, key_roads, tolerance: float = 0.01):
