@@ -7,7 +7,9 @@ Pipeline of :func:`split_domain` (one layout) and :func:`split_variations` (k la
    ending inside the region is continued straight to the next street (a dangle leaves a
    slit no template fills). Region outlines count as streets (a development bounded by
    roads) unless ``outline_streets`` is off: then they are "no street" edges (Fig. 4 edge
-   labels). Key roads of a motorway class take no junction and give no frontage.
+   labels); where the outline runs beside a key road just outside the region, the key road
+   is the street (:func:`_outline_onto_key_roads`). Key roads of a motorway class take no
+   junction and give no frontage.
 2. **Hierarchical splitting with backtracking** (sec. 3-5, :class:`_Search`): a region is
    replaced by a template when one matches: row templates are warped onto it
    (:func:`templates.warp_rows`, registration / regression) and their **warp energy**
