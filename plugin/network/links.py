@@ -19,10 +19,26 @@ from scipy.sparse.csgraph import connected_components
 
 from . import street_graph as _roads
 
-__all__ = ["link_floating_pieces"]
+__all__ = ["link_floating_pieces", "meets_only_at_ends"]
 
 #: Nodes of a piece tried as a link's start, nearest to the anchored network first.
 NODES_TRIED = 32
+
+
+def meets_only_at_ends(link, lines) -> bool:
+    """Whether ``link`` touches ``lines`` only at its two ends (within a micrometre): a new
+    street that crosses or runs along none of them.
+
+    >>> road = shapely.LineString([(0, 0), (10, 0)])
+    >>> meets_only_at_ends(shapely.LineString([(5, 0), (5, 5)]), [road])
+    True
+    >>> meets_only_at_ends(shapely.LineString([(5, -5), (5, 5)]), [road])
+    False
+    """
+    lines = np.asarray(lines, dtype=object)
+    hit = lines[shapely.intersects(lines, link)]
+    return bool(shapely.covers(shapely.buffer(shapely.boundary(link), 1e-6),
+                               shapely.intersection(hit, link)).all())
 
 
 def link_floating_pieces(lines, anchored, accept: Optional[Callable] = None,
@@ -90,13 +106,8 @@ def link_floating_pieces(lines, anchored, accept: Optional[Callable] = None,
                 link = shapely.shortest_line(pts[k], target)
                 if link.length <= 1e-6:
                     continue
-                drawn = np.asarray(others, dtype=object)
-                hit = shapely.intersects(drawn, link)
                 # it may touch only the piece at its start and the anchored line at its end
-                inner = shapely.intersection(drawn[hit], link)
-                ends = shapely.boundary(link)
-                if shapely.covers(shapely.buffer(ends, 1e-6), inner).all() and \
-                        (accept is None or accept(link)):
+                if meets_only_at_ends(link, others) and (accept is None or accept(link)):
                     best = (float(d[k]), comp, link)
                     break
         if best is None:

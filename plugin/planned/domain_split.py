@@ -67,6 +67,7 @@ from ..core.geometry import minimum_rectangles, substrings, unit
 from ..core.progress import InputError, Progress, ensure
 from ..measure import metrics as _metrics
 from ..network import invariants as _invariants
+from ..network.links import meets_only_at_ends
 from ..network.street_graph import snap_ends_onto_lines
 from ..parcels import subdivision as _parcels
 from . import templates as _templates
@@ -351,9 +352,7 @@ def _outline_onto_key_roads(roads, level, kind, key_roads):
         link = shapely.shortest_line(end, key_lines)
         if link is None or not 1e-6 < link.length <= reach:
             continue
-        drawn = np.asarray(out_roads, dtype=object)
-        crossed = shapely.intersection(drawn[shapely.intersects(drawn, link)], link)
-        if shapely.covers(shapely.buffer(shapely.boundary(link), 1e-6), crossed).all():
+        if meets_only_at_ends(link, out_roads):
             out_roads.append(link)
             out_level.append(LEVEL_OUTLINE)
             out_kind.append("outline")

@@ -66,7 +66,7 @@ from shapely.ops import substring
 from ..core.progress import InputError, Progress, ensure
 from ..network import street_graph as _roads
 from ..network.dead_ends import steer_share
-from ..network.links import link_floating_pieces
+from ..network.links import link_floating_pieces, meets_only_at_ends
 from ..network import invariants as _invariants
 from ..network.invariants import (
     CORRIDOR_HALF_WIDTH,
@@ -1043,9 +1043,7 @@ def _steer_dead_ends(geometry, level, attrs, share: float, area, rng, min_dangle
         if link.length <= 1e-6:
             return False
         others = current()
-        hit = others[shapely.intersects(others, link)]
-        if not shapely.covers(shapely.buffer(shapely.boundary(link), 1e-6),
-                              shapely.intersection(hit, link)).all():
+        if not meets_only_at_ends(link, others):
             return False   # it would cross a street
         near = others[shapely.dwithin(others, link, CORRIDOR_HALF_WIDTH)]
         if _doubling(np.array([link]), _corridor(None, near)).any():
