@@ -35,7 +35,7 @@ from ..core.progress import InputError, Progress, ensure
 __all__ = [
     "DRIVABLE_CLASSES", "ARTERIAL_CLASSES", "CLASS_RANK", "RoadGraph",
     "drivable_and_arterial", "parse_other_tags", "vertical_layer", "class_rank",
-    "clean_network", "graph_from_lines", "node_lines", "snap_ends_onto_lines",
+    "clean_network", "graph_from_lines", "node_lines", "renode", "snap_ends_onto_lines",
     "move_ends_onto_lines", "JUNCTION_TOLERANCE",
 ]
 
@@ -257,6 +257,20 @@ def node_lines(lines: Sequence) -> np.ndarray:
         return shapely.get_parts(shapely.node(lines))
     except shapely.errors.GEOSException:
         return shapely.get_parts(shapely.union_all(lines, grid_size=JUNCTION_TOLERANCE))
+
+
+def renode(lines: Sequence, new: Sequence, priority: Sequence, min_length: float = 0.0):
+    """A network with new lines added, noded again: the new lines' ends made vertices of the
+    lines they end on (:func:`snap_ends_onto_lines`), everything noded (:func:`node_lines`),
+    pieces of ``min_length`` m or less dropped. Returns (pieces, parent): the index of the
+    line each piece came from (the lowest ``priority`` where lines overlap), for carrying
+    attributes over."""
+    lines = snap_ends_onto_lines(lines, new)
+    pieces = node_lines(lines)
+    pieces = pieces[shapely.length(pieces) > min_length]
+    parent = _attach_attributes(pieces, lines, np.arange(len(lines)),
+                                np.asarray(priority, dtype=np.int64))
+    return pieces, parent
 
 
 def move_ends_onto_lines(lines: Sequence, onto: Sequence, tolerance: float) -> np.ndarray:

@@ -672,11 +672,7 @@ def _renode(geometry: np.ndarray, level: np.ndarray, attrs: Dict[str, np.ndarray
     ends shorter than ``min_dangle`` and merges chains through degree-2 nodes whose two edges
     share level and source.
     """
-    geometry = _roads.snap_ends_onto_lines(geometry, level == new_level)
-    pieces = _roads.node_lines(geometry)
-    pieces = pieces[shapely.length(pieces) > 1e-6]
-    parent = _roads._attach_attributes(pieces, geometry, np.arange(len(geometry)),
-                                       level.astype(np.int64))
+    pieces, parent = _roads.renode(geometry, level == new_level, level, min_length=1e-6)
     g = _roads.graph_from_lines(pieces, np.full(len(pieces), None, object),
                                 np.full(len(pieces), None, object), np.zeros(len(pieces), int),
                                 parent, snap_tolerance=0.0)

@@ -70,8 +70,7 @@ from ..core.progress import InputError, Progress, ensure
 from ..core.geometry import minimum_rectangles
 from ..network.blocks import planar_faces
 from ..network.links import link_floating_pieces
-from ..network.street_graph import (_attach_attributes, clean_network, node_lines,
-                                    snap_ends_onto_lines)
+from ..network.street_graph import clean_network, node_lines, renode
 from ..retrieval.shape_context import DemGrid
 
 __all__ = [
@@ -1310,11 +1309,8 @@ def link_pieces(result: "GrowthResult", width: float, max_slope: float = np.inf,
     level = np.r_[result.level, np.full(len(links), MINOR)]
     pattern = np.r_[result.pattern, np.full(len(links), "link", dtype=object)]
     width_all = np.r_[result.width, np.full(len(links), float(width))]
-    lines = snap_ends_onto_lines(lines, np.r_[np.zeros(len(result.geometry), bool),
-                                              np.ones(len(links), bool)])
-    pieces = node_lines(lines)
-    pieces = pieces[shapely.length(pieces) > 1e-9]
-    parent = _attach_attributes(pieces, lines, np.arange(len(lines)), level)
+    pieces, parent = renode(lines, np.r_[np.zeros(len(result.geometry), bool),
+                                         np.ones(len(links), bool)], level, min_length=1e-9)
     return GrowthResult(pieces, level[parent], pattern[parent].astype(object),
                         width_all[parent], result.stats), len(links)
 
