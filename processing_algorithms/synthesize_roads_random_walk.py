@@ -12,6 +12,7 @@ from qgis.core import (
     QgsWkbTypes,
 )
 
+from ..plugin.network import invariants
 from ..plugin.network import street_graph as roads
 from ..plugin.qgis_glue import qgis_io
 from ..plugin.roads import intersection_quadtree, random_walk
@@ -62,7 +63,9 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
             "probabilities. Streets are random walks, level by level: each step goes to a "
             "point drawn by a Gaussian on (distance, angle) from the base point's statistics, "
             "never to a point of another level, a point with all its connections (at most 4) "
-            "or across a street. Stubs close until the dead-end share is the example's, and "
+            "or across a street. Stubs close until the dead-end share is the example's (with "
+            "roads as the example: measured inside their convex hull, where the streets cut "
+            "at its edge are no dead ends), and "
             "every piece is joined to the rest (or to the existing roads) or dropped: the "
             "result is one network whose every crossing is a junction. Segments take the "
             "shapes of the example's street segments (with roads as the example: the same "
@@ -170,7 +173,7 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
             xy = shapely.get_coordinates(geoms)
             points = qgis_io.run_engine(frame.name, intersection_quadtree.points_from_table,
                                         xy, frame.attributes, index)
-            shapes = None
+            shapes, share = None, None
             feedback.pushInfo(f"{frame.name}: {len(points)} attributed intersection points "
                               "(no street shapes: segments bend as parabolas of the points' "
                               "tortuosity).")
@@ -179,6 +182,8 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
                                                feedback)
             points, shapes = qgis_io.run_engine(frame.name, self._points_from_roads,
                                                 frame.geometry, road_class, index)
+            # the share the network invariants hold the result to (the fragment database's)
+            share = invariants.dead_end_share_of_extract(frame.geometry)
             feedback.pushInfo(f"{frame.name}: {len(points)} intersection points and "
                               f"{len(shapes)} street segment shapes (mean tortuosity "
                               f"{shapes.mean_tortuosity():.3f}) computed from the roads.")
@@ -188,7 +193,7 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
         if len(points) < 3:
             raise QgsProcessingException(f"Layer {frame.name}: {len(points)} intersection "
                                          "points are too few to learn a street style from.")
-        return frame, points, shapes
+        return frame, points, shapes, share
 
     def _bound(self, target, *examples):
         """The points the target receives (its area at the densest example's intersections
@@ -240,12 +245,12 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
             min_angle=self.number(parameters, self.MIN_ANGLE, context))
         placement = self.PLACEMENTS[self.parameterAsEnum(parameters, self.PLACEMENT, context)]
         feedback.setProgress(5)
-        _, points, shapes = self._read_example(parameters, self.EXAMPLE, context, feedback,
+        _, points, shapes, share = self._read_example(parameters, self.EXAMPLE, context, feedback,
                                                target.crs, target.geometry, 0)
         points_b, shapes_b = None, None
         blend = 0.0
         if parameters.get(self.EXAMPLE_B) not in (None, ""):
-            _, points_b, shapes_b = self._read_example(parameters, self.EXAMPLE_B, context,
+            _, points_b, shapes_b, _ = self._read_example(parameters, self.EXAMPLE_B, context,
                                                        feedback, target.crs, target.geometry, 1)
             blend = self._blend(parameters, context, target, field)
         elif field:
@@ -262,7 +267,9 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
         result = qgis_io.run_engine(
             target.name, random_walk.synthesize, points, target.geometry, existing_lines,
             points_b, blend, seed, settings, placement,
-            progress=qgis_io.progress_for(feedback, 15, 90), shapes=shapes, shapes_b=shapes_b)
+            progress=qgis_io.progress_for(feedback, 15, 90), shapes=shapes, shapes_b=shapes_b,
+            # a blend mixes the two examples' shares among their points
+            dead_end_share=share if points_b is None else None)
         st = result.stats
         feedback.pushInfo(
             f"{st['n_points']} points placed ({st['n_points_generated']} drawn from the "

@@ -76,7 +76,7 @@ from ..core import coordinates
 from ..core.geometry import pinned_ends
 from ..core.progress import InputError, Progress, ensure
 from ..network.dead_ends import steer_share
-from ..network.invariants import MIN_DUPLICATE_LENGTH, corridor_of
+from ..network.invariants import MIN_DUPLICATE_LENGTH, corridor_of, counted_nodes
 from ..network.street_graph import node_lines
 from . import intersection_quadtree as iq
 
@@ -1002,13 +1002,21 @@ def connect_points(points: iq.PointSet, rng: np.random.Generator,
     # closing stubs last: it only adds connections, so the network stays one piece
     target = dead_end_share_of(points) if dead_end_share is None else float(dead_end_share)
 
+    inside = np.ones(0, dtype=bool)
+
     def share_now() -> float:
-        """Dead ends among the nodes of degree != 2 as the network will be measured: every
-        point the walker holds, the junctions its joins made included (not the given
-        roads' own nodes, whose roads are not counted here)."""
+        """Dead ends among the nodes of degree != 2 as the network will be measured
+        (:func:`invariants.dead_end_share`): every point the walker holds, the junctions its
+        joins made and the given roads' nodes included, inside the target and away from its
+        boundary (a street cut there has no dead end)."""
+        nonlocal inside
         m = len(w.p)
+        if len(inside) < m:  # the points added since (junctions made by joins)
+            more = counted_nodes(w.xy[len(inside):m], area) if area is not None else \
+                np.ones(m - len(inside), dtype=bool)
+            inside = np.concatenate([inside, more])
         deg = w.deg[:m]
-        counted = (deg > 0) & (deg != 2) & (w.p.example[:m] != EXISTING)
+        counted = (deg > 0) & (deg != 2) & inside
         k = int(counted.sum())
         return float((counted & (deg == 1)).sum() / k) if k else 0.0
 
@@ -1058,6 +1066,7 @@ def connect_points(points: iq.PointSet, rng: np.random.Generator,
         if s.close_ends else (0, 0)
     w.stats["n_closed"] = int(n_closed)
     w.stats["n_dead_ends_opened"] = int(n_opened)
+    w.stats["dead_end_share"] = share_now()
     progress.step(1.0)
     alive = np.asarray(w.edge_alive, dtype=bool)
     edges = np.array(w.edges, dtype=object).reshape(-1, 6)[alive]
@@ -1669,12 +1678,12 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
     ptab["generated"] = pts.generated.astype(np.int64)
     is_new = pts.example >= 0
     dead = is_new & (deg == 1)
-    n_on = int((used & is_new & (deg != 2)).sum())
     stats = {
         "n_points": int(n_new), "n_points_generated": int(pts.generated[:n_new].sum()),
         "n_points_connected": int((used & is_new).sum()),
         "n_edges": len(lines), "n_dead_ends": int(dead.sum()),
-        "dead_end_share": float(dead.sum() / max(n_on, 1)),
+        # as the invariants measure it (the given roads' nodes too, away from the edge)
+        "dead_end_share": w.stats["dead_end_share"],
         "example_dead_end_share": float(target_share),
         "n_straight": int((shapely.get_num_coordinates(lines) == 2).sum()),
         "n_redrawn": int(n_redrawn),

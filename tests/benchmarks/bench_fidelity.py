@@ -204,7 +204,8 @@ class Runner:
         # as synthesizeroadsrandomwalk does: the example's points and street shapes
         pts, shapes = self.cached("points", example_points)
         res = rw.synthesize(pts, self.target.area, existing_lines=self.target.given,
-                            seed=seed, in_place=False, shapes=shapes)
+                            seed=seed, in_place=False, shapes=shapes,
+                            dead_end_share=self.example.stats["degree1_share"])
         return res.geometry
 
     def streetgan(self, seed: int) -> np.ndarray:
