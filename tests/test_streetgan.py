@@ -207,6 +207,28 @@ def test_dead_end_share_is_steered_into_the_examples_band(models):
         streetgan.synthesize(target, models["streetgan_helsinki"], dead_end_share=1.5)
 
 
+def test_a_dead_end_no_street_reaches_is_pruned(models):
+    """Bubenec from the towns model with Helsinki's dead-end share, seed 4 (the fidelity
+    benchmark's run): 2 dead ends among 8 counted nodes (0.25, above the band 0.12-0.23
+    around 0.18) and none within reach of another street, so no closing street could be
+    drawn and the share stayed out of the band. The shortest dead-end street is now
+    removed where its other end stays a junction; the network stays one piece."""
+    from towns import bubenec_town, helsinki_town
+    from urban_synthesis.plugin.measure import fidelity
+    from urban_synthesis.plugin.network import invariants
+
+    target, example = bubenec_town(), helsinki_town()
+    share = fidelity.fidelity_statistics(example.lines, example.area)["degree1_share"]
+    res = streetgan.synthesize(target.area, models["streetgan_towns"], seed=4,
+                               given=target.given, given_class=target.given_class,
+                               dead_end_share=share)
+    check = invariants.check_network(res.geometry[~res.given], target.given,
+                                     target.given_class, target.area,
+                                     example_dead_end_share=share)
+    assert check.ok, check.summary()
+    assert res.stats["dead_ends_closed"] >= 1
+
+
 def test_new_streets_whose_noding_fails_are_snap_rounded():
     """Generated streets that defeat GEOS's floating-point noding are noded on the
     millimetre grid: planar, every street kept to that grid."""

@@ -948,7 +948,9 @@ def _steer_dead_ends(geometry, level, attrs, share: float, area, rng, min_dangle
     inside ``area``, away from its boundary, the arterials' nodes too); the changes are
     made to the network's own lines. Too many dead ends: a synthesised dead end is closed by
     the shortest straight street onto another line, at most ``CLOSE_REACH`` m, crossing
-    nothing and doubling nothing (shortest gaps first). Too few: first a cul-de-sac is added
+    nothing and doubling nothing (shortest gaps first); where no such street is left, a
+    synthesised dead-end street is removed (the shortest first) where its other end stays a
+    junction. Too few: first a cul-de-sac is added
     (no block is lost: the district model's blocks fell from -19 % to -33 % of the example's
     when T's were cut first): from the middle of a synthesised street, square to it, into
     the larger block beside it, as long as the block's mean width (at least ``min_dangle``
@@ -992,6 +994,7 @@ def _steer_dead_ends(geometry, level, attrs, share: float, area, rng, min_dangle
     state = {"dead": int((inside & (deg == 1)).sum()),
              "nodes": int((inside & (deg != 2) & (deg > 0)).sum())}
     joins = np.ones(m, bool)       # edges joining their two nodes (a cut stem does not)
+    kept = np.ones(len(lines), bool)   # lines not removed (a dead-end street pruned)
     links: List = []               # closing streets
     stubs: List = []               # new cul-de-sacs
 
@@ -1000,7 +1003,8 @@ def _steer_dead_ends(geometry, level, attrs, share: float, area, rng, min_dangle
 
     def current():
         added = links + stubs
-        return np.concatenate([lines, np.asarray(added, dtype=object)]) if added else lines
+        return np.concatenate([lines[kept], np.asarray(added, dtype=object)]) if added \
+            else lines[kept]
 
     def touch(j: int, d: int):
         """Degree of node j changes by d: the counts follow."""
@@ -1028,12 +1032,20 @@ def _steer_dead_ends(geometry, level, attrs, share: float, area, rng, min_dangle
             if len(near):
                 d = shapely.distance(lines[near], p)
                 cand.append((float(d.min()), int(k), e, int(near[int(np.argmin(d))])))
-        return sorted(cand)
+        # last, dead ends no closing street reaches: their street is pruned (the shortest
+        # first) where its other end stays a junction (StreetGAN on Bubenec had 2 dead ends
+        # among 8 nodes, none in reach of another street)
+        ends = np.flatnonzero(inside & (deg == 1))
+        stems = [int(inc_edge[np.flatnonzero(inc_node == k)[0]]) for k in ends]
+        prune = sorted((float(g.geometry[e].length), int(k), e, -1) for k, e in zip(ends, stems))
+        return sorted(cand) + [(np.inf, k, e, j) for _, k, e, j in prune]
 
     def close(c) -> bool:
         _, k, e, j = c
         if deg[k] != 1:
             return False
+        if j < 0:
+            return prune(k, e)
         p = shapely.Point(end_near(lines[src[e]], nodes[k]))
         link = shapely.shortest_line(p, lines[j])
         if link.length <= 1e-6:
@@ -1052,6 +1064,16 @@ def _steer_dead_ends(geometry, level, attrs, share: float, area, rng, min_dangle
             touch(int(at[0]), 1)
         elif counted(q)[0]:
             state["nodes"] += 1     # a new T on the line
+        return True
+
+    def prune(k: int, e: int) -> bool:
+        o = int(v[e] if u[e] == k else u[e])
+        if not new[e] or not whole[e] or not joins[e] or o == k or deg[o] < 3:
+            return False
+        kept[src[e]] = False
+        joins[e] = False
+        touch(k, -1)
+        touch(o, -1)
         return True
 
     # ---- opening: the stem of a T cut short into a cul-de-sac
@@ -1189,6 +1211,7 @@ def _steer_dead_ends(geometry, level, attrs, share: float, area, rng, min_dangle
                                      open_candidates, tolerance=DEAD_END_TOLERANCE / 2)
     if not n_closed and not n_opened:
         return geometry, level, attrs, (0, 0)
+    lines, level, attrs = lines[kept], level[kept], {k: a[kept] for k, a in attrs.items()}
     groups = [(np.asarray(a, dtype=object), (name, "", -1, len(a), -1))
               for a, name in ((links, "close"), (stubs, "cul-de-sac")) if a]
     if groups:
