@@ -104,7 +104,11 @@ class SplitDomain(AlgorithmBase):
             "User templates drawn in QGIS: one polygon per parcel or area, a text field "
             "'template' (the template each belongs to) and 'label' with the paper's labels: "
             "R parcel, P or A park / area, S for a spike. Rows of parcels are recognised "
-            "from the drawing (one row: strip, two rows: double strip).", advanced=True)
+            "from the drawing (one row: strip, two rows: double strip) and repeat along any "
+            "street; any other template (more rows, a private park among the parcels, any "
+            "shape) is warped as drawn onto regions with as many corners, within 0.75-1.35 x "
+            "its length and 0.8-1.25 x its depth, and chosen by its warp energy.",
+            advanced=True)
         self.add(QgsProcessingParameterNumber(
             self.PARCEL_LENGTH, "Parcel length (depth, m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=30.0, minValue=1.0, maxValue=1000.0),

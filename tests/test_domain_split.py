@@ -196,6 +196,68 @@ def test_templates_from_drawn_recognises_rows():
         templates.templates_from_drawn(park, ["c"], ["P"])
 
 
+def _pentagon_with_a_park():
+    """A drawn template: five lots round a private park (the paper's template with a
+    park), in metres."""
+    outer = np.array([(0, 0), (120, 0), (140, 70), (60, 120), (-20, 70)], dtype=float)
+    inner = outer.mean(axis=0) + 0.35 * (outer - outer.mean(axis=0))
+    lots = [shapely.Polygon([outer[i], outer[(i + 1) % 5], inner[(i + 1) % 5], inner[i]])
+            for i in range(5)]
+    geoms = lots + [shapely.Polygon(inner)]
+    return shapely.Polygon(outer), geoms, ["R"] * 5 + ["P"]
+
+
+def test_drawn_template_is_warped_as_drawn():
+    """A template that is no strip (five lots round a park) is kept as drawn and warped
+    onto a block of the same corners by mean value coordinates: the lots tile the block,
+    the park stays a park of its drawn share, a block of the template's shape costs less
+    than a skewed one, a mirrored block is matched by the mirrored template, and a block
+    with other corners (a rectangle) is not matched."""
+    from shapely import affinity
+
+    outline, geoms, labels = _pentagon_with_a_park()
+    (t,) = templates.templates_from_drawn(geoms, ["pentagon"] * 6, labels)
+    assert (t.kind, t.parcel_labels.count("P")) == ("drawn", 1)
+    rng = np.random.default_rng(0)
+    block = affinity.rotate(affinity.scale(outline, 1.1, 0.95), 30)
+    xy = shapely.get_coordinates(shapely.segmentize(block.exterior, 5))[:-1]
+    block = shapely.Polygon(xy + rng.normal(0, 0.3, xy.shape))   # a drawn-by-hand outline
+    res = templates.warp_drawn(block, t)
+    assert len(res.lots) == 6 and res.green.sum() == 1
+    assert shapely.area(res.lots).sum() == pytest.approx(block.area, rel=1e-9)
+    assert shapely.union_all(res.lots).area == pytest.approx(block.area, rel=1e-9)
+    park_share = geoms[-1].area / outline.area
+    assert shapely.area(res.lots[res.green])[0] / block.area == pytest.approx(park_share,
+                                                                             rel=0.15)
+    assert res.energy < 0.02
+    skewed = shapely.Polygon([(0, 0), (130, 0), (160, 60), (70, 125), (-30, 50)])
+    assert templates.warp_drawn(skewed, t).energy > 2 * res.energy
+    mirrored = affinity.scale(outline, -1.0, 1.0)
+    assert templates.warp_drawn(mirrored, t).energy < 1e-6
+    assert templates.warp_drawn(shapely.box(0, 0, 130, 110), t) is None
+    # three rows are no strip: drawn too, not an error
+    rows3 = [shapely.box(i * 18, j * 30, (i + 1) * 18, (j + 1) * 30)
+             for i in range(3) for j in range(3)]
+    (t3,) = templates.templates_from_drawn(rows3, ["c"] * 9, ["R"] * 9)
+    assert t3.kind == "drawn"
+
+
+def test_split_domain_uses_a_drawn_template():
+    """A region the drawn template fits (its outline and half a street all round) becomes
+    the drawn lots and the private park, every lot with street access."""
+    from shapely import affinity
+
+    outline, geoms, labels = _pentagon_with_a_park()
+    lib = templates.templates_from_drawn(geoms, ["pentagon"] * 6, labels) + \
+        [t for t in templates.load_library() if t.kind in ("rows", "park")]
+    region = affinity.scale(outline, 1.1, 1.1)
+    lay = domain_split.split_domain(region, seed=1, templates=lib)
+    tab = lay.table
+    assert (tab.template == "pentagon").sum() == 6
+    assert (tab.land_use[tab.template == "pentagon"] == "park").sum() == 1
+    assert tab.has_street_access[tab.land_use == "residential"].all()
+
+
 # --------------------------------------------------------------------------- optimisation
 
 def test_mesh_optimisation_fits_strips_and_fairs_roads():

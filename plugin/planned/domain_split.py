@@ -437,7 +437,7 @@ class _Splitter:
         self.s = settings
         self.rng = rng
         L, S = settings.parcel_length, settings.street_width
-        parts = [t for t in lib if t.kind in ("rows", "spike", "loop")]
+        parts = [t for t in lib if t.kind in ("rows", "spike", "loop", "drawn")]
         widths = [t.gross_depth(L, S) for t in parts]
         # the templates' user probabilities weight the widths: with the shipped library a
         # double strip (one street per two rows) is preferred to two single strips
@@ -457,15 +457,22 @@ class _Splitter:
     def energies(self, region) -> Dict[str, float]:
         """Warp energy of every template on a region (Yang sec. 4.1): row templates are
         warped onto the region shrunk by half a street and scored by their registration
-        residual; the others by :func:`templates.fit_energy`."""
+        residual, drawn templates warped as drawn and scored the same way
+        (:func:`templates.warp_drawn`); the others by :func:`templates.fit_energy`."""
         s = self.s
         shape = _templates.region_shape(region)
         out = {t.name: _templates.fit_energy(region, t, s.parcel_length, s.parcel_width,
                                              s.street_width, shape)
-               for t in self.lib if t.kind != "rows"}
+               for t in self.lib if t.kind not in ("rows", "drawn")}
         for t in self.lib:
             if t.kind == "rows":
                 out[t.name] = self.row_energy(region, t, self.no_street, self.no_frontage)
+            elif t.kind == "drawn":
+                parts = _parcels._polygon_parts([net_block(region, s.street_width,
+                                                           self.no_street)], 1.0)
+                warp = _templates.warp_drawn(parts[0], t, cut=False) if len(parts) == 1 \
+                    else None
+                out[t.name] = math.inf if warp is None else warp.energy
         return out
 
     def row_energy(self, region, t, no_street, no_frontage) -> float:
@@ -926,7 +933,7 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
     if seed is None or int(seed) != seed or seed < 0:
         raise InputError(f"the seed must be a whole number >= 0 (got {seed})")
     lib = list(templates) if templates is not None else _templates.load_library()
-    if not any(t.kind in ("rows", "spike", "loop") for t in lib):
+    if not any(t.kind in ("rows", "spike", "loop", "drawn") for t in lib):
         raise InputError("the templates hold no parcel template")
     rng = np.random.default_rng([int(seed), int(variation)])
     faces, fixed, fixed_kinds, key_polys, domain, no_access = prepare_domain(
@@ -1054,14 +1061,21 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
         if key_road_zone is not None:
             shrunk = shapely.difference(shrunk, key_road_zone)
         for part in _parcels._polygon_parts([shrunk], 1.0):
-            lots, kind, own_roads = _lots_for(part, reg, name, by_name, s, settings_sk, rng,
-                                              template_roads)
-            if kind == "park":
+            lots, kind, own_roads, green = _lots_for(part, reg, name, by_name, s, settings_sk,
+                                                     rng, template_roads)
+            if kind == "park" or (green is not None and green.all()):
                 lots_all.append(lots)
                 use_all += ["park"] * len(lots)
                 tmpl_all += [name] * len(lots)
                 front_all.append(np.full(len(lots), np.nan))
                 continue
+            if green is not None and green.any():
+                # a drawn template's parks (a private park) stay parks, as drawn
+                lots_all.append(lots[green])
+                use_all += ["park"] * int(green.sum())
+                tmpl_all += [kind] * int(green.sum())
+                front_all.append(np.full(int(green.sum()), np.nan))
+                lots = lots[~green]
             def frontage(lots_, reg=reg, own=own_roads):
                 """Frontage on the region's streets and on the template's own streets."""
                 front_ = access_frontage(lots_, reg, S, splitter.no_frontage)
@@ -1271,16 +1285,21 @@ def _fallback(region, energies, by_name, s: SplitSettings) -> str:
 
 
 def _lots_for(part, reg, name, by_name, s: SplitSettings, settings_sk, rng, template_roads):
-    """Lots of one shrunk block part: (lots, template name, the template's own streets)."""
+    """Lots of one shrunk block part: (lots, template name, the template's own streets,
+    park mask of the lots or None)."""
     L, W, S = s.parcel_length, s.parcel_width, s.street_width
     none = np.empty(0, dtype=object)
     if name == "park" or shapely.area(part) < 0.5 * L * W:
-        return np.array([part], dtype=object), "park", none
+        return np.array([part], dtype=object), "park", none, None
     t = by_name.get(name)
     if t is not None and t.kind == "rows":
         warped = _templates.warp_rows(part, t, L, W, rng)
         if warped is not None and len(warped.lots):
-            return warped.lots, t.name, none
+            return warped.lots, t.name, none, None
+    if t is not None and t.kind == "drawn":
+        warped = _templates.warp_drawn(part, t)
+        if warped is not None and len(warped.lots):
+            return warped.lots, t.name, none, warped.green
     if t is not None and t.kind in ("spike", "loop"):
         make = _templates.spike_lots if t.kind == "spike" else _templates.loop_lots
         got = make(reg, part, L, W, S, settings_sk, rng)
@@ -1289,9 +1308,9 @@ def _lots_for(part, reg, name, by_name, s: SplitSettings, settings_sk, rng, temp
             roads = list(roads) if isinstance(roads, (list, tuple)) else [roads]
             kind = "cul_de_sac" if t.kind == "spike" else "loop"
             template_roads += [(r, kind) for r in roads]
-            return lots, t.name, np.asarray(roads, dtype=object)
+            return lots, t.name, np.asarray(roads, dtype=object), None
     lots = _parcels._polygon_parts(_parcels.split_skeleton(part, settings_sk, rng))
-    return (lots if len(lots) else np.array([part], dtype=object)), "skeleton", none
+    return (lots if len(lots) else np.array([part], dtype=object)), "skeleton", none, None
 
 
 def split_variations(region, variations: int = 1, seed: int = 0, progress=None,

@@ -13,6 +13,8 @@ spike          S      a cul-de-sac street into the block, parcels (R) around it
 loop           O      a loop street inside a deep block, joined to the block's longest
                       street at its middle, parcels on both sides of the loop
 park           A      an area template kept as a park (the fallback of the paper)
+(drawn)        T      a user's template that is no strip (more rows, parks among the
+                      parcels, any outline), warped as drawn (:func:`warp_drawn`)
 =============  =====  ===============================================================
 
 Labels R (parcel), S (spike) and A (area) are the paper's (Fig. 4); L and D name the two
@@ -30,7 +32,9 @@ Template-based splitting (:func:`fit_energy`, :func:`warp_rows`):
   repeating row, taken by a pinned parcel joint, and costs only its residual). A
   template whose depth
   range or row length (``max_columns``) the region exceeds does not match. Spikes and
-  area templates keep the rectangle heuristic of :func:`fit_energy` (simplification).
+  area templates keep the rectangle heuristic of :func:`fit_energy` (simplification); a
+  drawn template is scored by the same residual for parcels of any shape
+  (:func:`warp_drawn`).
   Templates with energy under a threshold are drawn with probability template
   probability x exp(-energy / 0.1).
 * **Hierarchical warping** of the row templates: level one chooses the number of parcels
@@ -62,6 +66,7 @@ from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 import shapely
+import shapely.affinity
 import shapely.ops
 from scipy.spatial import cKDTree
 
@@ -69,14 +74,18 @@ from ..core.paths import RESOURCES
 from ..core.geometry import minimum_rectangles
 from ..core.progress import InputError
 from ..parcels import subdivision as _parcels
+from ..retrieval.warp import warp_geometries, warp_points
 
 __all__ = ["Template", "LIBRARY_PATH", "LIBRARY_SUBSETS", "default_library", "write_library",
            "load_library", "templates_from_drawn", "fit_energy", "region_shape", "region_frame",
-           "warp_rows", "spike_lots", "loop_lots", "WarpResult", "WARP_ITERATIONS"]
+           "warp_rows", "warp_drawn", "drawn_outline", "spike_lots", "loop_lots", "WarpResult",
+           "WARP_ITERATIONS", "KINDS"]
 
 LIBRARY_PATH = RESOURCES / "templates" / "library.json"
 #: Iterations of registration / regression (the paper: about 30 per match).
 WARP_ITERATIONS = 30
+#: Template kinds: parcel rows, spike (cul-de-sac), loop, area (park), drawn (as drawn).
+KINDS = ("rows", "spike", "loop", "park", "drawn")
 #: Named subsets of the shipped library (the toolbox's TEMPLATES enum, in this order).
 LIBRARY_SUBSETS = {
     "all": ("parcel_strip", "double_strip", "spike", "loop", "park"),
@@ -112,7 +121,10 @@ class Template:
         1,000-1,450 m, Table 1).
     land_use : str
     parcels : list of polygons (unit coordinates: x in parcel widths, y in parcel lengths)
-        The drawn layout, for display and user templates.
+        The drawn layout, for display and user templates; a 'drawn' template's parcels are
+        in metres, centred on its outline, its long axis along x (warped as drawn).
+    parcel_labels : tuple of str
+        A 'drawn' template's label per parcel: R (parcel), P or A (park).
     """
 
     name: str
@@ -127,6 +139,7 @@ class Template:
     max_columns: int = 22
     land_use: str = "residential"
     parcels: tuple = field(default=(), compare=False)
+    parcel_labels: tuple = field(default=(), compare=False)
 
     def gross_depth(self, length: float, street: float) -> float:
         """Ideal centre-line width of a block of this template (m)."""
@@ -134,6 +147,8 @@ class Template:
             return self.rows * length + street
         if self.kind in ("spike", "loop"):
             return 0.5 * sum(self.depth_range) * length + street
+        if self.kind == "drawn":
+            return float(minimum_rectangles([drawn_outline(self)])[1][0]) + street
         return 0.0
 
 
@@ -188,11 +203,12 @@ def load_library(path=LIBRARY_PATH, subset: Optional[str] = None) -> List[Templa
         out = [Template(**{**t, "width_scale": tuple(t.get("width_scale", (0.75, 1.35))),
                            "depth_scale": tuple(t.get("depth_scale", (0.8, 1.25))),
                            "depth_range": tuple(t.get("depth_range", (0.0, 0.0))),
-                           "parcels": tuple(t.get("parcels", ()))}) for t in items]
+                           "parcels": tuple(t.get("parcels", ())),
+                           "parcel_labels": tuple(t.get("parcel_labels", ()))}) for t in items]
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise InputError(f"the template library {path} cannot be read ({exc})") from exc
     for t in out:
-        if t.kind not in ("rows", "spike", "loop", "park") or t.rows < 1 or t.probability < 0:
+        if t.kind not in KINDS or t.rows < 1 or t.probability < 0:
             raise InputError(f"template {t.name!r} in {path} is not a valid template")
     if subset is not None:
         if subset not in LIBRARY_SUBSETS:
@@ -210,12 +226,15 @@ def templates_from_drawn(geoms: Sequence, names: Sequence, labels: Sequence) -> 
     paper's: R (residential parcel), P or A (park / area), S marks a spike (a cul-de-sac
     template). Row templates are recognised from the geometry: the parcels' centres are
     clustered across the template's long axis into rows (1 or 2 make a strip or a double
-    strip). A group of only park polygons is an area template.
+    strip, which repeat along any street length). A group of only park polygons is an area
+    template. Any other group -- three rows or more, parks among the parcels (the paper's
+    template with a private park), any shape -- is a **drawn** template, kept as drawn and
+    warped onto a region of the same number of corners (:func:`warp_drawn`).
 
     Raises
     ------
     InputError
-        No group with parcels, or a group that is neither rows, spike nor area.
+        No group with parcels, or a drawn group whose parcels do not form one polygon.
     """
     geoms = np.asarray(geoms, dtype=object)
     names = np.asarray([str(n) for n in names], dtype=object)
@@ -240,14 +259,41 @@ def templates_from_drawn(geoms: Sequence, names: Sequence, labels: Sequence) -> 
         across = shapely.get_coordinates(shapely.centroid(res)) @ np.array([np.cos(a), np.sin(a)])
         gap = max(0.5 * float(np.median(depth)), 1e-6)
         rows = 1 + int((np.diff(np.sort(across)) > gap).sum())
-        if rows > 2:
-            raise InputError(f"template {name!r} has {rows} parcel rows; row templates have "
-                             "one (strip) or two (double strip)")
-        out.append(Template(name, "L" if rows == 1 else "D", "rows", rows=rows,
-                            parcels=parcels_))
+        if rows <= 2 and set(lab) == {"R"}:
+            out.append(Template(name, "L" if rows == 1 else "D", "rows", rows=rows,
+                                parcels=parcels_))
+        else:
+            out.append(_drawn_template(name, g, lab))
     if not any(t.kind != "park" for t in out):
         raise InputError("the template layer has no parcel template (label R or S)")
     return out
+
+
+def _drawn_template(name: str, geoms: np.ndarray, labels: np.ndarray) -> Template:
+    """A drawn template: its parcels in metres about the outline's centre, the outline's
+    long axis along x (the frame :func:`warp_drawn` scales in)."""
+    outline = shapely.union_all(shapely.make_valid(geoms))
+    if shapely.get_type_id(outline) != 3:
+        raise InputError(f"template {name!r}: its parcels and areas must join into one "
+                         "polygon without gaps, to be warped as drawn")
+    _, _, angle = minimum_rectangles([outline])
+    centre = shapely.centroid(outline)
+    frame = shapely.affinity.rotate(shapely.affinity.translate(
+        shapely.GeometryCollection(list(geoms)), -centre.x, -centre.y),
+        -float(angle[0]), origin=(0.0, 0.0))
+    parcels_ = tuple(np.round(shapely.get_coordinates(shapely.get_exterior_ring(p)), 6).tolist()
+                     for p in shapely.get_parts(frame))
+    labs = tuple("P" if v in ("P", "A") else "R" for v in labels)
+    return Template(name, "T", "drawn", parcels=parcels_, parcel_labels=labs)
+
+
+def drawn_outline(template: Template):
+    """The outline of a drawn template (the union of its parcels, template frame)."""
+    return shapely.union_all(_drawn_parcels(template), grid_size=1e-6)
+
+
+def _drawn_parcels(template: Template) -> np.ndarray:
+    return np.array([shapely.Polygon(p) for p in template.parcels], dtype=object)
 
 
 # --------------------------------------------------------------------------- selection
@@ -390,6 +436,8 @@ class WarpResult:
         Block depth / template depth.
     long_sides : (ndarray, ndarray)
         The two street sides the rows run along (for the edge labels).
+    green : ndarray of bool, optional
+        A drawn template's park lots.
     """
 
     lots: np.ndarray
@@ -398,6 +446,7 @@ class WarpResult:
     energy: float = 0.0
     depth_scale: float = 1.0
     long_sides: tuple = ()
+    green: Optional[np.ndarray] = None
 
 
 def _project(line, pts: np.ndarray) -> np.ndarray:
@@ -560,6 +609,137 @@ def _cut(block, cuts) -> np.ndarray:
         return _parcels._polygon_parts([block])
     inside = shapely.within(shapely.point_on_surface(faces), block)
     return _parcels._polygon_parts(faces[inside])
+
+
+#: Samples of a drawn template's outline and the region's (m apart, at most) that define
+#: the warp: the outlines correspond corner to corner, and by arc length in between.
+DRAWN_SAMPLE_SPACING = 2.0
+
+
+def _sides(ring: np.ndarray, corners: np.ndarray) -> List[shapely.LineString]:
+    """The outline between consecutive corners, as lines (counter-clockwise)."""
+    n = len(ring)
+    out = []
+    for a, b in zip(corners, np.roll(corners, -1)):
+        ids = np.arange(a, b + 1) if b > a else np.r_[np.arange(a, n), np.arange(0, b + 1)]
+        out.append(shapely.LineString(ring[ids % n]))
+    return out
+
+
+def _register_polygon(tmpl: np.ndarray, warped: np.ndarray, wlo, whi, dlo, dhi) -> np.ndarray:
+    """The registration of :func:`_register` for one parcel of any shape: the template
+    parcel's vertices (n, 2, its frame) turned (Kabsch) and scaled along the frame's axes
+    within the allowed ranges onto the warped vertices; returns the registered vertices."""
+    ct, cw = tmpl.mean(axis=0), warped.mean(axis=0)
+    t, w = tmpl - ct, warped - cw
+    h = t.T @ w
+    ang = math.atan2(h[0, 1] - h[1, 0], h[0, 0] + h[1, 1])
+    rot = np.array([[math.cos(ang), -math.sin(ang)], [math.sin(ang), math.cos(ang)]])
+    local = w @ rot                                # R^T w
+    sx = np.clip((local[:, 0] * t[:, 0]).sum() / max((t[:, 0] ** 2).sum(), 1e-12), wlo, whi)
+    sy = np.clip((local[:, 1] * t[:, 1]).sum() / max((t[:, 1] ** 2).sum(), 1e-12), dlo, dhi)
+    return (t * [sx, sy]) @ rot.T + cw
+
+
+def warp_drawn(block, template: Template, cut: bool = True) -> Optional[WarpResult]:
+    """A drawn template warped onto a block as drawn (Yang sec. 4.1, for any template).
+
+    The template's outline corners (:func:`region_corners`) are matched to the block's in
+    cyclic order -- every rotation of the correspondence and the mirrored template tried --
+    and both outlines are sampled at the same arc-length fractions between matched corners
+    (at most :data:`DRAWN_SAMPLE_SPACING` m apart); the parcels are mapped by mean value
+    coordinates on those samples (Floater 2003, :mod:`retrieval.warp`). The warp energy is
+    the root mean square distance of each warped parcel's vertices from its registration
+    to the drawn parcel (turned and scaled along its axes within the template's width and
+    depth scales), divided by the square root of the drawn parcel's area: the residual of
+    the row templates for any parcel shape. The correspondence of least energy is kept.
+    The lots are the block cut along the warped inner parcel boundaries (its exact outline
+    kept, so the lots tile it); a lot takes the label of the drawn parcel whose inner point
+    it holds (P / A: a park, ``green``).
+
+    Simplification: the block must have as many corners as the template (a corner turns
+    by more than :data:`CORNER_TURN`); the paper's corner labels and penalties for extra
+    corners are not modelled here. Returns None when the corner counts differ or the
+    block's size is outside the template's scales (its minimum rectangle against the
+    outline's, width_scale along the long side and depth_scale across).
+    """
+    if block is None or shapely.get_type_id(block) != 3 or not template.parcels:
+        return None
+    outline = drawn_outline(template)
+    if shapely.get_type_id(outline) != 3:
+        return None
+    (t_long,), (t_short,), _ = minimum_rectangles([outline])
+    (b_long,), (b_short,), _ = minimum_rectangles([block])
+    sx, sy = b_long / max(t_long, 1e-9), b_short / max(t_short, 1e-9)
+    (wlo, whi), (dlo, dhi) = template.width_scale, template.depth_scale
+    if not (wlo <= sx <= whi and dlo <= sy <= dhi):
+        return None
+    b_ring, b_idx, _ = region_corners(block)
+    parcels_ = _drawn_parcels(template)
+    labels = np.asarray(template.parcel_labels or ("R",) * len(parcels_), dtype=object)
+    best = None
+    for mirror in (False, True):
+        parcels_m = shapely.transform(parcels_, lambda xy: xy * [-1.0, 1.0]) if mirror \
+            else parcels_
+        t_ring, t_idx, _ = region_corners(shapely.union_all(parcels_m, grid_size=1e-6))
+        k = len(t_idx)
+        if k < 3 or k != len(b_idx):
+            continue
+        t_sides = _sides(t_ring, t_idx)
+        dense = shapely.segmentize(parcels_m, DRAWN_SAMPLE_SPACING)
+        rings = [shapely.get_coordinates(shapely.get_exterior_ring(p))[:-1] for p in dense]
+        verts = np.concatenate(rings)
+        for shift in range(k):
+            b_sides = _sides(b_ring, np.roll(b_idx, -shift))
+            src, dst = [], []
+            for ts, bs in zip(t_sides, b_sides):
+                m = max(2, int(math.ceil(max(ts.length, bs.length) / DRAWN_SAMPLE_SPACING)))
+                f = np.arange(m) / m
+                src.append(_along(ts, f))
+                dst.append(_along(bs, f))
+            src, dst = np.concatenate(src), np.concatenate(dst)
+            moved = warp_points(verts, src, dst)
+            resid, n0 = [], 0
+            for ring_, poly in zip(rings, dense):
+                w = moved[n0:n0 + len(ring_)]
+                n0 += len(ring_)
+                reg = _register_polygon(ring_, w, wlo, whi, dlo, dhi)
+                rms = math.sqrt(float(((reg - w) ** 2).sum(axis=1).mean()))
+                resid.append(rms / math.sqrt(max(poly.area, 1e-9)))
+            energy = float(np.mean(resid))
+            if best is None or energy < best[0]:
+                best = (energy, mirror, src, dst, parcels_m)
+    if best is None:
+        return None
+    energy, mirror, src, dst, parcels_m = best
+    if not cut:
+        return WarpResult(np.empty(0, dtype=object), energy, len(parcels_), energy, sy)
+    # the inner parcel boundaries, noded in the template's frame (a T is a vertex of both
+    # lines, so the warped lines meet exactly), warped, and extended across the outline
+    t_outline = shapely.union_all(parcels_m, grid_size=1e-6)
+    edge = shapely.boundary(t_outline)
+    pieces = shapely.get_parts(shapely.node(shapely.union_all(shapely.boundary(parcels_m))))
+    mid = shapely.line_interpolate_point(pieces, 0.5, normalized=True)
+    inner = pieces[~shapely.dwithin(mid, edge, 1e-6)]
+    inner = shapely.get_parts(shapely.line_merge(shapely.union_all(inner)))
+    cuts = []
+    for line in shapely.segmentize(inner, DRAWN_SAMPLE_SPACING):
+        xy = shapely.get_coordinates(line)
+        on_edge = shapely.dwithin(shapely.points(xy[[0, -1]]), edge, 1e-6)
+        w = warp_points(xy, src, dst)
+        d0 = (w[0] - w[1]) / max(np.hypot(*(w[0] - w[1])), 1e-12)
+        d1 = (w[-1] - w[-2]) / max(np.hypot(*(w[-1] - w[-2])), 1e-12)
+        ext = 3 * DRAWN_SAMPLE_SPACING
+        w = np.vstack([w[:1] + ext * d0] * bool(on_edge[0]) + [w]
+                      + [w[-1:] + ext * d1] * bool(on_edge[1]))
+        cuts.append(shapely.LineString(w))
+    lots = _cut(block, cuts)
+    # each lot takes the label of the drawn parcel whose inner point it holds
+    inside = warp_geometries(shapely.point_on_surface(parcels_m), src, dst)
+    li, pi = shapely.STRtree(lots).query(inside, predicate="within")[::-1]
+    green = np.zeros(len(lots), dtype=bool)
+    green[li] = np.isin(labels[pi], ("P", "A"))
+    return WarpResult(lots, energy, len(parcels_), energy, sy, green=green)
 
 
 def spike_lots(block_centre, block, length: float, width: float, street: float,
