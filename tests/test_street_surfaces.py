@@ -315,6 +315,40 @@ def test_mesh_tiles_the_surfaces_and_skirts_the_terrain():
             assert geom.GetGeometryName() == "TIN" and geom.GetGeometryCount() == n
 
 
+def test_junction_corners_above_the_terrain_get_side_faces():
+    """In a hollow the junction's plane (fitted to the terrain around it) lies above the
+    ground at the junction's corners: those outer edges get side faces down to 0.5 m below
+    the terrain, facing outwards, and no side face stands on a connecting line, where the
+    street continues the junction's surface."""
+    from urban_synthesis.plugin.network import street_mesh as sm
+
+    lines, widths = star([0, 70, 150, 215, 290], [8, 8, 14, 6, 8])
+    g = roads.clean_network(lines, min_dangle_length=0.0)
+    x, y = np.meshgrid(np.arange(-100, 340, 2.0) + 1, 200 - np.arange(260) * 2.0 - 1)
+    dem = DemGrid(200 + 0.002 * (x ** 2 + y ** 2), (-100, 2.0, 0, 200, 0, -2.0))  # a hollow
+    t = ss.tessellate_network(g, np.asarray(widths)[g.source], dem=dem)
+    m = sm.street_mesh(t, spacing=3.0, z_offset=0.1)
+    n_s = len(t.surfaces)
+    skirt = m.triangles[m.side & (m.owner >= n_s)]
+    assert len(skirt) >= 6 and m.table.side_triangles.iloc[n_s:].sum() == len(skirt)
+    xyz = skirt.reshape(-1, 3)
+    ground = t.terrain_z(xyz[:, :2])
+    low = np.isclose(xyz[:, 2], ground - 0.5, atol=1e-9)
+    assert low.any() and (low | (xyz[:, 2] > ground)).all()
+    # the top edge of each face (its two highest vertices) is no connecting line
+    surfaces = shapely.union_all(shapely.force_2d(t.surfaces))
+    for tri in skirt:
+        hi = tri[np.argsort(tri[:, 2])[-2:], :2]
+        edge = shapely.LineString(hi)
+        assert shapely.intersection(edge, surfaces).length < 1e-6 * max(edge.length, 1.0)
+    # outward: the face's horizontal normal points away from the junction's centre
+    centre = t.graph.nodes[t.junction_node[0]]
+    a, b, c = skirt[:, 0], skirt[:, 1], skirt[:, 2]
+    normal = np.cross(b - a, c - a)[:, :2]
+    away = skirt.mean(axis=1)[:, :2] - centre
+    assert ((normal * away).sum(axis=1) > 0).all()
+
+
 def test_ear_clipping_of_a_non_star_ring():
     from urban_synthesis.plugin.network import street_mesh as sm
 

@@ -22,10 +22,12 @@ rotated into the terrain's tangent plane (Fig. 5.3).
   ``z_offset``; a ring that is not star-shaped around its centre (cut where streets
   overlapped) is ear-clipped instead (hand-written: shapely 2.0 has no constrained
   triangulation and no other library here does it; rings are a few dozen vertices);
-* **side faces**: along both street edges, wherever the edge lies more than ``min_gap``
-  above the terrain, a quad (two triangles) from the edge down to ``skirt`` metres below
-  the terrain. Junctions get no side faces (a simplification: they lie in the terrain's
-  tangent plane, which meets the terrain at their centre).
+* **side faces**: along both street edges and along the junction rings' outer edges (the
+  corner fills between the street heads; not the connecting lines a street continues
+  from), wherever the edge lies more than ``min_gap`` above the terrain, a quad (two
+  triangles) from the edge down to ``skirt`` metres below the terrain. A junction lies in
+  the terrain's tangent plane, which meets the terrain only at its centre: on a convex
+  slope its corners float without them.
 
 Without a DEM the mesh is flat (z = 0) and has no side faces. Texture coordinates
 (Scharl 5.3) are not made: GeoPackage has no place for them.
@@ -138,9 +140,10 @@ def _ear_clip(xy: np.ndarray) -> np.ndarray:
     return np.asarray(out, dtype=np.int64).reshape(-1, 3)
 
 
-def _junction_triangles(polys: np.ndarray, centres: np.ndarray):
-    """2D triangles (k, 3, 2) of junction polygons and their polygon index: the fan from
-    the centre where the ring is star-shaped around it, else ear clipping."""
+def _junction_rings(polys: np.ndarray):
+    """The junction polygons' outer rings, counter-clockwise: (vertices (n, 2) without the
+    closing ones, index of each vertex's successor on its ring, ring of each vertex, the
+    polygon of each ring, the parts, each ring's first vertex and end)."""
     parts, part_owner = shapely.get_parts(polys, return_index=True)
     # normalize() gives clockwise exteriors: reversed, they run counter-clockwise
     rings = shapely.reverse(shapely.get_exterior_ring(shapely.normalize(parts)))
@@ -152,6 +155,13 @@ def _junction_triangles(polys: np.ndarray, centres: np.ndarray):
     starts = np.flatnonzero(first)
     ends = np.r_[starts[1:], len(xy)]
     nxt[ends - 1] = starts
+    return xy, nxt, ring_idx, part_owner, parts, starts, ends
+
+
+def _junction_triangles(polys: np.ndarray, centres: np.ndarray):
+    """2D triangles (k, 3, 2) of junction polygons and their polygon index: the fan from
+    the centre where the ring is star-shaped around it, else ear clipping."""
+    xy, nxt, ring_idx, part_owner, parts, starts, ends = _junction_rings(polys)
     c = centres[part_owner[ring_idx]]
     area = _tri_area2(c, xy, xy[nxt])
     ok_ring = np.ones(len(parts), dtype=bool)
@@ -259,6 +269,28 @@ def street_mesh(tess, spacing: float = 5.0, z_offset: float = 0.1, skirt: float 
         tris.append(np.column_stack([flat, z]).reshape(-1, 3, 3))
         owner.append(n_s + jo)
         side.append(np.zeros(len(jo), dtype=bool))
+        if draped:
+            xy, nxt, ring_idx, part_owner, _, _, _ = _junction_rings(
+                shapely.force_2d(tess.junctions))
+            jr = part_owner[ring_idx]
+            node = tess.junction_node[jr]
+            top = np.column_stack([xy, tess.junction_z(node, xy) + z_offset])
+            gap = np.nan_to_num(top[:, 2] - tess.terrain_z(xy), nan=0.0)
+            up = (gap > min_gap) | (gap[nxt] > min_gap)
+            if n_s and up.any():
+                # an edge a street continues from (its connecting line) is no outer edge
+                mid = shapely.points(0.5 * (xy + xy[nxt]))
+                tree = shapely.STRtree(shapely.force_2d(tess.surfaces))
+                up[tree.query(mid, predicate="dwithin", distance=1e-6)[0]] = False
+            a = np.flatnonzero(up)                   # the outside is right of a -> nxt
+            b = nxt[a]
+            ground = tess.terrain_z(xy)
+            lo_a = np.column_stack([xy[a], np.nan_to_num(ground[a], nan=top[a, 2]) - skirt])
+            lo_b = np.column_stack([xy[b], np.nan_to_num(ground[b], nan=top[b, 2]) - skirt])
+            tris += [np.stack([top[a], lo_a, lo_b], axis=1),
+                     np.stack([top[a], lo_b, top[b]], axis=1)]
+            owner += [n_s + jr[a], n_s + jr[a]]
+            side += [np.ones(2 * len(a), dtype=bool)]
     triangles = np.concatenate(tris) if tris else np.zeros((0, 3, 3))
     owner = np.concatenate(owner).astype(np.int64) if owner else np.zeros(0, np.int64)
     side = np.concatenate(side) if side else np.zeros(0, bool)
