@@ -134,7 +134,8 @@ class SynthesizeRoadsGan(AlgorithmBase):
             "The example's share of dead ends among the street ends and junctions (layoutmetrics' "
             "dead_end_share of the example, e.g. 0.28 for the Liechtenstein towns): the "
             "generated streets' share is steered into ±30 % of it by closing dead ends with "
-            "short streets, or adding cul-de-sacs and cutting T stems short. Empty: the "
+            "short streets (or removing the shortest dead-end street where none reaches), or "
+            "adding cul-de-sacs and cutting T stems short. Empty: the "
             "network as read back from the image.", advanced=True)
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT, "StreetGAN roads", QgsProcessing.SourceType.TypeVectorLine),
@@ -227,7 +228,8 @@ class SynthesizeRoadsGan(AlgorithmBase):
                 "component(s).")
         if share is not None:
             feedback.pushInfo(f"Dead-end share steered to {share:.2f}: "
-                              f"{s['dead_ends_closed']} dead end(s) closed, "
+                              f"{s['dead_ends_closed']} dead end(s) closed (or removed "
+                              "where no short street reaches another), "
                               f"{s['dead_ends_opened']} opened.")
         if n_new == 0:
             feedback.reportError("The generator drew no road inside the target: try another "
