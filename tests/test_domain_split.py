@@ -211,8 +211,9 @@ def test_drawn_template_is_warped_as_drawn():
     """A template that is no strip (five lots round a park) is kept as drawn and warped
     onto a block of the same corners by mean value coordinates: the lots tile the block,
     the park stays a park of its drawn share, a block of the template's shape costs less
-    than a skewed one, a mirrored block is matched by the mirrored template, and a block
-    with other corners (a rectangle) is not matched."""
+    than a skewed one, a mirrored block is matched by the mirrored template, a block with
+    fewer vertices than the template has corners (a rectangle) is not matched, and one with
+    an extra corner pays its turn."""
     from shapely import affinity
 
     outline, geoms, labels = _pentagon_with_a_park()
@@ -235,6 +236,11 @@ def test_drawn_template_is_warped_as_drawn():
     mirrored = affinity.scale(outline, -1.0, 1.0)
     assert templates.warp_drawn(mirrored, t).energy < 1e-6
     assert templates.warp_drawn(shapely.box(0, 0, 130, 110), t) is None
+    # a sixth corner (a 40° bend in one side) is a bend the warp absorbs, at the price of
+    # its turn, as for the row templates: matched, but far above the selection threshold
+    bent = templates.warp_drawn(shapely.Polygon([(0, 0), (60, -22), (120, 0), (140, 70),
+                                                 (60, 120), (-20, 70)]), t)
+    assert len(bent.lots) == 6 and np.radians(40) < bent.energy < np.radians(40) + 0.1
     # three rows are no strip: drawn too, not an error
     rows3 = [shapely.box(i * 18, j * 30, (i + 1) * 18, (j + 1) * 30)
              for i in range(3) for j in range(3)]

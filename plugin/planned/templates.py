@@ -657,11 +657,14 @@ def warp_drawn(block, template: Template, cut: bool = True) -> Optional[WarpResu
     kept, so the lots tile it); a lot takes the label of the drawn parcel whose inner point
     it holds (P / A: a park, ``green``).
 
-    Simplification: the block must have as many corners as the template (a corner turns
-    by more than :data:`CORNER_TURN`); the paper's corner labels and penalties for extra
-    corners are not modelled here. Returns None when the corner counts differ or the
-    block's size is outside the template's scales (its minimum rectangle against the
-    outline's, width_scale along the long side and depth_scale across).
+    A block with more corners than the template (turning by more than
+    :data:`CORNER_TURN`) gives the template's corners to its sharpest ones, and the turn
+    (radians) of the others is added to the energy, as for the row templates
+    (:func:`region_frame`); with fewer, its sharpest other vertices take the rest
+    (simplification: no corner labels, convex and concave corners alike). Returns None
+    when the block has fewer vertices than the template has corners or its size is outside
+    the template's scales (its minimum rectangle against the outline's, width_scale along
+    the long side and depth_scale across).
     """
     if block is None or shapely.get_type_id(block) != 3 or not template.parcels:
         return None
@@ -674,7 +677,7 @@ def warp_drawn(block, template: Template, cut: bool = True) -> Optional[WarpResu
     (wlo, whi), (dlo, dhi) = template.width_scale, template.depth_scale
     if not (wlo <= sx <= whi and dlo <= sy <= dhi):
         return None
-    b_ring, b_idx, _ = region_corners(block)
+    b_ring, b_idx, b_turn = region_corners(block)
     parcels_ = _drawn_parcels(template)
     labels = np.asarray(template.parcel_labels or ("R",) * len(parcels_), dtype=object)
     best = None
@@ -683,14 +686,19 @@ def warp_drawn(block, template: Template, cut: bool = True) -> Optional[WarpResu
             else parcels_
         t_ring, t_idx, _ = region_corners(shapely.union_all(parcels_m, grid_size=1e-6))
         k = len(t_idx)
-        if k < 3 or k != len(b_idx):
+        if k < 3 or k > len(b_ring):
             continue
+        # the block's k sharpest vertices take the template's corners (more corners: the
+        # others are bends the warp absorbs, their turn the penalty; fewer: the sharpest
+        # other vertices fill in), as the row templates' frame does with four
+        keep = np.sort(np.argsort(-np.abs(b_turn), kind="stable")[:k])
+        penalty = float(np.radians(np.abs(b_turn[np.setdiff1d(b_idx, keep)])).sum())
         t_sides = _sides(t_ring, t_idx)
         dense = shapely.segmentize(parcels_m, DRAWN_SAMPLE_SPACING)
         rings = [shapely.get_coordinates(shapely.get_exterior_ring(p))[:-1] for p in dense]
         verts = np.concatenate(rings)
         for shift in range(k):
-            b_sides = _sides(b_ring, np.roll(b_idx, -shift))
+            b_sides = _sides(b_ring, np.roll(keep, -shift))
             src, dst = [], []
             for ts, bs in zip(t_sides, b_sides):
                 m = max(2, int(math.ceil(max(ts.length, bs.length) / DRAWN_SAMPLE_SPACING)))
@@ -706,7 +714,7 @@ def warp_drawn(block, template: Template, cut: bool = True) -> Optional[WarpResu
                 reg = _register_polygon(ring_, w, wlo, whi, dlo, dhi)
                 rms = math.sqrt(float(((reg - w) ** 2).sum(axis=1).mean()))
                 resid.append(rms / math.sqrt(max(poly.area, 1e-9)))
-            energy = float(np.mean(resid))
+            energy = float(np.mean(resid)) + penalty
             if best is None or energy < best[0]:
                 best = (energy, mirror, src, dst, parcels_m)
     if best is None:
