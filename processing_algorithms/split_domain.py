@@ -106,8 +106,9 @@ class SplitDomain(AlgorithmBase):
             "R parcel, P or A park / area, S for a spike. Rows of parcels are recognised "
             "from the drawing (one row: strip, two rows: double strip) and repeat along any "
             "street; any other template (more rows, a private park among the parcels, any "
-            "shape) is warped as drawn onto regions with as many corners, within 0.75-1.35 x "
-            "its length and 0.8-1.25 x its depth, and chosen by its warp energy.",
+            "shape) is warped as drawn onto a region corner to corner (a region's extra "
+            "corners cost their turn), within 0.75-1.35 x its length and 0.8-1.25 x its "
+            "depth, and chosen by its warp energy.",
             advanced=True)
         self.add(QgsProcessingParameterNumber(
             self.PARCEL_LENGTH, "Parcel length (depth, m)", QgsProcessingParameterNumber.Type.Double,
