@@ -182,6 +182,15 @@ def _junction_triangles(polys: np.ndarray, centres: np.ndarray):
     return np.concatenate(tris), np.concatenate(owner)
 
 
+def _side_faces(top: np.ndarray, ground: np.ndarray, a: np.ndarray, b: np.ndarray,
+                skirt: float) -> list:
+    """The two triangles of each vertical face from the top edges a -> b (the outside on
+    their right) down to ``skirt`` below the terrain (``ground``, NaN: the top's height)."""
+    lo_a = np.column_stack([top[a, :2], np.nan_to_num(ground[a], nan=top[a, 2]) - skirt])
+    lo_b = np.column_stack([top[b, :2], np.nan_to_num(ground[b], nan=top[b, 2]) - skirt])
+    return [np.stack([top[a], lo_a, lo_b], axis=1), np.stack([top[a], lo_b, top[b]], axis=1)]
+
+
 def street_mesh(tess, spacing: float = 5.0, z_offset: float = 0.1, skirt: float = 0.5,
                 min_gap: float = 0.01) -> StreetMesh:
     """Triangulated 3D mesh of a tessellated street network (see module doc).
@@ -253,10 +262,7 @@ def street_mesh(tess, spacing: float = 5.0, z_offset: float = 0.1, skirt: float 
                 gap = np.nan_to_num(top[:, 2] - ground, nan=0.0)
                 up = (gap[a] > min_gap) | (gap[b] > min_gap)
                 a, b = a[up], b[up]
-                lo_a = np.column_stack([top[a, :2], np.nan_to_num(ground[a], nan=top[a, 2]) - skirt])
-                lo_b = np.column_stack([top[b, :2], np.nan_to_num(ground[b], nan=top[b, 2]) - skirt])
-                tris += [np.stack([top[a], lo_a, lo_b], axis=1),
-                         np.stack([top[a], lo_b, top[b]], axis=1)]
+                tris += _side_faces(top, ground, a, b, skirt)
                 owner += [k[a], k[a]]
                 side += [np.ones(2 * len(a), dtype=bool)]
     n_j = len(tess.junctions)
@@ -283,12 +289,7 @@ def street_mesh(tess, spacing: float = 5.0, z_offset: float = 0.1, skirt: float 
                 tree = shapely.STRtree(shapely.force_2d(tess.surfaces))
                 up[tree.query(mid, predicate="dwithin", distance=1e-6)[0]] = False
             a = np.flatnonzero(up)                   # the outside is right of a -> nxt
-            b = nxt[a]
-            ground = tess.terrain_z(xy)
-            lo_a = np.column_stack([xy[a], np.nan_to_num(ground[a], nan=top[a, 2]) - skirt])
-            lo_b = np.column_stack([xy[b], np.nan_to_num(ground[b], nan=top[b, 2]) - skirt])
-            tris += [np.stack([top[a], lo_a, lo_b], axis=1),
-                     np.stack([top[a], lo_b, top[b]], axis=1)]
+            tris += _side_faces(top, tess.terrain_z(xy), a, nxt[a], skirt)
             owner += [n_s + jr[a], n_s + jr[a]]
             side += [np.ones(2 * len(a), dtype=bool)]
     triangles = np.concatenate(tris) if tris else np.zeros((0, 3, 3))
