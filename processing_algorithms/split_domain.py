@@ -103,7 +103,9 @@ class SplitDomain(AlgorithmBase):
             [QgsProcessing.SourceType.TypeVectorPolygon], optional=True),
             "User templates drawn in QGIS: one polygon per parcel or area, a text field "
             "'template' (the template each belongs to) and 'label' with the paper's labels: "
-            "R parcel, P or A park / area, S for a spike. Rows of parcels are recognised "
+            "R parcel, P or A park / area, S the template's own street drawn as its surface "
+            "(a cul-de-sac of any shape with its turning head; S alone marks the built-in "
+            "spike). Rows of parcels are recognised "
             "from the drawing (one row: strip, two rows: double strip) and repeat along any "
             "street; any other template (more rows, a private park among the parcels, any "
             "shape) is warped as drawn onto a region corner to corner (a region's extra "

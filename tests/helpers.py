@@ -251,3 +251,30 @@ def load_script(name: str):
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
+
+
+def drawn_pentagon_template():
+    """A drawn template: five lots round a private park (the paper's template with a
+    park), in metres."""
+    outer = np.array([(0, 0), (120, 0), (140, 70), (60, 120), (-20, 70)], dtype=float)
+    inner = outer.mean(axis=0) + 0.35 * (outer - outer.mean(axis=0))
+    lots = [shapely.Polygon([outer[i], outer[(i + 1) % 5], inner[(i + 1) % 5], inner[i]])
+            for i in range(5)]
+    geoms = lots + [shapely.Polygon(inner)]
+    return shapely.Polygon(outer), geoms, ["R"] * 5 + ["P"]
+
+
+def drawn_court_template():
+    """A drawn template: a 120 x 90 m block with a bent cul-de-sac (8 m, a round turning
+    head) from the middle of its south side, seven lots round it."""
+    block = shapely.box(0, 0, 120, 90)
+    axis = shapely.LineString([(60, 0), (60, 30), (70, 55)])
+    street = shapely.intersection(shapely.union(shapely.buffer(axis, 4, cap_style="flat"),
+                                                shapely.Point(70, 55).buffer(10)), block)
+    rest = shapely.difference(block, street)
+    cuts = [shapely.LineString([(30, -1), (30, 91)]), shapely.LineString([(90, -1), (90, 91)]),
+            shapely.LineString([(-1, 45), (121, 45)])]
+    faces = shapely.get_parts(shapely.polygonize(shapely.get_parts(shapely.node(
+        shapely.union_all([shapely.boundary(rest)] + cuts)))))
+    lots = list(faces[shapely.within(shapely.point_on_surface(faces), rest)])
+    return block, lots + [street], ["R"] * len(lots) + ["S"]

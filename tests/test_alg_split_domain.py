@@ -5,7 +5,8 @@ import shapely
 import shapely.affinity
 
 from conftest import BUBENEC, run_qgis_process
-from helpers import bubenec, layer_features, memory_layer
+from helpers import (bubenec, drawn_court_template, drawn_pentagon_template, layer_features,
+                     memory_layer)
 from urban_synthesis.plugin.planned import domain_split
 
 ALG = "urbansynth:splitdomain"
@@ -96,28 +97,38 @@ def test_drawn_templates(qgis_processing, region_layer):
 
 def test_a_drawn_template_warped_as_drawn(qgis_processing):
     """Through Processing: a template drawn as five lots round a private park (no strip)
-    fills a pentagonal region as drawn, the park kept; a template whose parcels leave a gap
-    is refused by name."""
+    fills a pentagonal region as drawn, the park kept; a court drawn with its own bent
+    cul-de-sac (label S) gets that street; a template whose parcels leave a gap is refused
+    by name."""
     from qgis.core import QgsProcessingException
 
-    outer = np.array([(0, 0), (120, 0), (140, 70), (60, 120), (-20, 70)], dtype=float)
-    inner = outer.mean(axis=0) + 0.35 * (outer - outer.mean(axis=0))
-    lots = [shapely.Polygon([outer[i], outer[(i + 1) % 5], inner[(i + 1) % 5], inner[i]])
-            for i in range(5)]
-    tmpl = memory_layer("Polygon", [g.wkt for g in lots + [shapely.Polygon(inner)]],
-                        crs="EPSG:32633", fields="&field=template:string&field=label:string",
-                        rows=[("court", "R")] * 5 + [("court", "P")], name="my templates")
-    region = shapely.affinity.scale(shapely.Polygon(outer + [500000, 5550000]), 1.1, 1.1)
-    layer = memory_layer("Polygon", [region.wkt], crs="EPSG:32633", name="court region")
-    out = qgis_processing.run(ALG, {"REGION": layer, "TEMPLATE_LAYER": tmpl, "SEED": 1,
-                                    "OUTPUT_ROADS": "memory:", "OUTPUT_PARCELS": "memory:"})
-    rows, geoms = layer_features(out["OUTPUT_PARCELS"])
+    def template_layer(geoms, labels, name, title):
+        return memory_layer("Polygon", [g.wkt for g in geoms], crs="EPSG:32633",
+                            fields="&field=template:string&field=label:string",
+                            rows=[(name, lab) for lab in labels], name=title)
+
+    def region_layer_of(poly, title):
+        poly = shapely.affinity.translate(poly, 500000, 5550000)
+        return memory_layer("Polygon", [poly.wkt], crs="EPSG:32633", name=title)
+
+    outline, pentagon, labels = drawn_pentagon_template()
+    layer = region_layer_of(shapely.affinity.scale(outline, 1.1, 1.1), "court region")
+    out = qgis_processing.run(ALG, {
+        "REGION": layer, "TEMPLATE_LAYER": template_layer(pentagon, labels, "court",
+                                                          "my templates"),
+        "SEED": 1, "OUTPUT_ROADS": "memory:", "OUTPUT_PARCELS": "memory:"})
+    rows, geoms_out = layer_features(out["OUTPUT_PARCELS"])
     court = [r for r in rows if r["template"] == "court"]
     assert len(court) == 6 and sum(r["land_use"] == "park" for r in court) == 1
     assert all(r["has_street_access"] for r in court if r["land_use"] == "residential")
-    gap = memory_layer("Polygon", [lots[0].wkt, lots[2].wkt], crs="EPSG:32633",
-                       fields="&field=template:string&field=label:string",
-                       rows=[("broken", "R"), ("broken", "P")], name="gappy templates")
+    block, geoms, labels = drawn_court_template()
+    out = qgis_processing.run(ALG, {
+        "REGION": region_layer_of(shapely.affinity.scale(block, 1.12, 1.15), "cul-de-sac region"),
+        "TEMPLATE_LAYER": template_layer(geoms, labels, "cds", "my cul-de-sac"),
+        "SEED": 1, "OUTPUT_ROADS": "memory:", "OUTPUT_PARCELS": "memory:"})
+    roads = layer_features(out["OUTPUT_ROADS"])[0]
+    assert sum(r["kind"] == "cul_de_sac" for r in roads) == 1
+    gap = template_layer([pentagon[0], pentagon[2]], ["R", "P"], "broken", "gappy templates")
     with pytest.raises(QgsProcessingException, match="gappy templates.*broken.*one polygon"):
         qgis_processing.run(ALG, {"REGION": layer, "TEMPLATE_LAYER": gap,
                                   "OUTPUT_ROADS": "memory:", "OUTPUT_PARCELS": "memory:"})

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import shapely
 
-from helpers import assert_planar, bubenec
+from helpers import assert_planar, bubenec, drawn_court_template, drawn_pentagon_template
 from urban_synthesis.plugin.planned import cross_field
 from urban_synthesis.plugin.planned import domain_split
 from urban_synthesis.plugin.planned import mesh_optimisation
@@ -196,17 +196,6 @@ def test_templates_from_drawn_recognises_rows():
         templates.templates_from_drawn(park, ["c"], ["P"])
 
 
-def _pentagon_with_a_park():
-    """A drawn template: five lots round a private park (the paper's template with a
-    park), in metres."""
-    outer = np.array([(0, 0), (120, 0), (140, 70), (60, 120), (-20, 70)], dtype=float)
-    inner = outer.mean(axis=0) + 0.35 * (outer - outer.mean(axis=0))
-    lots = [shapely.Polygon([outer[i], outer[(i + 1) % 5], inner[(i + 1) % 5], inner[i]])
-            for i in range(5)]
-    geoms = lots + [shapely.Polygon(inner)]
-    return shapely.Polygon(outer), geoms, ["R"] * 5 + ["P"]
-
-
 def test_drawn_template_is_warped_as_drawn():
     """A template that is no strip (five lots round a park) is kept as drawn and warped
     onto a block of the same corners by mean value coordinates: the lots tile the block,
@@ -216,7 +205,7 @@ def test_drawn_template_is_warped_as_drawn():
     an extra corner pays its turn."""
     from shapely import affinity
 
-    outline, geoms, labels = _pentagon_with_a_park()
+    outline, geoms, labels = drawn_pentagon_template()
     (t,) = templates.templates_from_drawn(geoms, ["pentagon"] * 6, labels)
     assert (t.kind, t.parcel_labels.count("P")) == ("drawn", 1)
     rng = np.random.default_rng(0)
@@ -248,12 +237,43 @@ def test_drawn_template_is_warped_as_drawn():
     assert t3.kind == "drawn"
 
 
+def test_drawn_template_with_its_own_cul_de_sac():
+    """A cul-de-sac drawn as a surface (S) among the parcels is the template's own street:
+    its centre line (raster skeleton of the surface) runs from the outline to the turning
+    head; warped onto a turned, stretched region it keeps its bend, runs on to the
+    region's outline street, no lot covers it, and every lot has street access."""
+    from shapely import affinity
+
+    block, geoms, labels = drawn_court_template()
+    (t,) = templates.templates_from_drawn(geoms, ["court"] * len(geoms), labels)
+    assert t.kind == "drawn" and len(t.streets) == 1
+    outline = templates.drawn_outline(t)
+    ends = shapely.points(np.asarray(t.streets[0])[[0, -1]])
+    assert sorted(np.round(shapely.distance(ends, shapely.boundary(outline)), 3))[0] == 0
+    region = affinity.rotate(affinity.scale(block, 1.12, 1.15), 20)
+    lib = [t] + [x for x in templates.load_library() if x.kind in ("rows", "park")]
+    lay = domain_split.split_domain(region, seed=1, templates=lib)
+    tab = lay.table
+    assert (tab.template == "court").sum() == 7 and tab.has_street_access.all()
+    kinds = np.asarray(lay.road_kind)
+    (cds,) = lay.roads[kinds == "cul_de_sac"]
+    d = shapely.distance(shapely.points(shapely.get_coordinates(cds)[[0, -1]]),
+                         shapely.boundary(region))
+    assert min(d) < 1e-3 and max(d) > 30            # from the outline street into the block
+    chord = shapely.distance(shapely.get_point(cds, 0), shapely.get_point(cds, -1))
+    assert cds.length / chord > 1.01                  # the drawn bend is kept
+    with np.errstate(invalid="ignore"):
+        covered = shapely.area(shapely.intersection(lay.parcels, shapely.buffer(cds, 3.0)))
+    assert covered.max() < 1.0                        # its surface is no lot
+    assert_planar(lay.roads)
+
+
 def test_split_domain_uses_a_drawn_template():
     """A region the drawn template fits (its outline and half a street all round) becomes
     the drawn lots and the private park, every lot with street access."""
     from shapely import affinity
 
-    outline, geoms, labels = _pentagon_with_a_park()
+    outline, geoms, labels = drawn_pentagon_template()
     lib = templates.templates_from_drawn(geoms, ["pentagon"] * 6, labels) + \
         [t for t in templates.load_library() if t.kind in ("rows", "park")]
     region = affinity.scale(outline, 1.1, 1.1)

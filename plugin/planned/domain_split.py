@@ -1284,6 +1284,24 @@ def _fallback(region, energies, by_name, s: SplitSettings) -> str:
     return "skeleton"
 
 
+def _onto_outline(line, part, reg, street: float):
+    """``line`` with each end on the block part's edge carried straight on to the region's
+    outline (the centre line of the street around the block), at most a street width."""
+    xy = shapely.get_coordinates(line)
+    edge, outline = shapely.boundary(part), shapely.boundary(reg)
+    for end, prev in ((0, 1), (-1, -2)):
+        if len(xy) < 2 or shapely.distance(shapely.Point(xy[end]), edge) > 1.0:
+            continue
+        d = xy[end] - xy[prev]
+        d /= max(float(np.hypot(*d)), 1e-9)
+        hit = shapely.get_coordinates(shapely.intersection(
+            shapely.LineString([xy[end], xy[end] + 2 * street * d]), outline))
+        if len(hit):
+            foot = hit[np.argmin(np.hypot(*(hit - xy[end]).T))]
+            xy = np.vstack([foot, xy]) if end == 0 else np.vstack([xy, foot])
+    return shapely.LineString(xy)
+
+
 def _lots_for(part, reg, name, by_name, s: SplitSettings, settings_sk, rng, template_roads):
     """Lots of one shrunk block part: (lots, template name, the template's own streets,
     park mask of the lots or None)."""
@@ -1299,7 +1317,11 @@ def _lots_for(part, reg, name, by_name, s: SplitSettings, settings_sk, rng, temp
     if t is not None and t.kind == "drawn":
         warped = _templates.warp_drawn(part, t)
         if warped is not None and len(warped.lots):
-            return warped.lots, t.name, none, warped.green
+            # the template's own streets run on from the block's edge to the street around
+            # it (the region's outline, half a street width away)
+            roads = [_onto_outline(r, part, reg, S) for r in warped.roads]
+            template_roads += [(r, "cul_de_sac") for r in roads]
+            return warped.lots, t.name, np.asarray(roads, dtype=object), warped.green
     if t is not None and t.kind in ("spike", "loop"):
         make = _templates.spike_lots if t.kind == "spike" else _templates.loop_lots
         got = make(reg, part, L, W, S, settings_sk, rng)

@@ -124,7 +124,11 @@ class Template:
         The drawn layout, for display and user templates; a 'drawn' template's parcels are
         in metres, centred on its outline, its long axis along x (warped as drawn).
     parcel_labels : tuple of str
-        A 'drawn' template's label per parcel: R (parcel), P or A (park).
+        A 'drawn' template's label per parcel: R (parcel), P or A (park), S (its own
+        street, drawn as a surface).
+    streets : tuple of coordinate lists
+        A 'drawn' template's own streets: the centre lines of its S surfaces (template
+        frame), running onto its outline where they leave it.
     """
 
     name: str
@@ -140,6 +144,7 @@ class Template:
     land_use: str = "residential"
     parcels: tuple = field(default=(), compare=False)
     parcel_labels: tuple = field(default=(), compare=False)
+    streets: tuple = field(default=(), compare=False)
 
     def gross_depth(self, length: float, street: float) -> float:
         """Ideal centre-line width of a block of this template (m)."""
@@ -204,7 +209,8 @@ def load_library(path=LIBRARY_PATH, subset: Optional[str] = None) -> List[Templa
                            "depth_scale": tuple(t.get("depth_scale", (0.8, 1.25))),
                            "depth_range": tuple(t.get("depth_range", (0.0, 0.0))),
                            "parcels": tuple(t.get("parcels", ())),
-                           "parcel_labels": tuple(t.get("parcel_labels", ()))}) for t in items]
+                           "parcel_labels": tuple(t.get("parcel_labels", ())),
+                           "streets": tuple(t.get("streets", ()))}) for t in items]
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise InputError(f"the template library {path} cannot be read ({exc})") from exc
     for t in out:
@@ -228,8 +234,10 @@ def templates_from_drawn(geoms: Sequence, names: Sequence, labels: Sequence) -> 
     clustered across the template's long axis into rows (1 or 2 make a strip or a double
     strip, which repeat along any street length). A group of only park polygons is an area
     template. Any other group -- three rows or more, parks among the parcels (the paper's
-    template with a private park), any shape -- is a **drawn** template, kept as drawn and
-    warped onto a region of the same number of corners (:func:`warp_drawn`).
+    template with a private park), its own street drawn as a surface (S: a cul-de-sac of
+    any shape, with its turning head), any outline -- is a **drawn** template, kept as drawn
+    and warped onto a region corner to corner (:func:`warp_drawn`). S alone (no parcel)
+    marks the built-in spike.
 
     Raises
     ------
@@ -248,7 +256,7 @@ def templates_from_drawn(geoms: Sequence, names: Sequence, labels: Sequence) -> 
         if set(lab) <= {"P", "A"}:
             out.append(Template(name, "A", "park", land_use="park", parcels=parcels_))
             continue
-        if "S" in lab:
+        if "S" in lab and "R" not in lab:   # a spike marker: the built-in cul-de-sac
             out.append(Template(name, "S", "spike", depth_range=(2.6, 4.6), parcels=parcels_))
             continue
         res = g[lab == "R"]
@@ -272,7 +280,11 @@ def templates_from_drawn(geoms: Sequence, names: Sequence, labels: Sequence) -> 
 def _drawn_template(name: str, geoms: np.ndarray, labels: np.ndarray) -> Template:
     """A drawn template: its parcels in metres about the outline's centre, the outline's
     long axis along x (the frame :func:`warp_drawn` scales in)."""
-    outline = shapely.union_all(shapely.make_valid(geoms))
+    geoms, part_of = shapely.get_parts(shapely.make_valid(np.asarray(geoms, dtype=object)),
+                                       return_index=True)
+    keep = shapely.get_type_id(geoms) == 3
+    geoms, labels = geoms[keep], np.asarray(labels)[part_of[keep]]
+    outline = shapely.union_all(geoms)
     if shapely.get_type_id(outline) != 3:
         raise InputError(f"template {name!r}: its parcels and areas must join into one "
                          "polygon without gaps, to be warped as drawn")
@@ -283,8 +295,30 @@ def _drawn_template(name: str, geoms: np.ndarray, labels: np.ndarray) -> Templat
         -float(angle[0]), origin=(0.0, 0.0))
     parcels_ = tuple(np.round(shapely.get_coordinates(shapely.get_exterior_ring(p)), 6).tolist()
                      for p in shapely.get_parts(frame))
-    labs = tuple("P" if v in ("P", "A") else "R" for v in labels)
-    return Template(name, "T", "drawn", parcels=parcels_, parcel_labels=labs)
+    labs = tuple("P" if v in ("P", "A") else ("S" if v == "S" else "R") for v in labels)
+    streets = []
+    surface = shapely.union_all([p for p, v in zip(shapely.get_parts(frame), labs) if v == "S"])
+    if not surface.is_empty:
+        from ..roads.raster_graph import polygon_centre_lines
+
+        edge = shapely.boundary(shapely.union_all(shapely.get_parts(frame)))
+        width = 2 * shapely.area(surface) / max(shapely.length(surface), 1e-9)
+        for line in polygon_centre_lines(surface):
+            xy = shapely.get_coordinates(line)
+            # an end near the outline is where the street leaves the template: it runs on
+            # onto the outline (the centre line stops half a width short of it)
+            for end, prev in ((0, 1), (-1, -2)):
+                if shapely.distance(shapely.Point(xy[end]), edge) <= width:
+                    d = xy[end] - xy[prev]
+                    d /= max(float(np.hypot(*d)), 1e-9)
+                    ray = shapely.LineString([xy[end], xy[end] + 2 * width * d])
+                    hit = shapely.intersection(ray, edge)
+                    if not hit.is_empty:
+                        xy[end] = shapely.get_coordinates(hit)[
+                            np.argmin(np.hypot(*(shapely.get_coordinates(hit) - xy[end]).T))]
+            streets.append(np.round(xy, 6).tolist())
+    return Template(name, "T", "drawn", parcels=parcels_, parcel_labels=labs,
+                    streets=tuple(streets))
 
 
 def drawn_outline(template: Template):
@@ -438,6 +472,8 @@ class WarpResult:
         The two street sides the rows run along (for the edge labels).
     green : ndarray of bool, optional
         A drawn template's park lots.
+    roads : tuple of LineString
+        A drawn template's own streets, warped (their surfaces are no lot).
     """
 
     lots: np.ndarray
@@ -447,6 +483,7 @@ class WarpResult:
     depth_scale: float = 1.0
     long_sides: tuple = ()
     green: Optional[np.ndarray] = None
+    roads: tuple = ()
 
 
 def _project(line, pts: np.ndarray) -> np.ndarray:
@@ -655,7 +692,8 @@ def warp_drawn(block, template: Template, cut: bool = True) -> Optional[WarpResu
     the row templates for any parcel shape. The correspondence of least energy is kept.
     The lots are the block cut along the warped inner parcel boundaries (its exact outline
     kept, so the lots tile it); a lot takes the label of the drawn parcel whose inner point
-    it holds (P / A: a park, ``green``).
+    it holds (P / A: a park, ``green``; S: the template's own street, no lot: its centre
+    lines, warped, are ``roads``).
 
     A block with more corners than the template (turning by more than
     :data:`CORNER_TURN`) gives the template's corners to its sharpest ones, and the turn
@@ -722,6 +760,12 @@ def warp_drawn(block, template: Template, cut: bool = True) -> Optional[WarpResu
     energy, mirror, src, dst, parcels_m = best
     if not cut:
         return WarpResult(np.empty(0, dtype=object), energy, len(parcels_), energy, sy)
+    # the template's own streets, warped (mirrored with the template)
+    roads = []
+    for xy in template.streets:
+        xy = np.asarray(xy, dtype=float) * ([-1.0, 1.0] if mirror else [1.0, 1.0])
+        line = shapely.segmentize(shapely.LineString(xy), DRAWN_SAMPLE_SPACING)
+        roads.append(shapely.LineString(warp_points(shapely.get_coordinates(line), src, dst)))
     # the inner parcel boundaries, noded in the template's frame (a T is a vertex of both
     # lines, so the warped lines meet exactly), warped, and extended across the outline
     t_outline = shapely.union_all(parcels_m, grid_size=1e-6)
@@ -747,7 +791,10 @@ def warp_drawn(block, template: Template, cut: bool = True) -> Optional[WarpResu
     li, pi = shapely.STRtree(lots).query(inside, predicate="within")[::-1]
     green = np.zeros(len(lots), dtype=bool)
     green[li] = np.isin(labels[pi], ("P", "A"))
-    return WarpResult(lots, energy, len(parcels_), energy, sy, green=green)
+    street = np.zeros(len(lots), dtype=bool)
+    street[li] = labels[pi] == "S"
+    return WarpResult(lots[~street], energy, len(parcels_), energy, sy, green=green[~street],
+                      roads=tuple(roads))
 
 
 def spike_lots(block_centre, block, length: float, width: float, street: float,

@@ -42,7 +42,8 @@ from ..core.geometry import pinned_ends
 from ..core.progress import InputError, Progress, ensure
 
 __all__ = ["rasterize_lines", "raster_to_graph", "RasterGraph", "road_mask", "skeleton", "pixel_graph",
-           "chains", "smooth_chain", "merge_junction_clusters", "CELL_SIZE", "LINE_WIDTH_PX"]
+           "chains", "smooth_chain", "merge_junction_clusters", "polygon_centre_lines",
+           "CELL_SIZE", "LINE_WIDTH_PX"]
 
 #: Thesis values: 3 m per pixel, 15 px wide roads.
 CELL_SIZE = 3.0
@@ -68,6 +69,31 @@ def _cross():
     if _CROSS is None:
         _CROSS = _cv2().getStructuringElement(_cv2().MORPH_CROSS, (3, 3))
     return _CROSS
+
+
+def polygon_centre_lines(polygon, cell_size: float = 0.25) -> np.ndarray:
+    """Centre lines of a street drawn as a surface (e.g. a cul-de-sac with its turning
+    head): the polygon rasterised at ``cell_size`` and read back by :func:`raster_to_graph`
+    without morphology, the skeleton's spurs shorter than the polygon's mean width (from the
+    edge, its corners) pruned. The lines stop about half a width short of the polygon's
+    ends. Returns an array of LineStrings (empty for an empty polygon)."""
+    polygon = shapely.make_valid(polygon)
+    if polygon.is_empty or shapely.area(polygon) <= 0:
+        return np.empty(0, dtype=object)
+    x0, y0, x1, y1 = polygon.bounds
+    pad = 2 * cell_size
+    gt = (x0 - pad, cell_size, 0.0, y1 + pad, 0.0, -cell_size)
+    image = np.zeros((int(math.ceil((y1 - y0 + 2 * pad) / cell_size)),
+                      int(math.ceil((x1 - x0 + 2 * pad) / cell_size))), dtype=np.uint8)
+    rings = [shapely.get_coordinates(shapely.get_exterior_ring(p))
+             for p in shapely.get_parts(polygon) if shapely.get_type_id(p) == 3]
+    px = [np.round(np.column_stack([(r[:, 0] - gt[0]) / cell_size,
+                                    (r[:, 1] - gt[3]) / gt[5]]) * 16).astype(np.int32)
+          for r in rings]
+    _cv2().fillPoly(image, px, 255, shift=4)   # 4 fractional bits: sub-pixel vertices
+    width = 2 * shapely.area(polygon) / max(shapely.length(polygon), 1e-9)
+    return raster_to_graph(image, gt, erosions=0, dilations=0, simplify=cell_size,
+                           min_dead_end=width, from_edge=True).geometry
 
 
 def rasterize_lines(lines: Sequence, cell_size: float = CELL_SIZE, width_px: int = LINE_WIDTH_PX,
