@@ -268,6 +268,38 @@ def test_drawn_template_with_its_own_cul_de_sac():
     assert_planar(lay.roads)
 
 
+def test_drawn_template_with_a_loop_street():
+    """A loop street drawn as a ring-shaped surface with its connector: two centre lines
+    (the ring, 2 x (90 + 60) m, and the connector), warped as drawn, kind 'loop', noded
+    with the outline street, every lot with street access."""
+    from shapely import affinity
+
+    from urban_synthesis.plugin.roads.raster_graph import polygon_centre_lines
+
+    block = shapely.box(0, 0, 160, 130)
+    street = shapely.intersection(shapely.union(
+        shapely.buffer(shapely.box(35, 35, 125, 95).exterior, 4, join_style="mitre"),
+        shapely.buffer(shapely.LineString([(80, 0), (80, 35)]), 4, cap_style="flat")), block)
+    lines = polygon_centre_lines(street)
+    assert sorted(np.round(shapely.length(lines) / 10)) == [3, 30]
+    rest = shapely.difference(block, street)
+    cuts = [shapely.LineString([(x, -1), (x, 131)]) for x in (20, 80, 140)] + \
+        [shapely.LineString([(-1, 65), (161, 65)])]
+    faces = shapely.get_parts(shapely.polygonize(shapely.get_parts(shapely.node(
+        shapely.union_all([shapely.boundary(rest)] + cuts)))))
+    lots = list(faces[shapely.within(shapely.point_on_surface(faces), rest)])
+    (t,) = templates.templates_from_drawn(lots + [street], ["loop"] * (len(lots) + 1),
+                                          ["R"] * len(lots) + ["S"])
+    assert len(t.streets) == 2
+    lib = [t] + [x for x in templates.load_library() if x.kind in ("rows", "park")]
+    lay = domain_split.split_domain(affinity.rotate(affinity.scale(block, 1.1, 1.12), -15),
+                                    seed=1, templates=lib)
+    kinds = np.asarray(lay.road_kind)
+    assert (kinds == "loop").sum() == 2 and any(r.is_ring for r in lay.roads[kinds == "loop"])
+    assert (lay.table.template == "loop").sum() >= 8 and lay.table.has_street_access.all()
+    assert_planar(lay.roads)
+
+
 def test_split_domain_uses_a_drawn_template():
     """A region the drawn template fits (its outline and half a street all round) becomes
     the drawn lots and the private park, every lot with street access."""

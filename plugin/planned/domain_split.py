@@ -1320,7 +1320,8 @@ def _lots_for(part, reg, name, by_name, s: SplitSettings, settings_sk, rng, temp
             # the template's own streets run on from the block's edge to the street around
             # it (the region's outline, half a street width away)
             roads = [_onto_outline(r, part, reg, S) for r in warped.roads]
-            template_roads += [(r, "cul_de_sac") for r in roads]
+            kind = "loop" if any(r.is_ring for r in roads) else "cul_de_sac"
+            template_roads += [(r, kind) for r in roads]
             return warped.lots, t.name, np.asarray(roads, dtype=object), warped.green
     if t is not None and t.kind in ("spike", "loop"):
         make = _templates.spike_lots if t.kind == "spike" else _templates.loop_lots

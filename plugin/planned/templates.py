@@ -234,8 +234,9 @@ def templates_from_drawn(geoms: Sequence, names: Sequence, labels: Sequence) -> 
     clustered across the template's long axis into rows (1 or 2 make a strip or a double
     strip, which repeat along any street length). A group of only park polygons is an area
     template. Any other group -- three rows or more, parks among the parcels (the paper's
-    template with a private park), its own street drawn as a surface (S: a cul-de-sac of
-    any shape, with its turning head), any outline -- is a **drawn** template, kept as drawn
+    template with a private park), its own streets drawn as a surface (S: a cul-de-sac of
+    any shape with its turning head, a loop street as a ring with its connector), any
+    outline -- is a **drawn** template, kept as drawn
     and warped onto a region corner to corner (:func:`warp_drawn`). S alone (no parcel)
     marks the built-in spike.
 

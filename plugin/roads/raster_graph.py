@@ -85,12 +85,18 @@ def polygon_centre_lines(polygon, cell_size: float = 0.25) -> np.ndarray:
     gt = (x0 - pad, cell_size, 0.0, y1 + pad, 0.0, -cell_size)
     image = np.zeros((int(math.ceil((y1 - y0 + 2 * pad) / cell_size)),
                       int(math.ceil((x1 - x0 + 2 * pad) / cell_size))), dtype=np.uint8)
-    rings = [shapely.get_coordinates(shapely.get_exterior_ring(p))
-             for p in shapely.get_parts(polygon) if shapely.get_type_id(p) == 3]
-    px = [np.round(np.column_stack([(r[:, 0] - gt[0]) / cell_size,
-                                    (r[:, 1] - gt[3]) / gt[5]]) * 16).astype(np.int32)
-          for r in rings]
-    _cv2().fillPoly(image, px, 255, shift=4)   # 4 fractional bits: sub-pixel vertices
+    def pixels(ring):
+        r = shapely.get_coordinates(ring)
+        return np.round(np.column_stack([(r[:, 0] - gt[0]) / cell_size,
+                                         (r[:, 1] - gt[3]) / gt[5]]) * 16).astype(np.int32)
+
+    parts = [p for p in shapely.get_parts(polygon) if shapely.get_type_id(p) == 3]
+    # 4 fractional bits: sub-pixel vertices; holes (a loop street's island) cut out again
+    _cv2().fillPoly(image, [pixels(shapely.get_exterior_ring(p)) for p in parts], 255, shift=4)
+    holes = [pixels(shapely.get_interior_ring(p, i)) for p in parts
+             for i in range(shapely.get_num_interior_rings(p))]
+    if holes:
+        _cv2().fillPoly(image, holes, 0, shift=4)
     width = 2 * shapely.area(polygon) / max(shapely.length(polygon), 1e-9)
     return raster_to_graph(image, gt, erosions=0, dilations=0, simplify=cell_size,
                            min_dead_end=width, from_edge=True).geometry
