@@ -247,6 +247,11 @@ def test_drawn_template_with_its_own_cul_de_sac():
     block, geoms, labels = drawn_court_template()
     (t,) = templates.templates_from_drawn(geoms, ["court"] * len(geoms), labels)
     assert t.kind == "drawn" and len(t.streets) == 1
+    # a street that does not reach the outline would be a floating piece: refused by name
+    island = shapely.Point(60, 60).buffer(8)
+    lots = [shapely.difference(block, island)]
+    with pytest.raises(InputError, match="'island'.*must be drawn as a surface that reaches"):
+        templates.templates_from_drawn(lots + [island], ["island"] * 2, ["R", "S"])
     outline = templates.drawn_outline(t)
     ends = shapely.points(np.asarray(t.streets[0])[[0, -1]])
     assert sorted(np.round(shapely.distance(ends, shapely.boundary(outline)), 3))[0] == 0

@@ -318,6 +318,12 @@ def _drawn_template(name: str, geoms: np.ndarray, labels: np.ndarray) -> Templat
                         xy[end] = shapely.get_coordinates(hit)[
                             np.argmin(np.hypot(*(shapely.get_coordinates(hit) - xy[end]).T))]
             streets.append(np.round(xy, 6).tolist())
+        ends = shapely.points(np.array([xy_[k] for xy_ in streets for k in (0, -1)])) \
+            if streets else np.empty(0, dtype=object)
+        if not len(ends) or not shapely.dwithin(ends, edge, 1e-3).any():
+            raise InputError(f"template {name!r}: its street (label S) must be drawn as a "
+                             "surface that reaches the template's outline, where it joins "
+                             "the street around the region")
     return Template(name, "T", "drawn", parcels=parcels_, parcel_labels=labs,
                     streets=tuple(streets))
 
