@@ -183,3 +183,21 @@ def test_given_roads_on_a_town(qgis_processing):
     check = invariants.check_network(geoms[~is_given], case["given"], case["given_class"],
                                      case["area"], example_dead_end_share=share)
     assert check.ok, check.summary()
+    # with the example's smallest blocks (10th percentile) the generator's small cells merge
+    from urban_synthesis.plugin.measure import fidelity
+
+    p10 = fidelity.fidelity_statistics(case["example"], case["example_area"])["block_area_p10"]
+    before = fidelity.fidelity_statistics(geoms, case["area"])
+    assert before["block_area_p10"] < 0.5 * p10
+    out = qgis_processing.run(GAN, {
+        "TARGET": memory_layer("Polygon", [case["area"].wkt], "EPSG:32632"),
+        "GIVEN_ROADS": given, "MODEL": streetgan.shipped_models().index("streetgan_helsinki"),
+        "SEED": 3, "DEAD_END_SHARE": share, "MIN_BLOCK_AREA": p10, "OUTPUT": "memory:"})
+    rows, geoms = layer_features(out["OUTPUT"])
+    is_given = np.array([r["road_class"] == "given" for r in rows])
+    after = fidelity.fidelity_statistics(geoms, case["area"])
+    assert after["block_area_p10"] > 2 * before["block_area_p10"]
+    assert after["block_area_p50"] > before["block_area_p50"]
+    check = invariants.check_network(geoms[~is_given], case["given"], case["given_class"],
+                                     case["area"], example_dead_end_share=share)
+    assert check.ok, check.summary()

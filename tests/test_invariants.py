@@ -210,3 +210,4 @@ def test_real_streets_keep_the_invariants_of_their_own_arterials():
     moved = shapely.transform(minor, lambda xy: xy + [30.0, 30.0])
     v = I.check_network(moved, given).violations()
     assert v["crossings_given"] > 20 and v["floating_pieces"] > 5
+

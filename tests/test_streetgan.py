@@ -205,6 +205,8 @@ def test_dead_end_share_is_steered_into_the_examples_band(models):
         assert res.stats["dead_ends_closed"] + res.stats["dead_ends_opened"] > 0
     with pytest.raises(InputError, match="dead-end share"):
         streetgan.synthesize(target, models["streetgan_helsinki"], dead_end_share=1.5)
+    with pytest.raises(InputError, match="smallest block area"):
+        streetgan.synthesize(target, models["streetgan_helsinki"], min_block_area=-5.0)
 
 
 def test_a_dead_end_no_street_reaches_is_pruned(models):

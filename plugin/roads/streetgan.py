@@ -338,7 +338,8 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
                tile: Optional[int] = 24, levels: bool = True,
                progress: Optional[Progress] = None, generate_fn=None, given=None,
                given_class=None, merge_junctions: Optional[float] = None,
-               dead_end_share: Optional[float] = None) -> StreetGanResult:
+               dead_end_share: Optional[float] = None,
+               min_block_area: Optional[float] = None) -> StreetGanResult:
     """Generate a road network over a target polygon (thesis ch. 4.2).
 
     Parameters
@@ -368,6 +369,10 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
         rule, :func:`from_fragments.steer_dead_ends`: dead ends closed by short streets, or
         cul-de-sacs added and T stems cut short); None: the network as read back (not in
         the thesis: its read-back leaves the share wherever the morphology puts it)
+    min_block_area : m², optional, the example's 10th-percentile block area: generated
+        streets between blocks under it are removed until at most a tenth of the blocks
+        are smaller (:func:`network.small_blocks.merge_small_blocks`; not in the thesis:
+        the generator draws cells of its own size); None: the cells as read back
     """
     progress = ensure(progress)
     gen = model if isinstance(model, Generator) else load_model(model)
@@ -378,6 +383,9 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
         raise InputError("the target has no area")
     if dead_end_share is not None and not 0 <= dead_end_share <= 1:
         raise InputError(f"the dead-end share must lie in [0, 1], got {dead_end_share}")
+    if min_block_area is not None and not (math.isfinite(min_block_area) and min_block_area > 0):
+        raise InputError(f"the smallest block area must be a positive number of m², not "
+                         f"{min_block_area}")
     cell = float(cell_size) if cell_size else gen.cell_size
     if not (math.isfinite(cell) and cell > 0):
         raise InputError(f"the cell size must be a positive number of metres, not {cell_size}")
@@ -433,6 +441,13 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
     lines, is_given, attach = attach_to_given(lines, given_lines, given_cls, area,
                                               reach=corridor + 0.75 * width,
                                               join_distance=JOIN_DISTANCE * width)
+    n_merged = 0
+    if min_block_area is not None and len(lines) > 1:
+        from ..network.small_blocks import merge_small_blocks
+
+        lines, is_new, n_merged = merge_small_blocks(lines, ~is_given, float(min_block_area),
+                                                     area)
+        is_given = ~is_new
     steered = (0, 0)
     if dead_end_share is not None and len(lines) > 1:
         from .from_fragments import steer_dead_ends
@@ -465,7 +480,7 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
                  vectorize_s=round(t_vec, 4), area_km2=area.area / 1e6, model=gen.name,
                  seed=int(seed), edges_clipped=int((~is_given).sum()),
                  n_joined_to_drawn_roads=int(n_cut), dead_ends_closed=int(steered[0]),
-                 dead_ends_opened=int(steered[1]), **attach)
+                 dead_ends_opened=int(steered[1]), small_blocks_merged=int(n_merged), **attach)
     return StreetGanResult(np.asarray(lines, dtype=object), level, image, gt, stats, is_given)
 
 

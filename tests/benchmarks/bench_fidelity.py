@@ -156,6 +156,7 @@ class Runner:
                  fill_quantile: float = 90.0):
         self.target, self.example, self.workdir = target, example, workdir
         self.fill_quantile = fill_quantile
+        self.gan_min_block = False
         self.extra: dict = {}
         self._cache: Dict[str, object] = {}
 
@@ -216,9 +217,12 @@ class Runner:
             raise RuntimeError("every shipped StreetGAN model was trained on this town")
         model = self.cached("gan_" + name, lambda: streetgan.load_model(name))
         self.extra = {"model": name}
+        # --gan-min-block: the example's smallest blocks (10th percentile) as MIN_BLOCK_AREA
+        min_block = self.example.stats["block_area_p10"] if self.gan_min_block else None
         return streetgan.synthesize(self.target.area, model, seed=seed, given=self.target.given,
                                     given_class=self.target.given_class,
-                                    dead_end_share=self.example.stats["degree1_share"]).geometry
+                                    dead_end_share=self.example.stats["degree1_share"],
+                                    min_block_area=min_block).geometry
 
     def growroads(self, seed: int) -> np.ndarray:
         from urban_synthesis.plugin.roads import growth
@@ -431,6 +435,9 @@ def main(argv=None):
     ap.add_argument("--gan-model", default=None,
                     help="judge this StreetGAN generator (.onnx, card next to it) on the "
                          "towns it was not trained on, instead of the shipped ones")
+    ap.add_argument("--gan-min-block", action="store_true",
+                    help="StreetGAN with the example's 10th-percentile block area as "
+                         "min_block_area (small generated cells merged)")
     ap.add_argument("--update", action="store_true",
                     help="rerun only --methods and keep every other result of --out (no "
                          "pictures: they show every method of one run)")
@@ -467,6 +474,7 @@ def main(argv=None):
             ex = example_for(target, towns)
             real = fidelity.fidelity_statistics(target.lines, target.area)
             runner = Runner(target, ex, Path(tmp), args.fill_quantile)
+            runner.gan_min_block = args.gan_min_block
             entry = {"region": target.region, "km2": target.km2, "villages": target.villages,
                      "example": ex.names, "given_km": float(shapely.length(target.given).sum()
                                                            / 1e3),
