@@ -1,0 +1,142 @@
+"""Drawn templates warped as drawn (Yang et al. 2013, sec. 4; `templates.warp_drawn`).
+
+Two templates drawn as an analyst would in QGIS (`tests/helpers.py`): a pentagon of five
+lots round a private park, and a court of seven lots round a bent cul-de-sac drawn as its
+surface (label S). Each is warped onto regions of its own shape turned and stretched, onto
+a skewed one and onto one with an extra corner (a 40° bend), and laid out by `split_domain`
+in a region it fits. Prints the warp energies (selection threshold 0.1), lot counts and
+times (best of three, wall and CPU, on this shared 2-core machine), writes
+``tests/benchmarks/results/drawn_templates.json`` and the picture
+``docs/drawn_templates.png`` (template as drawn | laid out in a region).
+
+    python tests/benchmarks/bench_drawn_templates.py
+"""
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import shapely
+import shapely.geometry
+from shapely import affinity
+
+ROOT = Path(__file__).resolve().parents[2]
+for p in (ROOT / "build" / "plugins", ROOT / "tests"):
+    if str(p) not in sys.path:
+        sys.path.insert(0, str(p))
+
+from helpers import drawn_court_template, drawn_pentagon_template  # noqa: E402
+from urban_synthesis.plugin.planned import domain_split, templates  # noqa: E402
+
+RESULTS = ROOT / "tests" / "benchmarks" / "results" / "drawn_templates.json"
+PICTURE = ROOT / "docs" / "drawn_templates.png"
+
+
+def _best(fn, n=3):
+    best = None
+    for _ in range(n):
+        w, c = time.perf_counter(), time.process_time()
+        out = fn()
+        w, c = time.perf_counter() - w, time.process_time() - c
+        if best is None or w < best[0]:
+            best = (w, c, out)
+    return best
+
+
+def _regions(outline):
+    xy = np.asarray(shapely.geometry.polygon.orient(outline).exterior.coords)[:-1]
+    d = xy[1] - xy[0]
+    # the first side's middle pushed out by 18 % of its length: a bend of about 40°
+    bent = np.insert(xy, 1, 0.5 * (xy[0] + xy[1]) + 0.18 * np.array([d[1], -d[0]]), axis=0)
+    return {
+        "turned 30°, stretched 1.1 x 0.95": affinity.rotate(affinity.scale(outline, 1.1, 0.95),
+                                                             30),
+        "skewed (x += 0.25 y)": affinity.skew(outline, xs=14.0),
+        "a 40° bend in one side": shapely.Polygon(bent),
+    }
+
+
+def main():
+    pentagon, p_geoms, p_labels = drawn_pentagon_template()
+    block, c_geoms, c_labels = drawn_court_template()
+    cases = [("pentagon with a private park", pentagon, p_geoms, p_labels),
+             ("court with a bent cul-de-sac", block, c_geoms, c_labels)]
+    lib_rest = [t for t in templates.load_library() if t.kind in ("rows", "park")]
+    rows, layouts = [], []
+    print(f"{'template':32s} {'region':34s} {'energy':>8s} {'lots':>5s} {'wall s':>8s} "
+          f"{'CPU s':>7s}")
+    for name, outline, geoms, labels in cases:
+        (t,) = templates.templates_from_drawn(geoms, [name] * len(geoms), labels)
+        for region_name, region in _regions(outline).items():
+            wall, cpu, res = _best(lambda: templates.warp_drawn(region, t))
+            row = {"template": name, "region": region_name,
+                   "energy": None if res is None else round(float(res.energy), 4),
+                   "lots": 0 if res is None else int(len(res.lots)),
+                   "parks": 0 if res is None else int(res.green.sum()),
+                   "streets": 0 if res is None else len(res.roads),
+                   "wall_s": round(wall, 4), "cpu_s": round(cpu, 4)}
+            rows.append(row)
+            print(f"{name:32s} {region_name:34s} "
+                  f"{row['energy'] if row['energy'] is not None else '-':>8} {row['lots']:5d} "
+                  f"{wall:8.3f} {cpu:7.3f}")
+        region = affinity.rotate(affinity.scale(outline, 1.12, 1.12), 20)
+        wall, cpu, lay = _best(lambda: domain_split.split_domain(
+            region, seed=1, templates=[t] + lib_rest), n=1)
+        tab = lay.table
+        mine = tab.template == name
+        layouts.append((name, t, region, lay))
+        rows.append({"template": name, "region": "split_domain, template plus a street",
+                     "lots": int(mine.sum()), "parks": int((tab.land_use[mine] == "park").sum()),
+                     "street_access": bool(tab.has_street_access[tab.land_use == "residential"]
+                                           .all()),
+                     "road_kinds": sorted(set(np.asarray(lay.road_kind).tolist())),
+                     "wall_s": round(wall, 3), "cpu_s": round(cpu, 3)})
+        print(f"{name:32s} {'split_domain in a fitting region':34s} {'':>8s} "
+              f"{int(mine.sum()):5d} {wall:8.3f} {cpu:7.3f}")
+    RESULTS.write_text(json.dumps({"benchmark": "drawn_templates", "rows": rows}, indent=1))
+    _draw(layouts)
+    print(f"wrote {RESULTS} and {PICTURE}")
+
+
+def _draw(layouts):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2 * len(layouts), figsize=(5 * 2 * len(layouts), 5))
+    colour = {"R": "#f4d6a0", "P": "#9ccf8a", "S": "#bbbbbb"}
+    for k, (name, t, region, lay) in enumerate(layouts):
+        ax = axes[2 * k]
+        for coords, lab in zip(t.parcels, t.parcel_labels):
+            xy = np.asarray(coords)
+            ax.fill(xy[:, 0], xy[:, 1], color=colour[lab], ec="k", lw=0.6)
+        for line in t.streets:
+            xy = np.asarray(line)
+            ax.plot(xy[:, 0], xy[:, 1], "r-", lw=1.2)
+        ax.set_title(f"{name}: as drawn", fontsize=9)
+        ax = axes[2 * k + 1]
+        use = lay.table.land_use.to_numpy()
+        for poly, u in zip(lay.parcels, use):
+            for part in shapely.get_parts(poly):
+                xy = np.asarray(part.exterior.coords)
+                ax.fill(xy[:, 0], xy[:, 1], color=colour["P" if u == "park" else "R"],
+                        ec="k", lw=0.6)
+        for line, kind in zip(lay.roads, lay.road_kind):
+            xy = shapely.get_coordinates(line)
+            ax.plot(xy[:, 0], xy[:, 1], "r-" if kind != "outline" else "k-", lw=1.2)
+        ax.set_title("laid out in a region turned 20°, 12 % larger", fontsize=9)
+        for a in axes[2 * k:2 * k + 2]:
+            a.set_aspect("equal")
+            a.axis("off")
+    fig.suptitle("Drawn templates warped as drawn (splitdomain TEMPLATE_LAYER): lots (sand), "
+                 "parks (green), the template's own streets (red)", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(PICTURE, dpi=80)
+    plt.close(fig)
+
+
+if __name__ == "__main__":
+    main()
