@@ -229,21 +229,21 @@ def templates_from_drawn(geoms: Sequence, names: Sequence, labels: Sequence) -> 
     """Templates drawn as polygons (e.g. in QGIS), one feature per parcel or area.
 
     Each template is the group of features sharing a ``names`` value; ``labels`` are the
-    paper's: R (residential parcel), P or A (park / area), S marks a spike (a cul-de-sac
-    template). Row templates are recognised from the geometry: the parcels' centres are
+    paper's: R (residential parcel), P or A (park / area), S the template's own street
+    drawn as a surface (alone, without parcels: a marker of the built-in spike). Row templates are recognised from the geometry: the parcels' centres are
     clustered across the template's long axis into rows (1 or 2 make a strip or a double
     strip, which repeat along any street length). A group of only park polygons is an area
     template. Any other group -- three rows or more, parks among the parcels (the paper's
     template with a private park), its own streets drawn as a surface (S: a cul-de-sac of
     any shape with its turning head, a loop street as a ring with its connector), any
-    outline -- is a **drawn** template, kept as drawn
-    and warped onto a region corner to corner (:func:`warp_drawn`). S alone (no parcel)
-    marks the built-in spike.
+    outline -- is a **drawn** template, kept as drawn and warped onto a region corner to
+    corner (:func:`warp_drawn`).
 
     Raises
     ------
     InputError
-        No group with parcels, or a drawn group whose parcels do not form one polygon.
+        No group with parcels, a drawn group whose parcels do not form one polygon, or a
+        drawn street that does not reach the template's outline.
     """
     geoms = np.asarray(geoms, dtype=object)
     names = np.asarray([str(n) for n in names], dtype=object)
@@ -415,6 +415,12 @@ def region_corners(poly, min_turn: float = CORNER_TURN):
     return ring, idx, full
 
 
+def _side_ids(a: int, b: int, n: int) -> np.ndarray:
+    """Vertex indices of a ring of ``n`` vertices from corner a to corner b, both included
+    (round the closing vertex where b comes before a)."""
+    return np.arange(a, b + 1) if b > a else np.r_[np.arange(a, n), np.arange(0, b + 1)]
+
+
 def region_frame(poly, with_penalty: bool = False):
     """Four corners of a quad-like polygon and its sides (Yang sec. 4.1 initialisation).
 
@@ -438,7 +444,7 @@ def region_frame(poly, with_penalty: bool = False):
     n = len(ring)
     sides, side_ids = [], []
     for a, b in zip(corner_idx, corner_idx[1:] + corner_idx[:1]):
-        ids = np.arange(a, b + 1) if b > a else np.r_[np.arange(a, n), np.arange(0, b + 1)]
+        ids = _side_ids(a, b, n)
         sides.append(ring[ids % n])
         side_ids.append(set((ids % n).tolist()))
     lengths = [np.hypot(*np.diff(s, axis=0).T).sum() for s in sides]
@@ -662,12 +668,8 @@ DRAWN_SAMPLE_SPACING = 2.0
 
 def _sides(ring: np.ndarray, corners: np.ndarray) -> List[shapely.LineString]:
     """The outline between consecutive corners, as lines (counter-clockwise)."""
-    n = len(ring)
-    out = []
-    for a, b in zip(corners, np.roll(corners, -1)):
-        ids = np.arange(a, b + 1) if b > a else np.r_[np.arange(a, n), np.arange(0, b + 1)]
-        out.append(shapely.LineString(ring[ids % n]))
-    return out
+    return [shapely.LineString(ring[_side_ids(a, b, len(ring)) % len(ring)])
+            for a, b in zip(corners, np.roll(corners, -1))]
 
 
 def _register_polygon(tmpl: np.ndarray, warped: np.ndarray, wlo, whi, dlo, dhi) -> np.ndarray:
