@@ -99,7 +99,16 @@ def merge_small_blocks(lines: Sequence, is_new: Sequence, min_area: float, area=
         alive[gone] = False
         np.subtract.at(degree, node[gone].ravel(), 1)   # its inner nodes drop to 0
         removed += 1
-    return pieces[alive], new[alive], removed
+    # the pieces of a street left between two junctions are one line again
+    chain, _ = _chains(node, degree, alive, new)
+    out, out_new = [], []
+    for root, members in _members(chain[alive], np.flatnonzero(alive)).items():
+        merged = shapely.line_merge(shapely.union_all(pieces[members])) \
+            if len(members) > 1 else pieces[members[0]]
+        parts = shapely.get_parts(merged)
+        out += list(parts)
+        out_new += [bool(new[members[0]])] * len(parts)
+    return np.asarray(out, dtype=object), np.asarray(out_new, dtype=bool), removed
 
 
 def _chains(node: np.ndarray, degree: np.ndarray, alive: np.ndarray, new: np.ndarray):

@@ -85,6 +85,7 @@ def polygon_centre_lines(polygon, cell_size: float = 0.25) -> np.ndarray:
     gt = (x0 - pad, cell_size, 0.0, y1 + pad, 0.0, -cell_size)
     image = np.zeros((int(math.ceil((y1 - y0 + 2 * pad) / cell_size)),
                       int(math.ceil((x1 - x0 + 2 * pad) / cell_size))), dtype=np.uint8)
+
     def pixels(ring):
         r = shapely.get_coordinates(ring)
         return np.round(np.column_stack([(r[:, 0] - gt[0]) / cell_size,
