@@ -273,6 +273,29 @@ def test_drawn_template_with_its_own_cul_de_sac():
     assert_planar(lay.roads)
 
 
+def test_a_drawn_street_never_enters_from_a_motorway():
+    """Edge labels for a drawn template's own street: with a motorway along the side its
+    cul-de-sac enters from (as drawn, it would end on the motorway: an at-grade junction),
+    the court is turned so that the cul-de-sac enters from a street."""
+    from shapely import affinity
+
+    block, geoms, labels = drawn_court_template()
+    (t,) = templates.templates_from_drawn(geoms, ["court"] * len(geoms), labels)
+    region = affinity.scale(block, 1.12, 1.15)
+    x0, y0, x1, y1 = region.bounds
+    motorway = shapely.LineString([(x0 - 50, y1), (x1 + 50, y1)])
+    lib = [t] + [x for x in templates.load_library() if x.kind in ("rows", "park")]
+    lay = domain_split.split_domain(region, key_roads=[motorway], key_road_classes=["motorway"],
+                                    seed=1, templates=lib)
+    assert (lay.table.template == "court").sum() == 7
+    kinds = np.asarray(lay.road_kind)
+    (cds,) = lay.roads[kinds == "cul_de_sac"]
+    ends = shapely.points(shapely.get_coordinates(cds)[[0, -1]])
+    assert shapely.distance(ends, motorway).min() > 20    # neither end near the motorway
+    outline = shapely.union_all(lay.roads[kinds == "outline"])
+    assert shapely.distance(ends, outline).min() < 1e-3    # it joins an outline street
+
+
 def test_drawn_template_with_a_loop_street():
     """A loop street drawn as a ring-shaped surface with its connector: two centre lines
     (the ring, 2 x (90 + 60) m, and the connector), warped as drawn, kind 'loop', noded

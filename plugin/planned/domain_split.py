@@ -470,10 +470,19 @@ class _Splitter:
             elif t.kind == "drawn":
                 parts = _parcels._polygon_parts([net_block(region, s.street_width,
                                                            self.no_street)], 1.0)
-                warp = _templates.warp_drawn(parts[0], t, cut=False) if len(parts) == 1 \
-                    else None
+                warp = _templates.warp_drawn(parts[0], t, cut=False,
+                                             entrance_ok=self.entrance_ok) \
+                    if len(parts) == 1 else None
                 out[t.name] = math.inf if warp is None else warp.energy
         return out
+
+    def entrance_ok(self, points) -> bool:
+        """Whether a drawn template's own streets, leaving its block at ``points`` (the
+        block's edge, half a street inside the region), join a street there: no "no
+        street" edge and no motorway within a street width (Yang's edge labels)."""
+        return self.no_frontage is None or not shapely.dwithin(
+            self.no_frontage, shapely.points(np.asarray(points).reshape(-1, 2)),
+            self.s.street_width).any()
 
     def row_energy(self, region, t, no_street, no_frontage) -> float:
         """Warp energy of the row template ``t`` on a region whose sides along
@@ -1062,7 +1071,7 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
             shrunk = shapely.difference(shrunk, key_road_zone)
         for part in _parcels._polygon_parts([shrunk], 1.0):
             lots, kind, own_roads, green = _lots_for(part, reg, name, by_name, s, settings_sk,
-                                                     rng, template_roads)
+                                                     rng, template_roads, splitter.entrance_ok)
             if kind == "park" or (green is not None and green.all()):
                 lots_all.append(lots)
                 use_all += ["park"] * len(lots)
@@ -1302,7 +1311,8 @@ def _onto_outline(line, part, reg, street: float):
     return shapely.LineString(xy)
 
 
-def _lots_for(part, reg, name, by_name, s: SplitSettings, settings_sk, rng, template_roads):
+def _lots_for(part, reg, name, by_name, s: SplitSettings, settings_sk, rng, template_roads,
+              entrance_ok=None):
     """Lots of one shrunk block part: (lots, template name, the template's own streets,
     park mask of the lots or None)."""
     L, W, S = s.parcel_length, s.parcel_width, s.street_width
@@ -1315,7 +1325,7 @@ def _lots_for(part, reg, name, by_name, s: SplitSettings, settings_sk, rng, temp
         if warped is not None and len(warped.lots):
             return warped.lots, t.name, none, None
     if t is not None and t.kind == "drawn":
-        warped = _templates.warp_drawn(part, t)
+        warped = _templates.warp_drawn(part, t, entrance_ok=entrance_ok)
         if warped is not None and len(warped.lots):
             # the template's own streets run on from the block's edge to the street around
             # it (the region's outline, half a street width away)

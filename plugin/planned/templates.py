@@ -687,7 +687,8 @@ def _register_polygon(tmpl: np.ndarray, warped: np.ndarray, wlo, whi, dlo, dhi) 
     return (t * [sx, sy]) @ rot.T + cw
 
 
-def warp_drawn(block, template: Template, cut: bool = True) -> Optional[WarpResult]:
+def warp_drawn(block, template: Template, cut: bool = True,
+               entrance_ok=None) -> Optional[WarpResult]:
     """A drawn template warped onto a block as drawn (Yang sec. 4.1, for any template).
 
     The template's outline corners (:func:`region_corners`) are matched to the block's in
@@ -711,7 +712,10 @@ def warp_drawn(block, template: Template, cut: bool = True) -> Optional[WarpResu
     (simplification: no corner labels, convex and concave corners alike). Returns None
     when the block has fewer vertices than the template has corners or its size is outside
     the template's scales (its minimum rectangle against the outline's, width_scale along
-    the long side and depth_scale across).
+    the long side and depth_scale across), or when ``entrance_ok`` (points -> bool) refuses
+    every correspondence: it says whether the warped points where the template's own
+    streets leave its outline may join the street around the block (edge labels: not a
+    "no street" edge, not a motorway).
     """
     if block is None or shapely.get_type_id(block) != 3 or not template.parcels:
         return None
@@ -727,6 +731,12 @@ def warp_drawn(block, template: Template, cut: bool = True) -> Optional[WarpResu
     b_ring, b_idx, b_turn = region_corners(block)
     parcels_ = _drawn_parcels(template)
     labels = np.asarray(template.parcel_labels or ("R",) * len(parcels_), dtype=object)
+    # where the template's own streets leave its outline (they join the street around)
+    t_edge = shapely.boundary(drawn_outline(template))
+    street_ends = np.array([xy[k] for xy in template.streets for k in (0, -1)]
+                           ).reshape(-1, 2)
+    entrances = street_ends[shapely.dwithin(shapely.points(street_ends), t_edge, 1e-3)] \
+        if len(street_ends) else street_ends
     best = None
     for mirror in (False, True):
         parcels_m = shapely.transform(parcels_, lambda xy: xy * [-1.0, 1.0]) if mirror \
@@ -762,19 +772,23 @@ def warp_drawn(block, template: Template, cut: bool = True) -> Optional[WarpResu
                 rms = math.sqrt(float(((reg - w) ** 2).sum(axis=1).mean()))
                 resid.append(rms / math.sqrt(max(poly.area, 1e-9)))
             energy = float(np.mean(resid)) + penalty
+            if entrance_ok is not None and len(entrances) and not entrance_ok(warp_points(
+                    entrances * ([-1.0, 1.0] if mirror else [1.0, 1.0]), src, dst)):
+                continue   # its street would enter from no street (edge labels)
             if best is None or energy < best[0]:
                 best = (energy, mirror, src, dst, parcels_m)
     if best is None:
         return None
     energy, mirror, src, dst, parcels_m = best
-    if not cut:
-        return WarpResult(np.empty(0, dtype=object), energy, len(parcels_), energy, sy)
     # the template's own streets, warped (mirrored with the template)
     roads = []
     for xy in template.streets:
         xy = np.asarray(xy, dtype=float) * ([-1.0, 1.0] if mirror else [1.0, 1.0])
         line = shapely.segmentize(shapely.LineString(xy), DRAWN_SAMPLE_SPACING)
         roads.append(shapely.LineString(warp_points(shapely.get_coordinates(line), src, dst)))
+    if not cut:
+        return WarpResult(np.empty(0, dtype=object), energy, len(parcels_), energy, sy,
+                          roads=tuple(roads))
     # the inner parcel boundaries, noded in the template's frame (a T is a vertex of both
     # lines, so the warped lines meet exactly), warped, and extended across the outline
     t_outline = shapely.union_all(parcels_m, grid_size=1e-6)
