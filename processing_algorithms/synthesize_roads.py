@@ -18,6 +18,7 @@ from qgis.core import (
     QgsVectorLayer,
 )
 
+from ..plugin.network import invariants
 from ..plugin.qgis_glue import qgis_io
 from ..plugin.roads import streetgan
 from .common import AlgorithmBase, fill_quantile_parameter
@@ -80,9 +81,10 @@ class SynthesizeRoads(AlgorithmBase):
         self.add(QgsProcessingParameterFeatureSource(
             self.EXAMPLE_ROADS, "Example roads with levels", [QgsProcessing.SourceType.TypeVectorLine],
             optional=True),
-            "Fragments only: the example city's roads as written by 'Extract road hierarchy' "
+            "Fragments: the example city's roads as written by 'Extract road hierarchy' "
             "(field level), from which the fragment database is built when no FRAGMENT_DB "
-            "is given.")
+            "is given. StreetGAN: the generated streets keep the example's dead-end share "
+            "(measured inside the example's hull, ±30 %).")
         self.add(QgsProcessingParameterFeatureSource(
             self.ARTERIALS, "Arterial roads of the district", [QgsProcessing.SourceType.TypeVectorLine]),
             "Sketched or real arterials: they are kept and the new streets connect to them.")
@@ -138,9 +140,19 @@ class SynthesizeRoads(AlgorithmBase):
                 raise QgsProcessingException(
                     f"The arterials {arterials.name} lie on one line: their convex hull has no "
                     "area. Give a District boundary (BOUNDARY).")
-        return self._child_method(parameters, context, feedback, method, arterials, area, seed)
+        share = None
+        if method.key == "gan" and self.given(parameters, self.EXAMPLE_ROADS):
+            # the generator keeps the example's dead-end share (the network invariants' band)
+            example = qgis_io.read_source(self, parameters, self.EXAMPLE_ROADS, context,
+                                          feedback, kind="lines", fields=[])
+            share = qgis_io.run_engine(example.name, invariants.dead_end_share_of_extract,
+                                       example.geometry)
+            feedback.pushInfo(f"{example.name}: dead-end share {share:.2f} (inside its hull).")
+        return self._child_method(parameters, context, feedback, method, arterials, area, seed,
+                                  share)
 
-    def _child_method(self, parameters, context, feedback, method, arterials, area, seed):
+    def _child_method(self, parameters, context, feedback, method, arterials, area, seed,
+                      dead_end_share=None):
         import processing  # QGIS's Processing plugin, present wherever algorithms run
 
         fragment_db = self.parameterAsFile(parameters, self.FRAGMENT_DB, context)
@@ -175,6 +187,8 @@ class SynthesizeRoads(AlgorithmBase):
                     "(reinstall the plugin).")
             params = {"TARGET": boundary, "SEED": seed, "MODEL": models.index(GAN_MODEL),
                       "GIVEN_ROADS": parameters[self.ARTERIALS]}
+            if dead_end_share is not None and np.isfinite(dead_end_share):
+                params["DEAD_END_SHARE"] = float(dead_end_share)
         else:
             params = {"BOUNDARY": boundary, "MAJOR_ROADS": parameters[self.ARTERIALS],
                       "DEM": dem, "SEED": seed}

@@ -122,6 +122,12 @@ def test_synthesize_roads_runs_each_method(qgis_processing, helsinki_arterials, 
     assert shapely.within(lines, hull.buffer(50.0)).mean() > 0.95
     if method != 1:  # growth keeps sketched arterials as drawn (they may cross)
         assert_planar(shapely.get_parts(lines))
+    if method == 2:  # StreetGAN keeps the example's dead-end share (measured in its hull)
+        from urban_synthesis.plugin.network import invariants
+
+        example = _read(hierarchy, None).to_crs(3067).geometry.values
+        share = invariants.dead_end_share_of_extract(example)
+        assert abs(invariants.dead_end_share(lines, hull) - share) <= 0.3 * share
 
 
 def test_synthesize_roads_rejects_points_as_arterials(qgis_processing):
