@@ -68,7 +68,8 @@ __all__ = [
     "DEAD_END_TOLERANCE", "EDGE_DISTANCE", "SNAP_TOLERANCE", "UNDERSHOOT_DISTANCE",
     "CONTROLLED_ACCESS",
     "CHECKS", "Contacts", "NetworkCheck", "line_contacts", "dead_end_share", "counted_nodes",
-    "dead_end_share_of_extract", "new_streets", "check_network",
+    "dead_end_share_of_extract", "new_streets", "check_network", "corridor_around",
+    "doubles_a_street",
 ]
 
 #: Half-width (m) of the corridor of a given road in which no synthesised street may run.
@@ -305,12 +306,52 @@ def dead_end_share_of_extract(lines: Sequence) -> float:
     return dead_end_share(lines, shapely.convex_hull(shapely.multilinestrings(list(lines))))
 
 
-def corridor_of(given: Sequence, half_width: float = CORRIDOR_HALF_WIDTH):
+def corridor_of(given: Sequence, half_width: float = CORRIDOR_HALF_WIDTH, quad_segs: int = 4):
     """The corridors of the given roads, in which no synthesised street may run (prepared)."""
     corridor = shapely.union_all(shapely.buffer(np.asarray(given, dtype=object), half_width,
-                                                quad_segs=4))
+                                                quad_segs=quad_segs))
     shapely.prepare(corridor)
     return corridor
+
+
+def corridor_around(face, lines=None):
+    """The corridors of the streets a new street in ``face`` must not run along: its outline
+    (none when ``face`` is None) and ``lines`` (the network lines that touch it), prepared;
+    the buffers' round ends coarser than :func:`corridor_of`'s (2 segments a quarter)."""
+    lines = np.empty(0, dtype=object) if lines is None else np.asarray(lines, dtype=object)
+    around = lines if face is None else np.concatenate([[shapely.boundary(face)], lines])
+    return corridor_of(around, quad_segs=2)
+
+
+def doubles_a_street(pieces: Sequence, corridor) -> np.ndarray:
+    """Which new streets double a street in its corridor (a mask over ``pieces``).
+
+    The rule of :func:`check_network`, applied to the streets as they will be
+    measured: a stretch inside the corridor longer than ``MIN_DUPLICATE_LENGTH``, the
+    stretches of all pieces joined where they meet end to end (two pieces under the limit
+    that meet inside the corridor become one street when the network's degree-2 chains are
+    merged). A street crossing the corridor, or crossing the face near its outline at both
+    ends, is no double.
+    """
+    pieces = np.asarray(pieces, dtype=object)
+    bad = np.zeros(len(pieces), bool)
+    if not len(pieces):
+        return bad
+    with np.errstate(invalid="ignore"):
+        inside = shapely.intersection(pieces, corridor)
+    parts, owner = shapely.get_parts(inside, return_index=True)
+    keep = (shapely.get_dimensions(parts) == 1) & (shapely.length(parts) > 1e-6)
+    parts, owner = parts[keep], owner[keep]
+    if not len(parts):
+        return bad
+    runs = shapely.get_parts(shapely.line_merge(shapely.union_all(parts)))
+    long = runs[shapely.length(runs) > MIN_DUPLICATE_LENGTH]
+    if len(long):
+        r_i, p_i = shapely.STRtree(parts).query(long, predicate="intersects")
+        with np.errstate(invalid="ignore"):
+            shared = shapely.length(shapely.intersection(long[r_i], parts[p_i]))
+        bad[owner[p_i[shared > 1e-6]]] = True
+    return bad
 
 
 def new_streets(lines: Sequence, given: Sequence, tolerance: float = 0.01) -> np.ndarray:

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
-from typing import Optional, Sequence
+from typing import Dict, Optional, Sequence
 
 import numpy as np
 import pandas as pd
@@ -36,7 +36,7 @@ __all__ = [
     "DRIVABLE_CLASSES", "ARTERIAL_CLASSES", "CLASS_RANK", "RoadGraph",
     "drivable_and_arterial", "parse_other_tags", "vertical_layer", "class_rank",
     "clean_network", "graph_from_lines", "node_lines", "renode", "snap_ends_onto_lines",
-    "move_ends_onto_lines", "JUNCTION_TOLERANCE",
+    "move_ends_onto_lines", "renode_attributed", "add_streets", "JUNCTION_TOLERANCE",
 ]
 
 #: OSM highway classes kept by default: what cars drive on and what forms city blocks.
@@ -603,3 +603,79 @@ def _loops_start_at_their_node(merged: np.ndarray, g: RoadGraph, comp: np.ndarra
             ring = np.roll(xy, -at[0], axis=0)
             merged[c] = shapely.linestrings(np.vstack([ring, ring[:1]]))
     return merged
+
+
+def renode_attributed(geometry: np.ndarray, level: np.ndarray, attrs: Dict[str, np.ndarray],
+                      new_level: int, min_dangle: float):
+    """One planar network from existing edges and new streets, attributes carried over.
+
+    ``attrs`` are a synthesised street's provenance (the fragment synthesis' edge fields:
+    ``source_fragment``, ``database``, ``fragment_id``, ``query``), one array each per line.
+
+    Nodes everything (:func:`network.street_graph.node_lines`), gives each piece the
+    attributes of its parent line (the lowest level wins where lines overlap), prunes new dead
+    ends shorter than ``min_dangle`` and merges chains through degree-2 nodes whose two edges
+    share level and source.
+    """
+    pieces, parent = renode(geometry, level == new_level, level, min_length=1e-6)
+    g = graph_from_lines(pieces, np.full(len(pieces), None, object),
+                                np.full(len(pieces), None, object), np.zeros(len(pieces), int),
+                                parent, snap_tolerance=0.0)
+    geom, u, v, src = g.geometry, g.u, g.v, g.source
+    lvl = level[src]
+    for _ in range(3):  # prune short new dead ends (chains of them in a few rounds)
+        deg = np.bincount(np.r_[u, v], minlength=len(g.nodes))
+        short = (lvl == new_level) & ((deg[u] == 1) | (deg[v] == 1)) & \
+            (shapely.length(geom) < min_dangle)
+        if not short.any():
+            break
+        keep = ~short
+        geom, u, v, src, lvl = geom[keep], u[keep], v[keep], src[keep], lvl[keep]
+    # merge degree-2 chains of one source
+    key = np.array([f"{lvl[i]}|{attrs['source_fragment'][s]}|{attrs['query'][s]}"
+                    for i, s in enumerate(src)], dtype=object)
+    m = len(geom)
+    inc_node = np.r_[u, v]
+    inc_edge = np.r_[np.arange(m), np.arange(m)]
+    deg = np.bincount(inc_node, minlength=len(g.nodes))
+    sel = deg[inc_node] == 2
+    order = np.argsort(inc_node[sel], kind="stable")
+    pairs = inc_edge[sel][order].reshape(-1, 2) if sel.any() else np.zeros((0, 2), int)
+    ok = (pairs[:, 0] != pairs[:, 1]) & (key[pairs[:, 0]] == key[pairs[:, 1]]) \
+        if len(pairs) else np.zeros(0, bool)
+    if ok.any():
+        adj = coo_matrix((np.ones(ok.sum()), (pairs[ok, 0], pairs[ok, 1])), shape=(m, m))
+        n_comp, comp = connected_components(adj, directed=False)
+        if n_comp < m:
+            by = np.argsort(comp, kind="stable")
+            merged = shapely.line_merge(shapely.multilinestrings(geom[by], indices=comp[by]))
+            single = shapely.get_type_id(merged) == 1
+            rep = by[np.r_[True, comp[by][1:] != comp[by][:-1]]]
+            # a chain that does not merge into one line (a ring) keeps its pieces
+            multi_members = np.isin(comp, np.flatnonzero(~single))
+            geom = np.concatenate([merged[single], geom[multi_members]])
+            src = np.concatenate([src[rep][single], src[multi_members]])
+    return geom, src
+
+
+def add_streets(geometry, level, attrs, new_geoms, new_attrs, new_level: int,
+                min_dangle: float):
+    """Add new streets (one array per face, attributes per face: source, database, fragment
+    id, count, query) and re-node the network (:func:`renode_attributed`)."""
+    sizes = [a[3] for a in new_attrs]
+    add = np.concatenate(new_geoms)
+    geometry_all = np.concatenate([geometry, add])
+    level_all = np.concatenate([level, np.full(len(add), new_level)])
+    attrs_all = {
+        "source_fragment": np.concatenate([attrs["source_fragment"], np.repeat(
+            np.array([a[0] for a in new_attrs], dtype=object), sizes)]),
+        "database": np.concatenate([attrs["database"], np.repeat(
+            np.array([a[1] for a in new_attrs], dtype=object), sizes)]),
+        "fragment_id": np.concatenate([attrs["fragment_id"], np.repeat(
+            np.array([a[2] for a in new_attrs], dtype=np.int64), sizes)]),
+        "query": np.concatenate([attrs["query"], np.repeat(
+            np.array([a[4] for a in new_attrs], dtype=np.int64), sizes)]),
+    }
+    geometry, src = renode_attributed(geometry_all, level_all, attrs_all, new_level,
+                                      min_dangle)
+    return geometry, level_all[src], {k: v[src] for k, v in attrs_all.items()}

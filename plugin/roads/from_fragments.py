@@ -28,10 +28,11 @@ Choices the thesis leaves open, made here:
   clipped to the query; the level is then re-noded as one planar network (the boundary
   edges split where new streets meet them), new dead ends shorter than ``min_dangle`` m
   are pruned and chains through degree-2 nodes of one source are merged. No new street
-  runs along a street in its corridor (the invariants' rule, :func:`_doubling`), whether
-  the street bounds the query or lies inside it (an arterial ending in the face).
+  runs along a street in its corridor (the invariants' rule,
+  :func:`network.invariants.doubles_a_street`), whether the street bounds the query or lies
+  inside it (an arterial ending in the face).
 - **Dead-end share** (issue 15, not in the thesis): last, the share is steered to the
-  example's (:func:`_steer_dead_ends`, :mod:`network.dead_ends`, as the random walk does).
+  example's (:mod:`network.dead_ends`, as the random walk does).
 - **Levels of a database**: a database's hierarchy starts at its own lowest fragment level
   (an example whose arterials close no face, like Bubenec, starts at level 1): query level
   l uses database level ``min_level + l``.
@@ -58,22 +59,13 @@ from typing import Dict, List, Optional, Sequence
 import numpy as np
 import pandas as pd
 import shapely
-from scipy.cluster.hierarchy import DisjointSet
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
-from shapely.ops import substring
 
 from ..core.progress import InputError, Progress, ensure
 from ..network import street_graph as _roads
-from ..network.dead_ends import steer_share
-from ..network.links import link_floating_pieces, meets_only_at_ends
-from ..network import invariants as _invariants
-from ..network.invariants import (
-    CORRIDOR_HALF_WIDTH,
-    DEAD_END_TOLERANCE,
-    MIN_DUPLICATE_LENGTH,
-    SNAP_TOLERANCE,
-)
+from ..network.dead_ends import MIN_DANGLE, steer_attributed
+from ..network.links import link_floating_pieces
+from ..network.invariants import corridor_around, doubles_a_street
+from ..network.street_graph import add_streets
 from ..network.blocks import (
     MIN_BLOCK_AREA,
     MIN_BLOCK_WIDTH,
@@ -89,7 +81,6 @@ from ..retrieval.warp import poisson_blend, warp_geometries, warp_points
 __all__ = [
     "MAX_N_BEST", "MAX_LEVELS", "EDGE_FIELDS", "Retrieval", "SynthesisResult",
     "retrieve", "synthesize", "procedural_split", "grid_streets", "example_blocks",
-    "steer_dead_ends",
     "close_sketch", "statistical_split", "example_dead_end_share",
 ]
 
@@ -106,17 +97,12 @@ MAX_CLIPPED_SHARE = 0.2
 MAX_SCALE = 2.0
 #: Street ends closer than this (m) to the example fragment's boundary end on it.
 _ON_BOUNDARY = 0.5
-#: New dead-end edges shorter than this (m) are pruned (stubs of clipped warps: tuned on the
-#: fidelity benchmark's tuning towns, where 5 m left a dead-end share 30 % over the example's).
-MIN_DANGLE = 25.0
 #: Rounds of the fill stage: each fills the faces the previous round left too large.
 MAX_FILL_ROUNDS = 16
 #: Candidates tried per face and way (at scale, scaled) in the fill stage.
 FILL_TRIES = 6
 #: Quantile of the example's block areas above which a face must not stay empty.
 FILL_QUANTILE = 90.0
-#: A dead end closes onto a street at most this far (m) when the network has too many.
-CLOSE_REACH = 2 * MIN_DANGLE
 
 
 @dataclass
@@ -298,53 +284,11 @@ def _sub_faces(polygon, streets: np.ndarray):
     return faces, area, perimeter
 
 
-def _corridor(face, lines=None):
-    """The corridors (the invariants' ``CORRIDOR_HALF_WIDTH``) of the streets a new street
-    in ``face`` must not run along: its outline (none when ``face`` is None) and ``lines``,
-    the network lines that touch it (:func:`_touching`), prepared."""
-    lines = np.empty(0, dtype=object) if lines is None else np.asarray(lines, dtype=object)
-    around = lines if face is None else np.concatenate([[shapely.boundary(face)], lines])
-    corridor = shapely.union_all(shapely.buffer(around, CORRIDOR_HALF_WIDTH, quad_segs=2))
-    shapely.prepare(corridor)
-    return corridor
-
-
 def _touching(face, tree: shapely.STRtree, lines: np.ndarray) -> np.ndarray:
     """The network lines that touch a face: those of its outline, and those inside it that
     its outline does not show (an arterial ending in the face, a dual carriageway whose
     sliver is no face, a dead end of an earlier level)."""
     return lines[tree.query(face, predicate="intersects")]
-
-
-def _doubling(pieces: np.ndarray, corridor) -> np.ndarray:
-    """Which new streets double a street in its corridor (a mask over ``pieces``).
-
-    The rule of :func:`invariants.check_network`, applied to the streets as they will be
-    measured: a stretch inside the corridor longer than ``MIN_DUPLICATE_LENGTH``, the
-    stretches of all pieces joined where they meet end to end (two pieces under the limit
-    that meet inside the corridor become one street when the network's degree-2 chains are
-    merged). A street crossing the corridor, or crossing the face near its outline at both
-    ends, is no double.
-    """
-    pieces = np.asarray(pieces, dtype=object)
-    bad = np.zeros(len(pieces), bool)
-    if not len(pieces):
-        return bad
-    with np.errstate(invalid="ignore"):
-        inside = shapely.intersection(pieces, corridor)
-    parts, owner = shapely.get_parts(inside, return_index=True)
-    keep = (shapely.get_dimensions(parts) == 1) & (shapely.length(parts) > 1e-6)
-    parts, owner = parts[keep], owner[keep]
-    if not len(parts):
-        return bad
-    runs = shapely.get_parts(shapely.line_merge(shapely.union_all(parts)))
-    long = runs[shapely.length(runs) > MIN_DUPLICATE_LENGTH]
-    if len(long):
-        r_i, p_i = shapely.STRtree(parts).query(long, predicate="intersects")
-        with np.errstate(invalid="ignore"):
-            shared = shapely.length(shapely.intersection(long[r_i], parts[p_i]))
-        bad[owner[p_i[shared > 1e-6]]] = True
-    return bad
 
 
 def procedural_split(face, min_area: float = MIN_BLOCK_AREA,
@@ -354,7 +298,8 @@ def procedural_split(face, min_area: float = MIN_BLOCK_AREA,
     The line through the centre of the minimum rotated rectangle, perpendicular to its long
     side, clipped to the face (a concave face may give several pieces, each from boundary
     to boundary). Returns no street when a resulting face would be a sliver; a piece that
-    would run along a street (in its corridor, :func:`_doubling`) is left out.
+    would run along a street (in its corridor, :func:`network.invariants.doubles_a_street`)
+    is left out.
 
     Parameters
     ----------
@@ -379,7 +324,7 @@ def procedural_split(face, min_area: float = MIN_BLOCK_AREA,
     parts = shapely.get_parts(shapely.intersection(line, face))
     parts = parts[(shapely.get_type_id(parts) == 1) & (shapely.length(parts) > 1e-6)]
     if len(parts):
-        parts = parts[~_doubling(parts, _corridor(face, avoid))]
+        parts = parts[~doubles_a_street(parts, corridor_around(face, avoid))]
     if len(parts) == 0:
         return parts
     _, area, perimeter = _sub_faces(face, parts)
@@ -520,8 +465,8 @@ def statistical_split(face, sides: np.ndarray, rng: np.random.Generator,
     face (a face with a hole). A cut that would leave a sliver is tried elsewhere
     (``tries`` positions: from the drawn side at both ends, then uniformly along the
     axis), and so is one that runs along a street (in the corridor of the face's outline or
-    of ``avoid``, the network lines touching it: :func:`_doubling`); no street when every
-    cut fails.
+    of ``avoid``, the network lines touching it: :func:`network.invariants.doubles_a_street`);
+    no street when every cut fails.
     """
     m = shape_metrics([face]).iloc[0]
     length = float(m.mbr_length_m)
@@ -542,7 +487,7 @@ def statistical_split(face, sides: np.ndarray, rng: np.random.Generator,
     # slivers the outline makes on its own (a spur of the boundary) are not the cut's
     _, area0, perimeter0 = _sub_faces(face, np.empty(0, dtype=object))
     base = _sliver_count(None, area0, perimeter0, min_area, min_width)
-    corridor = _corridor(face, avoid)
+    corridor = corridor_around(face, avoid)
     for t in positions:
         p = centre + t * along
         line = shapely.LineString([p - half * across, p + half * across])
@@ -557,7 +502,7 @@ def statistical_split(face, sides: np.ndarray, rng: np.random.Generator,
         one = parts[[int(np.argmin(dist)) if dist.min() < 1e-6 else
                      int(np.argmax(shapely.length(parts)))]]
         for cut in (one, parts) if len(parts) > 1 else (one,):
-            if _doubling(cut, corridor).any():
+            if doubles_a_street(cut, corridor).any():
                 continue
             _, area, perimeter = _sub_faces(face, cut)
             if len(area) >= 2 and \
@@ -649,7 +594,7 @@ class _Inserter:
         if len(pieces):
             # nothing that doubles a street of the query boundary, or one inside the query
             # that the boundary does not show, in its corridor
-            pieces = pieces[~_doubling(pieces, _corridor(face, avoid))]
+            pieces = pieces[~doubles_a_street(pieces, corridor_around(face, avoid))]
         kept = float(shapely.length(pieces).sum()) if len(pieces) else 0.0
         if total > 0 and kept < (1 - MAX_CLIPPED_SHARE) * total:
             return None, "clipped"
@@ -662,77 +607,6 @@ class _Inserter:
 
 
 # --------------------------------------------------------------------------- network
-
-def _renode(geometry: np.ndarray, level: np.ndarray, attrs: Dict[str, np.ndarray],
-            new_level: int, min_dangle: float):
-    """One planar network from existing edges and new streets, attributes carried over.
-
-    Nodes everything (:func:`network.street_graph.node_lines`), gives each piece the
-    attributes of its parent line (the lowest level wins where lines overlap), prunes new dead
-    ends shorter than ``min_dangle`` and merges chains through degree-2 nodes whose two edges
-    share level and source.
-    """
-    pieces, parent = _roads.renode(geometry, level == new_level, level, min_length=1e-6)
-    g = _roads.graph_from_lines(pieces, np.full(len(pieces), None, object),
-                                np.full(len(pieces), None, object), np.zeros(len(pieces), int),
-                                parent, snap_tolerance=0.0)
-    geom, u, v, src = g.geometry, g.u, g.v, g.source
-    lvl = level[src]
-    for _ in range(3):  # prune short new dead ends (chains of them in a few rounds)
-        deg = np.bincount(np.r_[u, v], minlength=len(g.nodes))
-        short = (lvl == new_level) & ((deg[u] == 1) | (deg[v] == 1)) & \
-            (shapely.length(geom) < min_dangle)
-        if not short.any():
-            break
-        keep = ~short
-        geom, u, v, src, lvl = geom[keep], u[keep], v[keep], src[keep], lvl[keep]
-    # merge degree-2 chains of one source
-    key = np.array([f"{lvl[i]}|{attrs['source_fragment'][s]}|{attrs['query'][s]}"
-                    for i, s in enumerate(src)], dtype=object)
-    m = len(geom)
-    inc_node = np.r_[u, v]
-    inc_edge = np.r_[np.arange(m), np.arange(m)]
-    deg = np.bincount(inc_node, minlength=len(g.nodes))
-    sel = deg[inc_node] == 2
-    order = np.argsort(inc_node[sel], kind="stable")
-    pairs = inc_edge[sel][order].reshape(-1, 2) if sel.any() else np.zeros((0, 2), int)
-    ok = (pairs[:, 0] != pairs[:, 1]) & (key[pairs[:, 0]] == key[pairs[:, 1]]) \
-        if len(pairs) else np.zeros(0, bool)
-    if ok.any():
-        adj = coo_matrix((np.ones(ok.sum()), (pairs[ok, 0], pairs[ok, 1])), shape=(m, m))
-        n_comp, comp = connected_components(adj, directed=False)
-        if n_comp < m:
-            by = np.argsort(comp, kind="stable")
-            merged = shapely.line_merge(shapely.multilinestrings(geom[by], indices=comp[by]))
-            single = shapely.get_type_id(merged) == 1
-            rep = by[np.r_[True, comp[by][1:] != comp[by][:-1]]]
-            # a chain that does not merge into one line (a ring) keeps its pieces
-            multi_members = np.isin(comp, np.flatnonzero(~single))
-            geom = np.concatenate([merged[single], geom[multi_members]])
-            src = np.concatenate([src[rep][single], src[multi_members]])
-    return geom, src
-
-
-def _add_streets(geometry, level, attrs, new_geoms, new_attrs, new_level: int,
-                 min_dangle: float):
-    """Add new streets (one array per face, attributes per face) and re-node the network."""
-    sizes = [a[3] for a in new_attrs]
-    add = np.concatenate(new_geoms)
-    geometry_all = np.concatenate([geometry, add])
-    level_all = np.concatenate([level, np.full(len(add), new_level)])
-    attrs_all = {
-        "source_fragment": np.concatenate([attrs["source_fragment"], np.repeat(
-            np.array([a[0] for a in new_attrs], dtype=object), sizes)]),
-        "database": np.concatenate([attrs["database"], np.repeat(
-            np.array([a[1] for a in new_attrs], dtype=object), sizes)]),
-        "fragment_id": np.concatenate([attrs["fragment_id"], np.repeat(
-            np.array([a[2] for a in new_attrs], dtype=np.int64), sizes)]),
-        "query": np.concatenate([attrs["query"], np.repeat(
-            np.array([a[4] for a in new_attrs], dtype=np.int64), sizes)]),
-    }
-    geometry, src = _renode(geometry_all, level_all, attrs_all, new_level, min_dangle)
-    return geometry, level_all[src], {k: v[src] for k, v in attrs_all.items()}
-
 
 def _faces_in(lines, min_area: float, min_width: float, target=None) -> np.ndarray:
     """Block faces of the lines that lie in the target (a hole of the boundary is a face of
@@ -864,8 +738,8 @@ def _fill_stage(geometry, level, attrs, databases, names, inserter, rng, max_blo
             query_rows.append(row)
             query_id += 1
         if new_geoms:
-            geometry, level, attrs = _add_streets(geometry, level, attrs, new_geoms, new_attrs,
-                                                  next_level, min_dangle)
+            geometry, level, attrs = add_streets(geometry, level, attrs, new_geoms, new_attrs,
+                                                 next_level, min_dangle)
             next_level += 1
     # what the rule is about: faces over the threshold with no street inside
     faces = _faces_in(geometry, min_area, min_width, target)
@@ -887,7 +761,7 @@ def _link_floating(geometry, level, attrs):
         return geometry, level, attrs, 0
     new_attrs = [("link", "", -1, len(links), -1)]
     lvl = int(level.max()) + 1 if len(level) else 1
-    geometry, level, attrs = _add_streets(geometry, level, attrs, [links], new_attrs, lvl, 0.0)
+    geometry, level, attrs = add_streets(geometry, level, attrs, [links], new_attrs, lvl, 0.0)
     return geometry, level, attrs, len(links)
 
 
@@ -902,324 +776,6 @@ def example_dead_end_share(databases: Sequence[FragmentDatabase]) -> float:
               if "dead_end_share" in (getattr(db, "metadata", None) or {})]
     return float(np.mean(values)) if values else float("nan")
 
-
-def _steer_measured(geometry, level, attrs, share: float, area, rng, min_dangle: float,
-                    max_block: float = np.inf):
-    """:func:`_steer_dead_ends`, again from the measured network (up to three rounds) where
-    its count drifted from the measure's; returns the network, (closed, opened) and the
-    measured share."""
-    n_closed = n_opened = 0
-    now = np.nan
-    for _ in range(3):
-        geometry, level, attrs, (closed, opened) = _steer_dead_ends(
-            geometry, level, attrs, share, area, rng, min_dangle, max_block)
-        n_closed, n_opened = n_closed + closed, n_opened + opened
-        now = _invariants.dead_end_share(geometry, area)
-        if not (closed or opened) or not np.isfinite(now) or \
-                abs(now - share) <= share * DEAD_END_TOLERANCE / 2 + 1e-9:
-            break
-    return geometry, level, attrs, (n_closed, n_opened), now
-
-
-def steer_dead_ends(lines, is_new, share: float, area, rng: np.random.Generator,
-                    min_dangle: float = MIN_DANGLE, max_block: float = np.inf):
-    """The fragment synthesis' dead-end steering (:func:`_steer_dead_ends`, in rounds from
-    the measured network) for any network: ``is_new`` marks the lines it may change; the
-    others are given and kept as they are. Returns (lines, is_new, (closed, opened)): the
-    network re-noded, chains of new lines through degree-2 nodes merged."""
-    lines = np.asarray(lines, dtype=object)
-    is_new = np.asarray(is_new, dtype=bool)
-    n = len(lines)
-    attrs = {"source_fragment": np.where(is_new, "new", "arterial").astype(object),
-             "database": np.full(n, "", dtype=object),
-             "fragment_id": np.full(n, -1, dtype=np.int64),
-             # given lines keep their own features: no two merge through a degree-2 node
-             "query": np.where(is_new, -1, -2 - np.arange(n)).astype(np.int64)}
-    geometry, _, attrs, counts, _ = _steer_measured(lines, is_new.astype(np.int64), attrs,
-                                                    share, area, rng, min_dangle, max_block)
-    return geometry, attrs["source_fragment"] != "arterial", counts
-
-
-def _steer_dead_ends(geometry, level, attrs, share: float, area, rng, min_dangle: float,
-                     max_block: float = np.inf):
-    """Steer the dead-end share of the network to ``share`` (:mod:`network.dead_ends`).
-
-    Counted on the graph :func:`invariants.dead_end_share` builds (nodes of degree != 2
-    inside ``area``, away from its boundary, the arterials' nodes too); the changes are
-    made to the network's own lines. Too many dead ends: a synthesised dead end is closed by
-    the shortest straight street onto another line, at most ``CLOSE_REACH`` m, crossing
-    nothing and doubling nothing (shortest gaps first); where no such street is left, a
-    synthesised dead-end street is removed (the shortest first) where its other end stays a
-    junction. Too few: first a cul-de-sac is added
-    (no block is lost: the district model's blocks fell from -19 % to -33 % of the example's
-    when T's were cut first): from the middle of a synthesised street, square to it, into
-    the larger block beside it, as long as the block's mean width (at least ``min_dangle``
-    m), clear of every other street's corridor; then the stem of a synthesised T (the edge
-    that leaves the through street at the largest angle) is cut short into a cul-de-sac,
-    half its length but at least ``min_dangle`` m kept, whose end is clear of every other
-    street's corridor, where the stem is no bridge of the network, its other end stays a
-    junction and the two blocks it parted make one no larger than ``max_block`` (the fill's
-    threshold: a town of few large blocks would lose them); last, T's whose blocks merge
-    larger (streets and T's in random order, as the random walk's unreached points). The
-    share is steered into the invariants' band with half of it as margin (``share`` ±15 %),
-    not onto ``share``: the streets are the example's, the steering a repair that changes
-    as few as the rule allows. Fill, procedural and statistical splits cut
-    faces from outline to outline, and the example's dead-end streets outside closed faces
-    are in no fragment, so the share otherwise lands wherever the chosen fragments put it
-    (0.02 for Helsinki from Bubeneč, whose share is 0.07).
-
-    Returns the network and the counts (closed, opened).
-    """
-    n = len(geometry)
-    if n < 2 or not np.isfinite(share):
-        return geometry, level, attrs, (0, 0)
-    # the measured graph: nodes closer than SNAP_TOLERANCE are one, look-alikes one street
-    g = _roads.clean_network(geometry, snap_tolerance=SNAP_TOLERANCE, min_dangle_length=0.0,
-                             merge_degree2=False, duplicate_tolerance=SNAP_TOLERANCE)
-    u, v, src = np.asarray(g.u), np.asarray(g.v), np.asarray(g.source)
-    nodes = np.asarray(g.nodes)
-    m = g.n_edges
-    deg = np.bincount(np.r_[u, v], minlength=len(nodes))
-    inc_node, inc_edge = np.r_[u, v], np.r_[np.arange(m), np.arange(m)]
-    lines = np.array(geometry, dtype=object)      # the network's own lines, changed in place
-    # an edge stands for its line where it is the whole of it (ends moved by the snapping)
-    whole = np.abs(shapely.length(lines[src]) - shapely.length(g.geometry)) < 2 * SNAP_TOLERANCE
-    new = (level[src] > 0) & ~np.isin(attrs["source_fragment"][src], ("arterial", "boundary"))
-    shapely.prepare(area)
-
-    def counted(xy) -> np.ndarray:
-        return _invariants.counted_nodes(xy, area)
-
-    inside = counted(nodes)
-    state = {"dead": int((inside & (deg == 1)).sum()),
-             "nodes": int((inside & (deg != 2) & (deg > 0)).sum())}
-    joins = np.ones(m, bool)       # edges joining their two nodes (a cut stem does not)
-    kept = np.ones(len(lines), bool)   # lines not removed (a dead-end street pruned)
-    links: List = []               # closing streets
-    stubs: List = []               # new cul-de-sacs
-
-    def share_now() -> float:
-        return state["dead"] / state["nodes"] if state["nodes"] else 0.0
-
-    def current():
-        added = links + stubs
-        return np.concatenate([lines[kept], np.asarray(added, dtype=object)]) if added \
-            else lines[kept]
-
-    def touch(j: int, d: int):
-        """Degree of node j changes by d: the counts follow."""
-        old, now = deg[j], deg[j] + d
-        deg[j] = now
-        if inside[j]:
-            state["dead"] += int(now == 1) - int(old == 1)
-            state["nodes"] += int(now not in (0, 2)) - int(old not in (0, 2))
-
-    def end_near(line, xy) -> np.ndarray:
-        ends = shapely.get_coordinates(shapely.boundary(line))
-        return ends[int(np.argmin(np.hypot(*(ends - xy).T)))] if len(ends) else xy
-
-    # ---- closing: a dead end onto the nearest other line
-    def close_candidates():
-        tree = shapely.STRtree(lines)
-        cand = []
-        for k in np.flatnonzero(inside & (deg == 1)):
-            e = int(inc_edge[np.flatnonzero(inc_node == k)[0]])
-            if not new[e] or not whole[e]:
-                continue
-            p = shapely.Point(end_near(lines[src[e]], nodes[k]))
-            near = tree.query(p, predicate="dwithin", distance=CLOSE_REACH)
-            near = near[near != src[e]]
-            if len(near):
-                d = shapely.distance(lines[near], p)
-                cand.append((float(d.min()), int(k), e, int(near[int(np.argmin(d))])))
-        # last, dead ends no closing street reaches: their street is pruned (the shortest
-        # first) where its other end stays a junction (StreetGAN on Bubenec had 2 dead ends
-        # among 8 nodes, none in reach of another street)
-        ends = np.flatnonzero(inside & (deg == 1))
-        stems = [int(inc_edge[np.flatnonzero(inc_node == k)[0]]) for k in ends]
-        prune = sorted((float(g.geometry[e].length), int(k), e, -1) for k, e in zip(ends, stems))
-        return sorted(cand) + [(np.inf, k, e, j) for _, k, e, j in prune]
-
-    def close(c) -> bool:
-        _, k, e, j = c
-        if deg[k] != 1:
-            return False
-        if j < 0:
-            return prune(k, e)
-        p = shapely.Point(end_near(lines[src[e]], nodes[k]))
-        link = shapely.shortest_line(p, lines[j])
-        if link.length <= 1e-6:
-            return False
-        others = current()
-        if not meets_only_at_ends(link, others):
-            return False   # it would cross a street
-        near = others[shapely.dwithin(others, link, CORRIDOR_HALF_WIDTH)]
-        if _doubling(np.array([link]), _corridor(None, near)).any():
-            return False
-        links.append(link)
-        touch(k, 1)
-        q = np.asarray(link.coords[-1])
-        at = np.flatnonzero(np.hypot(*(nodes - q).T) <= SNAP_TOLERANCE)
-        if len(at):
-            touch(int(at[0]), 1)
-        elif counted(q)[0]:
-            state["nodes"] += 1     # a new T on the line
-        return True
-
-    def prune(k: int, e: int) -> bool:
-        o = int(v[e] if u[e] == k else u[e])
-        if not new[e] or not whole[e] or not joins[e] or o == k or deg[o] < 3:
-            return False
-        kept[src[e]] = False
-        joins[e] = False
-        touch(k, -1)
-        touch(o, -1)
-        return True
-
-    # ---- opening: the stem of a T cut short into a cul-de-sac
-    def leaving(e: int, k: int) -> np.ndarray:
-        """Unit direction of edge e leaving node k (up to 10 m along it)."""
-        line = g.geometry[e]
-        t_ = min(10.0, line.length / 2)
-        q = shapely.get_coordinates(line.interpolate(t_ if u[e] == k else line.length - t_))[0]
-        d = q - nodes[k]
-        return d / max(np.hypot(*d), 1e-12)
-
-    # the blocks, to know what a cut merges: sets of faces, each block's area at its root
-    faces, f_area, f_perimeter = planar_faces(lines)
-    blocks = DisjointSet(range(len(faces)))
-    block_area = f_area.copy()
-    f_tree = shapely.STRtree(faces)
-
-    def sides(line):
-        """The faces left and right of a line's middle (-1: none)."""
-        mid = line.interpolate(0.5, normalized=True)
-        a_, b_ = shapely.get_coordinates(line.interpolate(
-            np.clip(np.array([0.5 * line.length - 0.5, 0.5 * line.length + 0.5]), 0,
-                    line.length)))
-        d = (b_ - a_) / max(np.hypot(*(b_ - a_)), 1e-12)
-        nrm = np.array([-d[1], d[0]])
-        c = shapely.get_coordinates(mid)[0]
-        out = []
-        for q in (c + 0.5 * nrm, c - 0.5 * nrm):
-            hit = f_tree.query(shapely.Point(q), predicate="within")
-            out.append(int(hit[0]) if len(hit) else -1)
-        return out, c, nrm
-
-    def open_candidates():
-        ts = np.flatnonzero(inside & (deg == 3))
-        es = np.flatnonzero(new & whole & (shapely.length(g.geometry) >= 2 * min_dangle))
-        ts = ts[rng.permutation(len(ts))]
-        return [("stub", int(x), None) for x in es[rng.permutation(len(es))]] + \
-            [("cut", int(x), max_block) for x in ts] + \
-            [("cut", int(x), np.inf) for x in ts]
-
-    def stub(e: int) -> bool:
-        line = lines[src[e]]
-        if line.length < 2 * min_dangle:
-            return False
-        (fl, fr), c, nrm = sides(line)
-        cand = [(block_area[blocks[f]], f, s) for f, s in ((fl, 1.0), (fr, -1.0)) if f >= 0]
-        if not cand:
-            return False
-        _, f, sgn = max(cand)
-        width = 2 * f_area[f] / max(f_perimeter[f], 1e-9)
-        others = current()
-        for length in (max(width, min_dangle), max(width / 2, min_dangle)):
-            street = shapely.LineString([c, c + sgn * length * nrm])
-            end = shapely.get_point(street, -1)
-            if not shapely.contains(faces[f], street.interpolate(length - 1e-3)):
-                continue
-            hit = others[shapely.intersects(others, street)]
-            if len(hit) > 1 or shapely.dwithin(others, end, CORRIDOR_HALF_WIDTH).any():
-                continue
-            near = others[shapely.dwithin(others, street, CORRIDOR_HALF_WIDTH)]
-            tail = substring(street, CORRIDOR_HALF_WIDTH, length)
-            if _doubling(np.array([tail]), _corridor(None, near)).any():
-                continue
-            stubs.append(street)
-            if counted(c)[0]:
-                state["nodes"] += 1                      # the T
-            if counted(shapely.get_coordinates(end))[0]:
-                state["dead"] += 1
-                state["nodes"] += 1
-            return True
-        return False
-
-    def is_bridge(e: int) -> bool:
-        keep = joins.copy()
-        keep[e] = False
-        k = len(nodes)
-        adj = coo_matrix((np.ones(keep.sum()), (u[keep], v[keep])), shape=(k, k))
-        _, label = connected_components(adj, directed=False)
-        return label[u[e]] != label[v[e]]
-
-    def open_(cand) -> bool:
-        kind, x, limit = cand
-        return cut(x, limit) if kind == "cut" else stub(x)
-
-    def cut(t_, limit) -> bool:
-        if deg[t_] != 3:
-            return False
-        es = np.unique(inc_edge[inc_node == t_])
-        es = es[joins[es]]
-        if len(es) != 3:
-            return False
-        dirs = np.array([leaving(int(e), t_) for e in es])
-        # the through pair is the most opposite pair; the stem is the edge left out of it
-        stem = int(es[int(np.argmin([dirs[1] @ dirs[2], dirs[0] @ dirs[2],
-                                     dirs[0] @ dirs[1]]))])
-        o = int(v[stem] if u[stem] == t_ else u[stem])
-        if not new[stem] or not whole[stem] or o == t_ or deg[o] < 3:
-            return False
-        line = lines[src[stem]]
-        length = line.length
-        keep_len = max(min_dangle, length / 2)
-        if length - keep_len < CORRIDOR_HALF_WIDTH:
-            return False
-        at_t = shapely.get_coordinates(shapely.get_point(line, 0))[0]
-        from_t = np.hypot(*(at_t - nodes[t_])) <= np.hypot(*(
-            shapely.get_coordinates(shapely.get_point(line, -1))[0] - nodes[t_]))
-        rest = substring(line, length - keep_len, length) if from_t else \
-            substring(line, 0, keep_len)
-        end = shapely.get_point(rest, 0 if from_t else -1)
-        others = current()
-        others = others[np.arange(len(others)) != src[stem]]
-        if shapely.dwithin(others, end, CORRIDOR_HALF_WIDTH).any() or is_bridge(stem):
-            return False
-        (fl, fr), _, _ = sides(g.geometry[stem])
-        if fl < 0 or fr < 0:
-            return False
-        fl, fr = blocks[fl], blocks[fr]
-        if fl != fr:
-            merged_area = block_area[fl] + block_area[fr]
-            if merged_area > limit:
-                return False
-            blocks.merge(fl, fr)
-            block_area[blocks[fl]] = merged_area
-        lines[src[stem]] = rest
-        joins[stem] = False
-        touch(t_, -1)
-        if counted(shapely.get_coordinates(end))[0]:
-            state["dead"] += 1
-            state["nodes"] += 1
-        return True
-
-    # into the invariants' band with half of it as margin: the streets are the example's,
-    # the steering a repair that changes as few as the rule allows
-    n_closed, n_opened = steer_share(share_now, share, close, close_candidates, open_,
-                                     open_candidates, tolerance=DEAD_END_TOLERANCE / 2)
-    if not n_closed and not n_opened:
-        return geometry, level, attrs, (0, 0)
-    lines, level, attrs = lines[kept], level[kept], {k: a[kept] for k, a in attrs.items()}
-    groups = [(np.asarray(a, dtype=object), (name, "", -1, len(a), -1))
-              for a, name in ((links, "close"), (stubs, "cul-de-sac")) if a]
-    if groups:
-        return (*_add_streets(lines, level, attrs, [a for a, _ in groups],
-                              [b for _, b in groups], int(level.max()) + 1, 0.0),
-                (n_closed, n_opened))
-    merged, s = _renode(lines, level, attrs, -1, 0.0)
-    return merged, level[s], {k: a[s] for k, a in attrs.items()}, (n_closed, n_opened)
 
 # --------------------------------------------------------------------------- relief
 
@@ -1346,7 +902,7 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
     of the network not connected to the arterials (streets of faces closed only by the
     boundary) are linked to them by the shortest street that crosses nothing ('link').
     Last, the dead-end share, counted as :func:`invariants.check_network` counts it, is
-    steered to the example's (:func:`_steer_dead_ends`: dead ends closed onto the nearest
+    steered to the example's (:mod:`network.dead_ends`: dead ends closed onto the nearest
     street while it is above ('close'), cul-de-sacs added into blocks ('cul-de-sac') and
     stems of T's cut short while it is below; ``stats['dead_ends']``).
 
@@ -1535,8 +1091,8 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
             heights = poisson_blend(base, guidance.reshape(heights.shape),
                                     mask.reshape(heights.shape), labels.reshape(heights.shape))
         if new_geoms:
-            geometry, level, attrs = _add_streets(geometry, level, attrs, new_geoms,
-                                                  new_attrs, lvl + 1, min_dangle)
+            geometry, level, attrs = add_streets(geometry, level, attrs, new_geoms,
+                                                 new_attrs, lvl + 1, min_dangle)
         counts["seconds"] = time.perf_counter() - t_level
         stats["levels"][lvl] = counts
         progress.info(f"Level {lvl}: {counts['queries']} query fragments, "
@@ -1571,7 +1127,7 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
         share = example_dead_end_share(databases) if dead_end_share is None else \
             float(dead_end_share)
         counted_in = target if target is not None else area
-        geometry, level, attrs, (n_closed, n_opened), now = _steer_measured(
+        geometry, level, attrs, (n_closed, n_opened), now = steer_attributed(
             geometry, level, attrs, share, counted_in, rng, min_dangle, max_block)
         stats["dead_ends"] = dict(example_share=share, share=now, closed=n_closed,
                                   opened=n_opened)

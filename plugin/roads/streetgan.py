@@ -366,7 +366,7 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
         rasterised road width, :meth:`Generator.merge_distance`; 0: the thesis's graph)
     dead_end_share : float in [0, 1], optional, the example's dead-end share: the generated
         streets' is steered into the invariants' band around it (the fragment synthesis'
-        rule, :func:`from_fragments.steer_dead_ends`: dead ends closed by short streets, or
+        rule, :func:`network.dead_ends.steer_dead_ends`: dead ends closed by short streets, or
         cul-de-sacs added and T stems cut short); None: the network as read back (not in
         the thesis: its read-back leaves the share wherever the morphology puts it)
     min_block_area : m², optional, the example's 10th-percentile block area: generated
@@ -450,7 +450,7 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
         is_given = ~is_new
     steered = (0, 0)
     if dead_end_share is not None and len(lines) > 1:
-        from .from_fragments import steer_dead_ends
+        from ..network.dead_ends import steer_dead_ends
 
         lines, is_new, steered = steer_dead_ends(lines, ~is_given, float(dead_end_share),
                                                  area, np.random.default_rng(seed))
