@@ -52,12 +52,12 @@ def merge_small_blocks(lines: Sequence, is_new: Sequence, min_area: float, area=
         return lines, is_new, 0
     pieces = node_lines(lines)
     pieces = pieces[shapely.length(pieces) > 0]
+    mids = shapely.line_interpolate_point(pieces, 0.5, normalized=True)
     # a piece is given where it lies on a given line
     given = lines[~is_new]
     new = np.ones(len(pieces), dtype=bool)
     if len(given):
-        mid = shapely.line_interpolate_point(pieces, 0.5, normalized=True)
-        hit = shapely.STRtree(given).query(mid, predicate="dwithin", distance=_NODE_GRID)[0]
+        hit = shapely.STRtree(given).query(mids, predicate="dwithin", distance=_NODE_GRID)[0]
         new[hit] = False
     ends = np.stack([shapely.get_coordinates(shapely.get_point(pieces, 0)),
                      shapely.get_coordinates(shapely.get_point(pieces, -1))], axis=1)
@@ -65,7 +65,6 @@ def merge_small_blocks(lines: Sequence, is_new: Sequence, min_area: float, area=
     _, node = np.unique(keys, axis=0, return_inverse=True)
     node = node.reshape(-1, 2)
     degree = np.bincount(node.ravel(), minlength=int(node.max()) + 1)
-    mids = shapely.line_interpolate_point(pieces, 0.5, normalized=True)
     alive = np.ones(len(pieces), dtype=bool)
     if area is not None:
         shapely.prepare(area)

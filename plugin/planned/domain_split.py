@@ -464,12 +464,14 @@ class _Splitter:
         out = {t.name: _templates.fit_energy(region, t, s.parcel_length, s.parcel_width,
                                              s.street_width, shape)
                for t in self.lib if t.kind not in ("rows", "drawn")}
+        parts = None   # the block a drawn template fills (made once, for the first)
         for t in self.lib:
             if t.kind == "rows":
                 out[t.name] = self.row_energy(region, t, self.no_street, self.no_frontage)
             elif t.kind == "drawn":
-                parts = _parcels._polygon_parts([net_block(region, s.street_width,
-                                                           self.no_street)], 1.0)
+                if parts is None:
+                    parts = _parcels._polygon_parts([net_block(region, s.street_width,
+                                                               self.no_street)], 1.0)
                 warp = _templates.warp_drawn(parts[0], t, cut=False,
                                              entrance_ok=self.entrance_ok) \
                     if len(parts) == 1 else None
@@ -1298,15 +1300,11 @@ def _onto_outline(line, part, reg, street: float):
     outline (the centre line of the street around the block), at most a street width."""
     xy = shapely.get_coordinates(line)
     edge, outline = shapely.boundary(part), shapely.boundary(reg)
-    for end, prev in ((0, 1), (-1, -2)):
+    for end in (0, -1):
         if len(xy) < 2 or shapely.distance(shapely.Point(xy[end]), edge) > 1.0:
             continue
-        d = xy[end] - xy[prev]
-        d /= max(float(np.hypot(*d)), 1e-9)
-        hit = shapely.get_coordinates(shapely.intersection(
-            shapely.LineString([xy[end], xy[end] + 2 * street * d]), outline))
-        if len(hit):
-            foot = hit[np.argmin(np.hypot(*(hit - xy[end]).T))]
+        foot = _templates.end_ray_hit(xy, end, outline, 2 * street)
+        if foot is not None:
             xy = np.vstack([foot, xy]) if end == 0 else np.vstack([xy, foot])
     return shapely.LineString(xy)
 

@@ -78,8 +78,8 @@ from ..retrieval.warp import warp_geometries, warp_points
 
 __all__ = ["Template", "LIBRARY_PATH", "LIBRARY_SUBSETS", "default_library", "write_library",
            "load_library", "templates_from_drawn", "fit_energy", "region_shape", "region_frame",
-           "warp_rows", "warp_drawn", "drawn_outline", "spike_lots", "loop_lots", "WarpResult",
-           "WARP_ITERATIONS", "KINDS"]
+           "warp_rows", "warp_drawn", "drawn_outline", "end_ray_hit", "spike_lots", "loop_lots",
+           "WarpResult", "WARP_ITERATIONS", "KINDS"]
 
 LIBRARY_PATH = RESOURCES / "templates" / "library.json"
 #: Iterations of registration / regression (the paper: about 30 per match).
@@ -308,15 +308,11 @@ def _drawn_template(name: str, geoms: np.ndarray, labels: np.ndarray) -> Templat
             xy = shapely.get_coordinates(line)
             # an end near the outline is where the street leaves the template: it runs on
             # onto the outline (the centre line stops half a width short of it)
-            for end, prev in ((0, 1), (-1, -2)):
+            for end in (0, -1):
                 if shapely.distance(shapely.Point(xy[end]), edge) <= width:
-                    d = xy[end] - xy[prev]
-                    d /= max(float(np.hypot(*d)), 1e-9)
-                    ray = shapely.LineString([xy[end], xy[end] + 2 * width * d])
-                    hit = shapely.intersection(ray, edge)
-                    if not hit.is_empty:
-                        xy[end] = shapely.get_coordinates(hit)[
-                            np.argmin(np.hypot(*(shapely.get_coordinates(hit) - xy[end]).T))]
+                    hit = end_ray_hit(xy, end, edge, 2 * width)
+                    if hit is not None:
+                        xy[end] = hit
             streets.append(np.round(xy, 6).tolist())
         ends = shapely.points(np.array([xy_[k] for xy_ in streets for k in (0, -1)])) \
             if streets else np.empty(0, dtype=object)
@@ -636,13 +632,26 @@ def _bends(xy: np.ndarray) -> np.ndarray:
     return xy[1:-1][turn > BEND_TURN]
 
 
-def _extend(xy: np.ndarray, ext: float) -> shapely.LineString:
+def _extend(xy: np.ndarray, ext: float, ends=(True, True)) -> shapely.LineString:
+    """The polyline extended straight on by ``ext`` at its first and/or last end."""
     xy = np.asarray(xy, dtype=float)
     d0 = xy[0] - xy[1]
     d1 = xy[-1] - xy[-2]
     d0 /= max(np.hypot(*d0), 1e-12)
     d1 /= max(np.hypot(*d1), 1e-12)
-    return shapely.LineString(np.vstack([xy[0] + ext * d0, xy, xy[-1] + ext * d1]))
+    return shapely.LineString(np.vstack([xy[0] + ext * d0] * bool(ends[0]) + [xy]
+                                        + [xy[-1] + ext * d1] * bool(ends[1])))
+
+
+def end_ray_hit(xy: np.ndarray, end: int, target, reach: float) -> Optional[np.ndarray]:
+    """Where the polyline ``xy`` carried straight on from its end (0 or -1) by up to
+    ``reach`` first meets ``target`` (a line geometry), or None."""
+    prev = 1 if end == 0 else -2
+    d = xy[end] - xy[prev]
+    d = d / max(float(np.hypot(*d)), 1e-9)
+    hit = shapely.get_coordinates(shapely.intersection(
+        shapely.LineString([xy[end], xy[end] + reach * d]), target))
+    return hit[np.argmin(np.hypot(*(hit - xy[end]).T))] if len(hit) else None
 
 
 def _cut(block, cuts) -> np.ndarray:
@@ -732,15 +741,14 @@ def warp_drawn(block, template: Template, cut: bool = True,
     parcels_ = _drawn_parcels(template)
     labels = np.asarray(template.parcel_labels or ("R",) * len(parcels_), dtype=object)
     # where the template's own streets leave its outline (they join the street around)
-    t_edge = shapely.boundary(drawn_outline(template))
+    t_edge = shapely.boundary(outline)
     street_ends = np.array([xy[k] for xy in template.streets for k in (0, -1)]
                            ).reshape(-1, 2)
     entrances = street_ends[shapely.dwithin(shapely.points(street_ends), t_edge, 1e-3)] \
         if len(street_ends) else street_ends
     best = None
-    for mirror in (False, True):
-        parcels_m = shapely.transform(parcels_, lambda xy: xy * [-1.0, 1.0]) if mirror \
-            else parcels_
+    for flip in (np.array([1.0, 1.0]), np.array([-1.0, 1.0])):   # as drawn, mirrored
+        parcels_m = shapely.transform(parcels_, lambda xy: xy * flip)
         t_ring, t_idx, _ = region_corners(shapely.union_all(parcels_m, grid_size=1e-6))
         k = len(t_idx)
         if k < 3 or k > len(b_ring):
@@ -772,23 +780,22 @@ def warp_drawn(block, template: Template, cut: bool = True,
                 rms = math.sqrt(float(((reg - w) ** 2).sum(axis=1).mean()))
                 resid.append(rms / math.sqrt(max(poly.area, 1e-9)))
             energy = float(np.mean(resid)) + penalty
-            if entrance_ok is not None and len(entrances) and not entrance_ok(warp_points(
-                    entrances * ([-1.0, 1.0] if mirror else [1.0, 1.0]), src, dst)):
+            if entrance_ok is not None and len(entrances) and \
+                    not entrance_ok(warp_points(entrances * flip, src, dst)):
                 continue   # its street would enter from no street (edge labels)
             if best is None or energy < best[0]:
-                best = (energy, mirror, src, dst, parcels_m)
+                best = (energy, flip, src, dst, parcels_m)
     if best is None:
         return None
-    energy, mirror, src, dst, parcels_m = best
+    energy, flip, src, dst, parcels_m = best
+    if not cut:
+        return WarpResult(np.empty(0, dtype=object), energy, len(parcels_), energy, sy)
     # the template's own streets, warped (mirrored with the template)
     roads = []
     for xy in template.streets:
-        xy = np.asarray(xy, dtype=float) * ([-1.0, 1.0] if mirror else [1.0, 1.0])
-        line = shapely.segmentize(shapely.LineString(xy), DRAWN_SAMPLE_SPACING)
+        line = shapely.segmentize(shapely.LineString(np.asarray(xy, dtype=float) * flip),
+                                  DRAWN_SAMPLE_SPACING)
         roads.append(shapely.LineString(warp_points(shapely.get_coordinates(line), src, dst)))
-    if not cut:
-        return WarpResult(np.empty(0, dtype=object), energy, len(parcels_), energy, sy,
-                          roads=tuple(roads))
     # the inner parcel boundaries, noded in the template's frame (a T is a vertex of both
     # lines, so the warped lines meet exactly), warped, and extended across the outline
     t_outline = shapely.union_all(parcels_m, grid_size=1e-6)
@@ -801,13 +808,7 @@ def warp_drawn(block, template: Template, cut: bool = True,
     for line in shapely.segmentize(inner, DRAWN_SAMPLE_SPACING):
         xy = shapely.get_coordinates(line)
         on_edge = shapely.dwithin(shapely.points(xy[[0, -1]]), edge, 1e-6)
-        w = warp_points(xy, src, dst)
-        d0 = (w[0] - w[1]) / max(np.hypot(*(w[0] - w[1])), 1e-12)
-        d1 = (w[-1] - w[-2]) / max(np.hypot(*(w[-1] - w[-2])), 1e-12)
-        ext = 3 * DRAWN_SAMPLE_SPACING
-        w = np.vstack([w[:1] + ext * d0] * bool(on_edge[0]) + [w]
-                      + [w[-1:] + ext * d1] * bool(on_edge[1]))
-        cuts.append(shapely.LineString(w))
+        cuts.append(_extend(warp_points(xy, src, dst), 3 * DRAWN_SAMPLE_SPACING, on_edge))
     lots = _cut(block, cuts)
     # each lot takes the label of the drawn parcel whose inner point it holds
     inside = warp_geometries(shapely.point_on_surface(parcels_m), src, dst)
