@@ -157,6 +157,34 @@ def test_bad_input(qgis_processing, region_layer):
                                   "OUTPUT_ROADS": "memory:", "OUTPUT_PARCELS": "memory:"})
 
 
+def test_qgis_process_drawn_template_on_bubenec(tmp_path, hull):
+    """The real qgis_process.bin on the Bubeneč cadastre's hull with a template drawn in a
+    GeoPackage: three rows of parcels (no strip, so warped as drawn) take part in the real
+    layout beside a drawn strip; every residential lot keeps street access (the middle
+    row's lots, with no frontage, join their neighbours). Before, three rows were refused."""
+    import geopandas as gpd
+    import pyogrio
+
+    region, templates_file, parcels_out = (tmp_path / n for n in (
+        "region.gpkg", "templates.gpkg", "parcels.gpkg"))
+    pyogrio.write_dataframe(gpd.GeoDataFrame({"name": ["bubenec"]}, geometry=[hull],
+                                             crs=32633), region)
+    cells = [shapely.box(i * 18, j * 30, (i + 1) * 18, (j + 1) * 30)
+             for i in range(5) for j in range(3)]
+    pyogrio.write_dataframe(gpd.GeoDataFrame(
+        {"template": ["three_rows"] * 15 + ["strip"] * 3, "label": ["R"] * 18},
+        geometry=cells + [shapely.box(i * 18, 200, (i + 1) * 18, 230) for i in range(3)],
+        crs=32633), templates_file)
+    code, out, err = run_qgis_process("splitdomain", {
+        "REGION": str(region), "TEMPLATE_LAYER": str(templates_file), "SEED": 2,
+        "OUTPUT_ROADS": "TEMPORARY_OUTPUT", "OUTPUT_PARCELS": str(parcels_out)})
+    assert code == 0, err
+    df = pyogrio.read_dataframe(parcels_out)
+    assert (df.template == "three_rows").sum() > 10
+    res = df[df.land_use == "residential"]
+    assert res.has_street_access.all() and shapely.is_valid(df.geometry.to_numpy()).all()
+
+
 def test_qgis_process_on_bubenec(tmp_path, full_hull):
     """The real qgis_process.bin on a region file made from the Bubeneč cadastre."""
     import pyogrio
