@@ -237,6 +237,26 @@ def test_drawn_template_is_warped_as_drawn():
     assert t3.kind == "drawn"
 
 
+def test_drawn_template_corners_keep_their_labels():
+    """Corner labels (Yang sec. 4.1): an L of five lots has one concave corner; it warps
+    onto an L-shaped block, turned and stretched, at no cost, but not onto a hexagon of
+    six convex corners, where the concave corner would have to land on a convex one (the
+    warp without labels took it at an energy of 0.18)."""
+    from shapely import affinity
+
+    lots = [shapely.box(0, 0, 18, 30), shapely.box(18, 0, 36, 30), shapely.box(36, 0, 54, 30),
+            shapely.box(0, 30, 30, 48), shapely.box(0, 48, 30, 66)]
+    (t,) = templates.templates_from_drawn(lots, ["L"] * 5, ["R"] * 5)
+    assert t.kind == "drawn"
+    block = affinity.rotate(affinity.scale(shapely.union_all(lots), 1.05, 1.0), 25)
+    res = templates.warp_drawn(block, t)
+    assert len(res.lots) == 5 and res.energy < 1e-6
+    a = np.radians(np.arange(6) * 60)
+    hexagon = shapely.Polygon(np.c_[33 * np.cos(a), 30 * np.sin(a)])
+    assert (templates.region_corners(hexagon)[2] > templates.CORNER_TURN).all()
+    assert templates.warp_drawn(hexagon, t) is None
+
+
 def test_drawn_template_with_its_own_cul_de_sac():
     """A cul-de-sac drawn as a surface (S) among the parcels is the template's own street:
     its centre line (raster skeleton of the surface) runs from the outline to the turning

@@ -717,8 +717,10 @@ def warp_drawn(block, template: Template, cut: bool = True,
     A block with more corners than the template (turning by more than
     :data:`CORNER_TURN`) gives the template's corners to its sharpest ones, and the turn
     (radians) of the others is added to the energy, as for the row templates
-    (:func:`region_frame`); with fewer, its sharpest other vertices take the rest
-    (simplification: no corner labels, convex and concave corners alike). Returns None
+    (:func:`region_frame`); with fewer, its sharpest other vertices take the rest. Corners
+    are labelled convex or concave (Yang sec. 4.1): a correspondence that puts a convex
+    corner of the template on a concave corner of the block, or the other way round, is
+    not taken (a vertex that only fills in for a missing corner takes either). Returns None
     when the block has fewer vertices than the template has corners or its size is outside
     the template's scales (its minimum rectangle against the outline's, width_scale along
     the long side and depth_scale across), or when ``entrance_ok`` (points -> bool) refuses
@@ -749,7 +751,7 @@ def warp_drawn(block, template: Template, cut: bool = True,
     best = None
     for flip in (np.array([1.0, 1.0]), np.array([-1.0, 1.0])):   # as drawn, mirrored
         parcels_m = shapely.transform(parcels_, lambda xy: xy * flip)
-        t_ring, t_idx, _ = region_corners(shapely.union_all(parcels_m, grid_size=1e-6))
+        t_ring, t_idx, t_turn = region_corners(shapely.union_all(parcels_m, grid_size=1e-6))
         k = len(t_idx)
         if k < 3 or k > len(b_ring):
             continue
@@ -758,11 +760,17 @@ def warp_drawn(block, template: Template, cut: bool = True,
         # other vertices fill in), as the row templates' frame does with four
         keep = np.sort(np.argsort(-np.abs(b_turn), kind="stable")[:k])
         penalty = float(np.radians(np.abs(b_turn[np.setdiff1d(b_idx, keep)])).sum())
+        # corner labels: +1 convex, -1 concave, 0 a block vertex filling in (either)
+        t_label = np.sign(t_turn[t_idx])
+        b_label = np.where(np.abs(b_turn[keep]) > CORNER_TURN, np.sign(b_turn[keep]), 0.0)
         t_sides = _sides(t_ring, t_idx)
         dense = shapely.segmentize(parcels_m, DRAWN_SAMPLE_SPACING)
         rings = [shapely.get_coordinates(shapely.get_exterior_ring(p))[:-1] for p in dense]
         verts = np.concatenate(rings)
         for shift in range(k):
+            on = np.roll(b_label, -shift)
+            if ((on != 0) & (on != t_label)).any():
+                continue   # a convex corner on a concave one, or the other way round
             b_sides = _sides(b_ring, np.roll(keep, -shift))
             src, dst = [], []
             for ts, bs in zip(t_sides, b_sides):
