@@ -48,7 +48,8 @@ class SplitDomain(AlgorithmBase):
     #: TEMPLATES enum: (library subset, label), in enum order
     SUBSETS = [("strips", "Single-family: parcel strips and double strips (the paper's "
                           "comparison set)"),
-               ("all", "All shipped: parcel strips, double strips, spikes (cul-de-sacs), parks"),
+               ("all", "All shipped: parcel strips, double strips, spikes (cul-de-sacs), "
+                       "loops, parks"),
                ("double_strips", "Double strips only")]
 
     def name(self):
@@ -61,7 +62,8 @@ class SplitDomain(AlgorithmBase):
         return (
             "Lays out streets and parcels inside a region by hierarchical domain splitting "
             "(Yang et al. 2013, 'Urban Pattern'). A region is replaced by a template (parcel "
-            "strip, double strip, spike / cul-de-sac) warped onto it when one fits; otherwise "
+            "strip, double strip, spike / cul-de-sac, loop) warped onto it when one fits, "
+            "chosen by its warp energy; otherwise "
             "it is split along the best-scoring streamline of a smooth cross field aligned "
             "with its boundary, recursively. The street mesh is then optimised (strip "
             "fitting, fairness, closeness) and the templates re-warped.\n\n"

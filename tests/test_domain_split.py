@@ -514,54 +514,66 @@ def test_bad_input():
                                              if t.kind == "park"])
 
 
-def test_spike_template_makes_a_cul_de_sac_with_street_access():
-    from urban_synthesis.plugin.parcels import subdivision as parcels
+def test_built_in_spike_is_a_drawn_cul_de_sac_selected_by_its_warp_energy():
+    """The shipped spike (Yang Fig. 2) is a drawn template at the layout's parcel size:
+    a straight cul-de-sac, four lots on each side and two across its end. It is selected
+    by its warp energy (a block of its shape, turned and stretched within its scales,
+    costs nothing; a skewed one does), and split_domain makes it a cul-de-sac off the
+    outline street that no lot covers, every lot with street access."""
+    from shapely import affinity
 
-    centre = shapely.box(0, 0, 160, 3.4 * L + S)  # a block too deep for a double strip
-    block = centre.buffer(-S / 2, join_style="mitre")
     lib = {t.name: t for t in templates.load_library()}
-    assert templates.fit_energy(centre, lib["spike"], L, W, S) < 0.45
-    assert templates.fit_energy(centre, lib["double_strip"], L, W, S) == np.inf
-    settings = parcels.SubdivisionSettings(max_area=1.6 * L * W, min_area=0.3 * L * W,
-                                           min_width=0.4 * W, lot_width=W, irregularity=0)
-    lots, road = templates.spike_lots(centre, block, L, W, S, settings,
-                                      np.random.default_rng(0))
-    assert road.length > L and shapely.within(road, centre)
-    assert shapely.is_valid(lots).all() and len(lots) >= 8
+    spike = templates.built_in_drawn(lib["spike"], L, W, S)
+    assert (spike.kind, spike.name, spike.max_count) == ("drawn", "spike", 4)
+    assert len(spike.parcels) == 11 and spike.parcel_labels.count("S") == 1
+    net = templates.drawn_outline(spike)                  # 75 x 102 m of lots
+    assert templates.warp_drawn(affinity.rotate(affinity.scale(net, 1.1, 0.9), 35),
+                                spike).energy < 1e-3
+    assert templates.warp_drawn(affinity.skew(net, 20), spike).energy > 0.05
+    region = affinity.rotate(shapely.box(0, 0, 2 * L + 2 * S, 4 * W + L + S), 20)
+    lay = domain_split.split_domain(region, seed=1, templates=[lib["spike"], lib["park"]])
+    kinds = np.asarray(lay.road_kind)
+    (cds,) = lay.roads[kinds == "cul_de_sac"]
+    assert cds.length > 3 * W and shapely.within(cds, region.buffer(1e-6))
+    # it starts on the outline street
+    assert shapely.distance(shapely.points(shapely.get_coordinates(cds)[[0, -1]]),
+                            region.boundary).min() < 1e-3
+    assert (lay.table.template == "spike").sum() == 10
+    assert lay.table.has_street_access.all() and shapely.is_valid(lay.parcels).all()
+    # no lot on the street: its centre line is the skeleton of the drawn surface read
+    # back at 0.25 m (templates._drawn_template), so within 0.3 m of the middle
     with np.errstate(invalid="ignore"):
-        on_road = shapely.area(shapely.intersection(lots, road.buffer(S / 2, cap_style="flat")))
-    assert on_road.sum() < 1e-6
-    # every lot fronts the block's streets or the cul-de-sac
-    assert (parcels.street_frontage(lots, shapely.union_all(lots)) >= parcels.MIN_FRONTAGE).all()
-
-
-def test_loop_template_makes_a_loop_street_with_lots_on_both_sides():
-    from urban_synthesis.plugin.parcels import subdivision as parcels
-
-    centre = shapely.box(0, 0, 260, 5.5 * L + S)      # deep enough for a loop
-    block = centre.buffer(-S / 2, join_style="mitre")
-    lib = {t.name: t for t in templates.load_library()}
-    assert templates.fit_energy(centre, lib["loop"], L, W, S) < 0.45
-    settings = parcels.SubdivisionSettings(max_area=1.6 * L * W, min_area=0.3 * L * W,
-                                           min_width=0.4 * W, lot_width=W, irregularity=0)
-    lots, (loop, connector) = templates.loop_lots(centre, block, L, W, S, settings,
-                                                  np.random.default_rng(0))
-    assert loop.is_ring and shapely.within(loop, block)
-    assert shapely.distance(connector, centre.boundary) < 1e-6 < connector.length
-    assert shapely.is_valid(lots).all() and len(lots) >= 20
-    streets = shapely.union_all([loop, connector])
-    with np.errstate(invalid="ignore"):
-        on_road = shapely.area(shapely.intersection(
-            lots, streets.buffer(S / 2 - 0.01, cap_style="flat")))
+        on_road = shapely.area(shapely.intersection(lay.parcels,
+                                                    cds.buffer(S / 2 - 0.3, cap_style="flat")))
     assert on_road.sum() < 1e-3
-    # lots inside the loop and outside it, every one with frontage on a street
-    inside = shapely.within(shapely.point_on_surface(lots), shapely.Polygon(loop))
-    assert inside.any() and (~inside).any()
-    band = shapely.union_all([shapely.boundary(block),
-                              streets.buffer(S / 2 + 0.05, cap_style="flat").boundary])
-    front = shapely.length(shapely.intersection(shapely.boundary(lots),
-                                                shapely.buffer(band, 0.06)))
-    assert (front >= parcels.MIN_FRONTAGE).all()
+    assert_planar(lay.roads)
+
+
+def test_built_in_loop_fronts_every_lot_on_a_street_when_stretched():
+    """The shipped loop (Yang Fig. 2/4): a ring street one lot deep inside the block with
+    its connector, a band of lots round the block and two rows inside the ring. Its
+    street surface is a ring (a polygon with a hole, kept as two pieces); warped onto a
+    block stretched by 10 % and turned, every one of its 35 lots keeps its frontage on
+    the block's streets or on the ring (measured on the warped surface: on the stretched
+    ring the lots lie more than half a street width from its centre line, and the inner
+    lots were merged away as lots without access)."""
+    from shapely import affinity
+
+    lib = {t.name: t for t in templates.load_library()}
+    loop = templates.built_in_drawn(lib["loop"], L, W, S)
+    assert loop.kind == "drawn" and loop.parcel_labels.count("S") == 2
+    net = templates.drawn_outline(loop)
+    region = affinity.rotate(affinity.scale(net.buffer(S / 2, join_style="mitre"), 1.1, 1.05),
+                             -25)
+    lay = domain_split.split_domain(region, seed=1, templates=[lib["loop"], lib["park"]])
+    kinds = np.asarray(lay.road_kind)
+    rings = [r for r in lay.roads[kinds == "loop"] if r.is_ring]
+    assert len(rings) == 1 and (kinds == "loop").sum() == 2
+    assert (lay.table.template == "loop").sum() == 35
+    assert lay.table.has_street_access.all() and (lay.table.land_use == "residential").all()
+    inside = shapely.within(shapely.point_on_surface(lay.parcels), shapely.Polygon(rings[0]))
+    assert inside.sum() == 8
+    assert_planar(lay.roads)
 
 
 # --------------------------------------------------------------------------- bad parcels

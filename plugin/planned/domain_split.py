@@ -437,7 +437,7 @@ class _Splitter:
         self.s = settings
         self.rng = rng
         L, S = settings.parcel_length, settings.street_width
-        parts = [t for t in lib if t.kind in ("rows", "spike", "loop", "drawn")]
+        parts = [t for t in lib if t.kind in ("rows", "drawn")]
         widths = [t.gross_depth(L, S) for t in parts]
         # the templates' user probabilities weight the widths: with the shipped library a
         # double strip (one street per two rows) is preferred to two single strips
@@ -457,8 +457,9 @@ class _Splitter:
     def energies(self, region) -> Dict[str, float]:
         """Warp energy of every template on a region (Yang sec. 4.1): row templates are
         warped onto the region shrunk by half a street and scored by their registration
-        residual, drawn templates warped as drawn and scored the same way
-        (:func:`templates.warp_drawn`); the others by :func:`templates.fit_energy`."""
+        residual, drawn templates (the built-in spike and loop among them) warped as drawn
+        and scored the same way (:func:`templates.warp_drawn`); the area template by
+        :func:`templates.fit_energy`."""
         s = self.s
         shape = _templates.region_shape(region)
         out = {t.name: _templates.fit_energy(region, t, s.parcel_length, s.parcel_width,
@@ -946,6 +947,9 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
     lib = list(templates) if templates is not None else _templates.load_library()
     if not any(t.kind in ("rows", "spike", "loop", "drawn") for t in lib):
         raise InputError("the templates hold no parcel template")
+    # the built-in spike and loop are drawn templates at this layout's parcel size
+    lib = [_templates.built_in_drawn(t, s.parcel_length, s.parcel_width, s.street_width)
+           for t in lib]
     rng = np.random.default_rng([int(seed), int(variation)])
     faces, fixed, fixed_kinds, key_polys, domain, no_access = prepare_domain(
         region, key_roads, key_areas, s.street_width, key_road_classes,
@@ -1072,8 +1076,9 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
         if key_road_zone is not None:
             shrunk = shapely.difference(shrunk, key_road_zone)
         for part in _parcels._polygon_parts([shrunk], 1.0):
-            lots, kind, own_roads, green = _lots_for(part, reg, name, by_name, s, settings_sk,
-                                                     rng, template_roads, splitter.entrance_ok)
+            lots, kind, own_street, green = _lots_for(part, reg, name, by_name, s,
+                                                      settings_sk, rng, template_roads,
+                                                      splitter.entrance_ok)
             if kind == "park" or (green is not None and green.all()):
                 lots_all.append(lots)
                 use_all += ["park"] * len(lots)
@@ -1087,12 +1092,12 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
                 tmpl_all += [kind] * int(green.sum())
                 front_all.append(np.full(int(green.sum()), np.nan))
                 lots = lots[~green]
-            def frontage(lots_, reg=reg, own=own_roads):
-                """Frontage on the region's streets and on the template's own streets."""
+            def frontage(lots_, reg=reg, own=own_street):
+                """Frontage on the region's streets and on the template's own streets (the
+                edge of their warped surface)."""
                 front_ = access_frontage(lots_, reg, S, splitter.no_frontage)
-                if len(own):
-                    band = shapely.buffer(shapely.union_all(own), S / 2 + 0.05,
-                                          cap_style="flat", join_style="mitre")
+                if own is not None:
+                    band = shapely.buffer(own, 0.05, join_style="mitre")
                     with np.errstate(invalid="ignore"):
                         inner_ = shapely.length(shapely.intersection(
                             shapely.boundary(lots_), band))
@@ -1311,17 +1316,16 @@ def _onto_outline(line, part, reg, street: float):
 
 def _lots_for(part, reg, name, by_name, s: SplitSettings, settings_sk, rng, template_roads,
               entrance_ok=None):
-    """Lots of one shrunk block part: (lots, template name, the template's own streets,
-    park mask of the lots or None)."""
+    """Lots of one shrunk block part: (lots, template name, the surface of the template's
+    own streets or None, park mask of the lots or None)."""
     L, W, S = s.parcel_length, s.parcel_width, s.street_width
-    none = np.empty(0, dtype=object)
     if name == "park" or shapely.area(part) < 0.5 * L * W:
-        return np.array([part], dtype=object), "park", none, None
+        return np.array([part], dtype=object), "park", None, None
     t = by_name.get(name)
     if t is not None and t.kind == "rows":
         warped = _templates.warp_rows(part, t, L, W, rng)
         if warped is not None and len(warped.lots):
-            return warped.lots, t.name, none, None
+            return warped.lots, t.name, None, None
     if t is not None and t.kind == "drawn":
         warped = _templates.warp_drawn(part, t, entrance_ok=entrance_ok)
         if warped is not None and len(warped.lots):
@@ -1330,18 +1334,9 @@ def _lots_for(part, reg, name, by_name, s: SplitSettings, settings_sk, rng, temp
             roads = [_onto_outline(r, part, reg, S) for r in warped.roads]
             kind = "loop" if any(r.is_ring for r in roads) else "cul_de_sac"
             template_roads += [(r, kind) for r in roads]
-            return warped.lots, t.name, np.asarray(roads, dtype=object), warped.green
-    if t is not None and t.kind in ("spike", "loop"):
-        make = _templates.spike_lots if t.kind == "spike" else _templates.loop_lots
-        got = make(reg, part, L, W, S, settings_sk, rng)
-        if got is not None and len(got[0]):
-            lots, roads = got
-            roads = list(roads) if isinstance(roads, (list, tuple)) else [roads]
-            kind = "cul_de_sac" if t.kind == "spike" else "loop"
-            template_roads += [(r, kind) for r in roads]
-            return lots, t.name, np.asarray(roads, dtype=object), None
+            return warped.lots, t.name, warped.surface, warped.green
     lots = _parcels._polygon_parts(_parcels.split_skeleton(part, settings_sk, rng))
-    return (lots if len(lots) else np.array([part], dtype=object)), "skeleton", none, None
+    return (lots if len(lots) else np.array([part], dtype=object)), "skeleton", None, None
 
 
 def split_variations(region, variations: int = 1, seed: int = 0, progress=None,

@@ -31,10 +31,11 @@ Template-based splitting (:func:`fit_energy`, :func:`warp_rows`):
   side turning by at most :data:`LONG_SIDE_BEND` is a regular boundary vertex of the
   repeating row, taken by a pinned parcel joint, and costs only its residual). A
   template whose depth
-  range or row length (``max_columns``) the region exceeds does not match. Spikes and
-  area templates keep the rectangle heuristic of :func:`fit_energy` (simplification); a
-  drawn template is scored by the same residual for parcels of any shape
-  (:func:`warp_drawn`).
+  range or row length (``max_columns``) the region exceeds does not match. A drawn
+  template is scored by the same residual for parcels of any shape (:func:`warp_drawn`),
+  and so are the built-in spike and loop, which are drawn templates built at the
+  layout's parcel and street size (:func:`built_in_drawn`); the area template keeps the
+  fixed price of :func:`fit_energy`.
   Templates with energy under a threshold are drawn with probability template
   probability x exp(-energy / 0.1).
 * **Hierarchical warping** of the row templates: level one chooses the number of parcels
@@ -60,7 +61,8 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
+from functools import lru_cache
 from pathlib import Path
 from typing import List, Optional, Sequence, Tuple
 
@@ -78,8 +80,8 @@ from ..retrieval.warp import warp_geometries, warp_points
 
 __all__ = ["Template", "LIBRARY_PATH", "LIBRARY_SUBSETS", "default_library", "write_library",
            "load_library", "templates_from_drawn", "fit_energy", "region_shape", "region_frame",
-           "warp_rows", "warp_drawn", "drawn_outline", "end_ray_hit", "spike_lots", "loop_lots",
-           "WarpResult", "WARP_ITERATIONS", "KINDS"]
+           "warp_rows", "warp_drawn", "drawn_outline", "end_ray_hit", "built_in_drawn",
+           "spike_geometry", "loop_geometry", "WarpResult", "WARP_ITERATIONS", "KINDS"]
 
 LIBRARY_PATH = RESOURCES / "templates" / "library.json"
 #: Iterations of registration / regression (the paper: about 30 per match).
@@ -104,7 +106,8 @@ class Template:
     label : str
         Region label (see the module table).
     kind : str
-        'rows' (parcel rows facing the streets), 'spike' or 'park'.
+        'rows' (parcel rows facing the streets), 'spike' or 'loop' (the built-in ones,
+        drawn at the layout's size by :func:`built_in_drawn`), 'park' or 'drawn'.
     rows : int
         Parcel rows across the block (rows templates).
     probability : float
@@ -112,7 +115,8 @@ class Template:
     width_scale, depth_scale : (float, float)
         Allowed scaling of a parcel's width (along the street) and depth.
     depth_range : (float, float)
-        For spikes: the block depth in parcel lengths that the pattern fits.
+        Spikes and loops: the block depth in parcel lengths the pattern was made for
+        (informative: they are matched by their warp energy as drawn).
     max_count : int or None
         At most this many per layout (met by backtracking).
     max_columns : int
@@ -150,8 +154,6 @@ class Template:
         """Ideal centre-line width of a block of this template (m)."""
         if self.kind == "rows":
             return self.rows * length + street
-        if self.kind in ("spike", "loop"):
-            return 0.5 * sum(self.depth_range) * length + street
         if self.kind == "drawn":
             return float(minimum_rectangles([drawn_outline(self)])[1][0]) + street
         return 0.0
@@ -278,6 +280,17 @@ def templates_from_drawn(geoms: Sequence, names: Sequence, labels: Sequence) -> 
     return out
 
 
+def _without_holes(poly) -> list:
+    """``poly`` cut by a line across its first hole, again until no piece has a hole."""
+    if not poly.interiors:
+        return [poly]
+    x = shapely.point_on_surface(shapely.Polygon(poly.interiors[0])).x
+    _, y0, _, y1 = poly.bounds
+    halves = shapely.get_parts(shapely.ops.split(poly, shapely.LineString([(x, y0 - 1),
+                                                                         (x, y1 + 1)])))
+    return [piece for half in halves for piece in _without_holes(half)]
+
+
 def _drawn_template(name: str, geoms: np.ndarray, labels: np.ndarray) -> Template:
     """A drawn template: its parcels in metres about the outline's centre, the outline's
     long axis along x (the frame :func:`warp_drawn` scales in)."""
@@ -285,6 +298,11 @@ def _drawn_template(name: str, geoms: np.ndarray, labels: np.ndarray) -> Templat
                                        return_index=True)
     keep = shapely.get_type_id(geoms) == 3
     geoms, labels = geoms[keep], np.asarray(labels)[part_of[keep]]
+    # a parcel is kept as its outer ring: a part with holes (the surface of a loop
+    # street) is cut across them into pieces without
+    pieces = [(piece, lab) for g, lab in zip(geoms, labels) for piece in _without_holes(g)]
+    geoms = np.array([p for p, _ in pieces], dtype=object)
+    labels = np.array([lab for _, lab in pieces])
     outline = shapely.union_all(geoms)
     if shapely.get_type_id(outline) != 3:
         raise InputError(f"template {name!r}: its parcels and areas must join into one "
@@ -363,19 +381,8 @@ def fit_energy(region, template: Template, length: float, width: float,
         if not lo <= scale <= hi or net_long < template.width_scale[0] * width:
             return math.inf
         return abs(math.log(scale)) + shape
-    if template.kind == "spike":
-        lo, hi = template.depth_range
-        depth = net_depth / length
-        if not lo <= depth <= hi or net_long < 2.5 * length:
-            return math.inf
-        return 0.15 + shape
-    if template.kind == "loop":
-        lo, hi = template.depth_range
-        depth = net_depth / length
-        if not lo <= depth <= hi or net_long < 1.2 * net_depth:
-            return math.inf
-        return 0.15 + shape
-    # an area template fits anything, at a price: it is the fallback
+    # an area template fits anything, at a price: it is the fallback (spikes and loops
+    # are drawn templates at the layout's size, :func:`built_in_drawn`)
     return 0.9
 
 
@@ -483,6 +490,8 @@ class WarpResult:
         A drawn template's park lots.
     roads : tuple of LineString
         A drawn template's own streets, warped (their surfaces are no lot).
+    surface : Polygon or None
+        A drawn template's own street surface, warped: what its lots front on there.
     """
 
     lots: np.ndarray
@@ -493,6 +502,7 @@ class WarpResult:
     long_sides: tuple = ()
     green: Optional[np.ndarray] = None
     roads: tuple = ()
+    surface: Optional[shapely.Geometry] = None
 
 
 def _project(line, pts: np.ndarray) -> np.ndarray:
@@ -826,74 +836,70 @@ def warp_drawn(block, template: Template, cut: bool = True,
     street = np.zeros(len(lots), dtype=bool)
     street[li] = labels[pi] == "S"
     return WarpResult(lots[~street], energy, len(parcels_), energy, sy, green=green[~street],
-                      roads=tuple(roads))
+                      roads=tuple(roads),
+                      surface=shapely.union_all(lots[street]) if street.any() else None)
 
 
-def spike_lots(block_centre, block, length: float, width: float, street: float,
-               settings, rng: np.random.Generator):
-    """Spike (cul-de-sac) template: a dead-end street from the middle of the longest
-    street side into the block, parcels around it (Yang 2013, Fig. 2 "spikes").
-
-    The cul-de-sac runs across the block and stops one parcel length (plus a turning
-    circle of the street width's radius) short of the far side; the remaining block, whose
-    whole outline is street, is cut into lots facing the streets by the skeleton method
-    (every lot with frontage).
-
-    Returns (lots, cul_de_sac LineString) or None when the block has no four corners.
-    """
-    frame = region_frame(block_centre)
-    if frame is None:
-        return None
-    c1, c2, _, _ = (shapely.LineString(s) for s in frame)
-    start = np.asarray(c1.interpolate(0.5, normalized=True).coords[0])
-    end_far = _project(c2, start[None])[0]
-    depth = float(np.hypot(*(end_far - start)))
-    run = depth - (street / 2 + length + street)
-    if run < length:
-        return None
-    direction = (end_far - start) / depth
-    road = shapely.LineString([start, start + run * direction])
-    # a square turning head (hammerhead) keeps the lots around it rectangular
-    head = shapely.buffer(shapely.LineString([start + (run - street) * direction,
-                                              start + run * direction]), street, cap_style="flat")
-    cut = shapely.union(shapely.buffer(road, street / 2, cap_style="flat"), head)
-    rest = _parcels._polygon_parts([shapely.difference(block, cut)])
-    lots = []
-    for part in rest:
-        lots.append(_parcels.split_skeleton(part, settings, rng))
-    lots = _parcels._polygon_parts(np.concatenate(lots)) if lots else np.empty(0, dtype=object)
-    return lots, road
+def spike_geometry(length: float, width: float, street: float, lots_per_side: int = 4):
+    """The built-in spike (Yang Fig. 2, "spikes"), drawn in metres as a block of lots at
+    the layout's parcel size: a straight cul-de-sac of the street width from the middle of
+    one side, ``lots_per_side`` lots (``width`` along it, ``length`` deep) on each side
+    facing it, and two lots across its end, each fronting half of it. Returns (polygons,
+    labels: R per lot, S the street surface)."""
+    L, W, S = float(length), float(width), float(street)
+    across, run = 2 * L + S, lots_per_side * W
+    polys = [shapely.box(x0, k * W, x0 + L, (k + 1) * W)
+             for k in range(lots_per_side) for x0 in (0.0, L + S)]
+    polys += [shapely.box(0, run, across / 2, run + L), shapely.box(across / 2, run, across, run + L)]
+    return polys + [shapely.box(L, 0, L + S, run)], ["R"] * len(polys) + ["S"]
 
 
-def loop_lots(block_centre, block, length: float, width: float, street: float,
-              settings, rng: np.random.Generator):
-    """Loop template: a street loop one parcel depth inside a deep block, joined by a
-    short street to the middle of the block's longest side, lots between the block's
-    streets and the loop and inside the loop (the loop pattern of Yang 2013, Fig. 2/4;
-    simplified: the loop follows the block's outline offset inwards, its lots are made by
-    the skeleton method, every lot with frontage).
+def loop_geometry(length: float, width: float, street: float, inner_columns: int = 4):
+    """The built-in loop (Yang Fig. 2/4), drawn in metres at the layout's parcel size: a
+    ring street of the street width one lot deep inside the block, joined to the middle of
+    one side by a connector; a band of lots (``length`` deep, about ``width`` wide) round
+    the block between its streets and the ring, and two rows of ``inner_columns`` lots
+    back to back inside the ring. Returns (polygons, labels: R per lot, S the street
+    surface)."""
+    L, W, S = float(length), float(width), float(street)
+    across, deep = 2 * L + 2 * S + inner_columns * W, 4 * L + 2 * S
 
-    Returns (lots, [loop, connector]) or None when the block is too shallow for a loop
-    with lots inside it.
-    """
-    ring_poly = shapely.buffer(block, -(length + street / 2), join_style="mitre")
-    if ring_poly.is_empty or shapely.get_type_id(ring_poly) != 3:
-        return None
-    inner = shapely.buffer(ring_poly, -street / 2, join_style="mitre")
-    if inner.is_empty or shapely.get_type_id(inner) != 3 or \
-            minimum_rectangles([inner])[1][0] < 1.2 * length:
-        return None
-    loop = shapely.LineString(shapely.get_coordinates(ring_poly.exterior))
-    frame = region_frame(block_centre)
-    if frame is None:
-        return None
-    c1 = shapely.LineString(frame[0])
-    start = np.asarray(c1.interpolate(0.5, normalized=True).coords[0])
-    foot = np.asarray(shapely.ops.nearest_points(loop, shapely.Point(start))[0].coords[0])
-    connector = shapely.LineString([start, foot])
-    roads = shapely.union_all([loop, connector])
-    cut = shapely.buffer(roads, street / 2, cap_style="flat", join_style="mitre")
-    rest = _parcels._polygon_parts([shapely.difference(block, cut)])
-    lots = [_parcels.split_skeleton(part, settings, rng) for part in rest]
-    lots = _parcels._polygon_parts(np.concatenate(lots)) if lots else np.empty(0, dtype=object)
-    return lots, [loop, connector]
+    def row(x0, y0, x1, y1, along_x=True):
+        n = max(1, int(round(((x1 - x0) if along_x else (y1 - y0)) / W)))
+        cuts = np.linspace(x0, x1, n + 1) if along_x else np.linspace(y0, y1, n + 1)
+        return [shapely.box(a, y0, b, y1) if along_x else shapely.box(x0, a, x1, b)
+                for a, b in zip(cuts[:-1], cuts[1:])]
+
+    mid = across / 2
+    polys = row(0, 0, mid - S / 2, L) + row(mid + S / 2, 0, across, L) + \
+        row(0, deep - L, across, deep) + row(0, L, L, deep - L, along_x=False) + \
+        row(across - L, L, across, deep - L, along_x=False)
+    core = (L + S, L + S, across - L - S, deep - L - S)
+    half = (core[1] + core[3]) / 2
+    polys += row(core[0], core[1], core[2], half) + row(core[0], half, core[2], core[3])
+    ring = shapely.difference(shapely.box(L, L, across - L, deep - L), shapely.box(*core))
+    surface = shapely.union(ring, shapely.box(mid - S / 2, 0, mid + S / 2, L))
+    return polys + [surface], ["R"] * len(polys) + ["S"]
+
+
+@lru_cache(maxsize=16)
+def _built_in(kind: str, length: float, width: float, street: float) -> Template:
+    polys, labels = (spike_geometry if kind == "spike" else loop_geometry)(length, width,
+                                                                          street)
+    return _drawn_template(kind, np.asarray(polys, dtype=object), np.asarray(labels))
+
+
+def built_in_drawn(template: Template, length: float, width: float,
+                   street: float) -> Template:
+    """The built-in spike or loop as a drawn template at the layout's parcel ``length`` x
+    ``width`` and ``street`` width (:func:`spike_geometry`, :func:`loop_geometry`), so that
+    it is warped as drawn and selected by its warp energy like any drawn template (Yang
+    sec. 4.1); it keeps the library entry's name, label, probability, scales and count
+    limit. Any other template is returned as it is."""
+    if template.kind not in ("spike", "loop"):
+        return template
+    drawn = _built_in(template.kind, float(length), float(width), float(street))
+    return replace(drawn, name=template.name, label=template.label,
+                   probability=template.probability, width_scale=template.width_scale,
+                   depth_scale=template.depth_scale, max_count=template.max_count,
+                   land_use=template.land_use)

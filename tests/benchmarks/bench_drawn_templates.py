@@ -2,11 +2,12 @@
 
 Two templates drawn as an analyst would in QGIS (`tests/helpers.py`): a pentagon of five
 lots round a private park, and a court of seven lots round a bent cul-de-sac drawn as its
-surface (label S). Each is warped onto regions of its own shape turned and stretched, onto
-a skewed one and onto one with an extra corner (a 40° bend), and laid out by `split_domain`
-in a region it fits. Prints the warp energies (selection threshold 0.1), lot counts and
-times (best of three, wall and CPU, on this shared 2-core machine), writes
-``tests/benchmarks/results/drawn_templates.json`` and the picture
+surface (label S); and the shipped spike and loop, drawn templates built at the default
+parcel size (`templates.built_in_drawn`). Each is warped onto regions of its own shape
+turned and stretched, onto a skewed one and onto one with an extra corner (a 40° bend),
+and laid out by `split_domain` in a region it fits. Prints the warp energies (selection
+threshold 0.1), lot counts and times (best of three, wall and CPU, on this shared 2-core
+machine), writes ``tests/benchmarks/results/drawn_templates.json`` and the picture
 ``docs/drawn_templates.png`` (template as drawn | laid out in a region).
 
     python tests/benchmarks/bench_drawn_templates.py
@@ -62,14 +63,26 @@ def _regions(outline):
 def main():
     pentagon, p_geoms, p_labels = drawn_pentagon_template()
     block, c_geoms, c_labels = drawn_court_template()
-    cases = [("pentagon with a private park", pentagon, p_geoms, p_labels),
+    drawn = [("pentagon with a private park", pentagon, p_geoms, p_labels),
              ("court with a bent cul-de-sac", block, c_geoms, c_labels)]
-    lib_rest = [t for t in templates.load_library() if t.kind in ("rows", "park")]
+    # (name, template, its outline, the other templates split_domain may use)
+    cases = [(name, templates.templates_from_drawn(g, [name] * len(g), lab)[0], outline,
+              "rows") for name, outline, g, lab in drawn]
+    library = templates.load_library()
+    lib_rest = [t for t in library if t.kind in ("rows", "park")]
+    settings = domain_split.SplitSettings()
+    for t in library:
+        if t.kind in ("spike", "loop"):
+            built = templates.built_in_drawn(t, settings.parcel_length, settings.parcel_width,
+                                             settings.street_width)
+            # its lots, and the street around them: the region's outline
+            outline = shapely.simplify(templates.drawn_outline(built), 1e-6)
+            cases.append((f"shipped {t.name}", built, outline.buffer(
+                settings.street_width / 2, join_style="mitre"), "park"))
     rows, layouts = [], []
     print(f"{'template':32s} {'region':34s} {'energy':>8s} {'lots':>5s} {'wall s':>8s} "
           f"{'CPU s':>7s}")
-    for name, outline, geoms, labels in cases:
-        (t,) = templates.templates_from_drawn(geoms, [name] * len(geoms), labels)
+    for name, t, outline, others in cases:
         for region_name, region in _regions(outline).items():
             wall, cpu, res = _best(lambda: templates.warp_drawn(region, t))
             row = {"template": name, "region": region_name,
@@ -83,10 +96,11 @@ def main():
                   f"{row['energy'] if row['energy'] is not None else '-':>8} {row['lots']:5d} "
                   f"{wall:8.3f} {cpu:7.3f}")
         region = affinity.rotate(affinity.scale(outline, 1.12, 1.12), 20)
+        rest = lib_rest if others == "rows" else [x for x in lib_rest if x.kind == "park"]
         wall, cpu, lay = _best(lambda: domain_split.split_domain(
-            region, seed=1, templates=[t] + lib_rest), n=1)
+            region, seed=1, templates=[t] + rest), n=1)
         tab = lay.table
-        mine = tab.template == name
+        mine = tab.template == t.name
         layouts.append((name, t, region, lay))
         rows.append({"template": name, "region": "split_domain, template plus a street",
                      "lots": int(mine.sum()), "parks": int((tab.land_use[mine] == "park").sum()),
@@ -106,7 +120,8 @@ def _draw(layouts):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, 2 * len(layouts), figsize=(5 * 2 * len(layouts), 5))
+    fig, axes = plt.subplots(2, len(layouts), figsize=(5 * len(layouts), 10))
+    axes = axes.T.ravel()
     colour = {"R": "#f4d6a0", "P": "#9ccf8a", "S": "#bbbbbb"}
     for k, (name, t, region, lay) in enumerate(layouts):
         ax = axes[2 * k]
@@ -128,11 +143,13 @@ def _draw(layouts):
             xy = shapely.get_coordinates(line)
             ax.plot(xy[:, 0], xy[:, 1], "r-" if kind != "outline" else "k-", lw=1.2)
         ax.set_title("laid out in a region turned 20°, 12 % larger", fontsize=9)
+        ax.plot(*np.asarray(region.exterior.coords).T, "k-", lw=1.2)
         for a in axes[2 * k:2 * k + 2]:
             a.set_aspect("equal")
             a.axis("off")
-    fig.suptitle("Drawn templates warped as drawn (splitdomain TEMPLATE_LAYER): lots (sand), "
-                 "parks (green), the template's own streets (red)", fontsize=10)
+    fig.suptitle("Templates warped as drawn (splitdomain): two drawn in QGIS (TEMPLATE_LAYER) "
+                 "and the shipped spike and loop; lots (sand), parks (green), the template's "
+                 "own streets (red)", fontsize=10)
     fig.tight_layout()
     fig.savefig(PICTURE, dpi=80)
     plt.close(fig)
