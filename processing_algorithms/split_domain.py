@@ -105,7 +105,9 @@ class SplitDomain(AlgorithmBase):
             [QgsProcessing.SourceType.TypeVectorPolygon], optional=True),
             "User templates drawn in QGIS: one polygon per parcel or area, a text field "
             "'template' (the template each belongs to) and 'label' with the paper's labels: "
-            "R parcel, P or A park / area, S the template's own street drawn as its surface "
+            "R parcel, P park, A area (a region of the next level, filled with parcel rows "
+            "or parcelled: Yang's hierarchical templates), S the template's own street drawn "
+            "as its surface "
             "(a cul-de-sac of any shape with its turning head, or a loop street as a ring "
             "with its connector; S alone marks the built-in spike). Rows of parcels are "
             "recognised "

@@ -257,6 +257,33 @@ def test_drawn_template_corners_keep_their_labels():
     assert templates.warp_drawn(hexagon, t) is None
 
 
+def test_drawn_template_areas_are_filled_by_level_two_templates():
+    """Yang's hierarchy (Fig. 4): the faces of a drawn template labelled A are regions of
+    the next level. A court with a straight cul-de-sac, an area on each side of it (65 x
+    80 m, between the street around and the cul-de-sac) and three lots across its end:
+    each area becomes a double strip fronting both streets (before, the areas were kept
+    as two parks), every lot with street access."""
+    from shapely import affinity
+
+    geoms = [shapely.box(65, 0, 75, 80), shapely.box(0, 0, 65, 80), shapely.box(75, 0, 140, 80),
+             shapely.box(0, 80, 140 / 3, 110), shapely.box(140 / 3, 80, 280 / 3, 110),
+             shapely.box(280 / 3, 80, 140, 110)]
+    (t,) = templates.templates_from_drawn(geoms, ["court"] * 6, ["S", "A", "A", "R", "R", "R"])
+    assert t.kind == "drawn" and t.parcel_labels.count("A") == 2
+    lib = [t] + [x for x in templates.load_library() if x.kind in ("rows", "park")]
+    outline = shapely.box(0, 0, 140, 110).buffer(S / 2, join_style="mitre")
+    lay = domain_split.split_domain(affinity.rotate(affinity.scale(outline, 1.1, 1.05), 15),
+                                    seed=1, templates=lib)
+    mine = (lay.table.template == "court").to_numpy()
+    assert mine.all() and (lay.table.land_use == "residential").all()
+    assert lay.table.has_street_access.all()
+    # the three drawn lots, and two double strips of 2 x 4 or 2 x 5 parcels of about
+    # the template's 30 x 18 m
+    small = shapely.area(lay.parcels) < 1.3 * L * W
+    assert 16 <= small.sum() <= 20 and (~small).sum() == 3
+    assert (np.asarray(lay.road_kind) == "cul_de_sac").sum() == 1
+
+
 def test_drawn_template_with_its_own_cul_de_sac():
     """A cul-de-sac drawn as a surface (S) among the parcels is the template's own street:
     its centre line (raster skeleton of the surface) runs from the outline to the turning

@@ -1334,9 +1334,52 @@ def _lots_for(part, reg, name, by_name, s: SplitSettings, settings_sk, rng, temp
             roads = [_onto_outline(r, part, reg, S) for r in warped.roads]
             kind = "loop" if any(r.is_ring for r in roads) else "cul_de_sac"
             template_roads += [(r, kind) for r in roads]
-            return warped.lots, t.name, warped.surface, warped.green
+            lots, green = warped.lots, warped.green
+            if warped.area is not None and warped.area.any():
+                rows = [x for x in by_name.values() if x.kind == "rows"]
+                lots, green = _fill_areas(lots, warped.area, green, part, warped.surface,
+                                          rows, s, settings_sk, rng)
+            return lots, t.name, warped.surface, green
     lots = _parcels._polygon_parts(_parcels.split_skeleton(part, settings_sk, rng))
     return (lots if len(lots) else np.array([part], dtype=object)), "skeleton", None, None
+
+
+def _fill_areas(lots, area, green, part, surface, rows, s: SplitSettings, settings_sk, rng):
+    """The area faces (label A) of a warped drawn template as regions of the next level
+    (Yang Fig. 4, "regions labeled A ... can be replaced by level-two templates"): each is
+    filled by the row template of least warp energy whose street sides agree (its rows'
+    fronts on the street around the block or on the template's own street; within twice
+    the selection threshold, as the fallback of the search), else parcelled by the
+    straight skeleton. Returns the lots and their park mask."""
+    L, W, S = s.parcel_length, s.parcel_width, s.street_width
+    streets = shapely.boundary(part) if surface is None else \
+        shapely.union(shapely.boundary(part), shapely.boundary(surface))
+    out, out_green = [], []
+    for lot, is_area, is_green in zip(lots, area, green):
+        if not is_area:
+            out.append(lot)
+            out_green.append(is_green)
+            continue
+        # the sides of the area that are no street: its parcels must not front on them
+        no_frontage = shapely.difference(shapely.boundary(lot), shapely.buffer(streets, 0.05))
+        best = None
+        for t in rows:
+            warp = _templates.warp_rows(lot, t, L, W, None, cut=False)
+            if warp is None or sum(_street_share(side, no_frontage, S) > 0.5
+                                   for side in warp.long_sides) < t.rows:
+                continue
+            if best is None or warp.energy < best[0]:
+                best = (warp.energy, t)
+        filled = None
+        if best is not None and best[0] < 2 * s.energy_threshold:
+            filled = _templates.warp_rows(lot, best[1], L, W, rng)
+        pieces = filled.lots if filled is not None and len(filled.lots) else \
+            _parcels._polygon_parts(_parcels.split_skeleton(lot, settings_sk, rng))
+        if not len(pieces):
+            pieces = [lot]
+        out += list(pieces)
+        out_green += [False] * len(pieces)
+    return np.asarray(out, dtype=object), np.asarray(out_green, dtype=bool)
 
 
 def split_variations(region, variations: int = 1, seed: int = 0, progress=None,

@@ -128,8 +128,9 @@ class Template:
         The drawn layout, for display and user templates; a 'drawn' template's parcels are
         in metres, centred on its outline, its long axis along x (warped as drawn).
     parcel_labels : tuple of str
-        A 'drawn' template's label per parcel: R (parcel), P or A (park), S (its own
-        street, drawn as a surface).
+        A 'drawn' template's label per parcel: R (parcel), P (park), A (an area of the
+        next level, filled by level-two templates: Yang Fig. 4), S (its own street,
+        drawn as a surface).
     streets : tuple of coordinate lists
         A 'drawn' template's own streets: the centre lines of its S surfaces (template
         frame), running onto its outline where they leave it.
@@ -231,15 +232,17 @@ def templates_from_drawn(geoms: Sequence, names: Sequence, labels: Sequence) -> 
     """Templates drawn as polygons (e.g. in QGIS), one feature per parcel or area.
 
     Each template is the group of features sharing a ``names`` value; ``labels`` are the
-    paper's: R (residential parcel), P or A (park / area), S the template's own street
-    drawn as a surface (alone, without parcels: a marker of the built-in spike). Row templates are recognised from the geometry: the parcels' centres are
-    clustered across the template's long axis into rows (1 or 2 make a strip or a double
-    strip, which repeat along any street length). A group of only park polygons is an area
-    template. Any other group -- three rows or more, parks among the parcels (the paper's
-    template with a private park), its own streets drawn as a surface (S: a cul-de-sac of
-    any shape with its turning head, a loop street as a ring with its connector), any
-    outline -- is a **drawn** template, kept as drawn and warped onto a region corner to
-    corner (:func:`warp_drawn`).
+    paper's: R (residential parcel), P (park), A (area: in a template with parcels, a
+    region of the next level that the layout fills with parcel rows, Yang Fig. 4), S the
+    template's own street drawn as a surface (alone, without parcels: a marker of the
+    built-in spike). Row templates are recognised from the geometry: the parcels' centres
+    are clustered across the template's long axis into rows (1 or 2 make a strip or a
+    double strip, which repeat along any street length). A group of only park or area
+    polygons is an area template (a park). Any other group -- three rows or more, parks or
+    areas among the parcels (the paper's template with a private park), its own streets
+    drawn as a surface (S: a cul-de-sac of any shape with its turning head, a loop street
+    as a ring with its connector), any outline -- is a **drawn** template, kept as drawn
+    and warped onto a region corner to corner (:func:`warp_drawn`).
 
     Raises
     ------
@@ -314,7 +317,7 @@ def _drawn_template(name: str, geoms: np.ndarray, labels: np.ndarray) -> Templat
         -float(angle[0]), origin=(0.0, 0.0))
     parcels_ = tuple(np.round(shapely.get_coordinates(shapely.get_exterior_ring(p)), 6).tolist()
                      for p in shapely.get_parts(frame))
-    labs = tuple("P" if v in ("P", "A") else ("S" if v == "S" else "R") for v in labels)
+    labs = tuple(v if v in ("P", "A", "S") else "R" for v in labels)
     streets = []
     surface = shapely.union_all([p for p, v in zip(shapely.get_parts(frame), labs) if v == "S"])
     if not surface.is_empty:
@@ -492,6 +495,9 @@ class WarpResult:
         A drawn template's own streets, warped (their surfaces are no lot).
     surface : Polygon or None
         A drawn template's own street surface, warped: what its lots front on there.
+    area : ndarray of bool, optional
+        A drawn template's area faces (label A): regions of the next level, which the
+        layout fills with level-two templates (Yang Fig. 4).
     """
 
     lots: np.ndarray
@@ -503,6 +509,7 @@ class WarpResult:
     green: Optional[np.ndarray] = None
     roads: tuple = ()
     surface: Optional[shapely.Geometry] = None
+    area: Optional[np.ndarray] = None
 
 
 def _project(line, pts: np.ndarray) -> np.ndarray:
@@ -721,8 +728,8 @@ def warp_drawn(block, template: Template, cut: bool = True,
     the row templates for any parcel shape. The correspondence of least energy is kept.
     The lots are the block cut along the warped inner parcel boundaries (its exact outline
     kept, so the lots tile it); a lot takes the label of the drawn parcel whose inner point
-    it holds (P / A: a park, ``green``; S: the template's own street, no lot: its centre
-    lines, warped, are ``roads``).
+    it holds (P: a park, ``green``; A: an area of the next level, ``area``; S: the
+    template's own street, no lot: its centre lines, warped, are ``roads``).
 
     A block with more corners than the template (turning by more than
     :data:`CORNER_TURN`) gives the template's corners to its sharpest ones, and the turn
@@ -831,13 +838,14 @@ def warp_drawn(block, template: Template, cut: bool = True,
     # each lot takes the label of the drawn parcel whose inner point it holds
     inside = warp_geometries(shapely.point_on_surface(parcels_m), src, dst)
     li, pi = shapely.STRtree(lots).query(inside, predicate="within")[::-1]
-    green = np.zeros(len(lots), dtype=bool)
-    green[li] = np.isin(labels[pi], ("P", "A"))
-    street = np.zeros(len(lots), dtype=bool)
+    green, area, street = (np.zeros(len(lots), dtype=bool) for _ in range(3))
+    green[li] = labels[pi] == "P"
+    area[li] = labels[pi] == "A"
     street[li] = labels[pi] == "S"
     return WarpResult(lots[~street], energy, len(parcels_), energy, sy, green=green[~street],
                       roads=tuple(roads),
-                      surface=shapely.union_all(lots[street]) if street.any() else None)
+                      surface=shapely.union_all(lots[street]) if street.any() else None,
+                      area=area[~street])
 
 
 def spike_geometry(length: float, width: float, street: float, lots_per_side: int = 4):
