@@ -135,6 +135,12 @@ def test_library_file_matches_the_generator(tmp_path):
     bad.write_text("{not json")
     with pytest.raises(InputError, match="cannot be read"):
         templates.load_library(bad)
+    # a minimum count above the maximum can never be met
+    doc = dict(shipped, templates=[dict(t, min_count=5) if t["name"] == "spike" else t
+                                   for t in shipped["templates"]])
+    bad.write_text(json.dumps(doc))
+    with pytest.raises(InputError, match="'spike' .* is not a valid template"):
+        templates.load_library(bad)
 
 
 def test_fit_energy_selects_by_depth():
@@ -545,6 +551,25 @@ def test_bad_input():
         domain_split.split_domain([shapely.box(0, 0, 100, 100)],
                                   templates=[t for t in templates.load_library()
                                              if t.kind == "park"])
+
+
+def test_minimum_template_count_is_met_by_repeating_the_search():
+    """Yang's k2: a template may have to occur at least k2 times. Seed 1 lays out one
+    spike in a 600 x 420 m region; with a minimum of three, the randomized search is
+    repeated (the spike's probability doubled each time it falls short) until it has at
+    least three, and the layout says how many searches it took."""
+    import dataclasses
+
+    lib = templates.load_library()
+    region = shapely.box(0, 0, 600, 420)
+    lay = domain_split.split_domain(region, seed=1, templates=lib)
+    assert list(lay.block_template).count("spike") == 1
+    assert (lay.stats["search_attempts"], lay.stats["min_count_short"]) == (1, 0)
+    lib3 = [dataclasses.replace(t, min_count=3) if t.name == "spike" else t for t in lib]
+    lay = domain_split.split_domain(region, seed=1, templates=lib3)
+    assert 3 <= list(lay.block_template).count("spike") <= 4      # its max_count
+    assert lay.stats["min_count_short"] == 0 and lay.stats["search_attempts"] > 1
+    assert lay.table.has_street_access[lay.table.land_use == "residential"].all()
 
 
 def test_built_in_spike_is_a_drawn_cul_de_sac_selected_by_its_warp_energy():

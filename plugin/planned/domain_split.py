@@ -96,6 +96,9 @@ METRIC_FIELDS = [("variation", "int"), ("l_s", "float"), ("l_r", "float"), ("l_p
 
 #: Streamline candidates drawn per region before it counts as not splittable.
 MAX_DRAWS = 20
+#: Searches at most, when templates have a minimum count (Yang's k2), until every minimum
+#: is met.
+MIN_COUNT_ATTEMPTS = 8
 #: Alternative splits tried per region when a child cannot be filled (backtracking) ...
 MAX_TRIES = 3
 #: ... and the most abandoned attempts in one layout.
@@ -509,13 +512,17 @@ class _Splitter:
                 return math.inf
         return warp.energy
 
-    def pick_template(self, energies, exclude=()):
+    def pick_template(self, energies, exclude=(), boost=None):
+        """A template for a region, drawn by probability x exp(-energy / 0.1) among those
+        under the threshold (``boost``: name -> factor on the probability)."""
         by_name = {t.name: t for t in self.lib}
         ok = [(n, e) for n, e in energies.items()
               if e < self.s.energy_threshold and n not in exclude and by_name[n].kind != "park"]
         if not ok:
             return None
-        p = np.array([by_name[n].probability * math.exp(-e / 0.1) for n, e in ok])
+        boost = boost or {}
+        p = np.array([by_name[n].probability * boost.get(n, 1.0) * math.exp(-e / 0.1)
+                      for n, e in ok])
         if p.sum() <= 0:
             return None
         return ok[int(self.rng.choice(len(ok), p=p / p.sum()))][0]
@@ -617,8 +624,9 @@ class _Search:
     least fallback area is kept. Template counts are restored on every undo.
     """
 
-    def __init__(self, splitter, by_name, s, work_area, progress):
+    def __init__(self, splitter, by_name, s, work_area, progress, boost=None):
         self.sp = splitter
+        self.boost = boost
         self.by_name = by_name
         self.s = s
         self.work_area = work_area
@@ -643,7 +651,7 @@ class _Search:
             name = "skeleton" if shapely.area(region) >= 0.5 * L * W else "park"
             return [[region, name, {}]], [], float(shapely.area(region))
         energies = self.sp.energies(region)
-        name = self.sp.pick_template(energies, exclude=self._full())
+        name = self.sp.pick_template(energies, exclude=self._full(), boost=self.boost)
         if name is not None:
             self.counts[name] += 1
             self._report(region)
@@ -966,15 +974,32 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
     splitter.no_street = shapely.union_all(edges) if len(edges) else None
     blocked = [g for g in (no_access, splitter.no_street) if g is not None]
     splitter.no_frontage = shapely.union_all(blocked) if blocked else None
-    search = _Search(splitter, by_name, s, work_area, progress)
-    leaves: List[list] = []  # [region, template name or 'skeleton' / 'park', energies]
-    split_lines: List[shapely.LineString] = []
-    ends = _end_dirs(fixed[fixed_kinds == "key"])
-    for face in faces:
-        got_leaves, got_lines, _ = search.fill(face, ends, 0)
-        leaves += got_leaves
-        split_lines += got_lines
-        ends = np.vstack([ends, _end_dirs(got_lines)])
+    # templates with a minimum count (Yang's k2): the randomized search is repeated until
+    # every minimum is met, each time with the probability of the templates still short
+    # doubled (at most MIN_COUNT_ATTEMPTS times; the attempt short of the fewest
+    # templates, then with the least fallback area, is kept)
+    attempts = MIN_COUNT_ATTEMPTS if any(t.min_count for t in lib) else 1
+    best, boost = None, Counter()
+    for attempt in range(1, attempts + 1):
+        search = _Search(splitter, by_name, s, work_area, progress,
+                         boost={n: 2.0 ** k for n, k in boost.items()})
+        leaves: List[list] = []  # [region, template name or 'skeleton' / 'park', energies]
+        split_lines: List[shapely.LineString] = []
+        fallback = 0.0
+        ends = _end_dirs(fixed[fixed_kinds == "key"])
+        for face in faces:
+            got_leaves, got_lines, bad = search.fill(face, ends, 0)
+            leaves += got_leaves
+            split_lines += got_lines
+            fallback += bad
+            ends = np.vstack([ends, _end_dirs(got_lines)])
+        short = sum(max(0, t.min_count - search.counts[t.name]) for t in lib)
+        boost.update(t.name for t in lib if search.counts[t.name] < t.min_count)
+        if best is None or (short, fallback) < best[0]:
+            best = ((short, fallback), search, leaves, split_lines, attempt)
+        if short == 0:
+            break
+    (n_short, _), search, leaves, split_lines, _ = best
     if split_lines:
         # a split street ends on its parent's outline only up to round-off (the outline is
         # a face of a snap-rounded arrangement, 1e-6 .. 3e-5 m off the line it came from):
@@ -1178,6 +1203,7 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
     stats = {
         "n_regions": n_done, "n_splits": splitter.n_split, "n_rejected_splits": splitter.n_rejected,
         "n_backtracked": n_backtracked, "n_blocks": len(leaves),
+        "search_attempts": attempt, "min_count_short": int(n_short),
         "n_no_access_rejected": splitter.n_no_access, "n_stubs_dropped": n_stubs,
         "n_outline_beside_key_roads": n_beside,
         "templates": dict(Counter(leaf[1] for leaf in leaves)),

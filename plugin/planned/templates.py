@@ -119,6 +119,9 @@ class Template:
         (informative: they are matched by their warp energy as drawn).
     max_count : int or None
         At most this many per layout (met by backtracking).
+    min_count : int
+        At least this many per layout (Yang's k2; met by repeating the randomized search,
+        :data:`domain_split.MIN_COUNT_ATTEMPTS` times at most).
     max_columns : int
         Most parcels in one row: the repeating element's limit, i.e. the longest block
         (22 x 18 m = 396 m with the paper's parcels; Yang's longest blocks have perimeters of
@@ -145,6 +148,7 @@ class Template:
     depth_scale: Tuple[float, float] = (0.8, 1.25)
     depth_range: Tuple[float, float] = (0.0, 0.0)
     max_count: Optional[int] = None
+    min_count: int = 0
     max_columns: int = 22
     land_use: str = "residential"
     parcels: tuple = field(default=(), compare=False)
@@ -217,7 +221,9 @@ def load_library(path=LIBRARY_PATH, subset: Optional[str] = None) -> List[Templa
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise InputError(f"the template library {path} cannot be read ({exc})") from exc
     for t in out:
-        if t.kind not in KINDS or t.rows < 1 or t.probability < 0:
+        if t.kind not in KINDS or t.rows < 1 or t.probability < 0 or \
+                not 0 <= t.min_count <= (t.max_count if t.max_count is not None else
+                                         math.inf):
             raise InputError(f"template {t.name!r} in {path} is not a valid template")
     if subset is not None:
         if subset not in LIBRARY_SUBSETS:
@@ -384,9 +390,10 @@ def fit_energy(region, template: Template, length: float, width: float,
         if not lo <= scale <= hi or net_long < template.width_scale[0] * width:
             return math.inf
         return abs(math.log(scale)) + shape
-    # an area template fits anything, at a price: it is the fallback (spikes and loops
-    # are drawn templates at the layout's size, :func:`built_in_drawn`)
-    return 0.9
+    # an area template fits anything, at a price: it is the fallback; drawn templates (the
+    # built-in spike and loop among them, :func:`built_in_drawn`) are scored by their warp
+    # energy (:func:`warp_drawn`)
+    return 0.9 if template.kind == "park" else math.inf
 
 
 #: A vertex of a region whose outline turns by more than this (degrees) is a corner
@@ -910,4 +917,5 @@ def built_in_drawn(template: Template, length: float, width: float,
     return replace(drawn, name=template.name, label=template.label,
                    probability=template.probability, width_scale=template.width_scale,
                    depth_scale=template.depth_scale, max_count=template.max_count,
+                   min_count=template.min_count,
                    land_use=template.land_use)
