@@ -45,6 +45,7 @@ class TessellateStreets(AlgorithmBase):
     OUTPUT_JUNCTIONS = "OUTPUT_JUNCTIONS"
     OUTPUT_MESH = "OUTPUT_MESH"
     OUTPUT_TIN = "OUTPUT_TIN"
+    OUTPUT_OBJ = "OUTPUT_OBJ"
 
     def name(self):
         return "tessellatestreets"
@@ -168,6 +169,14 @@ class TessellateStreets(AlgorithmBase):
             self.OUTPUT_TIN, "3D street mesh as TIN Z GeoPackage", "GeoPackage (*.gpkg)",
             optional=True, createByDefault=False),
             "The same mesh as TIN Z features (layer 'street_mesh') in a GeoPackage file.")
+        self.add(QgsProcessingParameterFileDestination(
+            self.OUTPUT_OBJ, "3D street mesh with texture coordinates (Wavefront OBJ)",
+            "Wavefront OBJ (*.obj)", optional=True, createByDefault=False),
+            "The same mesh as a Wavefront OBJ for 3D software, with Scharl's texture "
+            "coordinates (u across each street, 0 on its left edge and 1 on its right; one "
+            "texture row for streets, one for junctions, one for side faces), a material "
+            "file <name>.mtl and the road texture <name>_texture.png beside it. x and y are "
+            "in the working metric CRS minus an origin, both named in the file's first lines.")
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         width_field = self.parameterAsString(parameters, self.WIDTH_FIELD, context)
@@ -241,7 +250,9 @@ class TessellateStreets(AlgorithmBase):
         results = {}
         tin_path = self.parameterAsFileOutput(parameters, self.OUTPUT_TIN, context) \
             if parameters.get(self.OUTPUT_TIN) else ""
-        if parameters.get(self.OUTPUT_MESH) is not None or tin_path:
+        obj_path = self.parameterAsFileOutput(parameters, self.OUTPUT_OBJ, context) \
+            if parameters.get(self.OUTPUT_OBJ) else ""
+        if parameters.get(self.OUTPUT_MESH) is not None or tin_path or obj_path:
             mesh = qgis_io.run_engine(
                 label, street_mesh.street_mesh, result,
                 spacing=self.number(parameters, self.MESH_SPACING, context),
@@ -260,6 +271,10 @@ class TessellateStreets(AlgorithmBase):
                                    "street_mesh", geoms, t, street_mesh.MESH_FIELDS,
                                    frame.source_crs.toWkt())
                 results[self.OUTPUT_TIN] = tin_path
+            if obj_path:
+                qgis_io.run_engine(obj_path, street_mesh.write_obj, obj_path, mesh,
+                                   frame.crs.authid() or frame.crs.description())
+                results[self.OUTPUT_OBJ] = obj_path
         for name, geoms, table, spec, qml in (
                 (self.OUTPUT_SURFACES, result.surfaces, result.surface_table,
                  street_surfaces.SURFACE_FIELDS, "street_surfaces.qml"),

@@ -226,7 +226,8 @@ def test_3d_mesh_on_an_inclined_plane(qgis_processing, stars, tmp_path):
     out = qgis_processing.run(ALG, {"ROADS": stars, "WIDTH_FIELD": "w", "DEM": dem,
                                     "Z_OFFSET": 0.2, "OUTPUT_SURFACES": "memory:",
                                     "OUTPUT_JUNCTIONS": "memory:", "OUTPUT_MESH": "memory:",
-                                    "OUTPUT_TIN": str(tin)})
+                                    "OUTPUT_TIN": str(tin),
+                                    "OUTPUT_OBJ": str(tmp_path / "mesh.obj")})
     mesh = out["OUTPUT_MESH"]
     assert mesh.wkbType() == QgsWkbTypes.Type.MultiPolygonZ
     rows, geoms = layer_features(mesh)
@@ -266,3 +267,10 @@ def test_3d_mesh_on_an_inclined_plane(qgis_processing, stars, tmp_path):
     f = lyr.GetNextFeature()
     assert f.GetGeometryRef().GetGeometryName() == "TIN"
     assert f.GetGeometryRef().GetGeometryCount() == f.GetField("triangles")
+    # the OBJ: every triangle, each corner with its texture coordinate, and its texture
+    assert out["OUTPUT_OBJ"] == str(tmp_path / "mesh.obj")
+    text = (tmp_path / "mesh.obj").read_text().splitlines()
+    faces = [ln for ln in text if ln.startswith("f ")]
+    assert len(faces) == len(tris) and all(ln.count("/") == 3 for ln in faces)
+    assert text[1].startswith("# x, y: EPSG:") and "mtllib mesh.mtl" in text
+    assert (tmp_path / "mesh_texture.png").stat().st_size > 0

@@ -349,6 +349,66 @@ def test_junction_corners_above_the_terrain_get_side_faces():
     assert ((normal * away).sum(axis=1) > 0).all()
 
 
+def test_texture_coordinates_and_obj(tmp_path):
+    """Scharl 5.3 (Fig. 5.7): on a street u is 0 on its left edge and 1 on its right, in
+    the street row of the road texture; junctions take the junction row (no lane line),
+    side faces the kerb row. The OBJ holds the same triangles (x, y minus its origin),
+    each corner with its texture coordinate, and its material names the road texture."""
+    import cv2
+
+    from urban_synthesis.plugin.network import street_mesh as sm
+
+    lines, widths = star([0, 70, 150, 215, 290], [8, 8, 14, 6, 8], centre=(500000.0, 6e6))
+    g = roads.clean_network(lines, min_dangle_length=0.0)
+    x, y = np.meshgrid(np.arange(-100, 340, 2.0) + 1 + 5e5, 6e6 + 200 - np.arange(260) * 2.0 - 1)
+    dem = DemGrid(200 + 0.002 * ((x - 5e5) ** 2 + (y - 6e6) ** 2),
+                  (5e5 - 100, 2.0, 0, 6e6 + 200, 0, -2.0))                 # a hollow
+    t = ss.tessellate_network(g, np.asarray(widths)[g.source], dem=dem)
+    m = sm.street_mesh(t, spacing=3.0, z_offset=0.1)
+    assert m.uv.shape == (len(m.triangles), 3, 2) and m.side.any()
+    n_s = len(t.surfaces)
+    street = ~m.side & (m.owner < n_s)
+    rows = sm.TEXTURE_ROWS
+    np.testing.assert_array_equal(m.uv[street, :, 1], rows["street"])
+    assert (m.uv[~m.side & ~street] == [0.5, rows["junction"]]).all()
+    np.testing.assert_array_equal(m.uv[m.side, :, 1], rows["side"])
+    # u = 0 on the left of the street's centre line, 1 on its right
+    k = np.repeat(m.owner[street], 3)
+    xy = m.triangles[street][:, :, :2].reshape(-1, 2)
+    centre = t.centres[k]
+    along = shapely.line_locate_point(centre, shapely.points(xy))
+    p0 = shapely.get_coordinates(shapely.line_interpolate_point(
+        centre, np.maximum(along - 0.01, 0.0)))        # (a negative distance: from the end)
+    p1 = shapely.get_coordinates(shapely.line_interpolate_point(centre, along + 0.01))
+    d, r = p1 - p0, xy - 0.5 * (p0 + p1)
+    left = d[:, 0] * r[:, 1] - d[:, 1] * r[:, 0] > 0
+    np.testing.assert_array_equal(m.uv[street, :, 0].ravel() == 0.0, left)
+    # the OBJ: the same triangles and texture coordinates, grouped, with its material
+    out = sm.write_obj(tmp_path / "mesh.obj", m, crs_name="EPSG:32635")
+    text = (tmp_path / "mesh.obj").read_text().splitlines()
+    v = np.array([list(map(float, ln.split()[1:])) for ln in text if ln.startswith("v ")])
+    vt = np.array([list(map(float, ln.split()[1:])) for ln in text if ln.startswith("vt ")])
+    f = np.array([[int(i) for c in ln.split()[1:] for i in c.split("/")]
+                  for ln in text if ln.startswith("f ")]).reshape(-1, 3, 2)
+    assert len(f) == len(m.triangles) and len(v) < 3 * len(f)          # shared vertices
+    assert {ln for ln in text if ln.startswith("g ")} == {"g streets", "g junctions",
+                                                          "g side_faces"}
+    # faces in group order (streets, junctions, side faces), each in the mesh's order
+    kind = np.asarray(m.table.kind)[m.owner]
+    order = np.r_[np.flatnonzero(~m.side & (kind == "street")),
+                  np.flatnonzero(~m.side & (kind == "junction")), np.flatnonzero(m.side)]
+    xyz = v[f[..., 0] - 1] + np.r_[out["origin"], 0.0]
+    np.testing.assert_allclose(xyz, m.triangles[order], atol=6e-4)
+    np.testing.assert_allclose(vt[f[..., 1] - 1], m.uv[order], atol=1e-6)
+    assert "map_Kd mesh_texture.png" in (tmp_path / "mesh.mtl").read_text()
+    img = cv2.imread(out["texture"])
+    assert img.shape == (256, 256, 3)
+    top = img[10, :, 0]                                    # the street row: lines
+    assert top[int(0.075 * 256)] > 200 and top[int(0.25 * 256)] < 100 and \
+        top[int(0.475 * 256)] > 200
+    assert img[128, 128, 0] < 100                          # the junction row: no line
+
+
 def test_ear_clipping_of_a_non_star_ring():
     from urban_synthesis.plugin.network import street_mesh as sm
 

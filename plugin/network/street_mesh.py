@@ -29,8 +29,18 @@ rotated into the terrain's tangent plane (Fig. 5.3).
   the terrain's tangent plane, which meets the terrain only at its centre: on a convex
   slope its corners float without them.
 
-Without a DEM the mesh is flat (z = 0) and has no side faces. Texture coordinates
-(Scharl 5.3) are not made: GeoPackage has no place for them.
+Without a DEM the mesh is flat (z = 0) and has no side faces.
+
+**Texture coordinates** (Scharl 5.3, Fig. 5.7): Scharl textures every street with one
+road texture, u across the street (0 on one edge, 1 on the other: the lines of the hard
+shoulders near 0 and 1, the double line between the two lanes at 0.5) and one row of the
+texture for the streets, another for the junctions, so that the lanes' double line is not
+drawn on a junction. Here every vertex gets (u, v): on a street u = 0 on its left edge and
+1 on its right, v the street row (:data:`TEXTURE_ROWS`); on a junction u = 0.5 (plain
+asphalt: no line) in the junction row; a side face u = 0 at its top edge and 1 at its foot
+in the kerb row. GeoPackage has no place for them: :func:`write_obj` writes the mesh as
+a Wavefront OBJ with its texture coordinates, a material file and the road texture
+(:func:`road_texture`).
 
 Output: one MultiPolygon Z of triangles per street surface or junction (QGIS 3.22 renders
 it in its 3D view and cannot hold a TIN geometry), and the same triangles as TIN Z
@@ -56,7 +66,12 @@ import shapely
 
 from ..core.progress import InputError
 
-__all__ = ["MESH_FIELDS", "StreetMesh", "street_mesh", "tin_wkb", "write_tin_geopackage"]
+__all__ = ["MESH_FIELDS", "TEXTURE_ROWS", "StreetMesh", "street_mesh", "tin_wkb",
+           "write_tin_geopackage", "road_texture", "write_obj"]
+
+#: v of the texture row of each kind of face (Scharl 5.3: one row for the streets, one for
+#: the junctions; a third here for the side faces), the middle of its third of the image.
+TEXTURE_ROWS = {"street": 5 / 6, "junction": 1 / 2, "side": 1 / 6}
 
 #: Attributes of a mesh feature.
 MESH_FIELDS = [("mesh_id", "int"), ("kind", "str"), ("source_id", "int"),
@@ -80,12 +95,15 @@ class StreetMesh:
     side : ndarray (t,) of bool
         Side face (True) or top face.
     table : DataFrame (:data:`MESH_FIELDS`)
+    uv : ndarray (t, 3, 2)
+        Texture coordinates of every triangle's vertices (see the module doc).
     """
 
     triangles: np.ndarray
     owner: np.ndarray
     side: np.ndarray
     table: pd.DataFrame
+    uv: np.ndarray = None
 
     def geometries(self) -> np.ndarray:
         """One MultiPolygon Z of triangles per feature."""
@@ -191,6 +209,14 @@ def _side_faces(top: np.ndarray, ground: np.ndarray, a: np.ndarray, b: np.ndarra
     return [np.stack([top[a], lo_a, lo_b], axis=1), np.stack([top[a], lo_b, top[b]], axis=1)]
 
 
+def _side_uv(n: int) -> list:
+    """Texture coordinates of the two triangles of each of ``n`` side faces (the vertex
+    order of :func:`_side_faces`: top a, foot a, foot b / top a, foot b, top b)."""
+    row = TEXTURE_ROWS["side"]
+    return [np.tile([[0.0, row], [1.0, row], [1.0, row]], (n, 1, 1)),
+            np.tile([[0.0, row], [1.0, row], [0.0, row]], (n, 1, 1))]
+
+
 def street_mesh(tess, spacing: float = 5.0, z_offset: float = 0.1, skirt: float = 0.5,
                 min_gap: float = 0.01) -> StreetMesh:
     """Triangulated 3D mesh of a tessellated street network (see module doc).
@@ -223,7 +249,7 @@ def street_mesh(tess, spacing: float = 5.0, z_offset: float = 0.1, skirt: float 
     n_s = len(centres)
     widths = tess.widths[tess.surface_edge] if n_s else np.zeros(0)
     length = shapely.length(centres) if n_s else np.zeros(0)
-    tris, owner, side = [], [], []
+    tris, owner, side, uv = [], [], [], []
     if n_s:
         count = np.maximum(np.ceil(length / spacing).astype(np.int64), 1) + 1
         k = np.repeat(np.arange(n_s), count)
@@ -254,6 +280,9 @@ def street_mesh(tess, spacing: float = 5.0, z_offset: float = 0.1, skirt: float 
         tris += [np.stack([L3[i], R3[i], R3[j]], axis=1), np.stack([L3[i], R3[j], L3[j]], axis=1)]
         owner += [k[i], k[i]]
         side += [np.zeros(2 * len(i), dtype=bool)]
+        row = TEXTURE_ROWS["street"]   # u: 0 on the left edge, 1 on the right
+        uv += [np.tile([[0.0, row], [1.0, row], [1.0, row]], (len(i), 1, 1)),
+               np.tile([[0.0, row], [1.0, row], [0.0, row]], (len(i), 1, 1))]
         if draped:
             tl = tess.terrain_z(left)
             tr = tess.terrain_z(right)
@@ -265,6 +294,7 @@ def street_mesh(tess, spacing: float = 5.0, z_offset: float = 0.1, skirt: float 
                 tris += _side_faces(top, ground, a, b, skirt)
                 owner += [k[a], k[a]]
                 side += [np.ones(2 * len(a), dtype=bool)]
+                uv += _side_uv(len(a))
     n_j = len(tess.junctions)
     if n_j:
         nodes = tess.graph.nodes[tess.junction_node]
@@ -275,6 +305,7 @@ def street_mesh(tess, spacing: float = 5.0, z_offset: float = 0.1, skirt: float 
         tris.append(np.column_stack([flat, z]).reshape(-1, 3, 3))
         owner.append(n_s + jo)
         side.append(np.zeros(len(jo), dtype=bool))
+        uv.append(np.tile([0.5, TEXTURE_ROWS["junction"]], (len(jo), 3, 1)))
         if draped:
             xy, nxt, ring_idx, part_owner, _, _, _ = _junction_rings(
                 shapely.force_2d(tess.junctions))
@@ -292,11 +323,13 @@ def street_mesh(tess, spacing: float = 5.0, z_offset: float = 0.1, skirt: float 
             tris += _side_faces(top, tess.terrain_z(xy), a, nxt[a], skirt)
             owner += [n_s + jr[a], n_s + jr[a]]
             side += [np.ones(2 * len(a), dtype=bool)]
+            uv += _side_uv(len(a))
     triangles = np.concatenate(tris) if tris else np.zeros((0, 3, 3))
     owner = np.concatenate(owner).astype(np.int64) if owner else np.zeros(0, np.int64)
     side = np.concatenate(side) if side else np.zeros(0, bool)
+    uv = np.concatenate(uv) if uv else np.zeros((0, 3, 2))
     order = np.argsort(owner, kind="stable")
-    triangles, owner, side = triangles[order], owner[order], side[order]
+    triangles, owner, side, uv = triangles[order], owner[order], side[order], uv[order]
     n = n_s + n_j
     zs = triangles[:, :, 2]
     z_min = np.full(n, np.nan)
@@ -313,7 +346,7 @@ def street_mesh(tess, spacing: float = 5.0, z_offset: float = 0.1, skirt: float 
         "triangles": np.bincount(owner, minlength=n),
         "side_triangles": np.bincount(owner, weights=side, minlength=n).astype(np.int64),
         "z_min": z_min, "z_max": z_max})
-    return StreetMesh(triangles, owner, side, table)
+    return StreetMesh(triangles, owner, side, table, uv)
 
 
 def tin_wkb(multipolygons: Sequence) -> list:
@@ -380,3 +413,65 @@ def write_tin_geopackage(path: str, layer: str, multipolygons: Sequence,
     count = lyr.GetFeatureCount()
     ds = None
     return int(count)
+
+
+def road_texture(size: int = 256) -> np.ndarray:
+    """The road texture of :data:`TEXTURE_ROWS` (Scharl Fig. 5.7), a ``size`` x ``size``
+    BGR image: in the street row (top third) asphalt with the hard shoulders' lines near
+    u = 0 and 1 and the double line between the two lanes at u = 0.5; in the junction row
+    (middle) plain asphalt; in the side faces' row (bottom) concrete."""
+    img = np.full((size, size, 3), 70, dtype=np.uint8)
+    u = (np.arange(size) + 0.5) / size
+    street = slice(0, size // 3)
+    lines = ((u > 0.06) & (u < 0.09)) | ((u > 0.91) & (u < 0.94)) | \
+        ((u > 0.465) & (u < 0.485)) | ((u > 0.515) & (u < 0.535))
+    img[street, lines] = 235
+    img[size - size // 3:] = 150
+    return img
+
+
+def write_obj(path: str, mesh: StreetMesh, crs_name: str = "") -> dict:
+    """Write the mesh as a Wavefront OBJ with texture coordinates, its material file
+    (``<name>.mtl``) and the road texture (``<name>_texture.png``) beside it.
+
+    OBJ has no coordinate reference system: x and y are written minus an origin (the
+    mesh's south-west corner, whole metres; named with the CRS in the file's first lines)
+    so that a millimetre survives single-precision readers. Vertices and texture
+    coordinates are shared by the triangles that use them; faces are grouped as streets,
+    junctions and side faces. Returns the paths written and the origin."""
+    from pathlib import Path
+
+    import cv2
+
+    path = Path(path)
+    mtl = path.with_suffix(".mtl")
+    png = path.with_name(path.stem + "_texture.png")
+    xyz = mesh.triangles.reshape(-1, 3)
+    origin = np.floor(xyz[:, :2].min(axis=0)) if len(xyz) else np.zeros(2)
+    local = np.round(xyz - np.r_[origin, 0.0], 3)
+    verts, vi = np.unique(local, axis=0, return_inverse=True)
+    coords, ti = np.unique(mesh.uv.reshape(-1, 2), axis=0, return_inverse=True)
+    vi, ti = vi.reshape(-1, 3) + 1, ti.reshape(-1, 3) + 1
+    kind = np.asarray(mesh.table["kind"], dtype=object)[mesh.owner] if len(mesh.owner) \
+        else np.zeros(0, dtype=object)
+    group = np.where(mesh.side, "side_faces", kind + "s")
+    if not cv2.imwrite(str(png), road_texture()):
+        raise InputError(f"cannot write the texture {png}")
+    mtl.write_text(f"newmtl road\nKa 1 1 1\nKd 1 1 1\nmap_Kd {png.name}\n")
+    with open(path, "w") as f:
+        f.write("# Urban Synthesis street mesh (Scharl 2010, ch. 5.2-5.3)\n"
+                f"# x, y: {crs_name or 'the working CRS'} minus the origin "
+                f"{origin[0]:.0f} {origin[1]:.0f}; z: metres\n"
+                f"mtllib {mtl.name}\n")
+        np.savetxt(f, verts, fmt="v %.3f %.3f %.3f")
+        np.savetxt(f, coords, fmt="vt %.6f %.6f")
+        f.write("usemtl road\n")
+        for name in ("streets", "junctions", "side_faces"):
+            sel = group == name
+            if not sel.any():
+                continue
+            f.write(f"g {name}\n")
+            face = np.stack([vi[sel], ti[sel]], axis=2).reshape(-1, 6)
+            np.savetxt(f, face, fmt="f %d/%d %d/%d %d/%d")
+    return {"obj": str(path), "mtl": str(mtl), "texture": str(png),
+            "origin": (float(origin[0]), float(origin[1]))}

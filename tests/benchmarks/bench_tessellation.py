@@ -21,8 +21,10 @@ centre lines buffered by half their width. Writes ``tests/benchmarks/results/tes
 from __future__ import annotations
 
 import json
+import os
 import platform
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -122,8 +124,12 @@ def run(label, lines, classes, z, widths, dem=None):
     w = widths[graph.source]
     seconds, cpu, res = _best(lambda: ss.tessellate_network(graph, w, dem=dem))
     mesh_s, mesh_cpu, mesh = _best(lambda: sm.street_mesh(res))
+    with tempfile.TemporaryDirectory() as tmp:
+        obj_s, obj_cpu, written = _best(lambda: sm.write_obj(f"{tmp}/mesh.obj", mesh), repeat=1)
+        obj_mb = os.path.getsize(written["obj"]) / 1e6
     row = {"network": label, "segments": int(graph.n_edges), "junctions": len(res.junctions),
            "mesh_s": mesh_s, "mesh_cpu_s": mesh_cpu, "triangles": int(len(mesh.triangles)),
+           "obj_s": obj_s, "obj_cpu_s": obj_cpu, "obj_mb": obj_mb,
            "side_triangles": int(mesh.side.sum()),
            "mesh_total_s": clean_s + seconds + mesh_s,
            "mesh_total_cpu_s": clean_cpu + cpu + mesh_cpu,
@@ -181,7 +187,8 @@ def main():
     for r in result["rows"]:
         print(f"{r['network']:22} {r['segments']:8d} mesh {r['mesh_cpu_s']:5.2f} "
               f"({r['mesh_s']:5.2f}) {r['triangles']:8d} triangles ({r['side_triangles']} side); "
-              f"total {r['mesh_total_cpu_s']:5.2f} ({r['mesh_total_s']:5.2f})")
+              f"total {r['mesh_total_cpu_s']:5.2f} ({r['mesh_total_s']:5.2f}); OBJ with "
+              f"texture coordinates {r['obj_cpu_s']:5.2f} ({r['obj_s']:5.2f}), {r['obj_mb']:.0f} MB")
     for r in result["rows"]:
         if r["dem"]:
             print(f"{r['network']}: {100 * r['steep_long_share']:.1f} % of segments over 12 % "
