@@ -62,7 +62,8 @@ DATA = ROOT / "data" / "examples"
 LIECHTENSTEIN = ROOT.parent.parent / "shared" / "data" / "liechtenstein-2013-08-03.osm.pbf"
 if not LIECHTENSTEIN.exists():
     LIECHTENSTEIN = Path("/work/shared/data/liechtenstein-2013-08-03.osm.pbf")
-TOWNS = ("Vaduz", "Balzers", "Planken")
+TOWNS = ("Vaduz", "Balzers", "Planken", "Eschen", "Gamprin", "Mauren", "Ruggell", "Schaan",
+         "Triesen", "Triesenberg")
 #: The regions' names, in the order they run (``--regions`` takes them).
 REGIONS = ("Helsinki centre (key roads)", "Bubeneč", "Bubeneč, real streets kept") + tuple(
     f"{t} (LI)" for t in TOWNS)
