@@ -243,6 +243,22 @@ def test_drawn_template_is_warped_as_drawn():
     assert t3.kind == "drawn"
 
 
+def test_a_drawn_lot_with_a_hole_stays_one_lot():
+    """A lot drawn round a courtyard park (a polygon with a hole) is stored in two pieces
+    without holes and warped back into one lot with its hole, the park inside it."""
+    from shapely import affinity
+
+    block = shapely.box(0, 0, 100, 80)
+    park = shapely.box(35, 25, 65, 55)
+    (t,) = templates.templates_from_drawn([shapely.difference(block, park), park],
+                                          ["court"] * 2, ["R", "P"])
+    assert t.kind == "drawn" and t.parcel_groups == (0, 0, 1)
+    res = templates.warp_drawn(affinity.rotate(affinity.scale(block, 1.1, 0.95), 20), t)
+    assert len(res.lots) == 2 and res.green.tolist() == [False, True]
+    assert len(res.lots[0].interiors) == 1
+    assert shapely.area(res.lots).sum() == pytest.approx(1.1 * 0.95 * block.area, rel=1e-9)
+
+
 def test_drawn_template_corners_keep_their_labels():
     """Corner labels (Yang sec. 4.1): an L of five lots has one concave corner; it warps
     onto an L-shaped block, turned and stretched, at no cost, but not onto a hexagon of

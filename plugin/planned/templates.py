@@ -137,6 +137,10 @@ class Template:
     streets : tuple of coordinate lists
         A 'drawn' template's own streets: the centre lines of its S surfaces (template
         frame), running onto its outline where they leave it.
+    parcel_groups : tuple of int
+        A 'drawn' template's drawn parcel of every stored piece: a parcel drawn with a hole
+        (a ring street, a lot round a courtyard) is stored as pieces without holes and
+        warped back into one (empty: every piece is a parcel of its own).
     """
 
     name: str
@@ -154,6 +158,7 @@ class Template:
     parcels: tuple = field(default=(), compare=False)
     parcel_labels: tuple = field(default=(), compare=False)
     streets: tuple = field(default=(), compare=False)
+    parcel_groups: tuple = field(default=(), compare=False)
 
     def gross_depth(self, length: float, street: float) -> float:
         """Ideal centre-line width of a block of this template (m)."""
@@ -217,7 +222,8 @@ def load_library(path=LIBRARY_PATH, subset: Optional[str] = None) -> List[Templa
                            "depth_range": tuple(t.get("depth_range", (0.0, 0.0))),
                            "parcels": tuple(t.get("parcels", ())),
                            "parcel_labels": tuple(t.get("parcel_labels", ())),
-                           "streets": tuple(t.get("streets", ()))}) for t in items]
+                           "streets": tuple(t.get("streets", ())),
+                           "parcel_groups": tuple(t.get("parcel_groups", ()))}) for t in items]
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise InputError(f"the template library {path} cannot be read ({exc})") from exc
     for t in out:
@@ -308,10 +314,12 @@ def _drawn_template(name: str, geoms: np.ndarray, labels: np.ndarray) -> Templat
     keep = shapely.get_type_id(geoms) == 3
     geoms, labels = geoms[keep], np.asarray(labels)[part_of[keep]]
     # a parcel is kept as its outer ring: a part with holes (the surface of a loop
-    # street) is cut across them into pieces without
-    pieces = [(piece, lab) for g, lab in zip(geoms, labels) for piece in _without_holes(g)]
-    geoms = np.array([p for p, _ in pieces], dtype=object)
-    labels = np.array([lab for _, lab in pieces])
+    # street) is cut across them into pieces without, warped back into one
+    pieces = [(piece, lab, k) for k, (g, lab) in enumerate(zip(geoms, labels))
+              for piece in _without_holes(g)]
+    geoms = np.array([p for p, _, _ in pieces], dtype=object)
+    labels = np.array([lab for _, lab, _ in pieces])
+    groups = tuple(k for _, _, k in pieces)
     outline = shapely.union_all(geoms)
     if shapely.get_type_id(outline) != 3:
         raise InputError(f"template {name!r}: its parcels and areas must join into one "
@@ -348,7 +356,7 @@ def _drawn_template(name: str, geoms: np.ndarray, labels: np.ndarray) -> Templat
                              "surface that reaches the template's outline, where it joins "
                              "the street around the region")
     return Template(name, "T", "drawn", parcels=parcels_, parcel_labels=labs,
-                    streets=tuple(streets))
+                    streets=tuple(streets), parcel_groups=groups)
 
 
 def drawn_outline(template: Template):
@@ -845,6 +853,9 @@ def warp_drawn(block, template: Template, cut: bool = True,
     # each lot takes the label of the drawn parcel whose inner point it holds
     inside = warp_geometries(shapely.point_on_surface(parcels_m), src, dst)
     li, pi = shapely.STRtree(lots).query(inside, predicate="within")[::-1]
+    if len(template.parcel_groups) == len(parcels_) and \
+            len(set(template.parcel_groups)) < len(parcels_):
+        lots, li, pi = _rejoin_pieces(lots, li, pi, np.asarray(template.parcel_groups))
     green, area, street = (np.zeros(len(lots), dtype=bool) for _ in range(3))
     green[li] = labels[pi] == "P"
     area[li] = labels[pi] == "A"
@@ -853,6 +864,29 @@ def warp_drawn(block, template: Template, cut: bool = True,
                       roads=tuple(roads),
                       surface=shapely.union_all(lots[street]) if street.any() else None,
                       area=area[~street])
+
+
+def _rejoin_pieces(lots, li, pi, groups):
+    """The lots of the pieces of one drawn parcel (``groups``: its index per template
+    piece; ``li``/``pi``: lot and piece of each label) joined into one lot again. Returns
+    the lots and the (lot, piece) label pairs, one per lot."""
+    owner = np.full(len(lots), -1)
+    owner[li] = groups[pi]
+    piece_of = dict(zip(li.tolist(), pi.tolist()))
+    out, out_li, out_pi = [], [], []
+    done = set()
+    for k in range(len(lots)):
+        g = owner[k]
+        if g >= 0 and g in done:
+            continue
+        members = [k] if g < 0 else np.flatnonzero(owner == g).tolist()
+        out.append(lots[k] if len(members) == 1 else shapely.union_all(lots[members]))
+        if k in piece_of:
+            out_li.append(len(out) - 1)
+            out_pi.append(piece_of[k])
+        done.add(g)
+    return np.asarray(out, dtype=object), np.asarray(out_li, dtype=np.int64), \
+        np.asarray(out_pi, dtype=np.int64)
 
 
 def spike_geometry(length: float, width: float, street: float, lots_per_side: int = 4):
