@@ -788,12 +788,15 @@ def _warp_distortion(regions, leaves, by_name, s: SplitSettings) -> float:
     return total
 
 
-def _street_share(side, no_frontage, street_width: float) -> float:
-    """Share of a block side (of the net block) that lies along an access street."""
+def _street_share(side, no_frontage, street_width: float, near=None) -> float:
+    """Share of a block side (of the net block) that lies along an access street: away
+    from the no-frontage centre lines (``near``: the area where a side gives no access,
+    when known)."""
     line = shapely.LineString(side)
     if line.length <= 0:
         return 0.0
-    near = shapely.buffer(no_frontage, street_width / 2 + 1.0)
+    if near is None:
+        near = shapely.buffer(no_frontage, street_width / 2 + 1.0)
     with np.errstate(invalid="ignore"):
         return 1.0 - shapely.length(shapely.intersection(line, near)) / line.length
 
@@ -1103,7 +1106,8 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
         for part in _parcels._polygon_parts([shrunk], 1.0):
             lots, kind, own_street, green = _lots_for(part, reg, name, by_name, s,
                                                       settings_sk, rng, template_roads,
-                                                      splitter.entrance_ok)
+                                                      splitter.entrance_ok,
+                                                      splitter.no_frontage)
             if kind == "park" or (green is not None and green.all()):
                 lots_all.append(lots)
                 use_all += ["park"] * len(lots)
@@ -1341,7 +1345,7 @@ def _onto_outline(line, part, reg, street: float):
 
 
 def _lots_for(part, reg, name, by_name, s: SplitSettings, settings_sk, rng, template_roads,
-              entrance_ok=None):
+              entrance_ok=None, no_frontage=None):
     """Lots of one shrunk block part: (lots, template name, the surface of the template's
     own streets or None, park mask of the lots or None)."""
     L, W, S = s.parcel_length, s.parcel_width, s.street_width
@@ -1364,19 +1368,21 @@ def _lots_for(part, reg, name, by_name, s: SplitSettings, settings_sk, rng, temp
             if warped.area is not None and warped.area.any():
                 rows = [x for x in by_name.values() if x.kind == "rows"]
                 lots, green = _fill_areas(lots, warped.area, green, part, warped.surface,
-                                          rows, s, settings_sk, rng)
+                                          rows, s, settings_sk, rng, no_frontage)
             return lots, t.name, warped.surface, green
     lots = _parcels._polygon_parts(_parcels.split_skeleton(part, settings_sk, rng))
     return (lots if len(lots) else np.array([part], dtype=object)), "skeleton", None, None
 
 
-def _fill_areas(lots, area, green, part, surface, rows, s: SplitSettings, settings_sk, rng):
+def _fill_areas(lots, area, green, part, surface, rows, s: SplitSettings, settings_sk, rng,
+                no_frontage=None):
     """The area faces (label A) of a warped drawn template as regions of the next level
     (Yang Fig. 4, "regions labeled A ... can be replaced by level-two templates"): each is
     filled by the row template of least warp energy whose street sides agree (its rows'
     fronts on the street around the block or on the template's own street; within twice
     the selection threshold, as the fallback of the search), else parcelled by the
-    straight skeleton. Returns the lots and their park mask."""
+    straight skeleton. ``no_frontage``: the region's no-street edges and motorways, which
+    give no frontage. Returns the lots and their park mask."""
     L, W, S = s.parcel_length, s.parcel_width, s.street_width
     streets = shapely.boundary(part) if surface is None else \
         shapely.union(shapely.boundary(part), shapely.boundary(surface))
@@ -1386,12 +1392,16 @@ def _fill_areas(lots, area, green, part, surface, rows, s: SplitSettings, settin
             out.append(lot)
             out_green.append(is_green)
             continue
-        # the sides of the area that are no street: its parcels must not front on them
-        no_frontage = shapely.difference(shapely.boundary(lot), shapely.buffer(streets, 0.05))
+        # where its parcels would front on no street: its own sides that are no street,
+        # and the region's no-street edges and motorways (centre lines half a street off)
+        near = shapely.buffer(shapely.difference(shapely.boundary(lot),
+                                                 shapely.buffer(streets, 0.05)), 1.0)
+        if no_frontage is not None:
+            near = shapely.union(near, shapely.buffer(no_frontage, S / 2 + 1.0))
         best = None
         for t in rows:
             warp = _templates.warp_rows(lot, t, L, W, None, cut=False)
-            if warp is None or sum(_street_share(side, no_frontage, S) > 0.5
+            if warp is None or sum(_street_share(side, None, S, near) > 0.5
                                    for side in warp.long_sides) < t.rows:
                 continue
             if best is None or warp.energy < best[0]:
