@@ -984,7 +984,10 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
     attempts = MIN_COUNT_ATTEMPTS if any(t.min_count for t in lib) else 1
     best, boost = None, Counter()
     for attempt in range(1, attempts + 1):
-        search = _Search(splitter, by_name, s, work_area, progress,
+        # each search reports up to 0.6 of its share: the searches' shares follow each other
+        start = 0.6 * (attempt - 1) / attempts
+        search = _Search(splitter, by_name, s, work_area,
+                         progress.sub(start, start + 1.0 / attempts),
                          boost={n: 2.0 ** k for n, k in boost.items()})
         leaves: List[list] = []  # [region, template name or 'skeleton' / 'park', energies]
         split_lines: List[shapely.LineString] = []
