@@ -264,6 +264,16 @@ def drawn_pentagon_template():
     return shapely.Polygon(outer), geoms, ["R"] * 5 + ["P"]
 
 
+def drawn_area_court_template():
+    """A drawn template of two levels (Yang Fig. 4): a 140 x 110 m block with a straight
+    10 m cul-de-sac from its south side, an area (label A) of 65 x 80 m on each side of it,
+    to be filled by the next level's templates, and three lots across its end."""
+    geoms = [shapely.box(65, 0, 75, 80), shapely.box(0, 0, 65, 80), shapely.box(75, 0, 140, 80),
+             shapely.box(0, 80, 140 / 3, 110), shapely.box(140 / 3, 80, 280 / 3, 110),
+             shapely.box(280 / 3, 80, 140, 110)]
+    return shapely.box(0, 0, 140, 110), geoms, ["S", "A", "A", "R", "R", "R"]
+
+
 def drawn_court_template():
     """A drawn template: a 120 x 90 m block with a bent cul-de-sac (8 m, a round turning
     head) from the middle of its south side, seven lots round it."""

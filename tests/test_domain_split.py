@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 import shapely
 
-from helpers import assert_planar, bubenec, drawn_court_template, drawn_pentagon_template
+from helpers import (assert_planar, bubenec, drawn_area_court_template, drawn_court_template,
+                     drawn_pentagon_template)
 from urban_synthesis.plugin.planned import cross_field
 from urban_synthesis.plugin.planned import domain_split
 from urban_synthesis.plugin.planned import mesh_optimisation
@@ -287,13 +288,11 @@ def test_drawn_template_areas_are_filled_by_level_two_templates():
     as two parks), every lot with street access."""
     from shapely import affinity
 
-    geoms = [shapely.box(65, 0, 75, 80), shapely.box(0, 0, 65, 80), shapely.box(75, 0, 140, 80),
-             shapely.box(0, 80, 140 / 3, 110), shapely.box(140 / 3, 80, 280 / 3, 110),
-             shapely.box(280 / 3, 80, 140, 110)]
-    (t,) = templates.templates_from_drawn(geoms, ["court"] * 6, ["S", "A", "A", "R", "R", "R"])
+    block, geoms, labels = drawn_area_court_template()
+    (t,) = templates.templates_from_drawn(geoms, ["court"] * 6, labels)
     assert t.kind == "drawn" and t.parcel_labels.count("A") == 2
     lib = [t] + [x for x in templates.load_library() if x.kind in ("rows", "park")]
-    outline = shapely.box(0, 0, 140, 110).buffer(S / 2, join_style="mitre")
+    outline = block.buffer(S / 2, join_style="mitre")
     lay = domain_split.split_domain(affinity.rotate(affinity.scale(outline, 1.1, 1.05), 15),
                                     seed=1, templates=lib)
     mine = (lay.table.template == "court").to_numpy()

@@ -1,8 +1,9 @@
 """Drawn templates warped as drawn (Yang et al. 2013, sec. 4; `templates.warp_drawn`).
 
-Two templates drawn as an analyst would in QGIS (`tests/helpers.py`): a pentagon of five
-lots round a private park, and a court of seven lots round a bent cul-de-sac drawn as its
-surface (label S); and the shipped spike and loop, drawn templates built at the default
+Three templates drawn as an analyst would in QGIS (`tests/helpers.py`): a pentagon of five
+lots round a private park, a court of seven lots round a bent cul-de-sac drawn as its
+surface (label S), and a court whose two sides are areas (label A) for the next level's
+templates; and the shipped spike and loop, drawn templates built at the default
 parcel size (`templates.built_in_drawn`). Each is warped onto regions of its own shape
 turned and stretched, onto a skewed one and onto one with an extra corner (a 40° bend),
 and laid out by `split_domain` in a region it fits. Prints the warp energies (selection
@@ -29,7 +30,8 @@ for p in (ROOT / "build" / "plugins", ROOT / "tests"):
     if str(p) not in sys.path:
         sys.path.insert(0, str(p))
 
-from helpers import drawn_court_template, drawn_pentagon_template  # noqa: E402
+from helpers import (drawn_area_court_template, drawn_court_template,  # noqa: E402
+                     drawn_pentagon_template)
 from urban_synthesis.plugin.planned import domain_split, templates  # noqa: E402
 
 RESULTS = ROOT / "tests" / "benchmarks" / "results" / "drawn_templates.json"
@@ -63,8 +65,10 @@ def _regions(outline):
 def main():
     pentagon, p_geoms, p_labels = drawn_pentagon_template()
     block, c_geoms, c_labels = drawn_court_template()
+    area_block, a_geoms, a_labels = drawn_area_court_template()
     drawn = [("pentagon with a private park", pentagon, p_geoms, p_labels),
-             ("court with a bent cul-de-sac", block, c_geoms, c_labels)]
+             ("court with a bent cul-de-sac", block, c_geoms, c_labels),
+             ("court with two areas (A)", area_block, a_geoms, a_labels)]
     # (name, template, its outline, the other templates split_domain may use)
     cases = [(name, templates.templates_from_drawn(g, [name] * len(g), lab)[0], outline,
               "rows") for name, outline, g, lab in drawn]
@@ -122,7 +126,7 @@ def _draw(layouts):
 
     fig, axes = plt.subplots(2, len(layouts), figsize=(5 * len(layouts), 10))
     axes = axes.T.ravel()
-    colour = {"R": "#f4d6a0", "P": "#9ccf8a", "S": "#bbbbbb"}
+    colour = {"R": "#f4d6a0", "P": "#9ccf8a", "S": "#bbbbbb", "A": "#c9d7f0"}
     for k, (name, t, region, lay) in enumerate(layouts):
         ax = axes[2 * k]
         for coords, lab in zip(t.parcels, t.parcel_labels):
@@ -147,9 +151,9 @@ def _draw(layouts):
         for a in axes[2 * k:2 * k + 2]:
             a.set_aspect("equal")
             a.axis("off")
-    fig.suptitle("Templates warped as drawn (splitdomain): two drawn in QGIS (TEMPLATE_LAYER) "
-                 "and the shipped spike and loop; lots (sand), parks (green), the template's "
-                 "own streets (red)", fontsize=10)
+    fig.suptitle("Templates warped as drawn (splitdomain): three drawn in QGIS (TEMPLATE_LAYER) "
+                 "and the shipped spike and loop; lots (sand), parks (green), areas for the next "
+                 "level (blue, as drawn), the template's own streets (red)", fontsize=10)
     fig.tight_layout()
     fig.savefig(PICTURE, dpi=80)
     plt.close(fig)
