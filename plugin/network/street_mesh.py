@@ -58,6 +58,7 @@ from __future__ import annotations
 
 import struct
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Sequence
 
 import numpy as np
@@ -439,9 +440,7 @@ def write_obj(path: str, mesh: StreetMesh, crs_name: str = "") -> dict:
     so that a millimetre survives single-precision readers. Vertices and texture
     coordinates are shared by the triangles that use them; faces are grouped as streets,
     junctions and side faces. Returns the paths written and the origin."""
-    from pathlib import Path
-
-    import cv2
+    import cv2   # here: only this writer needs OpenCV
 
     path = Path(path)
     mtl = path.with_suffix(".mtl")
