@@ -115,7 +115,11 @@ class SplitDomain(AlgorithmBase):
             "street; any other template (more rows, a private park among the parcels, any "
             "shape) is warped as drawn onto a region corner to corner (a region's extra "
             "corners cost their turn), within 0.75-1.35 x its length and 0.8-1.25 x its "
-            "depth, and chosen by its warp energy.",
+            "depth, and chosen by its warp energy. Optional fields per template (the first "
+            "value among its features): 'probability' (how common it is, default 1), "
+            "'max_count' and 'min_count' (at most / at least this many per layout: Yang's k1 "
+            "and k2; a minimum is met by repeating the search, up to 8 times, and the log says "
+            "when it could not be).",
             advanced=True)
         self.add(QgsProcessingParameterNumber(
             self.PARCEL_LENGTH, "Parcel length (depth, m)", QgsProcessingParameterNumber.Type.Double,
@@ -246,6 +250,14 @@ class SplitDomain(AlgorithmBase):
                 f"{'kept' if st['optimisation'].get('kept') else 'not kept'} (it is kept "
                 f"when it lowers the warp distortion); times split "
                 f"{st['time_split_s']:.1f} s, optimise {st['time_optimise_s']:.1f} s.")
+            if st["min_count_short"]:
+                feedback.pushWarning(
+                    f"Variation {v}: {st['min_count_short']} templates short of their "
+                    f"min_count after {st['search_attempts']} searches (templates "
+                    f"{st['templates']}).")
+            elif st["search_attempts"] > 1:
+                feedback.pushInfo(f"Variation {v}: every min_count met after "
+                                  f"{st['search_attempts']} searches.")
         feedback.setProgress(88)
 
         road_geoms = np.concatenate([lay.roads for lay in layouts])
@@ -286,12 +298,15 @@ class SplitDomain(AlgorithmBase):
             subset = self.SUBSETS[self.parameterAsEnum(parameters, self.TEMPLATES, context)][0]
             return qgis_io.run_engine("Template library", templates.load_library,
                                       templates.LIBRARY_PATH, subset)
+        optional = ["probability", "min_count", "max_count"]
         frame = qgis_io.read_source(self, parameters, self.TEMPLATE_LAYER, context, feedback,
-                                    kind="polygons", fields=["template", "label"],
+                                    kind="polygons", fields=["template", "label"] + optional,
                                     required_fields=["template", "label"], target_crs=crs)
+        settings = {k: frame.attributes[k].to_numpy(dtype=object) for k in optional
+                    if k in frame.attributes}
         lib = qgis_io.run_engine(frame.name, templates.templates_from_drawn, frame.geometry,
                                  frame.attributes["template"].to_numpy(dtype=object),
-                                 frame.attributes["label"].to_numpy(dtype=object))
+                                 frame.attributes["label"].to_numpy(dtype=object), settings)
         feedback.pushInfo(f"{len(lib)} templates drawn in {frame.name}: "
                           + ", ".join(f"{t.name} ({t.label})" for t in lib))
         return lib

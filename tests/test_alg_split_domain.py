@@ -134,6 +134,36 @@ def test_a_drawn_template_warped_as_drawn(qgis_processing):
                                   "OUTPUT_ROADS": "memory:", "OUTPUT_PARCELS": "memory:"})
 
 
+def test_drawn_template_counts_from_fields(qgis_processing):
+    """A template layer's optional fields max_count / min_count (Yang's k1, k2) and
+    probability: with max_count 0 the pentagon that filled its region is never used; a
+    minimum above the maximum is refused naming the layer and the template."""
+    from qgis.core import QgsProcessingException
+
+    outline, pentagon, labels = drawn_pentagon_template()
+    region = memory_layer("Polygon", [shapely.affinity.translate(
+        shapely.affinity.scale(outline, 1.1, 1.1), 500000, 5550000).wkt], crs="EPSG:32633",
+        name="court region")
+
+    def counted(min_count, max_count, title):
+        return memory_layer("Polygon", [g.wkt for g in pentagon], crs="EPSG:32633",
+                            fields="&field=template:string&field=label:string"
+                                   "&field=min_count:integer&field=max_count:integer",
+                            rows=[("court", lab, min_count, max_count) for lab in labels],
+                            name=title)
+
+    out = qgis_processing.run(ALG, {"REGION": region, "TEMPLATE_LAYER": counted(0, 0, "none"),
+                                    "SEED": 1, "OUTPUT_ROADS": "memory:",
+                                    "OUTPUT_PARCELS": "memory:"})
+    rows = layer_features(out["OUTPUT_PARCELS"])[0]
+    assert rows and not any(r["template"] == "court" for r in rows)
+    with pytest.raises(QgsProcessingException,
+                       match="counted templates.*'court'.*min_count 3 is above max_count 1"):
+        qgis_processing.run(ALG, {"REGION": region,
+                                  "TEMPLATE_LAYER": counted(3, 1, "counted templates"),
+                                  "OUTPUT_ROADS": "memory:", "OUTPUT_PARCELS": "memory:"})
+
+
 def test_bad_input(qgis_processing, region_layer):
     from qgis.core import QgsProcessingException
 

@@ -260,6 +260,24 @@ def test_a_drawn_lot_with_a_hole_stays_one_lot():
     assert shapely.area(res.lots).sum() == pytest.approx(1.1 * 0.95 * block.area, rel=1e-9)
 
 
+def test_drawn_template_settings_per_template():
+    """Per-feature probability / min_count / max_count: each template takes the first value
+    among its features (None and NaN are no value); bad values are refused by name."""
+    outline, geoms, labels = drawn_pentagon_template()
+    n = len(geoms)
+    (t,) = templates.templates_from_drawn(geoms, ["p"] * n, labels, {
+        "probability": [None, 0.5] + [0.9] * (n - 2), "max_count": [float("nan")] * n,
+        "min_count": [2] + [None] * (n - 1)})
+    assert (t.probability, t.max_count, t.min_count) == (0.5, None, 2)
+    for settings, match in (({"min_count": ["many"] * n}, "'p': min_count 'many' is no number"),
+                            ({"max_count": [-1] * n}, "'p': max_count must be a whole"),
+                            ({"min_count": [1.5] * n}, "'p': min_count must be a whole"),
+                            ({"min_count": [3] * n, "max_count": [2] * n},
+                             "'p': min_count 3 is above max_count 2")):
+        with pytest.raises(InputError, match=match):
+            templates.templates_from_drawn(geoms, ["p"] * n, labels, settings)
+
+
 def test_drawn_template_corners_keep_their_labels():
     """Corner labels (Yang sec. 4.1): an L of five lots has one concave corner; it warps
     onto an L-shaped block, turned and stretched, at no cost, but not onto a hexagon of

@@ -240,7 +240,8 @@ def load_library(path=LIBRARY_PATH, subset: Optional[str] = None) -> List[Templa
     return out
 
 
-def templates_from_drawn(geoms: Sequence, names: Sequence, labels: Sequence) -> List[Template]:
+def templates_from_drawn(geoms: Sequence, names: Sequence, labels: Sequence,
+                         settings: Optional[dict] = None) -> List[Template]:
     """Templates drawn as polygons (e.g. in QGIS), one feature per parcel or area.
 
     Each template is the group of features sharing a ``names`` value; ``labels`` are the
@@ -256,11 +257,16 @@ def templates_from_drawn(geoms: Sequence, names: Sequence, labels: Sequence) -> 
     as a ring with its connector), any outline -- is a **drawn** template, kept as drawn
     and warped onto a region corner to corner (:func:`warp_drawn`).
 
+    ``settings`` (optional): per feature, ``probability``, ``min_count`` and ``max_count``
+    (Yang's user probability and k1 / k2 counts): a template takes the first value given
+    among its features (None or NaN: the default).
+
     Raises
     ------
     InputError
-        No group with parcels, a drawn group whose parcels do not form one polygon, or a
-        drawn street that does not reach the template's outline.
+        No group with parcels, a drawn group whose parcels do not form one polygon, a
+        drawn street that does not reach the template's outline, or a setting that is no
+        number, negative, or a minimum count above the maximum.
     """
     geoms = np.asarray(geoms, dtype=object)
     names = np.asarray([str(n) for n in names], dtype=object)
@@ -290,9 +296,36 @@ def templates_from_drawn(geoms: Sequence, names: Sequence, labels: Sequence) -> 
                                 parcels=parcels_))
         else:
             out.append(_drawn_template(name, g, lab))
+        if settings:
+            out[-1] = _with_settings(out[-1], {k: np.asarray(v, dtype=object)[sel]
+                                               for k, v in settings.items()})
     if not any(t.kind != "park" for t in out):
         raise InputError("the template layer has no parcel template (label R or S)")
     return out
+
+
+def _with_settings(template: Template, values: dict) -> Template:
+    """``template`` with the first probability / min_count / max_count given among its
+    features' ``values`` (see :func:`templates_from_drawn`)."""
+    changes = {}
+    for key in ("probability", "min_count", "max_count"):
+        given = [v for v in values.get(key, ()) if v is not None and v == v and v != ""]
+        if not given:
+            continue
+        try:
+            v = float(given[0])
+        except (TypeError, ValueError):
+            raise InputError(f"template {template.name!r}: {key} {given[0]!r} is no number")
+        if not (v >= 0 and math.isfinite(v)) or (key != "probability" and v != int(v)):
+            raise InputError(f"template {template.name!r}: {key} must be a "
+                             f"{'number' if key == 'probability' else 'whole number'} "
+                             f">= 0 (got {given[0]})")
+        changes[key] = v if key == "probability" else int(v)
+    t = replace(template, **changes)
+    if t.max_count is not None and t.min_count > t.max_count:
+        raise InputError(f"template {t.name!r}: min_count {t.min_count} is above max_count "
+                         f"{t.max_count}")
+    return t
 
 
 def _without_holes(poly) -> list:
