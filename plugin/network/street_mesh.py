@@ -210,10 +210,12 @@ def _side_faces(top: np.ndarray, ground: np.ndarray, a: np.ndarray, b: np.ndarra
     return [np.stack([top[a], lo_a, lo_b], axis=1), np.stack([top[a], lo_b, top[b]], axis=1)]
 
 
-def _side_uv(n: int) -> list:
-    """Texture coordinates of the two triangles of each of ``n`` side faces (the vertex
-    order of :func:`_side_faces`: top a, foot a, foot b / top a, foot b, top b)."""
-    row = TEXTURE_ROWS["side"]
+def _quad_uv(n: int, kind: str) -> list:
+    """Texture coordinates of the two triangles of each of ``n`` quads in the row of
+    ``kind``, u 0 on one edge and 1 on the other (the vertex order of a street's quads:
+    left i, right i, right j / left i, right j, left j; and of :func:`_side_faces`: top
+    a, foot a, foot b / top a, foot b, top b)."""
+    row = TEXTURE_ROWS[kind]
     return [np.tile([[0.0, row], [1.0, row], [1.0, row]], (n, 1, 1)),
             np.tile([[0.0, row], [1.0, row], [0.0, row]], (n, 1, 1))]
 
@@ -281,9 +283,7 @@ def street_mesh(tess, spacing: float = 5.0, z_offset: float = 0.1, skirt: float 
         tris += [np.stack([L3[i], R3[i], R3[j]], axis=1), np.stack([L3[i], R3[j], L3[j]], axis=1)]
         owner += [k[i], k[i]]
         side += [np.zeros(2 * len(i), dtype=bool)]
-        row = TEXTURE_ROWS["street"]   # u: 0 on the left edge, 1 on the right
-        uv += [np.tile([[0.0, row], [1.0, row], [1.0, row]], (len(i), 1, 1)),
-               np.tile([[0.0, row], [1.0, row], [0.0, row]], (len(i), 1, 1))]
+        uv += _quad_uv(len(i), "street")   # u: 0 on the left edge, 1 on the right
         if draped:
             tl = tess.terrain_z(left)
             tr = tess.terrain_z(right)
@@ -295,7 +295,7 @@ def street_mesh(tess, spacing: float = 5.0, z_offset: float = 0.1, skirt: float 
                 tris += _side_faces(top, ground, a, b, skirt)
                 owner += [k[a], k[a]]
                 side += [np.ones(2 * len(a), dtype=bool)]
-                uv += _side_uv(len(a))
+                uv += _quad_uv(len(a), "side")
     n_j = len(tess.junctions)
     if n_j:
         nodes = tess.graph.nodes[tess.junction_node]
@@ -324,7 +324,7 @@ def street_mesh(tess, spacing: float = 5.0, z_offset: float = 0.1, skirt: float 
             tris += _side_faces(top, tess.terrain_z(xy), a, nxt[a], skirt)
             owner += [n_s + jr[a], n_s + jr[a]]
             side += [np.ones(2 * len(a), dtype=bool)]
-            uv += _side_uv(len(a))
+            uv += _quad_uv(len(a), "side")
     triangles = np.concatenate(tris) if tris else np.zeros((0, 3, 3))
     owner = np.concatenate(owner).astype(np.int64) if owner else np.zeros(0, np.int64)
     side = np.concatenate(side) if side else np.zeros(0, bool)

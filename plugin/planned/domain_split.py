@@ -498,19 +498,9 @@ class _Splitter:
         parts = _parcels._polygon_parts([net_block(region, s.street_width, no_street)], 1.0)
         if len(parts) != 1:
             return math.inf
-        warp = _templates.warp_rows(parts[0], t, s.parcel_length, s.parcel_width, None,
-                                    cut=False)
-        if warp is None:
-            return math.inf
-        if no_frontage is not None:
-            # edge labels (Yang Fig. 4): a double strip needs a street on both long
-            # sides, a strip on one; a side mostly along a no-street edge or a
-            # motorway is no street
-            streets = [_street_share(side, no_frontage, s.street_width) > 0.5
-                       for side in warp.long_sides]
-            if sum(streets) < t.rows:
-                return math.inf
-        return warp.energy
+        near = shapely.buffer(no_frontage, s.street_width / 2 + 1.0) \
+            if no_frontage is not None else None
+        return _rows_energy(parts[0], t, s, near)
 
     def pick_template(self, energies, exclude=(), boost=None):
         """A template for a region, drawn by probability x exp(-energy / 0.1) among those
@@ -788,15 +778,26 @@ def _warp_distortion(regions, leaves, by_name, s: SplitSettings) -> float:
     return total
 
 
-def _street_share(side, no_frontage, street_width: float, near=None) -> float:
-    """Share of a block side (of the net block) that lies along an access street: away
-    from the no-frontage centre lines (``near``: the area where a side gives no access,
-    when known)."""
+def _rows_energy(part, t, s: SplitSettings, near=None) -> float:
+    """Warp energy of the row template ``t`` on a net block ``part`` (inf when it does not
+    fit). Edge labels (Yang Fig. 4): a double strip needs a street on both long sides, a
+    strip on one; a side mostly inside ``near`` (where a side gives no access: along a
+    no-street edge or a motorway; None: everywhere access) is no street."""
+    warp = _templates.warp_rows(part, t, s.parcel_length, s.parcel_width, None, cut=False)
+    if warp is None:
+        return math.inf
+    if near is not None and \
+            sum(_street_share(side, near) > 0.5 for side in warp.long_sides) < t.rows:
+        return math.inf
+    return warp.energy
+
+
+def _street_share(side, near) -> float:
+    """Share of a block side (of the net block) that lies along an access street: outside
+    ``near``, the area where a side gives no access."""
     line = shapely.LineString(side)
     if line.length <= 0:
         return 0.0
-    if near is None:
-        near = shapely.buffer(no_frontage, street_width / 2 + 1.0)
     with np.errstate(invalid="ignore"):
         return 1.0 - shapely.length(shapely.intersection(line, near)) / line.length
 
@@ -1401,17 +1402,10 @@ def _fill_areas(lots, area, green, part, surface, rows, s: SplitSettings, settin
                                                  shapely.buffer(streets, 0.05)), 1.0)
         if no_frontage is not None:
             near = shapely.union(near, shapely.buffer(no_frontage, S / 2 + 1.0))
-        best = None
-        for t in rows:
-            warp = _templates.warp_rows(lot, t, L, W, None, cut=False)
-            if warp is None or sum(_street_share(side, None, S, near) > 0.5
-                                   for side in warp.long_sides) < t.rows:
-                continue
-            if best is None or warp.energy < best[0]:
-                best = (warp.energy, t)
-        filled = None
-        if best is not None and best[0] < 2 * s.energy_threshold:
-            filled = _templates.warp_rows(lot, best[1], L, W, rng)
+        energy, best = min(((_rows_energy(lot, t, s, near), i) for i, t in enumerate(rows)),
+                           default=(math.inf, None))
+        filled = _templates.warp_rows(lot, rows[best], L, W, rng) \
+            if energy < 2 * s.energy_threshold else None
         pieces = filled.lots if filled is not None and len(filled.lots) else \
             _parcels._polygon_parts(_parcels.split_skeleton(lot, settings_sk, rng))
         if not len(pieces):

@@ -816,7 +816,8 @@ def warp_drawn(block, template: Template, cut: bool = True,
     best = None
     for flip in (np.array([1.0, 1.0]), np.array([-1.0, 1.0])):   # as drawn, mirrored
         parcels_m = shapely.transform(parcels_, lambda xy: xy * flip)
-        t_ring, t_idx, t_turn = region_corners(shapely.union_all(parcels_m, grid_size=1e-6))
+        t_outline = shapely.union_all(parcels_m, grid_size=1e-6)
+        t_ring, t_idx, t_turn = region_corners(t_outline)
         k = len(t_idx)
         if k < 3 or k > len(b_ring):
             continue
@@ -857,10 +858,10 @@ def warp_drawn(block, template: Template, cut: bool = True,
                     not entrance_ok(warp_points(entrances * flip, src, dst)):
                 continue   # its street would enter from no street (edge labels)
             if best is None or energy < best[0]:
-                best = (energy, flip, src, dst, parcels_m)
+                best = (energy, flip, src, dst, parcels_m, t_outline)
     if best is None:
         return None
-    energy, flip, src, dst, parcels_m = best
+    energy, flip, src, dst, parcels_m, t_outline = best
     if not cut:
         return WarpResult(np.empty(0, dtype=object), energy, len(parcels_), energy, sy)
     # the template's own streets, warped (mirrored with the template)
@@ -871,7 +872,6 @@ def warp_drawn(block, template: Template, cut: bool = True,
         roads.append(shapely.LineString(warp_points(shapely.get_coordinates(line), src, dst)))
     # the inner parcel boundaries, noded in the template's frame (a T is a vertex of both
     # lines, so the warped lines meet exactly), warped, and extended across the outline
-    t_outline = shapely.union_all(parcels_m, grid_size=1e-6)
     edge = shapely.boundary(t_outline)
     pieces = shapely.get_parts(shapely.node(shapely.union_all(shapely.boundary(parcels_m))))
     mid = shapely.line_interpolate_point(pieces, 0.5, normalized=True)
