@@ -216,7 +216,8 @@ def test_qgis_process_drawn_template_on_bubenec(tmp_path, hull):
 
 
 def test_qgis_process_on_bubenec(tmp_path, full_hull):
-    """The real qgis_process.bin on a region file made from the Bubeneč cadastre."""
+    """The real qgis_process.bin on a region file made from the Bubeneč cadastre, with the
+    whole shipped library: the drawn spike and loop take part beside the strips."""
     import pyogrio
     import geopandas as gpd
 
@@ -227,7 +228,7 @@ def test_qgis_process_on_bubenec(tmp_path, full_hull):
                                                         "metrics.csv"))
     code, out, err = run_qgis_process("splitdomain", {
         "REGION": str(region), "KEY_ROADS": f"{BUBENEC}|layername=streets", "SEED": 2,
-        "OUTPUT_ROADS": str(roads), "OUTPUT_PARCELS": str(parcels_out),
+        "TEMPLATES": 1, "OUTPUT_ROADS": str(roads), "OUTPUT_PARCELS": str(parcels_out),
         "OUTPUT_METRICS": str(table)})
     assert code == 0, err
     assert out is not None and set(out["results"]) >= {"OUTPUT_ROADS", "OUTPUT_PARCELS"}
@@ -238,3 +239,4 @@ def test_qgis_process_on_bubenec(tmp_path, full_hull):
     assert shapely.is_valid(df.geometry.to_numpy()).all()
     rd = pyogrio.read_dataframe(roads)
     assert (rd.level == 0).sum() >= 10  # Bubeneč's real streets are kept
+    assert {"spike", "loop"} & set(df.template) and {"cul_de_sac", "loop"} & set(rd.kind)

@@ -198,13 +198,25 @@ def test_styles_load(qgis_app):
 
 
 def test_qgis_process_helsinki(tmp_path):
-    """The real qgis_process.bin on the OSM extract: exit 0, both outputs written."""
+    """The real qgis_process.bin on the OSM extract: exit 0, the outputs written, the 3D mesh
+    as a Wavefront OBJ with Scharl's texture coordinates, its material and road texture."""
     surfaces, junctions = tmp_path / "surfaces.gpkg", tmp_path / "junctions.gpkg"
+    obj = tmp_path / "helsinki.obj"
     code, out, err = run_qgis_process("tessellatestreets", {
         "ROADS": helsinki_layer(), "MERGE_DISTANCE": 6, "OUTPUT_SURFACES": str(surfaces),
-        "OUTPUT_JUNCTIONS": str(junctions)})
+        "OUTPUT_JUNCTIONS": str(junctions), "OUTPUT_OBJ": str(obj)})
     assert code == 0, err
     assert out is not None and surfaces.exists() and junctions.exists()
+    assert out["results"]["OUTPUT_OBJ"] == str(obj)
+    text = obj.read_text().splitlines()
+    assert text[1].startswith("# x, y: EPSG:326") and "mtllib helsinki.mtl" in text
+    faces = [ln for ln in text if ln.startswith("f ")]
+    vt = np.array([[float(x) for x in ln.split()[1:]] for ln in text if ln.startswith("vt ")])
+    assert len(faces) > 5000 and all(ln.count("/") == 3 for ln in faces)
+    assert {"g streets", "g junctions"} <= set(text)
+    # u from 0 to 1 across the streets, 0.5 on the junctions; one row each (flat: no sides)
+    assert {0.0, 0.5, 1.0} <= set(vt[:, 0]) and len(set(vt[:, 1])) == 2
+    assert (tmp_path / "helsinki_texture.png").stat().st_size > 0
     import pyogrio
 
     s = pyogrio.read_dataframe(surfaces)
@@ -274,3 +286,4 @@ def test_3d_mesh_on_an_inclined_plane(qgis_processing, stars, tmp_path):
     assert len(faces) == len(tris) and all(ln.count("/") == 3 for ln in faces)
     assert text[1].startswith("# x, y: EPSG:") and "mtllib mesh.mtl" in text
     assert (tmp_path / "mesh_texture.png").stat().st_size > 0
+
