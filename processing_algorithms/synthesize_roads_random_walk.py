@@ -63,7 +63,10 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
             "probabilities. Streets are random walks, level by level: each step goes to a "
             "point drawn by a Gaussian on (distance, angle) from the base point's statistics, "
             "never to a point of another level, a point with all its connections (at most 4) "
-            "or across a street. Stubs close until the dead-end share is the example's (with "
+            "or across a street. T junctions that were crossings in the example, then "
+            "junctions on the existing roads, become crossings (their street goes on "
+            "straight across) until the share of 4-way junctions is the example's. "
+            "Stubs close until the dead-end share is the example's (with "
             "roads as the example: measured inside their convex hull, where the streets cut "
             "at its edge are no dead ends), and "
             "every piece is joined to the rest (or to the existing roads) or dropped: the "
@@ -138,6 +141,7 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
             "New road segments with level, length_m, tortuosity and origin ('walk'; 'seam' "
             "joins to existing roads; 'close' steps closing stubs; 'dead_end' streets to the "
             "example's street ends no walk reached; 'cross' crossing streets completed; "
+            "'across' a T junction's street continued across, making it a crossing; "
             "'join' steps joining pieces of the network).")
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT_INTERSECTIONS, "Intersection points used", QgsProcessing.SourceType.TypeVectorPoint,
@@ -280,7 +284,10 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
             f"example's {100 * st['example_dead_end_share']:.0f} %).")
         feedback.pushInfo(
             f"One network: {st['n_closed']} stubs closed, {st['n_crossings_made']} crossing "
-            f"streets completed, {st['n_joins'] + st['n_join_splits']} pieces joined "
+            f"streets completed, {st['n_crossings_matched']} T junctions made crossings "
+            f"({100 * st['crossing_share']:.0f} % 4-way junctions, the example's "
+            f"{100 * st['example_crossing_share']:.0f} %), "
+            f"{st['n_joins'] + st['n_join_splits']} pieces joined "
             f"({st['n_join_splits']} by a new junction on a street), "
             f"{st['n_dropped_edges']} segments of pieces that could not be joined dropped. "
             f"Mean tortuosity {st['mean_tortuosity']:.3f} (example "

@@ -82,7 +82,7 @@ from . import intersection_quadtree as iq
 
 __all__ = ["WalkSettings", "Synthesis", "StreetShapes", "street_shapes", "connect_points",
            "synthesize", "blocks_and_dual", "block_table", "dead_end_share_of",
-           "ROAD_FIELDS", "POINT_FIELDS", "BLOCK_FIELDS"]
+           "crossing_share_of", "ROAD_FIELDS", "POINT_FIELDS", "BLOCK_FIELDS"]
 
 ROAD_FIELDS = [("edge_id", "int"), ("level", "int"), ("length_m", "float"),
                ("tortuosity", "float"), ("origin", "str"), ("node_from", "int"),
@@ -125,6 +125,11 @@ class WalkSettings:
         dead ends is the example's (not in the paper: its walks leave such stubs)
     join_pieces : join every piece of the network to the given roads (or to the largest
         piece) and drop what cannot be joined (the paper's REPEAT, completed)
+    match_crossings : after the walks, T junctions that were crossings in the example, then
+        T junctions on the given roads, become crossings (the T's own street goes on
+        straight across, one step onto the network) until the share of 4-way junctions is
+        the example's (not in the paper: its walks keep about half the example's
+        crossings, as a crossing street is rarely walked both ways)
     road_slots : place junction slots along the given roads at the spacing of the
         example's level-0 streets (else new streets meet given roads only at their nodes)
     join_reach : joins look this many of the point's mean street distances far
@@ -142,6 +147,7 @@ class WalkSettings:
     seam_distance: Optional[float] = None
     close_ends: bool = True
     join_pieces: bool = True
+    match_crossings: bool = True
     road_slots: bool = True
     join_reach: float = 3.0
     shape_retries: int = 3
@@ -163,13 +169,13 @@ class WalkSettings:
         return self
 
 
-def dead_end_share_of(points: iq.PointSet) -> float:
-    """Share of dead ends (degree 1) among the example points of degree != 2 (the share of
-    the example network, whose nodes are its intersections and street ends).
+def _example_node_degrees(points: iq.PointSet) -> np.ndarray:
+    """Degrees of the example points that are nodes of the example network (degree != 2).
 
     Street ends on the convex hull of the example's points are left out: an example that is
     an extract has its streets cut at the extract's edge, and those ends are no dead ends
-    (Bubeneč: all 11 of its street ends; counted, its share was 0.44 instead of 0.07)."""
+    (Bubeneč: all 11 of its street ends; counted, its dead-end share was 0.44 instead of
+    0.07)."""
     from ..network.invariants import EDGE_DISTANCE
 
     own = points.example >= 0
@@ -179,8 +185,20 @@ def dead_end_share_of(points: iq.PointSet) -> float:
     if hull is not None and hull.area > 0:
         counted &= ~((deg == 1) & shapely.dwithin(shapely.boundary(hull), shapely.points(xy),
                                                   EDGE_DISTANCE))
-    n = int(counted.sum())
-    return float(((deg == 1) & counted).sum() / n) if n else 0.0
+    return deg[counted]
+
+
+def dead_end_share_of(points: iq.PointSet) -> float:
+    """Share of dead ends (degree 1) among the example's nodes (its intersections and street
+    ends, :func:`_example_node_degrees`)."""
+    deg = _example_node_degrees(points)
+    return float((deg == 1).mean()) if len(deg) else 0.0
+
+
+def crossing_share_of(points: iq.PointSet) -> float:
+    """Share of crossings (degree 4 or more) among the example's nodes."""
+    deg = _example_node_degrees(points)
+    return float((deg >= 4).mean()) if len(deg) else 0.0
 
 
 def _reserve(rows: np.ndarray, size: int) -> np.ndarray:
@@ -584,6 +602,8 @@ class _Walker:
         cap = np.where(p.example[nb] >= 0, self.s.max_capacity, self.cap[nb]) \
             if relaxed else self.cap[nb]
         free = (self.deg[nb] < cap) & (slot_ok[:, 0] | slot_ok[:, 1])
+        if relaxed == "across":  # a crossing street goes on onto the network, no new stub
+            free &= self.deg[nb] > 0
         if self.adj[v]:
             linked = set(self.adj[v])
             if relaxed:
@@ -600,8 +620,9 @@ class _Walker:
             alpha = np.degrees(np.arccos(np.clip(unit @ prev_dir, -1.0, 1.0)))
             logp = logp - 0.5 * ((alpha - p.angle_mean[v, slot]) / p.angle_sd[v, slot]) ** 2
         w_angle = 0.0
-        if relaxed == "close" and prev_dir is not None:
-            # a stub goes on about straight (its street's turn statistics, twice as wide)
+        if relaxed in ("close", "across") and prev_dir is not None:
+            # a stub (or a T's street) goes on about straight (its street's turn
+            # statistics, twice as wide)
             alpha = np.degrees(np.arccos(np.clip(unit @ prev_dir, -1.0, 1.0)))
             w_angle = -0.5 * ((alpha - p.angle_mean[v, slot]) / (2 * p.angle_sd[v, slot])) ** 2
         elif relaxed == "cross" and self.dirs[v]:
@@ -898,7 +919,8 @@ class _Walker:
 def connect_points(points: iq.PointSet, rng: np.random.Generator,
                    settings: Optional[WalkSettings] = None, existing=None,
                    dead_end_share: Optional[float] = None, area=None,
-                   progress: Optional[Progress] = None):
+                   progress: Optional[Progress] = None,
+                   crossing_share: Optional[float] = None):
     """Connect attributed points by random walks, level by level (fig. 3), into one network.
 
     Parameters
@@ -910,6 +932,9 @@ def connect_points(points: iq.PointSet, rng: np.random.Generator,
     dead_end_share : float, optional
         Close stubs until the dead-end share of the new points is at most this (default:
         the example's, :func:`dead_end_share_of`).
+    crossing_share : float, optional
+        Make T junctions crossings until the share of 4-way junctions is at least this
+        (default: the example's, :func:`crossing_share_of`; ``settings.match_crossings``).
 
     Returns
     -------
@@ -999,13 +1024,10 @@ def connect_points(points: iq.PointSet, rng: np.random.Generator,
             np.zeros(0, dtype=np.int64)
         w.stats.update(w.join_pieces(anchors))
     progress.step(0.9)
-    # closing stubs last: it only adds connections, so the network stays one piece
-    target = dead_end_share_of(points) if dead_end_share is None else float(dead_end_share)
-
     inside = np.ones(0, dtype=bool)
 
-    def share_now() -> float:
-        """Dead ends among the nodes of degree != 2 as the network will be measured
+    def node_degrees() -> np.ndarray:
+        """Degrees of the nodes (degree != 2) as the network will be measured
         (:func:`invariants.dead_end_share`): every point the walker holds, the junctions its
         joins made and the given roads' nodes included, inside the target and away from its
         boundary (a street cut there has no dead end)."""
@@ -1016,9 +1038,66 @@ def connect_points(points: iq.PointSet, rng: np.random.Generator,
                 np.ones(m - len(inside), dtype=bool)
             inside = np.concatenate([inside, more])
         deg = w.deg[:m]
-        counted = (deg > 0) & (deg != 2) & inside
-        k = int(counted.sum())
-        return float((counted & (deg == 1)).sum() / k) if k else 0.0
+        return deg[(deg > 0) & (deg != 2) & inside]
+
+    def crossings_now() -> float:
+        deg = node_degrees()
+        return float((deg >= 4).mean()) if len(deg) else 0.0
+
+    def across(v, split: bool) -> bool:
+        """A T junction becomes a crossing: its own street goes on straight across the
+        street it meets, one step to a connected free point, else (``split``) a T onto the
+        nearest street of its level."""
+        d = np.asarray(w.dirs[v])
+        if w.deg[v] != 3 or len(d) != 3:
+            return False
+        cos = d @ d.T
+        i, j = divmod(int(np.argmin(cos)), 3)  # the street it meets: the straightest pair
+        if cos[i, j] > -0.7:  # a fork (no street runs through): no side to cross to
+            return False
+        slot = 1 if w.p.level[v, 1] >= 0 else 0
+        h = int(w.p.level[v, slot])
+        before = (w.cap[v], w.cnt[v, slot], w.used[v, slot], w.slot_dir[v, slot].copy())
+        w.cap[v], w.cnt[v, slot], w.used[v, slot] = max(w.cap[v], 4), 1, True
+        w.slot_dir[v, slot] = -d[3 - i - j]  # as if the street arrived along its stem
+        added = w.extend(v, slot, h, relaxed="across", origin="across")
+        if not added and split:
+            reach = w.p.dist_mean[v, slot] + s.reach_sd * w.p.dist_sd[v, slot]
+            added = int(w._join_by_split(np.array([v]), None, reach, "across",
+                                         level=h) is not None)
+        if not added:
+            w.cap[v], w.cnt[v, slot], w.used[v, slot], w.slot_dir[v, slot] = before
+        return bool(added)
+
+    def t_junctions():
+        # the example's crossings whose crossing street went on only one way, then the
+        # junction slots of the given roads (a given road crossed, not only met); other T
+        # junctions stay T's (the walk made them so)
+        m = len(w.p)
+        t = (w.deg[:m] == 3) & ((w.p.example >= 0) | (w.p.example == ROAD_SLOT))
+        t[:len(inside)] &= inside
+        was = t & (np.minimum(w.p.degree, s.max_capacity) >= 4)
+        slot = t & ~was & (w.p.example == ROAD_SLOT)
+        return np.concatenate([rng.permutation(np.flatnonzero(was)),
+                               rng.permutation(np.flatnonzero(slot))])
+
+    n_across = 0
+    if s.match_crossings:
+        node_degrees()  # which points count (inside), before the candidates are listed
+        target_x = crossing_share_of(points) if crossing_share is None else \
+            float(crossing_share)
+        # steps onto free points first (they make no new T), then T's onto streets
+        for split in (False, True):
+            n_across += steer_share(crossings_now, target_x, lambda v: False, lambda: (),
+                                    lambda v: across(v, split), t_junctions)[1]
+    w.stats["n_crossings_matched"] = int(n_across)
+    w.stats["crossing_share"] = crossings_now()
+    # closing stubs last: it only adds connections, so the network stays one piece
+    target = dead_end_share_of(points) if dead_end_share is None else float(dead_end_share)
+
+    def share_now() -> float:
+        deg = node_degrees()
+        return float((deg == 1).mean()) if len(deg) else 0.0
 
     def close(v) -> bool:
         """Streets that stopped short of what their point had in the example (deg 1 < cap):
@@ -1611,12 +1690,16 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
         elif shapes_b is not None or shapes is not None:
             shapes = None  # one example without shapes: parabolas for both
     progress.step(0.1)
-    # the dead-end share to close stubs down to: the example's (a blend: the mix)
+    # the dead-end share to close stubs down to and the crossing share to make up to: the
+    # example's (a blend: the mix)
     target_share = dead_end_share_of(example) if dead_end_share is None else \
         float(dead_end_share)
-    if example_b is not None and dead_end_share is None:
+    crossing_share = crossing_share_of(example)
+    if example_b is not None:
         beta = float(np.mean(blend(pts.xy))) if callable(blend) else float(blend)
-        target_share = (1 - beta) * target_share + beta * dead_end_share_of(example_b)
+        if dead_end_share is None:
+            target_share = (1 - beta) * target_share + beta * dead_end_share_of(example_b)
+        crossing_share = (1 - beta) * crossing_share + beta * crossing_share_of(example_b)
     n_new = len(pts)
     existing = None
     ex_lines = None
@@ -1638,7 +1721,8 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
     if n_new == 0:
         raise InputError("no example point is left in the target")
     edges, w = connect_points(pts, rng, settings, existing, dead_end_share=target_share,
-                              area=area, progress=progress.sub(0.1, 0.85))
+                              area=area, progress=progress.sub(0.1, 0.85),
+                              crossing_share=crossing_share)
     pts = w.p
     if len(edges) == 0:
         raise InputError("no street could be made: the points are too far apart for their "
@@ -1693,6 +1777,10 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
         "n_levels": int(len(np.unique(level))),
         "quadtree_leaves": [len(q.leaves) for q in quadtrees],
         "n_closed": w.stats["n_closed"], "n_crossings_made": w.stats["n_crossings_made"],
+        "n_crossings_matched": w.stats["n_crossings_matched"],
+        # measured before the dead ends are steered (a stub closed may add a crossing)
+        "crossing_share": w.stats["crossing_share"],
+        "example_crossing_share": float(crossing_share),
         "n_dead_ends_opened": w.stats["n_dead_ends_opened"],
         "n_joins": w.stats["n_joins"],
         "n_join_splits": w.stats["n_join_splits"],
