@@ -230,10 +230,11 @@ def parcels_evidence():
 
 def performance(pts, shapes):
     """CPU and wall time of whole syntheses (placement, walks, one network, shapes), and of
-    the walks alone (no joins, no closing, parabolas) for the same points."""
+    the walks alone (no joins, no crossings matched, no closing, parabolas) for the same
+    points."""
     density = iq.example_density(pts)
     c = pts.xy.mean(axis=0)
-    walks_only = rw.WalkSettings(close_ends=False, join_pieces=False)
+    walks_only = rw.WalkSettings(close_ends=False, join_pieces=False, match_crossings=False)
     rows = []
     for n in (1000, 2000, 5000, 10000):
         side = np.sqrt(n / density)  # placement fills at the example's density
