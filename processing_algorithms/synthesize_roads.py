@@ -84,7 +84,8 @@ class SynthesizeRoads(AlgorithmBase):
             "Fragments: the example city's roads as written by 'Extract road hierarchy' "
             "(field level), from which the fragment database is built when no FRAGMENT_DB "
             "is given. StreetGAN: the generated streets keep the example's dead-end share "
-            "(measured inside the example's hull, ±30 %).")
+            "(measured inside the example's hull, ±30 %) and make up its share of 4-way "
+            "junctions.")
         self.add(QgsProcessingParameterFeatureSource(
             self.ARTERIALS, "Arterial roads of the district", [QgsProcessing.SourceType.TypeVectorLine]),
             "Sketched or real arterials: they are kept and the new streets connect to them.")
@@ -140,19 +141,23 @@ class SynthesizeRoads(AlgorithmBase):
                 raise QgsProcessingException(
                     f"The arterials {arterials.name} lie on one line: their convex hull has no "
                     "area. Give a District boundary (BOUNDARY).")
-        share = None
+        shares = {}
         if method.key == "gan" and self.given(parameters, self.EXAMPLE_ROADS):
             # the generator keeps the example's dead-end share (the network invariants' band)
+            # and makes up its share of crossings
             example = qgis_io.read_source(self, parameters, self.EXAMPLE_ROADS, context,
                                           feedback, kind="lines", fields=[])
-            share = qgis_io.run_engine(example.name, invariants.dead_end_share_of_extract,
-                                       example.geometry)
-            feedback.pushInfo(f"{example.name}: dead-end share {share:.2f} (inside its hull).")
+            for key, share_of in (("DEAD_END_SHARE", invariants.dead_end_share_of_extract),
+                                  ("CROSSING_SHARE", invariants.crossing_share_of_extract)):
+                shares[key] = qgis_io.run_engine(example.name, share_of, example.geometry)
+            feedback.pushInfo(f"{example.name}: dead-end share {shares['DEAD_END_SHARE']:.2f}, "
+                              f"4-way junctions {shares['CROSSING_SHARE']:.2f} (inside its "
+                              "hull).")
         return self._child_method(parameters, context, feedback, method, arterials, area, seed,
-                                  share)
+                                  shares)
 
     def _child_method(self, parameters, context, feedback, method, arterials, area, seed,
-                      dead_end_share=None):
+                      shares=None):
         import processing  # QGIS's Processing plugin, present wherever algorithms run
 
         fragment_db = self.parameterAsFile(parameters, self.FRAGMENT_DB, context)
@@ -187,8 +192,8 @@ class SynthesizeRoads(AlgorithmBase):
                     "(reinstall the plugin).")
             params = {"TARGET": boundary, "SEED": seed, "MODEL": models.index(GAN_MODEL),
                       "GIVEN_ROADS": parameters[self.ARTERIALS]}
-            if dead_end_share is not None and np.isfinite(dead_end_share):
-                params["DEAD_END_SHARE"] = float(dead_end_share)
+            params.update({key: float(v) for key, v in (shares or {}).items()
+                           if np.isfinite(v)})
         else:
             params = {"BOUNDARY": boundary, "MAJOR_ROADS": parameters[self.ARTERIALS],
                       "DEM": dem, "SEED": seed}

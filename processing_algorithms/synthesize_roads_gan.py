@@ -44,6 +44,7 @@ class SynthesizeRoadsGan(AlgorithmBase):
     FROM_EDGE = "FROM_EDGE"
     DEAD_END_SHARE = "DEAD_END_SHARE"
     MIN_BLOCK_AREA = "MIN_BLOCK_AREA"
+    CROSSING_SHARE = "CROSSING_SHARE"
     OUTPUT = "OUTPUT"
     OUTPUT_RASTER = "OUTPUT_RASTER"
 
@@ -139,6 +140,15 @@ class SynthesizeRoadsGan(AlgorithmBase):
             "adding cul-de-sacs and cutting T stems short. Empty: the "
             "network as read back from the image.", advanced=True)
         self.add(QgsProcessingParameterNumber(
+            self.CROSSING_SHARE, "Share of 4-way junctions to make up to (0-1)",
+            QgsProcessingParameterNumber.Type.Double, optional=True, minValue=0.0, maxValue=1.0),
+            "The example's share of 4-way junctions among the street ends and junctions "
+            "(layoutmetrics' degree4_share of the example, e.g. 0.08 for the Liechtenstein "
+            "towns): while the generated network has fewer, T junctions become crossings, "
+            "their generated street continued straight across to the next generated street "
+            "(crossing nothing, inside the target, along no given road). Empty: the "
+            "junctions as read back from the image.", advanced=True)
+        self.add(QgsProcessingParameterNumber(
             self.MIN_BLOCK_AREA, "Smallest block (m², the example's 10th percentile)",
             QgsProcessingParameterNumber.Type.Double, optional=True, minValue=1.0),
             "The generator draws cells of its own size (on the Liechtenstein towns a quarter "
@@ -205,6 +215,9 @@ class SynthesizeRoadsGan(AlgorithmBase):
         share = None  # as read back
         if parameters.get(self.DEAD_END_SHARE) not in (None, ""):
             share = self.number(parameters, self.DEAD_END_SHARE, context)
+        crossing_share = None  # as read back
+        if parameters.get(self.CROSSING_SHARE) not in (None, ""):
+            crossing_share = self.number(parameters, self.CROSSING_SHARE, context)
         min_block = None
         if parameters.get(self.MIN_BLOCK_AREA) not in (None, ""):
             min_block = self.number(parameters, self.MIN_BLOCK_AREA, context)
@@ -225,7 +238,8 @@ class SynthesizeRoadsGan(AlgorithmBase):
             cell_size=cell or None, max_gap=max_gap, min_dead_end=min_dead,
             from_edge=self.parameterAsBoolean(parameters, self.FROM_EDGE, context),
             progress=qgis_io.progress_for(feedback, 5, 90), given=given,
-            given_class=given_class, dead_end_share=share, min_block_area=min_block)
+            given_class=given_class, dead_end_share=share, min_block_area=min_block,
+            crossing_share=crossing_share)
         s = result.stats
         n_new = int((~result.given).sum())
         feedback.pushInfo(f"Generated {s['pixels'][0]} x {s['pixels'][1]} px in "
@@ -242,6 +256,9 @@ class SynthesizeRoadsGan(AlgorithmBase):
         if min_block is not None:
             feedback.pushInfo(f"{s['small_blocks_merged']} generated street(s) between blocks "
                               f"under {min_block:,.0f} m² removed.")
+        if crossing_share is not None:
+            feedback.pushInfo(f"{s['crossings_made']} T junction(s) made crossings "
+                              f"(4-way share made up to {crossing_share:.2f}).")
         if share is not None:
             feedback.pushInfo(f"Dead-end share steered to {share:.2f}: "
                               f"{s['dead_ends_closed']} dead end(s) closed (or removed "

@@ -201,3 +201,35 @@ def test_given_roads_on_a_town(qgis_processing):
     check = invariants.check_network(geoms[~is_given], case["given"], case["given_class"],
                                      case["area"], example_dead_end_share=share)
     assert check.ok, check.summary()
+
+
+def test_crossing_share_on_a_town_never_seen(qgis_processing):
+    """Eschen with the towns model (trained on other towns), its level-0 roads given: read
+    back, 2.3 % of the nodes are 4-way junctions where the other towns have 7.8 %; with
+    CROSSING_SHARE the example's share, T junctions become crossings up to it (within
+    30 %), and every invariant holds with the example's dead-end share."""
+    from helpers import liechtenstein_town
+    from urban_synthesis.plugin.measure import fidelity
+    from urban_synthesis.plugin.network import invariants
+
+    case = liechtenstein_town("Eschen")
+    example = fidelity.fidelity_statistics(case["example"], case["example_area"])
+    share = invariants.dead_end_share(case["example"], case["example_area"])
+    given = memory_layer("LineString", shapely.to_wkt(case["given"]), "EPSG:32632",
+                         "&field=highway:string", [[c] for c in case["given_class"]],
+                         name="arterials")
+    crossings = []
+    for extra in ({}, {"CROSSING_SHARE": example["degree4_share"]}):
+        out = qgis_processing.run(GAN, {
+            "TARGET": memory_layer("Polygon", [case["area"].wkt], "EPSG:32632"),
+            "GIVEN_ROADS": given, "MODEL": streetgan.shipped_models().index("streetgan_towns"),
+            "SEED": 3, "DEAD_END_SHARE": share, "OUTPUT": "memory:", **extra})
+        rows, geoms = layer_features(out["OUTPUT"])
+        is_given = np.array([r["road_class"] == "given" for r in rows])
+        check = invariants.check_network(geoms[~is_given], case["given"], case["given_class"],
+                                         case["area"], example_dead_end_share=share)
+        assert check.ok, check.summary()
+        assert_planar(geoms)
+        crossings.append(fidelity.fidelity_statistics(geoms, case["area"])["degree4_share"])
+    assert crossings[0] < 0.5 * example["degree4_share"]
+    assert crossings[1] == pytest.approx(example["degree4_share"], rel=0.3)

@@ -67,8 +67,9 @@ __all__ = [
     "corridor_of",
     "DEAD_END_TOLERANCE", "EDGE_DISTANCE", "SNAP_TOLERANCE", "UNDERSHOOT_DISTANCE",
     "CONTROLLED_ACCESS",
-    "CHECKS", "Contacts", "NetworkCheck", "line_contacts", "dead_end_share", "counted_nodes",
-    "dead_end_share_of_extract", "new_streets", "check_network", "corridor_around",
+    "CHECKS", "Contacts", "NetworkCheck", "line_contacts", "node_degrees", "dead_end_share",
+    "crossing_share", "counted_nodes", "dead_end_share_of_extract", "crossing_share_of_extract",
+    "new_streets", "check_network", "corridor_around",
     "doubles_a_street",
 ]
 
@@ -249,32 +250,48 @@ def _unique_points(points: np.ndarray, tolerance: float) -> np.ndarray:
     return points[np.sort(first)]
 
 
-def dead_end_share(lines: Sequence, area=None, edge_distance: float = EDGE_DISTANCE,
-                   snap_tolerance: float = SNAP_TOLERANCE) -> float:
-    """Share of dead ends among the nodes of degree != 2 of a noded street network.
+def node_degrees(lines: Sequence, area=None, edge_distance: float = EDGE_DISTANCE,
+                 snap_tolerance: float = SNAP_TOLERANCE) -> np.ndarray:
+    """Degrees of the nodes of degree != 2 of a noded street network, as its shares count.
 
     Lines are noded at crossings, nodes closer than ``snap_tolerance`` merged and chains
     through degree-2 nodes dissolved: the street graph of ``layoutmetrics`` (its default
-    0.5 m), so that this is its ``dead_end_share``; with ``area``, only nodes inside it (or
-    on its boundary, within the millimetre the nodes are rounded to) and at least
-    ``edge_distance`` m from its boundary count (the ends of a network clipped to the area
-    are not dead ends).
-
-    Returns
-    -------
-    float in [0, 1], NaN when no node counts.
+    0.5 m); with ``area``, only nodes inside it (or on its boundary, within the millimetre
+    the nodes are rounded to) and at least ``edge_distance`` m from its boundary count (the
+    ends of a network clipped to the area are not dead ends).
     """
     lines, _ = _lines(lines, "roads")
     if not len(lines):
-        return float("nan")
+        return np.zeros(0, dtype=np.int64)
     g = clean_network(lines, snap_tolerance=snap_tolerance, min_dangle_length=0.0,
                       merge_degree2=True, duplicate_tolerance=snap_tolerance)
     deg = g.degree
     count = deg != 2
     if area is not None:
         count &= counted_nodes(g.nodes, area, edge_distance)
-    n = int(count.sum())
-    return float(((deg == 1) & count).sum() / n) if n else float("nan")
+    return deg[count]
+
+
+def dead_end_share(lines: Sequence, area=None, edge_distance: float = EDGE_DISTANCE,
+                   snap_tolerance: float = SNAP_TOLERANCE) -> float:
+    """Share of dead ends among the nodes of degree != 2 of a noded street network (counted
+    as :func:`node_degrees` counts them: ``layoutmetrics``' ``dead_end_share``).
+
+    Returns
+    -------
+    float in [0, 1], NaN when no node counts.
+    """
+    deg = node_degrees(lines, area, edge_distance, snap_tolerance)
+    return float((deg == 1).mean()) if len(deg) else float("nan")
+
+
+def crossing_share(lines: Sequence, area=None, edge_distance: float = EDGE_DISTANCE,
+                   snap_tolerance: float = SNAP_TOLERANCE) -> float:
+    """Share of 4-way (and more) junctions among the nodes of degree != 2 (counted as
+    :func:`node_degrees` counts them: ``layoutmetrics``' ``degree4_share``); NaN when no
+    node counts."""
+    deg = node_degrees(lines, area, edge_distance, snap_tolerance)
+    return float((deg >= 4).mean()) if len(deg) else float("nan")
 
 
 def counted_nodes(xy: np.ndarray, area, edge_distance: float = EDGE_DISTANCE) -> np.ndarray:
@@ -300,10 +317,26 @@ def dead_end_share_of_extract(lines: Sequence) -> float:
     >>> round(dead_end_share_of_extract(lines), 3), round(dead_end_share(lines), 3)
     (0.333, 0.714)
     """
+    return _share_of_extract(dead_end_share, lines)
+
+
+def crossing_share_of_extract(lines: Sequence) -> float:
+    """:func:`crossing_share` of an example known only by its lines, inside their convex hull
+    (as :func:`dead_end_share_of_extract`).
+
+    >>> lines = [shapely.LineString([(0, 50), (100, 50)]), shapely.LineString([(50, 0), (50, 100)]),
+    ...          shapely.LineString([(75, 50), (75, 70)])]
+    >>> round(crossing_share_of_extract(lines), 3)
+    0.333
+    """
+    return _share_of_extract(crossing_share, lines)
+
+
+def _share_of_extract(share, lines) -> float:
     lines, _ = _lines(lines, "roads")
     if not len(lines):
         return float("nan")
-    return dead_end_share(lines, shapely.convex_hull(shapely.multilinestrings(list(lines))))
+    return share(lines, shapely.convex_hull(shapely.multilinestrings(list(lines))))
 
 
 def corridor_of(given: Sequence, half_width: float = CORRIDOR_HALF_WIDTH, quad_segs: int = 4):

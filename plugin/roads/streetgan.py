@@ -339,7 +339,8 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
                progress: Optional[Progress] = None, generate_fn=None, given=None,
                given_class=None, merge_junctions: Optional[float] = None,
                dead_end_share: Optional[float] = None,
-               min_block_area: Optional[float] = None) -> StreetGanResult:
+               min_block_area: Optional[float] = None,
+               crossing_share: Optional[float] = None) -> StreetGanResult:
     """Generate a road network over a target polygon (thesis ch. 4.2).
 
     Parameters
@@ -373,6 +374,11 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
         streets between blocks under it are removed until at most a tenth of the blocks
         are smaller (:func:`network.small_blocks.merge_small_blocks`; not in the thesis:
         the generator draws cells of its own size); None: the cells as read back
+    crossing_share : float in [0, 1], optional, the example's share of 4-way junctions:
+        while the network has fewer, T junctions become crossings, their generated street
+        continued straight across to the next generated street
+        (:func:`network.crossings.match_crossings`; not in the thesis); None: the
+        junctions as read back
     """
     progress = ensure(progress)
     gen = model if isinstance(model, Generator) else load_model(model)
@@ -381,8 +387,9 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
     area = shapely.make_valid(shapely.union_all(geoms)) if len(geoms) else None
     if area is None or area.is_empty or area.area <= 0:
         raise InputError("the target has no area")
-    if dead_end_share is not None and not 0 <= dead_end_share <= 1:
-        raise InputError(f"the dead-end share must lie in [0, 1], got {dead_end_share}")
+    for name, value in (("dead-end", dead_end_share), ("crossing", crossing_share)):
+        if value is not None and not 0 <= value <= 1:
+            raise InputError(f"the {name} share must lie in [0, 1], got {value}")
     if min_block_area is not None and not (math.isfinite(min_block_area) and min_block_area > 0):
         raise InputError(f"the smallest block area must be a positive number of m², not "
                          f"{min_block_area}")
@@ -448,6 +455,14 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
         lines, is_new, n_merged = merge_small_blocks(lines, ~is_given, float(min_block_area),
                                                      area)
         is_given = ~is_new
+    n_crossings = 0
+    if crossing_share is not None and len(lines) > 1:
+        from ..network.crossings import match_crossings
+
+        lines, is_new, n_crossings = match_crossings(lines, ~is_given, float(crossing_share),
+                                                     area, np.random.default_rng(seed),
+                                                     given=given_lines)
+        is_given = ~is_new
     steered = (0, 0)
     if dead_end_share is not None and len(lines) > 1:
         from ..network.dead_ends import steer_dead_ends
@@ -480,7 +495,8 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
                  vectorize_s=round(t_vec, 4), area_km2=area.area / 1e6, model=gen.name,
                  seed=int(seed), edges_clipped=int((~is_given).sum()),
                  n_joined_to_drawn_roads=int(n_cut), dead_ends_closed=int(steered[0]),
-                 dead_ends_opened=int(steered[1]), small_blocks_merged=int(n_merged), **attach)
+                 dead_ends_opened=int(steered[1]), small_blocks_merged=int(n_merged),
+                 crossings_made=int(n_crossings), **attach)
     return StreetGanResult(np.asarray(lines, dtype=object), level, image, gt, stats, is_given)
 
 

@@ -19,7 +19,9 @@ For each target town:
 - **methods** (5 seeds each; the references 1 unless ``--reference-seeds``): fragments
   (database built from the example), random walk
   (intersection points of the example, expanding the given roads), StreetGAN (the shipped
-  Helsinki generator), and the non-example references growroads and splitdomain (without
+  towns generator where it never saw the town, else the Helsinki one; the example's
+  dead-end and crossing shares steered to), and the non-example references growroads and
+  splitdomain (without
   its global mesh optimisation, which costs ten times the rest on 2 cores).
 - **baselines** in the same target, given roads included: a grid at the example's median
   segment length, random chords and random Delaunay edges up to the example's km / km².
@@ -222,7 +224,8 @@ class Runner:
         return streetgan.synthesize(self.target.area, model, seed=seed, given=self.target.given,
                                     given_class=self.target.given_class,
                                     dead_end_share=self.example.stats["degree1_share"],
-                                    min_block_area=min_block).geometry
+                                    min_block_area=min_block,
+                                    crossing_share=self.example.stats["degree4_share"]).geometry
 
     def growroads(self, seed: int) -> np.ndarray:
         from urban_synthesis.plugin.roads import growth

@@ -1,0 +1,86 @@
+"""The crossing-share steering of a network of lines (network/crossings.py)."""
+
+import numpy as np
+import pytest
+import shapely
+
+from helpers import assert_planar
+from urban_synthesis.plugin.measure import fidelity
+from urban_synthesis.plugin.network.crossings import match_crossings
+
+
+def _ladder(bottom_given=False):
+    """Three east-west streets 100 m apart and four stems between the upper two: eight T
+    junctions, no crossing. The stems' T's on the middle street can go on south to the
+    bottom street."""
+    rows = [shapely.LineString([(0, y), (500, y)]) for y in (-100, 0, 100)]
+    stems = [shapely.LineString([(x, 0), (x, 100)]) for x in (100, 200, 300, 400)]
+    lines = np.array(rows + stems, dtype=object)
+    is_new = np.ones(len(lines), bool)
+    if bottom_given:
+        is_new[0] = False
+    return lines, is_new
+
+
+def _noded(lines, is_new):
+    from urban_synthesis.plugin.network.street_graph import renode
+
+    return renode(lines, is_new, np.zeros(len(lines), np.int64))
+
+
+AREA = shapely.box(-50, -150, 550, 150)
+
+
+def test_t_junctions_become_straight_crossings_up_to_the_share():
+    lines, is_new = _ladder()
+    pieces, parent = _noded(lines, is_new)
+    before = fidelity.fidelity_statistics(pieces, AREA)["degree4_share"]
+    assert before == 0.0
+    # the middle street's T's and the ends of the three streets are the nodes: two of the
+    # four stems going on south (two crossings, two new T's: 2 of 16) reach a share of 0.1
+    out, new, made = match_crossings(pieces, is_new[parent], 0.1, AREA,
+                                     np.random.default_rng(0), reach=150.0)
+    assert made == 2
+    assert fidelity.fidelity_statistics(out, AREA)["degree4_share"] == pytest.approx(2 / 16)
+    assert_planar(out)
+    assert new.all()
+    # each one its stem straight on south, onto the bottom street
+    south = [g for g in out if g.bounds[1] == -100 and g.bounds[3] == 0]
+    assert len(south) == made and all(g.bounds[0] == g.bounds[2] for g in south)
+    # a share the stems cannot reach: every stem goes on, and no more
+    out, _, made = match_crossings(pieces, is_new[parent], 0.9, AREA,
+                                   np.random.default_rng(0), reach=150.0)
+    assert made == 4
+    assert fidelity.fidelity_statistics(out, AREA)["degree4_share"] == pytest.approx(4 / 18)
+
+
+def test_no_street_ends_on_a_given_road_or_out_of_reach():
+    lines, is_new = _ladder(bottom_given=True)
+    pieces, parent = _noded(lines, is_new)
+    out, new, made = match_crossings(pieces, is_new[parent], 0.5, AREA,
+                                     np.random.default_rng(0), reach=150.0)
+    assert made == 0 and len(out) == len(pieces)
+    lines, is_new = _ladder()
+    pieces, parent = _noded(lines, is_new)
+    out, new, made = match_crossings(pieces, is_new[parent], 0.5, AREA,
+                                     np.random.default_rng(0), reach=80.0)
+    assert made == 0
+
+
+def test_a_network_with_enough_crossings_is_returned_as_it_is():
+    grid = [shapely.LineString([(0, y), (300, y)]) for y in (0, 100, 200)] + \
+        [shapely.LineString([(x, 0), (x, 200)]) for x in (0, 100, 200, 300)]
+    pieces, _ = _noded(np.array(grid, dtype=object), np.ones(len(grid), bool))
+    out, new, made = match_crossings(pieces, np.ones(len(pieces), bool), 0.1,
+                                     shapely.box(-50, -50, 350, 250), np.random.default_rng(0))
+    assert made == 0 and out is pieces
+
+
+@pytest.mark.parametrize("share", [-0.1, 1.5])
+def test_streetgan_refuses_a_share_outside_0_1(share):
+    from urban_synthesis.plugin.core.progress import InputError
+    from urban_synthesis.plugin.roads import streetgan
+
+    with pytest.raises(InputError, match="crossing share"):
+        streetgan.synthesize(shapely.box(0, 0, 300, 300), "streetgan_towns",
+                             crossing_share=share)
