@@ -84,8 +84,7 @@ class SynthesizeRoads(AlgorithmBase):
             "Fragments: the example city's roads as written by 'Extract road hierarchy' "
             "(field level), from which the fragment database is built when no FRAGMENT_DB "
             "is given. StreetGAN: the generated streets keep the example's dead-end share "
-            "(measured inside the example's hull, ±30 %) and make up its share of 4-way "
-            "junctions.")
+            "(measured inside the example's hull, ±30 %) and its share of 4-way junctions.")
         self.add(QgsProcessingParameterFeatureSource(
             self.ARTERIALS, "Arterial roads of the district", [QgsProcessing.SourceType.TypeVectorLine]),
             "Sketched or real arterials: they are kept and the new streets connect to them.")
@@ -144,7 +143,7 @@ class SynthesizeRoads(AlgorithmBase):
         shares = {}
         if method.key == "gan" and self.given(parameters, self.EXAMPLE_ROADS):
             # the generator keeps the example's dead-end share (the network invariants' band)
-            # and makes up its share of crossings
+            # and its share of crossings
             example = qgis_io.read_source(self, parameters, self.EXAMPLE_ROADS, context,
                                           feedback, kind="lines", fields=[])
             for key, share_of in (("DEAD_END_SHARE", invariants.dead_end_share_of_extract),

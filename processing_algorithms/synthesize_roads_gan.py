@@ -140,14 +140,16 @@ class SynthesizeRoadsGan(AlgorithmBase):
             "adding cul-de-sacs and cutting T stems short. Empty: the "
             "network as read back from the image.", advanced=True)
         self.add(QgsProcessingParameterNumber(
-            self.CROSSING_SHARE, "Share of 4-way junctions to make up to (0-1)",
+            self.CROSSING_SHARE, "Share of 4-way junctions to steer to (0-1)",
             QgsProcessingParameterNumber.Type.Double, optional=True, minValue=0.0, maxValue=1.0),
             "The example's share of 4-way junctions among the street ends and junctions "
             "(layoutmetrics' degree4_share of the example, e.g. 0.08 for the Liechtenstein "
             "towns): while the generated network has fewer, T junctions become crossings, "
             "their generated street continued straight across to the next generated street "
-            "(crossing nothing, inside the target, along no given road). Empty: the "
-            "junctions as read back from the image.", advanced=True)
+            "(crossing nothing, inside the target, along no given road); while it has more, "
+            "generated streets at crossings are removed where both their ends stay "
+            "junctions, smallest merged blocks first. Empty: the junctions as read back "
+            "from the image.", advanced=True)
         self.add(QgsProcessingParameterNumber(
             self.MIN_BLOCK_AREA, "Smallest block (m², the example's 10th percentile)",
             QgsProcessingParameterNumber.Type.Double, optional=True, minValue=1.0),
@@ -257,8 +259,10 @@ class SynthesizeRoadsGan(AlgorithmBase):
             feedback.pushInfo(f"{s['small_blocks_merged']} generated street(s) between blocks "
                               f"under {min_block:,.0f} m² removed.")
         if crossing_share is not None:
-            feedback.pushInfo(f"{s['crossings_made']} T junction(s) made crossings "
-                              f"(4-way share made up to {crossing_share:.2f}).")
+            feedback.pushInfo(f"4-way junctions steered to {crossing_share:.2f}: "
+                              f"{s['crossings_made']} T junction(s) made crossings, "
+                              f"{s['crossing_streets_removed']} street(s) at crossings "
+                              "removed.")
         if share is not None:
             feedback.pushInfo(f"Dead-end share steered to {share:.2f}: "
                               f"{s['dead_ends_closed']} dead end(s) closed (or removed "

@@ -38,7 +38,7 @@ def test_t_junctions_become_straight_crossings_up_to_the_share():
     assert before == 0.0
     # the middle street's T's and the ends of the three streets are the nodes: two of the
     # four stems going on south (two crossings, two new T's: 2 of 16) reach a share of 0.1
-    out, new, made = match_crossings(pieces, is_new[parent], 0.1, AREA,
+    out, new, (made, _) = match_crossings(pieces, is_new[parent], 0.1, AREA,
                                      np.random.default_rng(0), reach=150.0)
     assert made == 2
     assert fidelity.fidelity_statistics(out, AREA)["degree4_share"] == pytest.approx(2 / 16)
@@ -48,7 +48,7 @@ def test_t_junctions_become_straight_crossings_up_to_the_share():
     south = [g for g in out if g.bounds[1] == -100 and g.bounds[3] == 0]
     assert len(south) == made and all(g.bounds[0] == g.bounds[2] for g in south)
     # a share the stems cannot reach: every stem goes on, and no more
-    out, _, made = match_crossings(pieces, is_new[parent], 0.9, AREA,
+    out, _, (made, _) = match_crossings(pieces, is_new[parent], 0.9, AREA,
                                    np.random.default_rng(0), reach=150.0)
     assert made == 4
     assert fidelity.fidelity_statistics(out, AREA)["degree4_share"] == pytest.approx(4 / 18)
@@ -57,23 +57,48 @@ def test_t_junctions_become_straight_crossings_up_to_the_share():
 def test_no_street_ends_on_a_given_road_or_out_of_reach():
     lines, is_new = _ladder(bottom_given=True)
     pieces, parent = _noded(lines, is_new)
-    out, new, made = match_crossings(pieces, is_new[parent], 0.5, AREA,
+    out, new, (made, _) = match_crossings(pieces, is_new[parent], 0.5, AREA,
                                      np.random.default_rng(0), reach=150.0)
     assert made == 0 and len(out) == len(pieces)
     lines, is_new = _ladder()
     pieces, parent = _noded(lines, is_new)
-    out, new, made = match_crossings(pieces, is_new[parent], 0.5, AREA,
+    out, new, (made, _) = match_crossings(pieces, is_new[parent], 0.5, AREA,
                                      np.random.default_rng(0), reach=80.0)
     assert made == 0
 
 
-def test_a_network_with_enough_crossings_is_returned_as_it_is():
-    grid = [shapely.LineString([(0, y), (300, y)]) for y in (0, 100, 200)] + \
-        [shapely.LineString([(x, 0), (x, 200)]) for x in (0, 100, 200, 300)]
-    pieces, _ = _noded(np.array(grid, dtype=object), np.ones(len(grid), bool))
-    out, new, made = match_crossings(pieces, np.ones(len(pieces), bool), 0.1,
-                                     shapely.box(-50, -50, 350, 250), np.random.default_rng(0))
-    assert made == 0 and out is pieces
+def test_too_many_crossings_lose_streets_between_junctions():
+    """A 5 x 4 grid of streets 100 m apart: 6 crossings among 16 counted nodes (the T's on
+    its edge; its corners are bends). Down to a share of 0.25, streets at crossings go,
+    smallest merged blocks first: no dead end is made, nothing floats, the given outline
+    stays, and blocks merge."""
+    from urban_synthesis.plugin.network import invariants
+
+    rows = [shapely.LineString([(0, y), (400, y)]) for y in (0, 100, 200, 300)]
+    cols = [shapely.LineString([(x, 0), (x, 300)]) for x in (0, 100, 200, 300, 400)]
+    lines = np.array(rows + cols, dtype=object)
+    is_new = np.ones(len(lines), bool)
+    is_new[[0, 3, 4, 8]] = False   # the outline is given
+    pieces, parent = _noded(lines, is_new)
+    area = shapely.box(-20, -20, 420, 320)
+    before = invariants.crossing_share(pieces, area)
+    assert before == pytest.approx(6 / 16)
+    out, new, (made, removed) = match_crossings(pieces, is_new[parent], 0.25, area,
+                                                np.random.default_rng(0))
+    assert made == 0 and removed >= 1
+    assert invariants.crossing_share(out, area) <= 0.25
+    assert invariants.dead_end_share(out, area) == 0.0
+    assert_planar(out)
+    check = invariants.check_network(out[new], out[~new], None, area)
+    assert check.floating_pieces == 0
+    outline = shapely.union_all(out[~new])
+    assert outline.equals(shapely.union_all(lines[~is_new]))
+    faces = shapely.get_parts(shapely.polygonize(out))
+    assert len(faces) == 12 - removed
+    # a share the network already has: nothing changes
+    same, _, (made, removed) = match_crossings(pieces, is_new[parent], before, area,
+                                               np.random.default_rng(0))
+    assert (made, removed) == (0, 0) and same is pieces
 
 
 @pytest.mark.parametrize("share", [-0.1, 1.5])

@@ -24,7 +24,7 @@ from scipy.cluster.hierarchy import DisjointSet
 
 from .street_graph import node_lines
 
-__all__ = ["merge_small_blocks"]
+__all__ = ["merge_small_blocks", "fewer_crossings"]
 
 #: Line ends closer than this (m) are one node.
 _NODE_GRID = 1e-3
@@ -50,40 +50,16 @@ def merge_small_blocks(lines: Sequence, is_new: Sequence, min_area: float, area=
     is_new = np.asarray(is_new, dtype=bool)
     if not len(lines) or not np.isfinite(min_area) or min_area <= 0:
         return lines, is_new, 0
-    pieces = node_lines(lines)
-    pieces = pieces[shapely.length(pieces) > 0]
-    mids = shapely.line_interpolate_point(pieces, 0.5, normalized=True)
-    # a piece is given where it lies on a given line
-    given = lines[~is_new]
-    new = np.ones(len(pieces), dtype=bool)
-    if len(given):
-        hit = shapely.STRtree(given).query(mids, predicate="dwithin", distance=_NODE_GRID)[0]
-        new[hit] = False
-    ends = np.stack([shapely.get_coordinates(shapely.get_point(pieces, 0)),
-                     shapely.get_coordinates(shapely.get_point(pieces, -1))], axis=1)
-    keys = np.round(ends.reshape(-1, 2) / _NODE_GRID).astype(np.int64)
-    _, node = np.unique(keys, axis=0, return_inverse=True)
-    node = node.reshape(-1, 2)
-    degree = np.bincount(node.ravel(), minlength=int(node.max()) + 1)
-    alive = np.ones(len(pieces), dtype=bool)
-    if area is not None:
-        shapely.prepare(area)
+    net = _Network(lines, is_new, area)
     removed = 0
     while True:
-        faces = shapely.get_parts(shapely.polygonize(pieces[alive]))
-        if area is not None and len(faces):
-            faces = faces[shapely.within(shapely.point_on_surface(faces), area)]
+        faces, fa = net.faces()
         if not len(faces):
             break
-        fa = shapely.area(faces)
         small = np.flatnonzero(fa < min_area)
         if len(small) <= share * len(faces):
             break
-        chain, removable = _chains(node, degree, alive, new)
-        on_p, on_f = shapely.STRtree(shapely.get_exterior_ring(faces)).query(
-            mids, predicate="dwithin", distance=_NODE_GRID)
-        keep = alive[on_p]
-        on_p, on_f = on_p[keep], on_f[keep]
+        on_p, on_f, chain, removable = net.sides(faces)
         best = None
         for f in small[np.argsort(fa[small], kind="stable")]:
             for p in on_p[(on_f == f) & removable[chain[on_p]]]:
@@ -94,20 +70,114 @@ def merge_small_blocks(lines: Sequence, is_new: Sequence, min_area: float, area=
                 break
         if best is None:
             break
-        gone = alive & (chain == best[1])
-        alive[gone] = False
-        np.subtract.at(degree, node[gone].ravel(), 1)   # its inner nodes drop to 0
+        net.remove(chain, best[1])
         removed += 1
-    # the pieces of a street left between two junctions are one line again
-    chain, _ = _chains(node, degree, alive, new)
-    out, out_new = [], []
-    for root, members in _members(chain[alive], np.flatnonzero(alive)).items():
-        merged = shapely.line_merge(shapely.union_all(pieces[members])) \
-            if len(members) > 1 else pieces[members[0]]
-        parts = shapely.get_parts(merged)
-        out += list(parts)
-        out_new += [bool(new[members[0]])] * len(parts)
-    return np.asarray(out, dtype=object), np.asarray(out_new, dtype=bool), removed
+    return (*net.lines(), removed)
+
+
+def fewer_crossings(lines: Sequence, is_new: Sequence, share: float, area,
+                    share_of) -> Tuple[np.ndarray, np.ndarray, int]:
+    """While the share of 4-way junctions is above ``share``, remove the synthesised street
+    at a 4-way junction whose two blocks together are the smallest: the crossing becomes a
+    T and the two blocks one (a street whose ends both stay junctions, between two faces:
+    no dead end, no floating piece).
+
+    ``share_of(lines) -> float``: the share as it will be measured
+    (:func:`invariants.crossing_share` in the target). Returns (lines noded, is_new,
+    streets removed).
+    """
+    lines = np.asarray(lines, dtype=object)
+    is_new = np.asarray(is_new, dtype=bool)
+    if not len(lines) or not np.isfinite(share):
+        return lines, is_new, 0
+    net = _Network(lines, is_new, area)
+    inside = np.ones(len(net.node_xy), dtype=bool) if area is None else \
+        shapely.contains_xy(area, *net.node_xy.T)
+    removed = 0
+    while share_of(net.pieces[net.alive]) > share:
+        faces, fa = net.faces()
+        if not len(faces):
+            break
+        on_p, on_f, chain, removable = net.sides(faces)
+        crossing = inside & (net.degree >= 4)
+        best = None
+        for p in on_p[removable[chain[on_p]]]:
+            ends = net.chain_ends(chain, chain[p])
+            if not crossing[ends].any():
+                continue
+            merged = fa[on_f[on_p == p]].sum()
+            if best is None or merged < best[0]:
+                best = (float(merged), int(chain[p]))
+        if best is None:
+            break
+        net.remove(chain, best[1])
+        removed += 1
+    return (*net.lines(), removed)
+
+
+class _Network:
+    """A network noded into pieces, with node ids, degrees and which pieces are synthesised
+    (a piece is given where it lies on a given line); streets are removed piece by piece
+    and the rest joined again into lines between junctions."""
+
+    def __init__(self, lines, is_new, area):
+        pieces = node_lines(lines)
+        self.pieces = pieces[shapely.length(pieces) > 0]
+        self.mids = shapely.line_interpolate_point(self.pieces, 0.5, normalized=True)
+        given = lines[~is_new]
+        self.new = np.ones(len(self.pieces), dtype=bool)
+        if len(given):
+            hit = shapely.STRtree(given).query(self.mids, predicate="dwithin",
+                                               distance=_NODE_GRID)[0]
+            self.new[hit] = False
+        ends = np.stack([shapely.get_coordinates(shapely.get_point(self.pieces, 0)),
+                         shapely.get_coordinates(shapely.get_point(self.pieces, -1))], axis=1)
+        keys = np.round(ends.reshape(-1, 2) / _NODE_GRID).astype(np.int64)
+        _, first, node = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+        self.node = node.reshape(-1, 2)
+        self.node_xy = ends.reshape(-1, 2)[first]
+        self.degree = np.bincount(self.node.ravel(), minlength=int(self.node.max()) + 1)
+        self.alive = np.ones(len(self.pieces), dtype=bool)
+        self.area = area
+        if area is not None:
+            shapely.prepare(area)
+
+    def faces(self):
+        faces = shapely.get_parts(shapely.polygonize(self.pieces[self.alive]))
+        if self.area is not None and len(faces):
+            faces = faces[shapely.within(shapely.point_on_surface(faces), self.area)]
+        return faces, shapely.area(faces)
+
+    def sides(self, faces):
+        """(piece, face) pairs of live pieces on the faces' outlines, each piece's chain and
+        which chains may be removed."""
+        chain, removable = _chains(self.node, self.degree, self.alive, self.new)
+        on_p, on_f = shapely.STRtree(shapely.get_exterior_ring(faces)).query(
+            self.mids, predicate="dwithin", distance=_NODE_GRID)
+        keep = self.alive[on_p]
+        return on_p[keep], on_f[keep], chain, removable
+
+    def chain_ends(self, chain, root):
+        members = np.flatnonzero(self.alive & (chain == root))
+        v = self.node[members].ravel()
+        return v[self.degree[v] != 2]
+
+    def remove(self, chain, root):
+        gone = self.alive & (chain == root)
+        self.alive[gone] = False
+        np.subtract.at(self.degree, self.node[gone].ravel(), 1)   # its inner nodes drop to 0
+
+    def lines(self):
+        """The live pieces of a street between two junctions joined into one line again."""
+        chain, _ = _chains(self.node, self.degree, self.alive, self.new)
+        out, out_new = [], []
+        for root, members in _members(chain[self.alive], np.flatnonzero(self.alive)).items():
+            merged = shapely.line_merge(shapely.union_all(self.pieces[members])) \
+                if len(members) > 1 else self.pieces[members[0]]
+            parts = shapely.get_parts(merged)
+            out += list(parts)
+            out_new += [bool(self.new[members[0]])] * len(parts)
+        return np.asarray(out, dtype=object), np.asarray(out_new, dtype=bool)
 
 
 def _chains(node: np.ndarray, degree: np.ndarray, alive: np.ndarray, new: np.ndarray):

@@ -375,10 +375,10 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
         are smaller (:func:`network.small_blocks.merge_small_blocks`; not in the thesis:
         the generator draws cells of its own size); None: the cells as read back
     crossing_share : float in [0, 1], optional, the example's share of 4-way junctions:
-        while the network has fewer, T junctions become crossings, their generated street
-        continued straight across to the next generated street
-        (:func:`network.crossings.match_crossings`; not in the thesis); None: the
-        junctions as read back
+        the network's is steered to it (:func:`network.crossings.match_crossings`: T
+        junctions become crossings, their generated street continued straight across to the
+        next generated street, or generated streets at crossings are removed, smallest
+        merged blocks first; not in the thesis); None: the junctions as read back
     """
     progress = ensure(progress)
     gen = model if isinstance(model, Generator) else load_model(model)
@@ -455,13 +455,13 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
         lines, is_new, n_merged = merge_small_blocks(lines, ~is_given, float(min_block_area),
                                                      area)
         is_given = ~is_new
-    n_crossings = 0
+    crossings = (0, 0)
     if crossing_share is not None and len(lines) > 1:
         from ..network.crossings import match_crossings
 
-        lines, is_new, n_crossings = match_crossings(lines, ~is_given, float(crossing_share),
-                                                     area, np.random.default_rng(seed),
-                                                     given=given_lines)
+        lines, is_new, crossings = match_crossings(lines, ~is_given, float(crossing_share),
+                                                   area, np.random.default_rng(seed),
+                                                   given=given_lines)
         is_given = ~is_new
     steered = (0, 0)
     if dead_end_share is not None and len(lines) > 1:
@@ -496,7 +496,8 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
                  seed=int(seed), edges_clipped=int((~is_given).sum()),
                  n_joined_to_drawn_roads=int(n_cut), dead_ends_closed=int(steered[0]),
                  dead_ends_opened=int(steered[1]), small_blocks_merged=int(n_merged),
-                 crossings_made=int(n_crossings), **attach)
+                 crossings_made=int(crossings[0]), crossing_streets_removed=int(crossings[1]),
+                 **attach)
     return StreetGanResult(np.asarray(lines, dtype=object), level, image, gt, stats, is_given)
 
 
