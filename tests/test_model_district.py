@@ -128,8 +128,8 @@ def test_synthesize_roads_runs_each_method(qgis_processing, helsinki_arterials, 
         example = _read(hierarchy, None).to_crs(3067).geometry.values
         share = invariants.dead_end_share_of_extract(example)
         assert abs(invariants.dead_end_share(lines, hull) - share) <= 0.3 * share
-        # and makes up crossings towards Helsinki's 35 % (read back: 12 %; T's continued
-        # across: 20 %, as far as the generated streets reach)
+        # and makes up crossings towards Helsinki's 35 % (read back: 12 %; with T's
+        # continued across, over half of it, as far as the generated streets reach)
         assert invariants.crossing_share(lines, hull) > \
             0.5 * invariants.crossing_share_of_extract(example)
 
