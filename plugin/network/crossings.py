@@ -26,7 +26,7 @@ from .links import meets_only_at_ends
 from .small_blocks import fewer_crossings
 from .street_graph import clean_network, renode
 
-__all__ = ["match_crossings", "STRAIGHT_THROUGH", "MIN_ANGLE"]
+__all__ = ["match_crossings", "t_stem", "STRAIGHT_THROUGH", "MIN_ANGLE"]
 
 #: A T's two other streets run through (the street it meets) when they leave the junction
 #: at least this far from the same direction (cosine below -0.7: 134 degrees or more).
@@ -36,6 +36,20 @@ STRAIGHT_THROUGH = -0.7
 MIN_ANGLE = 25.0
 #: m: a stem's direction is taken along its first this many metres.
 STEM_PROBE = 20.0
+
+
+def t_stem(directions: np.ndarray) -> Optional[int]:
+    """Of a junction's three street directions (unit vectors, (3, 2)), the index of the T's
+    own street (the stem): the other two are the street it meets, running through (their
+    straightest pair, :data:`STRAIGHT_THROUGH`); None for a fork, where no street runs
+    through and there is no side to cross to.
+
+    >>> t_stem(np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0]]))
+    2
+    """
+    cos = directions @ directions.T
+    i, j = divmod(int(np.argmin(cos)), 3)
+    return None if cos[i, j] > STRAIGHT_THROUGH else 3 - i - j
 
 
 def match_crossings(lines, is_new, share: float, area, rng: np.random.Generator,
@@ -73,13 +87,11 @@ def match_crossings(lines, is_new, share: float, area, rng: np.random.Generator,
     deg = np.bincount(np.r_[u, v], minlength=len(nodes))
     counted = counted_nodes(nodes, area)
     added = []   # the continued streets, in the order they were made
+    new_ts = 0   # their far ends: new T junctions, where they count
 
     def share_now() -> float:
-        # the continued streets' far ends are new T junctions where they count
-        ends = np.array([s.coords[-1] for s in added]).reshape(-1, 2)
-        n_t = int(counted_nodes(ends, area).sum()) if len(ends) else 0
         nodes_ = counted & (deg > 0) & (deg != 2)
-        k = int(nodes_.sum()) + n_t
+        k = int(nodes_.sum()) + new_ts
         return float((nodes_ & (deg >= 4)).sum() / k) if k else 0.0
 
     now = share_now()
@@ -111,13 +123,12 @@ def match_crossings(lines, is_new, share: float, area, rng: np.random.Generator,
     start = np.searchsorted(inc_node[order], np.arange(len(nodes)))
 
     def across(k) -> bool:
+        nonlocal new_ts
         rows = order[start[k]:start[k] + 3]
         d = direction[rows]
-        cos = d @ d.T
-        i, j = divmod(int(np.argmin(cos)), 3)
-        if cos[i, j] > STRAIGHT_THROUGH:
-            return False   # a fork: no street runs through
-        stem = 3 - i - j
+        stem = t_stem(d)
+        if stem is None:
+            return False
         if not edge_new[inc_edge[rows[stem]]]:
             return False   # only a synthesised street goes on
         p = nodes[k]
@@ -150,6 +161,7 @@ def match_crossings(lines, is_new, share: float, area, rng: np.random.Generator,
             return False
         added.append(seg)
         deg[k] += 1
+        new_ts += int(counted_nodes(q[None], area)[0])
         return True
 
     def t_junctions():

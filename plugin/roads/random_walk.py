@@ -75,6 +75,7 @@ from scipy.spatial import cKDTree
 from ..core import coordinates
 from ..core.geometry import pinned_ends
 from ..core.progress import InputError, Progress, ensure
+from ..network.crossings import t_stem
 from ..network.dead_ends import steer_share
 from ..network.invariants import MIN_DUPLICATE_LENGTH, corridor_of, counted_nodes
 from ..network.street_graph import node_lines
@@ -1051,15 +1052,14 @@ def connect_points(points: iq.PointSet, rng: np.random.Generator,
         d = np.asarray(w.dirs[v])
         if w.deg[v] != 3 or len(d) != 3:
             return False
-        cos = d @ d.T
-        i, j = divmod(int(np.argmin(cos)), 3)  # the street it meets: the straightest pair
-        if cos[i, j] > -0.7:  # a fork (no street runs through): no side to cross to
+        stem = t_stem(d)
+        if stem is None:
             return False
         slot = 1 if w.p.level[v, 1] >= 0 else 0
         h = int(w.p.level[v, slot])
         before = (w.cap[v], w.cnt[v, slot], w.used[v, slot], w.slot_dir[v, slot].copy())
         w.cap[v], w.cnt[v, slot], w.used[v, slot] = max(w.cap[v], 4), 1, True
-        w.slot_dir[v, slot] = -d[3 - i - j]  # as if the street arrived along its stem
+        w.slot_dir[v, slot] = -d[stem]  # as if the street arrived along its stem
         added = w.extend(v, slot, h, relaxed="across", origin="across")
         if not added and split:
             reach = w.p.dist_mean[v, slot] + s.reach_sd * w.p.dist_sd[v, slot]
