@@ -66,6 +66,9 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
             "or across a street. T junctions that were crossings in the example, then "
             "junctions on the existing roads, become crossings (their street goes on "
             "straight across) until the share of 4-way junctions is the example's. "
+            "These steps after the walks close no ring of streets shorter than 1.5 times "
+            "the square root of the example's block area around the point (a block a "
+            "seventh of its neighbours'). "
             "Stubs close until the dead-end share is the example's (with "
             "roads as the example: measured inside their convex hull, where the streets cut "
             "at its edge are no dead ends), and "
@@ -289,7 +292,9 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
             f"{100 * st['example_crossing_share']:.0f} %), "
             f"{st['n_joins'] + st['n_join_splits']} pieces joined "
             f"({st['n_join_splits']} by a new junction on a street), "
-            f"{st['n_dropped_edges']} segments of pieces that could not be joined dropped. "
+            f"{st['n_dropped_edges']} segments of pieces that could not be joined dropped; "
+            f"{st['n_small_faces_refused']} steps refused that would close a block far "
+            "smaller than the example's around them. "
             f"Mean tortuosity {st['mean_tortuosity']:.3f} (example "
             f"{st['example_mean_tortuosity']:.3f}).")
         if "n_seam_ends" in st:
