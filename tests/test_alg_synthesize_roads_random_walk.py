@@ -54,9 +54,11 @@ def test_copy_and_reconnect_intersection_points(qgis_processing, helsinki_points
     assert len(copied) == helsinki_points.featureCount()
     assert sorted(r["source_id"] for r in copied) == list(range(len(copied)))
     assert shapely.within(p_geoms, shapely.from_wkt(_hull_wkt(helsinki_graph, 200))).all()
-    # at most 4 connections; more than the example's only where a stub was closed
+    # at most 4 connections; more than the example's only where a step after the walks
+    # needed one (a stub closed, a crossing street led past a short ring onto a point
+    # further on: 10.7 % of the points here, 6.5 % before the ring rule)
     assert all(r["connections"] <= 4 for r in p_rows)
-    assert np.mean([r["connections"] <= r["degree"] for r in copied]) > 0.9
+    assert np.mean([r["connections"] <= r["degree"] for r in copied]) > 0.85
     # the blocks chain into the voronoi-obb parcels (sec. 3.1.2)
     b_rows, b_geoms = layer_features(out["OUTPUT_BLOCKS"])
     assert len(b_rows) > 10 and shapely.is_valid(b_geoms).all()

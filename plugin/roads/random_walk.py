@@ -142,7 +142,8 @@ class WalkSettings:
         a(v) the mean block area around the point in the example: a square of a seventh
         of those blocks at 1.5. Without it a third of the walk's blocks were smaller than
         the example's 10th percentile, mostly behind a crossing street's one step (not in
-        the paper, whose walks make no such steps); 0: off
+        the paper, whose walks make no such steps); a stub that closes no other way may
+        still close a shorter ring (the dead-end share comes first); 0: off
     """
 
     threshold: float = 0.05
@@ -343,6 +344,7 @@ class _Walker:
         finite = pts.area[np.isfinite(pts.area)]
         self._area_fill = float(np.median(finite)) if len(finite) else 1e4
         self.n_small_faces_refused = 0
+        self.check_rings = True  # off for a stub that closes no other way
 
     def _neighbourhoods(self, pts: iq.PointSet):
         """For every point and street slot, the other points within the slot's reach
@@ -584,7 +586,7 @@ class _Walker:
 
     def _face_limit(self, v) -> float:
         """The shortest ring of streets a step from v may close (m; 0: any)."""
-        if not self.s.min_face:
+        if not self.s.min_face or not self.check_rings:
             return 0.0
         a = self.p.area[v]
         if not math.isfinite(a):
@@ -613,7 +615,7 @@ class _Walker:
     def _closes_small_face(self, v, j, dist) -> bool:
         """Whether a step v -> j of ``dist`` m closes a ring of streets shorter than
         :meth:`_face_limit` (``WalkSettings.min_face``)."""
-        if self.deg[j] == 0 or self.deg[v] == 0:
+        if self.deg[j] == 0 or self.deg[v] == 0 or not self.check_rings:
             return False
         limit = self._face_limit(v) - dist
         if limit > 0 and j in self._graph_distances(v, limit):
@@ -1170,7 +1172,10 @@ def connect_points(points: iq.PointSet, rng: np.random.Generator,
     def close(v) -> bool:
         """Streets that stopped short of what their point had in the example (deg 1 < cap):
         one more step to the nearest free point of any level, turn angle ignored, else a T
-        onto the nearest street."""
+        onto the nearest street; closing a ring shorter than ``min_face`` only where it
+        closes no other way (the dead-end share is an invariant, the ring rule a
+        preference: in a blend towards Bubenec's small blocks the stubs kept open moved
+        the share to twice the example's)."""
         if w.deg[v] != 1:
             return False
         was_end = w.cap[v] == 1
@@ -1181,11 +1186,17 @@ def connect_points(points: iq.PointSet, rng: np.random.Generator,
             slot = int(np.argmax(w.cnt[v] == 1))
         if w.cnt[v, slot] != 1:
             return False
-        added = w.extend(v, slot, points.level[v, slot], relaxed="close", origin="close")
-        if not added:  # no free point in reach: a T onto the nearest street
-            reach = points.dist_mean[v, slot] + s.reach_sd * points.dist_sd[v, slot]
-            added = int(w._join_by_split(np.array([v]), None, reach, "close",
-                                         level=points.level[v, slot]) is not None)
+        reach = points.dist_mean[v, slot] + s.reach_sd * points.dist_sd[v, slot]
+        for rings in (True, False):
+            # a short ring rather than a stub where nothing else closes it
+            w.check_rings = rings
+            added = w.extend(v, slot, points.level[v, slot], relaxed="close", origin="close")
+            if not added:  # no free point in reach: a T onto the nearest street
+                added = int(w._join_by_split(np.array([v]), None, reach, "close",
+                                             level=points.level[v, slot]) is not None)
+            if added:
+                break
+        w.check_rings = True
         if not added and was_end:
             w.cap[v], w.cnt[v, 0] = 1, 2
         return bool(added)

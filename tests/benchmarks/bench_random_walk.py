@@ -229,8 +229,9 @@ def parcels_evidence():
 
 
 def performance(pts, shapes):
-    """CPU and wall time of whole syntheses (placement, walks, one network, shapes), and of
-    the walks alone (no joins, no crossings matched, no closing, parabolas) for the same
+    """CPU and wall time of whole syntheses (placement, walks, one network, shapes), of the
+    same without the ring rule (``WalkSettings.min_face`` 0) at 10,000 points, and of the
+    walks alone (no joins, no crossings matched, no closing, parabolas) for the same
     points."""
     density = iq.example_density(pts)
     c = pts.xy.mean(axis=0)
@@ -240,8 +241,13 @@ def performance(pts, shapes):
         side = np.sqrt(n / density)  # placement fills at the example's density
         square = shapely.box(*(c - side / 2), *(c + side / 2))
         for label, kw in (("one network, example shapes", dict(shapes=shapes)),
+                          # the cost of the ring rule, side by side
+                          ("same, short rings allowed", dict(
+                              shapes=shapes, settings=rw.WalkSettings(min_face=0.0))),
                           ("walks only (as before)", dict(settings=walks_only))):
             if label.startswith("walks") and n not in (1000, 10000):
+                continue
+            if label.startswith("same") and n != 10000:
                 continue
             best, best_cpu = None, None
             for _ in range(1 if n > 2000 else 2):
