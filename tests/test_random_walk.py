@@ -8,7 +8,7 @@ import shapely
 from helpers import (assert_planar, bubenec, helsinki_roads, liechtenstein_town,
                      nearly_coincident_streets)
 from urban_synthesis.plugin.roads import intersection_quadtree as iq
-from urban_synthesis.plugin.measure import metrics
+from urban_synthesis.plugin.measure import fidelity, metrics
 from urban_synthesis.plugin.network import invariants
 from urban_synthesis.plugin.roads import random_walk as rw
 from urban_synthesis.plugin.core.progress import InputError
@@ -480,14 +480,11 @@ def test_one_network_on_a_town_never_seen(eschen):
     assert inside[res.points.example >= 0].all()
 
 
-def test_crossings_as_often_as_in_the_example():
-    """Balzers from the other Liechtenstein towns, seed 0 (the fidelity benchmark's run): a
-    crossing street is rarely walked both ways, and the walks kept 0.32 x the example's
-    share of 4-way junctions (0.3-0.75 x on every town of the benchmark). The example's
-    crossings that lost a crossing street, then the junctions on the given roads, now
-    become crossings until the share is the example's: within 30 %, one network still."""
+@pytest.fixture(scope="module")
+def balzers():
+    """Balzers as the fidelity benchmark runs it: (target town, the other towns' fidelity
+    statistics, their points, their street shapes)."""
     from towns import LI_PBF, liechtenstein_towns
-    from urban_synthesis.plugin.measure import fidelity
 
     if not LI_PBF.exists():
         pytest.skip(f"{LI_PBF} is missing")
@@ -497,7 +494,16 @@ def test_crossings_as_often_as_in_the_example():
     lines = np.concatenate([t.lines for t in others])
     example = fidelity.fidelity_statistics(lines, shapely.union_all([t.area for t in others]))
     pts, graph, h = iq.points_from_roads(lines, np.concatenate([t.road_class for t in others]))
-    shapes = rw.street_shapes(graph, h.edge_level)
+    return target, example, pts, rw.street_shapes(graph, h.edge_level)
+
+
+def test_crossings_as_often_as_in_the_example(balzers):
+    """Balzers from the other Liechtenstein towns, seed 0 (the fidelity benchmark's run): a
+    crossing street is rarely walked both ways, and the walks kept 0.32 x the example's
+    share of 4-way junctions (0.3-0.75 x on every town of the benchmark). The example's
+    crossings that lost a crossing street, then the junctions on the given roads, now
+    become crossings until the share is the example's: within 30 %, one network still."""
+    target, example, pts, shapes = balzers
 
     def crossing_share(settings):
         res = rw.synthesize(pts, target.area, existing_lines=target.given, seed=0,
@@ -517,24 +523,13 @@ def test_crossings_as_often_as_in_the_example():
     assert walks_only < 0.7 * example["degree4_share"]
 
 
-def test_no_block_far_smaller_than_the_examples():
+def test_no_block_far_smaller_than_the_examples(balzers):
     """Balzers from the other Liechtenstein towns, seeds 0-2 (the fidelity benchmark's
     runs): the steps made after the walks (a crossing street's one step, a stub closed, a
     T onto a street) closed rings of a few short segments, and the smallest blocks (10th
     percentile) were 0.13-0.28 x the example's. Refusing rings shorter than 1.5 sqrt(a(v))
     (``WalkSettings.min_face``) doubles them, the network staying one, without a violation."""
-    from towns import LI_PBF, liechtenstein_towns
-    from urban_synthesis.plugin.measure import fidelity
-
-    if not LI_PBF.exists():
-        pytest.skip(f"{LI_PBF} is missing")
-    towns = liechtenstein_towns()
-    target = next(t for t in towns if t.name == "Balzers")
-    others = [t for t in towns if t.name != "Balzers"]
-    lines = np.concatenate([t.lines for t in others])
-    example = fidelity.fidelity_statistics(lines, shapely.union_all([t.area for t in others]))
-    pts, graph, h = iq.points_from_roads(lines, np.concatenate([t.road_class for t in others]))
-    shapes = rw.street_shapes(graph, h.edge_level)
+    target, example, pts, shapes = balzers
 
     def smallest_blocks(min_face):
         ratios = []
@@ -595,7 +590,6 @@ def test_dead_end_share_as_the_invariants_count_it():
     under the band 0.047-0.087 around Bubenec's 0.067). It now counts the nodes the
     invariants count, and the share it reports is the measured one."""
     from towns import bubenec_town, helsinki_town
-    from urban_synthesis.plugin.measure import fidelity
 
     target, example = helsinki_town(), bubenec_town()
     share = fidelity.fidelity_statistics(example.lines, example.area)["degree1_share"]
