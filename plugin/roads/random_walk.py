@@ -123,8 +123,9 @@ class WalkSettings:
     seam_distance : m; dead ends of existing roads this close to the target are seam ends
         (None: a quarter of the example's median street distance)
     close_ends : after the walks, points whose street stopped short of the connections they
-        had in the example make one more step to the nearest free point, until the share of
-        dead ends is the example's (not in the paper: its walks leave such stubs)
+        had in the example make one more step to the nearest free point, or a T onto the
+        nearest street (of their level; where none is in reach, of any level), until the
+        share of dead ends is the example's (not in the paper: its walks leave such stubs)
     join_pieces : join every piece of the network to the given roads (or to the largest
         piece) and drop what cannot be joined (the paper's REPEAT, completed)
     match_crossings : after the walks, T junctions that were crossings in the example, then
@@ -835,8 +836,9 @@ class _Walker:
     def _join_by_split(self, members, root, reach, origin="join", level=None):
         """A clear step from a point of ``members`` onto the nearest street of another piece
         (or a given road), split there: a new T junction. ``root(points)`` gives each
-        point's piece; None: any street not at the point (closing a dead end). Returns
-        (the new junction, the street's end point (-1 for a given road)), or None."""
+        point's piece; None: any street not at the point (closing a dead end), of ``level``
+        where given. Returns (the new junction, the street's end point (-1 for a given
+        road)), or None."""
         cap = self.s.max_capacity
         best = None
         for v in members[self.deg[members] < cap]:
@@ -1187,13 +1189,18 @@ def connect_points(points: iq.PointSet, rng: np.random.Generator,
         if w.cnt[v, slot] != 1:
             return False
         reach = points.dist_mean[v, slot] + s.reach_sd * points.dist_sd[v, slot]
-        for rings in (True, False):
-            # a short ring rather than a stub where nothing else closes it
+        # a short ring rather than a stub where nothing else closes it; then a T onto a
+        # street of any level (the stub's street ends there, as at a join): Bubenec's
+        # stubs blended into a square of Helsinki found no street of their own level in
+        # reach and kept up to twice its dead ends
+        h = points.level[v, slot]
+        for rings, level in ((True, h), (False, h), (False, None)):
             w.check_rings = rings
-            added = w.extend(v, slot, points.level[v, slot], relaxed="close", origin="close")
+            added = w.extend(v, slot, h, relaxed="close", origin="close") \
+                if level is not None else 0
             if not added:  # no free point in reach: a T onto the nearest street
                 added = int(w._join_by_split(np.array([v]), None, reach, "close",
-                                             level=points.level[v, slot]) is not None)
+                                             level=level) is not None)
             if added:
                 break
         w.check_rings = True
