@@ -112,8 +112,9 @@ def test_grid_is_reconnected_planar_within_capacity():
 def test_wrong_level_is_never_connected():
     """Two interleaved grids of level 0 and level 1 points, one street each: every street
     segment joins two points of its own level; only the joins that make one network of the
-    two (the completed REPEAT) link the levels, and they do, and a stub closed at the end
-    may end on a street of the other level (a T; it leaves its own point)."""
+    two (the completed REPEAT) link the levels, and they do, and the stubs closed while the
+    dead-end share is above the invariants' band (a T from the stub's own point onto a
+    street of the other level)."""
     a, _ = _grid_points(n=5, levels=(0, -1))
     b, _ = _grid_points(n=5, levels=(1, -1))
     b = b.moved([50.0, 50.0])
@@ -332,8 +333,9 @@ def test_blend_ends_streets_as_often_as_its_example(helsinki, bubenec_points):
     """BLEND 1 of Helsinki and Bubeneč over a 2 km square of Helsinki (the blend benchmark),
     seeds 0-4: Bubeneč's streets end in a dead end at 6.7 % of the nodes. Stubs that could
     close only onto a street of another level stayed open, and the share was 0.096-0.136 on
-    four seeds, outside the invariants' +-30 % band; a stub now closes onto a street of any
-    level where its own has none in reach."""
+    four seeds, outside the invariants' +-30 % band; while the share is above the band (less a
+    margin), a stub with no street of its own level in reach now closes onto one of any
+    level."""
     pts, graph, h = helsinki
     df = bubenec("streets", crs=32635)
     bpts, bgraph, bh = iq.points_from_roads(df.geometry.values, example=1)

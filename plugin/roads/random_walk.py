@@ -78,7 +78,8 @@ from ..core.geometry import pinned_ends
 from ..core.progress import InputError, Progress, ensure
 from ..network.crossings import t_stem
 from ..network.dead_ends import steer_share
-from ..network.invariants import MIN_DUPLICATE_LENGTH, corridor_of, counted_nodes
+from ..network.invariants import (DEAD_END_TOLERANCE, MIN_DUPLICATE_LENGTH, corridor_of,
+                                  counted_nodes)
 from ..network.street_graph import node_lines
 from . import intersection_quadtree as iq
 
@@ -124,8 +125,9 @@ class WalkSettings:
         (None: a quarter of the example's median street distance)
     close_ends : after the walks, points whose street stopped short of the connections they
         had in the example make one more step to the nearest free point, or a T onto the
-        nearest street (of their level; where none is in reach, of any level), until the
-        share of dead ends is the example's (not in the paper: its walks leave such stubs)
+        nearest street of their level, until the share of dead ends is the example's (not
+        in the paper: its walks leave such stubs); where that leaves the share above the
+        invariants' band less half its width, stubs end on streets of any level
     join_pieces : join every piece of the network to the given roads (or to the largest
         piece) and drop what cannot be joined (the paper's REPEAT, completed)
     match_crossings : after the walks, T junctions that were crossings in the example, then
@@ -1171,13 +1173,14 @@ def connect_points(points: iq.PointSet, rng: np.random.Generator,
         deg = node_degrees()
         return float((deg == 1).mean()) if len(deg) else 0.0
 
-    def close(v) -> bool:
+    def close(v, any_level=False) -> bool:
         """Streets that stopped short of what their point had in the example (deg 1 < cap):
         one more step to the nearest free point of any level, turn angle ignored, else a T
-        onto the nearest street; closing a ring shorter than ``min_face`` only where it
-        closes no other way (the dead-end share is an invariant, the ring rule a
+        onto the nearest street of its level; closing a ring shorter than ``min_face`` only
+        where it closes no other way (the dead-end share is an invariant, the ring rule a
         preference: in a blend towards Bubenec's small blocks the stubs kept open moved
-        the share to twice the example's)."""
+        the share to twice the example's). ``any_level``: a T onto a street of any level
+        (the stub's street ends there, as at a join)."""
         if w.deg[v] != 1:
             return False
         was_end = w.cap[v] == 1
@@ -1189,18 +1192,14 @@ def connect_points(points: iq.PointSet, rng: np.random.Generator,
         if w.cnt[v, slot] != 1:
             return False
         reach = points.dist_mean[v, slot] + s.reach_sd * points.dist_sd[v, slot]
-        # a short ring rather than a stub where nothing else closes it; then a T onto a
-        # street of any level (the stub's street ends there, as at a join): Bubenec's
-        # stubs blended into a square of Helsinki found no street of their own level in
-        # reach and kept up to twice its dead ends
         h = points.level[v, slot]
-        for rings, level in ((True, h), (False, h), (False, None)):
+        for rings in (True, False):  # a short ring rather than a stub that stays
             w.check_rings = rings
-            added = w.extend(v, slot, h, relaxed="close", origin="close") \
-                if level is not None else 0
+            added = 0 if any_level else \
+                w.extend(v, slot, h, relaxed="close", origin="close")
             if not added:  # no free point in reach: a T onto the nearest street
                 added = int(w._join_by_split(np.array([v]), None, reach, "close",
-                                             level=level) is not None)
+                                             level=None if any_level else h) is not None)
             if added:
                 break
         w.check_rings = True
@@ -1229,6 +1228,13 @@ def connect_points(points: iq.PointSet, rng: np.random.Generator,
     # the share is steered to the example's (network.dead_ends: one home for the rule)
     n_closed, n_opened = steer_share(share_now, target, close, stubs, open_, unreached) \
         if s.close_ends else (0, 0)
+    # still above the invariants' band (with a margin): stubs with no street of their own
+    # level in reach end on one of any level (Bubenec's stubs blended into a square of
+    # Helsinki kept up to twice its dead ends); within the band, the level rule is kept
+    margin = 0.5 * DEAD_END_TOLERANCE
+    if s.close_ends and share_now() > target * (1 + margin):
+        n_closed += steer_share(share_now, target, functools.partial(close, any_level=True),
+                                stubs, lambda v: False, lambda: (), tolerance=margin)[0]
     w.stats["n_closed"] = int(n_closed)
     w.stats["n_dead_ends_opened"] = int(n_opened)
     w.stats["dead_end_share"] = share_now()
