@@ -352,6 +352,30 @@ def test_blend_ends_streets_as_often_as_its_example(helsinki, bubenec_points):
     assert np.all(np.abs(np.array(shares) / share - 1.0) <= invariants.DEAD_END_TOLERANCE), shares
 
 
+def test_no_bent_street_runs_along_a_given_road():
+    """Triesen's level-0 roads, a blend of the other towns' and Bubeneč's points (BLEND 0.5,
+    no street shapes: parabolas), seed 0. A step may run up to the invariants' 40 m in a
+    given road's corridor, and a bend up to 10 m more than its chord, so a crossing street's
+    parabola ran 41 m along the road (a parallel duplicate). A bend now also stays within
+    the invariants' 40 m: every invariant holds."""
+    from towns import LI_PBF, bubenec_town, liechtenstein_towns
+
+    if not LI_PBF.exists():
+        pytest.skip(f"{LI_PBF} is missing")
+    towns = liechtenstein_towns()
+    target = next(t for t in towns if t.name == "Triesen")
+    others = [t for t in towns if t.name != "Triesen"]
+    pts = iq.points_from_roads(np.concatenate([t.lines for t in others]),
+                               np.concatenate([t.road_class for t in others]))[0]
+    bub = bubenec_town()
+    bpts = iq.points_from_roads(bub.lines, bub.road_class)[0]
+    res = rw.synthesize(pts, target.area, existing_lines=target.given, seed=0, in_place=False,
+                        example_b=bpts, blend=0.5)
+    new = res.geometry[invariants.new_streets(res.geometry, target.given)]
+    check = invariants.check_network(new, target.given, target.given_class, target.area)
+    assert len(check.duplicates) == 0 and check.ok, check.summary()
+
+
 def test_bad_inputs(helsinki):
     pts = helsinki[0]
     with pytest.raises(InputError, match="target"):

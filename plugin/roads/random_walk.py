@@ -1384,7 +1384,9 @@ def _conflicts(lines, others, subset=None, tree=None, area=None, chord_inside=No
     ``area`` (prepared), bent lines whose chord lies in it (``chord_inside``) but that
     bulge out of it conflict too; with ``corridor`` (the given roads' corridors, prepared),
     bent lines that run in it over 10 m longer than their chord does
-    (``chord_in_corridor``) double a given road and conflict too."""
+    (``chord_in_corridor``), or longer than the invariants allow (a chord may run up to
+    that: the two allowances added up to a double), double a given road and conflict
+    too."""
     if subset is None:  # chords never cross each other: only bent lines can
         cand = np.arange(len(lines))
         bent = cand[shapely.get_num_coordinates(lines[cand]) > 2]
@@ -1401,7 +1403,8 @@ def _conflicts(lines, others, subset=None, tree=None, area=None, chord_inside=No
         if len(check):
             with np.errstate(invalid="ignore"):
                 run = shapely.length(shapely.intersection(lines[check], corridor))
-            out_of_area = np.r_[out_of_area, check[run > chord_in_corridor[check] + 10.0]]
+            double = (run > chord_in_corridor[check] + 10.0) | (run > MIN_DUPLICATE_LENGTH)
+            out_of_area = np.r_[out_of_area, check[double]]
     allg = np.concatenate([lines, others]) if len(others) else lines
     if tree is None:
         tree = shapely.STRtree(allg)
