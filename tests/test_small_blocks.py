@@ -28,3 +28,40 @@ def test_small_blocks_merge_down_to_the_examples_share():
     _, counts = np.unique(np.round(ends, 3), axis=0, return_counts=True)
     assert (counts != 1).all()                        # no dead end
     assert invariants.check_network(out[new], out[~new]).floating_pieces == 0
+
+
+def test_crossings_go_in_rounds_not_one_measurement_per_street():
+    """A 600 m square of given roads cut by a synthesised 50 m grid: 121 crossings among 165
+    counted nodes (0.73), steered down to 0.3. The share is measured on the whole network, so
+    one street per measurement (the rule before, ``per_round=1``) measured it once per street
+    (96 s of CPU for a 36 km² StreetGAN network, ``bench_crossings.py``). The streets now go
+    in rounds of up to half the crossings still to remove: a few measurements, as many
+    streets, the same rules kept (no dead end, nothing floating, the given roads whole, the
+    share reached and not undershot by much)."""
+    from urban_synthesis.plugin.network.small_blocks import fewer_crossings
+
+    frame = [shapely.LineString([(0, 0), (600, 0), (600, 600), (0, 600), (0, 0)])]
+    grid = [shapely.LineString([(x, 0), (x, 600)]) for x in range(50, 600, 50)] + \
+        [shapely.LineString([(0, y), (600, y)]) for y in range(50, 600, 50)]
+    lines = np.array(frame + grid, dtype=object)
+    is_new = np.r_[False, np.ones(len(grid), bool)]
+    area = shapely.box(-10, -10, 610, 610)
+    assert invariants.crossing_share(lines, area) == pytest.approx(121 / 165)
+    got = {}
+    for per_round in (1, None):
+        calls = []
+
+        def share_of(g):
+            calls.append(1)
+            return invariants.crossing_share(g, area)
+
+        out, new, removed = fewer_crossings(lines, is_new, 0.3, area, share_of,
+                                            per_round=per_round)
+        assert 0.25 < invariants.crossing_share(out, area) <= 0.3
+        assert invariants.dead_end_share(out, area) == 0.0
+        assert invariants.check_network(out[new], out[~new], None, area).floating_pieces == 0
+        assert shapely.union_all(out[~new]).length == pytest.approx(2400)
+        got[per_round] = (len(calls), removed)
+    (calls_one, removed_one), (calls, removed) = got[1], got[None]
+    assert calls_one == removed_one + 1 and removed_one > 50
+    assert calls <= 15 and abs(removed - removed_one) <= 0.1 * removed_one

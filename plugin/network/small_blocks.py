@@ -15,7 +15,7 @@ Nothing here imports QGIS.
 """
 from __future__ import annotations
 
-from typing import Sequence, Tuple
+from typing import Optional, Sequence, Tuple
 
 import numpy as np
 import shapely
@@ -76,11 +76,19 @@ def merge_small_blocks(lines: Sequence, is_new: Sequence, min_area: float, area=
 
 
 def fewer_crossings(lines: Sequence, is_new: Sequence, share: float, area,
-                    share_of) -> Tuple[np.ndarray, np.ndarray, int]:
+                    share_of, per_round: Optional[int] = None
+                    ) -> Tuple[np.ndarray, np.ndarray, int]:
     """While the share of 4-way junctions is above ``share``, remove the synthesised street
     at a 4-way junction whose two blocks together are the smallest: the crossing becomes a
     T and the two blocks one (a street whose ends both stay junctions, between two faces:
     no dead end, no floating piece).
+
+    The streets go in rounds: each takes, smallest merged blocks first, up to half the
+    crossings still to remove (counted on the network's own nodes; ``per_round`` fixes the
+    number), no two of them at the same block, each checked against the degrees the earlier
+    ones left; the share is measured after each round. One street per round (``per_round``
+    1, the rule before) measures the whole network once per street
+    (``tests/benchmarks/bench_crossings.py``).
 
     ``share_of(lines) -> float``: the share as it will be measured
     (:func:`invariants.crossing_share` in the target). Returns (lines noded, is_new,
@@ -99,19 +107,36 @@ def fewer_crossings(lines: Sequence, is_new: Sequence, share: float, area,
         if not len(faces):
             break
         on_p, on_f, chain, removable = net.sides(faces)
-        crossing = inside & (net.degree >= 4)
-        best = None
-        for p in on_p[removable[chain[on_p]]]:
-            ends = net.chain_ends(chain, chain[p])
-            if not crossing[ends].any():
+        counted = inside & (net.degree > 0) & (net.degree != 2)
+        n4 = int((counted & (net.degree >= 4)).sum())
+        batch = per_round or max(1, int(n4 - share * counted.sum()) // 2)
+        # per chain: its end nodes (degree != 2) and the least area its pieces would merge
+        ends = net.chain_ends_all(chain)
+        merged = np.bincount(on_p, weights=fa[on_f], minlength=len(net.pieces))
+        by_chain = {}
+        for p in np.unique(on_p[removable[chain[on_p]]]):  # ties: the lower piece
+            root = int(chain[p])
+            if root not in by_chain or merged[p] < by_chain[root][0]:
+                by_chain[root] = (float(merged[p]), int(p))
+        touched = set()
+        taken = 0
+        for area_sum, p, root in sorted((v[0], v[1], r) for r, v in by_chain.items()):
+            if taken >= batch:
+                break
+            e = ends.get(root, ())
+            # both ends junctions, one a crossing, under the degrees left so far
+            if len(e) != 2 or min(net.degree[e]) < 3 or \
+                    not (inside[e] & (net.degree[e] >= 4)).any():
                 continue
-            merged = fa[on_f[on_p == p]].sum()
-            if best is None or merged < best[0]:
-                best = (float(merged), int(chain[p]))
-        if best is None:
+            blocks = set(on_f[np.isin(on_p, np.flatnonzero(net.alive & (chain == root)))])
+            if blocks & touched:
+                continue
+            touched |= blocks
+            net.remove(chain, root)
+            taken += 1
+        if not taken:
             break
-        net.remove(chain, best[1])
-        removed += 1
+        removed += taken
     return (*net.lines(), removed)
 
 
@@ -157,10 +182,16 @@ class _Network:
         keep = self.alive[on_p]
         return on_p[keep], on_f[keep], chain, removable
 
-    def chain_ends(self, chain, root):
-        members = np.flatnonzero(self.alive & (chain == root))
-        v = self.node[members].ravel()
-        return v[self.degree[v] != 2]
+    def chain_ends_all(self, chain) -> dict:
+        """Chain root -> the array of its end nodes (degree != 2), for the live pieces."""
+        live = np.flatnonzero(self.alive)
+        roots = np.repeat(chain[live], 2)
+        v = self.node[live].ravel()
+        end = self.degree[v] != 2
+        out: dict = {}
+        for r, x in zip(roots[end].tolist(), v[end].tolist()):
+            out.setdefault(r, []).append(x)
+        return {r: np.asarray(x, dtype=np.int64) for r, x in out.items()}
 
     def remove(self, chain, root):
         gone = self.alive & (chain == root)
