@@ -17,17 +17,23 @@ def test_small_blocks_merge_down_to_the_examples_share():
     grid = [shapely.LineString([(x, 0), (x, 400)]) for x in range(50, 400, 50)] + \
         [shapely.LineString([(0, y), (400, y)]) for y in range(50, 400, 50)]
     lines = np.array(frame + grid, dtype=object)
-    out, new, removed = merge_small_blocks(lines, np.r_[False, np.ones(len(grid), bool)],
-                                           10_000.0)
-    faces = shapely.get_parts(shapely.polygonize(out))
-    area = shapely.area(faces)
-    assert removed > 0 and (area < 10_000).sum() <= 0.1 * len(faces)
-    assert area.sum() == pytest.approx(400 * 400)
-    assert shapely.union_all(out[~new]).length == pytest.approx(1600)
-    ends = shapely.get_coordinates(np.r_[shapely.get_point(out, 0), shapely.get_point(out, -1)])
-    _, counts = np.unique(np.round(ends, 3), axis=0, return_counts=True)
-    assert (counts != 1).all()                        # no dead end
-    assert invariants.check_network(out[new], out[~new]).floating_pieces == 0
+    got = []
+    # in rounds (the default) and one street at a time (the rule before): the same rules
+    for per_round in (None, 1):
+        out, new, removed = merge_small_blocks(lines, np.r_[False, np.ones(len(grid), bool)],
+                                               10_000.0, per_round=per_round)
+        faces = shapely.get_parts(shapely.polygonize(out))
+        area = shapely.area(faces)
+        assert removed > 0 and (area < 10_000).sum() <= 0.1 * len(faces)
+        assert area.sum() == pytest.approx(400 * 400)
+        assert shapely.union_all(out[~new]).length == pytest.approx(1600)
+        ends = shapely.get_coordinates(np.r_[shapely.get_point(out, 0),
+                                             shapely.get_point(out, -1)])
+        _, counts = np.unique(np.round(ends, 3), axis=0, return_counts=True)
+        assert (counts != 1).all()                        # no dead end
+        assert invariants.check_network(out[new], out[~new]).floating_pieces == 0
+        got.append(removed)
+    assert abs(got[0] - got[1]) <= 0.15 * got[1]
 
 
 def test_crossings_go_in_rounds_not_one_measurement_per_street():

@@ -31,7 +31,8 @@ _NODE_GRID = 1e-3
 
 
 def merge_small_blocks(lines: Sequence, is_new: Sequence, min_area: float, area=None,
-                       share: float = 0.1) -> Tuple[np.ndarray, np.ndarray, int]:
+                       share: float = 0.1, per_round: Optional[int] = None
+                       ) -> Tuple[np.ndarray, np.ndarray, int]:
     """Remove synthesised streets between small blocks (see the module doc).
 
     Parameters
@@ -41,6 +42,9 @@ def merge_small_blocks(lines: Sequence, is_new: Sequence, min_area: float, area=
     min_area : m², the example's 10th-percentile block area (<= 0 or NaN: nothing done)
     area : polygon, optional: only blocks inside it count
     share : the share of blocks that may stay under ``min_area``
+    per_round : streets removed between two polygonisations of the network (default: half
+        the small blocks over the share, no two at one block; 1: one street at a time,
+        the rule before, whose cost grew with the square of the target)
 
     Returns
     -------
@@ -59,19 +63,35 @@ def merge_small_blocks(lines: Sequence, is_new: Sequence, min_area: float, area=
         small = np.flatnonzero(fa < min_area)
         if len(small) <= share * len(faces):
             break
+        batch = per_round or max(1, int(len(small) - share * len(faces)) // 2)
         on_p, on_f, chain, removable = net.sides(faces)
-        best = None
+        ends = net.chain_ends_all(chain)
+        touched = set()
+        taken = 0
         for f in small[np.argsort(fa[small], kind="stable")]:
+            if taken >= batch:
+                break
+            if f in touched:
+                continue
+            # the street the block shares with its smallest neighbour
+            best = None
             for p in on_p[(on_f == f) & removable[chain[on_p]]]:
                 other = on_f[(on_p == p) & (on_f != f)]
                 if len(other) and (best is None or fa[other].min() < best[0]):
-                    best = (float(fa[other].min()), int(chain[p]))
-            if best is not None:
-                break
-        if best is None:
+                    best = (float(fa[other].min()), int(chain[p]), int(other[np.argmin(fa[other])]))
+            if best is None:
+                continue
+            _, root, g = best
+            e = ends.get(root, ())
+            # both ends still junctions after the streets taken before it in this round
+            if g in touched or len(e) != 2 or min(net.degree[e]) < 3:
+                continue
+            touched |= {int(f), g}
+            net.remove(chain, root)
+            taken += 1
+        if not taken:
             break
-        net.remove(chain, best[1])
-        removed += 1
+        removed += taken
     return (*net.lines(), removed)
 
 

@@ -158,7 +158,7 @@ class Runner:
                  fill_quantile: float = 90.0):
         self.target, self.example, self.workdir = target, example, workdir
         self.fill_quantile = fill_quantile
-        self.gan_min_block = False
+        self.gan_min_block = True
         self.extra: dict = {}
         self._cache: Dict[str, object] = {}
 
@@ -219,7 +219,9 @@ class Runner:
             raise RuntimeError("every shipped StreetGAN model was trained on this town")
         model = self.cached("gan_" + name, lambda: streetgan.load_model(name))
         self.extra = {"model": name}
-        # --gan-min-block: the example's smallest blocks (10th percentile) as MIN_BLOCK_AREA
+        # every example statistic the tool takes, as an analyst with the example would pass
+        # them: dead-end and crossing shares, and the example's smallest blocks (10th
+        # percentile) as MIN_BLOCK_AREA (--gan-no-min-block: without)
         min_block = self.example.stats["block_area_p10"] if self.gan_min_block else None
         return streetgan.synthesize(self.target.area, model, seed=seed, given=self.target.given,
                                     given_class=self.target.given_class,
@@ -438,9 +440,9 @@ def main(argv=None):
     ap.add_argument("--gan-model", default=None,
                     help="judge this StreetGAN generator (.onnx, card next to it) on the "
                          "towns it was not trained on, instead of the shipped ones")
-    ap.add_argument("--gan-min-block", action="store_true",
-                    help="StreetGAN with the example's 10th-percentile block area as "
-                         "min_block_area (small generated cells merged)")
+    ap.add_argument("--gan-no-min-block", action="store_true",
+                    help="StreetGAN without the example's 10th-percentile block area as "
+                         "min_block_area (its small generated cells kept)")
     ap.add_argument("--update", action="store_true",
                     help="rerun only --methods and keep every other result of --out (no "
                          "pictures: they show every method of one run)")
@@ -477,7 +479,7 @@ def main(argv=None):
             ex = example_for(target, towns)
             real = fidelity.fidelity_statistics(target.lines, target.area)
             runner = Runner(target, ex, Path(tmp), args.fill_quantile)
-            runner.gan_min_block = args.gan_min_block
+            runner.gan_min_block = not args.gan_no_min_block
             entry = {"region": target.region, "km2": target.km2, "villages": target.villages,
                      "example": ex.names, "given_km": float(shapely.length(target.given).sum()
                                                            / 1e3),
