@@ -40,8 +40,8 @@ def test_crossings_go_in_rounds_not_one_measurement_per_street():
     """A 600 m square of given roads cut by a synthesised 50 m grid: 121 crossings among 165
     counted nodes (0.73), steered down to 0.3. The share is measured on the whole network, so
     one street per measurement (the rule before, ``per_round=1``) measured it once per street
-    (96 s of CPU for a 36 km² StreetGAN network, ``bench_crossings.py``). The streets now go
-    in rounds of up to half the crossings still to remove: a few measurements, as many
+    (two minutes of CPU for a 36 km² StreetGAN network, ``bench_crossings.py``). The streets
+    now go in rounds of up to half the crossings still to remove: a few measurements, as many
     streets, the same rules kept (no dead end, nothing floating, the given roads whole, the
     share reached and not undershot by much)."""
     from urban_synthesis.plugin.network.small_blocks import fewer_crossings

@@ -78,7 +78,8 @@ def merge_small_blocks(lines: Sequence, is_new: Sequence, min_area: float, area=
             for p in on_p[(on_f == f) & removable[chain[on_p]]]:
                 other = on_f[(on_p == p) & (on_f != f)]
                 if len(other) and (best is None or fa[other].min() < best[0]):
-                    best = (float(fa[other].min()), int(chain[p]), int(other[np.argmin(fa[other])]))
+                    best = (float(fa[other].min()), int(chain[p]),
+                            int(other[np.argmin(fa[other])]))
             if best is None:
                 continue
             _, root, g = best
