@@ -141,7 +141,7 @@ def fewer_crossings(lines: Sequence, is_new: Sequence, share: float, area,
                 by_chain[root] = (float(merged[p]), int(p))
         touched = set()
         taken = 0
-        for area_sum, p, root in sorted((v[0], v[1], r) for r, v in by_chain.items()):
+        for _, _, root in sorted((v[0], v[1], r) for r, v in by_chain.items()):
             if taken >= batch:
                 break
             e = ends.get(root, ())
