@@ -83,9 +83,8 @@ def merge_small_blocks(lines: Sequence, is_new: Sequence, min_area: float, area=
             if best is None:
                 continue
             _, root, g = best
-            e = ends.get(root, ())
             # both ends still junctions after the streets taken before it in this round
-            if g in touched or len(e) != 2 or min(net.degree[e]) < 3:
+            if g in touched or not _between_junctions(ends.get(root, ()), net.degree):
                 continue
             touched |= {int(f), g}
             net.remove(chain, root)
@@ -146,7 +145,7 @@ def fewer_crossings(lines: Sequence, is_new: Sequence, share: float, area,
                 break
             e = ends.get(root, ())
             # both ends junctions, one a crossing, under the degrees left so far
-            if len(e) != 2 or min(net.degree[e]) < 3 or \
+            if not _between_junctions(e, net.degree) or \
                     not (inside[e] & (net.degree[e] >= 4)).any():
                 continue
             blocks = set(on_f[np.isin(on_p, np.flatnonzero(net.alive & (chain == root)))])
@@ -251,10 +250,16 @@ def _chains(node: np.ndarray, degree: np.ndarray, alive: np.ndarray, new: np.nda
     chain = np.array([groups[i] for i in range(n)], dtype=np.int64)
     removable = np.zeros(n, dtype=bool)
     for root, members in _members(chain[live_new], live_new).items():
-        ends = [v for p in members for v in node[p] if degree[v] != 2]
-        removable[root] = len(ends) == 2 and ends[0] != ends[1] and \
-            min(degree[ends[0]], degree[ends[1]]) >= 3
+        removable[root] = _between_junctions(
+            [v for p in members for v in node[p] if degree[v] != 2], degree)
     return chain, removable
+
+
+def _between_junctions(ends, degree: np.ndarray) -> bool:
+    """Whether a street with these end nodes (degree != 2) runs between two distinct
+    junctions (degree >= 3): removed, it leaves no dead end."""
+    return len(ends) == 2 and ends[0] != ends[1] and \
+        min(degree[ends[0]], degree[ends[1]]) >= 3
 
 
 def _members(roots: np.ndarray, pieces: np.ndarray) -> dict:
