@@ -55,43 +55,26 @@ def merge_small_blocks(lines: Sequence, is_new: Sequence, min_area: float, area=
     if not len(lines) or not np.isfinite(min_area) or min_area <= 0:
         return lines, is_new, 0
     net = _Network(lines, is_new, area)
-    removed = 0
-    while True:
-        faces, fa = net.faces()
-        if not len(faces):
-            break
+
+    def plan(faces, fa, on_p, on_f, chain, removable):
         small = np.flatnonzero(fa < min_area)
         if len(small) <= share * len(faces):
-            break
-        batch = per_round or max(1, int(len(small) - share * len(faces)) // 2)
-        on_p, on_f, chain, removable = net.sides(faces)
-        ends = net.chain_ends_all(chain)
-        touched = set()
-        taken = 0
-        for f in small[np.argsort(fa[small], kind="stable")]:
-            if taken >= batch:
-                break
-            if f in touched:
-                continue
-            # the street the block shares with its smallest neighbour
-            best = None
-            for p in on_p[(on_f == f) & removable[chain[on_p]]]:
-                other = on_f[(on_p == p) & (on_f != f)]
-                if len(other) and (best is None or fa[other].min() < best[0]):
-                    best = (float(fa[other].min()), int(chain[p]),
-                            int(other[np.argmin(fa[other])]))
-            if best is None:
-                continue
-            _, root, g = best
-            # both ends still junctions after the streets taken before it in this round
-            if g in touched or not _between_junctions(ends.get(root, ()), net.degree):
-                continue
-            touched |= {int(f), g}
-            net.remove(chain, root)
-            taken += 1
-        if not taken:
-            break
-        removed += taken
+            return None
+
+        def candidates():  # smallest block first, with the street to its smallest neighbour
+            for f in small[np.argsort(fa[small], kind="stable")]:
+                best = None
+                for p in on_p[(on_f == f) & removable[chain[on_p]]]:
+                    other = on_f[(on_p == p) & (on_f != f)]
+                    if len(other) and (best is None or fa[other].min() < best[0]):
+                        best = (float(fa[other].min()), int(chain[p]),
+                                int(other[np.argmin(fa[other])]))
+                if best is not None:
+                    yield best[1], {int(f), best[2]}
+
+        return per_round or max(1, int(len(small) - share * len(faces)) // 2), candidates()
+
+    removed = _remove_in_rounds(net, plan, lambda ends: True)
     return (*net.lines(), removed)
 
 
@@ -121,35 +104,58 @@ def fewer_crossings(lines: Sequence, is_new: Sequence, share: float, area,
     net = _Network(lines, is_new, area)
     inside = np.ones(len(net.node_xy), dtype=bool) if area is None else \
         shapely.contains_xy(area, *net.node_xy.T)
+
+    def plan(faces, fa, on_p, on_f, chain, removable):
+        if share_of(net.pieces[net.alive]) <= share:
+            return None
+        counted = inside & (net.degree > 0) & (net.degree != 2)
+        n4 = int((counted & (net.degree >= 4)).sum())
+        # per chain the least area its pieces would merge; ties: the lower piece
+        merged = np.bincount(on_p, weights=fa[on_f], minlength=len(net.pieces))
+        by_chain = {}
+        for p in np.unique(on_p[removable[chain[on_p]]]):
+            root = int(chain[p])
+            if root not in by_chain or merged[p] < by_chain[root][0]:
+                by_chain[root] = (float(merged[p]), int(p))
+
+        def candidates():
+            for _, _, root in sorted((v[0], v[1], r) for r, v in by_chain.items()):
+                yield root, set(on_f[np.isin(on_p, np.flatnonzero(net.alive & (chain == root)))])
+
+        return per_round or max(1, int(n4 - share * counted.sum()) // 2), candidates()
+
+    # one end a crossing, under the degrees left so far
+    removed = _remove_in_rounds(net, plan,
+                                lambda ends: (inside[ends] & (net.degree[ends] >= 4)).any())
+    return (*net.lines(), removed)
+
+
+def _remove_in_rounds(net, plan, end_rule) -> int:
+    """Streets removed in rounds, one polygonisation per round (the one home of both rules'
+    loop). ``plan(faces, face_area, *net.sides(faces))`` gives None to stop, else
+    (how many streets this round at most, candidates in order as (chain root, the blocks it
+    touches)); a candidate is taken when none of its blocks was touched this round and both
+    its ends are still junctions under the degrees the streets taken before it left, and
+    ``end_rule(ends)`` holds. Returns the number of streets removed."""
     removed = 0
-    while share_of(net.pieces[net.alive]) > share:
+    while True:
         faces, fa = net.faces()
         if not len(faces):
             break
         on_p, on_f, chain, removable = net.sides(faces)
-        counted = inside & (net.degree > 0) & (net.degree != 2)
-        n4 = int((counted & (net.degree >= 4)).sum())
-        batch = per_round or max(1, int(n4 - share * counted.sum()) // 2)
-        # per chain: its end nodes (degree != 2) and the least area its pieces would merge
+        todo = plan(faces, fa, on_p, on_f, chain, removable)
+        if todo is None:
+            break
+        batch, candidates = todo
         ends = net.chain_ends_all(chain)
-        merged = np.bincount(on_p, weights=fa[on_f], minlength=len(net.pieces))
-        by_chain = {}
-        for p in np.unique(on_p[removable[chain[on_p]]]):  # ties: the lower piece
-            root = int(chain[p])
-            if root not in by_chain or merged[p] < by_chain[root][0]:
-                by_chain[root] = (float(merged[p]), int(p))
-        touched = set()
-        taken = 0
-        for _, _, root in sorted((v[0], v[1], r) for r, v in by_chain.items()):
+        touched, taken = set(), 0
+        for root, blocks in candidates:
             if taken >= batch:
                 break
-            e = ends.get(root, ())
-            # both ends junctions, one a crossing, under the degrees left so far
-            if not _between_junctions(e, net.degree) or \
-                    not (inside[e] & (net.degree[e] >= 4)).any():
-                continue
-            blocks = set(on_f[np.isin(on_p, np.flatnonzero(net.alive & (chain == root)))])
             if blocks & touched:
+                continue
+            e = ends.get(root, ())
+            if not _between_junctions(e, net.degree) or not end_rule(e):
                 continue
             touched |= blocks
             net.remove(chain, root)
@@ -157,7 +163,7 @@ def fewer_crossings(lines: Sequence, is_new: Sequence, share: float, area,
         if not taken:
             break
         removed += taken
-    return (*net.lines(), removed)
+    return removed
 
 
 class _Network:
