@@ -212,19 +212,25 @@ def read_source(alg, parameters, name: str, context, feedback,
     # the context's check is applied below, on every feature at once (a message that names
     # the layer and the feature; "do not filter" repairs instead)
     features = source.getFeatures(request, QgsProcessingFeatureSource.Flag.FlagSkipGeometryValidityChecks)
-    for i, feature in enumerate(features):
-        if i % 256 == 0:
-            stop_if_canceled(feedback)
-        geom = feature.geometry()
-        if geom is None or geom.isNull() or geom.isEmpty():
-            n_null += 1
-            continue
-        wkbs.append(bytes(geom.asWkb()))
-        rows.append(feature.attributes() if fields is None else
-                    [feature.attribute(i) for i in field_idx])
-        fids.append(feature.id())
-        if step and feedback is not None and i % 1000 == 0:
-            feedback.setProgress(p0 + i * step)
+    try:
+        for i, feature in enumerate(features):
+            if i % 256 == 0:
+                stop_if_canceled(feedback)
+            geom = feature.geometry()
+            if geom is None or geom.isNull() or geom.isEmpty():
+                n_null += 1
+                continue
+            wkbs.append(bytes(geom.asWkb()))
+            rows.append(feature.attributes() if fields is None else
+                        [feature.attribute(i) for i in field_idx])
+            fids.append(feature.id())
+            if step and feedback is not None and i % 1000 == 0:
+                feedback.setProgress(p0 + i * step)
+    finally:
+        # hand the provider's connection back now, not when the iterator is collected: the
+        # OSM driver serves a file's layers from one dataset and a second reader of the same
+        # .pbf waited on it once (tests/test_model_chain.py)
+        features.close()
     if not wkbs:
         raise QgsProcessingException(
             f"Layer {label} is empty: it has no features with a geometry"
