@@ -182,6 +182,27 @@ def test_given_roads_are_kept_and_joined(models):
     assert shapely.equals_exact(again.geometry, res.geometry, 0.0).all()
 
 
+def test_a_floating_piece_joins_through_a_piece_that_joined_first():
+    """Two generated streets parallel to a given road, 60 m and 140 m from it: with
+    connectors up to 90 m the near one joins the road and the far one joins the near one
+    (the walk's REPEAT); nothing is dropped and every contact is a junction."""
+    road = shapely.LineString([(0, 0), (1000, 0)])
+    near = shapely.LineString([(300, 60), (600, 60)])
+    far = shapely.LineString([(300, 140), (600, 140)])
+    lines, is_given, stats = streetgan.attach_to_given([near, far], [road], ["residential"],
+                                                       join_distance=90.0)
+    assert stats["n_joined"] == 2 and stats["n_dropped_edges"] == 0
+    assert stats["n_components"] == 1
+    new = lines[~is_given]
+    assert shapely.length(new).sum() == pytest.approx(600 + 60 + 80, abs=1e-6)
+    assert_planar(lines)
+    # out of reach of both (a third street 200 m beyond): dropped, and said so
+    lost = shapely.LineString([(300, 340), (600, 340)])
+    _, _, stats = streetgan.attach_to_given([near, far, lost], [road], ["residential"],
+                                            join_distance=90.0)
+    assert stats["n_joined"] == 2 and stats["dropped_m"] == pytest.approx(300.0)
+
+
 def test_dead_end_share_is_steered_into_the_examples_band(models):
     """The read-back leaves the dead-end share where the morphology puts it; with the
     example's share given, it is steered into the invariants' band (±30 %) both ways, the

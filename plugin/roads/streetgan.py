@@ -29,7 +29,8 @@ might also incorporate existing objects", ch. 4.2.8) are respected and kept:
   motorways and trunks, which are crossed only at their own junctions;
 - all lines are noded together (every contact is a junction), and generated pieces that
   reach neither a given road nor (without given roads) the largest piece are joined by
-  the shortest clear connector within :data:`JOIN_DISTANCE` road widths, or dropped;
+  the shortest clear connector within :data:`JOIN_DISTANCE` road widths, in rounds (a
+  piece may join through one that joined before it), or dropped;
 - the given roads are returned whole (split at the new junctions), level 0; the generated
   streets rank below them.
 """
@@ -639,21 +640,22 @@ def attach_to_given(lines, given, given_class=None, area=None, reach: float = 60
     area : Polygon, optional; dead ends on its boundary are clip ends (not extended)
     reach : m; a dead end this close to a given road, pointing at it (within ``max_angle``
         degrees), is extended straight onto it
-    join_distance : m; the longest connector that joins a floating piece
+    join_distance : m; the longest connector that joins a floating piece (to the network
+        or to a piece that joined it in an earlier round)
 
     Returns
     -------
     lines : the noded network (generated pieces and given pieces)
     is_given : bool per line
-    stats : dict (n_attached, n_joined, n_dropped_edges, n_components)
+    stats : dict (n_attached, n_joined, n_dropped_edges, dropped_m: their length,
+        n_components)
     """
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
-
     lines = np.asarray(lines, dtype=object)
     given = np.asarray(given, dtype=object)
-    stats = {"n_attached": 0, "n_joined": 0, "n_dropped_edges": 0}
+    stats = {"n_attached": 0, "n_joined": 0, "n_dropped_edges": 0, "dropped_m": 0.0}
     if not len(lines):
         return given.copy(), np.ones(len(given), dtype=bool), dict(stats, n_components=int(
             len(given) > 0))
@@ -720,40 +722,32 @@ def attach_to_given(lines, given, given_class=None, area=None, reach: float = 60
                 shapely.union_all(shapely.buffer(closed, 0.01)), main_geom)]
         if not len(main_geom):
             main_geom = noded[np.isin(label, list(main))][:0]
-        mtree = shapely.STRtree(main_geom) if len(main_geom) else None
         add, drop = [], np.zeros(n, dtype=bool)
-        for lab in floating:
-            members = noded[label == lab]
-            if mtree is None:
-                drop |= label == lab
-                continue
-            ends = shapely.get_coordinates(shapely.boundary(members))
-            if not len(ends):
-                ends = shapely.get_coordinates(members)
-            p = shapely.points(ends)
-            gi = mtree.nearest(p)
-            seg = shapely.shortest_line(p, main_geom[gi])
-            dl = shapely.length(seg)
-            order = np.argsort(dl)
-            done = False
-            for k in order[:5]:
-                if dl[k] > join_distance:
-                    break
-                if dl[k] < 1e-6:
-                    done = True
-                    break
-                crossing = mtree.query(seg[k], predicate="intersects")
-                blocked = len(closed) and shapely.intersects(seg[k], closed).any()
-                if len(crossing) <= 1 and not blocked and \
-                        not shapely.crosses(seg[k], members).any():
-                    add.append(seg[k])
-                    done = True
-                    break
-            if done:
+        # in rounds, so that a piece too far from the network may join through a piece that
+        # joined it (the random walk's REPEAT): each round every piece still floating looks
+        # for a connector to the network as it has grown; a round that joins none ends it
+        while floating and len(main_geom):
+            mtree = shapely.STRtree(main_geom)
+            joined, still = [], []
+            for lab in floating:
+                members = noded[label == lab]
+                seg = _join_connector(members, main_geom, mtree, closed, join_distance)
+                if seg is None:
+                    still.append(lab)
+                    continue
                 stats["n_joined"] += 1
-            else:
-                drop |= label == lab
+                joined.append(members)
+                if not seg.is_empty:
+                    add.append(seg)
+                    joined.append(np.array([seg], dtype=object))
+            if not joined:
+                break
+            main_geom = np.concatenate([main_geom, *joined])
+            floating = still
+        for lab in floating:
+            drop |= label == lab
         stats["n_dropped_edges"] = int(drop.sum())
+        stats["dropped_m"] = round(float(shapely.length(noded[drop]).sum()), 1)
         noded = noded[~drop]
         is_given = is_given[~drop]
         if add:
@@ -762,3 +756,27 @@ def attach_to_given(lines, given, given_class=None, area=None, reach: float = 60
                 noded[is_given])
     stats["n_components"] = int(len(np.unique(components(noded)))) if len(noded) else 0
     return noded, is_given, stats
+
+
+def _join_connector(members, main_geom, mtree, closed, join_distance):
+    """The shortest clear connector (of the five nearest ends') from a floating piece to
+    the network: crossing at most the street it ends on, no motorway or trunk, not through
+    the piece itself. An empty line when the piece already touches the network; None when
+    no connector within ``join_distance`` is clear."""
+    ends = shapely.get_coordinates(shapely.boundary(members))
+    if not len(ends):
+        ends = shapely.get_coordinates(members)
+    p = shapely.points(ends)
+    gi = mtree.nearest(p)
+    seg = shapely.shortest_line(p, main_geom[gi])
+    dl = shapely.length(seg)
+    for k in np.argsort(dl)[:5]:
+        if dl[k] > join_distance:
+            return None
+        if dl[k] < 1e-6:
+            return shapely.LineString()
+        crossing = mtree.query(seg[k], predicate="intersects")
+        blocked = len(closed) and shapely.intersects(seg[k], closed).any()
+        if len(crossing) <= 1 and not blocked and not shapely.crosses(seg[k], members).any():
+            return seg[k]
+    return None
