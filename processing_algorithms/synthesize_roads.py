@@ -18,6 +18,7 @@ from qgis.core import (
     QgsVectorLayer,
 )
 
+from ..plugin.measure import fidelity
 from ..plugin.network import invariants
 from ..plugin.qgis_glue import qgis_io
 from ..plugin.roads import streetgan
@@ -84,7 +85,9 @@ class SynthesizeRoads(AlgorithmBase):
             "Fragments: the example city's roads as written by 'Extract road hierarchy' "
             "(field level), from which the fragment database is built when no FRAGMENT_DB "
             "is given. StreetGAN: the generated streets keep the example's dead-end share "
-            "(measured inside the example's hull, ±30 %) and its share of 4-way junctions.")
+            "(measured inside the example's hull, ±30 %) and its share of 4-way junctions, "
+            "and its cells are merged up to the example's median and 10th-percentile block "
+            "areas.")
         self.add(QgsProcessingParameterFeatureSource(
             self.ARTERIALS, "Arterial roads of the district", [QgsProcessing.SourceType.TypeVectorLine]),
             "Sketched or real arterials: they are kept and the new streets connect to them.")
@@ -140,23 +143,31 @@ class SynthesizeRoads(AlgorithmBase):
                 raise QgsProcessingException(
                     f"The arterials {arterials.name} lie on one line: their convex hull has no "
                     "area. Give a District boundary (BOUNDARY).")
-        shares = {}
+        held_to = {}
         if method.key == "gan" and self.given(parameters, self.EXAMPLE_ROADS):
-            # the generator keeps the example's dead-end share (the network invariants' band)
-            # and its share of crossings
+            # what the generator is held to: the example's dead-end share (the network
+            # invariants' band) and its share of crossings
             example = qgis_io.read_source(self, parameters, self.EXAMPLE_ROADS, context,
                                           feedback, kind="lines", fields=[])
             for key, share_of in (("DEAD_END_SHARE", invariants.dead_end_share_of_extract),
                                   ("CROSSING_SHARE", invariants.crossing_share_of_extract)):
-                shares[key] = qgis_io.run_engine(example.name, share_of, example.geometry)
-            feedback.pushInfo(f"{example.name}: dead-end share {shares['DEAD_END_SHARE']:.2f}, "
-                              f"4-way junctions {shares['CROSSING_SHARE']:.2f} (inside its "
-                              "hull).")
+                held_to[key] = qgis_io.run_engine(example.name, share_of, example.geometry)
+            # and its block sizes: the generator's cells are merged up to its median and
+            # its smallest tenth
+            blocks = qgis_io.run_engine(example.name, fidelity.block_areas_of_extract,
+                                        example.geometry)
+            held_to["MEDIAN_BLOCK_AREA"] = blocks["block_area_p50"]
+            held_to["MIN_BLOCK_AREA"] = blocks["block_area_p10"]
+            feedback.pushInfo(f"{example.name}: dead-end share "
+                              f"{held_to['DEAD_END_SHARE']:.2f}, "
+                              f"4-way junctions {held_to['CROSSING_SHARE']:.2f}, blocks "
+                              f"{blocks['block_area_p10']:,.0f} m² (10th percentile) and "
+                              f"{blocks['block_area_p50']:,.0f} m² (median) (inside its hull).")
         return self._child_method(parameters, context, feedback, method, arterials, area, seed,
-                                  shares)
+                                  held_to)
 
     def _child_method(self, parameters, context, feedback, method, arterials, area, seed,
-                      shares=None):
+                      held_to=None):
         import processing  # QGIS's Processing plugin, present wherever algorithms run
 
         fragment_db = self.parameterAsFile(parameters, self.FRAGMENT_DB, context)
@@ -191,7 +202,7 @@ class SynthesizeRoads(AlgorithmBase):
                     "(reinstall the plugin).")
             params = {"TARGET": boundary, "SEED": seed, "MODEL": models.index(GAN_MODEL),
                       "GIVEN_ROADS": parameters[self.ARTERIALS]}
-            params.update({key: float(v) for key, v in (shares or {}).items()
+            params.update({key: float(v) for key, v in (held_to or {}).items()
                            if np.isfinite(v)})
         else:
             params = {"BOUNDARY": boundary, "MAJOR_ROADS": parameters[self.ARTERIALS],

@@ -44,6 +44,7 @@ class SynthesizeRoadsGan(AlgorithmBase):
     FROM_EDGE = "FROM_EDGE"
     DEAD_END_SHARE = "DEAD_END_SHARE"
     MIN_BLOCK_AREA = "MIN_BLOCK_AREA"
+    MEDIAN_BLOCK_AREA = "MEDIAN_BLOCK_AREA"
     CROSSING_SHARE = "CROSSING_SHARE"
     OUTPUT = "OUTPUT"
     OUTPUT_RASTER = "OUTPUT_RASTER"
@@ -159,6 +160,14 @@ class SynthesizeRoadsGan(AlgorithmBase):
             "removed, smallest first and only where both ends stay junctions, until at most a "
             "tenth of the blocks are smaller: bigger blocks, longer segments, fewer streets. "
             "Empty: the cells as read back.", advanced=True)
+        self.add(QgsProcessingParameterNumber(
+            self.MEDIAN_BLOCK_AREA, "Median block (m², the example's)",
+            QgsProcessingParameterNumber.Type.Double, optional=True, minValue=1.0),
+            "The example's median block area (layoutmetrics of the example): generated "
+            "streets are removed the same way, before the smallest blocks, until at most half "
+            "the blocks are smaller. A small cell with no removable street to another block "
+            "(at the network's edge) opens onto the land around it. Empty: not held to the "
+            "example's median.", advanced=True)
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT, "StreetGAN roads", QgsProcessing.SourceType.TypeVectorLine),
             "Roads with edge_id, level, road_class, length_m, model, seed.")
@@ -223,6 +232,9 @@ class SynthesizeRoadsGan(AlgorithmBase):
         min_block = None
         if parameters.get(self.MIN_BLOCK_AREA) not in (None, ""):
             min_block = self.number(parameters, self.MIN_BLOCK_AREA, context)
+        median_block = None
+        if parameters.get(self.MEDIAN_BLOCK_AREA) not in (None, ""):
+            median_block = self.number(parameters, self.MEDIAN_BLOCK_AREA, context)
         gen = qgis_io.run_engine(f"Model '{Path(str(model)).name}'", streetgan.load_model, model)
         feedback.pushInfo(f"Model {gen.name}: {gen.card.get('title', '')}, "
                           f"{gen.cell_size:g} m per pixel.")
@@ -241,7 +253,7 @@ class SynthesizeRoadsGan(AlgorithmBase):
             from_edge=self.parameterAsBoolean(parameters, self.FROM_EDGE, context),
             progress=qgis_io.progress_for(feedback, 5, 90), given=given,
             given_class=given_class, dead_end_share=share, min_block_area=min_block,
-            crossing_share=crossing_share)
+            median_block_area=median_block, crossing_share=crossing_share)
         s = result.stats
         n_new = int((~result.given).sum())
         feedback.pushInfo(f"Generated {s['pixels'][0]} x {s['pixels'][1]} px in "
@@ -255,9 +267,12 @@ class SynthesizeRoadsGan(AlgorithmBase):
                 f"{s['n_joined']} pieces joined by a connector, {s['n_dropped_edges']} edges "
                 f"of pieces that reach no road dropped; {s['n_components']} connected "
                 "component(s).")
-        if min_block is not None:
-            feedback.pushInfo(f"{s['small_blocks_merged']} generated street(s) between blocks "
-                              f"under {min_block:,.0f} m² removed.")
+        if min_block is not None or median_block is not None:
+            under = " and ".join(f"{a:,.0f} m² ({what})" for a, what in
+                                 ((median_block, "median"), (min_block, "10th percentile"))
+                                 if a is not None)
+            feedback.pushInfo(f"{s['small_blocks_merged']} generated street(s) at blocks "
+                              f"under {under} removed.")
         if crossing_share is not None:
             feedback.pushInfo(f"4-way junctions steered to {crossing_share:.2f}: "
                               f"{s['crossings_made']} T junction(s) made crossings, "

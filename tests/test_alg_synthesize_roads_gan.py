@@ -201,6 +201,24 @@ def test_given_roads_on_a_town(qgis_processing):
     check = invariants.check_network(geoms[~is_given], case["given"], case["given_class"],
                                      case["area"], example_dead_end_share=share)
     assert check.ok, check.summary()
+    # and with the example's median block: the median comes up to it (half the blocks
+    # smaller at most, counted as the merge counts them: every face in the target)
+    p50 = fidelity.fidelity_statistics(case["example"], case["example_area"])["block_area_p50"]
+    assert after["block_area_p50"] < 0.6 * p50
+    out = qgis_processing.run(GAN, {
+        "TARGET": memory_layer("Polygon", [case["area"].wkt], "EPSG:32632"),
+        "GIVEN_ROADS": given, "MODEL": streetgan.shipped_models().index("streetgan_helsinki"),
+        "SEED": 3, "DEAD_END_SHARE": share, "MIN_BLOCK_AREA": p10, "MEDIAN_BLOCK_AREA": p50,
+        "OUTPUT": "memory:"})
+    rows, geoms = layer_features(out["OUTPUT"])
+    is_given = np.array([r["road_class"] == "given" for r in rows])
+    faces = shapely.get_parts(shapely.polygonize(shapely.get_parts(shapely.node(
+        shapely.multilinestrings(geoms)))))
+    faces = faces[shapely.within(shapely.point_on_surface(faces), case["area"])]
+    assert (shapely.area(faces) < p50).sum() <= 0.5 * len(faces) + 1
+    check = invariants.check_network(geoms[~is_given], case["given"], case["given_class"],
+                                     case["area"], example_dead_end_share=share)
+    assert check.ok, check.summary()
 
 
 def test_crossing_share_on_a_town_never_seen(qgis_processing):

@@ -71,3 +71,34 @@ def test_crossings_go_in_rounds_not_one_measurement_per_street():
     (calls_one, removed_one), (calls, removed) = got[1], got[None]
     assert calls_one == removed_one + 1 and removed_one > 50
     assert calls <= 15 and abs(removed - removed_one) <= 0.1 * removed_one
+
+
+def test_a_cell_at_the_edge_opens_and_a_street_on_it_stays_attached():
+    """One small cell on a given road, no block beside it: it is opened onto the land around
+    it (its shortest removable street goes). A street ends on the cell's top at a point that
+    lies on it only up to round-off (GEOS noding leaves that T unsplit): it is made a
+    junction first, so the street it hangs from is not taken for one street between the
+    cell's two corners on the road, and nothing floats afterwards."""
+    from urban_synthesis.plugin.network.small_blocks import merge_small_blocks
+
+    road = shapely.LineString([(0, 0), (400, 0)])
+    top = shapely.LineString([(100, 40), (160, 41.3)])
+    hang = shapely.line_interpolate_point(top, 0.3, normalized=True)
+    # the premise: noding alone does not split the top where the street ends
+    side_street = shapely.LineString([hang.coords[0], (118, 100)])
+    assert len(shapely.get_parts(shapely.node(shapely.multilinestrings([top, side_street])))) == 2
+    cell = [shapely.LineString([(100, 0), (100, 40)]), top,
+            shapely.LineString([(160, 41.3), (160, 0)])]
+    lines = np.array([road, *cell, side_street], dtype=object)
+    is_new = np.r_[False, np.ones(4, bool)]
+    out, new, removed = merge_small_blocks(lines, is_new, 10_000.0)
+    assert removed == 1
+    assert not len(shapely.get_parts(shapely.polygonize(out)))       # the cell is open
+    assert shapely.union_all(out[~new]).length == pytest.approx(400)
+    check = invariants.check_network(out[new], out[~new])
+    assert check.floating_pieces == 0 and not len(check.crossings_synthesised)
+    # the side street's own end is the only dead end
+    ends = shapely.get_coordinates(np.r_[shapely.get_point(out, 0), shapely.get_point(out, -1)])
+    keys, counts = np.unique(np.round(ends, 3), axis=0, return_counts=True)
+    dead = keys[counts == 1]
+    assert {tuple(k) for k in dead} == {(118.0, 100.0), (0.0, 0.0), (400.0, 0.0)}

@@ -37,7 +37,8 @@ from ..network import blocks as _blocks
 from . import metrics as _metrics
 
 __all__ = [
-    "STATISTICS", "EDGE_DISTANCE", "clip_to_area", "fidelity_statistics", "relative_errors",
+    "STATISTICS", "EDGE_DISTANCE", "clip_to_area", "fidelity_statistics",
+    "block_areas_of_extract", "relative_errors",
     "grid_baseline", "chord_baseline", "delaunay_baseline", "score",
 ]
 
@@ -109,6 +110,28 @@ def fidelity_statistics(lines: Sequence, area, min_block_area: float = _blocks.M
         d = m.distribution("blocks", name) if has_blocks else np.zeros(0)
         out[key] = float(np.median(d)) if len(d) else np.nan
     return {k: float(out[k]) for k, _ in STATISTICS}
+
+
+def block_areas_of_extract(lines: Sequence) -> Dict[str, float]:
+    """The block areas (``block_area_p10``, ``block_area_p50``, m²) of an example known only
+    by its lines, measured inside their convex hull as :func:`fidelity_statistics` measures
+    them (the rule of :func:`invariants.dead_end_share_of_extract`): what a generator's cells
+    are held to. NaN where the example closes no block.
+
+    A 300 m square cut into nine 100 m blocks, one of them halved:
+
+    >>> grid = ([shapely.LineString([(x, 0), (x, 300)]) for x in range(0, 301, 100)]
+    ...         + [shapely.LineString([(0, y), (300, y)]) for y in range(0, 301, 100)])
+    >>> halved = grid + [shapely.LineString([(0, 50), (100, 50)])]
+    >>> {k: round(v) for k, v in block_areas_of_extract(halved).items()}
+    {'block_area_p10': 5000, 'block_area_p50': 10000}
+    """
+    lines = np.asarray(lines, dtype=object)
+    hull = shapely.convex_hull(shapely.union_all(lines)) if len(lines) else None
+    if hull is None or hull.area <= 0:
+        return {"block_area_p10": np.nan, "block_area_p50": np.nan}
+    stats = fidelity_statistics(lines, hull)
+    return {k: stats[k] for k in ("block_area_p10", "block_area_p50")}
 
 
 def relative_errors(candidate: Mapping[str, float], real: Mapping[str, float]) -> Dict[str, float]:

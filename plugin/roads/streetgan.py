@@ -341,7 +341,8 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
                given_class=None, merge_junctions: Optional[float] = None,
                dead_end_share: Optional[float] = None,
                min_block_area: Optional[float] = None,
-               crossing_share: Optional[float] = None) -> StreetGanResult:
+               crossing_share: Optional[float] = None,
+               median_block_area: Optional[float] = None) -> StreetGanResult:
     """Generate a road network over a target polygon (thesis ch. 4.2).
 
     Parameters
@@ -375,6 +376,8 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
         streets between blocks under it are removed until at most a tenth of the blocks
         are smaller (:func:`network.small_blocks.merge_small_blocks`; not in the thesis:
         the generator draws cells of its own size); None: the cells as read back
+    median_block_area : m², optional, the example's median block area: merged the same way
+        first, until at most half the blocks are smaller
     crossing_share : float in [0, 1], optional, the example's share of 4-way junctions:
         the network's is steered to it (:func:`network.crossings.match_crossings`: T
         junctions become crossings, their generated street continued straight across to the
@@ -391,9 +394,10 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
     for name, value in (("dead-end", dead_end_share), ("crossing", crossing_share)):
         if value is not None and not 0 <= value <= 1:
             raise InputError(f"the {name} share must lie in [0, 1], got {value}")
-    if min_block_area is not None and not (math.isfinite(min_block_area) and min_block_area > 0):
-        raise InputError(f"the smallest block area must be a positive number of m², not "
-                         f"{min_block_area}")
+    for name, value in (("smallest", min_block_area), ("median", median_block_area)):
+        if value is not None and not (math.isfinite(value) and value > 0):
+            raise InputError(f"the {name} block area must be a positive number of m², not "
+                             f"{value}")
     cell = float(cell_size) if cell_size else gen.cell_size
     if not (math.isfinite(cell) and cell > 0):
         raise InputError(f"the cell size must be a positive number of metres, not {cell_size}")
@@ -450,12 +454,14 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
                                               reach=corridor + 0.75 * width,
                                               join_distance=JOIN_DISTANCE * width)
     n_merged = 0
-    if min_block_area is not None and len(lines) > 1:
-        from ..network.small_blocks import merge_small_blocks
+    # the median first (half the blocks may be under it), then the smallest tenth
+    for block, share in ((median_block_area, 0.5), (min_block_area, 0.1)):
+        if block is not None and len(lines) > 1:
+            from ..network.small_blocks import merge_small_blocks
 
-        lines, is_new, n_merged = merge_small_blocks(lines, ~is_given, float(min_block_area),
-                                                     area)
-        is_given = ~is_new
+            lines, is_new, n = merge_small_blocks(lines, ~is_given, float(block), area, share)
+            is_given = ~is_new
+            n_merged += n
     steered = (0, 0)
     if dead_end_share is not None and len(lines) > 1:
         from ..network.dead_ends import steer_dead_ends

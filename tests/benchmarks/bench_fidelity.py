@@ -159,6 +159,7 @@ class Runner:
         self.target, self.example, self.workdir = target, example, workdir
         self.fill_quantile = fill_quantile
         self.gan_min_block = True
+        self.gan_median_block = True
         self.extra: dict = {}
         self._cache: Dict[str, object] = {}
 
@@ -221,12 +222,14 @@ class Runner:
         self.extra = {"model": name}
         # every example statistic the tool takes, as an analyst with the example would pass
         # them: dead-end and crossing shares, and the example's smallest blocks (10th
-        # percentile) as MIN_BLOCK_AREA (--gan-no-min-block: without)
+        # percentile) as MIN_BLOCK_AREA and its median block as MEDIAN_BLOCK_AREA
+        # (--gan-no-min-block, --gan-no-median-block: without)
         min_block = self.example.stats["block_area_p10"] if self.gan_min_block else None
+        median_block = self.example.stats["block_area_p50"] if self.gan_median_block else None
         return streetgan.synthesize(self.target.area, model, seed=seed, given=self.target.given,
                                     given_class=self.target.given_class,
                                     dead_end_share=self.example.stats["degree1_share"],
-                                    min_block_area=min_block,
+                                    min_block_area=min_block, median_block_area=median_block,
                                     crossing_share=self.example.stats["degree4_share"]).geometry
 
     def growroads(self, seed: int) -> np.ndarray:
@@ -443,6 +446,9 @@ def main(argv=None):
     ap.add_argument("--gan-no-min-block", action="store_true",
                     help="StreetGAN without the example's 10th-percentile block area as "
                          "min_block_area (its small generated cells kept)")
+    ap.add_argument("--gan-no-median-block", action="store_true",
+                    help="StreetGAN without the example's median block area as "
+                         "median_block_area")
     ap.add_argument("--update", action="store_true",
                     help="rerun only --methods and keep every other result of --out (no "
                          "pictures: they show every method of one run)")
@@ -480,6 +486,7 @@ def main(argv=None):
             real = fidelity.fidelity_statistics(target.lines, target.area)
             runner = Runner(target, ex, Path(tmp), args.fill_quantile)
             runner.gan_min_block = not args.gan_no_min_block
+            runner.gan_median_block = not args.gan_no_median_block
             entry = {"region": target.region, "km2": target.km2, "villages": target.villages,
                      "example": ex.names, "given_km": float(shapely.length(target.given).sum()
                                                            / 1e3),
