@@ -29,8 +29,8 @@ might also incorporate existing objects", ch. 4.2.8) are respected and kept:
   motorways and trunks, which are crossed only at their own junctions;
 - all lines are noded together (every contact is a junction), and generated pieces that
   reach neither a given road nor (without given roads) the largest piece are joined by
-  the shortest clear connector within :data:`JOIN_DISTANCE` road widths, in rounds (a
-  piece may join through one that joined before it), or dropped;
+  the shortest clear connector within :data:`JOIN_DISTANCE` road widths, nearest first (a
+  piece may join through one that joined before it; :mod:`network.links`), or dropped;
 - the given roads are returned whole (split at the new junctions), level 0; the generated
   streets rank below them.
 """
@@ -50,6 +50,7 @@ import shapely.ops
 
 from ..core.paths import RESOURCES
 from ..core.progress import InputError, Progress, ensure
+from ..network.links import link_floating_pieces
 from . import raster_graph
 
 __all__ = ["MODELS_DIR", "Generator", "shipped_models", "load_model", "noise", "noise_size",
@@ -606,12 +607,13 @@ def _noded_with_given(new, given):
     """New lines noded among themselves and the given roads split where new lines end on
     them (the given roads are not noded with each other: a bridge stays a bridge).
     Returns (lines, is_given)."""
-    from ..network.street_graph import node_lines
+    from ..network.street_graph import node_lines, snap_ends_onto_lines
 
     new = np.asarray(new, dtype=object)
     given = np.asarray(given, dtype=object)
     if len(new):
-        new = node_lines(new)
+        # a connector's end lies on the street it meets only up to round-off: a vertex first
+        new = node_lines(snap_ends_onto_lines(new))
         new = new[shapely.length(new) > 1e-6]
     pieces = []
     if len(given):
@@ -647,7 +649,7 @@ def attach_to_given(lines, given, given_class=None, area=None, reach: float = 60
     reach : m; a dead end this close to a given road, pointing at it (within ``max_angle``
         degrees), is extended straight onto it
     join_distance : m; the longest connector that joins a floating piece (to the network
-        or to a piece that joined it in an earlier round)
+        or to a piece that joined it before: :func:`network.links.link_floating_pieces`)
 
     Returns
     -------
@@ -709,80 +711,30 @@ def attach_to_given(lines, given, given_class=None, area=None, reach: float = 60
     n = len(noded)
 
     def components(geoms):
-        # lines joined where they meet (everything is noded: a contact is a junction)
+        # lines joined where they meet (everything is noded: a contact is a junction; within
+        # the invariants' micrometre, as a given road cut at a new street's end meets it)
         tree = shapely.STRtree(geoms)
-        a, b = tree.query(geoms, predicate="intersects")
+        a, b = tree.query(geoms, predicate="dwithin", distance=1e-6)
         adj = coo_matrix((np.ones(len(a)), (a, b)), shape=(len(geoms), len(geoms)))
         return connected_components(adj, directed=False)[1]
 
-    label = components(noded)
-    if is_given.any():
-        main = set(np.unique(label[is_given]).tolist())
-    else:
-        main = {int(np.bincount(label, weights=shapely.length(noded)).argmax())}
-    floating = [x for x in np.unique(label) if x not in main]
-    if floating:
-        main_geom = noded[np.isin(label, list(main))]
-        if len(closed):  # motorways and trunks take no connector
-            main_geom = main_geom[~shapely.covers(
-                shapely.union_all(shapely.buffer(closed, 0.01)), main_geom)]
-        if not len(main_geom):
-            main_geom = noded[np.isin(label, list(main))][:0]
-        add, drop = [], np.zeros(n, dtype=bool)
-        # in rounds, so that a piece too far from the network may join through a piece that
-        # joined it (the random walk's REPEAT): each round every piece still floating looks
-        # for a connector to the network as it has grown; a round that joins none ends it
-        while floating and len(main_geom):
-            mtree = shapely.STRtree(main_geom)
-            joined, still = [], []
-            for lab in floating:
-                members = noded[label == lab]
-                seg = _join_connector(members, main_geom, mtree, closed, join_distance)
-                if seg is None:
-                    still.append(lab)
-                    continue
-                stats["n_joined"] += 1
-                joined.append(members)
-                if not seg.is_empty:
-                    add.append(seg)
-                    joined.append(np.array([seg], dtype=object))
-            if not joined:
-                break
-            main_geom = np.concatenate([main_geom, *joined])
-            floating = still
-        for lab in floating:
-            drop |= label == lab
-        stats["n_dropped_edges"] = int(drop.sum())
-        stats["dropped_m"] = round(float(shapely.length(noded[drop]).sum()), 1)
-        noded = noded[~drop]
-        is_given = is_given[~drop]
-        if add:
-            noded, is_given = _noded_with_given(
-                np.concatenate([noded[~is_given], np.asarray(add, dtype=object)]),
-                noded[is_given])
+    # pieces that reach no given road (without given roads: the longest piece) are joined
+    # by the shortest clear connector, nearest first, so that a joined piece anchors the
+    # next (the one home of the rule, network.links), at most join_distance long and never
+    # onto a motorway or trunk; the rest is dropped
+    closed_line = np.zeros(n, dtype=bool)
+    if len(closed):
+        closed_line[is_given] = shapely.covers(shapely.union_all(shapely.buffer(closed, 0.01)),
+                                               noded[is_given])
+    add, keep = link_floating_pieces(noded, is_given, drop_unlinked=True, ends_on=~closed_line,
+                                     accept=lambda link: link.length <= join_distance)
+    drop = ~keep
+    stats["n_joined"] = len(add)
+    stats["n_dropped_edges"] = int(drop.sum())
+    stats["dropped_m"] = round(float(shapely.length(noded[drop]).sum()), 1)
+    noded, is_given = noded[keep], is_given[keep]
+    if len(add):
+        noded, is_given = _noded_with_given(np.concatenate([noded[~is_given], add]),
+                                            noded[is_given])
     stats["n_components"] = int(len(np.unique(components(noded)))) if len(noded) else 0
     return noded, is_given, stats
-
-
-def _join_connector(members, main_geom, mtree, closed, join_distance):
-    """The shortest clear connector (of the five nearest ends') from a floating piece to
-    the network: crossing at most the street it ends on, no motorway or trunk, not through
-    the piece itself. An empty line when the piece already touches the network; None when
-    no connector within ``join_distance`` is clear."""
-    ends = shapely.get_coordinates(shapely.boundary(members))
-    if not len(ends):
-        ends = shapely.get_coordinates(members)
-    p = shapely.points(ends)
-    gi = mtree.nearest(p)
-    seg = shapely.shortest_line(p, main_geom[gi])
-    dl = shapely.length(seg)
-    for k in np.argsort(dl)[:5]:
-        if dl[k] > join_distance:
-            return None
-        if dl[k] < 1e-6:
-            return shapely.LineString()
-        crossing = mtree.query(seg[k], predicate="intersects")
-        blocked = len(closed) and shapely.intersects(seg[k], closed).any()
-        if len(crossing) <= 1 and not blocked and not shapely.crosses(seg[k], members).any():
-            return seg[k]
-    return None
