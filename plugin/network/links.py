@@ -72,6 +72,14 @@ def link_floating_pieces(lines, anchored, accept: Optional[Callable] = None,
     >>> links, keep = link_floating_pieces([a, b], [True, False])
     >>> [round(x.length, 6) for x in links], keep.tolist()
     ([30.0], [True, True])
+
+    A motorway 30 m away takes no junction (``ends_on``): the link goes to the road 50 m away.
+
+    >>> road = shapely.LineString([(0, 80), (100, 80)])
+    >>> links, keep = link_floating_pieces([a, road, b], [True, True, False],
+    ...                                    ends_on=[False, True, True])
+    >>> [round(x.length, 6) for x in links], keep.tolist()
+    ([50.0], [True, True, True])
     """
     geometry = np.asarray(lines, dtype=object)
     anchored_line = np.asarray(anchored, dtype=bool)
