@@ -7,8 +7,8 @@ of the real one. :func:`merge_small_blocks` removes, smallest block first, the s
 street between a block under ``min_area`` (the example's 10th-percentile block area) and
 its smallest neighbouring block, until no more than ``share`` of the blocks (the example's
 10 %) are under it (counting the blocks a synthesised street bounds: a strip between the
-given roads alone is not the method's to merge); run with the example's median block area and half the blocks, it holds
-the median too. A small block with no removable street to another block (a cell at the
+given roads alone is not the method's to merge); run with the example's median block area
+and half the blocks, it holds the median too. A small block with no removable street to another block (a cell at the
 network's edge) is opened onto the land around it: its shortest removable street with no
 block behind it goes. Only a street whose two ends stay junctions (degree >= 3 before) is
 removed, so no dead end is made, and a street on a block's outline is never a bridge, so
