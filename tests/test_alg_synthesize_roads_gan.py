@@ -256,9 +256,11 @@ def test_crossing_share_on_a_town_never_seen(qgis_processing):
 def test_qgis_process_crossing_share_on_a_town(tmp_path):
     """The crossing and dead-end shares through the real ``qgis_process`` command line:
     Eschen (outline and level-0 roads written to a GeoPackage) with the towns model, the
-    other towns' shares as CROSSING_SHARE and DEAD_END_SHARE. The output's share of 4-way
-    junctions is the example's within 30 % (2.3 % without it, test above) and every
-    invariant holds."""
+    other towns' shares as CROSSING_SHARE and DEAD_END_SHARE and their block areas as
+    MIN_BLOCK_AREA and MEDIAN_BLOCK_AREA (every example statistic the tool takes, as the
+    fidelity benchmark passes them). The output's share of 4-way junctions is the
+    example's within 30 % (2.3 % without it, test above), streets were removed at small
+    blocks, and every invariant holds."""
     import geopandas as gpd
     import pyogrio
     from helpers import liechtenstein_town
@@ -279,8 +281,12 @@ def test_qgis_process_crossing_share_on_a_town(tmp_path):
         "TARGET": f"{src}|layername=outline", "GIVEN_ROADS": f"{src}|layername=arterials",
         "MODEL": streetgan.shipped_models().index("streetgan_towns"), "SEED": 3,
         "DEAD_END_SHARE": share, "CROSSING_SHARE": example["degree4_share"],
-        "OUTPUT": str(out)})
+        "MIN_BLOCK_AREA": example["block_area_p10"],
+        "MEDIAN_BLOCK_AREA": example["block_area_p50"], "OUTPUT": str(out)})
     assert code == 0, err
+    # every example statistic the tool takes, the block areas too: the log says what went
+    merged = [line for line in result["log"]["info"] if "(median)" in line]
+    assert merged and int(merged[0].split()[0]) > 0, result["log"]["info"]
     frame = pyogrio.read_dataframe(out, layer=pyogrio.list_layers(out)[0][0])
     geoms = frame.geometry.to_numpy()
     is_given = (frame["road_class"] == "given").to_numpy()
