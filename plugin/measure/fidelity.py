@@ -34,6 +34,7 @@ from scipy.spatial import Delaunay
 
 from ..core.progress import InputError
 from ..network import blocks as _blocks
+from ..network import invariants as _invariants
 from . import metrics as _metrics
 
 __all__ = [
@@ -115,7 +116,7 @@ def fidelity_statistics(lines: Sequence, area, min_block_area: float = _blocks.M
 def block_areas_of_extract(lines: Sequence) -> Dict[str, float]:
     """The block areas (``block_area_p10``, ``block_area_p50``, m²) of an example known only
     by its lines, measured inside their convex hull as :func:`fidelity_statistics` measures
-    them (the rule of :func:`invariants.dead_end_share_of_extract`): what a generator's cells
+    them (:func:`invariants.extract_hull`, as the example's shares): what a generator's cells
     are held to. NaN where the example closes no block.
 
     A 300 m square cut into nine 100 m blocks, one of them halved:
@@ -127,7 +128,7 @@ def block_areas_of_extract(lines: Sequence) -> Dict[str, float]:
     {'block_area_p10': 5000, 'block_area_p50': 10000}
     """
     lines = np.asarray(lines, dtype=object)
-    hull = shapely.convex_hull(shapely.union_all(lines)) if len(lines) else None
+    hull = _invariants.extract_hull(lines) if len(lines) else None
     if hull is None or hull.area <= 0:
         return {"block_area_p10": np.nan, "block_area_p50": np.nan}
     stats = fidelity_statistics(lines, hull)

@@ -69,7 +69,7 @@ __all__ = [
     "CONTROLLED_ACCESS",
     "CHECKS", "Contacts", "NetworkCheck", "line_contacts", "node_degrees", "dead_end_share",
     "crossing_share", "counted_nodes", "dead_end_share_of_extract", "crossing_share_of_extract",
-    "new_streets", "check_network", "corridor_around",
+    "extract_hull", "new_streets", "check_network", "corridor_around",
     "doubles_a_street",
 ]
 
@@ -336,7 +336,13 @@ def _share_of_extract(share, lines) -> float:
     lines, _ = _lines(lines, "roads")
     if not len(lines):
         return float("nan")
-    return share(lines, shapely.convex_hull(shapely.multilinestrings(list(lines))))
+    return share(lines, extract_hull(lines))
+
+
+def extract_hull(lines: Sequence):
+    """The area an example known only by its lines is measured in: their convex hull (its
+    streets are cut at the extract's edge, which the hull follows)."""
+    return shapely.convex_hull(shapely.multilinestrings(list(lines)))
 
 
 def corridor_of(given: Sequence, half_width: float = CORRIDOR_HALF_WIDTH, quad_segs: int = 4):

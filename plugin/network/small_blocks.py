@@ -8,12 +8,13 @@ street between a block under ``min_area`` (the example's 10th-percentile block a
 its smallest neighbouring block, until no more than ``share`` of the blocks (the example's
 10 %) are under it (counting the blocks a synthesised street bounds: a strip between the
 given roads alone is not the method's to merge); run with the example's median block area
-and half the blocks, it holds the median too. A small block with no removable street to another block (a cell at the
-network's edge) is opened onto the land around it: its shortest removable street with no
-block behind it goes. Only a street whose two ends stay junctions (degree >= 3 before) is
-removed, so no dead end is made, and a street on a block's outline is never a bridge, so
-the network stays in one piece. Given streets are never removed. Not in the papers: a rule
-of ours that holds a method to the example's block-size distribution.
+and half the blocks, it holds the median too. A small block with no removable street to
+another block (a cell at the network's edge) is opened onto the land around it: its
+shortest removable street with no block behind it goes. Only a street whose two ends stay
+junctions (degree >= 3 before) is removed, so no dead end is made, and a street on a
+block's outline is never a bridge, so the network stays in one piece. Given streets are
+never removed. Not in the papers: a rule of ours that holds a method to the example's
+block-size distribution.
 
 Nothing here imports QGIS.
 """
@@ -69,6 +70,8 @@ def merge_small_blocks(lines: Sequence, is_new: Sequence, min_area: float, area=
         small = np.flatnonzero((fa < min_area) & made)
         if len(small) <= share * made.sum():
             return None
+        chain_length = np.bincount(chain, weights=shapely.length(net.pieces) * net.alive,
+                                   minlength=len(net.pieces))
 
         def candidates():
             # smallest block first, with the street to its smallest neighbour; a block with
@@ -88,9 +91,6 @@ def merge_small_blocks(lines: Sequence, is_new: Sequence, min_area: float, area=
                     yield best[1], {int(f), best[2]}
                 elif outer is not None:
                     yield outer[1], {int(f)}
-
-        chain_length = np.bincount(chain, weights=shapely.length(net.pieces) * net.alive,
-                                   minlength=len(net.pieces))
 
         return per_round or max(1, int(len(small) - share * made.sum()) // 2), candidates()
 
