@@ -825,7 +825,7 @@ def no_street_joints(leaves, split_lines, roads, splitter, by_name, s: SplitSett
       end), with an energy under the threshold or no higher than before,
     * no street is left ending there (no dead end is made), and
     * the blocks it joins have a centre-line perimeter of at most that of the longest row
-      template: 2 (max_columns x parcel width + 2 parcel lengths + street width), 942 m
+      template: 2 (max_columns x parcel width + 2 parcel lengths + street width), 1,230 m
       with the paper's parcels (sec. 7: a block too long "will take too long to walk (or
       drive) around"; Table 1, "Our": b_max 955-1,454 m).
 

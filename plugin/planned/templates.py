@@ -124,8 +124,9 @@ class Template:
         :data:`domain_split.MIN_COUNT_ATTEMPTS` times at most).
     max_columns : int
         Most parcels in one row: the repeating element's limit, i.e. the longest block
-        (22 x 18 m = 396 m with the paper's parcels; Yang's longest blocks have perimeters of
-        1,000-1,450 m, Table 1).
+        (30 x 18 m = 540 m with the paper's parcels: a double-strip block of 1,230 m
+        perimeter, inside the range of Yang's longest blocks, b_max 955-1,454 m in
+        Table 1's "Our" rows).
     land_use : str
     parcels : list of polygons (unit coordinates: x in parcel widths, y in parcel lengths)
         The drawn layout, for display and user templates; a 'drawn' template's parcels are
@@ -153,7 +154,7 @@ class Template:
     depth_range: Tuple[float, float] = (0.0, 0.0)
     max_count: Optional[int] = None
     min_count: int = 0
-    max_columns: int = 22
+    max_columns: int = 30
     land_use: str = "residential"
     parcels: tuple = field(default=(), compare=False)
     parcel_labels: tuple = field(default=(), compare=False)
