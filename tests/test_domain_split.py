@@ -980,3 +980,22 @@ def test_outline_beside_a_key_road_is_no_second_street():
     assert shapely.length(shapely.intersection(new, south)).sum() < 2 * 3.0
     assert shapely.dwithin(new, keys[0], 1e-6).sum() >= 2
     assert_planar(g)
+
+
+def test_no_split_street_runs_along_a_key_road_outside_the_region():
+    """Schaan's outline (the fidelity benchmark's target) runs beside its level-0 roads, and
+    where it lies in a road's corridor it is no street; with rows of up to 30 parcels a split
+    street ran 108 m along such a road there (seed 0). Split streets keep out of every key
+    road's corridor, the invariants' rule: no parallel duplicate on the real town."""
+    from towns import LI_PBF, liechtenstein_towns
+    from urban_synthesis.plugin.network import invariants
+
+    if not LI_PBF.exists():
+        pytest.skip(f"{LI_PBF} is missing")
+    town = {t.name: t for t in liechtenstein_towns()}["Schaan"]
+    lay = domain_split.split_domain(shapely.get_parts(town.area), key_roads=town.given, seed=0,
+                                    settings=domain_split.SplitSettings(optimise=False))
+    new = lay.roads[invariants.new_streets(lay.roads, town.given)]
+    check = invariants.check_network(new, town.given, town.given_class, town.area)
+    assert check.violations()["parallel_duplicates"] == 0
+    assert check.violations()["crossings_given"] == 0 and check.n_components == 1

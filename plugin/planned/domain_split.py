@@ -20,7 +20,9 @@ Pipeline of :func:`split_domain` (one layout) and :func:`split_variations` (k la
    x exp(-energy / 0.1).
    Otherwise the region is split along a streamline of its cross field (:mod:`cross_field`
    with a divergence term, :mod:`streamlines`: Delaunay seeds, RK2, the four quality
-   terms), drawn by quality; a split whose children could hold no template is rejected,
+   terms), drawn by quality; a split whose children could hold no template, or whose
+   street would run along a key road (in its corridor, :func:`invariants.doubles_a_street`;
+   key roads just outside the region too), is rejected,
    and when a child can be neither matched nor split the split is undone and another
    streamline drawn (``MAX_TRIES`` per region, ``MAX_BACKTRACKS`` per layout; template
    ``max_count`` limits are kept during the search). A region that fails everything
@@ -454,6 +456,7 @@ class _Splitter:
         self.n_rejected = 0
         self.n_no_access = 0
         self.no_access = None      # motorways: no junction
+        self.key_corridor = None   # the key roads' corridors: no split street runs along one
         self.no_street = None      # no-street edges: no street land
         self.no_frontage = None    # both: no parcel fronts on them
 
@@ -587,6 +590,9 @@ class _Splitter:
         street = shapely.line_merge(shapely.union_all(pieces[in_region & ~on_outline]))
         if street.geom_type != "LineString":
             return None
+        if self.key_corridor is not None and \
+                _invariants.doubles_a_street(np.array([street]), self.key_corridor).any():
+            return None  # it would run along a key road (the invariants' corridor rule)
         _, short, _ = minimum_rectangles(faces)
         if (short < self.min_depth).any():
             return None
@@ -974,6 +980,16 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
     # ---- hierarchical splitting with backtracking
     t0 = time.perf_counter()
     splitter.no_access = no_access
+    # whole key roads, also those just outside the region (where its outline is no street)
+    keys = fixed[np.isin(fixed_kinds, ("key", "limited"))]
+    if key_roads is not None and len(key_roads):
+        raw = np.asarray(key_roads, dtype=object).ravel()
+        raw = raw[[g is not None and not shapely.is_empty(g) for g in raw]]
+        near = shapely.buffer(domain, 2 * _invariants.CORRIDOR_HALF_WIDTH)
+        with np.errstate(invalid="ignore"):
+            raw = shapely.intersection(raw[shapely.intersects(raw, near)], near)
+        keys = np.concatenate([keys, raw[~shapely.is_empty(raw)]])
+    splitter.key_corridor = _invariants.corridor_of(keys) if len(keys) else None
     edges = fixed[fixed_kinds == "edge"]
     splitter.no_street = shapely.union_all(edges) if len(edges) else None
     blocked = [g for g in (no_access, splitter.no_street) if g is not None]
