@@ -314,6 +314,12 @@ def _extend_dangles(lines: np.ndarray, barrier, max_extension: float) -> np.ndar
     return np.asarray(out, dtype=object)
 
 
+def _key_lines(key_roads) -> np.ndarray:
+    """The key roads as given, missing and empty geometries left out."""
+    keys = np.asarray(key_roads, dtype=object).ravel()
+    return keys[~(shapely.is_missing(keys) | shapely.is_empty(keys))]
+
+
 def _outline_onto_key_roads(roads, level, kind, key_roads):
     """The region's outline where it runs beside a key road (in its corridor for longer than
     the invariants allow, :func:`invariants.corridor_of`: a key road just outside the region)
@@ -321,8 +327,7 @@ def _outline_onto_key_roads(roads, level, kind, key_roads):
     the streets that ended on the dropped stretch are carried straight onto the key road (at
     most twice the corridor's half-width, crossing no street), so that none is left dangling.
     Returns (roads, level, kind, stretches dropped)."""
-    keys = np.asarray(key_roads, dtype=object).ravel()
-    keys = keys[~(shapely.is_missing(keys) | shapely.is_empty(keys))]
+    keys = _key_lines(key_roads)
     if not len(keys):
         return roads, level, kind, 0
     corridor = _invariants.corridor_of(keys)
@@ -590,9 +595,6 @@ class _Splitter:
         street = shapely.line_merge(shapely.union_all(pieces[in_region & ~on_outline]))
         if street.geom_type != "LineString":
             return None
-        if self.key_corridor is not None and \
-                _invariants.doubles_a_street(np.array([street]), self.key_corridor).any():
-            return None  # it would run along a key road (the invariants' corridor rule)
         _, short, _ = minimum_rectangles(faces)
         if (short < self.min_depth).any():
             return None
@@ -605,6 +607,9 @@ class _Splitter:
         opened = shapely.area(shapely.buffer(inner, r, join_style="mitre"))
         if (opened < 0.85 * shapely.area(faces)).any():
             return None
+        if self.key_corridor is not None and \
+                _invariants.doubles_a_street(np.array([street]), self.key_corridor).any():
+            return None  # it would run along a key road (the invariants' corridor rule)
         return street, faces
 
 
@@ -980,11 +985,11 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
     # ---- hierarchical splitting with backtracking
     t0 = time.perf_counter()
     splitter.no_access = no_access
-    # whole key roads, also those just outside the region (where its outline is no street)
+    # the key roads as fixed (their dangles continued) and as given, also just outside the
+    # region (where its outline is no street)
     keys = fixed[np.isin(fixed_kinds, ("key", "limited"))]
     if key_roads is not None and len(key_roads):
-        raw = np.asarray(key_roads, dtype=object).ravel()
-        raw = raw[[g is not None and not shapely.is_empty(g) for g in raw]]
+        raw = _key_lines(key_roads)
         near = shapely.buffer(domain, 2 * _invariants.CORRIDOR_HALF_WIDTH)
         with np.errstate(invalid="ignore"):
             raw = shapely.intersection(raw[shapely.intersects(raw, near)], near)
