@@ -14,6 +14,7 @@ from qgis.core import (
     QgsWkbTypes,
 )
 
+from ..plugin.parcels import subdivision as parcels
 from ..plugin.planned import domain_split, templates
 from ..plugin.qgis_glue import qgis_io
 from .common import AlgorithmBase
@@ -36,6 +37,7 @@ class SplitDomain(AlgorithmBase):
     REPAIR_LOTS = "REPAIR_LOTS"
     OUTLINE_STREETS = "OUTLINE_STREETS"
     BACK_TO_BACK = "BACK_TO_BACK"
+    FALLBACK_PARCELS = "FALLBACK_PARCELS"
     KEY_ROAD_CLASS_FIELD = "KEY_ROAD_CLASS_FIELD"
     OUTPUT_ROADS = "OUTPUT_ROADS"
     OUTPUT_PARCELS = "OUTPUT_PARCELS"
@@ -160,6 +162,14 @@ class SplitDomain(AlgorithmBase):
             "template and street access without it becomes a 'no street' edge (two parcel "
             "strips back to back along their rear lot lines, rows end to end), up to a block "
             "as long as the longest row. Off: every split street is kept.", advanced=True)
+        self.add(QgsProcessingParameterEnum(
+            self.FALLBACK_PARCELS, "Parcels where no template fits",
+            options=[parcels.METHODS[k].label for k in domain_split.FALLBACK_PARCELS],
+            defaultValue=0),
+            "How a region that no template fits and no street splits is parcelled (the "
+            "paper's rule-based assignment): recursive cuts across its long axis (default; "
+            "squarer lots on odd leftover regions) or the straight-skeleton strips the "
+            "paper names (Vanegas et al. 2012).", advanced=True)
         self.add(QgsProcessingParameterBoolean(
             self.REPAIR_LOTS, "Repair misshapen lots (not in the paper)", defaultValue=False),
             "Optional post-process: a misshapen lot keeps the largest rectangle on its street "
@@ -193,7 +203,9 @@ class SplitDomain(AlgorithmBase):
             optimise=self.parameterAsBoolean(parameters, self.OPTIMISE, context),
             repair_lots=self.parameterAsBoolean(parameters, self.REPAIR_LOTS, context),
             outline_streets=self.parameterAsBoolean(parameters, self.OUTLINE_STREETS, context),
-            back_to_back=self.parameterAsBoolean(parameters, self.BACK_TO_BACK, context))
+            back_to_back=self.parameterAsBoolean(parameters, self.BACK_TO_BACK, context),
+            fallback_parcels=domain_split.FALLBACK_PARCELS[
+                self.parameterAsEnum(parameters, self.FALLBACK_PARCELS, context)])
         qgis_io.run_engine("Parameters", settings.validate)
 
         region = qgis_io.read_source(self, parameters, self.REGION, context, feedback,

@@ -92,7 +92,7 @@ def test_drawn_templates(qgis_processing, region_layer):
                                     "OUTPUT_ROADS": "memory:", "OUTPUT_PARCELS": "memory:"})
     rows = layer_features(out["OUTPUT_PARCELS"])[0]
     used = {r["template"] for r in rows if r["land_use"] == "residential"}
-    assert "double" in used and used <= {"double", "skeleton"}
+    assert "double" in used and used <= {"double", "recursive"}
 
 
 def test_a_drawn_template_warped_as_drawn(qgis_processing):

@@ -199,6 +199,9 @@ def test_templates_from_drawn_recognises_rows():
     assert (lib["a"].kind, lib["a"].rows) == ("rows", 1)
     assert (lib["b"].kind, lib["b"].rows) == ("rows", 2)
     assert lib["c"].kind == "park"
+    with pytest.raises(InputError, match="rule-based parcels must be one of"):
+        domain_split.split_domain([shapely.box(0, 0, 100, 100)],
+                                  settings=domain_split.SplitSettings(fallback_parcels="voronoi"))
     with pytest.raises(InputError, match="no parcel template"):
         templates.templates_from_drawn(park, ["c"], ["P"])
 
@@ -529,7 +532,7 @@ def test_bubenec_layout_quality(bubenec_layouts, bubenec_hull):
     assert m["p_angle"] < real.scalar("parcels", "p_angle")
     assert m["p_area"] < real.scalar("parcels", "p_area")
     # parcel sizes follow the template (30 x 18 m = 540 m²) within its tolerances
-    area = t.area_m2[res & (t.template != "skeleton")]
+    area = t.area_m2[res & (~t.template.isin(domain_split.FALLBACK_PARCELS))]
     assert 0.6 * L * W < np.median(area) < 1.5 * L * W
     # streets: the outline plus streamline streets, land use shares add up
     assert (lay.road_level == domain_split.LEVEL_SPLIT).sum() >= 3
@@ -584,6 +587,26 @@ def test_bad_input():
         domain_split.split_domain([shapely.box(0, 0, 100, 100)],
                                   templates=[t for t in templates.load_library()
                                              if t.kind == "park"])
+
+
+@pytest.mark.parametrize("method", domain_split.FALLBACK_PARCELS)
+def test_rule_based_parcels_tile_the_block_with_street_access(method):
+    """A region no template fits gets the rule-based parcels of ``fallback_parcels`` (here
+    the whole region: no region may be split, ``max_regions=0``): they tile the net block
+    without overlaps, every lot fronts on the street round it, lots are parcel-sized, and
+    the parcels carry the method's name."""
+    region = shapely.Polygon([(0, 0), (230, 30), (260, 170), (90, 210), (-30, 120)])
+    s = domain_split.SplitSettings(max_regions=0, fallback_parcels=method, optimise=False)
+    lay = domain_split.split_domain([region], seed=0, settings=s)
+    t = lay.table
+    assert set(t.template) == {method} and set(t.land_use) == {"residential"}
+    assert t.has_street_access.all() and shapely.is_valid(lay.parcels).all()
+    net = domain_split.net_block(region, s.street_width, None)
+    union = shapely.union_all(lay.parcels)
+    assert abs(shapely.area(union) - shapely.area(net)) < 1.0
+    assert abs(shapely.area(lay.parcels).sum() - shapely.area(union)) < 1.0  # no overlaps
+    lot = s.parcel_length * s.parcel_width
+    assert 0.3 * lot <= shapely.area(lay.parcels).min() and np.median(t.area_m2) < 1.6 * lot
 
 
 def test_minimum_template_count_is_met_by_repeating_the_search():
