@@ -161,7 +161,9 @@ class SplitDomain(AlgorithmBase):
             "On: a split street between two blocks of parcel rows that both keep their "
             "template and street access without it becomes a 'no street' edge (two parcel "
             "strips back to back along their rear lot lines, rows end to end), up to a block "
-            "as long as the longest row. Off: every split street is kept.", advanced=True)
+            "as long as the longest row; so does one between parcel rows or a park and a "
+            "park left in a small region (rows back onto it; the park keeps a street along "
+            "at least a parcel width). Off: every split street is kept.", advanced=True)
         self.add(QgsProcessingParameterEnum(
             self.FALLBACK_PARCELS, "Parcels where no template fits",
             options=[parcels.METHODS[k].label for k in domain_split.FALLBACK_PARCELS],

@@ -934,6 +934,35 @@ def test_no_street_joints_put_rows_back_to_back_and_end_to_end():
     assert joints == [] and len(kept) == 1
 
 
+def test_a_parcel_strip_backs_onto_a_park_that_keeps_a_street():
+    """A park the layout left in a small region (Yang's rule-based assignment) needs no
+    street on every side: a parcel strip backs onto it without the split street between
+    them. A park keeps a street along at least a parcel width of its outline: with the
+    region's ends "no street" edges (a town's edge against fields) only one of the two
+    streets along a park between two strips goes."""
+    below = shapely.LineString([(0, 48), (200, 48)])
+    kept, joints = _joints([(shapely.box(0, 0, 200, 48), "parcel_strip"),
+                            (shapely.box(0, 48, 200, 90), "park")], [below])
+    assert kept == [] and len(joints) == 1
+    # a double strip still needs its street along the park
+    kept, joints = _joints([(shapely.box(0, 0, 200, 75), "double_strip"),
+                            (shapely.box(0, 75, 200, 117), "park")],
+                           [shapely.LineString([(0, 75), (200, 75)])])
+    assert joints == [] and len(kept) == 1
+    s = domain_split.SplitSettings()
+    splitter = domain_split._Splitter(LIB, s, np.random.default_rng(0))
+    splitter.no_street = shapely.MultiLineString([[(0, 0), (0, 138)], [(200, 0), (200, 138)]])
+    above = shapely.LineString([(0, 90), (200, 90)])
+    leaves = [[shapely.box(0, 0, 200, 48), "parcel_strip", {}],
+              [shapely.box(0, 48, 200, 90), "park", {}],
+              [shapely.box(0, 90, 200, 138), "parcel_strip", {}]]
+    kept, joints, _ = domain_split.no_street_joints(
+        leaves, [below, above], [shapely.box(0, 0, 200, 138).exterior], splitter,
+        {t.name: t for t in LIB}, s)
+    assert len(joints) == 1 and len(kept) == 1
+    assert {round(shapely.get_coordinates(g)[0, 1]) for g in kept + joints} == {48, 90}
+
+
 def _rear_lot_lines(lay, template):
     """Shared outlines (longer than half a parcel width) of two residential lots of the
     template that lie more than a parcel depth from every street: rear lot lines of rows

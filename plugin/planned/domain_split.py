@@ -36,7 +36,8 @@ Pipeline of :func:`split_domain` (one layout) and :func:`split_variations` (k la
    Then the **"no street" joints** (Fig. 4 edge labels, :func:`no_street_joints`, on by
    ``back_to_back``): a split street between two row-template blocks that both keep their
    template and street access without it is dropped (parcel strips back to back along
-   their rear lot lines, rows end to end), up to a block as long as the longest row.
+   their rear lot lines, rows end to end), up to a block as long as the longest row; so
+   is one between rows or a park and a park left in a small region, which keeps a street.
 4. Parcels: lots without frontage and crumbs join their neighbours; a lot still without
    frontage is an inner green (the paper's template with a private park). The optional
    :func:`repair_lots` (off by default; not in the paper) cuts misshapen lots to the
@@ -848,12 +849,16 @@ def no_street_joints(leaves, split_lines, roads, splitter, by_name, s: SplitSett
     the pieces between the same two blocks are dropped together, and kept as a "no street"
     edge between them, when
 
-    * both blocks along it are row templates (parcel strip or double strip),
-    * each of them still fits its block without the street, labels included
+    * both blocks along it are row templates (parcel strip or double strip) or parks,
+    * each row template still fits its block without the street, labels included
       (:meth:`_Splitter.row_energy`: its lots take the street's half of the land; a
       parcel strip needs a street on its other long side, a double strip on both: two
       parcel strips end up back to back along their rear lot lines, row templates end to
-      end), with an energy under the threshold or no higher than before,
+      end, a parcel strip backs onto a park), with an energy under the threshold or no
+      higher than before,
+    * a park keeps a street along at least a parcel width of its outline (a park the
+      layout left in a small region stays public; a park no street reaches would be a
+      private one, which only a drawn template makes),
     * no street is left ending there (no dead end is made), and
     * the blocks it joins have a centre-line perimeter of at most that of the longest row
       template: 2 (max_columns x parcel width + 2 parcel lengths + street width), 1,230 m
@@ -866,6 +871,12 @@ def no_street_joints(leaves, split_lines, roads, splitter, by_name, s: SplitSett
     regions = np.array([leaf[0] for leaf in leaves], dtype=object)
     names = [leaf[1] for leaf in leaves]
     rows = [t for t in by_name.values() if t.kind == "rows"]
+
+    def is_rows(k):
+        return names[k] in by_name and by_name[names[k]].kind == "rows"
+
+    def is_park(k):
+        return names[k] == "park" or (names[k] in by_name and by_name[names[k]].kind == "park")
     if len(split_lines) == 0 or len(regions) < 2 or not rows:
         return list(split_lines), [], np.arange(len(regions))
     limit = 2 * (max(t.max_columns for t in rows) * s.parcel_width + 2 * s.parcel_length
@@ -899,8 +910,7 @@ def no_street_joints(leaves, split_lines, roads, splitter, by_name, s: SplitSett
                 shapely.boundary(regions[near]),
                 shapely.buffer(pieces[i], 0.05, cap_style="flat")))
         adj = near[shared > 0.5 * shapely.length(pieces[i])]
-        if len(adj) == 2 and all(names[a] in by_name and by_name[names[a]].kind == "rows"
-                                 for a in adj):
+        if len(adj) == 2 and all(is_rows(a) or is_park(a) for a in adj):
             between.setdefault(tuple(sorted(int(a) for a in adj)), []).append(int(i))
     order = sorted(between, key=lambda k: -shapely.length(pieces[between[k]]).sum())
     for pair in order:
@@ -917,6 +927,10 @@ def no_street_joints(leaves, split_lines, roads, splitter, by_name, s: SplitSett
         trial_ns, trial_nf = _union(no_street, line), _union(no_frontage, line)
         after = {}
         for a in adj:
+            if is_park(a):
+                if not _reached_by_street(regions[a], trial_ns, trial_nf, s.parcel_width):
+                    break
+                continue
             t = by_name[names[a]]
             if a not in energy:
                 energy[a] = splitter.row_energy(regions[a], t, no_street, no_frontage)
@@ -933,6 +947,17 @@ def no_street_joints(leaves, split_lines, roads, splitter, by_name, s: SplitSett
             number[joined[pair[0]]] = block_number
     block = number[[joined[k] for k in range(len(regions))]]
     return list(pieces[is_split & ~removed]), list(pieces[removed]), block
+
+
+def _reached_by_street(region, no_street, no_frontage, length: float) -> bool:
+    """Whether at least ``length`` (m) of the region's outline is a street that gives
+    access: not on a "no street" edge, not along a motorway."""
+    edge = shapely.boundary(region)
+    with np.errstate(invalid="ignore"):
+        for lines in (no_street, no_frontage):
+            if lines is not None:
+                edge = shapely.difference(edge, shapely.buffer(lines, 0.05))
+    return shapely.length(edge) >= length
 
 
 def _end_dirs(lines) -> np.ndarray:
