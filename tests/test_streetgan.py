@@ -5,6 +5,7 @@ import shutil
 import numpy as np
 import pytest
 import shapely
+import shapely.affinity
 
 from helpers import assert_planar, helsinki_roads, nearly_coincident_streets
 from urban_synthesis.plugin.measure import metrics
@@ -201,6 +202,32 @@ def test_a_floating_piece_joins_through_a_piece_that_joined_first():
     _, _, stats = streetgan.attach_to_given([near, far, lost], [road], ["residential"],
                                             join_distance=90.0)
     assert stats["n_joined"] == 2 and stats["dropped_m"] == pytest.approx(300.0)
+
+
+def test_a_large_piece_is_worth_a_longer_street_to_it():
+    """A part of the settlement the generator drew apart from the rest (a grid of 2.4 km of
+    streets, 250 m from the given road) joins by a 250 m street: a quarter of its own
+    streets, up to MAX_PIECE_LINK; a single 300 m street as far off, or the same grid
+    beyond MAX_PIECE_LINK, is dropped (connectors up to 90 m)."""
+    road = shapely.LineString([(0, 0), (1000, 0)])
+    grid = [shapely.LineString([(300, y), (600, y)]) for y in (250, 350, 450, 550)] + \
+        [shapely.LineString([(x, 250), (x, 550)]) for x in (300, 400, 500, 600)]
+    lines, is_given, stats = streetgan.attach_to_given(grid, [road], ["residential"],
+                                                       join_distance=90.0)
+    assert stats["n_joined"] == 1 and stats["n_dropped_edges"] == 0
+    assert stats["n_components"] == 1
+    new = lines[~is_given]
+    assert shapely.length(new).sum() == pytest.approx(2400 + 250, abs=1e-6)
+    assert_planar(lines)
+    single = shapely.LineString([(300, 250), (600, 250)])
+    _, _, stats = streetgan.attach_to_given([single], [road], ["residential"],
+                                            join_distance=90.0)
+    assert stats["n_joined"] == 0 and stats["dropped_m"] == pytest.approx(300.0)
+    beyond = shapely.affinity.translate(shapely.MultiLineString(grid), 0,
+                                        streetgan.MAX_PIECE_LINK)
+    _, _, stats = streetgan.attach_to_given(list(beyond.geoms), [road], ["residential"],
+                                            join_distance=90.0)
+    assert stats["n_joined"] == 0 and stats["dropped_m"] == pytest.approx(2400.0)
 
 
 def test_dead_end_share_is_steered_into_the_examples_band(models):

@@ -10,6 +10,8 @@ Nothing here imports QGIS.
 """
 from __future__ import annotations
 
+import math
+
 from typing import Callable, Optional, Tuple
 
 import numpy as np
@@ -42,7 +44,8 @@ def meets_only_at_ends(link, lines) -> bool:
 
 
 def link_floating_pieces(lines, anchored, accept: Optional[Callable] = None,
-                         drop_unlinked: bool = True, ends_on=None
+                         drop_unlinked: bool = True, ends_on=None,
+                         max_length: Optional[Callable[[float], float]] = None
                          ) -> Tuple[np.ndarray, np.ndarray]:
     """Links that join every piece of a noded network to its anchored pieces.
 
@@ -61,6 +64,8 @@ def link_floating_pieces(lines, anchored, accept: Optional[Callable] = None,
     drop_unlinked : bool, leave out the lines of pieces that cannot be joined
     ends_on : bool array, optional, one per line: the anchored lines a link may end on
         (default all; a motorway is anchored but takes no new junction)
+    max_length : (m of street in the piece) -> m, optional: the longest link a piece of that
+        much street may take (StreetGAN: a larger piece is worth a longer street to it)
 
     Returns
     -------
@@ -101,6 +106,7 @@ def link_floating_pieces(lines, anchored, accept: Optional[Callable] = None,
     if not anchored.any():
         anchored[np.argmax(np.bincount(edge_comp, weights=shapely.length(g.geometry),
                                        minlength=n_comp))] = True
+    piece_m = np.bincount(edge_comp, weights=shapely.length(g.geometry), minlength=n_comp)
     links = []
     edges = np.asarray(g.geometry, dtype=object)
     edge_tree = shapely.STRtree(edges)
@@ -123,8 +129,9 @@ def link_floating_pieces(lines, anchored, accept: Optional[Callable] = None,
             nodes = np.unique(np.r_[g.u[edge_comp == comp], g.v[edge_comp == comp]])
             pts = shapely.points(g.nodes[nodes])
             (_, near), d = tree.query_nearest(pts, return_distance=True, all_matches=False)
+            longest = math.inf if max_length is None else max_length(float(piece_m[comp]))
             for k in np.argsort(d, kind="stable")[:NODES_TRIED]:
-                if best is not None and d[k] >= best[0]:
+                if (best is not None and d[k] >= best[0]) or d[k] > longest:
                     break
                 link = shapely.shortest_line(pts[k], target[near[k]])
                 if link.length <= 1e-6:

@@ -29,8 +29,10 @@ might also incorporate existing objects", ch. 4.2.8) are respected and kept:
   motorways and trunks, which are crossed only at their own junctions;
 - all lines are noded together (every contact is a junction), and generated pieces that
   reach neither a given road nor (without given roads) the largest piece are joined by
-  the shortest clear connector within :data:`JOIN_DISTANCE` road widths, nearest first (a
-  piece may join through one that joined before it; :mod:`network.links`), or dropped;
+  the shortest clear connector within :data:`JOIN_DISTANCE` road widths, or within a
+  quarter of the piece's own street length up to 400 m (:data:`PIECE_LINK_SHARE`,
+  :data:`MAX_PIECE_LINK`), nearest first (a piece may join through one that joined before
+  it; :mod:`network.links`), or dropped;
 - the given roads are returned whole (split at the new junctions), level 0; the generated
   streets rank below them.
 """
@@ -55,7 +57,8 @@ from . import raster_graph
 
 __all__ = ["MODELS_DIR", "Generator", "shipped_models", "load_model", "noise", "noise_size",
            "generate", "synthesize", "StreetGanResult", "SCALE", "TILE_MARGIN", "tile_plan",
-           "TileWindow", "attach_to_given", "GIVEN_CORRIDOR", "JOIN_DISTANCE",
+           "TileWindow", "attach_to_given", "GIVEN_CORRIDOR", "JOIN_DISTANCE", "PIECE_LINK_SHARE",
+           "MAX_PIECE_LINK",
            "junction_merge_distance"]
 
 MODELS_DIR = RESOURCES / "models"
@@ -68,8 +71,14 @@ TILE_MARGIN = 3
 #: m beyond half a rasterised road width in which generation is blanked along a given road
 #: (the invariant checker's corridor: no generated street may run there)
 GIVEN_CORRIDOR = 8.0
-#: floating generated pieces are joined by connectors up to this many road widths long
+#: floating generated pieces are joined by connectors up to this many road widths long ...
 JOIN_DISTANCE = 2.0
+#: ... or, for a larger piece (a part of the settlement the generator drew apart from the
+#: rest), up to this share of the piece's own street length ...
+PIECE_LINK_SHARE = 0.25
+#: ... and at most this long (m; about the longest street segments, 90th percentile, of
+#: the fidelity benchmark's towns: 250-390 m)
+MAX_PIECE_LINK = 400.0
 
 
 def junction_merge_distance(line_width_px: float, cell_size: float) -> float:
@@ -649,7 +658,9 @@ def attach_to_given(lines, given, given_class=None, area=None, reach: float = 60
     reach : m; a dead end this close to a given road, pointing at it (within ``max_angle``
         degrees), is extended straight onto it
     join_distance : m; the longest connector that joins a floating piece (to the network
-        or to a piece that joined it before: :func:`network.links.link_floating_pieces`)
+        or to a piece that joined it before: :func:`network.links.link_floating_pieces`);
+        a larger piece may take one up to :data:`PIECE_LINK_SHARE` of its street length,
+        at most :data:`MAX_PIECE_LINK`
 
     Returns
     -------
@@ -720,14 +731,17 @@ def attach_to_given(lines, given, given_class=None, area=None, reach: float = 60
 
     # pieces that reach no given road (without given roads: the longest piece) are joined
     # by the shortest clear connector, nearest first, so that a joined piece anchors the
-    # next (the one home of the rule, network.links), at most join_distance long and never
+    # next (the one home of the rule, network.links), at most join_distance long (a larger
+    # piece: a quarter of its streets, up to MAX_PIECE_LINK) and never
     # onto a motorway or trunk; the rest is dropped
     closed_line = np.zeros(n, dtype=bool)
     if len(closed):
         closed_line[is_given] = shapely.covers(shapely.union_all(shapely.buffer(closed, 0.01)),
                                                noded[is_given])
     add, keep = link_floating_pieces(noded, is_given, drop_unlinked=True, ends_on=~closed_line,
-                                     accept=lambda link: link.length <= join_distance)
+                                     max_length=lambda piece_m: max(
+                                         join_distance,
+                                         min(PIECE_LINK_SHARE * piece_m, MAX_PIECE_LINK)))
     drop = ~keep
     stats["n_joined"] = len(add)
     stats["n_dropped_edges"] = int(drop.sum())
