@@ -1458,8 +1458,8 @@ def _fill_areas(lots, area, green, part, surface, rows, s: SplitSettings, settin
     filled by the row template of least warp energy whose street sides agree (its rows'
     fronts on the street around the block or on the template's own street; within twice
     the selection threshold, as the fallback of the search), else given rule-based
-    parcels (``fallback_parcels``). ``no_frontage``: the region's no-street edges and motorways, which
-    give no frontage. Returns the lots and their park mask."""
+    parcels (``fallback_parcels``). ``no_frontage``: the region's no-street edges and
+    motorways, which give no frontage. Returns the lots and their park mask."""
     L, W, S = s.parcel_length, s.parcel_width, s.street_width
     streets = shapely.boundary(part) if surface is None else \
         shapely.union(shapely.boundary(part), shapely.boundary(surface))

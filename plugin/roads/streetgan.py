@@ -57,9 +57,8 @@ from . import raster_graph
 
 __all__ = ["MODELS_DIR", "Generator", "shipped_models", "load_model", "noise", "noise_size",
            "generate", "synthesize", "StreetGanResult", "SCALE", "TILE_MARGIN", "tile_plan",
-           "TileWindow", "attach_to_given", "GIVEN_CORRIDOR", "JOIN_DISTANCE", "PIECE_LINK_SHARE",
-           "MAX_PIECE_LINK",
-           "junction_merge_distance"]
+           "TileWindow", "attach_to_given", "GIVEN_CORRIDOR", "JOIN_DISTANCE",
+           "PIECE_LINK_SHARE", "MAX_PIECE_LINK", "junction_merge_distance"]
 
 MODELS_DIR = RESOURCES / "models"
 #: pixels per noise cell (five stride-2 layers)
