@@ -199,9 +199,6 @@ def test_templates_from_drawn_recognises_rows():
     assert (lib["a"].kind, lib["a"].rows) == ("rows", 1)
     assert (lib["b"].kind, lib["b"].rows) == ("rows", 2)
     assert lib["c"].kind == "park"
-    with pytest.raises(InputError, match="rule-based parcels must be one of"):
-        domain_split.split_domain([shapely.box(0, 0, 100, 100)],
-                                  settings=domain_split.SplitSettings(fallback_parcels="voronoi"))
     with pytest.raises(InputError, match="no parcel template"):
         templates.templates_from_drawn(park, ["c"], ["P"])
 
@@ -583,6 +580,9 @@ def test_bad_input():
                                   settings=domain_split.SplitSettings(street_width=500))
     with pytest.raises(InputError, match="variations"):
         domain_split.split_variations([shapely.box(0, 0, 100, 100)], 0)
+    with pytest.raises(InputError, match="rule-based parcels must be one of"):
+        domain_split.split_domain([shapely.box(0, 0, 100, 100)],
+                                  settings=domain_split.SplitSettings(fallback_parcels="voronoi"))
     with pytest.raises(InputError, match="no parcel template"):
         domain_split.split_domain([shapely.box(0, 0, 100, 100)],
                                   templates=[t for t in templates.load_library()
