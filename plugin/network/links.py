@@ -11,7 +11,6 @@ Nothing here imports QGIS.
 from __future__ import annotations
 
 import math
-
 from typing import Callable, Optional, Tuple
 
 import numpy as np
@@ -103,10 +102,10 @@ def link_floating_pieces(lines, anchored, accept: Optional[Callable] = None,
     src = np.asarray(g.source)
     anchored = np.zeros(n_comp, bool)
     anchored[edge_comp[anchored_line[src]]] = True
-    if not anchored.any():
-        anchored[np.argmax(np.bincount(edge_comp, weights=shapely.length(g.geometry),
-                                       minlength=n_comp))] = True
+    # metres of street per piece: the longest anchors when nothing is anchored
     piece_m = np.bincount(edge_comp, weights=shapely.length(g.geometry), minlength=n_comp)
+    if not anchored.any():
+        anchored[np.argmax(piece_m)] = True
     links = []
     edges = np.asarray(g.geometry, dtype=object)
     edge_tree = shapely.STRtree(edges)

@@ -1164,7 +1164,7 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
     key_lines = fixed[fixed_kinds == "key"]
     if len(key_lines):
         key_road_zone = shapely.buffer(shapely.union_all(key_lines), S / 2, cap_style="flat")
-    settings_sk = _parcels.SubdivisionSettings(
+    lot_settings = _parcels.SubdivisionSettings(
         max_area=1.6 * L * W, min_area=0.3 * L * W, min_width=0.4 * W, lot_width=W,
         irregularity=0.0)
     n_inner = n_pocket = 0
@@ -1175,7 +1175,7 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
             shrunk = shapely.difference(shrunk, key_road_zone)
         for part in _parcels._polygon_parts([shrunk], 1.0):
             lots, kind, own_street, green = _lots_for(part, reg, name, by_name, s,
-                                                      settings_sk, rng, template_roads,
+                                                      lot_settings, rng, template_roads,
                                                       splitter.entrance_ok,
                                                       splitter.no_frontage)
             if kind == "park" or (green is not None and green.all()):
@@ -1414,7 +1414,7 @@ def _onto_outline(line, part, reg, street: float):
     return shapely.LineString(xy)
 
 
-def _lots_for(part, reg, name, by_name, s: SplitSettings, settings_sk, rng, template_roads,
+def _lots_for(part, reg, name, by_name, s: SplitSettings, lot_settings, rng, template_roads,
               entrance_ok=None, no_frontage=None):
     """Lots of one shrunk block part: (lots, template name, the surface of the template's
     own streets or None, park mask of the lots or None)."""
@@ -1438,20 +1438,20 @@ def _lots_for(part, reg, name, by_name, s: SplitSettings, settings_sk, rng, temp
             if warped.area is not None and warped.area.any():
                 rows = [x for x in by_name.values() if x.kind == "rows"]
                 lots, green = _fill_areas(lots, warped.area, green, part, warped.surface,
-                                          rows, s, settings_sk, rng, no_frontage)
+                                          rows, s, lot_settings, rng, no_frontage)
             return lots, t.name, warped.surface, green
-    lots = _rule_based_lots(part, s, settings_sk, rng)
+    lots = _rule_based_lots(part, s, lot_settings, rng)
     return (lots if len(lots) else np.array([part], dtype=object)), s.fallback_parcels, \
         None, None
 
 
-def _rule_based_lots(part, s: SplitSettings, settings_sk, rng) -> np.ndarray:
+def _rule_based_lots(part, s: SplitSettings, lot_settings, rng) -> np.ndarray:
     """Lots of a region no template fits, by the subdivision method ``fallback_parcels``."""
     method = _parcels.METHODS[s.fallback_parcels]
-    return _parcels._polygon_parts(method.subdivide(part, settings_sk, rng))
+    return _parcels._polygon_parts(method.subdivide(part, lot_settings, rng))
 
 
-def _fill_areas(lots, area, green, part, surface, rows, s: SplitSettings, settings_sk, rng,
+def _fill_areas(lots, area, green, part, surface, rows, s: SplitSettings, lot_settings, rng,
                 no_frontage=None):
     """The area faces (label A) of a warped drawn template as regions of the next level
     (Yang Fig. 4, "regions labeled A ... can be replaced by level-two templates"): each is
@@ -1480,7 +1480,7 @@ def _fill_areas(lots, area, green, part, surface, rows, s: SplitSettings, settin
         filled = _templates.warp_rows(lot, rows[best], L, W, rng) \
             if energy < 2 * s.energy_threshold else None
         pieces = filled.lots if filled is not None and len(filled.lots) else \
-            _rule_based_lots(lot, s, settings_sk, rng)
+            _rule_based_lots(lot, s, lot_settings, rng)
         if not len(pieces):
             pieces = [lot]
         out += list(pieces)
