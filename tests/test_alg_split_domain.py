@@ -240,3 +240,19 @@ def test_qgis_process_on_bubenec(tmp_path, full_hull):
     rd = pyogrio.read_dataframe(roads)
     assert (rd.level == 0).sum() >= 10  # Bubeneč's real streets are kept
     assert {"spike", "loop"} & set(df.template) and {"cul_de_sac", "loop"} & set(rd.kind)
+
+
+@pytest.mark.parametrize("choice", [0, 1])
+def test_rule_based_parcels_follow_the_choice(qgis_processing, choice):
+    """FALLBACK_PARCELS picks the method of the rule-based parcels (a region no template
+    fits: a twelve-sided 280 m disc) by its place in ``domain_split.FALLBACK_PARCELS``: the
+    lots carry that method's name, never the other's, and tile without overlaps."""
+    disc = shapely.Point(460_000, 5_550_000).buffer(140, quad_segs=3)
+    region = memory_layer("Polygon", [disc.wkt], crs="EPSG:32633", name="disc")
+    out = qgis_processing.run(ALG, {"REGION": region, "FALLBACK_PARCELS": choice, "SEED": 1,
+                                    "OUTPUT_ROADS": "memory:", "OUTPUT_PARCELS": "memory:"})
+    rows, geoms = layer_features(out["OUTPUT_PARCELS"])
+    used = {r["template"] for r in rows if r["land_use"] == "residential"}
+    assert used == {domain_split.FALLBACK_PARCELS[choice]}
+    assert shapely.is_valid(geoms).all()
+    assert abs(shapely.union_all(geoms).area - shapely.area(geoms).sum()) < 1.0
