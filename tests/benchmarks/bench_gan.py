@@ -202,10 +202,23 @@ def _li():
     return liechtenstein
 
 
+def example_steering(example_lines, example_area) -> dict:
+    """What an analyst with the example passes to StreetGAN, as the fidelity benchmark
+    does: the example's dead-end and crossing shares, its 10th-percentile block area
+    (MIN_BLOCK_AREA) and its median block (MEDIAN_BLOCK_AREA), measured inside the
+    example's towns."""
+    from urban_synthesis.plugin.measure import fidelity
+
+    ex = fidelity.fidelity_statistics(example_lines, example_area)
+    return {"dead_end_share": ex["degree1_share"], "crossing_share": ex["degree4_share"],
+            "min_block_area": ex["block_area_p10"], "median_block_area": ex["block_area_p50"]}
+
+
 def evaluate_held_out(name: str, figures: dict) -> dict:
     """The towns a model never saw (its card's ``training_data.held_out``): the fidelity
-    statistics of the model and of the raster round trip of the real network (the
-    ceiling), relative errors against the real town, and the invariants."""
+    statistics of the model, steered to the example's statistics (the other towns, as the
+    fidelity benchmark steers it) and as read back, and of the raster round trip of the
+    real network (the ceiling), relative errors against the real town, and the invariants."""
     from urban_synthesis.plugin.network import invariants
 
     li = _li()
@@ -225,11 +238,13 @@ def evaluate_held_out(name: str, figures: dict) -> dict:
                                                                    x0 + cols * 3.0, y1))
             return img[:rows, :cols].astype(np.float32)
 
+        steering = example_steering(case["example"], case["example_area"])
         rows = {}
         for label, kw in (("real -> raster -> graph (ceiling)", dict(generate_fn=real_raster)),
-                          (name, {})):
+                          (name, steering),
+                          (f"{name}, as read back (no example statistics)", {})):
             vals, viols, comps = [], [], []
-            seeds = SEEDS if not kw else (1,)
+            seeds = (1,) if "generate_fn" in kw else SEEDS
             for seed in seeds:
                 res = streetgan.synthesize(area, gen, seed=seed, given=given, given_class=cls,
                                            **kw)
@@ -250,7 +265,8 @@ def evaluate_held_out(name: str, figures: dict) -> dict:
                            "median_relative_error": round(float(np.median(err)), 3),
                            "violations": viols, "floating_pieces": comps}
         towns[town] = {"area_km2": round(area.area / 1e6, 2),
-                       "real": [round(float(x), 4) for x in real], "rows": rows}
+                       "real": [round(float(x), 4) for x in real], "rows": rows,
+                       "example_steering": {k: round(float(v), 4) for k, v in steering.items()}}
     return {"model": name, "title": gen.card.get("title"), "against": "towns never seen in "
             "training (leave-one-town-out), their level-0 roads given",
             "statistics": list(FIDELITY_LABELS), "seeds": list(SEEDS),
