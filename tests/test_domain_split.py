@@ -963,6 +963,26 @@ def test_a_parcel_strip_backs_onto_a_park_that_keeps_a_street():
     assert {round(shapely.get_coordinates(g)[0, 1]) for g in kept + joints} == {48, 90}
 
 
+def test_a_street_run_through_by_a_joint_is_dropped_whole():
+    """A split street whose blocks on one side were joined before (a "no street" edge now
+    meets it at a node of two pieces) is dropped whole when every block along it allows
+    it: either of its two pieces alone would leave the other ending there (refused: no
+    dead end is made). Three parcel strips: one along the bottom, two end to end along the
+    top, a cross street between these two; no street is left and no dead end made."""
+    s = domain_split.SplitSettings()
+    splitter = domain_split._Splitter(LIB, s, np.random.default_rng(0))
+    leaves = [[shapely.box(0, 0, 200, 48), "parcel_strip", {}],
+              [shapely.box(0, 48, 100, 96), "parcel_strip", {}],
+              [shapely.box(100, 48, 200, 96), "parcel_strip", {}]]
+    lines = [shapely.LineString([(0, 48), (200, 48)]), shapely.LineString([(100, 48), (100, 96)])]
+    kept, joints, block = domain_split.no_street_joints(
+        leaves, lines, [shapely.box(0, 0, 200, 96).exterior], splitter,
+        {t.name: t for t in LIB}, s)
+    assert kept == [] and len(joints) == 3
+    assert sum(shapely.length(joints)) == pytest.approx(248, abs=1e-6)
+    assert len(set(block.tolist())) == 1  # one street block
+
+
 def _rear_lot_lines(lay, template):
     """Shared outlines (longer than half a parcel width) of two residential lots of the
     template that lie more than a parcel depth from every street: rear lot lines of rows

@@ -37,7 +37,9 @@ Pipeline of :func:`split_domain` (one layout) and :func:`split_variations` (k la
    ``back_to_back``): a split street between two row-template blocks that both keep their
    template and street access without it is dropped (parcel strips back to back along
    their rear lot lines, rows end to end), up to a block as long as the longest row; so
-   is one between rows or a park and a park left in a small region, which keeps a street.
+   is one between rows or a park and a park left in a small region, which keeps a street;
+   a street whose blocks on one side were joined before is dropped whole when all its
+   blocks allow it (one piece alone would leave the rest of it a dead end).
 4. Parcels: lots without frontage and crumbs join their neighbours; a lot still without
    frontage is an inner green (the paper's template with a private park). The optional
    :func:`repair_lots` (off by default; not in the paper) cuts misshapen lots to the
@@ -865,8 +867,15 @@ def no_street_joints(leaves, split_lines, roads, splitter, by_name, s: SplitSett
       with the paper's parcels (sec. 7: a block too long "will take too long to walk (or
       drive) around"; Table 1, "Our": b_max 955-1,454 m).
 
-    Pairs of blocks are tried longest joint first. Returns (split street pieces kept, "no street"
-    lines, street block number per leaf: leaves joined by a "no street" edge share one).
+    Pairs of blocks are tried longest joint first. Then the streets that those joints ran
+    through: where the blocks on one side of a street were joined, the "no street" edge
+    meets it at a node of two pieces, each between another pair of blocks, and either
+    piece dropped alone would leave the other ending there (refused above, though no
+    block needs either). The pieces along such a street, up to nodes where it meets
+    other streets, are dropped together under the same rules (every block along it keeps
+    its template and access, the joined block within the limit): no dead end is made.
+    Returns (split street pieces kept, "no street" lines, street block number per leaf:
+    leaves joined by a "no street" edge share one).
     """
     regions = np.array([leaf[0] for leaf in leaves], dtype=object)
     names = [leaf[1] for leaf in leaves]
@@ -913,38 +922,86 @@ def no_street_joints(leaves, split_lines, roads, splitter, by_name, s: SplitSett
         if len(adj) == 2 and all(is_rows(a) or is_park(a) for a in adj):
             between.setdefault(tuple(sorted(int(a) for a in adj)), []).append(int(i))
     order = sorted(between, key=lambda k: -shapely.length(pieces[between[k]]).sum())
-    for pair in order:
-        ids = np.asarray(between[pair])
-        adj = np.asarray(pair)
+    group_of = {i: pair for pair, ids in between.items() for i in ids}
+    at_node: Dict[int, list] = {}
+    for i, (n0, n1) in enumerate(node):
+        at_node.setdefault(int(n0), []).append(i)
+        at_node.setdefault(int(n1), []).append(i)
+
+    def join(pairs) -> bool:
+        """Drop the pieces between the pairs of blocks ``pairs`` together when the rules
+        allow it (see above); whether they were dropped."""
+        nonlocal degree, no_street, no_frontage
+        ids = np.concatenate([between[p] for p in pairs])
+        adj = sorted({a for p in pairs for a in p})
         left = degree.copy()
         np.subtract.at(left, node[ids].ravel(), 1)
         if (left[node[ids].ravel()] == 1).any():
-            continue  # a street would end there: no dead end is made
+            return False  # a street would end there: no dead end is made
         line = shapely.line_merge(shapely.union_all(pieces[ids]))
-        members = sorted(joined.subset(pair[0]) | joined.subset(pair[1]))
+        members = sorted(set().union(*(joined.subset(a) for a in adj)))
         if shapely.length(shapely.boundary(shapely.union_all(regions[members]))) > limit:
-            continue
+            return False
         trial_ns, trial_nf = _union(no_street, line), _union(no_frontage, line)
         after = {}
         for a in adj:
             if is_park(a):
                 if not _reached_by_street(regions[a], trial_ns, trial_nf, s.parcel_width):
-                    break
+                    return False
                 continue
             t = by_name[names[a]]
             if a not in energy:
                 energy[a] = splitter.row_energy(regions[a], t, no_street, no_frontage)
             after[a] = splitter.row_energy(regions[a], t, trial_ns, trial_nf)
             if not (after[a] < s.energy_threshold or after[a] <= energy[a]):
-                break
-        else:
-            removed[ids] = True
-            degree = left
-            no_street, no_frontage = trial_ns, trial_nf
-            energy.update(after)
-            block_number = number[joined[pair[0]]]
-            joined.merge(*pair)
-            number[joined[pair[0]]] = block_number
+                return False
+        removed[ids] = True
+        degree = left
+        no_street, no_frontage = trial_ns, trial_nf
+        energy.update(after)
+        block_number = number[joined[pairs[0][0]]]
+        for p in pairs:
+            joined.merge(*p)
+        number[joined[pairs[0][0]]] = block_number
+        return True
+
+    def street_through(pair):
+        """The pairs of blocks along the street that the pieces of ``pair`` belong to: the
+        pair itself and, while dropping them would leave a street ending at a node, the
+        pair of the piece that would end there (a street whose blocks on one side changed
+        at a joint dropped before runs on through that node); None when a piece that
+        would end there is no candidate (a fixed road, or a street along another block)."""
+        pairs = [pair]
+        while True:
+            ids = np.concatenate([between[p] for p in pairs])
+            left = degree.copy()
+            np.subtract.at(left, node[ids].ravel(), 1)
+            ends = [n for n in np.unique(node[ids].ravel()) if left[n] == 1]
+            if not ends:
+                return pairs
+            taken = set(ids.tolist())
+            for n in ends:
+                rest = [j for j in at_node[int(n)] if not removed[j] and j not in taken]
+                if len(rest) != 1 or rest[0] not in group_of:
+                    return None
+                if group_of[rest[0]] not in pairs:  # (two ends may lead to one pair)
+                    pairs.append(group_of[rest[0]])
+
+    for pair in order:
+        join([pair])
+    # a street run through by joints dropped before it: its pieces between different pairs
+    # of blocks, each of which alone would leave the rest of the street ending there
+    # (refused above), are dropped together when every block along it allows it; a street
+    # dropped so can leave others running through a node of two pieces: until none is left
+    changed = True
+    while changed:
+        changed = False
+        for pair in order:
+            if removed[between[pair][0]]:
+                continue
+            pairs = street_through(pair)
+            if pairs is not None and len(pairs) > 1 and join(pairs):
+                changed = True
     block = number[[joined[k] for k in range(len(regions))]]
     return list(pieces[is_split & ~removed]), list(pieces[removed]), block
 
