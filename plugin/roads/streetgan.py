@@ -44,7 +44,7 @@ import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Optional
+from typing import Dict, Mapping, Optional
 
 import numpy as np
 import shapely
@@ -56,9 +56,9 @@ from ..network.links import link_floating_pieces
 from . import raster_graph
 
 __all__ = ["MODELS_DIR", "Generator", "shipped_models", "load_model", "noise", "noise_size",
-           "generate", "synthesize", "StreetGanResult", "SCALE", "TILE_MARGIN", "tile_plan",
-           "TileWindow", "attach_to_given", "GIVEN_CORRIDOR", "JOIN_DISTANCE",
-           "PIECE_LINK_SHARE", "MAX_PIECE_LINK", "junction_merge_distance"]
+           "generate", "synthesize", "example_steering", "StreetGanResult", "SCALE",
+           "TILE_MARGIN", "tile_plan", "TileWindow", "attach_to_given", "GIVEN_CORRIDOR",
+           "JOIN_DISTANCE", "PIECE_LINK_SHARE", "MAX_PIECE_LINK", "junction_merge_distance"]
 
 MODELS_DIR = RESOURCES / "models"
 #: pixels per noise cell (five stride-2 layers)
@@ -340,6 +340,22 @@ class StreetGanResult:
     def __post_init__(self):
         if self.given is None:
             self.given = np.zeros(len(self.geometry), dtype=bool)
+
+
+def example_steering(stats: Mapping[str, float]) -> Dict[str, float]:
+    """What :func:`synthesize` is steered to, from an example's fidelity statistics
+    (:func:`measure.fidelity.fidelity_statistics` inside the example's area): its dead-end
+    and crossing shares, its 10th-percentile block area as ``min_block_area`` and its median
+    block as ``median_block_area``, the arguments an analyst with the example passes; a
+    statistic the example has not (NaN: it closes no block) is left out.
+
+    >>> example_steering({"degree1_share": 0.28, "degree4_share": 0.08,
+    ...                   "block_area_p10": 4600.0, "block_area_p50": float("nan")})
+    {'dead_end_share': 0.28, 'crossing_share': 0.08, 'min_block_area': 4600.0}
+    """
+    keys = (("dead_end_share", "degree1_share"), ("crossing_share", "degree4_share"),
+            ("min_block_area", "block_area_p10"), ("median_block_area", "block_area_p50"))
+    return {arg: float(stats[k]) for arg, k in keys if math.isfinite(stats[k])}
 
 
 def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,

@@ -221,16 +221,16 @@ class Runner:
         model = self.cached("gan_" + name, lambda: streetgan.load_model(name))
         self.extra = {"model": name}
         # every example statistic the tool takes, as an analyst with the example would pass
-        # them: dead-end and crossing shares, and the example's smallest blocks (10th
-        # percentile) as MIN_BLOCK_AREA and its median block as MEDIAN_BLOCK_AREA
-        # (--gan-no-min-block, --gan-no-median-block: without)
-        min_block = self.example.stats["block_area_p10"] if self.gan_min_block else None
-        median_block = self.example.stats["block_area_p50"] if self.gan_median_block else None
+        # them (streetgan.example_steering): dead-end and crossing shares, and the example's
+        # smallest blocks (10th percentile) as MIN_BLOCK_AREA and its median block as
+        # MEDIAN_BLOCK_AREA (--gan-no-min-block, --gan-no-median-block: without)
+        steering = streetgan.example_steering(self.example.stats)
+        if not self.gan_min_block:
+            steering.pop("min_block_area", None)
+        if not self.gan_median_block:
+            steering.pop("median_block_area", None)
         return streetgan.synthesize(self.target.area, model, seed=seed, given=self.target.given,
-                                    given_class=self.target.given_class,
-                                    dead_end_share=self.example.stats["degree1_share"],
-                                    min_block_area=min_block, median_block_area=median_block,
-                                    crossing_share=self.example.stats["degree4_share"]).geometry
+                                    given_class=self.target.given_class, **steering).geometry
 
     def growroads(self, seed: int) -> np.ndarray:
         from urban_synthesis.plugin.roads import growth

@@ -202,23 +202,12 @@ def _li():
     return liechtenstein
 
 
-def example_steering(example_lines, example_area) -> dict:
-    """What an analyst with the example passes to StreetGAN, as the fidelity benchmark
-    does: the example's dead-end and crossing shares, its 10th-percentile block area
-    (MIN_BLOCK_AREA) and its median block (MEDIAN_BLOCK_AREA), measured inside the
-    example's towns."""
-    from urban_synthesis.plugin.measure import fidelity
-
-    ex = fidelity.fidelity_statistics(example_lines, example_area)
-    return {"dead_end_share": ex["degree1_share"], "crossing_share": ex["degree4_share"],
-            "min_block_area": ex["block_area_p10"], "median_block_area": ex["block_area_p50"]}
-
-
 def evaluate_held_out(name: str, figures: dict) -> dict:
     """The towns a model never saw (its card's ``training_data.held_out``): the fidelity
     statistics of the model, steered to the example's statistics (the other towns, as the
     fidelity benchmark steers it) and as read back, and of the raster round trip of the
     real network (the ceiling), relative errors against the real town, and the invariants."""
+    from urban_synthesis.plugin.measure import fidelity
     from urban_synthesis.plugin.network import invariants
 
     li = _li()
@@ -238,7 +227,9 @@ def evaluate_held_out(name: str, figures: dict) -> dict:
                                                                    x0 + cols * 3.0, y1))
             return img[:rows, :cols].astype(np.float32)
 
-        steering = example_steering(case["example"], case["example_area"])
+        # what an analyst with the example passes, as the fidelity benchmark steers it
+        steering = streetgan.example_steering(fidelity.fidelity_statistics(
+            case["example"], case["example_area"]))
         rows = {}
         for label, kw in (("real -> raster -> graph (ceiling)", dict(generate_fn=real_raster)),
                           (name, steering),
