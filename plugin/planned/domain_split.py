@@ -928,14 +928,19 @@ def no_street_joints(leaves, split_lines, roads, splitter, by_name, s: SplitSett
         at_node.setdefault(int(n0), []).append(i)
         at_node.setdefault(int(n1), []).append(i)
 
+    def degree_without(ids) -> np.ndarray:
+        """Node degrees with the pieces ``ids`` dropped."""
+        left = degree.copy()
+        np.subtract.at(left, node[ids].ravel(), 1)
+        return left
+
     def join(pairs) -> bool:
         """Drop the pieces between the pairs of blocks ``pairs`` together when the rules
         allow it (see above); whether they were dropped."""
         nonlocal degree, no_street, no_frontage
         ids = np.concatenate([between[p] for p in pairs])
         adj = sorted({a for p in pairs for a in p})
-        left = degree.copy()
-        np.subtract.at(left, node[ids].ravel(), 1)
+        left = degree_without(ids)
         if (left[node[ids].ravel()] == 1).any():
             return False  # a street would end there: no dead end is made
         line = shapely.line_merge(shapely.union_all(pieces[ids]))
@@ -974,8 +979,7 @@ def no_street_joints(leaves, split_lines, roads, splitter, by_name, s: SplitSett
         pairs = [pair]
         while True:
             ids = np.concatenate([between[p] for p in pairs])
-            left = degree.copy()
-            np.subtract.at(left, node[ids].ravel(), 1)
+            left = degree_without(ids)
             ends = [n for n in np.unique(node[ids].ravel()) if left[n] == 1]
             if not ends:
                 return pairs
