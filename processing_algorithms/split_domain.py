@@ -163,7 +163,9 @@ class SplitDomain(AlgorithmBase):
             "strips back to back along their rear lot lines, rows end to end), up to a block "
             "as long as the longest row; so does one between parcel rows or a park and a "
             "park left in a small region (rows back onto it; the park keeps a street along "
-            "at least a parcel width). Off: every split street is kept.", advanced=True)
+            "at least a parcel width). A street cut in pieces where such edges meet it is "
+            "dropped whole, when no block needs any piece and none would be left a dead "
+            "end. Off: every split street is kept.", advanced=True)
         self.add(QgsProcessingParameterEnum(
             self.FALLBACK_PARCELS, "Parcels where no template fits",
             options=[parcels.METHODS[k].label for k in domain_split.FALLBACK_PARCELS],

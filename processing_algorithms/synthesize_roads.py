@@ -19,7 +19,6 @@ from qgis.core import (
 )
 
 from ..plugin.measure import fidelity
-from ..plugin.network import invariants
 from ..plugin.qgis_glue import qgis_io
 from ..plugin.roads import streetgan
 from .common import AlgorithmBase, fill_quantile_parameter
@@ -145,24 +144,18 @@ class SynthesizeRoads(AlgorithmBase):
                     "area. Give a District boundary (BOUNDARY).")
         held_to = {}
         if method.key == "gan" and self.given(parameters, self.EXAMPLE_ROADS):
-            # what the generator is held to: the example's dead-end share (the network
-            # invariants' band) and its share of crossings
+            # what the generator is held to (one rule: streetgan.example_steering): the
+            # example's dead-end and crossing shares, its median and smallest-tenth blocks
             example = qgis_io.read_source(self, parameters, self.EXAMPLE_ROADS, context,
                                           feedback, kind="lines", fields=[])
-            for key, share_of in (("DEAD_END_SHARE", invariants.dead_end_share_of_extract),
-                                  ("CROSSING_SHARE", invariants.crossing_share_of_extract)):
-                held_to[key] = qgis_io.run_engine(example.name, share_of, example.geometry)
-            # and its block sizes: the generator's cells are merged up to its median and
-            # its smallest tenth
-            blocks = qgis_io.run_engine(example.name, fidelity.block_areas_of_extract,
-                                        example.geometry)
-            held_to["MEDIAN_BLOCK_AREA"] = blocks["block_area_p50"]
-            held_to["MIN_BLOCK_AREA"] = blocks["block_area_p10"]
-            feedback.pushInfo(f"{example.name}: dead-end share "
-                              f"{held_to['DEAD_END_SHARE']:.2f}, "
-                              f"4-way junctions {held_to['CROSSING_SHARE']:.2f}, blocks "
-                              f"{blocks['block_area_p10']:,.0f} m² (10th percentile) and "
-                              f"{blocks['block_area_p50']:,.0f} m² (median) (inside its hull).")
+            stats = qgis_io.run_engine(example.name, fidelity.statistics_of_extract,
+                                       example.geometry)
+            held_to = {arg.upper(): v for arg, v in streetgan.example_steering(stats).items()}
+            feedback.pushInfo(f"{example.name} (inside its hull): dead-end share "
+                              f"{stats['degree1_share']:.2f}, 4-way junctions "
+                              f"{stats['degree4_share']:.2f}, blocks "
+                              f"{stats['block_area_p10']:,.0f} m² (10th percentile) and "
+                              f"{stats['block_area_p50']:,.0f} m² (median).")
         return self._child_method(parameters, context, feedback, method, arterials, area, seed,
                                   held_to)
 
@@ -202,8 +195,7 @@ class SynthesizeRoads(AlgorithmBase):
                     "(reinstall the plugin).")
             params = {"TARGET": boundary, "SEED": seed, "MODEL": models.index(GAN_MODEL),
                       "GIVEN_ROADS": parameters[self.ARTERIALS]}
-            params.update({key: float(v) for key, v in (held_to or {}).items()
-                           if np.isfinite(v)})
+            params.update(held_to or {})
         else:
             params = {"BOUNDARY": boundary, "MAJOR_ROADS": parameters[self.ARTERIALS],
                       "DEM": dem, "SEED": seed}

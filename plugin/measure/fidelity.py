@@ -39,7 +39,7 @@ from . import metrics as _metrics
 
 __all__ = [
     "STATISTICS", "EDGE_DISTANCE", "clip_to_area", "fidelity_statistics",
-    "block_areas_of_extract", "relative_errors",
+    "statistics_of_extract", "relative_errors",
     "grid_baseline", "chord_baseline", "delaunay_baseline", "score",
 ]
 
@@ -113,26 +113,26 @@ def fidelity_statistics(lines: Sequence, area, min_block_area: float = _blocks.M
     return {k: float(out[k]) for k, _ in STATISTICS}
 
 
-def block_areas_of_extract(lines: Sequence) -> Dict[str, float]:
-    """The block areas (``block_area_p10``, ``block_area_p50``, m²) of an example known only
-    by its lines, measured inside their convex hull as :func:`fidelity_statistics` measures
-    them (:func:`invariants.extract_hull`, as the example's shares): what a generator's cells
-    are held to. NaN where the example closes no block.
+def statistics_of_extract(lines: Sequence) -> Dict[str, float]:
+    """The :data:`STATISTICS` of an example known only by its lines, measured inside their
+    convex hull (:func:`invariants.extract_hull`: an extract's streets are cut at its edge,
+    which the hull follows): what a generator is steered to
+    (:func:`roads.streetgan.example_steering`). All NaN when the lines span no area.
 
     A 300 m square cut into nine 100 m blocks, one of them halved:
 
     >>> grid = ([shapely.LineString([(x, 0), (x, 300)]) for x in range(0, 301, 100)]
     ...         + [shapely.LineString([(0, y), (300, y)]) for y in range(0, 301, 100)])
     >>> halved = grid + [shapely.LineString([(0, 50), (100, 50)])]
-    >>> {k: round(v) for k, v in block_areas_of_extract(halved).items()}
-    {'block_area_p10': 5000, 'block_area_p50': 10000}
+    >>> s = statistics_of_extract(halved)
+    >>> round(s["block_area_p10"]), round(s["block_area_p50"]), s["blocks_per_km2"] > 0
+    (5000, 10000, True)
     """
     lines = np.asarray(lines, dtype=object)
     hull = _invariants.extract_hull(lines) if len(lines) else None
     if hull is None or hull.area <= 0:
-        return {"block_area_p10": np.nan, "block_area_p50": np.nan}
-    stats = fidelity_statistics(lines, hull)
-    return {k: stats[k] for k in ("block_area_p10", "block_area_p50")}
+        return {k: np.nan for k, _ in STATISTICS}
+    return fidelity_statistics(lines, hull)
 
 
 def relative_errors(candidate: Mapping[str, float], real: Mapping[str, float]) -> Dict[str, float]:
