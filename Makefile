@@ -119,3 +119,14 @@ train-gan: setup $(TRAIN_PY)
 	  --epochs $(TOWNS_EPOCHS) --patch 161 --batch 8 --lr 0.0002 --name streetgan_towns --no-untrained \
 	  --title "Helsinki and eight Liechtenstein towns (real OSM roads)" --held-out Triesen,Eschen,Mauren
 	QT_QPA_PLATFORM=offscreen $(PY) tests/benchmarks/bench_gan.py --cards
+
+# The shipped towns model: the thesis's recipe (321 px patches, batch 64) from scratch on a GPU,
+# stopped after 7.5 minutes (an H200: 78 epochs; resources/models/streetgan_towns.json)
+.PHONY: train-gan-gpu
+train-gan-gpu: setup $(TRAIN_PY)
+	$(PY) tools/streetgan/prepare.py build/streetgan
+	$(TRAIN_PY) tools/streetgan/train.py build/streetgan/helsinki.npz build/streetgan/li_*.npz \
+	  resources/models/streetgan_towns --device cuda --patch 321 --batch 64 --filters 16 \
+	  --epochs 400 --minutes 7.5 --name streetgan_towns --no-untrained --erosions 1 --dilations 1 \
+	  --held-out Triesen,Eschen,Mauren --title "Helsinki and eight Liechtenstein towns (real OSM roads)"
+	QT_QPA_PLATFORM=offscreen $(PY) tests/benchmarks/bench_gan.py --cards

@@ -24,7 +24,7 @@ from .invariants import (SNAP_TOLERANCE, corridor_of, counted_nodes, crossing_sh
                          doubles_a_street)
 from .links import meets_only_at_ends
 from .small_blocks import fewer_crossings
-from .street_graph import clean_network, renode
+from .street_graph import JUNCTION_TOLERANCE, clean_network, collapse_short_pieces, renode
 
 __all__ = ["match_crossings", "t_stem", "STRAIGHT_THROUGH", "MIN_ANGLE"]
 
@@ -178,4 +178,7 @@ def match_crossings(lines, is_new, share: float, area, rng: np.random.Generator,
     # where pieces overlap, a given road's piece keeps its flag
     made = np.r_[np.zeros(len(lines), bool), np.ones(len(new_lines), bool)]
     pieces, parent = renode(everything, made, np.where(flags, 1, 0))
-    return pieces, flags[parent], (int(n_made), 0)
+    # round-off between ends that noding set apart: no zero-length piece of a given road
+    short = shapely.length(pieces) < JUNCTION_TOLERANCE
+    return collapse_short_pieces(pieces, JUNCTION_TOLERANCE), flags[parent][~short], \
+        (int(n_made), 0)

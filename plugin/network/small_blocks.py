@@ -27,7 +27,7 @@ import shapely
 
 from scipy.cluster.hierarchy import DisjointSet
 
-from .street_graph import node_lines, snap_ends_onto_lines
+from .street_graph import collapse_short_pieces, node_lines, snap_ends_onto_lines
 
 __all__ = ["merge_small_blocks", "fewer_crossings"]
 
@@ -196,7 +196,9 @@ class _Network:
         # left such a T unsplit, and the street it held on to looked removable (a floating
         # piece on Vaduz)
         pieces = node_lines(snap_ends_onto_lines(lines))
-        self.pieces = pieces[shapely.length(pieces) > 0]
+        # round-off between two ends that noding set apart (5e-11 m on a given road) is
+        # no street: a loop there would count twice in its node's degree
+        self.pieces = collapse_short_pieces(pieces, _NODE_GRID)
         self.mids = shapely.line_interpolate_point(self.pieces, 0.5, normalized=True)
         given = lines[~is_new]
         self.new = np.ones(len(self.pieces), dtype=bool)

@@ -35,7 +35,8 @@ from ..core.progress import InputError, Progress, ensure
 __all__ = [
     "DRIVABLE_CLASSES", "ARTERIAL_CLASSES", "CLASS_RANK", "RoadGraph",
     "drivable_and_arterial", "parse_other_tags", "vertical_layer", "class_rank",
-    "clean_network", "graph_from_lines", "node_lines", "renode", "snap_ends_onto_lines",
+    "clean_network", "collapse_short_pieces", "graph_from_lines", "node_lines", "renode",
+    "snap_ends_onto_lines",
     "move_ends_onto_lines", "renode_attributed", "add_streets", "JUNCTION_TOLERANCE",
 ]
 
@@ -271,6 +272,41 @@ def renode(lines: Sequence, new: Sequence, priority: Sequence, min_length: float
     parent = _attach_attributes(pieces, lines, np.arange(len(lines)),
                                 np.asarray(priority, dtype=np.int64))
     return pieces, parent
+
+
+def collapse_short_pieces(pieces: Sequence, tolerance: float) -> np.ndarray:
+    """Noded pieces shorter than ``tolerance`` m dropped, the other pieces' ends at a dropped
+    piece's last point moved to its first (along chains of them): round-off between two
+    ends that noding set apart leaves no zero-length street and no gap.
+
+    >>> a, b = shapely.LineString([(0, 0), (5, 0)]), shapely.LineString([(5, 0), (5, 1e-10)])
+    >>> c = shapely.LineString([(5, 1e-10), (9, 0)])
+    >>> [p.wkt for p in collapse_short_pieces([a, b, c], 1e-6)]
+    ['LINESTRING (0 0, 5 0)', 'LINESTRING (5 0, 9 0)']
+    """
+    pieces = np.asarray(pieces, dtype=object)
+    short = shapely.length(pieces) < tolerance
+    if not short.any():
+        return pieces
+    first = shapely.get_coordinates(shapely.get_point(pieces[short], 0))
+    last = shapely.get_coordinates(shapely.get_point(pieces[short], -1))
+    onto = {tuple(q): tuple(p) for p, q in zip(first, last) if tuple(p) != tuple(q)}
+
+    def target(xy):
+        seen = set()
+        while xy in onto and xy not in seen:
+            seen.add(xy)
+            xy = onto[xy]
+        return xy
+
+    kept = pieces[~short].copy()
+    ends = [shapely.get_coordinates(shapely.get_point(kept, k)) for k in (0, -1)]
+    for i in np.flatnonzero([tuple(a) in onto or tuple(b) in onto for a, b in zip(*ends)]):
+        xyz = shapely.get_coordinates(kept[i], include_z=shapely.has_z(kept[i]))
+        for k in (0, -1):
+            xyz[k, :2] = target(tuple(xyz[k, :2]))
+        kept[i] = shapely.set_coordinates(kept[i], xyz)
+    return kept
 
 
 def move_ends_onto_lines(lines: Sequence, onto: Sequence, tolerance: float) -> np.ndarray:

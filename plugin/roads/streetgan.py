@@ -650,9 +650,12 @@ def _noded_with_given(new, given):
                 with np.errstate(invalid="ignore"):
                     t = np.unique(shapely.line_locate_point(g, ends[hit]))
                 t = t[(t > 1e-6) & (t < g.length - 1e-6)]
+                # ends that round-off set apart on the road are one junction (the same
+                # tolerance that finds them): no zero-length piece of road between them
+                t = t[np.r_[True, np.diff(t) > 1e-6]] if len(t) else t
                 cuts = np.r_[0.0, t, g.length]
                 pieces.extend(shapely.ops.substring(g, c0, c1)
-                              for c0, c1 in zip(cuts[:-1], cuts[1:]) if c1 - c0 > 1e-9)
+                              for c0, c1 in zip(cuts[:-1], cuts[1:]))
             else:
                 pieces.append(g)
     pieces = np.asarray(pieces, dtype=object)

@@ -23,6 +23,11 @@ The model is exported after every epoch, so a run can be stopped when time is up
 thesis chose its epoch by eye). Deterministic for a given ``--seed`` (one thread,
 deterministic algorithms): ``--epochs N`` reproduces epoch N of a longer run.
 
+``--device cuda`` (default ``auto``: a GPU when torch sees one) trains there; patches and
+noise are still drawn on the CPU from the same generators, so a run is reproducible on the
+same GPU and software (cuDNN's deterministic kernels), not bit for bit against the CPU.
+``--minutes M`` stops after the first epoch that ends past M minutes (a GPU lease).
+
 Writes ``<out>.onnx`` (the generator, eval mode, dynamic spatial size), ``<out>.json`` (the
 model card: data, architecture, epochs, losses, timing, sha256 of the ONNX file) and
 ``<out>_untrained.onnx`` next to the output unless ``--no-untrained`` (the raw generator, a
@@ -34,6 +39,7 @@ import argparse
 import copy
 import hashlib
 import json
+import os
 import time
 from pathlib import Path
 
@@ -125,9 +131,10 @@ def recalibrate_bn(g: nn.Module, m: int, gen: torch.Generator, batches: int = 6,
             mod.reset_running_stats()
             mod.momentum = None  # cumulative average
     g.train()
+    device = next(g.parameters()).device
     with torch.no_grad():
         for _ in range(batches):
-            g(noise(n, m, gen))
+            g(noise(n, m, gen).to(device))
 
 
 def save(g, args, meta, m, history, t0) -> Path:
@@ -135,6 +142,7 @@ def save(g, args, meta, m, history, t0) -> Path:
     and the last completed epoch is the model; the thesis picked its epoch by eye)."""
     g = copy.deepcopy(g)
     recalibrate_bn(g, m, torch.Generator().manual_seed(args.seed + 1))
+    g = g.cpu()
     onnx_path = args.out.with_suffix(".onnx")
     sha = export(g, onnx_path)
     card = {
@@ -158,7 +166,7 @@ def save(g, args, meta, m, history, t0) -> Path:
                      "iterations": len(history) * args.iterations, "lr": args.lr,
                      "betas": [0.5, 0.999], "weight_decay": 1e-5, "seed": args.seed,
                      "augmentation": "8 rotations/reflections", "threads": args.threads,
-                     "device": "cpu", "seconds": round(time.time() - t0, 1),
+                     "device": args.device_name, "seconds": round(time.time() - t0, 1),
                      "torch": torch.__version__, "losses": history},
         "onnx_sha256": sha,
         # the plugin's default dead-end pruning for this model (streetgan.synthesize)
@@ -199,13 +207,28 @@ def main() -> None:
     ap.add_argument("--dilations", type=int, default=5,
                     help="dilations of the road mask before thinning for this model (thesis "
                          "5, for 15 px lines; 1 for 5 px lines)")
+    ap.add_argument("--device", default="auto",
+                    help="cpu, cuda or auto (cuda when torch sees a GPU)")
+    ap.add_argument("--minutes", type=float, default=None,
+                    help="stop after the first epoch that ends past this many minutes")
     args = ap.parse_args()
     if (args.patch - 1) % 32:
         ap.error("--patch must be 32 (m - 1) + 1, e.g. 161, 321")
+    if args.device == "auto":
+        args.device = "cuda" if torch.cuda.is_available() else "cpu"
+    device = torch.device(args.device)
+    if device.type == "cuda":
+        # cuBLAS needs a fixed workspace for deterministic results
+        os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")
+        torch.backends.cudnn.benchmark = False
+        args.device_name = torch.cuda.get_device_name(device)
+    else:
+        args.device_name = "cpu"
 
     torch.set_num_threads(args.threads)
     torch.manual_seed(args.seed)
-    torch.use_deterministic_algorithms(True)
+    # on a GPU an op without a deterministic kernel warns instead of stopping the run
+    torch.use_deterministic_algorithms(True, warn_only=device.type == "cuda")
     rng = np.random.default_rng(args.seed)
     zgen = torch.Generator().manual_seed(args.seed)
     images, corners, metas = [], [], []
@@ -233,6 +256,8 @@ def main() -> None:
     g, d = generator(args.filters), discriminator(args.filters)
     g.apply(init_weights)
     d.apply(init_weights)
+    g.to(device)
+    d.to(device)
     if args.init_onnx:
         # fine-tune: the generator's weights from an exported model of the same shape (its
         # ONNX initialisers carry the state-dict names); the discriminator starts afresh
@@ -246,6 +271,7 @@ def main() -> None:
             ap.error(f"{args.init_onnx} is not a generator with {args.filters} base filters "
                      f"(missing {', '.join(missing[:3])})")
         g.load_state_dict(init, strict=False)
+        g.to(device)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     if not args.no_untrained:
         raw = args.out.with_name(args.out.name + "_untrained.onnx")
@@ -258,8 +284,8 @@ def main() -> None:
     for epoch in range(args.epochs):
         ld_sum = lg_sum = 0.0
         for it in range(args.iterations):
-            real = patches(images, corners, args.batch, args.patch, rng)
-            fake = g(noise(args.batch, m, zgen))
+            real = patches(images, corners, args.batch, args.patch, rng).to(device)
+            fake = g(noise(args.batch, m, zgen).to(device))
             # discriminator: -1/2 E log D(x) - 1/2 E log(1 - D(G(z)))
             out_r, out_f = d(real), d(fake.detach())
             loss_d = 0.5 * (bce(out_r, torch.ones_like(out_r)) + bce(out_f, torch.zeros_like(out_f)))
@@ -272,10 +298,10 @@ def main() -> None:
             opt_g.zero_grad(set_to_none=True)
             loss_g.backward()
             opt_g.step()
-            ld_sum += loss_d.item()
-            lg_sum += loss_g.item()
-        history.append({"epoch": epoch + 1, "loss_d": round(ld_sum / args.iterations, 4),
-                        "loss_g": round(lg_sum / args.iterations, 4),
+            ld_sum += loss_d.detach()  # summed on the device: no wait for it each step
+            lg_sum += loss_g.detach()
+        history.append({"epoch": epoch + 1, "loss_d": round(float(ld_sum) / args.iterations, 4),
+                        "loss_g": round(float(lg_sum) / args.iterations, 4),
                         "seconds": round(time.time() - t0, 1)})
         print(json.dumps(history[-1]), flush=True)
         onnx_path = save(g, args, meta, m, history, t0)
@@ -284,6 +310,8 @@ def main() -> None:
             for suffix in (".onnx", ".json"):
                 dest = args.snapshots / f"epoch_{epoch + 1}{suffix}"
                 dest.write_bytes(onnx_path.with_suffix(suffix).read_bytes())
+        if args.minutes is not None and time.time() - t0 > 60 * args.minutes:
+            break
     print(f"wrote {onnx_path} ({onnx_path.stat().st_size / 1e6:.1f} MB)")
 
 
