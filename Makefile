@@ -120,12 +120,14 @@ train-gan: setup $(TRAIN_PY)
 	  --title "Helsinki and eight Liechtenstein towns (real OSM roads)" --held-out Triesen,Eschen,Mauren
 	QT_QPA_PLATFORM=offscreen $(PY) tests/benchmarks/bench_gan.py --cards
 
-# The thesis's recipe (321 px patches, batch 64) from scratch on a GPU, stopped after 7.5 minutes
-# (an H200: 78 epochs). Not shipped: see the README, "StreetGAN trained on a GPU"
+# The shipped towns model: the thesis's recipe (321 px patches, batch 64) from scratch on a GPU,
+# stopped after 7.5 minutes (an H200: 78 epochs; resources/models/streetgan_towns.json). Without a
+# GPU, train-gan's CPU fine-tune above is the fallback
 .PHONY: train-gan-gpu
 train-gan-gpu: setup $(TRAIN_PY)
 	$(PY) tools/streetgan/prepare.py build/streetgan
 	$(TRAIN_PY) tools/streetgan/train.py build/streetgan/helsinki.npz build/streetgan/li_*.npz \
-	  build/streetgan/streetgan_towns_gpu --device cuda --patch 321 --batch 64 --filters 16 \
-	  --epochs 400 --minutes 7.5 --name streetgan_towns_gpu --no-untrained --erosions 1 --dilations 1 \
+	  resources/models/streetgan_towns --device cuda --patch 321 --batch 64 --filters 16 \
+	  --epochs 400 --minutes 7.5 --name streetgan_towns --no-untrained --erosions 1 --dilations 1 \
 	  --held-out Triesen,Eschen,Mauren --title "Helsinki and eight Liechtenstein towns (real OSM roads)"
+	QT_QPA_PLATFORM=offscreen $(PY) tests/benchmarks/bench_gan.py --cards

@@ -223,9 +223,11 @@ def test_given_roads_on_a_town(qgis_processing):
 
 def test_crossing_share_on_a_town_never_seen(qgis_processing):
     """Eschen with the towns model (trained on other towns), its level-0 roads given: read
-    back, 2.3 % of the nodes are 4-way junctions where the other towns have 7.8 %; with
-    CROSSING_SHARE the example's share, T junctions become crossings up to it (within
-    30 %), and every invariant holds with the example's dead-end share."""
+    back, 9.0 % of the nodes are 4-way junctions where the other towns have 7.8 % (the
+    model trained with the thesis's 321 px patches on a GPU draws crossings; the earlier
+    CPU fine-tune drew 2.3 %); with CROSSING_SHARE the example's share, the share is
+    steered to it (within 30 %), and every invariant holds with the example's dead-end
+    share."""
     from helpers import liechtenstein_town
     from urban_synthesis.plugin.measure import fidelity
     from urban_synthesis.plugin.network import invariants
@@ -249,7 +251,7 @@ def test_crossing_share_on_a_town_never_seen(qgis_processing):
         assert check.ok, check.summary()
         assert_planar(geoms)
         crossings.append(fidelity.fidelity_statistics(geoms, case["area"])["degree4_share"])
-    assert crossings[0] < 0.5 * example["degree4_share"]
+    assert crossings[0] > 0.5 * example["degree4_share"]
     assert crossings[1] == pytest.approx(example["degree4_share"], rel=0.3)
 
 

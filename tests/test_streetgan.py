@@ -258,18 +258,19 @@ def test_dead_end_share_is_steered_into_the_examples_band(models):
 
 
 def test_a_dead_end_no_street_reaches_is_pruned(models):
-    """Bubenec from the towns model with Helsinki's dead-end share, seed 4 (the fidelity
-    benchmark's run): 2 dead ends among 8 counted nodes (0.25, above the band 0.12-0.23
-    around 0.18) and none within reach of another street, so no closing street could be
-    drawn and the share stayed out of the band. The shortest dead-end street is now
-    removed where its other end stays a junction; the network stays one piece."""
+    """Bubenec from the towns model with Helsinki's dead-end share, seed 1: the dead
+    ends read back put the share above the band around 0.18, and none is within reach of
+    another street, so no closing street can be drawn (found with the earlier towns model,
+    seed 4 of the fidelity benchmark, where the share stayed out of the band). The
+    shortest dead-end streets are removed where their other end stays a junction (two
+    here, no street closed); the network stays one piece, inside the band."""
     from towns import bubenec_town, helsinki_town
     from urban_synthesis.plugin.measure import fidelity
     from urban_synthesis.plugin.network import invariants
 
     target, example = bubenec_town(), helsinki_town()
     share = fidelity.fidelity_statistics(example.lines, example.area)["degree1_share"]
-    res = streetgan.synthesize(target.area, models["streetgan_towns"], seed=4,
+    res = streetgan.synthesize(target.area, models["streetgan_towns"], seed=1,
                                given=target.given, given_class=target.given_class,
                                dead_end_share=share)
     check = invariants.check_network(res.geometry[~res.given], target.given,
