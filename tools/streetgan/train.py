@@ -161,7 +161,8 @@ def save(g, args, meta, m, history, t0) -> Path:
         "generator_filters": [args.filters * 2 ** (LAYERS - 2 - i) for i in range(LAYERS - 1)],
         "generator_parameters": int(sum(p.numel() for p in g.parameters())),
         "training": {"initialised_from": args.init_onnx.name if args.init_onnx else None,
-                     "patch_px": args.patch, "noise_m": m, "batch": args.batch,
+                     "patch_px": args.patch, "min_inside": args.min_inside, "noise_m": m,
+                     "batch": args.batch,
                      "epochs": len(history), "iterations_per_epoch": args.iterations,
                      "iterations": len(history) * args.iterations, "lr": args.lr,
                      "betas": [0.5, 0.999], "weight_decay": 1e-5, "seed": args.seed,
@@ -209,6 +210,9 @@ def main() -> None:
                          "5, for 15 px lines; 1 for 5 px lines)")
     ap.add_argument("--device", default="auto",
                     help="cpu, cuda or auto (cuda when torch sees a GPU)")
+    ap.add_argument("--min-inside", type=float, default=0.5,
+                    help="share of a patch that must lie inside the mapped area (outside is "
+                         "drawn empty: a patch mostly outside a town teaches empty land)")
     ap.add_argument("--minutes", type=float, default=None,
                     help="stop after the first epoch that ends past this many minutes")
     args = ap.parse_args()
@@ -235,9 +239,10 @@ def main() -> None:
     for path in args.data:
         data = np.load(path, allow_pickle=True)
         inside = data["inside"] if "inside" in data else np.ones_like(data["image"])
-        c = patch_corners(inside, args.patch)
+        c = patch_corners(inside, args.patch, args.min_inside)
         if not len(c):
-            ap.error(f"{path}: no {args.patch} px window lies inside its mapped area")
+            ap.error(f"{path}: no {args.patch} px window lies {args.min_inside:.0%} inside its "
+                     "mapped area")
         images.append(data["image"])
         corners.append(c)
         meta = json.loads(path.with_suffix(".json").read_text())
@@ -249,7 +254,7 @@ def main() -> None:
         "cell_size_m": metas[0]["cell_size_m"], "line_width_px": metas[0]["line_width_px"],
         "length_km": round(sum(m_["length_km"] for m_ in metas), 2),
         "sampling": "image drawn with probability proportional to its windows of the patch "
-                    "size that lie at least half inside the mapped area",
+                    f"size that lie at least {args.min_inside:.0%} inside the mapped area",
         "held_out": [t for t in args.held_out.split(",") if t]}
     m = (args.patch - 1) // 32 + 1
 
