@@ -280,6 +280,28 @@ def test_a_dead_end_no_street_reaches_is_pruned(models):
     assert res.stats["dead_ends_closed"] >= 1
 
 
+@pytest.mark.parametrize("seed", [2, 4])
+def test_dead_ends_stay_in_their_band_after_the_crossings(models, seed):
+    """Bubenec (about nine counted nodes: one dead end is 0.11 of the share, the band around
+    Helsinki's 0.18 is 0.13-0.23) with every example statistic the fidelity benchmark passes:
+    the crossings, matched after the dead ends were steered, moved the towns model's share
+    out of the band in these runs (0.07 and 0.12). The dead ends are steered once more where
+    the share left it: every invariant holds."""
+    from towns import bubenec_town, helsinki_town
+    from urban_synthesis.plugin.measure import fidelity
+    from urban_synthesis.plugin.network import invariants
+
+    target, example = bubenec_town(), helsinki_town()
+    stats = fidelity.fidelity_statistics(example.lines, example.area)
+    res = streetgan.synthesize(target.area, models["streetgan_towns"], seed=seed,
+                               given=target.given, given_class=target.given_class,
+                               **streetgan.example_steering(stats))
+    check = invariants.check_network(res.geometry[~res.given], target.given,
+                                     target.given_class, target.area,
+                                     example_dead_end_share=stats["degree1_share"])
+    assert check.ok, check.summary()
+
+
 def test_new_streets_whose_noding_fails_are_snap_rounded():
     """Generated streets that defeat GEOS's floating-point noding are noded on the
     millimetre grid: planar, every street kept to that grid."""
