@@ -395,8 +395,9 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
     dead_end_share : float in [0, 1], optional, the example's dead-end share: the generated
         streets' is steered into the invariants' band around it (the fragment synthesis'
         rule, :func:`network.dead_ends.steer_dead_ends`: dead ends closed by short streets, or
-        cul-de-sacs added and T stems cut short); None: the network as read back (not in
-        the thesis: its read-back leaves the share wherever the morphology puts it)
+        cul-de-sacs added and T stems cut short; steered once more after the crossings where
+        the share left the band); None: the network as read back (not in the thesis: its
+        read-back leaves the share wherever the morphology puts it)
     min_block_area : m², optional, the example's 10th-percentile block area: generated
         streets between blocks under it are removed until at most a tenth of the blocks
         are smaller (:func:`network.small_blocks.merge_small_blocks`; not in the thesis:
