@@ -113,6 +113,8 @@ MAX_BACKTRACKS = 60
 
 #: Parcel outlines are simplified with this tolerance (m).
 _OUTPUT_GRID = 0.01
+#: (m) a line this close to a region's outline runs along it (a few output grid cells)
+_ON_OUTLINE = 0.05
 #: The leaf marker of a region given rule-based parcels (no template, no split).
 RULE_BASED = "rule_based"
 #: The subdivision methods that may give a region its rule-based parcels.
@@ -784,10 +786,7 @@ def access_frontage(lots, region, street_width: float, no_access=None) -> np.nda
     lots = np.asarray(lots, dtype=object)
     if len(lots) == 0:
         return np.zeros(0)
-    edge = shapely.boundary(region)
-    if no_access is not None:
-        with np.errstate(invalid="ignore"):
-            edge = shapely.difference(edge, shapely.buffer(no_access, 0.01))
+    edge = _access_edge(region, no_access)
     if shapely.is_empty(edge):
         return np.zeros(len(lots))
     band = shapely.buffer(edge, street_width / 2 + 0.05, cap_style="flat", join_style="mitre")
@@ -1013,12 +1012,18 @@ def no_street_joints(leaves, split_lines, roads, splitter, by_name, s: SplitSett
 def _reached_by_street(region, no_street, no_frontage, length: float) -> bool:
     """Whether at least ``length`` (m) of the region's outline is a street that gives
     access: not on a "no street" edge, not along a motorway."""
+    return shapely.length(_access_edge(region, no_street, no_frontage)) >= length
+
+
+def _access_edge(region, *no_access):
+    """The region's outline less the lines that give no access (no-street edges,
+    motorways); one that lies within :data:`_ON_OUTLINE` of the outline runs along it."""
     edge = shapely.boundary(region)
     with np.errstate(invalid="ignore"):
-        for lines in (no_street, no_frontage):
+        for lines in no_access:
             if lines is not None:
-                edge = shapely.difference(edge, shapely.buffer(lines, 0.05))
-    return shapely.length(edge) >= length
+                edge = shapely.difference(edge, shapely.buffer(lines, _ON_OUTLINE))
+    return edge
 
 
 def _end_dirs(lines) -> np.ndarray:
