@@ -179,6 +179,5 @@ def match_crossings(lines, is_new, share: float, area, rng: np.random.Generator,
     made = np.r_[np.zeros(len(lines), bool), np.ones(len(new_lines), bool)]
     pieces, parent = renode(everything, made, np.where(flags, 1, 0))
     # round-off between ends that noding set apart: no zero-length piece of a given road
-    short = shapely.length(pieces) < JUNCTION_TOLERANCE
-    return collapse_short_pieces(pieces, JUNCTION_TOLERANCE), flags[parent][~short], \
-        (int(n_made), 0)
+    pieces, kept = collapse_short_pieces(pieces, JUNCTION_TOLERANCE)
+    return pieces, flags[parent][kept], (int(n_made), 0)

@@ -198,7 +198,7 @@ class _Network:
         pieces = node_lines(snap_ends_onto_lines(lines))
         # round-off between two ends that noding set apart (5e-11 m on a given road) is
         # no street: a loop there would count twice in its node's degree
-        self.pieces = collapse_short_pieces(pieces, _NODE_GRID)
+        self.pieces = collapse_short_pieces(pieces, _NODE_GRID)[0]
         self.mids = shapely.line_interpolate_point(self.pieces, 0.5, normalized=True)
         given = lines[~is_new]
         self.new = np.ones(len(self.pieces), dtype=bool)

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
-from typing import Dict, Optional, Sequence
+from typing import Dict, Optional, Sequence, Tuple
 
 import numpy as np
 import pandas as pd
@@ -274,20 +274,22 @@ def renode(lines: Sequence, new: Sequence, priority: Sequence, min_length: float
     return pieces, parent
 
 
-def collapse_short_pieces(pieces: Sequence, tolerance: float) -> np.ndarray:
+def collapse_short_pieces(pieces: Sequence, tolerance: float) -> Tuple[np.ndarray, np.ndarray]:
     """Noded pieces shorter than ``tolerance`` m dropped, the other pieces' ends at a dropped
     piece's last point moved to its first (along chains of them): round-off between two
-    ends that noding set apart leaves no zero-length street and no gap.
+    ends that noding set apart leaves no zero-length street and no gap. Returns (the kept
+    pieces, which pieces were kept: for carrying their attributes over).
 
     >>> a, b = shapely.LineString([(0, 0), (5, 0)]), shapely.LineString([(5, 0), (5, 1e-10)])
     >>> c = shapely.LineString([(5, 1e-10), (9, 0)])
-    >>> [p.wkt for p in collapse_short_pieces([a, b, c], 1e-6)]
-    ['LINESTRING (0 0, 5 0)', 'LINESTRING (5 0, 9 0)']
+    >>> kept, keep = collapse_short_pieces([a, b, c], 1e-6)
+    >>> [p.wkt for p in kept], keep.tolist()
+    (['LINESTRING (0 0, 5 0)', 'LINESTRING (5 0, 9 0)'], [True, False, True])
     """
     pieces = np.asarray(pieces, dtype=object)
     short = shapely.length(pieces) < tolerance
     if not short.any():
-        return pieces
+        return pieces, ~short
     first = shapely.get_coordinates(shapely.get_point(pieces[short], 0))
     last = shapely.get_coordinates(shapely.get_point(pieces[short], -1))
     onto = {tuple(q): tuple(p) for p, q in zip(first, last) if tuple(p) != tuple(q)}
@@ -306,7 +308,7 @@ def collapse_short_pieces(pieces: Sequence, tolerance: float) -> np.ndarray:
         for k in (0, -1):
             xyz[k, :2] = target(tuple(xyz[k, :2]))
         kept[i] = shapely.set_coordinates(kept[i], xyz)
-    return kept
+    return kept, ~short
 
 
 def move_ends_onto_lines(lines: Sequence, onto: Sequence, tolerance: float) -> np.ndarray:

@@ -261,8 +261,6 @@ def main() -> None:
     g, d = generator(args.filters), discriminator(args.filters)
     g.apply(init_weights)
     d.apply(init_weights)
-    g.to(device)
-    d.to(device)
     if args.init_onnx:
         # fine-tune: the generator's weights from an exported model of the same shape (its
         # ONNX initialisers carry the state-dict names); the discriminator starts afresh
@@ -276,7 +274,8 @@ def main() -> None:
             ap.error(f"{args.init_onnx} is not a generator with {args.filters} base filters "
                      f"(missing {', '.join(missing[:3])})")
         g.load_state_dict(init, strict=False)
-        g.to(device)
+    g.to(device)
+    d.to(device)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     if not args.no_untrained:
         raw = args.out.with_name(args.out.name + "_untrained.onnx")
