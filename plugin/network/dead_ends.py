@@ -9,7 +9,8 @@ that rule; each method says what closing and opening are for its streets (the ra
 one more step from a stub, or a new street from an unreached dead-end point onto the nearest
 street; the fragment synthesis: a short link from a dead end onto the nearest street, or
 the stem of a T cut short into a cul-de-sac). For a network of lines (the fragment
-synthesis', StreetGAN's) those two are here too: :func:`steer_dead_ends`.
+synthesis', StreetGAN's) those two are here too: :func:`steer_dead_ends`, and
+:func:`steer_into_band` for once more where a later step moved the share out of the band.
 
 References
 ----------
@@ -33,7 +34,8 @@ from .invariants import (CORRIDOR_HALF_WIDTH, DEAD_END_TOLERANCE, SNAP_TOLERANCE
 from .links import meets_only_at_ends
 from .street_graph import add_streets, clean_network, renode_attributed
 
-__all__ = ["steer_share", "steer_dead_ends", "steer_attributed", "MIN_DANGLE", "CLOSE_REACH"]
+__all__ = ["steer_share", "steer_dead_ends", "steer_into_band", "steer_attributed", "MIN_DANGLE",
+           "CLOSE_REACH"]
 
 #: New dead-end edges shorter than this (m) are pruned (stubs of clipped warps: tuned on the
 #: fidelity benchmark's tuning towns, where 5 m left a dead-end share 30 % over the example's).
@@ -128,6 +130,23 @@ def steer_dead_ends(lines, is_new, share: float, area, rng: np.random.Generator,
     geometry, _, attrs, counts, _ = steer_attributed(lines, is_new.astype(np.int64), attrs,
                                                      share, area, rng, min_dangle, max_block)
     return geometry, attrs["source_fragment"] != "arterial", counts
+
+
+def steer_into_band(lines, is_new, share: float, area, rng: np.random.Generator):
+    """Where the dead-end share (as the invariants measure it) is outside their band around
+    ``share`` (a step after :func:`steer_dead_ends` moved it: StreetGAN's crossings; or a
+    small network, where one dead end is a tenth of the share): :func:`steer_dead_ends` once
+    more with ``rng``'s draw, its result kept only where it brings the share nearer.
+    Returns (lines, is_new, (closed, opened)); (0, 0) where the network is kept."""
+    lines = np.asarray(lines, dtype=object)
+    is_new = np.asarray(is_new, dtype=bool)
+    before = abs(dead_end_share(lines, area) - share)
+    if before <= DEAD_END_TOLERANCE * share:
+        return lines, is_new, (0, 0)
+    again, again_new, counts = steer_dead_ends(lines, is_new, share, area, rng)
+    if sum(counts) and abs(dead_end_share(again, area) - share) < before:
+        return again, again_new, counts
+    return lines, is_new, (0, 0)
 
 
 def _steer_dead_ends(geometry, level, attrs, share: float, area, rng, min_dangle: float,

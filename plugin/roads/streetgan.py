@@ -510,8 +510,11 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
         # on a small network one step moves the share far (Bubenec, about nine nodes: one
         # dead end is 0.11 of it), and a crossing made or removed moves it too: where it
         # left the invariants' band, the dead ends are steered once more
-        lines, is_given, again = _steer_dead_ends_again(lines, is_given,
-                                                        float(dead_end_share), area, seed)
+        from ..network.dead_ends import steer_into_band
+
+        lines, is_new, again = steer_into_band(lines, ~is_given, float(dead_end_share), area,
+                                               np.random.default_rng(seed + 1))
+        is_given = ~is_new
         steered = (steered[0] + again[0], steered[1] + again[1])
     t_vec = time.perf_counter() - t
     level = np.zeros(len(lines), dtype=np.int64)
@@ -633,24 +636,6 @@ def _end_directions(lines, probe: float = 10.0):
     d0 /= np.maximum(np.linalg.norm(d0, axis=1), 1e-9)[:, None]
     d1 /= np.maximum(np.linalg.norm(d1, axis=1), 1e-9)[:, None]
     return np.vstack([p0, p1]), np.vstack([d0, d1])
-
-
-def _steer_dead_ends_again(lines, is_given, share: float, area, seed: int):
-    """Where the dead-end share (as the invariants measure it) is outside their band
-    around ``share``: :func:`network.dead_ends.steer_dead_ends` once more (another draw),
-    its result kept only where it brings the share nearer. Returns (lines, is_given,
-    (closed, opened))."""
-    from ..network.dead_ends import steer_dead_ends
-    from ..network.invariants import DEAD_END_TOLERANCE, dead_end_share
-
-    before = abs(dead_end_share(lines, area) - share)
-    if before <= DEAD_END_TOLERANCE * share:
-        return lines, is_given, (0, 0)
-    again, is_new, counts = steer_dead_ends(lines, ~is_given, share, area,
-                                            np.random.default_rng(seed + 1))
-    if sum(counts) and abs(dead_end_share(again, area) - share) < before:
-        return again, ~is_new, counts
-    return lines, is_given, (0, 0)
 
 
 def _noded_with_given(new, given):
