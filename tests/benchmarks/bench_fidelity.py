@@ -344,6 +344,13 @@ def against_example(t: dict, r: dict) -> float:
     return fidelity.score([run["stats"] for run in r["runs"]], t["example_stats"])["median_error"]
 
 
+def run_range(t: dict, r: dict) -> str:
+    """The lowest and highest of the method's runs' own median relative errors (one seed
+    each): how much a town's figure moves from one seed to the next."""
+    errs = [fidelity.score([run["stats"]], t["real"])["median_error"] for run in r["runs"]]
+    return f"{min(errs):.2f}–{max(errs):.2f}" if errs else ""
+
+
 def goals(results: dict) -> str:
     """Issue 15's goals for fragment synthesis, side by side with what each target got."""
     out = ["| target | median rel. error (goal ≤ 0.15) | the example copied as is | fewest "
@@ -414,24 +421,26 @@ def markdown(results: dict) -> str:
         tuned = " (tuned on)" if name in TUNED_ON else " (held out)"
         out.append(f"#### {name}{tuned}: {t['km2']:.2f} km², example: "
                    f"{', '.join(t['example'])}\n")
-        out.append("| method | median rel. error | against the example's statistics | beats "
-                   "grid / chords / Delaunay (of 16) | invariant violations (runs) | s / km² |")
-        out.append("|---|---|---|---|---|---|")
+        out.append("| method | median rel. error | single runs | against the example's "
+                   "statistics | beats grid / chords / Delaunay (of 16) | invariant violations "
+                   "(runs) | s / km² |")
+        out.append("|---|---|---|---|---|---|---|")
         for m, r in t["methods"].items():
             if "error" in r:
-                out.append(f"| {m} | failed: {r['error'][:60]} | | | | |")
+                out.append(f"| {m} | failed: {r['error'][:60]} | | | | | |")
                 continue
             wins = " / ".join(str(r["score"]["wins"].get(b, "–")) for b in BASELINES)
             viol = ", ".join(str(v) for v in r["n_violations"])
             model = r["runs"][0].get("model") if r.get("runs") else None
             label = f"{m} ({model})" if model else m
-            out.append(f"| {label} | {r['score']['median_error']:.2f} | "
+            out.append(f"| {label} | {r['score']['median_error']:.2f} | {run_range(t, r)} | "
                        f"{against_example(t, r):.2f} | {wins} | {viol} | "
                        f"{r['seconds_per_km2']:.1f} |")
         for b in BASELINES:
-            out.append(f"| *{b} baseline* | {t['baselines'][b]['score']['median_error']:.2f} | "
-                       f"{against_example(t, t['baselines'][b]):.2f} | | | |")
-        out.append(f"| *the example copied as is* | {example_as_is(t):.2f} | | | | |")
+            base = t["baselines"][b]
+            out.append(f"| *{b} baseline* | {base['score']['median_error']:.2f} | "
+                       f"{run_range(t, base)} | {against_example(t, base):.2f} | | | |")
+        out.append(f"| *the example copied as is* | {example_as_is(t):.2f} | | | | | |")
         out.append("")
     return "\n".join(out)
 
