@@ -109,3 +109,28 @@ def test_streetgan_refuses_a_share_outside_0_1(share):
     with pytest.raises(InputError, match="crossing share"):
         streetgan.synthesize(shapely.box(0, 0, 300, 300), "streetgan_towns",
                              crossing_share=share)
+
+
+def test_no_street_goes_on_along_the_street_it_crosses():
+    """A street that meets a through street at a shallow angle (30 degrees, the through
+    street bending by 10 degrees there): going straight on would leave the junction 20
+    degrees from the through street, running beside it (with a given road: a crossing that
+    noding left a millimetre off the junction, Helsinki's fragments). It is not continued;
+    the square T beside it is."""
+    west = shapely.LineString([(-200, 0), (0, 0)])
+    east = shapely.LineString([(0, 0), (200, -35)])
+    shallow = shapely.LineString([(-173.2, 100), (0, 0)])
+    square = shapely.LineString([(-100, 0), (-100, 150)])
+    south = shapely.LineString([(100, -17.5), (100, -200)])
+    south_west = shapely.LineString([(-200, -120), (150, -120)])
+    lines = np.array([west, east, shallow, square, south, south_west], dtype=object)
+    lines, _ = _noded(lines, np.ones(len(lines), bool))
+    area = shapely.box(-300, -300, 300, 300)
+    out, is_new, (made, removed) = match_crossings(lines, np.ones(len(lines), bool), 1.0, area,
+                                                   np.random.default_rng(0))
+    assert made == 1 and removed == 0
+    added = out[~shapely.covered_by(out, shapely.union_all(lines).buffer(1e-6))]
+    assert len(added) >= 1
+    xs = shapely.get_coordinates(shapely.union_all(added))[:, 0]
+    assert np.allclose(xs, -100.0)   # the square T's street went on south, nothing at (0, 0)
+    assert_planar(out)

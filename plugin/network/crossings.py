@@ -31,8 +31,8 @@ __all__ = ["match_crossings", "t_stem", "STRAIGHT_THROUGH", "MIN_ANGLE"]
 #: A T's two other streets run through (the street it meets) when they leave the junction
 #: at least this far from the same direction (cosine below -0.7: 134 degrees or more).
 STRAIGHT_THROUGH = -0.7
-#: Degrees: the continued street meets the street it ends on at least this steeply (the
-#: random walk's least angle between streets).
+#: Degrees: the continued street meets the street it ends on, and leaves the street it
+#: crosses, at least this steeply (the random walk's least angle between streets).
 MIN_ANGLE = 25.0
 #: m: a stem's direction is taken along its first this many metres.
 STEM_PROBE = 20.0
@@ -131,6 +131,9 @@ def match_crossings(lines, is_new, share: float, area, rng: np.random.Generator,
             return False
         if not edge_new[inc_edge[rows[stem]]]:
             return False   # only a synthesised street goes on
+        through = np.delete(d, stem, axis=0)
+        if (through @ -d[stem] >= cos_min).any():
+            return False   # straight on would run along the street it crosses (a bend)
         p = nodes[k]
         ray = shapely.LineString([p, p - reach * d[stem]])
         hits = tree.query(ray, predicate="intersects")
