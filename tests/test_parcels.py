@@ -353,3 +353,25 @@ def test_bubenec_yang_metrics_against_cadastre(bubenec_blocks):
     # range of the real parcels overall
     assert 1.0 < skeleton["p_area"] < cadastre["p_area"] + 0.05
     assert skeleton["p_angle"] < cadastre["p_angle"] + 3
+
+
+def test_recursive_cut_leaves_from_a_bend_of_the_street_side():
+    """A block whose top street bends by 16 degrees 3 m from where the middle cut would be:
+    with ``pin_cuts_to_corners`` the cut moves onto the bend, so neither lot keeps it as a
+    corner of 164 degrees (Yang's p_angle counts it); without, one lot does."""
+    block = shapely.Polygon([(0, 0), (80, 0), (80, 42), (37, 30), (0, 30)])
+    rng = np.random.default_rng(0)
+    base = dict(max_area=2000.0, min_area=300.0, min_width=5.0, lot_width=18.0,
+                irregularity=0.0)
+    plain = parcels.split_recursive(block, parcels.SubdivisionSettings(**base), rng)
+    pinned = parcels.split_recursive(block, parcels.SubdivisionSettings(
+        **base, options={"pin_cuts_to_corners": 6.0}), rng)
+    assert len(plain) == len(pinned) == 2
+    for lots, straddled in ((plain, True), (pinned, False)):
+        angles, _ = metrics.corner_angles(lots)
+        assert bool(((angles > 150) & (angles < 170)).any()) is straddled
+        assert np.isclose(shapely.area(lots).sum(), block.area)
+    assert all(shapely.dwithin(lot, shapely.Point(37, 30), 1e-6) for lot in pinned)
+    p_plain, _, _ = parcels.lot_quality(plain)
+    p_pinned, _, _ = parcels.lot_quality(pinned)
+    assert p_pinned.mean() < p_plain.mean()

@@ -49,7 +49,7 @@ __all__ = [
     "Scalar", "Distribution", "MetricsResult", "COMPARISON_COLUMNS",
     "road_graph", "road_metrics", "block_faces", "block_metrics", "parcel_metrics",
     "footprint_metrics", "compute_layout_metrics", "compare", "two_sample",
-    "corner_angles", "street_bearings", "intersection_angles", "network_invariants",
+    "corner_angles", "corners", "street_bearings", "intersection_angles", "network_invariants",
     "orientation_entropy", "landuse_category",
 ]
 
@@ -208,7 +208,16 @@ def _inside(area_geom, geoms) -> np.ndarray:
 
 
 def corner_angles(polygons, straight: float = STRAIGHT_ANGLE) -> Tuple[np.ndarray, np.ndarray]:
-    """Corner angles of polygon outlines, in degrees, with the index of their polygon.
+    """Corner angles of polygon outlines, in degrees, with the index of their polygon
+    (:func:`corners` without the points)."""
+    _, angle, owner = corners(polygons, straight)
+    return angle, owner
+
+
+def corners(polygons, straight: float = STRAIGHT_ANGLE
+            ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Corners of polygon outlines: their points, their angles in degrees and the index of
+    their polygon.
 
     The angle at a vertex is the unsigned angle between its two edges, in [0, 180]: a
     reflex corner of 270 degrees counts as 90, so that an L-shaped parcel has only right
@@ -224,8 +233,9 @@ def corner_angles(polygons, straight: float = STRAIGHT_ANGLE) -> Tuple[np.ndarra
 
     Returns
     -------
+    points : (n, 2) float array
     angles : float array
-    owner : int array, index into ``polygons`` of each angle
+    owner : int array, index into ``polygons`` of each corner
     """
     parts, owner = shapely.get_parts(np.asarray(polygons, dtype=object), return_index=True)
     # vertices within a centimetre of the previous one are digitising noise, not corners
@@ -241,7 +251,7 @@ def corner_angles(polygons, straight: float = STRAIGHT_ANGLE) -> Tuple[np.ndarra
     ok = n[ring] >= 3
     coords, ring = coords[ok], ring[ok]
     if len(coords) == 0:
-        return np.zeros(0), np.zeros(0, dtype=np.int64)
+        return np.zeros((0, 2)), np.zeros(0), np.zeros(0, dtype=np.int64)
     n = np.bincount(ring, minlength=len(rings))
     start = np.r_[0, np.cumsum(n)[:-1]]
     pos = np.arange(len(coords)) - start[ring]
@@ -252,7 +262,7 @@ def corner_angles(polygons, straight: float = STRAIGHT_ANGLE) -> Tuple[np.ndarra
     cos = np.einsum("ij,ij->i", a, b) / (np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1))
     angle = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
     corner = angle <= straight
-    return angle[corner], owner[ring[corner]]
+    return coords[corner], angle[corner], owner[ring[corner]]
 
 
 # --------------------------------------------------------------------------- roads

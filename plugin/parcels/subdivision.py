@@ -637,6 +637,31 @@ def _projections(coords, idx, starts, direction):
     return np.minimum.reduceat(p, starts), np.maximum.reduceat(p, starts)
 
 
+def _pinned_to_corners(lots: np.ndarray, angle: np.ndarray, t: np.ndarray,
+                       max_shift: float) -> np.ndarray:
+    """Cut fractions ``t`` along each lot's axis moved, by at most ``max_shift`` m, onto the
+    nearest corner of its outline (a vertex Yang's p_angle counts,
+    :func:`metrics.corners`), so that the cut leaves from that corner: a lot then has no
+    bend of its street side inside it, where it would count as a corner of 150-170 degrees
+    (the row templates' alignment, sec. 4.1). Corners within 5 % of either end stay."""
+    t = np.array(t, dtype=float, copy=True)
+    xy, _, owner = _metrics.corners(lots)
+    if not len(xy):
+        return t
+    coords, idx = shapely.get_coordinates(lots, return_index=True)
+    starts = np.flatnonzero(group_starts(idx))
+    u = np.column_stack([np.cos(angle), np.sin(angle)])
+    umin, umax = _projections(coords, idx, starts, u)
+    extent = np.maximum(umax - umin, 1e-9)
+    frac = (np.einsum("ij,ij->i", xy, u[owner]) - umin[owner]) / extent[owner]
+    gap = np.abs(frac - t[owner]) * extent[owner]
+    ok = (frac > 0.05) & (frac < 0.95) & (gap <= max_shift)
+    for i in np.unique(owner[ok]):
+        mine = np.flatnonzero(ok & (owner == i))
+        t[i] = frac[mine[np.argmin(gap[mine])]]
+    return t
+
+
 def _cut(lots: np.ndarray, angle: np.ndarray, t: np.ndarray, turn: np.ndarray):
     """Cut each lot in two by a line across its axis.
 
@@ -715,7 +740,9 @@ def split_recursive(block, settings: SubdivisionSettings,
     would be smaller than ``min_area``, narrower than ``min_width`` or, with
     ``force_street_access``, without street frontage; then the middle perpendicular cut
     and the cut across the other axis are tried, and when none is acceptable the lot
-    stays as it is (larger than ``max_area``).
+    stays as it is (larger than ``max_area``). ``settings.options['pin_cuts_to_corners']``
+    (m, optional): the first cut moves by up to that much onto a corner of the lot's
+    outline (:func:`_pinned_to_corners`; the domain split's rule-based parcels).
 
     Scharl cuts perpendicular to the polygon's longest side after merging collinear
     edges; for a rectangle that is the long axis of the minimum bounding rectangle used
@@ -766,8 +793,11 @@ def split_recursive(block, settings: SubdivisionSettings,
         # one draw per lot and level, also when a later attempt wins: deterministic order
         shift = rng.uniform(-1.0, 1.0, k)
         turn = rng.uniform(-1.0, 1.0, k)
-        attempts = [(axis, 0.5 + irr * MAX_CUT_SHIFT * shift,
-                     irr * np.radians(MAX_CUT_TURN) * turn)]
+        middle = 0.5 + irr * MAX_CUT_SHIFT * shift
+        pin = float(settings.options.get("pin_cuts_to_corners", 0.0) or 0.0)
+        if pin > 0:
+            middle = _pinned_to_corners(lots, axis, middle, pin)
+        attempts = [(axis, middle, irr * np.radians(MAX_CUT_TURN) * turn)]
         if irr > 0:  # else the jittered cut is the middle one already
             attempts.append((axis, np.full(k, 0.5), np.zeros(k)))
         attempts.append((axis + np.pi / 2, np.full(k, 0.5), np.zeros(k)))
