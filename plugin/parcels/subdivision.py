@@ -798,7 +798,7 @@ def split_recursive(block, settings: SubdivisionSettings,
         if pin > 0:
             middle = _pinned_to_corners(lots, axis, middle, pin)
         attempts = [(axis, middle, irr * np.radians(MAX_CUT_TURN) * turn)]
-        if irr > 0:  # else the jittered cut is the middle one already
+        if irr > 0 or pin > 0:  # else the first cut is the middle one already
             attempts.append((axis, np.full(k, 0.5), np.zeros(k)))
         attempts.append((axis + np.pi / 2, np.full(k, 0.5), np.zeros(k)))
         pending = np.arange(k)
