@@ -643,7 +643,8 @@ def _pinned_to_corners(lots: np.ndarray, angle: np.ndarray, t: np.ndarray,
     nearest corner of its outline (a vertex Yang's p_angle counts,
     :func:`metrics.corners`), so that the cut leaves from that corner: a lot then has no
     bend of its street side inside it, where it would count as a corner of 150-170 degrees
-    (the row templates' alignment, sec. 4.1). Corners within 5 % of either end stay."""
+    (the row templates' alignment, sec. 4.1). Corners within 5 % of the lot's extent from
+    either end are not used (a cut there would leave a sliver)."""
     t = np.array(t, dtype=float, copy=True)
     xy, _, owner = _metrics.corners(lots)
     if not len(xy):
