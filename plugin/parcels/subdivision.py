@@ -780,6 +780,7 @@ def split_recursive(block, settings: SubdivisionSettings,
     done: List[np.ndarray] = []
     limit = settings.max_area * (1.0 + 1e-9)
     irr = settings.irregularity
+    pin = float(settings.options.get("pin_cuts_to_corners", 0.0) or 0.0)
     for _ in range(_MAX_LEVELS):
         if len(lots) == 0:
             break
@@ -795,7 +796,6 @@ def split_recursive(block, settings: SubdivisionSettings,
         shift = rng.uniform(-1.0, 1.0, k)
         turn = rng.uniform(-1.0, 1.0, k)
         middle = 0.5 + irr * MAX_CUT_SHIFT * shift
-        pin = float(settings.options.get("pin_cuts_to_corners", 0.0) or 0.0)
         if pin > 0:
             middle = _pinned_to_corners(lots, axis, middle, pin)
         attempts = [(axis, middle, irr * np.radians(MAX_CUT_TURN) * turn)]

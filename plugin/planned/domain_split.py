@@ -118,7 +118,7 @@ _ON_OUTLINE = 0.05
 #: Rule-based parcels: a recursive cut moves by up to this many parcel widths to leave from
 #: a corner of the lot's outline (the row templates' alignment: no parcel straddles a bend
 #: of its street side; on the fidelity benchmark's Schaan and Vaduz p_angle 3.22 and 3.28
-#: -> 3.06 and 3.05 degrees at 0.35).
+#: -> 3.05 and 3.10 degrees at 0.35).
 CUT_TO_CORNER = 0.35
 #: The leaf marker of a region given rule-based parcels (no template, no split).
 RULE_BASED = "rule_based"
