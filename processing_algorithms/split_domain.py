@@ -153,7 +153,8 @@ class SplitDomain(AlgorithmBase):
             advanced=True)
         self.add(QgsProcessingParameterBoolean(
             self.OUTLINE_STREETS, "Outline is a street", defaultValue=True),
-            "On: the region is bounded by streets (the paper's boundary condition). Off: "
+            "On: the region is bounded by streets (the paper's boundary condition), laid as "
+            "curves where the outline only bends (by under 35°, e.g. a buffer's arcs). Off: "
             "the outline is a 'no street' edge (a town's edge against fields): parcels back "
             "onto it and no street land is kept along it.", advanced=True)
         self.add(QgsProcessingParameterBoolean(

@@ -1071,3 +1071,37 @@ def test_no_split_street_runs_along_a_key_road_outside_the_region():
     check = invariants.check_network(new, town.given, town.given_class, town.area)
     assert check.violations()["parallel_duplicates"] == 0
     assert check.violations()["crossings_given"] == 0 and check.n_components == 1
+
+
+def _vertex_turns(lines) -> np.ndarray:
+    """Turn (degrees) at every inner vertex of the lines."""
+    turns = []
+    for line in lines:
+        d = np.diff(shapely.get_coordinates(line), axis=0)
+        a = np.arctan2(d[:, 1], d[:, 0])
+        turns.append(np.degrees(np.abs((np.diff(a) + np.pi) % (2 * np.pi) - np.pi)))
+    return np.concatenate(turns) if turns else np.zeros(0)
+
+
+def test_outline_street_is_a_curve_where_the_region_only_bends():
+    """A region drawn as a 16-gon (a buffer's arc: a bend of 22.5 degrees every 86 m): the
+    street along its outline bends as a curve, no vertex turning more than 5 degrees, and
+    no lot along it keeps a kink of the polygon as a corner of 145-170 degrees (Yang's
+    p_angle would count each as a 55-80 degree deviation). A square corner stays a corner."""
+    disc = shapely.Point(0, 0).buffer(220, quad_segs=4)
+    region = shapely.union(disc, shapely.box(0, -220, 220, 0))  # one square corner
+    settings = domain_split.SplitSettings(optimise=False)
+    lay = domain_split.split_domain([region], seed=3, settings=settings)
+    outline = lay.roads[lay.road_kind == "outline"]
+    turns = _vertex_turns(outline)
+    assert turns.max() > 80  # the square corner
+    assert np.sort(turns)[-2] <= 5.0 + 1e-6
+    # on the outline, within the arcs' sagitta
+    vertices = shapely.points(shapely.get_coordinates(outline))
+    assert shapely.distance(vertices, region.exterior).max() < 1.2
+    points, angles, owner = metrics.corners(lay.parcels)
+    along = shapely.distance(shapely.points(points), region.exterior) < \
+        settings.street_width / 2 + 3.0
+    assert along.sum() > 20
+    assert not ((angles[along] > 145) & (angles[along] < 170)).any()
+    assert shapely.within(shapely.union_all(lay.parcels), region)

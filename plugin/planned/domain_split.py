@@ -8,8 +8,10 @@ Pipeline of :func:`split_domain` (one layout) and :func:`split_variations` (k la
    slit no template fills). Region outlines count as streets (a development bounded by
    roads) unless ``outline_streets`` is off: then they are "no street" edges (Fig. 4 edge
    labels); where the outline runs beside a key road just outside the region, the key road
-   is the street (:func:`_outline_onto_key_roads`). Key roads of a motorway class take no
-   junction and give no frontage.
+   is the street (:func:`_outline_onto_key_roads`). An outline street bends as a curve,
+   not a kink, where the outline bends by less than a corner (``templates.CORNER_TURN``,
+   35°: a boundary polygon's arcs, such as a buffer's 22.5° steps; :func:`rounded_bends`).
+   Key roads of a motorway class take no junction and give no frontage.
 2. **Hierarchical splitting with backtracking** (sec. 3-5, :class:`_Search`): a region is
    replaced by a template when one matches: row templates are warped onto it
    (:func:`templates.warp_rows`, registration / regression) and their **warp energy**
@@ -70,7 +72,7 @@ import pandas as pd
 import shapely
 from scipy.cluster.hierarchy import DisjointSet
 
-from ..core.geometry import minimum_rectangles, substrings, unit
+from ..core.geometry import minimum_rectangles, rounded_bends, substrings, unit
 from ..core.progress import InputError, Progress, ensure
 from ..measure import metrics as _metrics
 from ..network import invariants as _invariants
@@ -265,12 +267,18 @@ def prepare_domain(region, key_roads=None, key_areas=None, street_width: float =
     domain = _polygonal(region, "region")
     key_polys = np.empty(0, dtype=object)
     work = domain
+    if outline_streets:
+        # the street along the outline is laid as a curve where the outline only bends (a
+        # polygon's arc): copied kink by kink, every lot along it would have a corner of
+        # 145-170° at each kink. It moves by under 1.2 m, inside its half street width.
+        work = shapely.union_all([rounded_bends(p, _templates.CORNER_TURN, street_width / 2)
+                                  for p in shapely.get_parts(domain)])
     if key_areas is not None and len(key_areas):
         keys = _polygonal(key_areas, "key areas layer")
         with np.errstate(invalid="ignore"):
             keys = shapely.intersection(keys, domain)
         key_polys = _parcels._polygon_parts([keys], 1.0)
-        work = shapely.difference(domain, keys)
+        work = shapely.difference(work, keys)
     outline = shapely.get_parts(shapely.line_merge(shapely.boundary(work)))
     lines = list(outline)
     kinds = ["outline" if outline_streets else "edge"] * len(lines)
