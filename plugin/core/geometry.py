@@ -303,10 +303,11 @@ def rounded_bends(polygon, max_turn: float, reach: float, step: float = 5.0):
     ``max_turn`` degrees (a bend of a curved side, not a corner) replaced by a quadratic
     Bézier arc from ``reach`` metres before it to ``reach`` metres after it (at most 0.4 of
     either edge), sampled so that no vertex of the arc turns by more than ``step``
-    degrees. Sharper corners stay as they are; the outline moves by about
-    ``reach * sin(turn / 2) / 2`` at a bend (the arc's polyline a little more). A result that would not be valid (arcs of
-    two bends of a narrow neck crossing) is not returned: the polygon comes back as it
-    was. Written here because shapely smooths no curve.
+    degrees. Sharper corners, and flatter bends, stay as they are; the outline moves by
+    about ``reach * sin(turn / 2) / 2`` at a bend (the arc's polyline a little more). A
+    result that would not be valid (the arcs of two bends of a narrow neck crossing) is
+    not returned: the polygon comes back as it was. Written here because shapely smooths
+    no curve.
 
     Examples
     --------
