@@ -1105,3 +1105,34 @@ def test_outline_street_is_a_curve_where_the_region_only_bends():
     assert along.sum() > 20
     assert not ((angles[along] > 145) & (angles[along] < 170)).any()
     assert shapely.within(shapely.union_all(lay.parcels), region)
+
+
+def test_outline_beside_a_key_road_inside_the_region_is_no_street():
+    """A key road 20 m inside the top of a 400 x 300 m region, parallel to it (a town's edge
+    road inside its envelope): a street along the top would leave a 5 m strip between the
+    two streets, too shallow for any lot (Gamprin's slivers). The top is no street there:
+    the strip's lots front on the key road, 12.5 m deep, and no outline street runs beside
+    it (nor does any link street run along the region's side). Without a key road the
+    whole outline is a street."""
+    region = shapely.box(0, 0, 400, 300)
+    key = shapely.LineString([(-20, 280), (420, 280)])
+    settings = domain_split.SplitSettings(optimise=False)
+    lay = domain_split.split_domain([region], key_roads=[key], seed=2, settings=settings)
+    top = shapely.LineString([(0, 300), (400, 300)])
+    streets = lay.roads[lay.road_kind != "key"]
+    assert shapely.length(shapely.intersection(
+        shapely.union_all(streets), shapely.buffer(top, 1.0))).sum() < 1.0
+    in_strip = np.asarray(shapely.within(lay.parcels, shapely.box(-1, 279, 401, 301)))
+    assert in_strip.sum() >= 6
+    bounds = shapely.bounds(lay.parcels[in_strip])
+    assert np.allclose(bounds[:, 1], 287.5) and np.allclose(bounds[:, 3], 300.0)  # 12.5 m
+    assert np.isclose(shapely.area(lay.parcels[in_strip]).sum(), 400 * 12.5)
+    assert lay.table[in_strip].has_street_access.all()
+    # no street runs along the region's sides next to the strip (a link there would)
+    for side in (shapely.LineString([(0, 280), (0, 300)]),
+                 shapely.LineString([(400, 280), (400, 300)])):
+        near = shapely.intersection(shapely.union_all(streets), shapely.buffer(side, 3.0))
+        assert shapely.length(near) < 4.0
+    plain = domain_split.split_domain([region], seed=2, settings=settings)
+    outline = shapely.union_all(plain.roads[plain.road_kind == "outline"])
+    assert shapely.length(shapely.intersection(outline, shapely.buffer(top, 1.0))) > 399

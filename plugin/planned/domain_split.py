@@ -251,7 +251,7 @@ LIMITED_ACCESS = frozenset({"motorway", "motorway_link"})
 
 def prepare_domain(region, key_roads=None, key_areas=None, street_width: float = 15.0,
                    key_road_classes=None, max_extension: float = 400.0,
-                   outline_streets: bool = True):
+                   outline_streets: bool = True, beside_reach: float = 0.0):
     """Work regions, the fixed street lines and the key-area polygons.
 
     A key road that ends inside the region (a dangling street of a real network) is
@@ -260,7 +260,12 @@ def prepare_domain(region, key_roads=None, key_areas=None, street_width: float =
     that no template fits (the continuity rule of Yang sec. 5, applied to the given roads).
     Key roads of a :data:`LIMITED_ACCESS` class stay as they are and are returned in
     ``no_access`` (a line geometry, or None): no new street may end on them and no parcel
-    counts them as frontage.
+    counts them as frontage. Where the outline runs beside a key road (not a motorway), a
+    street width to ``beside_reach`` metres from it, for
+    :data:`invariants.MIN_DUPLICATE_LENGTH` or more, no row of parcels would fit between
+    the two streets: the outline is no street there (the key road is; the land up to the
+    outline fronts on it), and the outline street's ends there are joined to the key road
+    (:func:`_outline_beside_key_roads`).
 
     Returns (faces, fixed_lines, fixed_kinds, key_polys, domain, no_access).
     """
@@ -315,11 +320,91 @@ def prepare_domain(region, key_roads=None, key_areas=None, street_width: float =
                 no_access = shapely.union_all(merged) if len(merged) else None
             lines += list(merged)
             kinds += [kind] * len(merged)
+        keys_ = np.asarray([g for g, k in zip(lines, kinds) if k == "key"], dtype=object)
+        if outline_streets and beside_reach > 0 and len(keys_):
+            lines, kinds = _outline_beside_key_roads(lines, kinds, keys_, beside_reach,
+                                                     street_width)
     faces = _faces(lines, work)
     if len(faces) == 0:
         raise InputError("the region is empty once the key areas are removed" if len(key_polys)
                          else "the region encloses no area to lay out")
     return faces, np.asarray(lines, dtype=object), np.asarray(kinds), key_polys, domain, no_access
+
+
+def _outline_beside_key_roads(lines, kinds, keys, reach: float, nearest: float,
+                              step: float = 5.0, max_angle: float = 30.0):
+    """The fixed lines with each stretch of outline street that runs beside a key road
+    (``nearest`` to ``reach`` m from it and within ``max_angle`` degrees of its direction,
+    sampled every ``step`` m, for at least :data:`invariants.MIN_DUPLICATE_LENGTH`) made a
+    "no street" edge, and a link street from each of the stretch's ends to the key road
+    (when it crosses no line). Nearer than ``nearest`` (a street width) the two streets
+    leave no land between them and the outline stays a street (the key road takes its
+    place in the result, :func:`_outline_onto_key_roads`). Returns (lines, kinds)."""
+    key_union = shapely.union_all(keys)
+    tree = shapely.STRtree(keys)
+    cos_max = math.cos(math.radians(max_angle))
+    out_lines, out_kinds, links = [], [], []
+    for line, kind in zip(lines, kinds):
+        if kind != "outline" or line.length < _invariants.MIN_DUPLICATE_LENGTH:
+            out_lines.append(line)
+            out_kinds.append(kind)
+            continue
+        at = np.linspace(0.0, line.length, max(int(line.length // step), 1) + 1)
+        pts = shapely.line_interpolate_point(line, at)
+        near = shapely.get_point(shapely.shortest_line(pts, key_union), 1)
+        key = keys[tree.nearest(near)]
+        pos = shapely.line_locate_point(key, near)
+        # directions over 2 m (a negative distance would count from the line's far end)
+        key_len = shapely.length(key)
+        key_dir = unit(shapely.get_coordinates(shapely.line_interpolate_point(
+            key, np.minimum(pos + 1.0, key_len))) - shapely.get_coordinates(
+            shapely.line_interpolate_point(key, np.maximum(pos - 1.0, 0.0))))
+        own_dir = unit(shapely.get_coordinates(shapely.line_interpolate_point(
+            line, np.minimum(at + 1.0, line.length))) - shapely.get_coordinates(
+            shapely.line_interpolate_point(line, np.maximum(at - 1.0, 0.0))))
+        dist = shapely.distance(pts, key_union)
+        beside = (dist >= nearest) & (dist < reach) & \
+            (np.abs((key_dir * own_dir).sum(1)) > cos_max)
+        # runs of samples beside a key road, long enough to be more than a crossing
+        edges = np.flatnonzero(np.diff(np.r_[0, beside.astype(np.int8), 0]))
+        runs = [(at[a], at[b - 1]) for a, b in zip(edges[::2], edges[1::2])
+                if at[b - 1] - at[a] >= _invariants.MIN_DUPLICATE_LENGTH]
+        if not runs:
+            out_lines.append(line)
+            out_kinds.append(kind)
+            continue
+        # where the outline goes on to meet the key road within ``reach`` (a corner of the
+        # region where the key road leaves it), the stretch runs on to that crossing: no
+        # link is needed there, and none would run along the outline
+        with np.errstate(invalid="ignore"):
+            meet = shapely.get_parts(shapely.intersection(line, key_union))
+        meet = np.sort(shapely.line_locate_point(line, meet[shapely.get_type_id(meet) == 0]))
+        lo, hi = np.array(runs).T
+        before = np.searchsorted(meet, lo, side="right") - 1
+        after = np.searchsorted(meet, hi, side="left")
+        lo_meets = (before >= 0) & (lo - meet[np.maximum(before, 0)] <= reach) \
+            if len(meet) else np.zeros(len(lo), dtype=bool)
+        hi_meets = (after < len(meet)) & (meet[np.minimum(after, len(meet) - 1)] - hi <= reach) \
+            if len(meet) else np.zeros(len(hi), dtype=bool)
+        if len(meet):
+            lo = np.where(lo_meets, meet[np.maximum(before, 0)], lo)
+            hi = np.where(hi_meets, meet[np.minimum(after, len(meet) - 1)], hi)
+        stretches = substrings([line] * len(lo), lo, hi)
+        rest = _line_without(line, stretches)
+        out_lines += list(rest) + list(stretches)
+        out_kinds += [kind] * len(rest) + ["edge"] * len(stretches)
+        rest_union = shapely.union_all(rest) if len(rest) else None
+        # an end at a crossing, at the line's own end or at another stretch stays as it is
+        for ends, meets in ((shapely.get_point(stretches, 0), lo_meets),
+                            (shapely.get_point(stretches, -1), hi_meets)):
+            links += [shapely.shortest_line(e, key_union) for e, m in zip(ends, meets)
+                      if not m and rest_union is not None
+                      and shapely.distance(e, rest_union) < 1e-6]
+    for link in links:
+        if 1e-6 < link.length <= reach + step and meets_only_at_ends(link, out_lines):
+            out_lines.append(link)
+            out_kinds.append("outline")
+    return out_lines, out_kinds
 
 
 def _extend_dangles(lines: np.ndarray, barrier, max_extension: float) -> np.ndarray:
@@ -1099,9 +1184,12 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
     lib = [_templates.built_in_drawn(t, s.parcel_length, s.parcel_width, s.street_width)
            for t in lib]
     rng = np.random.default_rng([int(seed), int(variation)])
+    # no row of parcels fits between the outline street and a key road nearer than this
+    rows_depth = min([t.rows * s.parcel_length * t.depth_scale[0] for t in lib
+                      if t.kind == "rows"] or [s.parcel_length])
     faces, fixed, fixed_kinds, key_polys, domain, no_access = prepare_domain(
         region, key_roads, key_areas, s.street_width, key_road_classes,
-        outline_streets=s.outline_streets)
+        outline_streets=s.outline_streets, beside_reach=s.street_width + rows_depth)
     work_area = float(shapely.area(domain))
     L, W, S = s.parcel_length, s.parcel_width, s.street_width
     splitter = _Splitter(lib, s, rng)
