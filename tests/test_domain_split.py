@@ -853,6 +853,20 @@ def test_a_continued_key_road_stays_the_road_given_plus_a_new_street():
     assert len(continued) and shapely.dwithin(continued, road.boundary.geoms[1], 1e-4).any()
 
 
+def test_a_continuation_with_several_vertices_is_cut_where_the_given_road_ends():
+    """A continued key road whose continuation has two vertices past the given road's end
+    (a vertex where it was noded on its way): it is cut at the given road's end, not left
+    one street that runs 13 m along the given road and on past its end (splitdomain on the
+    fidelity benchmark's Mauren: a crossing of a given road without a junction)."""
+    given = shapely.LineString([(0, 0), (40, 3), (80, 0)])
+    continued = shapely.LineString([(20, 1.5), (40, 3), (80, 0), (100, -1.5), (140, -4.5)])
+    lines, level, kind = domain_split._cut_continuations(
+        [continued], [0], ["key"], [given])
+    assert len(lines) == 2 and list(kind) == ["key", "key"]
+    assert shapely.equals(lines[1], shapely.LineString([(80, 0), (100, -1.5), (140, -4.5)]))
+    assert shapely.covers(shapely.buffer(given, 1e-6), lines[0])
+
+
 def test_a_corner_on_a_long_street_side_is_a_parcel_joint():
     """A strip block whose long sides bend by 40° (a region corner, > CORNER_TURN) is
     taken by a row template: a parcel joint is pinned on each bend and its cost is the

@@ -536,10 +536,13 @@ def _cut_continuations(roads, level, kind, key_roads, tolerance: float = 0.01):
         cuts = []
         if k == "key" and len(xy) >= 3:
             on = shapely.dwithin(given, shapely.points(xy), tolerance)
-            if not on[0] and on[1]:
-                cuts.append(1)
-            if not on[-1] and on[-2]:
-                cuts.append(len(xy) - 2)
+            # the given part may end any number of vertices from the line's end (a
+            # continuation noded at a junction on its way has more than one)
+            if on.any() and not on[0]:
+                cuts.append(int(np.argmax(on)))
+            if on.any() and not on[-1]:
+                cuts.append(len(xy) - 1 - int(np.argmax(on[::-1])))
+            cuts = sorted(set(c for c in cuts if 0 < c < len(xy) - 1))
         bounds = [0] + cuts + [len(xy) - 1]
         for i0, i1 in zip(bounds[:-1], bounds[1:]):
             if i1 > i0:
