@@ -11,6 +11,9 @@ Pipeline of :func:`split_domain` (one layout) and :func:`split_variations` (k la
    is the street (:func:`_outline_onto_key_roads`). An outline street bends as a curve,
    not a kink, where the outline bends by less than a corner (``templates.CORNER_TURN``,
    35°: a boundary polygon's arcs, such as a buffer's 22.5° steps; :func:`rounded_bends`).
+   Where the outline runs beside a key road a street width to a street plus the shallowest
+   row of parcels from it, it is no street: no row would fit between the two streets, so
+   the land up to the outline fronts on the key road (:func:`_outline_beside_key_roads`).
    Key roads of a motorway class take no junction and give no frontage.
 2. **Hierarchical splitting with backtracking** (sec. 3-5, :class:`_Search`): a region is
    replaced by a template when one matches: row templates are warped onto it
