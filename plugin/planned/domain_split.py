@@ -392,6 +392,16 @@ def _outline_beside_key_roads(lines, kinds, keys, reach: float, nearest: float,
         if len(meet):
             lo = np.where(lo_meets, meet[np.maximum(before, 0)], lo)
             hi = np.where(hi_meets, meet[np.minimum(after, len(meet) - 1)], hi)
+        # two stretches run on over the same short gap are one (only possible where
+        # ``reach`` exceeds MIN_DUPLICATE_LENGTH: large streets or parcels)
+        spans: list = []
+        for a, b, ma, mb in sorted(zip(lo, hi, lo_meets, hi_meets)):
+            if spans and a < spans[-1][1]:
+                if b > spans[-1][1]:
+                    spans[-1][1], spans[-1][3] = b, mb
+            else:
+                spans.append([a, b, ma, mb])
+        lo, hi, lo_meets, hi_meets = (np.asarray(v) for v in zip(*spans))
         stretches = substrings([line] * len(lo), lo, hi)
         rest = _line_without(line, stretches)
         out_lines += list(rest) + list(stretches)
