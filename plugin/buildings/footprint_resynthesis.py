@@ -52,6 +52,7 @@ import shapely
 from shapely.geometry.polygon import orient
 
 from ..core import coordinates
+from ..core.geometry import ring_turns
 from ..retrieval.warp import warp_geometries
 from .sequences import Constraint, InfeasibleError, solve
 
@@ -130,10 +131,7 @@ def boundary_segments(block, corner_angle: float = CORNER_ANGLE,
     xy = shapely.get_coordinates(ring)[:-1]
     if len(xy) < 3:
         xy = shapely.get_coordinates(poly.exterior)[:-1]
-    d_in = xy - np.roll(xy, 1, axis=0)
-    d_out = np.roll(xy, -1, axis=0) - xy
-    turn = np.degrees(np.abs(np.arctan2(d_in[:, 0] * d_out[:, 1] - d_in[:, 1] * d_out[:, 0],
-                                        (d_in * d_out).sum(1))))
+    turn = np.abs(ring_turns(xy))
     corners = np.flatnonzero(turn > corner_angle)
     if len(corners) < 2:
         corners = np.round(np.linspace(0, len(xy), 5)[:-1]).astype(int) % len(xy)

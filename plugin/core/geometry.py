@@ -6,6 +6,7 @@
 - :func:`largest_polygons`: the largest polygon part of each (repaired) geometry;
 - :func:`substrings`: stretches of lines between arc lengths;
 - :func:`unit`: unit vectors; :func:`group_starts` / :func:`group_ends`: runs of equal keys;
+- :func:`ring_turns`: the signed turn at each vertex of a closed ring;
 - :func:`rounded_bends`: a polygon's shallow bends drawn as arcs (shapely smooths nothing).
 
 shapely's ``oriented_envelope`` loops over geometries in Python on GEOS 3.11 and gives no
@@ -22,7 +23,7 @@ import shapely
 
 __all__ = ["group_starts", "group_ends", "unit", "substrings", "pinned_ends",
            "largest_polygons", "minimum_rectangles", "minimum_rectangle_corners",
-           "rounded_bends"]
+           "ring_turns", "rounded_bends"]
 
 
 # --------------------------------------------------------------------------- arrays
@@ -269,6 +270,20 @@ def minimum_rectangle_corners(polygons: Sequence) -> np.ndarray:
 
 # --------------------------------------------------------------------------- curves
 
+def ring_turns(xy: np.ndarray) -> np.ndarray:
+    """Turn (degrees, positive to the left, in [-180, 180]) at every vertex of a closed ring
+    given without its closing vertex.
+
+    >>> ring_turns(np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 1.0], [0.0, 1.0]])).tolist()
+    [90.0, 90.0, 90.0, 90.0]
+    """
+    xy = np.asarray(xy, dtype=float)
+    into = xy - np.roll(xy, 1, axis=0)
+    out_of = np.roll(xy, -1, axis=0) - xy
+    return np.degrees(np.arctan2(into[:, 0] * out_of[:, 1] - into[:, 1] * out_of[:, 0],
+                                 (into * out_of).sum(1)))
+
+
 def _rounded_ring(xy: np.ndarray, max_turn: float, reach: float, step: float):
     """Coordinates of a closed ring with its bends rounded (see :func:`rounded_bends`), or
     None when it has no bend to round."""
@@ -278,8 +293,7 @@ def _rounded_ring(xy: np.ndarray, max_turn: float, reach: float, step: float):
     into = xy - np.roll(xy, 1, axis=0)
     out_of = np.roll(xy, -1, axis=0) - xy
     len_in, len_out = np.hypot(*into.T), np.hypot(*out_of.T)
-    turn = np.degrees(np.abs(np.arctan2(into[:, 0] * out_of[:, 1] - into[:, 1] * out_of[:, 0],
-                                        (into * out_of).sum(1))))
+    turn = np.abs(ring_turns(xy))
     bend = (turn > step) & (turn <= max_turn) & (len_in > 0) & (len_out > 0)
     if not bend.any():
         return None

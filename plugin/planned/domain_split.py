@@ -354,20 +354,13 @@ def _outline_beside_key_roads(lines, kinds, keys, reach: float, nearest: float,
             continue
         at = np.linspace(0.0, line.length, max(int(line.length // step), 1) + 1)
         pts = shapely.line_interpolate_point(line, at)
-        near = shapely.get_point(shapely.shortest_line(pts, key_union), 1)
+        to_key = shapely.shortest_line(pts, key_union)
+        dist = shapely.length(to_key)
+        near = shapely.get_point(to_key, 1)
         key = keys[tree.nearest(near)]
-        pos = shapely.line_locate_point(key, near)
-        # directions over 2 m (a negative distance would count from the line's far end)
-        key_len = shapely.length(key)
-        key_dir = unit(shapely.get_coordinates(shapely.line_interpolate_point(
-            key, np.minimum(pos + 1.0, key_len))) - shapely.get_coordinates(
-            shapely.line_interpolate_point(key, np.maximum(pos - 1.0, 0.0))))
-        own_dir = unit(shapely.get_coordinates(shapely.line_interpolate_point(
-            line, np.minimum(at + 1.0, line.length))) - shapely.get_coordinates(
-            shapely.line_interpolate_point(line, np.maximum(at - 1.0, 0.0))))
-        dist = shapely.distance(pts, key_union)
+        key_dir = _direction_at(key, shapely.line_locate_point(key, near))
         beside = (dist >= nearest) & (dist < reach) & \
-            (np.abs((key_dir * own_dir).sum(1)) > cos_max)
+            (np.abs((key_dir * _direction_at(line, at)).sum(1)) > cos_max)
         # runs of samples beside a key road, long enough to be more than a crossing
         edges = np.flatnonzero(np.diff(np.r_[0, beside.astype(np.int8), 0]))
         runs = [(at[a], at[b - 1]) for a, b in zip(edges[::2], edges[1::2])
@@ -418,6 +411,14 @@ def _outline_beside_key_roads(lines, kinds, keys, reach: float, nearest: float,
             out_lines.append(link)
             out_kinds.append("outline")
     return out_lines, out_kinds
+
+
+def _direction_at(lines, at) -> np.ndarray:
+    """Unit directions (n, 2) of lines at distances ``at`` along them, over 2 m (clamped to
+    the line: a negative distance would count from its far end)."""
+    ahead = shapely.line_interpolate_point(lines, np.minimum(at + 1.0, shapely.length(lines)))
+    behind = shapely.line_interpolate_point(lines, np.maximum(at - 1.0, 0.0))
+    return unit(shapely.get_coordinates(ahead) - shapely.get_coordinates(behind))
 
 
 def _extend_dangles(lines: np.ndarray, barrier, max_extension: float) -> np.ndarray:

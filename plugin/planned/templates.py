@@ -73,7 +73,7 @@ import shapely.ops
 from scipy.spatial import cKDTree
 
 from ..core.paths import RESOURCES
-from ..core.geometry import minimum_rectangles
+from ..core.geometry import minimum_rectangles, ring_turns
 from ..core.progress import InputError
 from ..parcels import subdivision as _parcels
 from ..retrieval.warp import warp_geometries, warp_points
@@ -460,9 +460,7 @@ def region_corners(poly, min_turn: float = CORNER_TURN):
     if coarse.geom_type != "Polygon" or coarse.is_empty:
         coarse = poly
     c = np.asarray(coarse.exterior.coords)[:-1]
-    a = c - np.roll(c, 1, axis=0)
-    b = np.roll(c, -1, axis=0) - c
-    turn = np.degrees(np.arctan2(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0], (a * b).sum(1)))
+    turn = ring_turns(c)
     near = cKDTree(ring).query(c)[1]
     full = np.zeros(len(ring))
     full[near] = turn
