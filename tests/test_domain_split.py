@@ -701,8 +701,23 @@ def test_children_reject_a_band_too_thin_for_any_template():
     # an L-shaped child: 100 m wide on the right, a 25 m band along the bottom
     hook = shapely.LineString([(0, 25), (200, 25), (200, 200)])
     assert splitter._children(region, hook) is None
-    faces = splitter._children(region, shapely.LineString([(0, 100), (300, 100)]))
-    assert faces is not None and len(faces) == 2
+    got = splitter._children(region, shapely.LineString([(0, 100), (300, 100)]))
+    assert got is not None and len(got[1]) == 2
+
+
+def test_children_reject_a_street_down_a_narrow_arm_of_a_large_region():
+    """A region with an arm 40 m wide (a town's envelope round a road leaving it): a
+    street running out of the body down the middle of the arm leaves two 12.5 m slivers
+    beside it, too shallow for any row, though each is a small part of its large child
+    (Mauren's long lots 2-5 m deep). The split is rejected; a street across the body that
+    leaves the arm whole is not."""
+    splitter = domain_split._Splitter(LIB, domain_split.SplitSettings(),
+                                      np.random.default_rng(0))
+    region = shapely.union(shapely.box(0, 0, 400, 400), shapely.box(399, 100, 700, 140))
+    down_the_arm = shapely.LineString([(0, 120), (700, 120)])
+    assert splitter._children(region, down_the_arm) is None
+    across = splitter._children(region, shapely.LineString([(0, 250), (400, 250)]))
+    assert across is not None and len(across[1]) == 2
 
 
 def test_acute_lot_keeps_the_rectangle_on_its_street_and_the_wedge_turns_green():

@@ -125,6 +125,9 @@ _ON_OUTLINE = 0.05
 #: of its street side; on the fidelity benchmark's Schaan and Vaduz p_angle 3.22 and 3.28
 #: -> 3.05 and 3.10 degrees at 0.35).
 CUT_TO_CORNER = 0.35
+#: A split is rejected when it leaves more than this many parcel lengths squared of land in
+#: bands too thin for a row of parcels that were not thin before.
+THIN_LAND = 2.0
 #: The leaf marker of a region given rule-based parcels (no template, no split).
 RULE_BASED = "rule_based"
 #: The subdivision methods that may give a region its rule-based parcels.
@@ -745,8 +748,17 @@ class _Splitter:
             return None
         # morphological opening: a child that is thick somewhere but a thin band elsewhere
         # (a streamline running close to the boundary) leaves a sliver no template fills
-        opened = shapely.area(shapely.buffer(inner, r, join_style="mitre"))
-        if (opened < 0.85 * shapely.area(faces)).any():
+        opened = shapely.buffer(inner, r, join_style="mitre")
+        if (shapely.area(opened) < 0.85 * shapely.area(faces)).any():
+            return None
+        # ... nor one that makes bands of land too thin for a row where the region had none,
+        # however large its children (a street down the middle of a narrow arm of the region
+        # leaves a sliver on each side of it, a small part of each child)
+        thin_before = shapely.difference(region, shapely.buffer(
+            shapely.buffer(region, -r, join_style="mitre"), r, join_style="mitre"))
+        thin_now = shapely.union_all(shapely.difference(faces, opened))
+        if shapely.area(shapely.difference(thin_now, thin_before)) > \
+                THIN_LAND * self.s.parcel_length ** 2:
             return None
         if self.key_corridor is not None and \
                 _invariants.doubles_a_street(np.array([street]), self.key_corridor).any():
