@@ -25,9 +25,11 @@ Pipeline of :func:`split_domain` (one layout) and :func:`split_variations` (k la
    x exp(-energy / 0.1).
    Otherwise the region is split along a streamline of its cross field (:mod:`cross_field`
    with a divergence term, :mod:`streamlines`: Delaunay seeds, RK2, the four quality
-   terms), drawn by quality; a split whose children could hold no template, or whose
-   street would run along a key road (in its corridor, :func:`invariants.doubles_a_street`;
-   key roads just outside the region too), is rejected,
+   terms; the width fit prefers the templates with less street, ``WIDTH_FIT_PREFERENCE``),
+   drawn by quality; a split whose children could hold no template, that leaves land too
+   thin for a row of parcels where the region had none (``THIN_LAND``), or whose street
+   would run along a key road (in its corridor, :func:`invariants.doubles_a_street`; key
+   roads just outside the region too), is rejected,
    and when a child can be neither matched nor split the split is undone and another
    streamline drawn (``MAX_TRIES`` per region, ``MAX_BACKTRACKS`` per layout; template
    ``max_count`` limits are kept during the search). A region that fails everything
