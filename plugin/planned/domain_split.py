@@ -594,6 +594,13 @@ def _faces(lines, work) -> np.ndarray:
 
 # --------------------------------------------------------------------------- splitting
 
+def _shallowest_rows(lib, length: float) -> float:
+    """Depth (m) of the shallowest row template of ``lib`` at its smallest depth scale,
+    parcels ``length`` deep (inf without a row template): thinner land holds no row."""
+    return min([t.rows * length * t.depth_scale[0] for t in lib if t.kind == "rows"],
+               default=math.inf)
+
+
 class _Splitter:
     def __init__(self, lib, settings: SplitSettings, rng):
         self.lib = lib
@@ -603,8 +610,7 @@ class _Splitter:
         self.fitted = [t for t in lib if t.kind in ("rows", "drawn")]
         self.use_boost({})
         # a sub-region thinner than this holds no template: its split is rejected
-        self.min_depth = S + min([t.rows * L * t.depth_scale[0] for t in lib if t.kind == "rows"]
-                                 + [2.6 * L])
+        self.min_depth = S + min(_shallowest_rows(lib, L), 2.6 * L)
         self.n_split = 0
         self.n_rejected = 0
         self.n_no_access = 0
@@ -1230,8 +1236,9 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
            for t in lib]
     rng = np.random.default_rng([int(seed), int(variation)])
     # no row of parcels fits between the outline street and a key road nearer than this
-    rows_depth = min([t.rows * s.parcel_length * t.depth_scale[0] for t in lib
-                      if t.kind == "rows"] or [s.parcel_length])
+    rows_depth = _shallowest_rows(lib, s.parcel_length)
+    if not math.isfinite(rows_depth):
+        rows_depth = s.parcel_length
     faces, fixed, fixed_kinds, key_polys, domain, no_access = prepare_domain(
         region, key_roads, key_areas, s.street_width, key_road_classes,
         outline_streets=s.outline_streets, beside_reach=s.street_width + rows_depth)
