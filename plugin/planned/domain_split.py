@@ -66,6 +66,7 @@ Vanegas, C. A. et al. (2012). Procedural generation of parcels in urban modeling
 """
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections import Counter
@@ -718,6 +719,7 @@ class _Splitter:
                                                        cands.orientation[keep])
         qual, _ = score_streamlines(cands, field_, region, self.opt, ends, step=h)
         alive = np.ones(len(qual), dtype=bool)
+        thin_before = functools.lru_cache(maxsize=1)(lambda: self._thin_land(region)[2])
         for _ in range(MAX_DRAWS):
             if not alive.any():
                 return
@@ -725,17 +727,28 @@ class _Splitter:
             p = np.exp((q - q.max()) / max(self.s.choice_temperature, 1e-6))
             i = int(self.rng.choice(len(q), p=p / p.sum()))
             alive[i] = False
-            got = self._children(region, cands.lines[i])
+            got = self._children(region, cands.lines[i], thin_before)
             if got is not None:
                 self.n_split += 1
                 yield got
             else:
                 self.n_rejected += 1
 
-    def _children(self, region, line):
+    def _thin_land(self, polygons):
+        """(eroded, opened, thin) of ``polygons`` by half a street and 0.3 parcel depths:
+        the thin land, what the morphological opening takes away, is too thin for a row of
+        parcels with its street."""
+        r = self.s.street_width / 2 + 0.3 * self.s.parcel_length
+        inner = shapely.buffer(polygons, -r, join_style="mitre")
+        opened = shapely.buffer(inner, r, join_style="mitre")
+        return inner, opened, shapely.difference(polygons, opened)
+
+    def _children(self, region, line, thin_before=None):
         """(street, children) of a split along ``line``, or None when a child could hold
         no template. The street is the streamline clipped by the region, so that its ends
-        lie exactly on the region's outline (no overshoot, no gap)."""
+        lie exactly on the region's outline (no overshoot, no gap). ``thin_before``: a
+        callable giving the region's own thin land (cached by :meth:`candidates`, which
+        tries up to MAX_DRAWS splits of one region)."""
         coords = shapely.get_coordinates(line)
         ext = shapely.LineString(np.vstack([coords[0] + 0.5 * unit(coords[0] - coords[1]),
                                             coords,
@@ -763,24 +776,21 @@ class _Splitter:
         _, short, _ = minimum_rectangles(faces)
         if (short < self.min_depth).any():
             return None
-        r = self.s.street_width / 2 + 0.3 * self.s.parcel_length
-        inner = shapely.buffer(faces, -r, join_style="mitre")
+        inner, opened, thin = self._thin_land(faces)
         if shapely.is_empty(inner).any():
             return None
         # morphological opening: a child that is thick somewhere but a thin band elsewhere
         # (a streamline running close to the boundary) leaves a sliver no template fills
-        opened = shapely.buffer(inner, r, join_style="mitre")
         if (shapely.area(opened) < 0.85 * shapely.area(faces)).any():
             return None
         # ... nor one that makes bands of land too thin for a row where the region had none,
         # however large its children (a street down the middle of a narrow arm of the region
         # leaves a sliver on each side of it, a small part of each child)
         most_thin = THIN_LAND * self.s.parcel_length ** 2
-        thin_now = shapely.union_all(shapely.difference(faces, opened))
+        thin_now = shapely.union_all(thin)
         if shapely.area(thin_now) > most_thin:
-            thin_before = shapely.difference(region, shapely.buffer(
-                shapely.buffer(region, -r, join_style="mitre"), r, join_style="mitre"))
-            if shapely.area(shapely.difference(thin_now, thin_before)) > most_thin:
+            before = thin_before() if thin_before is not None else self._thin_land(region)[2]
+            if shapely.area(shapely.difference(thin_now, before)) > most_thin:
                 return None
         if self.key_corridor is not None and \
                 _invariants.doubles_a_street(np.array([street]), self.key_corridor).any():
