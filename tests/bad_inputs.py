@@ -5,8 +5,8 @@ Every case runs one algorithm (or the shipped model) and states what must happen
 QgsProcessingException whose message matches ``expect`` (never a traceback), or a result
 ``check`` accepts. Whatever happens, the input files keep their checksums, a failed run
 leaves no output and no staging folder behind, and nothing but a QgsProcessingException
-escapes. ``tests/test_bad_inputs.py`` runs the core cases in ``make test`` and every case
-in ``make sweep``; ``python tests/bad_inputs.py`` prints the table of the full sweep.
+escapes. ``tests/test_bad_inputs.py`` runs every case in ``make test`` and ``make sweep``,
+the core cases when pytest runs it alone; ``python tests/bad_inputs.py`` prints the table of the full sweep.
 
 Generic cases are derived from each algorithm's declaration (every Number parameter out of
 range and not whole, every vector input empty, null, of the wrong geometry type, without a
@@ -200,7 +200,7 @@ class Case:
     """One run: ``alg`` with ``params`` (``{name}`` placeholders are inputs of
     :func:`make_inputs`, ``{out}`` the case's output folder); ``expect`` a regex the error
     must match, or None when the run must succeed (then ``check(results)`` may look at the
-    outputs); ``core`` runs in ``make test``."""
+    outputs); ``core`` runs in a plain pytest run too (every case runs in ``make test``)."""
 
     id: str
     alg: str

@@ -74,3 +74,19 @@ def test_largest_polygons_and_substrings():
     assert shapely.equals(pieces[1], shapely.LineString([(5, 0), (10, 0), (10, 5)]))
     starts = geometry.group_starts(np.array([3, 3, 1, 1, 1, 2]))
     assert np.flatnonzero(starts).tolist() == [0, 2, 5]
+
+
+def test_rounded_bends_keeps_holes_of_any_vertex_count():
+    """A region with a round hole (a 16-gon: bends of 22.5 degrees, rounded) and a square
+    hole (corners, kept): both holes survive as rings of different lengths. The sweep's
+    region of cadastre plots failed here (the holes as one coordinate array)."""
+    outer = shapely.box(-300, -300, 300, 300)
+    round_hole = shapely.Point(-120, 0).buffer(60, quad_segs=4)
+    square_hole = shapely.box(80, -40, 160, 40)
+    region = shapely.Polygon(outer.exterior.coords,
+                             [round_hole.exterior.coords, square_hole.exterior.coords])
+    out = geometry.rounded_bends(region, max_turn=35.0, reach=7.5)
+    assert out.is_valid and len(out.interiors) == 2
+    counts = sorted(len(r.coords) for r in out.interiors)
+    assert counts[0] == 5 and counts[1] > 17   # the square as it was, the 16-gon rounded
+    assert shapely.hausdorff_distance(out, region) < 1.0

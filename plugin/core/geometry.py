@@ -345,5 +345,6 @@ def rounded_bends(polygon, max_turn: float, reach: float, step: float = 5.0):
     if all(r is None for r in rounded):
         return polygon
     xy = [shapely.get_coordinates(r) if new is None else new for r, new in zip(rings, rounded)]
-    out = shapely.polygons(xy[0], holes=xy[1:] or None)
+    # holes as rings: their vertex counts differ, so they make no (k, n, 2) coordinate array
+    out = shapely.polygons(xy[0], holes=[shapely.linearrings(h) for h in xy[1:]] or None)
     return out if shapely.is_valid(out) else polygon
