@@ -6,11 +6,13 @@ QgsProcessingException whose message matches ``expect`` (never a traceback), or 
 ``check`` accepts. Whatever happens, the input files keep their checksums, a failed run
 leaves no output and no staging folder behind, and nothing but a QgsProcessingException
 escapes. ``tests/test_bad_inputs.py`` runs every case in ``make test`` and ``make sweep``,
-the core cases when pytest runs it alone; ``python tests/bad_inputs.py`` prints the table of the full sweep.
+the core cases when pytest runs it alone; ``python tests/bad_inputs.py`` prints the table
+of the full sweep.
 
 Generic cases are derived from each algorithm's declaration (every Number parameter out of
 range and not whole, every vector input empty, null, of the wrong geometry type, without a
-CRS, with an undefined CRS, geographic; every file output onto an input and into a
+CRS, with an undefined CRS, geographic; every optional line or polygon input the same, where
+a result or any clear message will do; every file output onto an input and into a
 read-only folder); specific cases are the findings of issue 22.
 """
 from __future__ import annotations
@@ -439,6 +441,14 @@ def generic_cases(registry) -> List[Case]:
                                   dict(base, **{name: "{" + by_kind[geometry] + "}"}),
                                   f"{expect}|{alternative}" if alternative else expect,
                                   core=kind == core_kind and p == 0))
+        # optional line and polygon inputs (key roads, given roads, key areas, ...): the
+        # same mutations, each a result or a clear message (an empty layer may count as none
+        # given; an input the run does not use, such as example roads for a method that
+        # needs none, is not read; a missing field may be reported before the CRS)
+        for name, geometry in _optional_vectors(alg, vectors).items():
+            for kind, (by_kind, _) in VECTOR_MUTATIONS.items():
+                cases.append(Case(f"{alg_id}-{name}-{kind}", full,
+                                  dict(base, **{name: "{" + by_kind[geometry] + "}"}), EITHER))
         numbers = [d for d in alg.parameterDefinitions()
                    if isinstance(d, QgsProcessingParameterNumber)]
         for n, definition in enumerate(numbers):
@@ -464,6 +474,27 @@ def generic_cases(registry) -> List[Case]:
                                   dict(base, **{name: _file_of_source(source)}),
                                   r"would overwrite", core=k % 3 == 0 and o == 0))
     return cases
+
+
+def _optional_vectors(alg, required) -> Dict[str, str]:
+    """Name -> 'lines' or 'polygons' of the algorithm's optional vector inputs of one
+    geometry type that are not among its ``required`` (BASE) inputs."""
+    from qgis.core import (QgsProcessing, QgsProcessingParameterDefinition,
+                           QgsProcessingParameterFeatureSource,
+                           QgsProcessingParameterVectorLayer)
+
+    kinds = {QgsProcessing.TypeVectorLine: "lines", QgsProcessing.TypeVectorPolygon: "polygons"}
+    out = {}
+    for d in alg.parameterDefinitions():
+        if not isinstance(d, (QgsProcessingParameterFeatureSource,
+                              QgsProcessingParameterVectorLayer)) or d.name() in required:
+            continue
+        if not d.flags() & QgsProcessingParameterDefinition.FlagOptional:
+            continue
+        types = {kinds.get(t) for t in d.dataTypes()}
+        if len(types) == 1 and None not in types:
+            out[d.name()] = types.pop()
+    return out
 
 
 def _file_of_source(source: str) -> str:
