@@ -70,7 +70,8 @@ class SynthesizeRoads(AlgorithmBase):
             "- StreetGAN: a generator trained on real towns fills the BOUNDARY; the ARTERIALS "
             "are kept and the generated streets join them.\n\n"
             "Without a BOUNDARY, the convex hull of the arterials is the district. Each method "
-            "is also a tool of its own with every option; this one uses their defaults."
+            "is also a tool of its own with every option; this one uses their defaults. An "
+            "input the chosen method does not read is named in a warning and ignored."
         )
 
     def initAlgorithm(self, config=None):  # noqa: N802
@@ -120,6 +121,16 @@ class SynthesizeRoads(AlgorithmBase):
                     "roads with levels (EXAMPLE_ROADS) to build one from.")
         return None
 
+    def unused_inputs(self, parameters, method):
+        """The optional inputs given that ``method`` does not read (an analyst who switched
+        the method in a model would otherwise not know)."""
+        uses = {"fragments": {self.FRAGMENT_DB, self.DEM}, "growth": {self.DEM},
+                "gan": {self.EXAMPLE_ROADS}}[method.key]
+        if method.key == "fragments" and not self.given(parameters, self.FRAGMENT_DB):
+            uses.add(self.EXAMPLE_ROADS)  # the database is built from it
+        return [n for n in (self.EXAMPLE_ROADS, self.FRAGMENT_DB, self.DEM)
+                if n not in uses and self.given(parameters, n)]
+
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         message = self.input_error(parameters, context)
         if message:
@@ -127,6 +138,10 @@ class SynthesizeRoads(AlgorithmBase):
         method = METHODS[self.parameterAsEnum(parameters, self.METHOD, context)]
         seed = self.seed(parameters, context)
         feedback.pushInfo(f"Method: {method.label}")
+        for name in self.unused_inputs(parameters, method):
+            feedback.pushWarning(
+                f"{self.parameterDefinition(name).description()} ({name}) is not used by the "
+                f"method '{method.label}': it is ignored.")
         # read here first: wrong geometry types, empty layers and missing CRSs are reported
         # with the user's layer names, before any step runs
         arterials = qgis_io.read_source(self, parameters, self.ARTERIALS, context, feedback,

@@ -3,7 +3,7 @@ import pytest
 import shapely
 
 from conftest import bubenec_layer, helsinki_layer, run_qgis_process
-from helpers import assert_planar
+from helpers import assert_planar, log_feedback
 
 OUTPUTS = {"roads:ROADS": "roads", "blocks:BLOCKS": "blocks", "parcels:PARCELS": "parcels",
            "buildings:BUILDINGS": "buildings", "streets:STREET_SURFACES": "street_surfaces",
@@ -103,9 +103,13 @@ def test_synthesize_roads_runs_each_method(qgis_processing, helsinki_arterials, 
     """Helsinki's arterials filled by each method: planar roads with levels, near the hull."""
     hierarchy, arterials = helsinki_arterials
     out = str(tmp_path / "roads.gpkg")
+    log = log_feedback()
     qgis_processing.run("urbansynth:synthesizeroads", {
         "METHOD": method, "EXAMPLE_ROADS": hierarchy, "ARTERIALS": arterials, "SEED": 3,
-        "OUTPUT": out})
+        "OUTPUT": out}, feedback=log)
+    # growth reads no example: the analyst is told that the example roads are ignored
+    unused = [w for w in log.warnings if "(EXAMPLE_ROADS) is not used" in w]
+    assert len(unused) == (method == 1)
     roads = _read(out, None)
     sketch = _read(arterials, None).to_crs(roads.crs)
     # the arterials are kept and streets are added to them (Helsinki's clipped extract closes
