@@ -164,6 +164,23 @@ def test_drawn_template_counts_from_fields(qgis_processing):
                                   "OUTPUT_ROADS": "memory:", "OUTPUT_PARCELS": "memory:"})
 
 
+def test_key_areas_covering_the_region_leave_no_parcels_and_say_so(qgis_processing,
+                                                                    region_layer, hull):
+    """Key areas that cover all but a 2 m rim of the region (the region, reprojected,
+    given again as a lake; covering it exactly is refused as an empty region): no lot is
+    made, and the log says why instead of printing p_angle nan."""
+    from helpers import log_feedback
+
+    lake = memory_layer("Polygon", [hull.buffer(-2.0).wkt], crs="EPSG:32633", name="lake")
+    log = log_feedback()
+    out = qgis_processing.run(ALG, {
+        "REGION": region_layer, "KEY_AREAS": lake, "SEED": 1,
+        "OUTPUT_ROADS": "memory:", "OUTPUT_PARCELS": "memory:"}, feedback=log)
+    rows, _ = layer_features(out["OUTPUT_PARCELS"])
+    assert not [r for r in rows if r["land_use"] == "residential"]
+    assert any("no parcels: the key areas cover the region" in w for w in log.warnings)
+
+
 def test_bad_input(qgis_processing, region_layer):
     from qgis.core import QgsProcessingException
 
