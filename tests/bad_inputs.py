@@ -11,9 +11,10 @@ of the full sweep.
 
 Generic cases are derived from each algorithm's declaration (every Number parameter out of
 range and not whole, every vector input empty, null, of the wrong geometry type, without a
-CRS, with an undefined CRS, geographic; every optional line or polygon input the same, where
-a result or any clear message will do; every file output onto an input and into a
-read-only folder); specific cases are the findings of issue 22.
+CRS, with an undefined CRS, geographic; every optional line or polygon input the same, and
+every optional raster without a CRS, elsewhere and flat, where a result or any clear message
+will do; every file output onto an input and into a read-only folder); specific cases are
+the findings of issue 22.
 """
 from __future__ import annotations
 
@@ -395,6 +396,8 @@ VECTOR_MUTATIONS = {
     "invalid_rings": ({"lines": "tiny_lines", "polygons": "bowties"}, EITHER),
     "geographic": ({"lines": "streets_4326", "polygons": "plots_4326"}, EITHER),
 }
+#: Replacements of an optional raster input (each a result or a clear message).
+RASTER_MUTATIONS = {"no_crs": "mask_nocrs", "elsewhere": "road_mask", "flat": "all255"}
 #: Other clear messages a mutation may meet first: (algorithm, input) -> alternative.
 ALTERNATIVES = {
     # a layer without the level field is refused before its CRS is looked at
@@ -449,6 +452,13 @@ def generic_cases(registry) -> List[Case]:
             for kind, (by_kind, _) in VECTOR_MUTATIONS.items():
                 cases.append(Case(f"{alg_id}-{name}-{kind}", full,
                                   dict(base, **{name: "{" + by_kind[geometry] + "}"}), EITHER))
+        # optional rasters (terrain, example image, ...): one without a CRS, a road mask
+        # (0 / 255) around the square, which lies elsewhere for the runs on the example data
+        # and is a cliff-ridden terrain for those on the square, and a flat one
+        for name in _optional_rasters(alg):
+            for kind, source in RASTER_MUTATIONS.items():
+                cases.append(Case(f"{alg_id}-{name}-{kind}", full,
+                                  dict(base, **{name: "{" + source + "}"}), EITHER))
         numbers = [d for d in alg.parameterDefinitions()
                    if isinstance(d, QgsProcessingParameterNumber)]
         for n, definition in enumerate(numbers):
@@ -483,18 +493,28 @@ def _optional_vectors(alg, required) -> Dict[str, str]:
                            QgsProcessingParameterFeatureSource,
                            QgsProcessingParameterVectorLayer)
 
-    kinds = {QgsProcessing.TypeVectorLine: "lines", QgsProcessing.TypeVectorPolygon: "polygons"}
+    kinds = {QgsProcessing.SourceType.TypeVectorLine: "lines",
+             QgsProcessing.SourceType.TypeVectorPolygon: "polygons"}
     out = {}
     for d in alg.parameterDefinitions():
         if not isinstance(d, (QgsProcessingParameterFeatureSource,
                               QgsProcessingParameterVectorLayer)) or d.name() in required:
             continue
-        if not d.flags() & QgsProcessingParameterDefinition.FlagOptional:
+        if not d.flags() & QgsProcessingParameterDefinition.Flag.FlagOptional:
             continue
         types = {kinds.get(t) for t in d.dataTypes()}
         if len(types) == 1 and None not in types:
             out[d.name()] = types.pop()
     return out
+
+
+def _optional_rasters(alg) -> List[str]:
+    """Names of the algorithm's optional raster inputs."""
+    from qgis.core import QgsProcessingParameterDefinition, QgsProcessingParameterRasterLayer
+
+    return [d.name() for d in alg.parameterDefinitions()
+            if isinstance(d, QgsProcessingParameterRasterLayer)
+            and d.flags() & QgsProcessingParameterDefinition.Flag.FlagOptional]
 
 
 def _file_of_source(source: str) -> str:
