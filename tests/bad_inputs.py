@@ -11,10 +11,10 @@ of the full sweep.
 
 Generic cases are derived from each algorithm's declaration (every Number parameter out of
 range and not whole, every vector input empty, null, of the wrong geometry type, without a
-CRS, with an undefined CRS, geographic; every optional line or polygon input the same, and
-every optional raster without a CRS, elsewhere and flat, where a result or any clear message
-will do; every file output onto an input and into a read-only folder); specific cases are
-the findings of issue 22.
+CRS, with an undefined CRS, geographic, with heights and measures (Z, M); every optional line
+or polygon input the same, and every optional raster without a CRS, elsewhere and flat,
+where a result or any clear message will do; every file output onto an input and into a
+read-only folder); specific cases are the findings of issue 22.
 """
 from __future__ import annotations
 
@@ -43,12 +43,13 @@ UNCLEAR = re.compile(r"Traceback \(most recent call last\)|\b(KeyError|Attribute
 # --------------------------------------------------------------------------- inputs
 
 def _translate(src: str, dst: Path, layer: Optional[str] = None, sql: Optional[str] = None,
-               srs: Optional[str] = None, name: Optional[str] = None, fmt: str = "GPKG"):
+               srs: Optional[str] = None, name: Optional[str] = None, fmt: str = "GPKG",
+               dim: Optional[str] = None):
     from osgeo import gdal
 
     options = gdal.VectorTranslateOptions(
         format=fmt, layers=[layer] if layer and not sql else None, SQLStatement=sql,
-        dstSRS=srs, reproject=bool(srs), layerName=name or layer, accessMode=None)
+        dstSRS=srs, reproject=bool(srs), layerName=name or layer, accessMode=None, dim=dim)
     ds = gdal.VectorTranslate(str(dst), src, options=options)
     assert ds is not None, (src, dst)
     ds = None
@@ -95,6 +96,10 @@ def make_inputs(folder: Path) -> Dict[str, str]:
     # geographic (degrees) and a shapefile without .prj
     _translate(bub, folder / "streets_4326.gpkg", "streets", srs="EPSG:4326")
     out["streets_4326"] = f"{folder / 'streets_4326.gpkg'}|layername=streets"
+    # heights and measures (a cadastre or a GPS survey exported in 3D)
+    for layer in ("streets", "plots"):
+        _translate(bub, folder / f"{layer}_zm.gpkg", layer, dim="XYZM")
+        out[f"{layer}_zm"] = f"{folder / f'{layer}_zm.gpkg'}|layername={layer}"
     _translate(bub, folder / "plots_noprj.shp", "plots", fmt="ESRI Shapefile")
     (folder / "plots_noprj.prj").unlink()
     out["plots_noprj"] = str(folder / "plots_noprj.shp")
@@ -395,6 +400,7 @@ VECTOR_MUTATIONS = {
                  r"no coordinate reference system"),
     "invalid_rings": ({"lines": "tiny_lines", "polygons": "bowties"}, EITHER),
     "geographic": ({"lines": "streets_4326", "polygons": "plots_4326"}, EITHER),
+    "z_and_m": ({"lines": "streets_zm", "polygons": "plots_zm"}, EITHER),
 }
 #: Replacements of an optional raster input (each a result or a clear message).
 RASTER_MUTATIONS = {"no_crs": "mask_nocrs", "elsewhere": "road_mask", "flat": "all255"}

@@ -1238,6 +1238,10 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
     s = (settings or SplitSettings()).validate()
     if seed is None or int(seed) != seed or seed < 0:
         raise InputError(f"the seed must be a whole number >= 0 (got {seed})")
+    # the layout is planar: the inputs' heights (Z) are dropped (a cadastre exported in 3D)
+    region, key_roads, key_areas = (
+        None if g is None else shapely.force_2d(np.asarray(g, dtype=object).ravel())
+        for g in (region, key_roads, key_areas))
     lib = list(templates) if templates is not None else _templates.load_library()
     if not any(t.kind in ("rows", "spike", "loop", "drawn") for t in lib):
         raise InputError("the templates hold no parcel template")
