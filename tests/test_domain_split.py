@@ -498,8 +498,6 @@ def bubenec_hull():
     """The convex hull of Bubeneč's cadastre plots, cut to 450 m x 450 m around its centre
     (a real outline, small enough for a fast test)."""
     plots = bubenec("plots").geometry.to_numpy()
-    c = shapely.centroid(shapely.union_all(plots))
-    plots = plots[shapely.within(shapely.centroid(plots), shapely.buffer(c, 150))]
     hull = shapely.convex_hull(shapely.union_all(plots))
     c = hull.centroid
     return hull.intersection(shapely.box(c.x - 225, c.y - 225, c.x + 225, c.y + 225))
@@ -786,8 +784,6 @@ def bubenec_with_streets():
     """The whole hull of Bubeneč's plots with its 35 real streets kept (the bench's
     hardest region: acute junctions, curved streets, region corners)."""
     plots = bubenec("plots").geometry.to_numpy()
-    c = shapely.centroid(shapely.union_all(plots))
-    plots = plots[shapely.within(shapely.centroid(plots), shapely.buffer(c, 150))]
     streets = bubenec("streets").geometry.to_numpy()
     hull = shapely.convex_hull(shapely.union_all(plots))
     return hull, streets, domain_split.split_domain(hull, key_roads=streets, templates=LIB,
