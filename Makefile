@@ -56,7 +56,7 @@ test: setup
 
 # Every case of the bad-input sweep (tests/bad_inputs.py: inputs generated from the example
 # data, cases derived from each algorithm's parameters plus the findings of issue 22);
-# `make test` runs every case too (about 75 s; pytest alone runs the core subset).
+# `make test` runs every case too (about 2 min; pytest alone runs the core subset).
 sweep: setup
 	URBANSYNTH_SWEEP=full QT_QPA_PLATFORM=offscreen $(PY) -m pytest -q tests/test_bad_inputs.py
 

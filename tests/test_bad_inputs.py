@@ -1,7 +1,7 @@
 """The sweep of bad inputs (tests/bad_inputs.py) through real QGIS: every case a clear
 QgsProcessingException (or a correct result), inputs untouched, no partial outputs.
 
-``make test`` and ``make sweep`` run every case (URBANSYNTH_SWEEP=full, about 75 s); pytest
+``make test`` and ``make sweep`` run every case (URBANSYNTH_SWEEP=full, about 2 min); pytest
 alone runs the core cases (a representative subset: every finding of issue 22 and one
 mutation of each kind per algorithm). The full sweep joined ``make test`` when it found a
 region with holes of different vertex counts failing in splitdomain, which the core cases
