@@ -230,6 +230,36 @@ def test_a_large_piece_is_worth_a_longer_street_to_it():
     assert stats["n_joined"] == 0 and stats["dropped_m"] == pytest.approx(2400.0)
 
 
+def test_given_roads_apart_are_joined_through_the_streets():
+    """A lane the level-0 roads do not reach (in the benchmark: Gamprin, Triesen,
+    Triesenberg and Helsinki's given roads are two pieces each): the shortest clear street
+    joins it to the rest, here from the generated street whose end is nearest (the real
+    streets join them); a motorway apart takes no junction; every given road stays whole."""
+    road = shapely.LineString([(0, 0), (1000, 0)])
+    lane = shapely.LineString([(300, 200), (600, 200)])
+    street = shapely.LineString([(450, 0), (450, 120)])     # on the road, 80 m short of the lane
+    lines, is_given, stats = streetgan.attach_to_given([street], [road, lane],
+                                                       ["primary", "unclassified"],
+                                                       join_distance=90.0)
+    assert stats["n_given_joined"] == 1 and stats["n_components"] == 1
+    assert shapely.length(lines[~is_given]).sum() == pytest.approx(120 + 80, abs=1e-6)
+    assert shapely.length(lines[is_given]).sum() == pytest.approx(1300, abs=1e-6)
+    assert_planar(lines)
+    # the lane a motorway: no street ends on it, and it is kept as it is
+    lines, is_given, stats = streetgan.attach_to_given([street], [road, lane],
+                                                       ["primary", "motorway"],
+                                                       join_distance=90.0)
+    assert stats["n_given_joined"] == 0 and stats["n_components"] == 2
+    assert shapely.length(lines[is_given]).sum() == pytest.approx(1300, abs=1e-6)
+    # out of reach (a 300 m lane takes a link of up to 90 m): apart, nothing dropped
+    far = shapely.affinity.translate(lane, 0, 100)
+    lines, is_given, stats = streetgan.attach_to_given([street], [road, far],
+                                                       ["primary", "unclassified"],
+                                                       join_distance=90.0)
+    assert stats["n_given_joined"] == 0 and stats["n_components"] == 2
+    assert stats["n_dropped_edges"] == 0
+
+
 def test_dead_end_share_is_steered_into_the_examples_band(models):
     """The read-back leaves the dead-end share where the morphology puts it; with the
     example's share given, it is steered into the invariants' band (±30 %) both ways, the

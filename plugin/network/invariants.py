@@ -67,7 +67,8 @@ __all__ = [
     "corridor_of",
     "DEAD_END_TOLERANCE", "EDGE_DISTANCE", "SNAP_TOLERANCE", "UNDERSHOOT_DISTANCE",
     "CONTROLLED_ACCESS",
-    "CHECKS", "Contacts", "NetworkCheck", "line_contacts", "node_degrees", "dead_end_share",
+    "CHECKS", "Contacts", "NetworkCheck", "line_contacts", "connected_pieces", "node_degrees",
+    "dead_end_share",
     "crossing_share", "counted_nodes", "dead_end_share_of_extract", "crossing_share_of_extract",
     "extract_hull", "new_streets", "check_network", "corridor_around",
     "doubles_a_street",
@@ -204,6 +205,34 @@ def line_contacts(lines: Sequence, tolerance: float = JUNCTION_TOLERANCE) -> Con
         junction[point] = end_a | end_b | (vtx_a & vtx_b)
     keep = point | overlap
     return Contacts(pa[keep], pb[keep], parts[keep], junction[keep], overlap[keep])
+
+
+def _pieces(con: Contacts, n: int, joinable=None):
+    """(count, label per line) of the connected pieces of ``n`` lines: lines are joined
+    where they meet at a junction or share a stretch (``joinable``: per contact, False for
+    lines on different vertical layers)."""
+    joined = con.junction | con.overlap
+    if joinable is not None:
+        joined &= joinable
+    adj = coo_matrix((np.ones(joined.sum()), (con.a[joined], con.b[joined])), shape=(n, n))
+    return connected_components(adj, directed=False)
+
+
+def connected_pieces(lines: Sequence, tolerance: float = JUNCTION_TOLERANCE) -> np.ndarray:
+    """The connected piece of each line, as :func:`check_network` counts components: lines
+    are joined where they meet at a junction or share a stretch, not where one crosses the
+    other (a bridge).
+
+    >>> import shapely
+    >>> tee = [shapely.LineString([(0, 5), (10, 5)]), shapely.LineString([(5, 5), (5, 10)])]
+    >>> connected_pieces(tee + [shapely.LineString([(20, 0), (20, 9)])]).tolist()
+    [0, 0, 1]
+    >>> plus = [shapely.LineString([(0, 5), (10, 5)]), shapely.LineString([(5, 0), (5, 10)])]
+    >>> connected_pieces(plus).tolist()
+    [0, 1]
+    """
+    lines = np.asarray(lines, dtype=object)
+    return _pieces(line_contacts(lines, tolerance), len(lines))[1]
 
 
 def _node_degrees(lines: np.ndarray, points: np.ndarray, tolerance: float) -> np.ndarray:
@@ -603,12 +632,9 @@ def check_network(synthesised: Sequence, given: Optional[Sequence] = None,
                                             _self_crossings(syn, tolerance)])
     overlaps = con.geometry[con.overlap & ~(ga & gb) & ~apart]
 
-    # components: lines joined where they meet at a junction or share a stretch
-    joined = (con.junction | con.overlap) & ~apart
     n = len(lines)
     if n:
-        adj = coo_matrix((np.ones(joined.sum()), (con.a[joined], con.b[joined])), shape=(n, n))
-        n_comp, label = connected_components(adj, directed=False)
+        n_comp, label = _pieces(con, n, ~apart)
         with_given = np.zeros(n_comp, bool)
         with_given[label[is_given]] = True
         with_syn = np.zeros(n_comp, bool)

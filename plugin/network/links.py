@@ -19,11 +19,15 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from . import street_graph as _roads
+from .invariants import connected_pieces
 
-__all__ = ["link_floating_pieces", "meets_only_at_ends"]
+__all__ = ["link_floating_pieces", "join_pieces", "meets_only_at_ends"]
 
 #: Nodes of a piece tried as a link's start, nearest to the anchored network first.
 NODES_TRIED = 32
+
+#: m: how far a link that joins pieces may leave the target (one along its outline).
+OUTSIDE_TOLERANCE = 1.0
 
 
 def meets_only_at_ends(link, lines) -> bool:
@@ -44,7 +48,8 @@ def meets_only_at_ends(link, lines) -> bool:
 
 def link_floating_pieces(lines, anchored, accept: Optional[Callable] = None,
                          drop_unlinked: bool = True, ends_on=None,
-                         max_length: Optional[Callable[[float], float]] = None
+                         max_length: Optional[Callable[[float], float]] = None,
+                         pieces=None, both_ways: bool = False
                          ) -> Tuple[np.ndarray, np.ndarray]:
     """Links that join every piece of a noded network to its anchored pieces.
 
@@ -61,10 +66,14 @@ def link_floating_pieces(lines, anchored, accept: Optional[Callable] = None,
     accept : (LineString) -> bool, optional: a method's own rule for a road it may build
         (growroads: no steeper than its slope limit, through no obstacle)
     drop_unlinked : bool, leave out the lines of pieces that cannot be joined
-    ends_on : bool array, optional, one per line: the anchored lines a link may end on
-        (default all; a motorway is anchored but takes no new junction)
+    ends_on : bool array, optional, one per line: the lines a link may end on (default all;
+        a motorway is anchored but takes no new junction)
     max_length : (m of street in the piece) -> m, optional: the longest link a piece of that
         much street may take (StreetGAN: a larger piece is worth a longer street to it)
+    pieces : int array, optional, one per line: the piece of each line (default: lines meet
+        at their end points)
+    both_ways : bool, a link may also start on the anchored network and end on the piece
+        (a lane apart is joined by the street whose end is nearest to it)
 
     Returns
     -------
@@ -93,13 +102,17 @@ def link_floating_pieces(lines, anchored, accept: Optional[Callable] = None,
         return np.empty(0, dtype=object), keep
     g = _roads.graph_from_lines(geometry, np.full(n, None, object), np.full(n, None, object),
                                 np.zeros(n, int), np.arange(n), snap_tolerance=0.0)
-    m = len(g.nodes)
-    adj = coo_matrix((np.ones(g.n_edges), (g.u, g.v)), shape=(m, m))
-    n_comp, label = connected_components(adj, directed=False)
-    if n_comp == 1:
-        return np.empty(0, dtype=object), keep
-    edge_comp = label[g.u]
     src = np.asarray(g.source)
+    if pieces is None:
+        m = len(g.nodes)
+        adj = coo_matrix((np.ones(g.n_edges), (g.u, g.v)), shape=(m, m))
+        n_comp, label = connected_components(adj, directed=False)
+        edge_comp = label[g.u]
+    else:
+        _, label = np.unique(np.asarray(pieces)[src], return_inverse=True)
+        n_comp, edge_comp = int(label.max()) + 1 if len(label) else 0, label.ravel()
+    if n_comp <= 1:
+        return np.empty(0, dtype=object), keep
     anchored = np.zeros(n_comp, bool)
     anchored[edge_comp[anchored_line[src]]] = True
     # metres of street per piece: the longest anchors when nothing is anchored
@@ -116,29 +129,47 @@ def link_floating_pieces(lines, anchored, accept: Optional[Callable] = None,
 
     takes_link = np.ones(len(edges), bool) if ends_on is None else \
         np.asarray(ends_on, dtype=bool)[src]
+    def nearest_clear(starts, ends, ends_tree, longest, bound):
+        """The shortest clear link from one of the points ``starts`` to the lines ``ends``
+        (in ``ends_tree``), shorter than ``bound`` and ``longest``: (length, link) or None."""
+        (_, near), d = ends_tree.query_nearest(starts, return_distance=True, all_matches=False)
+        for k in np.argsort(d, kind="stable")[:NODES_TRIED]:
+            if d[k] >= bound or d[k] > longest:
+                break
+            link = shapely.shortest_line(starts[k], ends[near[k]])
+            if link.length <= 1e-6:
+                continue
+            # it may touch only the piece at its start and the line it ends on
+            if clear(link) and (accept is None or accept(link)):
+                return float(d[k]), link
+        return None
+
     while not anchored.all():
-        # the anchored network as a tree of its edges (its union, rebuilt per link, cost
-        # seconds on a 36 km² StreetGAN network): the nearest edge is the nearest point
+        # the anchored network as its edges (its union, rebuilt per link, cost seconds on a
+        # 36 km² StreetGAN network): the nearest edge is the nearest point
         target = edges[anchored[edge_comp] & takes_link]
         if not len(target):
             break
-        tree = shapely.STRtree(target)
+        target_tree = shapely.STRtree(target)
+        if both_ways:
+            at = anchored[edge_comp] & takes_link
+            anchor_points = shapely.points(g.nodes[np.unique(np.r_[g.u[at], g.v[at]])])
         best = None
         for comp in np.flatnonzero(~anchored):
-            nodes = np.unique(np.r_[g.u[edge_comp == comp], g.v[edge_comp == comp]])
-            pts = shapely.points(g.nodes[nodes])
-            (_, near), d = tree.query_nearest(pts, return_distance=True, all_matches=False)
+            # a link starts or ends only on lines that take one (not on a motorway)
+            own = (edge_comp == comp) & takes_link
+            if not own.any():
+                continue
+            pts = shapely.points(g.nodes[np.unique(np.r_[g.u[own], g.v[own]])])
             longest = math.inf if max_length is None else max_length(float(piece_m[comp]))
-            for k in np.argsort(d, kind="stable")[:NODES_TRIED]:
-                if (best is not None and d[k] >= best[0]) or d[k] > longest:
-                    break
-                link = shapely.shortest_line(pts[k], target[near[k]])
-                if link.length <= 1e-6:
-                    continue
-                # it may touch only the piece at its start and the anchored line at its end
-                if clear(link) and (accept is None or accept(link)):
-                    best = (float(d[k]), comp, link)
-                    break
+            tries = [(pts, target, target_tree)]
+            if both_ways:
+                tries.append((anchor_points, edges[own], shapely.STRtree(edges[own])))
+            for starts, ends, ends_tree in tries:
+                found = nearest_clear(starts, ends, ends_tree, longest,
+                                      math.inf if best is None else best[0])
+                if found is not None:
+                    best = (found[0], comp, found[1])
         if best is None:
             break  # no piece can be linked without crossing a street
         _, comp, link = best
@@ -147,3 +178,47 @@ def link_floating_pieces(lines, anchored, accept: Optional[Callable] = None,
     if drop_unlinked:
         keep[src[~anchored[edge_comp]]] = False
     return np.asarray(links, dtype=object), keep
+
+
+def join_pieces(lines, ends_on=None, max_length: Optional[Callable[[float], float]] = None,
+                inside=None) -> np.ndarray:
+    """Links that join the pieces of a noded network into one, keeping every piece.
+
+    For a network whose pieces all reach given roads, and given roads that are themselves
+    apart inside the target (a village's roads cut off by the boundary, a lane the level-0
+    roads do not reach): the real streets join them, so the synthesised ones should. The
+    piece with the most street anchors; the others are linked to it nearest first, as
+    :func:`link_floating_pieces` links floating pieces but from either side (the street
+    whose end is nearest to a lane joins it), and stay as they are when no clear street
+    reaches them. Pieces are counted as :func:`invariants.check_network` counts components
+    (a bridge over a road does not join it). ``ends_on`` and ``max_length`` as for
+    :func:`link_floating_pieces`; with ``inside`` (the target) a link stays in it, so parts
+    of a target apart stay apart.
+
+    >>> road = shapely.LineString([(0, 0), (100, 0)])
+    >>> street = shapely.LineString([(50, 0), (50, 40)])
+    >>> lane = shapely.LineString([(0, 70), (100, 70)])
+    >>> [x.wkt for x in join_pieces([road, street, lane])]
+    ['LINESTRING (50 40, 50 70)']
+
+    The lane in a part of the target apart from the road's: no street joins them.
+
+    >>> parts = shapely.union_all([shapely.box(-9, -9, 109, 50), shapely.box(-9, 60, 109, 80)])
+    >>> len(join_pieces([road, street, lane], inside=parts))
+    0
+    """
+    lines = np.asarray(lines, dtype=object)
+    if len(lines) < 2:
+        return np.empty(0, dtype=object)
+    accept = None
+    if inside is not None:
+        within = shapely.buffer(inside, OUTSIDE_TOLERANCE)
+        shapely.prepare(within)
+
+        def accept(link):
+            return bool(shapely.covers(within, link))
+    links, _ = link_floating_pieces(lines, np.zeros(len(lines), bool), accept=accept,
+                                    drop_unlinked=False, ends_on=ends_on,
+                                    max_length=max_length, pieces=connected_pieces(lines),
+                                    both_ways=True)
+    return links

@@ -63,7 +63,7 @@ import shapely
 from ..core.progress import InputError, Progress, ensure
 from ..network import street_graph as _roads
 from ..network.dead_ends import MIN_DANGLE, steer_attributed
-from ..network.links import link_floating_pieces
+from ..network.links import join_pieces, link_floating_pieces
 from ..network.invariants import corridor_around, doubles_a_street
 from ..network.street_graph import add_streets
 from ..network.blocks import (
@@ -748,21 +748,29 @@ def _fill_stage(geometry, level, attrs, databases, names, inserter, rng, max_blo
     return geometry, level, attrs, counts, query_id
 
 
-def _link_floating(geometry, level, attrs):
+def _link_floating(geometry, level, attrs, inside):
     """Link the pieces of the network that do not reach an arterial to the network that does
     (:func:`links.link_floating_pieces`: streets of faces closed only by the boundary, whose
-    outline is no street); a piece that cannot be linked is dropped. Returns the network and
-    the number of links."""
+    outline is no street); a piece that cannot be linked is dropped. Then arterials apart
+    inside the target, with the streets on each, are joined into one network by streets
+    that stay ``inside`` (:func:`links.join_pieces`; parts of a target apart stay apart).
+    Returns the network and the number of links."""
     links, keep = link_floating_pieces(geometry, attrs["source_fragment"] == "arterial")
     if not keep.all():
         geometry, level = geometry[keep], level[keep]
         attrs = {k: v[keep] for k, v in attrs.items()}
-    if not len(links):
-        return geometry, level, attrs, 0
-    new_attrs = [("link", "", -1, len(links), -1)]
-    lvl = int(level.max()) + 1 if len(level) else 1
-    geometry, level, attrs = add_streets(geometry, level, attrs, [links], new_attrs, lvl, 0.0)
-    return geometry, level, attrs, len(links)
+
+    def with_links(geometry, level, attrs, links):
+        if not len(links):
+            return geometry, level, attrs
+        lvl = int(level.max()) + 1 if len(level) else 1
+        return add_streets(geometry, level, attrs, [links], [("link", "", -1, len(links), -1)],
+                           lvl, 0.0)
+
+    geometry, level, attrs = with_links(geometry, level, attrs, links)
+    joins = join_pieces(geometry, inside=inside)
+    geometry, level, attrs = with_links(geometry, level, attrs, joins)
+    return geometry, level, attrs, len(links) + len(joins)
 
 
 def example_dead_end_share(databases: Sequence[FragmentDatabase]) -> float:
@@ -1118,7 +1126,8 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
         on_ring = attrs["source_fragment"] == "boundary"
         geometry, level = geometry[~on_ring], level[~on_ring]
         attrs = {k: v[~on_ring] for k, v in attrs.items()}
-    geometry, level, attrs, n_links = _link_floating(geometry, level, attrs)
+    geometry, level, attrs, n_links = _link_floating(geometry, level, attrs,
+                                                     target if target is not None else area)
     stats["links"] = n_links
     if n_links:
         progress.info(f"{n_links} street(s) added to link pieces of the network that "

@@ -52,7 +52,8 @@ import shapely.ops
 
 from ..core.paths import RESOURCES
 from ..core.progress import InputError, Progress, ensure
-from ..network.links import link_floating_pieces
+from ..network.invariants import connected_pieces
+from ..network.links import join_pieces, link_floating_pieces
 from . import raster_graph
 
 __all__ = ["MODELS_DIR", "Generator", "shipped_models", "load_model", "noise", "noise_size",
@@ -696,11 +697,8 @@ def attach_to_given(lines, given, given_class=None, area=None, reach: float = 60
     lines : the noded network (generated pieces and given pieces)
     is_given : bool per line
     stats : dict (n_attached, n_joined, n_dropped_edges, dropped_m: their length,
-        n_components)
+        n_given_joined: links that join given roads apart, n_components)
     """
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
     lines = np.asarray(lines, dtype=object)
     given = np.asarray(given, dtype=object)
     stats = {"n_attached": 0, "n_joined": 0, "n_dropped_edges": 0, "dropped_m": 0.0}
@@ -748,29 +746,26 @@ def attach_to_given(lines, given, given_class=None, area=None, reach: float = 60
                 stats["n_attached"] = len(conn)
     noded, is_given = _noded_with_given(
         np.concatenate([lines, np.asarray(connectors, dtype=object)]), given)
-    n = len(noded)
-
-    def components(geoms):
-        # lines joined where they meet (everything is noded: a contact is a junction; within
-        # the invariants' micrometre, as a given road cut at a new street's end meets it)
-        tree = shapely.STRtree(geoms)
-        a, b = tree.query(geoms, predicate="dwithin", distance=1e-6)
-        adj = coo_matrix((np.ones(len(a)), (a, b)), shape=(len(geoms), len(geoms)))
-        return connected_components(adj, directed=False)[1]
 
     # pieces that reach no given road (without given roads: the longest piece) are joined
     # by the shortest clear connector, nearest first, so that a joined piece anchors the
     # next (the one home of the rule, network.links), at most join_distance long (a larger
     # piece: a quarter of its streets, up to MAX_PIECE_LINK) and never
     # onto a motorway or trunk; the rest is dropped
-    closed_line = np.zeros(n, dtype=bool)
-    if len(closed):
-        closed_line[is_given] = shapely.covers(shapely.union_all(shapely.buffer(closed, 0.01)),
-                                               noded[is_given])
-    add, keep = link_floating_pieces(noded, is_given, drop_unlinked=True, ends_on=~closed_line,
-                                     max_length=lambda piece_m: max(
-                                         join_distance,
-                                         min(PIECE_LINK_SHARE * piece_m, MAX_PIECE_LINK)))
+    closed_zone = shapely.union_all(shapely.buffer(closed, 0.01)) if len(closed) else None
+
+    def takes_link(net, net_given):  # a line a link may end on: not a motorway or trunk
+        ok = np.ones(len(net), dtype=bool)
+        if closed_zone is not None:
+            ok[net_given] = ~shapely.covers(closed_zone, net[net_given])
+        return ok
+
+    def longest_link(piece_m):
+        return max(join_distance, min(PIECE_LINK_SHARE * piece_m, MAX_PIECE_LINK))
+
+    add, keep = link_floating_pieces(noded, is_given, drop_unlinked=True,
+                                     ends_on=takes_link(noded, is_given),
+                                     max_length=longest_link)
     drop = ~keep
     stats["n_joined"] = len(add)
     stats["n_dropped_edges"] = int(drop.sum())
@@ -779,5 +774,13 @@ def attach_to_given(lines, given, given_class=None, area=None, reach: float = 60
     if len(add):
         noded, is_given = _noded_with_given(np.concatenate([noded[~is_given], add]),
                                             noded[is_given])
-    stats["n_components"] = int(len(np.unique(components(noded)))) if len(noded) else 0
+    # given roads apart inside the area (and the streets on each) are joined into one
+    # network by the same rule, as the real streets join them
+    bridge = join_pieces(noded, ends_on=takes_link(noded, is_given), max_length=longest_link,
+                         inside=area)
+    stats["n_given_joined"] = len(bridge)
+    if len(bridge):
+        noded, is_given = _noded_with_given(np.concatenate([noded[~is_given], bridge]),
+                                            noded[is_given])
+    stats["n_components"] = int(len(np.unique(connected_pieces(noded)))) if len(noded) else 0
     return noded, is_given, stats
