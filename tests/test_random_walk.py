@@ -531,21 +531,45 @@ def test_one_network_on_a_town_never_seen(eschen):
     assert inside[res.points.example >= 0].all()
 
 
-@pytest.fixture(scope="module")
-def balzers():
-    """Balzers as the fidelity benchmark runs it: (target town, the other towns' fidelity
-    statistics, their points, their street shapes)."""
+def _left_out(name):
+    """A Liechtenstein town as the fidelity benchmark runs it: (target town, the other
+    towns' fidelity statistics, their points, their street shapes)."""
     from towns import LI_PBF, liechtenstein_towns
 
     if not LI_PBF.exists():
         pytest.skip(f"{LI_PBF} is missing")
     towns = liechtenstein_towns()
-    target = next(t for t in towns if t.name == "Balzers")
-    others = [t for t in towns if t.name != "Balzers"]
+    target = next(t for t in towns if t.name == name)
+    others = [t for t in towns if t.name != name]
     lines = np.concatenate([t.lines for t in others])
     example = fidelity.fidelity_statistics(lines, shapely.union_all([t.area for t in others]))
     pts, graph, h = iq.points_from_roads(lines, np.concatenate([t.road_class for t in others]))
     return target, example, pts, rw.street_shapes(graph, h.edge_level)
+
+
+@pytest.fixture(scope="module")
+def balzers():
+    return _left_out("Balzers")
+
+
+def test_a_piece_with_full_slots_joins_instead_of_being_dropped():
+    """Vaduz from the other Liechtenstein towns, seed 0 (the fidelity benchmark's run): the
+    walks west of its main road made one piece of 56 points whose points within reach of
+    the rest had used both their street slots, so no join was allowed and the piece was
+    dropped with its 83 streets: 103 of 169 points connected, the western third of the town
+    left empty. Such a piece now joins through a full slot: at least 90 % of the points
+    connected, nothing dropped, one network without a violation."""
+    target, example, pts, shapes = _left_out("Vaduz")
+    res = rw.synthesize(pts, target.area, existing_lines=target.given, seed=0, in_place=False,
+                        shapes=shapes, dead_end_share=example["degree1_share"])
+    assert res.stats["n_joins_saturated"] > 0
+    assert res.stats["n_dropped_edges"] == 0
+    assert res.stats["n_points_connected"] >= 0.9 * res.stats["n_points"]
+    new = res.geometry[invariants.new_streets(res.geometry, target.given)]
+    check = invariants.check_network(new, target.given, target.given_class, target.area,
+                                     example_dead_end_share=example["degree1_share"])
+    assert check.ok, check.summary()
+    assert check.n_components == 1
 
 
 def test_crossings_as_often_as_in_the_example(balzers):

@@ -789,18 +789,20 @@ class _Walker:
             main = np.bincount(label[on]).argmax() if on.any() else -1
         return label, main
 
-    def _free_slot(self, v):
-        """The street slot of v that can take one more connection (the emptier one)."""
+    def _free_slot(self, v, saturated=False):
+        """The street slot of v that can take one more connection (the emptier one);
+        ``saturated``: the emptier of its slots even when both are full."""
         c = self.cnt[v]
-        ok = (self.p.level[v] >= 0) & (c < 2)
+        ok = (self.p.level[v] >= 0) & ((c < 2) | saturated)
         if not ok.any():
             return None
         return int(np.flatnonzero(ok)[np.argmin(c[ok])])
 
-    def _join_by_point(self, members, root, tree, pool, reach):
+    def _join_by_point(self, members, root, tree, pool, reach, saturated=False):
         """The shortest clear step from a point of ``members`` to a connected point of
         another piece (``root(points)`` gives each point's piece; ``tree`` indexes the
-        candidate points ``pool``). Returns the joined point, or -1."""
+        candidate points ``pool``; ``saturated``: through full street slots too). Returns
+        the joined point, or -1."""
         cap = self.s.max_capacity
         ok = members[self.deg[members] < cap]
         if not len(ok) or tree is None:
@@ -824,7 +826,7 @@ class _Walker:
             if d < 1e-6:
                 continue
             unit = vec / d
-            sv, su = self._free_slot(v), self._free_slot(u)
+            sv, su = self._free_slot(v, saturated), self._free_slot(u, saturated)
             if sv is None or su is None or not self._angles_ok(v, u, unit):
                 continue
             nb = np.asarray(self.kd.query_ball_point(self.xy[v], d + 1.0), dtype=np.int64)
@@ -835,7 +837,8 @@ class _Walker:
             return int(u)
         return -1
 
-    def _join_by_split(self, members, root, reach, origin="join", level=None):
+    def _join_by_split(self, members, root, reach, origin="join", level=None,
+                       saturated=False):
         """A clear step from a point of ``members`` onto the nearest street of another piece
         (or a given road), split there: a new T junction. ``root(points)`` gives each
         point's piece; None: any street not at the point (closing a dead end), of ``level``
@@ -844,7 +847,7 @@ class _Walker:
         cap = self.s.max_capacity
         best = None
         for v in members[self.deg[members] < cap]:
-            sv = self._free_slot(v)
+            sv = self._free_slot(v, saturated)
             if sv is None:
                 continue
             pv = self.xy[v]
@@ -941,10 +944,11 @@ class _Walker:
         """Join every piece to the anchors' network (or the largest piece); drop what
         cannot be joined. Returns counts. The pieces are found once and merged (a disjoint
         set of their labels) as joins are made."""
-        joined = split = dropped = 0
+        joined = split = dropped = relaxed = 0
         label, main = self.pieces(anchors)
         if main < 0:
-            return {"n_joins": 0, "n_join_splits": 0, "n_dropped_edges": 0}
+            return {"n_joins": 0, "n_join_splits": 0, "n_dropped_edges": 0,
+                    "n_joins_saturated": 0}
         merged = DisjointSet(range(label.max() + 1))
 
         def root(points):
@@ -971,24 +975,35 @@ class _Walker:
             if not len(members):
                 continue
             reach = self.s.join_reach * float(np.median(self.p.dist_mean[members, 0]))
-            u = self._join_by_point(members, root, tree, pool, reach)
-            if u >= 0:
-                merged.merge(lab, label[u])
-                joined += 1
-                continue
-            r = self._join_by_split(members, root, reach)
-            if r is not None:
-                k, end = r
-                other = label[end] if end >= 0 else main
-                label = np.r_[label, other]
-                merged.merge(lab, other)
-                split += 1
+            done = False
+            # a piece whose points near the rest have used their street slots joins through
+            # a full slot rather than being dropped (a third of a town was, on Vaduz)
+            for saturated in (False, True):
+                u = self._join_by_point(members, root, tree, pool, reach, saturated)
+                if u >= 0:
+                    merged.merge(lab, label[u])
+                    joined += 1
+                    relaxed += saturated
+                    done = True
+                    break
+                r = self._join_by_split(members, root, reach, saturated=saturated)
+                if r is not None:
+                    k, end = r
+                    other = label[end] if end >= 0 else main
+                    label = np.r_[label, other]
+                    merged.merge(lab, other)
+                    split += 1
+                    relaxed += saturated
+                    done = True
+                    break
+            if done:
                 continue
             # rejected: this piece and the pieces that joined it so far
             gone = labs[np.isin(labs, list(merged.subset(lab)))]
             members = np.concatenate([by_label[x] for x in gone])
             dropped += self.drop_piece(members[self.deg[members] > 0])
-        return {"n_joins": joined, "n_join_splits": split, "n_dropped_edges": dropped}
+        return {"n_joins": joined, "n_join_splits": split, "n_dropped_edges": dropped,
+                "n_joins_saturated": relaxed}
 
 
 def connect_points(points: iq.PointSet, rng: np.random.Generator,
@@ -1093,7 +1108,7 @@ def connect_points(points: iq.PointSet, rng: np.random.Generator,
                 n_crossed += added
     progress.step(0.8)
     w.stats = {"n_crossings_made": int(n_crossed), "n_joins": 0, "n_join_splits": 0,
-               "n_dropped_edges": 0}
+               "n_dropped_edges": 0, "n_joins_saturated": 0}
     if s.join_pieces:
         anchors = np.flatnonzero(points.example < 0) if existing is not None else \
             np.zeros(0, dtype=np.int64)
@@ -1860,7 +1875,7 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
     dead = is_new & (deg == 1)
     stats = {
         "n_points": int(n_new), "n_points_generated": int(pts.generated[:n_new].sum()),
-        "n_points_connected": int((used & is_new).sum()),
+        "n_points_connected": int(used[:n_new].sum()),
         "n_edges": len(lines), "n_dead_ends": int(dead.sum()),
         # as the invariants measure it (the given roads' nodes too, away from the edge)
         "dead_end_share": w.stats["dead_end_share"],
@@ -1881,6 +1896,7 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
         "n_joins": w.stats["n_joins"],
         "n_join_splits": w.stats["n_join_splits"],
         "n_dropped_edges": w.stats["n_dropped_edges"],
+        "n_joins_saturated": w.stats["n_joins_saturated"],
         "n_small_faces_refused": w.stats["n_small_faces_refused"],
     }
     if existing is not None:
