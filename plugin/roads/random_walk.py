@@ -977,16 +977,17 @@ class _Walker:
             reach = self.s.join_reach * float(np.median(self.p.dist_mean[members, 0]))
             done = False
             # a piece whose points near the rest have used their street slots joins through
-            # a full slot rather than being dropped (a third of a town was, on Vaduz)
-            for saturated in (False, True):
-                u = self._join_by_point(members, root, tree, pool, reach, saturated)
+            # a full slot rather than being dropped (a third of a town was, on Vaduz), and
+            # then by a step up to twice as long
+            for saturated, far in ((False, 1.0), (True, 1.0), (True, 2.0)):
+                u = self._join_by_point(members, root, tree, pool, far * reach, saturated)
                 if u >= 0:
                     merged.merge(lab, label[u])
                     joined += 1
                     relaxed += saturated
                     done = True
                     break
-                r = self._join_by_split(members, root, reach, saturated=saturated)
+                r = self._join_by_split(members, root, far * reach, saturated=saturated)
                 if r is not None:
                     k, end = r
                     other = label[end] if end >= 0 else main
