@@ -78,8 +78,8 @@ def link_floating_pieces(lines, anchored, accept: Optional[Callable] = None,
     Returns
     -------
     (links, keep): the link lines (they end on a node of their piece and on an anchored line,
-    which is not split), and per line whether it is kept (False: its piece could not be
-    joined).
+    or with ``both_ways`` on a node of the anchored network and a line of the piece; the line
+    is not split), and per line whether it is kept (False: its piece could not be joined).
 
     >>> a = shapely.LineString([(0, 0), (100, 0)]); b = shapely.LineString([(40, 30), (60, 30)])
     >>> links, keep = link_floating_pieces([a, b], [True, False])
@@ -129,6 +129,7 @@ def link_floating_pieces(lines, anchored, accept: Optional[Callable] = None,
 
     takes_link = np.ones(len(edges), bool) if ends_on is None else \
         np.asarray(ends_on, dtype=bool)[src]
+
     def nearest_clear(starts, ends, ends_tree, longest, bound):
         """The shortest clear link from one of the points ``starts`` to the lines ``ends``
         (in ``ends_tree``), shorter than ``bound`` and ``longest``: (length, link) or None."""

@@ -1131,7 +1131,8 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
     stats["links"] = n_links
     if n_links:
         progress.info(f"{n_links} street(s) added to link pieces of the network that "
-                      "touched only the boundary to the arterials.")
+                      "touched only the boundary to the arterials, or arterials that lay "
+                      "apart to each other.")
     if fill and max_level is None:
         share = example_dead_end_share(databases) if dead_end_share is None else \
             float(dead_end_share)

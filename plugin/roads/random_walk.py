@@ -944,7 +944,7 @@ class _Walker:
         """Join every piece to the anchors' network (or the largest piece); drop what
         cannot be joined. Returns counts. The pieces are found once and merged (a disjoint
         set of their labels) as joins are made."""
-        joined = split = dropped = relaxed = 0
+        joined = split = dropped = through_full_slots = 0
         label, main = self.pieces(anchors)
         if main < 0:
             return {"n_joins": 0, "n_join_splits": 0, "n_dropped_edges": 0,
@@ -975,7 +975,6 @@ class _Walker:
             if not len(members):
                 continue
             reach = self.s.join_reach * float(np.median(self.p.dist_mean[members, 0]))
-            done = False
             # a piece whose points near the rest have used their street slots joins through
             # a full slot rather than being dropped (a third of a town was, on Vaduz), and
             # then by a step up to twice as long
@@ -984,8 +983,6 @@ class _Walker:
                 if u >= 0:
                     merged.merge(lab, label[u])
                     joined += 1
-                    relaxed += saturated
-                    done = True
                     break
                 r = self._join_by_split(members, root, far * reach, saturated=saturated)
                 if r is not None:
@@ -994,17 +991,16 @@ class _Walker:
                     label = np.r_[label, other]
                     merged.merge(lab, other)
                     split += 1
-                    relaxed += saturated
-                    done = True
                     break
-            if done:
+            else:
+                # rejected: this piece and the pieces that joined it so far
+                gone = labs[np.isin(labs, list(merged.subset(lab)))]
+                members = np.concatenate([by_label[x] for x in gone])
+                dropped += self.drop_piece(members[self.deg[members] > 0])
                 continue
-            # rejected: this piece and the pieces that joined it so far
-            gone = labs[np.isin(labs, list(merged.subset(lab)))]
-            members = np.concatenate([by_label[x] for x in gone])
-            dropped += self.drop_piece(members[self.deg[members] > 0])
+            through_full_slots += saturated
         return {"n_joins": joined, "n_join_splits": split, "n_dropped_edges": dropped,
-                "n_joins_saturated": relaxed}
+                "n_joins_saturated": through_full_slots}
 
 
 def connect_points(points: iq.PointSet, rng: np.random.Generator,
