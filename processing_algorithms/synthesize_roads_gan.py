@@ -266,8 +266,9 @@ class SynthesizeRoadsGan(AlgorithmBase):
                 f"Given roads kept ({int(result.given.sum())} pieces); "
                 f"{s['n_joined_to_drawn_roads'] + s['n_attached']} new streets end on them; "
                 f"{s['n_joined']} pieces joined by a connector, {s['n_dropped_edges']} edges "
-                f"of pieces that reach no road dropped; {s['n_components']} connected "
-                "component(s).")
+                f"of pieces that reach no road dropped; {s['n_given_joined']} "
+                f"street(s) joining given roads that lay apart; {s['n_components']} "
+                "connected component(s).")
         if min_block is not None or median_block is not None:
             under = " and ".join(f"{a:,.0f} m² ({what})" for a, what in
                                  ((median_block, "median"), (min_block, "10th percentile"))

@@ -701,7 +701,8 @@ def attach_to_given(lines, given, given_class=None, area=None, reach: float = 60
     """
     lines = np.asarray(lines, dtype=object)
     given = np.asarray(given, dtype=object)
-    stats = {"n_attached": 0, "n_joined": 0, "n_dropped_edges": 0, "dropped_m": 0.0}
+    stats = {"n_attached": 0, "n_joined": 0, "n_dropped_edges": 0, "dropped_m": 0.0,
+             "n_given_joined": 0}
     if not len(lines):
         return given.copy(), np.ones(len(given), dtype=bool), dict(stats, n_components=int(
             len(given) > 0))
