@@ -563,7 +563,7 @@ def test_real_town_from_its_neighbours():
     ex_share = fidelity.fidelity_statistics(ex_lines, shapely.union_all(
         [towns[n].area for n in ("Eschen", "Mauren")]))["degree1_share"]
     check = invariants.check_network(new, target.given, target.given_class, target.area,
-                                     example_dead_end_share=ex_share)
+                                     example_dead_end_share=ex_share, target=target.area)
     assert check.ok, check.summary()
     assert check.n_components == 1
     real = fidelity.fidelity_statistics(target.lines, target.area)

@@ -44,6 +44,24 @@ def test_end_within_the_tolerance_touches():
     assert c.floating_pieces == 1 and len(c.undershoots) == 1
 
 
+def test_a_street_leaving_the_target_is_a_violation():
+    """A street that cuts across the land between two arms of a concave target (the random
+    walk's straight steps did, up to 1.7 km on the fidelity benchmark's towns) leaves the
+    target; one along its edge, within a metre, does not; without a target nothing is
+    checked (a study area may be smaller than the layout it measures)."""
+    target = shapely.union_all([shapely.box(0, 0, 200, 60), shapely.box(0, 140, 200, 200),
+                                shapely.box(0, 0, 40, 200)])               # a C shape
+    across = L([(150, 30), (150, 170)])                                      # over the gap
+    along = L([(40.5, 60), (40.5, 140)])                                     # its inner edge
+    streets = [L([(100, 0), (100, 30)]), L([(100, 30), (150, 30)]), across, along]
+    c = I.check_network(streets, ARTERIAL, target=target)
+    assert c.violations()["outside_target"] == 1
+    assert shapely.length(c.outside).sum() == pytest.approx(80.0 - 2 * I.EDGE_DISTANCE)
+    assert I.check_network(streets, ARTERIAL).violations()["outside_target"] == 0
+    kept = I.check_network(streets[:2] + [along], ARTERIAL, target=target)
+    assert kept.violations()["outside_target"] == 0 and len(kept.outside) == 0
+
+
 def test_synthesised_streets_crossing_each_other_and_themselves():
     streets = [L([(50, 0), (50, 100)]), L([(150, 0), (150, 100)]),
                L([(20, 50), (180, 50)]),                              # crosses both

@@ -510,11 +510,13 @@ def test_one_network_on_a_town_never_seen(eschen):
     """Leave-one-town-out on real data: Eschen's level-0 roads and outline, the other
     Liechtenstein towns as the example. One network with the given roads, every contact a
     junction, no street along a given road, junctions on the given roads, the example's
-    dead-end share (±30 %) and mean tortuosity (±2 %)."""
+    dead-end share (±30 %) and mean tortuosity (±2 %); no street leaves the outline (a
+    straight step between two of its arms crossed the fields between them)."""
     pts, shapes, res = _eschen_run(eschen, 1)
     share = invariants.dead_end_share(eschen["example"], eschen["example_area"])
     check = invariants.check_network(res.geometry, eschen["given"], eschen["given_class"],
-                                     eschen["area"], example_dead_end_share=share)
+                                     eschen["area"], example_dead_end_share=share,
+                                     target=eschen["area"])
     assert check.ok, check.summary()
     assert check.floating_pieces == 0
     assert res.stats["n_road_junctions"] >= 5
@@ -557,17 +559,20 @@ def test_a_piece_with_full_slots_joins_instead_of_being_dropped():
     walks west of its main road made one piece of 56 points whose points within reach of
     the rest had used both their street slots, so no join was allowed and the piece was
     dropped with its 83 streets: 103 of 169 points connected, the western third of the town
-    left empty. Such a piece now joins through a full slot: at least 90 % of the points
-    connected, nothing dropped, one network without a violation."""
+    left empty. Such a piece now joins through a full slot: over 85 % of the points
+    connected, at most a few streets dropped (a piece in the narrow eastern arm that no step
+    inside the target reaches), one network without a violation, none outside the town (the
+    walks' steps crossed 4.1 km of land outside it on this run)."""
     target, example, pts, shapes = _left_out("Vaduz")
     res = rw.synthesize(pts, target.area, existing_lines=target.given, seed=0, in_place=False,
                         shapes=shapes, dead_end_share=example["degree1_share"])
     assert res.stats["n_joins_saturated"] > 0
-    assert res.stats["n_dropped_edges"] == 0
-    assert res.stats["n_points_connected"] >= 0.9 * res.stats["n_points"]
+    assert res.stats["n_dropped_edges"] <= 10
+    assert res.stats["n_points_connected"] >= 0.85 * res.stats["n_points"]
     new = res.geometry[invariants.new_streets(res.geometry, target.given)]
     check = invariants.check_network(new, target.given, target.given_class, target.area,
-                                     example_dead_end_share=example["degree1_share"])
+                                     example_dead_end_share=example["degree1_share"],
+                                     target=target.area)
     assert check.ok, check.summary()
     assert check.n_components == 1
 
@@ -602,8 +607,9 @@ def test_no_block_far_smaller_than_the_examples(balzers):
     """Balzers from the other Liechtenstein towns, seeds 0-2 (the fidelity benchmark's
     runs): the steps made after the walks (a crossing street's one step, a stub closed, a
     T onto a street) closed rings of a few short segments, and the smallest blocks (10th
-    percentile) were 0.13-0.28 x the example's. Refusing rings shorter than 1.5 sqrt(a(v))
-    (``WalkSettings.min_face``) doubles them, the network staying one, without a violation."""
+    percentile) were 0.13-0.28 x the example's (0.20-0.46, mean 0.29, since steps stay
+    inside the target). Refusing rings shorter than 1.5 sqrt(a(v)) (``WalkSettings.min_face``)
+    raises them to 0.44, the network staying one, without a violation."""
     target, example, pts, shapes = balzers
 
     def smallest_blocks(min_face):
@@ -623,7 +629,7 @@ def test_no_block_far_smaller_than_the_examples(balzers):
                           / example["block_area_p10"])
         return float(np.mean(ratios))
 
-    assert smallest_blocks(0.0) < 0.25
+    assert smallest_blocks(0.0) < 0.3
     assert smallest_blocks(1.5) > 0.4
 
 

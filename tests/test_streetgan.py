@@ -159,7 +159,7 @@ def test_given_roads_are_kept_and_joined(models):
     assert kept.length == pytest.approx(arterial.length + motorway.length, rel=1e-9)
     new = res.geometry[~res.given]
     check = invariants.check_network(new, [arterial, motorway], ["primary", "motorway"],
-                                     target)
+                                     target, target=target)
     v = check.violations()
     v.pop("dead_end_share")
     assert sum(v.values()) == 0, check.summary()

@@ -99,6 +99,7 @@ CHECKS = (
     ("floating_pieces", "Floating pieces (not connected to the given roads)", True),
     ("parallel_duplicates", "Streets running inside a given road's corridor", True),
     ("controlled_access", "Motorway / trunk contacts away from existing junctions", True),
+    ("outside_target", "Synthesised streets leaving the target", True),
     ("dead_end_share", "Dead-end share outside the example's ±30 %", True),
     ("components", "Connected components (synthesised and given roads)", False),
     ("undershoots", "Dangling ends just short of another line", False),
@@ -452,6 +453,8 @@ class NetworkCheck:
         from an existing junction
     undershoots : dangling synthesised end points just short of another line (not counted
         as violations; they leave the street a dead end)
+    outside : the pieces of synthesised streets outside the target (``check_network``'s
+        ``target``), more than ``edge_distance`` beyond it
     n_components : connected components of synthesised and given roads together
     floating_pieces : components with synthesised streets and no given road
     dead_end_share, example_dead_end_share : float (NaN / None when unknown)
@@ -473,6 +476,7 @@ class NetworkCheck:
     n_synthesised: int = 0
     n_given: int = 0
     notes: List[str] = field(default_factory=list)
+    outside: np.ndarray = field(default_factory=lambda: np.empty(0, dtype=object))
 
     @property
     def dead_end_ok(self) -> Optional[bool]:
@@ -490,6 +494,7 @@ class NetworkCheck:
                 "floating_pieces": self.floating_pieces,
                 "parallel_duplicates": len(self.duplicates),
                 "controlled_access": len(self.controlled_access),
+                "outside_target": len(self.outside),
                 "dead_end_share": self.dead_end_share,
                 "components": self.n_components,
                 "undershoots": len(self.undershoots)}
@@ -548,6 +553,7 @@ def check_network(synthesised: Sequence, given: Optional[Sequence] = None,
                   junction_radius: float = JUNCTION_RADIUS,
                   dead_end_tolerance: float = DEAD_END_TOLERANCE,
                   edge_distance: float = EDGE_DISTANCE,
+                  target=None,
                   progress: Optional[Progress] = None) -> NetworkCheck:
     """Check the network invariants of synthesised streets against the roads they were given.
 
@@ -558,8 +564,8 @@ def check_network(synthesised: Sequence, given: Optional[Sequence] = None,
         roads); crossings among them are not checked
     given_class : OSM ``highway`` class per given line, optional (for the motorway / trunk
         check, :data:`CONTROLLED_ACCESS`)
-    area : Polygon, optional, the target: dead ends are counted inside it, away from its
-        boundary
+    area : Polygon, optional, where dead ends are counted (inside it, away from its
+        boundary): the target, or a study area
     given_layer : OSM vertical layer per given line, optional: given roads of another layer
         than 0 (bridges, tunnels) cross synthesised streets (layer 0) and each other
         without a junction when no end point or shared vertex joins them
@@ -568,6 +574,9 @@ def check_network(synthesised: Sequence, given: Optional[Sequence] = None,
     example_dead_end_share : float, optional, the example's share (:func:`dead_end_share`)
     tolerance, corridor_half_width, min_duplicate_length, junction_radius,
     dead_end_tolerance, edge_distance : float, see the module constants
+    target : Polygon(s), optional, the land the streets were synthesised for: a synthesised
+        street that leaves it by more than ``edge_distance`` is a violation (``area`` may be
+        a study area that streets run beyond; a synthesis' target may not be)
     progress : Progress, optional
 
     Returns
@@ -694,9 +703,19 @@ def check_network(synthesised: Sequence, given: Optional[Sequence] = None,
         close[e_i[l_i != own[e_i]]] = True
         undershoots = ends[close & ~touching]
 
+    # pieces of synthesised streets outside the target
+    outside = np.empty(0, dtype=object)
+    if n_s and target is not None:
+        within = shapely.buffer(target, max(edge_distance, tolerance))
+        leaves = ~shapely.covers(within, syn)
+        if leaves.any():
+            with np.errstate(invalid="ignore"):
+                pieces = shapely.get_parts(shapely.difference(syn[leaves], within))
+            outside = pieces[shapely.length(pieces) > tolerance]
+
     share = dead_end_share(lines, area, edge_distance) if n else float("nan")
     progress.step(1.0)
     return NetworkCheck(crossings_given, crossings_synthesised, overlaps, duplicates, controlled,
                         undershoots, int(n_comp), floating, share,
                         None if example_dead_end_share is None else float(example_dead_end_share),
-                        dead_end_tolerance, n_s, n_g)
+                        dead_end_tolerance, n_s, n_g, outside=outside)

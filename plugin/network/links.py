@@ -49,7 +49,7 @@ def meets_only_at_ends(link, lines) -> bool:
 def link_floating_pieces(lines, anchored, accept: Optional[Callable] = None,
                          drop_unlinked: bool = True, ends_on=None,
                          max_length: Optional[Callable[[float], float]] = None,
-                         pieces=None, both_ways: bool = False
+                         pieces=None, both_ways: bool = False, inside=None
                          ) -> Tuple[np.ndarray, np.ndarray]:
     """Links that join every piece of a noded network to its anchored pieces.
 
@@ -74,6 +74,9 @@ def link_floating_pieces(lines, anchored, accept: Optional[Callable] = None,
         at their end points)
     both_ways : bool, a link may also start on the anchored network and end on the piece
         (a lane apart is joined by the street whose end is nearest to it)
+    inside : Polygon(s), optional, the target: a link stays in it (within
+        :data:`OUTSIDE_TOLERANCE`; between two arms of a concave target a straight link
+        would cross land outside it)
 
     Returns
     -------
@@ -129,6 +132,10 @@ def link_floating_pieces(lines, anchored, accept: Optional[Callable] = None,
 
     takes_link = np.ones(len(edges), bool) if ends_on is None else \
         np.asarray(ends_on, dtype=bool)[src]
+    within = None
+    if inside is not None:
+        within = shapely.buffer(inside, OUTSIDE_TOLERANCE)
+        shapely.prepare(within)
 
     def nearest_clear(starts, ends, ends_tree, longest, bound):
         """The shortest clear link from one of the points ``starts`` to the lines ``ends``
@@ -141,7 +148,8 @@ def link_floating_pieces(lines, anchored, accept: Optional[Callable] = None,
             if link.length <= 1e-6:
                 continue
             # it may touch only the piece at its start and the line it ends on
-            if clear(link) and (accept is None or accept(link)):
+            if clear(link) and (within is None or shapely.covers(within, link)) and \
+                    (accept is None or accept(link)):
                 return float(d[k]), link
         return None
 
@@ -192,9 +200,8 @@ def join_pieces(lines, ends_on=None, max_length: Optional[Callable[[float], floa
     :func:`link_floating_pieces` links floating pieces but from either side (the street
     whose end is nearest to a lane joins it), and stay as they are when no clear street
     reaches them. Pieces are counted as :func:`invariants.check_network` counts components
-    (a bridge over a road does not join it). ``ends_on`` and ``max_length`` as for
-    :func:`link_floating_pieces`; with ``inside`` (the target) a link stays in it, so parts
-    of a target apart stay apart.
+    (a bridge over a road does not join it). ``ends_on``, ``max_length`` and ``inside`` as
+    for :func:`link_floating_pieces`: with ``inside`` parts of a target apart stay apart.
 
     >>> road = shapely.LineString([(0, 0), (100, 0)])
     >>> street = shapely.LineString([(50, 0), (50, 40)])
@@ -211,15 +218,8 @@ def join_pieces(lines, ends_on=None, max_length: Optional[Callable[[float], floa
     lines = np.asarray(lines, dtype=object)
     if len(lines) < 2:
         return np.empty(0, dtype=object)
-    accept = None
-    if inside is not None:
-        within = shapely.buffer(inside, OUTSIDE_TOLERANCE)
-        shapely.prepare(within)
-
-        def accept(link):
-            return bool(shapely.covers(within, link))
-    links, _ = link_floating_pieces(lines, np.zeros(len(lines), bool), accept=accept,
-                                    drop_unlinked=False, ends_on=ends_on,
-                                    max_length=max_length, pieces=connected_pieces(lines),
-                                    both_ways=True)
+    links, _ = link_floating_pieces(lines, np.zeros(len(lines), bool), drop_unlinked=False,
+                                    ends_on=ends_on, max_length=max_length,
+                                    pieces=connected_pieces(lines), both_ways=True,
+                                    inside=inside)
     return links

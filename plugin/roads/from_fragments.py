@@ -752,10 +752,11 @@ def _link_floating(geometry, level, attrs, inside):
     """Link the pieces of the network that do not reach an arterial to the network that does
     (:func:`links.link_floating_pieces`: streets of faces closed only by the boundary, whose
     outline is no street); a piece that cannot be linked is dropped. Then arterials apart
-    inside the target, with the streets on each, are joined into one network by streets
-    that stay ``inside`` (:func:`links.join_pieces`; parts of a target apart stay apart).
-    Returns the network and the number of links."""
-    links, keep = link_floating_pieces(geometry, attrs["source_fragment"] == "arterial")
+    inside the target, with the streets on each, are joined into one network
+    (:func:`links.join_pieces`; parts of a target apart stay apart). Every link stays
+    ``inside``. Returns the network and the number of links."""
+    links, keep = link_floating_pieces(geometry, attrs["source_fragment"] == "arterial",
+                                       inside=inside)
     if not keep.all():
         geometry, level = geometry[keep], level[keep]
         attrs = {k: v[keep] for k, v in attrs.items()}

@@ -280,7 +280,8 @@ def measure_run(target: Town, example: Example, lines: np.ndarray, check: bool) 
            "km_new": float(shapely.length(fidelity.clip_to_area(new, target.area)).sum() / 1e3)}
     if check:
         c = invariants.check_network(new, target.given, target.given_class, target.area,
-                                     example_dead_end_share=example.stats["degree1_share"])
+                                     example_dead_end_share=example.stats["degree1_share"],
+                                     target=target.area)
         out["violations"] = c.violations()
         out["n_violations"] = c.n_violations
         out["components"] = c.n_components
