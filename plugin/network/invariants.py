@@ -454,7 +454,7 @@ class NetworkCheck:
     undershoots : dangling synthesised end points just short of another line (not counted
         as violations; they leave the street a dead end)
     outside : the pieces of synthesised streets outside the target (``check_network``'s
-        ``target``), more than ``edge_distance`` beyond it
+        ``target``) by more than ``edge_distance``, each longer than that
     n_components : connected components of synthesised and given roads together
     floating_pieces : components with synthesised streets and no given road
     dead_end_share, example_dead_end_share : float (NaN / None when unknown)
@@ -575,8 +575,9 @@ def check_network(synthesised: Sequence, given: Optional[Sequence] = None,
     tolerance, corridor_half_width, min_duplicate_length, junction_radius,
     dead_end_tolerance, edge_distance : float, see the module constants
     target : Polygon(s), optional, the land the streets were synthesised for: a synthesised
-        street that leaves it by more than ``edge_distance`` is a violation (``area`` may be
-        a study area that streets run beyond; a synthesis' target may not be)
+        street that leaves it (by more than ``edge_distance``, for longer than that) is a
+        violation (``area`` may be a study area that streets run beyond; a synthesis' target
+        may not be)
     progress : Progress, optional
 
     Returns
@@ -711,7 +712,8 @@ def check_network(synthesised: Sequence, given: Optional[Sequence] = None,
         if leaves.any():
             with np.errstate(invalid="ignore"):
                 pieces = shapely.get_parts(shapely.difference(syn[leaves], within))
-            outside = pieces[shapely.length(pieces) > tolerance]
+            # a street along the outline may wiggle out by a little more (a rounded bend)
+            outside = pieces[shapely.length(pieces) > max(edge_distance, tolerance)]
 
     share = dead_end_share(lines, area, edge_distance) if n else float("nan")
     progress.step(1.0)

@@ -766,7 +766,7 @@ def attach_to_given(lines, given, given_class=None, area=None, reach: float = 60
 
     add, keep = link_floating_pieces(noded, is_given, drop_unlinked=True,
                                      ends_on=takes_link(noded, is_given),
-                                     max_length=longest_link)
+                                     max_length=longest_link, inside=area)
     drop = ~keep
     stats["n_joined"] = len(add)
     stats["n_dropped_edges"] = int(drop.sum())
