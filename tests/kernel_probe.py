@@ -3,8 +3,9 @@
 ``python tests/kernel_probe.py OUT.npz`` in a process whose BLAS kernel is chosen by
 ``OPENBLAS_CORETYPE`` (read when numpy loads, so one process per kernel);
 test_reproducible.py compares two such files. Footprints by transfer and by re-synthesis
-(Helsinki database onto Bubeneč: rigid alignment, warps, relaxation) and fragment synthesis
-(Helsinki fragments into a sketch: mean value coordinates).
+(Helsinki database onto Bubeneč: rigid alignment, warps, relaxation), fragment synthesis
+(Helsinki fragments into a sketch: mean value coordinates) and random walks (Vaduz from the
+other Liechtenstein towns: points placed by the quadtree in its rotated frame, then walked).
 """
 import sys
 import tempfile
@@ -17,6 +18,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from conftest import PLUGINS  # noqa: E402,F401  (puts the plugin package on sys.path)
 from helpers import bubenec, helsinki_roads  # noqa: E402
 from test_footprints import helsinki_example_db  # noqa: E402
+from towns import LI_PBF, liechtenstein_towns  # noqa: E402
 from urban_synthesis.plugin.network import blocks  # noqa: E402
 from urban_synthesis.plugin.retrieval import database
 from urban_synthesis.plugin.buildings import footprints
@@ -24,6 +26,8 @@ from urban_synthesis.plugin.network import fragments
 from urban_synthesis.plugin.network import hierarchy
 from urban_synthesis.plugin.network import street_graph as roads
 from urban_synthesis.plugin.roads import from_fragments as synthesis_fragments
+from urban_synthesis.plugin.roads import intersection_quadtree as iq
+from urban_synthesis.plugin.roads import random_walk
 
 
 def main(out: str) -> None:
@@ -48,6 +52,17 @@ def main(out: str) -> None:
             [shapely.LineString([(-40, y), (1040, y + 20)]) for y in (0, 500, 1000)]
         res = synthesis_fragments.synthesize(sketch, [fdb], seed=1)
         arrays["fragments"] = shapely.get_coordinates(res.geometry)
+    if LI_PBF.exists():
+        # Vaduz from the other Liechtenstein towns, as the fidelity benchmark runs it: the
+        # quadtree's frame was a BLAS product, and the generic kernel placed other points
+        towns = liechtenstein_towns()
+        target = next(t for t in towns if t.name == "Vaduz")
+        others = [t for t in towns if t.name != "Vaduz"]
+        points, _, _ = iq.points_from_roads(np.concatenate([t.lines for t in others]),
+                                            np.concatenate([t.road_class for t in others]))
+        walk = random_walk.synthesize(points, target.area, existing_lines=target.given, seed=0,
+                                      in_place=False)
+        arrays["random_walk"] = shapely.get_coordinates(walk.geometry)
     np.savez(out, **arrays)
 
 

@@ -43,6 +43,7 @@ import shapely
 from scipy import stats
 from scipy.spatial import cKDTree
 
+from ..core.coordinates import apply_affine
 from ..core.geometry import minimum_rectangle_corners
 from ..core.progress import InputError
 
@@ -290,7 +291,7 @@ def build_quadtree(points: PointSet, min_points: int = 8, min_area: float = 2500
     e = c[1] - c[0]
     angle = float(np.arctan2(e[1], e[0])) if np.isfinite(e).all() and e.any() else 0.0
     rot = _rotation(-angle)
-    local = xy @ rot.T
+    local = apply_affine(xy, rot, (0.0, 0.0))
     lo, hi = local.min(axis=0) - 1e-6, local.max(axis=0) + 1e-6
     hi = np.maximum(hi, lo + 1.0)
     levels = points.level[points.level >= 0]
@@ -303,7 +304,7 @@ def build_quadtree(points: PointSet, min_points: int = 8, min_area: float = 2500
 
     def add_leaf(idx, b0, b1):
         corners = np.array([[b0[0], b0[1]], [b1[0], b0[1]], [b1[0], b1[1]], [b0[0], b1[1]]])
-        poly = shapely.Polygon(corners @ back.T)
+        poly = shapely.Polygon(apply_affine(corners, back, (0.0, 0.0)))
         area = float(np.prod(b1 - b0))
         lv = points.level[idx].ravel()
         lv = lv[lv >= 0]
@@ -732,7 +733,9 @@ def _smooth_uniform(xy, scale, rng, n_waves: int = 48) -> np.ndarray:
     Gaussian field with correlation length ``scale``, mapped through the normal CDF)."""
     k = rng.normal(0.0, 1.0 / scale, (n_waves, 2))
     phase = rng.uniform(0.0, 2.0 * np.pi, n_waves)
-    field = np.sqrt(2.0 / n_waves) * np.cos(xy @ k.T + phase).sum(axis=1)
+    # written out: a BLAS product rounds differently under different processor kernels
+    proj = xy[:, :1] * k[:, 0] + xy[:, 1:2] * k[:, 1]
+    field = np.sqrt(2.0 / n_waves) * np.cos(proj + phase).sum(axis=1)
     return stats.norm.cdf(field)
 
 

@@ -80,6 +80,7 @@ from ..network.crossings import t_stem
 from ..network.dead_ends import steer_share
 from ..network.invariants import (DEAD_END_TOLERANCE, MIN_DUPLICATE_LENGTH, corridor_of,
                                   counted_nodes)
+from ..network.links import join_pieces
 from ..network.street_graph import node_lines
 from . import intersection_quadtree as iq
 
@@ -1913,6 +1914,20 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
         stats["n_seam_joins_relaxed"] = int((origin == "seam").sum())
         slot_idx = np.flatnonzero(pts.example == ROAD_SLOT)
         stats["n_road_junctions"] = int(used[slot_idx].sum())
+        # the walks join their pieces to the given roads, not given roads that lie apart
+        # inside the target to each other: the shortest clear street inside it does, as for
+        # the other methods (network.links.join_pieces)
+        bridge = join_pieces(np.concatenate([lines, shapely.get_parts(existing_lines)]),
+                             inside=area)
+        stats["n_given_joined"] = len(bridge)
+        if len(bridge):
+            lines = np.concatenate([lines, bridge])
+            table = pd.concat([table, pd.DataFrame({
+                "edge_id": np.arange(len(table) + 1, len(lines) + 1),
+                "level": int(level.min()), "length_m": shapely.length(bridge),
+                "tortuosity": 1.0, "origin": "given_join", "node_from": -1, "node_to": -1})],
+                ignore_index=True)
+            stats["n_edges"] = len(lines)
     progress.step(1.0)
     return Synthesis(lines, table, pts, ptab, stats, quadtrees, ex_lines)
 
