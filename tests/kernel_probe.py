@@ -18,7 +18,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from conftest import PLUGINS  # noqa: E402,F401  (puts the plugin package on sys.path)
 from helpers import bubenec, helsinki_roads  # noqa: E402
 from test_footprints import helsinki_example_db  # noqa: E402
-from towns import LI_PBF, liechtenstein_towns  # noqa: E402
+from test_random_walk import _left_out as left_out  # noqa: E402
+from towns import LI_PBF  # noqa: E402
 from urban_synthesis.plugin.network import blocks  # noqa: E402
 from urban_synthesis.plugin.retrieval import database
 from urban_synthesis.plugin.buildings import footprints
@@ -26,7 +27,6 @@ from urban_synthesis.plugin.network import fragments
 from urban_synthesis.plugin.network import hierarchy
 from urban_synthesis.plugin.network import street_graph as roads
 from urban_synthesis.plugin.roads import from_fragments as synthesis_fragments
-from urban_synthesis.plugin.roads import intersection_quadtree as iq
 from urban_synthesis.plugin.roads import random_walk
 
 
@@ -55,11 +55,7 @@ def main(out: str) -> None:
     if LI_PBF.exists():
         # Vaduz from the other Liechtenstein towns, as the fidelity benchmark runs it: the
         # quadtree's frame was a BLAS product, and the generic kernel placed other points
-        towns = liechtenstein_towns()
-        target = next(t for t in towns if t.name == "Vaduz")
-        others = [t for t in towns if t.name != "Vaduz"]
-        points, _, _ = iq.points_from_roads(np.concatenate([t.lines for t in others]),
-                                            np.concatenate([t.road_class for t in others]))
+        target, _, points, _ = left_out("Vaduz")
         walk = random_walk.synthesize(points, target.area, existing_lines=target.given, seed=0,
                                       in_place=False)
         arrays["random_walk"] = shapely.get_coordinates(walk.geometry)

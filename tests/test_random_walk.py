@@ -549,6 +549,16 @@ def _left_out(name):
     return target, example, pts, rw.street_shapes(graph, h.edge_level)
 
 
+def _assert_one_network_in_the_town(res, target, example):
+    """No invariant violation (every street inside the town among them) and one network."""
+    new = res.geometry[invariants.new_streets(res.geometry, target.given)]
+    check = invariants.check_network(new, target.given, target.given_class, target.area,
+                                     example_dead_end_share=example["degree1_share"],
+                                     target=target.area)
+    assert check.ok, check.summary()
+    assert check.n_components == 1
+
+
 @pytest.fixture(scope="module")
 def balzers():
     return _left_out("Balzers")
@@ -569,12 +579,7 @@ def test_a_piece_with_full_slots_joins_instead_of_being_dropped():
     assert res.stats["n_joins_saturated"] > 0
     assert res.stats["n_dropped_edges"] <= 10
     assert res.stats["n_points_connected"] >= 0.8 * res.stats["n_points"]
-    new = res.geometry[invariants.new_streets(res.geometry, target.given)]
-    check = invariants.check_network(new, target.given, target.given_class, target.area,
-                                     example_dead_end_share=example["degree1_share"],
-                                     target=target.area)
-    assert check.ok, check.summary()
-    assert check.n_components == 1
+    _assert_one_network_in_the_town(res, target, example)
 
 
 def test_crossings_as_often_as_in_the_example(balzers):
@@ -646,12 +651,7 @@ def test_given_roads_apart_are_joined():
     assert res.stats["n_given_joined"] == 1
     assert (res.table.origin == "given_join").sum() == 1
     assert len(res.table) == len(res.geometry) == res.stats["n_edges"]
-    new = res.geometry[invariants.new_streets(res.geometry, target.given)]
-    check = invariants.check_network(new, target.given, target.given_class, target.area,
-                                     example_dead_end_share=example["degree1_share"],
-                                     target=target.area)
-    assert check.ok, check.summary()
-    assert check.n_components == 1
+    _assert_one_network_in_the_town(res, target, example)
 
 
 def test_same_seed_same_network(eschen):
