@@ -19,15 +19,16 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from . import street_graph as _roads
-from .invariants import connected_pieces
+from .invariants import EDGE_DISTANCE, connected_pieces
 
 __all__ = ["link_floating_pieces", "join_pieces", "meets_only_at_ends"]
 
 #: Nodes of a piece tried as a link's start, nearest to the anchored network first.
 NODES_TRIED = 32
 
-#: m: how far a link that joins pieces may leave the target (one along its outline).
-OUTSIDE_TOLERANCE = 1.0
+#: m: how far a new street may leave the target (one along its outline): the invariants'
+#: own tolerance for a street leaving it (``check_network(target=...)``).
+OUTSIDE_TOLERANCE = EDGE_DISTANCE
 
 
 def meets_only_at_ends(link, lines) -> bool:
