@@ -172,8 +172,9 @@ class SplitDomain(AlgorithmBase):
             options=[parcels.METHODS[k].label for k in domain_split.FALLBACK_PARCELS],
             defaultValue=0),
             "How a region that no template fits and no street splits is parcelled (the "
-            "paper's rule-based assignment): recursive cuts across its long axis (default; "
-            "squarer lots on odd leftover regions) or the straight-skeleton strips the "
+            "paper's rule-based assignment): recursive cuts across its long axis or its "
+            "longest side, whichever leaves squarer lots (default; squarer lots on odd "
+            "leftover regions) or the straight-skeleton strips the "
             "paper names (Vanegas et al. 2012).", advanced=True)
         self.add(QgsProcessingParameterBoolean(
             self.REPAIR_LOTS, "Repair misshapen lots (not in the paper)", defaultValue=False),

@@ -375,3 +375,27 @@ def test_recursive_cut_leaves_from_a_bend_of_the_street_side():
     p_plain, _, _ = parcels.lot_quality(plain)
     p_pinned, _, _ = parcels.lot_quality(pinned)
     assert p_pinned.mean() < p_plain.mean()
+
+
+def test_recursive_cut_across_the_longest_side_where_it_leaves_squarer_lots():
+    """A wedge whose long street side (114 m) is not along its bounding rectangle: cut
+    across the rectangle's axis it leaves skewed lots (p_area 1.54); with
+    ``cut_across_longest_side`` each cut is Scharl's across the lot's longest side where
+    that leaves the smaller bounding rectangles, and the same number of lots covers the
+    block with street access, squarer in both of Yang's measures."""
+    block = shapely.Polygon([(-13, 64), (-71, -47), (33, -62), (13, -23)])
+    base = dict(max_area=864.0, min_area=162.0, min_width=7.2, lot_width=18.0,
+                irregularity=0.0)
+    quality = {}
+    for across in (False, True):
+        lots = parcels.split_recursive(block, parcels.SubdivisionSettings(
+            **base, options={"pin_cuts_to_corners": 6.3, "cut_across_longest_side": across}),
+            np.random.default_rng(0))
+        assert np.isclose(shapely.area(lots).sum(), block.area)
+        assert np.isclose(shapely.area(shapely.union_all(lots)), block.area)  # no overlaps
+        assert (parcels.street_frontage(lots, block) >= parcels.MIN_FRONTAGE).all()
+        p_angle, p_area, _ = parcels.lot_quality(lots)
+        quality[across] = (len(lots), p_angle.mean(), p_area.mean())
+    (n_axis, angle_axis, area_axis), (n_side, angle_side, area_side) = quality.values()
+    assert n_axis == n_side
+    assert area_side < area_axis - 0.1 and angle_side < angle_axis - 5

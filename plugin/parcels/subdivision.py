@@ -99,6 +99,10 @@ MIN_FRONTAGE = 3.0
 MAX_CUT_SHIFT = 0.25
 #: ... and turns up to this many degrees off the perpendicular.
 MAX_CUT_TURN = 15.0
+#: Recursive with ``cut_across_longest_side``: where along the longest side (share of the
+#: lot's extent) the cuts across it are tried; the three did as well as five positions
+#: or a second side on the fidelity benchmark's Gamprin, Mauren and Helsinki.
+SIDE_CUT_POSITIONS = (0.35, 0.5, 0.65)
 #: Skeleton: a boundary vertex turning more than this (degrees) starts a new street side;
 CORNER_ANGLE = 30.0
 #: and a side ends where its edges have turned this much in total (a curved street is
@@ -121,6 +125,7 @@ _CRUMB = 1e-3       # m²: polygon parts smaller than this are numerical crumbs
 _GRID = 1e-6
 _SHARE_EPS = 0.01   # m: band width used to measure shared boundary lengths
 _MAX_LEVELS = 64    # recursion depth guard (2**64 lots)
+_SIDE_NOISE = 0.5   # m: vertices this near a straight side do not break it
 
 
 # --------------------------------------------------------------------------- settings
@@ -663,6 +668,51 @@ def _pinned_to_corners(lots: np.ndarray, angle: np.ndarray, t: np.ndarray,
     return t
 
 
+def _longest_side_directions(lots: np.ndarray) -> np.ndarray:
+    """Direction (radians) of each lot's longest outline side; vertices within
+    :data:`_SIDE_NOISE` of a straight line are dropped first, so that a digitised straight
+    side counts whole."""
+    rings = shapely.simplify(shapely.get_exterior_ring(lots), _SIDE_NOISE)
+    xy, idx = shapely.get_coordinates(rings, return_index=True)
+    same = idx[1:] == idx[:-1]
+    step, owner = np.diff(xy, axis=0)[same], idx[1:][same]
+    order = np.lexsort((-np.hypot(step[:, 0], step[:, 1]), owner))
+    longest = order[group_starts(owner[order])]
+    direction = np.zeros(len(lots))
+    direction[owner[longest]] = np.arctan2(step[longest, 1], step[longest, 0])
+    return direction
+
+
+def _across_longest_side_if_better(lots: np.ndarray, cut, pin: float,
+                                   settings: SubdivisionSettings, zone):
+    """The cut ``(angle, t, turn)`` per lot, or Scharl's cut across the lot's longest side
+    (at :data:`SIDE_CUT_POSITIONS` of its extent, pinned to a corner as the first cut is)
+    where one of those is acceptable and leaves the two pieces smaller minimum bounding
+    rectangles together, which is Yang's p_area weighted by the pieces' areas. On a lot
+    whose long street side is not along its bounding rectangle (a wedge, a parallelogram)
+    the rectangle's cut leaves trapezoids where the side's leaves right angles on the
+    street."""
+    k = len(lots)
+    side = _longest_side_directions(lots)
+    candidates = [cut]
+    for position in SIDE_CUT_POSITIONS:
+        t = np.full(k, position)
+        if pin > 0:
+            t = _pinned_to_corners(lots, side, t, pin)
+        candidates.append((side, t, np.zeros(k)))
+    rectangle_area = np.empty((len(candidates), k))
+    for c, (angle, t, turn) in enumerate(candidates):
+        parts, owner, beyond = _cut(lots, angle, t, turn)
+        length, width, _ = minimum_rectangles(parts)
+        ok = _accept(parts, owner, beyond, k, settings, zone)
+        rectangle_area[c] = np.where(ok, np.bincount(owner, length * width, minlength=k), np.inf)
+    rectangle_area[1:] += 1e-6  # a tie keeps the first cut
+    best = np.argmin(rectangle_area, axis=0)
+    lot = np.arange(k)
+    return tuple(np.array([np.broadcast_to(c[i], k) for c in candidates])[best, lot]
+                 for i in range(3))
+
+
 def _cut(lots: np.ndarray, angle: np.ndarray, t: np.ndarray, turn: np.ndarray):
     """Cut each lot in two by a line across its axis.
 
@@ -744,6 +794,9 @@ def split_recursive(block, settings: SubdivisionSettings,
     stays as it is (larger than ``max_area``). ``settings.options['pin_cuts_to_corners']``
     (m, optional): the first cut moves by up to that much onto a corner of the lot's
     outline (:func:`_pinned_to_corners`; the domain split's rule-based parcels).
+    ``settings.options['cut_across_longest_side']`` (bool, optional): the first cut is
+    the better of that one and Scharl's cut across the lot's longest side
+    (:func:`_across_longest_side_if_better`; the domain split's rule-based parcels).
 
     Scharl cuts perpendicular to the polygon's longest side after merging collinear
     edges; for a rectangle that is the long axis of the minimum bounding rectangle used
@@ -781,6 +834,7 @@ def split_recursive(block, settings: SubdivisionSettings,
     limit = settings.max_area * (1.0 + 1e-9)
     irr = settings.irregularity
     pin = float(settings.options.get("pin_cuts_to_corners", 0.0) or 0.0)
+    across_side = bool(settings.options.get("cut_across_longest_side", False))
     for _ in range(_MAX_LEVELS):
         if len(lots) == 0:
             break
@@ -799,6 +853,8 @@ def split_recursive(block, settings: SubdivisionSettings,
         if pin > 0:
             middle = _pinned_to_corners(lots, axis, middle, pin)
         attempts = [(axis, middle, irr * np.radians(MAX_CUT_TURN) * turn)]
+        if across_side:
+            attempts[0] = _across_longest_side_if_better(lots, attempts[0], pin, settings, zone)
         if irr > 0 or pin > 0:  # else the first cut is the middle one already
             attempts.append((axis, np.full(k, 0.5), np.zeros(k)))
         attempts.append((axis + np.pi / 2, np.full(k, 0.5), np.zeros(k)))

@@ -34,7 +34,8 @@ Pipeline of :func:`split_domain` (one layout) and :func:`split_variations` (k la
    streamline drawn (``MAX_TRIES`` per region, ``MAX_BACKTRACKS`` per layout; template
    ``max_count`` limits are kept during the search). A region that fails everything
    gets rule-based parcels (``fallback_parcels``: recursive splits across its long axis
-   by default, or the straight-skeleton parcels the paper names, Vanegas et al. 2012)
+   or its longest side, whichever leaves the smaller bounding rectangles, by default, or
+   the straight-skeleton parcels the paper names, Vanegas et al. 2012)
    or, when small, a park.
 3. **Global optimisation of the road mesh** (sec. 6, :mod:`mesh_optimisation`): strip
    fitting, fairness and closeness on the noded street mesh, junctions sliding along the
@@ -1401,7 +1402,8 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
         key_road_zone = shapely.buffer(shapely.union_all(key_lines), S / 2, cap_style="flat")
     lot_settings = _parcels.SubdivisionSettings(
         max_area=1.6 * L * W, min_area=0.3 * L * W, min_width=0.4 * W, lot_width=W,
-        irregularity=0.0, options={"pin_cuts_to_corners": CUT_TO_CORNER * W})
+        irregularity=0.0, options={"pin_cuts_to_corners": CUT_TO_CORNER * W,
+                                    "cut_across_longest_side": True})
     n_inner = n_pocket = 0
     for k, (reg, name, _) in enumerate(leaves):
         progress.step(0.7 + 0.25 * k / max(len(leaves), 1))
