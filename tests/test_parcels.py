@@ -378,7 +378,7 @@ def test_recursive_cut_leaves_from_a_bend_of_the_street_side():
 
 
 def test_recursive_cut_across_the_longest_side_where_it_leaves_squarer_lots():
-    """A wedge whose long street side (114 m) is not along its bounding rectangle: cut
+    """A wedge whose long street side (125 m) is not along its bounding rectangle: cut
     across the rectangle's axis it leaves skewed lots (p_area 1.54); with
     ``cut_across_longest_side`` each cut is Scharl's across the lot's longest side where
     that leaves the smaller bounding rectangles, and the same number of lots covers the

@@ -707,10 +707,10 @@ def _across_longest_side_if_better(lots: np.ndarray, cut, pin: float,
         ok = _accept(parts, owner, beyond, k, settings, zone)
         rectangle_area[c] = np.where(ok, np.bincount(owner, length * width, minlength=k), np.inf)
     rectangle_area[1:] += 1e-6  # a tie keeps the first cut
-    best = np.argmin(rectangle_area, axis=0)
-    lot = np.arange(k)
-    return tuple(np.array([np.broadcast_to(c[i], k) for c in candidates])[best, lot]
-                 for i in range(3))
+    best, lot = np.argmin(rectangle_area, axis=0), np.arange(k)
+    angle, t, turn = (np.stack([np.broadcast_to(c[i], k) for c in candidates])[best, lot]
+                      for i in range(3))
+    return angle, t, turn
 
 
 def _cut(lots: np.ndarray, angle: np.ndarray, t: np.ndarray, turn: np.ndarray):
