@@ -757,9 +757,10 @@ def network_invariants(roads, z_layer=None, given_roads=None, given_class=None,
 
     Runs :func:`plugin.network.invariants.check_network` on the roads that are not copies of
     ``given_roads`` (:func:`plugin.network.invariants.new_streets`), against the given
-    roads; one scalar per check of :data:`plugin.network.invariants.CHECKS` (a count, or the
-    dead-end share) plus ``violations``, the total of the violation counts without the
-    dead-end share, which needs an example (:func:`compare` gives its relative difference).
+    roads; one scalar per check of :data:`plugin.network.invariants.CHECKS` that runs
+    without a target (a count, or the dead-end share) plus ``violations``, the total of the
+    violation counts without the dead-end share, which needs an example (:func:`compare`
+    gives its relative difference).
     """
     res = MetricsResult()
     roads = np.asarray(roads, dtype=object)
@@ -778,9 +779,8 @@ def network_invariants(roads, z_layer=None, given_roads=None, given_class=None,
                                       edge_distance=edge_distance, progress=progress)
     counts = check.counts()
     for name, label, _ in _invariants.CHECKS:
-        if name == "outside_target":  # a layout measured in a study area has no target
-            continue
-        res.add_scalar("invariants", name, counts[name], "", label)
+        if name in counts:  # a layout measured in a study area has no target to leave
+            res.add_scalar("invariants", name, counts[name], "", label)
     v = check.violations()
     v.pop("dead_end_share")
     res.add_scalar("invariants", "violations", sum(v.values()), "",
@@ -848,7 +848,8 @@ def compute_layout_metrics(roads=None, blocks=None, parcels=None, buildings=None
         kind ``layout`` scalar ``area_km2`` plus the results of :func:`road_metrics`,
         :func:`block_metrics`, :func:`parcel_metrics` and :func:`footprint_metrics`, and with
         roads the scalars of kind ``invariants``: one per check of
-        :data:`plugin.network.invariants.CHECKS` plus ``violations`` (their total; the
+        :data:`plugin.network.invariants.CHECKS` but ``outside_target`` (a study area is no
+        target) plus ``violations`` (their total; the
         dead-end share is compared with an example by :func:`compare`).
 
     Raises

@@ -454,7 +454,8 @@ class NetworkCheck:
     undershoots : dangling synthesised end points just short of another line (not counted
         as violations; they leave the street a dead end)
     outside : the pieces of synthesised streets outside the target (``check_network``'s
-        ``target``) by more than ``edge_distance``, each longer than that
+        ``target``) by more than ``edge_distance``, each longer than that; None when no
+        target was given (the check did not run: it is left out of the counts)
     n_components : connected components of synthesised and given roads together
     floating_pieces : components with synthesised streets and no given road
     dead_end_share, example_dead_end_share : float (NaN / None when unknown)
@@ -476,7 +477,7 @@ class NetworkCheck:
     n_synthesised: int = 0
     n_given: int = 0
     notes: List[str] = field(default_factory=list)
-    outside: np.ndarray = field(default_factory=lambda: np.empty(0, dtype=object))
+    outside: Optional[np.ndarray] = None
 
     @property
     def dead_end_ok(self) -> Optional[bool]:
@@ -487,23 +488,25 @@ class NetworkCheck:
         return bool(abs(self.dead_end_share - e) <= self.dead_end_tolerance * e + 1e-12)
 
     def counts(self) -> Dict[str, float]:
-        """Every check by name (see :data:`CHECKS`): a count, or the share for dead ends."""
-        return {"crossings_given": len(self.crossings_given),
-                "crossings_synthesised": len(self.crossings_synthesised),
-                "overlaps": len(self.overlaps),
-                "floating_pieces": self.floating_pieces,
-                "parallel_duplicates": len(self.duplicates),
-                "controlled_access": len(self.controlled_access),
-                "outside_target": len(self.outside),
-                "dead_end_share": self.dead_end_share,
-                "components": self.n_components,
-                "undershoots": len(self.undershoots)}
+        """Every check that ran by name, in the order of :data:`CHECKS`: a count, or the
+        share for dead ends (``outside_target`` only when a target was given)."""
+        c = {"crossings_given": len(self.crossings_given),
+             "crossings_synthesised": len(self.crossings_synthesised),
+             "overlaps": len(self.overlaps),
+             "floating_pieces": self.floating_pieces,
+             "parallel_duplicates": len(self.duplicates),
+             "controlled_access": len(self.controlled_access),
+             "outside_target": None if self.outside is None else len(self.outside),
+             "dead_end_share": self.dead_end_share,
+             "components": self.n_components,
+             "undershoots": len(self.undershoots)}
+        return {name: c[name] for name, _, _ in CHECKS if c[name] is not None}
 
     def violations(self) -> Dict[str, int]:
         """Violation count per check (the dead-end share gives 1 when out of tolerance)."""
         c = self.counts()
         out = {name: int(c[name]) for name, _, is_violation in CHECKS
-               if is_violation and name != "dead_end_share"}
+               if is_violation and name != "dead_end_share" and name in c}
         out["dead_end_share"] = int(self.dead_end_ok is False)
         return out
 
@@ -520,6 +523,8 @@ class NetworkCheck:
         c, v = self.counts(), self.violations()
         rows = []
         for name, text, is_violation in CHECKS:
+            if name not in c:
+                continue
             limit = np.nan
             if name == "dead_end_share" and self.example_dead_end_share is not None:
                 limit = self.example_dead_end_share
@@ -577,7 +582,7 @@ def check_network(synthesised: Sequence, given: Optional[Sequence] = None,
     target : Polygon(s), optional, the land the streets were synthesised for: a synthesised
         street that leaves it (by more than ``edge_distance``, for longer than that) is a
         violation (``area`` may be a study area that streets run beyond; a synthesis' target
-        may not be)
+        may not be); without it ``outside_target`` is not checked and not reported
     progress : Progress, optional
 
     Returns
@@ -705,7 +710,7 @@ def check_network(synthesised: Sequence, given: Optional[Sequence] = None,
         undershoots = ends[close & ~touching]
 
     # pieces of synthesised streets outside the target
-    outside = np.empty(0, dtype=object)
+    outside = None if target is None else np.empty(0, dtype=object)
     if n_s and target is not None:
         within = shapely.buffer(target, max(edge_distance, tolerance))
         leaves = ~shapely.covers(within, syn)
