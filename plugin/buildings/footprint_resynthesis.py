@@ -52,7 +52,7 @@ import shapely
 from shapely.geometry.polygon import orient
 
 from ..core import coordinates
-from ..core.geometry import ring_turns
+from ..core.geometry import longest_edge_directions, ring_turns
 from ..retrieval.warp import warp_geometries
 from .sequences import Constraint, InfeasibleError, solve
 
@@ -272,20 +272,6 @@ def _valid(geoms: np.ndarray) -> np.ndarray:
         geoms = geoms.copy()
         geoms[bad] = parts
     return geoms
-
-
-def _longest_edge_angle(polys: np.ndarray) -> np.ndarray:
-    """Direction (radians) of each polygon's longest exterior edge."""
-    rings = shapely.get_exterior_ring(polys)
-    coords, idx = shapely.get_coordinates(rings, return_index=True)
-    d = np.diff(coords, axis=0)
-    same = idx[1:] == idx[:-1]
-    length = np.where(same, np.hypot(d[:, 0], d[:, 1]), -1.0)
-    out = np.zeros(len(polys))
-    order = np.lexsort((-length, idx[:-1]))
-    first = order[np.r_[True, idx[:-1][order][1:] != idx[:-1][order][:-1]]]
-    out[idx[:-1][first]] = np.arctan2(d[first, 1], d[first, 0])
-    return out
 
 
 def _translate(geom, offsets: np.ndarray) -> np.ndarray:
@@ -524,7 +510,8 @@ def _synthesize_group(seg: Segment, members: np.ndarray, kinds: np.ndarray,
     theta = np.arctan2(seg.u[1], seg.u[0])
     el = rest[members]
     cen = shapely.get_coordinates(shapely.centroid(el))
-    diff = (theta - _longest_edge_angle(el) + np.pi / 4) % (np.pi / 2) - np.pi / 4
+    longest = longest_edge_directions(shapely.get_exterior_ring(el))
+    diff = (theta - longest + np.pi / 4) % (np.pi / 2) - np.pi / 4
     diff = np.where(np.abs(diff) <= np.radians(SQUARE_ANGLE), diff, 0.0)
     el = coordinates.rotate(el, diff, cen)
     eb = _bounds_local(el, seg)

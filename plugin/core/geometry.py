@@ -23,7 +23,7 @@ import shapely
 
 __all__ = ["group_starts", "group_ends", "unit", "substrings", "pinned_ends",
            "largest_polygons", "minimum_rectangles", "minimum_rectangle_corners",
-           "ring_turns", "rounded_bends"]
+           "longest_edge_directions", "ring_turns", "rounded_bends"]
 
 
 # --------------------------------------------------------------------------- arrays
@@ -265,6 +265,25 @@ def minimum_rectangle_corners(polygons: Sequence) -> np.ndarray:
         s = d @ direction
         lo, hi = xy[int(np.argmin(s))], xy[int(np.argmax(s))]
         out[i] = [lo, hi, hi, lo]
+    return out
+
+
+def longest_edge_directions(rings: Sequence) -> np.ndarray:
+    """Direction (radians, from the edge's first vertex to its second) of each ring's or
+    line's longest edge; the first of equally long edges. 0 for one without an edge.
+
+    >>> box = shapely.box(0, 0, 4, 2)   # drawn from (4, 0) counter-clockwise
+    >>> longest_edge_directions([box.exterior]).round(6).tolist()
+    [3.141593]
+    """
+    rings = np.asarray(rings, dtype=object)
+    coords, idx = shapely.get_coordinates(rings, return_index=True)
+    same = idx[1:] == idx[:-1]
+    step, owner = np.diff(coords, axis=0)[same], idx[1:][same]
+    order = np.lexsort((-np.hypot(step[:, 0], step[:, 1]), owner))
+    longest = order[group_starts(owner[order])]
+    out = np.zeros(len(rings))
+    out[owner[longest]] = np.arctan2(step[longest, 1], step[longest, 0])
     return out
 
 

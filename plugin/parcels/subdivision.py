@@ -57,7 +57,7 @@ import shapely
 from scipy.spatial import cKDTree
 from shapely.geometry.polygon import orient
 
-from ..core.geometry import group_starts, minimum_rectangles
+from ..core.geometry import group_starts, longest_edge_directions, minimum_rectangles
 from ..core.progress import InputError, Progress, ensure
 from ..measure import metrics as _metrics
 
@@ -672,15 +672,8 @@ def _longest_side_directions(lots: np.ndarray) -> np.ndarray:
     """Direction (radians) of each lot's longest outline side; vertices within
     :data:`_SIDE_NOISE` of a straight line are dropped first, so that a digitised straight
     side counts whole."""
-    rings = shapely.simplify(shapely.get_exterior_ring(lots), _SIDE_NOISE)
-    xy, idx = shapely.get_coordinates(rings, return_index=True)
-    same = idx[1:] == idx[:-1]
-    step, owner = np.diff(xy, axis=0)[same], idx[1:][same]
-    order = np.lexsort((-np.hypot(step[:, 0], step[:, 1]), owner))
-    longest = order[group_starts(owner[order])]
-    direction = np.zeros(len(lots))
-    direction[owner[longest]] = np.arctan2(step[longest, 1], step[longest, 0])
-    return direction
+    return longest_edge_directions(shapely.simplify(shapely.get_exterior_ring(lots),
+                                                    _SIDE_NOISE))
 
 
 def _across_longest_side_if_better(lots: np.ndarray, cut, pin: float,
