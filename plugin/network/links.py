@@ -21,7 +21,7 @@ from scipy.sparse.csgraph import connected_components
 from . import street_graph as _roads
 from .invariants import EDGE_DISTANCE, connected_pieces
 
-__all__ = ["link_floating_pieces", "join_pieces", "meets_only_at_ends"]
+__all__ = ["link_floating_pieces", "join_pieces", "meets_only_at_ends", "allowed_area"]
 
 #: Nodes of a piece tried as a link's start, nearest to the anchored network first.
 NODES_TRIED = 32
@@ -29,6 +29,19 @@ NODES_TRIED = 32
 #: m: how far a new street may leave the target (one along its outline): the invariants'
 #: own tolerance for a street leaving it (``check_network(target=...)``).
 OUTSIDE_TOLERANCE = EDGE_DISTANCE
+
+
+def allowed_area(target):
+    """Where a new street may run: the target grown by :data:`OUTSIDE_TOLERANCE`, prepared
+    (the one construction of that rule for the links, the walk's joins and its bends).
+
+    >>> area = allowed_area(shapely.box(0, 0, 10, 10))
+    >>> shapely.covers(area, shapely.LineString([(0, -0.5), (10, -0.5)]))
+    True
+    """
+    area = shapely.buffer(target, OUTSIDE_TOLERANCE)
+    shapely.prepare(area)
+    return area
 
 
 def meets_only_at_ends(link, lines) -> bool:
@@ -135,8 +148,7 @@ def link_floating_pieces(lines, anchored, accept: Optional[Callable] = None,
         np.asarray(ends_on, dtype=bool)[src]
     within = None
     if inside is not None:
-        within = shapely.buffer(inside, OUTSIDE_TOLERANCE)
-        shapely.prepare(within)
+        within = allowed_area(inside)
 
     def nearest_clear(starts, ends, ends_tree, longest, bound):
         """The shortest clear link from one of the points ``starts`` to the lines ``ends``

@@ -80,7 +80,7 @@ from ..network.crossings import t_stem
 from ..network.dead_ends import steer_share
 from ..network.invariants import (DEAD_END_TOLERANCE, MIN_DUPLICATE_LENGTH, corridor_of,
                                   counted_nodes)
-from ..network.links import OUTSIDE_TOLERANCE, join_pieces
+from ..network.links import allowed_area, join_pieces
 from ..network.street_graph import node_lines
 from . import intersection_quadtree as iq
 
@@ -1065,8 +1065,7 @@ def connect_points(points: iq.PointSet, rng: np.random.Generator,
         seam[ex[existing["seam"]]] = True
     w = _Walker(points, s, rng, cap, cnt, slot_dir, dirs, seg0)
     if area is not None:
-        w.area = shapely.buffer(area, OUTSIDE_TOLERANCE)
-        shapely.prepare(w.area)
+        w.area = allowed_area(area)
     if len(seg0):
         w.corridor = corridor_of(shapely.linestrings(seg0.reshape(-1, 2, 2)))
     if existing is not None:
@@ -1477,8 +1476,7 @@ def _draw_geometry(xy, a, b, level, tort, shapes, settings, rng, others, area=No
     n_redrawn = 0
     inside = None
     if area is not None:  # a bend may not bulge out of the target where its chord is in
-        area = shapely.buffer(area, OUTSIDE_TOLERANCE)
-        shapely.prepare(area)
+        area = allowed_area(area)
         inside = shapely.contains(area, straight)  # prepared: faster than within
     corridor, chord_run = None, None
     if len(others):  # no bend may run along a given road (the invariants' corridor)
