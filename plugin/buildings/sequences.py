@@ -693,59 +693,14 @@ def k_best(g: IntermediateGraph, k: int = 1) -> List[Tuple[float, List[int]]]:
         return [(float(dist[sink]), path[::-1])]
     # incoming edges per node: edges are sorted by destination
     in_ptr = np.searchsorted(g.edge_dst, np.arange(len(g.element) + 1))
-    paths: Dict[int, List[Tuple[float, int, int]]] = {0: [(0.0, -1, 0)]}
-    heaps: Dict[int, list] = {}
-    pushed: Dict[int, bool] = {}
-    exhausted = {0}
 
-    def ensure_path(v0: int, j0: int) -> None:
-        stack = [(v0, j0)]
-        while stack:
-            v, j = stack[-1]
-            P = paths.get(v)
-            if P is not None and (len(P) >= j or v in exhausted):
-                stack.pop()
-                continue
-            if P is None:
-                es = np.arange(in_ptr[v], in_ptr[v + 1])
-                c = dist[src[es]] + cost[es]
-                heap = [(float(ci), int(ei), 1) for ci, ei in zip(c, es) if np.isfinite(ci)]
-                heapq.heapify(heap)
-                heaps[v], P = heap, []
-                paths[v] = P
-                pushed[v] = True
-            if not pushed[v]:
-                c_last, e_last, r_last = P[-1]
-                u = int(src[e_last])
-                Pu = paths.get(u)
-                if Pu is None or (len(Pu) <= r_last and u not in exhausted):
-                    stack.append((u, r_last + 1))
-                    continue
-                if len(Pu) > r_last:
-                    heapq.heappush(heaps[v], (Pu[r_last][0] + float(cost[e_last]),
-                                              e_last, r_last + 1))
-                pushed[v] = True
-            if heaps[v]:
-                P.append(heapq.heappop(heaps[v]))
-                pushed[v] = False
-            else:
-                exhausted.add(v)
+    def in_edges(v: int) -> List[tuple]:
+        es = np.arange(in_ptr[v], in_ptr[v + 1])
+        c = dist[src[es]] + cost[es]
+        return [(float(c[i]), int(src[es[i]]), float(cost[es[i]]))
+                for i in np.flatnonzero(np.isfinite(c))]
 
-    out = []
-    for j in range(1, k + 1):
-        ensure_path(sink, j)
-        if len(paths[sink]) < j:
-            break
-        c_total = paths[sink][j - 1][0]
-        path, v, idx = [], sink, j - 1
-        while v != 0:
-            ensure_path(v, idx + 1)
-            _, e, r = paths[v][idx]
-            v, idx = int(src[e]), r - 1
-            if v:
-                path.append(v)
-        out.append((float(c_total), path[::-1]))
-    return out
+    return _enumerate(in_edges, k, source=0, sink=sink)
 
 
 # --------------------------------------------------------------------------- implicit graph
@@ -1080,13 +1035,14 @@ class ImplicitGraph:
         return _enumerate(self.in_edges, k)
 
 
-def _enumerate(in_edges: Callable[[tuple], List[tuple]], k: int
-               ) -> List[Tuple[float, List[tuple]]]:
-    """k shortest SOURCE-SINK paths of a DAG given by ``in_edges`` (REA, see k_best)."""
-    paths: Dict[tuple, list] = {SOURCE: [(0.0, None, 0.0, 0)]}
-    heaps: Dict[tuple, list] = {}
-    pushed: Dict[tuple, bool] = {}
-    exhausted = {SOURCE}
+def _enumerate(in_edges: Callable, k: int, source=SOURCE, sink=SINK) -> List[tuple]:
+    """k shortest ``source``-``sink`` paths of a DAG given by ``in_edges`` (REA, see
+    k_best): ``in_edges(v)`` lists (cost of the best path through u, u, edge cost) for the
+    in-neighbours u of v; a path is (cost, [its nodes between source and sink])."""
+    paths: Dict[object, list] = {source: [(0.0, None, 0.0, 0)]}
+    heaps: Dict[object, list] = {}
+    pushed: Dict[object, bool] = {}
+    exhausted = {source}
 
     def ensure_path(v0: tuple, j0: int) -> None:
         stack = [(v0, j0)]
@@ -1119,16 +1075,16 @@ def _enumerate(in_edges: Callable[[tuple], List[tuple]], k: int
 
     out = []
     for j in range(1, k + 1):
-        ensure_path(SINK, j)
-        if len(paths[SINK]) < j:
+        ensure_path(sink, j)
+        if len(paths[sink]) < j:
             break
-        c_total = paths[SINK][j - 1][0]
-        path, v, idx = [], SINK, j - 1
-        while v != SOURCE:
+        c_total = paths[sink][j - 1][0]
+        path, v, idx = [], sink, j - 1
+        while v != source:
             ensure_path(v, idx + 1)
             _, u, _, r = paths[v][idx]
             v, idx = u, r - 1
-            if v != SOURCE:
+            if v != source:
                 path.append(v)
         out.append((float(c_total), path[::-1]))
     return out
