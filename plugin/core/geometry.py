@@ -22,7 +22,7 @@ import numpy as np
 import shapely
 
 __all__ = ["group_starts", "group_ends", "unit", "substrings", "pinned_ends",
-           "largest_polygons", "minimum_rectangles", "minimum_rectangle_corners",
+           "polygon_parts", "largest_polygons", "minimum_rectangles", "minimum_rectangle_corners",
            "longest_edge_directions", "ring_turns", "rounded_bends"]
 
 
@@ -110,6 +110,29 @@ def pinned_ends(lines: Sequence, start: np.ndarray, end: np.ndarray) -> np.ndarr
     return shapely.linestrings(coords, indices=index)
 
 
+def polygon_parts(geoms: Sequence):
+    """The Polygon parts of any geometries and the index of the geometry each came from.
+
+    Overlays and ``make_valid`` of touching polygons return collections that hold
+    collections: they are flattened once more; lines and points are left out.
+
+    >>> nested = shapely.GeometryCollection([shapely.GeometryCollection(
+    ...     [shapely.box(0, 0, 1, 1), shapely.LineString([(2, 0), (3, 0)])]), shapely.box(5, 5, 6, 6)])
+    >>> parts, owner = polygon_parts([shapely.Point(9, 9), nested])
+    >>> len(parts), owner.tolist()
+    (2, [1, 1])
+    """
+    parts, owner = shapely.get_parts(np.asarray(geoms, dtype=object).ravel(),
+                                     return_index=True)
+    nested = shapely.get_type_id(parts) == 7
+    if nested.any():
+        inner, j = shapely.get_parts(parts[nested], return_index=True)
+        parts = np.concatenate([parts[~nested], inner])
+        owner = np.concatenate([owner[~nested], owner[nested][j]])
+    poly = shapely.get_type_id(parts) == 3
+    return parts[poly], owner[poly]
+
+
 def largest_polygons(geoms: Sequence) -> np.ndarray:
     """Valid single polygons: the largest polygon part of each geometry after
     ``make_valid`` (None where there is none).
@@ -121,15 +144,7 @@ def largest_polygons(geoms: Sequence) -> np.ndarray:
     [None]
     """
     geoms = shapely.make_valid(np.asarray(geoms, dtype=object))
-    parts, idx = shapely.get_parts(geoms, return_index=True)
-    # collections inside collections (make_valid of touching parts): flatten once more
-    nested = shapely.get_type_id(parts) == 7
-    if nested.any():
-        inner, j = shapely.get_parts(parts[nested], return_index=True)
-        parts = np.concatenate([parts[~nested], inner])
-        idx = np.concatenate([idx[~nested], idx[nested][j]])
-    poly = shapely.get_type_id(parts) == 3
-    parts, idx = parts[poly], idx[poly]
+    parts, idx = polygon_parts(geoms)
     out = np.full(len(geoms), None, dtype=object)
     if len(parts):
         area = shapely.area(parts)

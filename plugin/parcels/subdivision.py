@@ -57,7 +57,8 @@ import shapely
 from scipy.spatial import cKDTree
 from shapely.geometry.polygon import orient
 
-from ..core.geometry import group_starts, longest_edge_directions, minimum_rectangles
+from ..core.geometry import (group_starts, longest_edge_directions, minimum_rectangles,
+                             polygon_parts)
 from ..core.progress import InputError, Progress, ensure
 from ..measure import metrics as _metrics
 
@@ -266,12 +267,7 @@ def _polygon_parts(geoms, min_area: float = _CRUMB) -> np.ndarray:
     geoms = np.asarray(geoms, dtype=object).ravel()
     if len(geoms) == 0:
         return np.empty(0, dtype=object)
-    parts = shapely.get_parts(geoms)
-    # collections can hold collections (intersections of touching polygons): flatten twice
-    nested = shapely.get_type_id(parts) == 7
-    if nested.any():
-        parts = np.concatenate([parts[~nested], shapely.get_parts(parts[nested])])
-    parts = parts[shapely.get_type_id(parts) == 3]
+    parts, _ = polygon_parts(geoms)
     return parts[shapely.area(parts) > min_area]
 
 
@@ -745,14 +741,8 @@ def _cut(lots: np.ndarray, angle: np.ndarray, t: np.ndarray, turn: np.ndarray):
     below = shapely.intersection(lots, rectangles(amin - margin, at))
     above = shapely.intersection(lots, rectangles(at, amax + margin))
     pieces = np.concatenate([below, above])
-    parts, owner = shapely.get_parts(pieces, return_index=True)
-    nested = shapely.get_type_id(parts) == 7
-    if nested.any():
-        sub, sub_owner = shapely.get_parts(parts[nested], return_index=True)
-        parts = np.concatenate([parts[~nested], sub])
-        owner = np.concatenate([owner[~nested], owner[nested][sub_owner]])
-    ok = (shapely.get_type_id(parts) == 3)
-    ok[ok] = shapely.area(parts[ok]) > _CRUMB
+    parts, owner = polygon_parts(pieces)
+    ok = shapely.area(parts) > _CRUMB
     parts, owner = parts[ok], owner[ok]
     return parts, owner % k, owner >= k
 
