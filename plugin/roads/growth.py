@@ -385,6 +385,19 @@ def chord_slopes(lines, dem, step: float) -> np.ndarray:
     return out
 
 
+def _end_gap2(za: np.ndarray, zb: np.ndarray, length: float):
+    """Squared distance from a new street's end (``length`` along its heading, in the
+    heading frame) to each road segment za-zb (complex, same frame), the segments' squared
+    lengths (a segment of length 0 gives NaN), the nearest points and their fractions along
+    the segments."""
+    e = zb - za
+    l2 = e.real * e.real + e.imag * e.imag
+    w = length - za
+    u = np.clip((w.real * e.real + w.imag * e.imag) / l2, 0.0, 1.0)
+    q = za + u * e
+    return (q.real - length) ** 2 + q.imag * q.imag, l2, q, u
+
+
 def _wrap(a: float) -> float:
     """Angle in (-pi, pi]."""
     return (a + math.pi) % (2 * math.pi) - math.pi
@@ -780,12 +793,7 @@ class _Grower:
             if len(cand):
                 # distance of the street end to every road: a street end near a road meets
                 # it at the nearest point (P&M 2001) and does not stop short of it
-                e = zb - za
-                l2 = e.real * e.real + e.imag * e.imag
-                w = length - za
-                uu = np.clip((w.real * e.real + w.imag * e.imag) / l2, 0.0, 1.0)
-                q = za + uu * e
-                d2 = (q.real - length) ** 2 + q.imag * q.imag
+                d2, l2, q, uu = _end_gap2(za, zb, length)
                 d2[at_p | ~(l2 > 0)] = np.inf
                 i = int(np.argmin(d2))
                 near = d2[i] < s.snap_distance ** 2
@@ -986,12 +994,7 @@ class _Grower:
                     return "near"
             if kind == _CLIP:
                 # a dead end must not stop just short of a road (it would have met it)
-                e = zb - za
-                e2 = e.real * e.real + e.imag * e.imag
-                w = length - za
-                uu = np.clip((w.real * e.real + w.imag * e.imag) / e2, 0.0, 1.0)
-                q = za + uu * e
-                d2 = (q.real - length) ** 2 + q.imag * q.imag
+                d2 = _end_gap2(za, zb, length)[0]
                 if (~at_p & (d2 < s.snap_distance ** 2)).any():
                     return "near"
         if st.halfplanes is not None:
