@@ -116,8 +116,9 @@ def polygon_parts(geoms: Sequence):
     Overlays and ``make_valid`` of touching polygons return collections that hold
     collections: they are flattened once more; lines and points are left out.
 
-    >>> nested = shapely.GeometryCollection([shapely.GeometryCollection(
-    ...     [shapely.box(0, 0, 1, 1), shapely.LineString([(2, 0), (3, 0)])]), shapely.box(5, 5, 6, 6)])
+    >>> inner = shapely.GeometryCollection([shapely.box(0, 0, 1, 1),
+    ...                                     shapely.LineString([(2, 0), (3, 0)])])
+    >>> nested = shapely.GeometryCollection([inner, shapely.box(5, 5, 6, 6)])
     >>> parts, owner = polygon_parts([shapely.Point(9, 9), nested])
     >>> len(parts), owner.tolist()
     (2, [1, 1])
