@@ -264,9 +264,6 @@ def _snap(geoms):
 
 def _polygon_parts(geoms, min_area: float = _CRUMB) -> np.ndarray:
     """The Polygon parts (area > ``min_area``) of any geometries, as a flat array."""
-    geoms = np.asarray(geoms, dtype=object).ravel()
-    if len(geoms) == 0:
-        return np.empty(0, dtype=object)
     parts, _ = polygon_parts(geoms)
     return parts[shapely.area(parts) > min_area]
 
