@@ -1441,10 +1441,9 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
                 return front_
 
             front = frontage(lots)
-            # lots without frontage, crumbs, and small misshapen end lots (the triangle
-            # left where a strip meets a slanted street) join their neighbour
             # lots without frontage and crumbs join their neighbour (parcelling: every lot
-            # needs street access and a useful size)
+            # needs street access and a useful size); with the optional repair, small
+            # misshapen end lots too (the triangle left where a strip meets a slanted street)
             area = shapely.area(lots)
             bad = (front < _parcels.MIN_FRONTAGE) | (area < 0.25 * L * W)
             if s.repair_lots:
