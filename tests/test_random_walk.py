@@ -4,6 +4,7 @@ import numpy as np
 import pandas as pd
 import pytest
 import shapely
+from scipy.spatial import cKDTree
 
 from helpers import (assert_planar, bubenec, helsinki_roads, liechtenstein_town,
                      nearly_coincident_streets)
@@ -652,6 +653,18 @@ def test_given_roads_apart_are_joined():
     assert (res.table.origin == "given_join").sum() == 1
     assert len(res.table) == len(res.geometry) == res.stats["n_edges"]
     _assert_one_network_in_the_town(res, target, example)
+    # the point table counts the joining street: a point's connections are the streets
+    # ending at it (here the join leaves from a street end, point 49, and ends in a T)
+    ends = np.vstack([shapely.get_coordinates(shapely.get_point(res.geometry, k))
+                      for k in (0, -1)])
+    new = np.flatnonzero(res.points.example >= 0)
+    at = cKDTree(ends).query_ball_point(res.points.xy[new], 0.01)
+    np.testing.assert_array_equal(res.point_table.connections.to_numpy()[new],
+                                  [len(x) for x in at])
+    join = res.table[res.table.origin == "given_join"]
+    assert (join.node_from >= 0).any()
+    assert res.stats["n_dead_ends"] == int(((res.point_table.connections == 1)
+                                            & (res.points.example >= 0)).sum())
 
 
 def test_same_seed_same_network(eschen):

@@ -102,6 +102,7 @@ BLOCK_FIELDS = [("block_id", "int"), ("area_m2", "float"), ("neighbours", "int")
                 ("parcel_area", "float")]
 
 _TOUCH = 0.5     # m: a step closer than this to another segment touches it
+_ON_POINT = 0.01  # m: a line end this close to a point ends there (points are on a mm grid)
 #: example == -1: a node of the given roads; -2: a junction slot placed on a given road
 EXISTING, ROAD_SLOT = -1, -2
 #: Existing roads' nodes closer than this (m) are one junction when the walk cleans them;
@@ -1919,12 +1920,21 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
                              inside=area)
         stats["n_given_joined"] = len(bridge)
         if len(bridge):
+            # a joining street leaves from a point (a street end or a road node) or from a
+            # street (a T, no point there): its points count it among their connections
+            ends = np.column_stack([shapely.get_coordinates(shapely.get_point(bridge, 0)),
+                                    shapely.get_coordinates(shapely.get_point(bridge, -1))])
+            gap, near = cKDTree(pts.xy).query(ends.reshape(-1, 2))
+            node = np.where(gap <= _ON_POINT, near, -1).reshape(-1, 2)
+            np.add.at(deg, node[node >= 0], 1)
+            ptab["connections"] = deg
+            stats["n_dead_ends"] = int((is_new & (deg == 1)).sum())
             lines = np.concatenate([lines, bridge])
             table = pd.concat([table, pd.DataFrame({
                 "edge_id": np.arange(len(table) + 1, len(lines) + 1),
                 "level": int(level.min()), "length_m": shapely.length(bridge),
-                "tortuosity": 1.0, "origin": "given_join", "node_from": -1, "node_to": -1})],
-                ignore_index=True)
+                "tortuosity": 1.0, "origin": "given_join", "node_from": node[:, 0],
+                "node_to": node[:, 1]})], ignore_index=True)
             stats["n_edges"] = len(lines)
     progress.step(1.0)
     return Synthesis(lines, table, pts, ptab, stats, quadtrees, ex_lines)
