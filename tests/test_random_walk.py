@@ -654,7 +654,7 @@ def test_given_roads_apart_are_joined():
     assert len(res.table) == len(res.geometry) == res.stats["n_edges"]
     _assert_one_network_in_the_town(res, target, example)
     # the point table counts the joining street: a point's connections are the streets
-    # ending at it (here the join leaves from a street end, point 49, and ends in a T)
+    # ending at it (here the join leaves from a street end and ends in a T on a street)
     ends = np.vstack([shapely.get_coordinates(shapely.get_point(res.geometry, k))
                       for k in (0, -1)])
     new = np.flatnonzero(res.points.example >= 0)
