@@ -1859,6 +1859,18 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
 
         lines = move_ends_onto_lines(lines, shapely.get_parts(existing_lines),
                                      ROAD_SNAP_TOLERANCE)
+    bridge, bridge_node = np.empty(0, dtype=object), np.zeros((0, 2), dtype=np.int64)
+    if existing is not None:
+        # the walks join their pieces to the given roads, not given roads that lie apart
+        # inside the target to each other: the shortest clear street inside it does, as for
+        # the other methods (network.links.join_pieces). It leaves from a point (a street
+        # end or a road node) or from a street (a T, no point there: -1)
+        bridge = join_pieces(np.concatenate([lines, shapely.get_parts(existing_lines)]),
+                             inside=area)
+        ends = np.column_stack([shapely.get_coordinates(shapely.get_point(bridge, 0)),
+                                shapely.get_coordinates(shapely.get_point(bridge, -1))])
+        gap, near = cKDTree(pts.xy).query(ends.reshape(-1, 2))
+        bridge_node = np.where(gap <= _ON_POINT, near, -1).reshape(-1, 2)
     progress.step(0.95)
     length = shapely.length(lines)
     chord = shapely.length(straight)
@@ -1876,6 +1888,7 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
         deg[ex] += existing["degree"]
         made = np.arange(n_new + len(ex), len(pts))  # junctions made by joins
         deg[made[pts.example[made] == ROAD_SLOT]] += 2
+        np.add.at(deg, bridge_node[bridge_node >= 0], 1)
     ptab["connections"] = deg
     ptab["generated"] = pts.generated.astype(np.int64)
     is_new = pts.example >= 0
@@ -1913,28 +1926,14 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
         stats["n_seam_joins_relaxed"] = int((origin == "seam").sum())
         slot_idx = np.flatnonzero(pts.example == ROAD_SLOT)
         stats["n_road_junctions"] = int(used[slot_idx].sum())
-        # the walks join their pieces to the given roads, not given roads that lie apart
-        # inside the target to each other: the shortest clear street inside it does, as for
-        # the other methods (network.links.join_pieces)
-        bridge = join_pieces(np.concatenate([lines, shapely.get_parts(existing_lines)]),
-                             inside=area)
         stats["n_given_joined"] = len(bridge)
         if len(bridge):
-            # a joining street leaves from a point (a street end or a road node) or from a
-            # street (a T, no point there): its points count it among their connections
-            ends = np.column_stack([shapely.get_coordinates(shapely.get_point(bridge, 0)),
-                                    shapely.get_coordinates(shapely.get_point(bridge, -1))])
-            gap, near = cKDTree(pts.xy).query(ends.reshape(-1, 2))
-            node = np.where(gap <= _ON_POINT, near, -1).reshape(-1, 2)
-            np.add.at(deg, node[node >= 0], 1)
-            ptab["connections"] = deg
-            stats["n_dead_ends"] = int((is_new & (deg == 1)).sum())
             lines = np.concatenate([lines, bridge])
             table = pd.concat([table, pd.DataFrame({
                 "edge_id": np.arange(len(table) + 1, len(lines) + 1),
                 "level": int(level.min()), "length_m": shapely.length(bridge),
-                "tortuosity": 1.0, "origin": "given_join", "node_from": node[:, 0],
-                "node_to": node[:, 1]})], ignore_index=True)
+                "tortuosity": 1.0, "origin": "given_join", "node_from": bridge_node[:, 0],
+                "node_to": bridge_node[:, 1]})], ignore_index=True)
             stats["n_edges"] = len(lines)
     progress.step(1.0)
     return Synthesis(lines, table, pts, ptab, stats, quadtrees, ex_lines)
