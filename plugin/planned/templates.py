@@ -72,8 +72,7 @@ import numpy as np
 import shapely
 import shapely.affinity
 import shapely.ops
-from scipy.interpolate import LinearNDInterpolator, NearestNDInterpolator
-from scipy.spatial import cKDTree
+from scipy.spatial import Delaunay, cKDTree
 
 from ..core.paths import RESOURCES
 from ..core.geometry import minimum_rectangles, ring_turns
@@ -737,6 +736,10 @@ def _cut(block, cuts) -> np.ndarray:
     return _parcels._polygon_parts(faces[inside])
 
 
+#: A vertex where a drawn face's outline turns by more than this (degrees) is a node of
+#: the regressed mesh (:class:`_DrawnMesh`); the points of a curve between nodes follow.
+MESH_NODE_TURN = 20.0
+
 #: Samples of a drawn template's outline and the region's (m apart, at most) that define
 #: the warp: the outlines correspond corner to corner, and by arc length in between.
 DRAWN_SAMPLE_SPACING = 2.0
@@ -767,16 +770,20 @@ class _DrawnMesh:
     """The regression of a drawn template's parcel mesh (Yang sec. 4.1, as
     :func:`warp_rows` does for rows): the noded vertices of the parcel boundaries start at
     their mean value warp; each face (parcel, park, street surface) is registered to its
-    drawn shape (:func:`_register_polygon`'s class), every vertex moves to the mean of its
-    registered copies, vertices of the outline slide along the block side they were
-    warped onto and the matched corners stay; :data:`WARP_ITERATIONS` rounds. Points that
-    are no vertex (street centre lines, inner points) are carried by the mean value warp
-    plus the vertices' displacement, interpolated linearly."""
+    drawn shape (:func:`_register_polygon`'s class) and every node of the mesh (a vertex
+    where a face's outline turns by more than :data:`MESH_NODE_TURN`: lot corners,
+    junctions) moves to the mean of its registered copies; the other vertices (the points
+    of a drawn curve, a cul-de-sac's turning circle) follow their nodes' displacement,
+    interpolated linearly, so that a curve moves as a whole and cannot fold; vertices of
+    the outline slide along the block side they were warped onto and the matched corners
+    stay; :data:`WARP_ITERATIONS` rounds. Points that are no vertex (street centre lines,
+    inner points) are carried the same way (:meth:`carry`)."""
 
     def __init__(self, pieces, edge, t_sides, b_sides, src, dst, wlo, whi, dlo, dhi):
         self.src, self.dst = src, dst
         # the drawn coordinates, a T's node of both lines once
         verts = np.unique(np.round(shapely.get_coordinates(pieces), 6), axis=0)
+        nv = len(verts)
         self.tree = cKDTree(verts)
         self.start = warp_points(verts, src, dst)
         faces = shapely.get_parts(shapely.polygonize(pieces))
@@ -788,7 +795,7 @@ class _DrawnMesh:
         count = np.bincount(face, minlength=n)
         centre = np.stack([np.bincount(face, tmpl[:, k], n) for k in (0, 1)], 1) / count[:, None]
         t = tmpl - centre[face]
-        on_side = np.full(len(verts), -1)
+        on_side = np.full(nv, -1)
         pts = shapely.points(verts)
         on_edge = shapely.dwithin(pts, edge, 1e-6)
         if on_edge.any():
@@ -796,6 +803,10 @@ class _DrawnMesh:
             on_side[on_edge] = np.argmin(d, axis=1)
         corners = np.unique(self.tree.query(np.array(
             [shapely.get_coordinates(side)[0] for side in t_sides]))[1])
+        node = np.zeros(nv, dtype=bool)
+        node[corners] = True
+        node[idx[np.abs(np.concatenate([ring_turns(r) for r in rings])) > MESH_NODE_TURN]] = True
+        follow = _linear_weights(self.start[node], self.start[~node])
         pos = self.start.copy()
         for _ in range(WARP_ITERATIONS):
             w = pos[idx]
@@ -812,17 +823,30 @@ class _DrawnMesh:
             sy = np.clip(np.nan_to_num(sy, nan=1.0), dlo, dhi)[face]
             tx, ty = t[:, 0] * sx, t[:, 1] * sy
             reg = np.stack([c * tx - s * ty, s * tx + c * ty], 1) + cw[face]
-            acc = np.stack([np.bincount(idx, reg[:, k], len(verts)) for k in (0, 1)], 1)
-            cnt = np.bincount(idx, minlength=len(verts))
+            acc = np.stack([np.bincount(idx, reg[:, k], nv) for k in (0, 1)], 1)
+            cnt = np.bincount(idx, minlength=nv)
             new = np.where(cnt[:, None] > 0, acc / np.maximum(cnt, 1)[:, None], pos)
+            new[~node] = self.start[~node] + _interpolate(follow, new[node] - self.start[node])
             for k, side in enumerate(b_sides):
                 sel = on_side == k
                 if sel.any():
                     new[sel] = _project(side, new[sel])
             new[corners] = self.start[corners]
             pos = new
+        self.regressed, self.pos = pos, pos
+        self._on_side, self._b_sides = on_side, b_sides
+        #: faces of the drawn mesh (the lots a clean cut gives, its own slivers left out)
+        self.n_faces = int((shapely.area(faces) > 1e-3).sum())
+
+    def damp(self, share: float) -> None:
+        """Take only ``share`` of the regression's displacement (outline vertices kept on
+        their sides)."""
+        pos = self.start + share * (self.regressed - self.start)
+        for k, side in enumerate(self._b_sides):
+            sel = self._on_side == k
+            if sel.any() and 0.0 < share < 1.0:
+                pos[sel] = _project(side, pos[sel])
         self.pos = pos
-        self._shift = None
 
     def vertices_at(self, xy: np.ndarray) -> np.ndarray:
         """The regressed positions of mesh vertices given in the template's frame (other
@@ -838,16 +862,31 @@ class _DrawnMesh:
         """Points of the template's frame warped: the mean value warp plus the vertices'
         displacement by the regression, interpolated linearly (nearest outside them)."""
         moved = warp_points(xy, self.src, self.dst)
-        if self._shift is None:
-            shift = self.pos - self.start
-            self._shift = (LinearNDInterpolator(self.start, shift),
-                           NearestNDInterpolator(self.start, shift))
-        lin, near = self._shift
-        d = lin(moved)
-        bad = ~np.isfinite(d).all(axis=1)
-        if bad.any():
-            d[bad] = near(moved[bad])
-        return moved + d
+        return moved + _interpolate(_linear_weights(self.start, moved), self.pos - self.start)
+
+
+def _linear_weights(at: np.ndarray, query: np.ndarray):
+    """Indices into ``at`` (n, 3) and weights (n, 3) that interpolate values given at the
+    points ``at`` linearly over their Delaunay triangles at the points ``query``; outside
+    them, the nearest point's value."""
+    query = np.asarray(query, dtype=float).reshape(-1, 2)
+    tri = Delaunay(at)
+    simplex = tri.find_simplex(query)
+    inside = simplex >= 0
+    tr = tri.transform[np.maximum(simplex, 0)]
+    b = np.einsum("nij,nj->ni", tr[:, :2], query - tr[:, 2])
+    weights = np.c_[b, 1.0 - b.sum(axis=1)]
+    index = tri.simplices[np.maximum(simplex, 0)]
+    if not inside.all():
+        index[~inside] = cKDTree(at).query(query[~inside])[1][:, None]
+        weights[~inside] = 1.0 / 3.0
+    return index, weights
+
+
+def _interpolate(weights, values: np.ndarray) -> np.ndarray:
+    """Values (m, 2) at the points of :func:`_linear_weights` interpolated (no BLAS)."""
+    index, w = weights
+    return np.einsum("nk,nkj->nj", w, values[index])
 
 
 def warp_drawn(block, template: Template, cut: bool = True,
@@ -868,7 +907,8 @@ def warp_drawn(block, template: Template, cut: bool = True,
     copies, outline vertices sliding along their block side, corners fixed): the mean
     value warp spreads a block's skew over every lot, the regression gives it back to the
     lots along the outline (a spike on a block skewed by 12°: its lots' mean corner
-    deviation 12° -> 4°). The lots are the block cut along the regressed inner parcel
+    deviation 12° -> 4°); where the regressed cut leaves other faces than the drawn ones
+    (a fold), the displacement is halved until it does not. The lots are the block cut along the regressed inner parcel
     boundaries, straight between their drawn vertices as drawn (its exact outline kept,
     so the lots tile it); a lot takes the label of the drawn parcel whose inner point it
     holds (P: a park, ``green``; A: an area of the next level, ``area``; S: the
@@ -963,23 +1003,30 @@ def warp_drawn(block, template: Template, cut: bool = True,
     edge = shapely.boundary(t_outline)
     pieces = shapely.get_parts(shapely.node(shapely.union_all(shapely.boundary(parcels_m))))
     mesh = _DrawnMesh(pieces, edge, t_sides, b_sides, src, dst, wlo, whi, dlo, dhi)
+    # the inner parcel boundaries, noded in the template's frame (a T is a vertex of both
+    # lines, so the warped lines meet exactly), warped, and extended across the outline
+    mid = shapely.line_interpolate_point(pieces, 0.5, normalized=True)
+    inner = pieces[~shapely.dwithin(mid, edge, 1e-6)]
+    inner = shapely.get_parts(shapely.line_merge(shapely.union_all(inner)))
+    # where the regression would fold the mesh (a narrow neck of a drawn street surface
+    # between two lots pulled apart: the cut leaves a sliver), its displacement is halved
+    # until the cut gives the drawn faces again; none of it, the mean value warp as before
+    for share in (1.0, 0.5, 0.25, 0.0):
+        mesh.damp(share)
+        cuts = []
+        for line in inner:
+            xy = shapely.get_coordinates(line)
+            on_edge = shapely.dwithin(shapely.points(xy[[0, -1]]), edge, 1e-6)
+            cuts.append(_extend(mesh.vertices_at(xy), 3 * DRAWN_SAMPLE_SPACING, on_edge))
+        lots = _cut(block, cuts)
+        if len(lots) == mesh.n_faces:
+            break
     # the template's own streets, warped (mirrored with the template)
     roads = []
     for xy in template.streets:
         line = shapely.segmentize(shapely.LineString(np.asarray(xy, dtype=float) * flip),
                                   DRAWN_SAMPLE_SPACING)
         roads.append(shapely.LineString(mesh.carry(shapely.get_coordinates(line))))
-    # the inner parcel boundaries, noded in the template's frame (a T is a vertex of both
-    # lines, so the warped lines meet exactly), warped, and extended across the outline
-    mid = shapely.line_interpolate_point(pieces, 0.5, normalized=True)
-    inner = pieces[~shapely.dwithin(mid, edge, 1e-6)]
-    inner = shapely.get_parts(shapely.line_merge(shapely.union_all(inner)))
-    cuts = []
-    for line in inner:
-        xy = shapely.get_coordinates(line)
-        on_edge = shapely.dwithin(shapely.points(xy[[0, -1]]), edge, 1e-6)
-        cuts.append(_extend(mesh.vertices_at(xy), 3 * DRAWN_SAMPLE_SPACING, on_edge))
-    lots = _cut(block, cuts)
     # each lot takes the label of the drawn parcel whose inner point it holds
     inside = shapely.points(mesh.carry(shapely.get_coordinates(
         shapely.point_on_surface(parcels_m))))

@@ -7,8 +7,9 @@ templates; and the shipped spike and loop, drawn templates built at the default
 parcel size (`templates.built_in_drawn`). Each is warped onto regions of its own shape
 turned and stretched, onto a skewed one and onto one with an extra corner (a 40° bend),
 and laid out by `split_domain` in a region it fits. Prints the warp energies (selection
-threshold 0.1), lot counts and times (best of three, wall and CPU, on this shared 2-core
-machine), writes ``tests/benchmarks/results/drawn_templates.json`` and the picture
+threshold 0.1), lot counts, times (best of three, wall and CPU, on this shared 2-core
+machine) and the lots' p_angle / p_area beside those of the mean value warp alone (no
+regression rounds, in the same run), writes ``tests/benchmarks/results/drawn_templates.json`` and the picture
 ``docs/drawn_templates.png`` (template as drawn | laid out in a region).
 
     python tests/benchmarks/bench_drawn_templates.py
@@ -49,6 +50,15 @@ def _best(fn, n=3):
     return best
 
 
+def _quality(res):
+    """Mean p_angle (°) and p_area of a warp's lots, parks and areas left out."""
+    from urban_synthesis.plugin.parcels import subdivision
+
+    lots = res.lots[~res.green & ~res.area] if res.area is not None else res.lots[~res.green]
+    p_angle, p_area, _ = subdivision.lot_quality(lots)
+    return round(float(np.nanmean(p_angle)), 2), round(float(np.nanmean(p_area)), 4)
+
+
 def _regions(outline):
     xy = np.asarray(shapely.geometry.polygon.orient(outline).exterior.coords)[:-1]
     d = xy[1] - xy[0]
@@ -85,7 +95,7 @@ def main():
                 settings.street_width / 2, join_style="mitre"), "park"))
     rows, layouts = [], []
     print(f"{'template':32s} {'region':34s} {'energy':>8s} {'lots':>5s} {'wall s':>8s} "
-          f"{'CPU s':>7s}")
+          f"{'CPU s':>7s} p_angle p_area (mean value warp alone)")
     for name, t, outline, others in cases:
         for region_name, region in _regions(outline).items():
             wall, cpu, res = _best(lambda: templates.warp_drawn(region, t))
@@ -95,10 +105,23 @@ def main():
                    "parks": 0 if res is None else int(res.green.sum()),
                    "streets": 0 if res is None else len(res.roads),
                    "wall_s": round(wall, 4), "cpu_s": round(cpu, 4)}
+            if res is not None:
+                # the lots' quality (Yang's p_angle, p_area), and the same template warped
+                # by mean value coordinates alone (no regression rounds), side by side
+                row["p_angle"], row["p_area"] = _quality(res)
+                kept, templates.WARP_ITERATIONS = templates.WARP_ITERATIONS, 0
+                try:
+                    row["p_angle_mean_value_only"], row["p_area_mean_value_only"] = \
+                        _quality(templates.warp_drawn(region, t))
+                finally:
+                    templates.WARP_ITERATIONS = kept
             rows.append(row)
             print(f"{name:32s} {region_name:34s} "
                   f"{row['energy'] if row['energy'] is not None else '-':>8} {row['lots']:5d} "
-                  f"{wall:8.3f} {cpu:7.3f}")
+                  f"{wall:8.3f} {cpu:7.3f} " + (
+                      f"{row['p_angle']:6.2f}° {row['p_area']:.3f}  "
+                      f"({row['p_angle_mean_value_only']:.2f}° "
+                      f"{row['p_area_mean_value_only']:.3f})" if res is not None else ""))
         region = affinity.rotate(affinity.scale(outline, 1.12, 1.12), 20)
         rest = lib_rest if others == "rows" else [x for x in lib_rest if x.kind == "park"]
         wall, cpu, lay = _best(lambda: domain_split.split_domain(
