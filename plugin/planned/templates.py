@@ -835,6 +835,7 @@ class _DrawnMesh:
             pos = new
         self.regressed, self.pos = pos, pos
         self._on_side, self._b_sides = on_side, b_sides
+        self._edge, self._t_sides = edge, t_sides
         #: faces of the drawn mesh (the lots a clean cut gives, its own slivers left out)
         self.n_faces = int((shapely.area(faces) > 1e-3).sum())
 
@@ -860,9 +861,21 @@ class _DrawnMesh:
 
     def carry(self, xy: np.ndarray) -> np.ndarray:
         """Points of the template's frame warped: the mean value warp plus the vertices'
-        displacement by the regression, interpolated linearly (nearest outside them)."""
+        displacement by the regression, interpolated linearly (nearest outside them); a
+        point on the template's outline (where its own street enters) stays on its side of
+        the block, as the outline's vertices do."""
+        xy = np.asarray(xy, dtype=float).reshape(-1, 2)
         moved = warp_points(xy, self.src, self.dst)
-        return moved + _interpolate(_linear_weights(self.start, moved), self.pos - self.start)
+        out = moved + _interpolate(_linear_weights(self.start, moved), self.pos - self.start)
+        pts = shapely.points(xy)
+        on_edge = shapely.dwithin(pts, self._edge, 1e-3)
+        if on_edge.any():
+            side = np.argmin(np.stack([shapely.distance(pts[on_edge], t)
+                                       for t in self._t_sides], 1), axis=1)
+            rows = np.flatnonzero(on_edge)
+            for k in np.unique(side):
+                out[rows[side == k]] = _project(self._b_sides[k], out[rows[side == k]])
+        return out
 
 
 def _linear_weights(at: np.ndarray, query: np.ndarray):
