@@ -395,7 +395,8 @@ def yang_goals(results: dict) -> str:
             return " / ".join(format(y[key], fmt) for y in rows)
 
         met = sum(goals_met(y) for y in rows)
-        out.append(f"| {name} | {each('p_angle', '.2f')} | {each('p_area', '.3f')} | "
+        # p_area to four places: 1.0605 is above the goal, which three places would hide
+        out.append(f"| {name} | {each('p_angle', '.2f')} | {each('p_area', '.4f')} | "
                    f"{each('l_s', '.1f')} | {met} of {len(rows)} |")
     return "\n".join(out) if len(out) > 2 else ""
 
