@@ -751,6 +751,52 @@ def _sides(ring: np.ndarray, corners: np.ndarray) -> List[shapely.LineString]:
             for a, b in zip(corners, np.roll(corners, -1))]
 
 
+def _register_faces(t: np.ndarray, w: np.ndarray, face: np.ndarray, n: int,
+                    wlo, whi, dlo, dhi) -> np.ndarray:
+    """The registration of :func:`_register` for faces of any shape at once: each face's
+    drawn vertices ``t`` (its frame, centred on the face) turned (Kabsch) and scaled along
+    the frame's axes within the allowed ranges onto its warped vertices ``w`` (the same
+    rows); ``face`` says which of the ``n`` faces a row belongs to. Returns the registered
+    vertices. Sums by face (no BLAS: the same digits under every processor kernel)."""
+    def by_face(v):
+        return np.bincount(face, v, n)
+
+    count = np.bincount(face, minlength=n)
+    cw = np.stack([by_face(w[:, 0]), by_face(w[:, 1])], 1) / np.maximum(count, 1)[:, None]
+    w = w - cw[face]
+    ang = np.arctan2(by_face(t[:, 0] * w[:, 1]) - by_face(t[:, 1] * w[:, 0]),
+                     by_face(t[:, 0] * w[:, 0]) + by_face(t[:, 1] * w[:, 1]))
+    c, s = np.cos(ang)[face], np.sin(ang)[face]
+    lx, ly = w[:, 0] * c + w[:, 1] * s, -w[:, 0] * s + w[:, 1] * c     # R^T w
+    sx = np.clip(by_face(lx * t[:, 0]) / np.maximum(by_face(t[:, 0] ** 2), 1e-12), wlo, whi)
+    sy = np.clip(by_face(ly * t[:, 1]) / np.maximum(by_face(t[:, 1] ** 2), 1e-12), dlo, dhi)
+    tx, ty = t[:, 0] * sx[face], t[:, 1] * sy[face]
+    return np.stack([c * tx - s * ty, s * tx + c * ty], 1) + cw[face]
+
+
+def _register_polygon(tmpl: np.ndarray, warped: np.ndarray, wlo, whi, dlo, dhi) -> np.ndarray:
+    """:func:`_register_faces` for one parcel of any shape (its drawn vertices ``tmpl``,
+    n x 2 in the template's frame); returns the registered vertices."""
+    tmpl = np.asarray(tmpl, dtype=float)
+    return _register_faces(tmpl - tmpl.mean(axis=0), np.asarray(warped, dtype=float),
+                           np.zeros(len(tmpl), dtype=np.int64), 1, wlo, whi, dlo, dhi)
+
+
+#: A vertex where a drawn face's outline turns by more than this (degrees) is a node of
+#: the regressed mesh (:class:`_DrawnMesh`); the points of a curve between nodes follow.
+MESH_NODE_TURN = 20.0
+
+#: Samples of a drawn template's outline and the region's (m apart, at most) that define
+#: the warp: the outlines correspond corner to corner, and by arc length in between.
+DRAWN_SAMPLE_SPACING = 2.0
+
+
+def _sides(ring: np.ndarray, corners: np.ndarray) -> List[shapely.LineString]:
+    """The outline between consecutive corners, as lines (counter-clockwise)."""
+    return [shapely.LineString(ring[_side_ids(a, b, len(ring)) % len(ring)])
+            for a, b in zip(corners, np.roll(corners, -1))]
+
+
 def _register_polygon(tmpl: np.ndarray, warped: np.ndarray, wlo, whi, dlo, dhi) -> np.ndarray:
     """The registration of :func:`_register` for one parcel of any shape: the template
     parcel's vertices (n, 2, its frame) turned (Kabsch) and scaled along the frame's axes
@@ -809,20 +855,7 @@ class _DrawnMesh:
         follow = _linear_weights(self.start[node], self.start[~node])
         pos = self.start.copy()
         for _ in range(WARP_ITERATIONS):
-            w = pos[idx]
-            cw = np.stack([np.bincount(face, w[:, k], n) for k in (0, 1)], 1) / count[:, None]
-            w = w - cw[face]
-            h = [np.bincount(face, t[:, i] * w[:, j], n) for i in (0, 1) for j in (0, 1)]
-            ang = np.arctan2(h[1] - h[2], h[0] + h[3])
-            c, s = np.cos(ang)[face], np.sin(ang)[face]
-            lx, ly = w[:, 0] * c + w[:, 1] * s, -w[:, 0] * s + w[:, 1] * c
-            with np.errstate(invalid="ignore", divide="ignore"):
-                sx = np.bincount(face, lx * t[:, 0], n) / np.bincount(face, t[:, 0] ** 2, n)
-                sy = np.bincount(face, ly * t[:, 1], n) / np.bincount(face, t[:, 1] ** 2, n)
-            sx = np.clip(np.nan_to_num(sx, nan=1.0), wlo, whi)[face]
-            sy = np.clip(np.nan_to_num(sy, nan=1.0), dlo, dhi)[face]
-            tx, ty = t[:, 0] * sx, t[:, 1] * sy
-            reg = np.stack([c * tx - s * ty, s * tx + c * ty], 1) + cw[face]
+            reg = _register_faces(t, pos[idx], face, n, wlo, whi, dlo, dhi)
             acc = np.stack([np.bincount(idx, reg[:, k], nv) for k in (0, 1)], 1)
             cnt = np.bincount(idx, minlength=nv)
             new = np.where(cnt[:, None] > 0, acc / np.maximum(cnt, 1)[:, None], pos)
