@@ -9,7 +9,8 @@ turned and stretched, onto a skewed one and onto one with an extra corner (a 40Â
 and laid out by `split_domain` in a region it fits. Prints the warp energies (selection
 threshold 0.1), lot counts, times (best of three, wall and CPU, on this shared 2-core
 machine) and the lots' p_angle / p_area beside those of the mean value warp alone (no
-regression rounds, in the same run), writes ``tests/benchmarks/results/drawn_templates.json`` and the picture
+regression rounds, in the same run), writes
+``tests/benchmarks/results/drawn_templates.json`` and the picture
 ``docs/drawn_templates.png`` (template as drawn | laid out in a region).
 
     python tests/benchmarks/bench_drawn_templates.py
