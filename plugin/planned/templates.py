@@ -782,36 +782,6 @@ def _register_polygon(tmpl: np.ndarray, warped: np.ndarray, wlo, whi, dlo, dhi) 
                            np.zeros(len(tmpl), dtype=np.int64), 1, wlo, whi, dlo, dhi)
 
 
-#: A vertex where a drawn face's outline turns by more than this (degrees) is a node of
-#: the regressed mesh (:class:`_DrawnMesh`); the points of a curve between nodes follow.
-MESH_NODE_TURN = 20.0
-
-#: Samples of a drawn template's outline and the region's (m apart, at most) that define
-#: the warp: the outlines correspond corner to corner, and by arc length in between.
-DRAWN_SAMPLE_SPACING = 2.0
-
-
-def _sides(ring: np.ndarray, corners: np.ndarray) -> List[shapely.LineString]:
-    """The outline between consecutive corners, as lines (counter-clockwise)."""
-    return [shapely.LineString(ring[_side_ids(a, b, len(ring)) % len(ring)])
-            for a, b in zip(corners, np.roll(corners, -1))]
-
-
-def _register_polygon(tmpl: np.ndarray, warped: np.ndarray, wlo, whi, dlo, dhi) -> np.ndarray:
-    """The registration of :func:`_register` for one parcel of any shape: the template
-    parcel's vertices (n, 2, its frame) turned (Kabsch) and scaled along the frame's axes
-    within the allowed ranges onto the warped vertices; returns the registered vertices."""
-    ct, cw = tmpl.mean(axis=0), warped.mean(axis=0)
-    t, w = tmpl - ct, warped - cw
-    h = t.T @ w
-    ang = math.atan2(h[0, 1] - h[1, 0], h[0, 0] + h[1, 1])
-    rot = np.array([[math.cos(ang), -math.sin(ang)], [math.sin(ang), math.cos(ang)]])
-    local = w @ rot                                # R^T w
-    sx = np.clip((local[:, 0] * t[:, 0]).sum() / max((t[:, 0] ** 2).sum(), 1e-12), wlo, whi)
-    sy = np.clip((local[:, 1] * t[:, 1]).sum() / max((t[:, 1] ** 2).sum(), 1e-12), dlo, dhi)
-    return (t * [sx, sy]) @ rot.T + cw
-
-
 class _DrawnMesh:
     """The regression of a drawn template's parcel mesh (Yang sec. 4.1, as
     :func:`warp_rows` does for rows): the noded vertices of the parcel boundaries start at
@@ -954,12 +924,12 @@ def warp_drawn(block, template: Template, cut: bool = True,
     value warp spreads a block's skew over every lot, the regression gives it back to the
     lots along the outline (a spike on a block skewed by 12°: its lots' mean corner
     deviation 12° -> 4°); where the regressed cut leaves other faces than the drawn ones
-    (a fold), the displacement is halved until it does not. The lots are the block cut along the regressed inner parcel
-    boundaries, straight between their drawn vertices as drawn (its exact outline kept,
-    so the lots tile it); a lot takes the label of the drawn parcel whose inner point it
-    holds (P: a park, ``green``; A: an area of the next level, ``area``; S: the
-    template's own street, no lot: its centre lines, warped and moved with the mesh, are
-    ``roads``).
+    (a fold), the displacement is halved until it does not. The lots are the block cut
+    along the regressed inner parcel boundaries, straight between their drawn vertices as
+    drawn (its exact outline kept, so the lots tile it); a lot takes the label of the
+    drawn parcel whose inner point it holds (P: a park, ``green``; A: an area of the next
+    level, ``area``; S: the template's own street, no lot: its centre lines, warped and
+    moved with the mesh, are ``roads``).
 
     A block with more corners than the template (turning by more than
     :data:`CORNER_TURN`) gives the template's corners to its sharpest ones, and the turn
