@@ -774,19 +774,11 @@ def _register_faces(t: np.ndarray, w: np.ndarray, face: np.ndarray, n: int,
     return np.stack([c * tx - s * ty, s * tx + c * ty], 1) + cw[face]
 
 
-def _register_polygon(tmpl: np.ndarray, warped: np.ndarray, wlo, whi, dlo, dhi) -> np.ndarray:
-    """:func:`_register_faces` for one parcel of any shape (its drawn vertices ``tmpl``,
-    n x 2 in the template's frame); returns the registered vertices."""
-    tmpl = np.asarray(tmpl, dtype=float)
-    return _register_faces(tmpl - tmpl.mean(axis=0), np.asarray(warped, dtype=float),
-                           np.zeros(len(tmpl), dtype=np.int64), 1, wlo, whi, dlo, dhi)
-
-
 class _DrawnMesh:
     """The regression of a drawn template's parcel mesh (Yang sec. 4.1, as
     :func:`warp_rows` does for rows): the noded vertices of the parcel boundaries start at
     their mean value warp; each face (parcel, park, street surface) is registered to its
-    drawn shape (:func:`_register_polygon`'s class) and every node of the mesh (a vertex
+    drawn shape (:func:`_register_faces`) and every node of the mesh (a vertex
     where a face's outline turns by more than :data:`MESH_NODE_TURN`: lot corners,
     junctions) moves to the mean of its registered copies; the other vertices (the points
     of a drawn curve, a cul-de-sac's turning circle) follow their nodes' displacement,
@@ -985,6 +977,11 @@ def warp_drawn(block, template: Template, cut: bool = True,
         dense = shapely.segmentize(parcels_m, DRAWN_SAMPLE_SPACING)
         rings = [shapely.get_coordinates(shapely.get_exterior_ring(p))[:-1] for p in dense]
         verts = np.concatenate(rings)
+        # every parcel registered to its drawn shape at once
+        face = np.repeat(np.arange(len(rings)), [len(r) for r in rings])
+        centred = np.concatenate([r - r.mean(axis=0) for r in rings])
+        ends = np.cumsum([len(r) for r in rings])[:-1]
+        root_area = np.sqrt(np.maximum(shapely.area(dense), 1e-9))
         for shift in range(k):
             on = np.roll(b_label, -shift)
             if ((on != 0) & (on != t_label)).any():
@@ -998,14 +995,10 @@ def warp_drawn(block, template: Template, cut: bool = True,
                 dst.append(_along(bs, f))
             src, dst = np.concatenate(src), np.concatenate(dst)
             moved = warp_points(verts, src, dst)
-            resid, n0 = [], 0
-            for ring_, poly in zip(rings, dense):
-                w = moved[n0:n0 + len(ring_)]
-                n0 += len(ring_)
-                reg = _register_polygon(ring_, w, wlo, whi, dlo, dhi)
-                rms = math.sqrt(float(((reg - w) ** 2).sum(axis=1).mean()))
-                resid.append(rms / math.sqrt(max(poly.area, 1e-9)))
-            energy = float(np.mean(resid)) + penalty
+            reg = _register_faces(centred, moved, face, len(rings), wlo, whi, dlo, dhi)
+            sq = np.split(((reg - moved) ** 2).sum(axis=1), ends)
+            rms = np.sqrt([float(v.mean()) for v in sq])
+            energy = float(np.mean(rms / root_area)) + penalty
             if entrance_ok is not None and len(entrances) and \
                     not entrance_ok(warp_points(entrances * flip, src, dst)):
                 continue   # its street would enter from no street (edge labels)
