@@ -1243,3 +1243,29 @@ def test_inputs_with_heights_give_the_planar_layout():
     high = domain_split.split_domain(shapely.force_3d(plots, 7.5), seed=2, settings=settings)
     assert not shapely.has_z(high.parcels).any() and len(high.parcels) == len(flat.parcels)
     assert shapely.equals(high.parcels, flat.parcels).all()
+
+
+def test_lots_along_a_kinked_given_road_have_no_corner_at_its_kinks():
+    """A given road across the region digitised as a polyline with kinks of 12-30 degrees
+    (as OSM draws a curve): the lots on both sides of it keep half a street from its centre
+    line, front on it, and have no corner of 145-170 degrees at the kinks (Yang's p_angle
+    would count each as a 55-80 degree deviation); the road keeps every kink given."""
+    region = shapely.box(0, 0, 600, 400)
+    xs = np.array([-20.0, 90, 170, 260, 340, 430, 520, 620])
+    ys = np.array([190.0, 190, 210, 200, 228, 212, 190, 190])   # turns of 12-30 degrees
+    key = shapely.LineString(np.c_[xs, ys])
+    settings = domain_split.SplitSettings(optimise=False)
+    lay = domain_split.split_domain([region], key_roads=[key], seed=1, settings=settings)
+    given = shapely.union_all(lay.roads[lay.road_kind == "key"])
+    assert shapely.hausdorff_distance(given, shapely.clip_by_rect(key, 0, 0, 600, 400)) < 1e-3
+    points, angles, owner = metrics.corners(lay.parcels)
+    near = shapely.distance(shapely.points(points), key) < S / 2 + 2.0
+    assert near.sum() > 30
+    assert not ((angles[near] > 145) & (angles[near] < 170)).any()
+    with np.errstate(invalid="ignore"):
+        on_road = shapely.area(shapely.intersection(
+            lay.parcels, shapely.buffer(key, S / 2 - 0.01, cap_style="flat")))
+    assert on_road.sum() < 1e-3
+    beside = shapely.distance(lay.parcels, key) < S / 2 + 0.5
+    assert beside.sum() > 20
+    assert lay.table[beside].has_street_access.all()

@@ -79,7 +79,8 @@ import pandas as pd
 import shapely
 from scipy.cluster.hierarchy import DisjointSet
 
-from ..core.geometry import minimum_rectangles, rounded_bends, substrings, unit
+from ..core.geometry import (minimum_rectangles, rounded_band_bends, rounded_bends,
+                             substrings, unit)
 from ..core.progress import InputError, Progress, ensure
 from ..measure import metrics as _metrics
 from ..network import invariants as _invariants
@@ -673,7 +674,7 @@ class _Splitter:
         parts = _parcels._polygon_parts([net_block(region, s.street_width, no_street)], 1.0)
         if len(parts) != 1:
             return math.inf
-        near = shapely.buffer(no_frontage, s.street_width / 2 + 1.0) \
+        near = shapely.buffer(_near(no_frontage, region, s.street_width), s.street_width / 2 + 1.0) \
             if no_frontage is not None else None
         return _rows_energy(parts[0], t, s, near)
 
@@ -931,14 +932,24 @@ def net_block(region, street_width: float, no_street=None):
     edge = shapely.boundary(region)
     if no_street is not None:
         with np.errstate(invalid="ignore"):
-            edge = shapely.difference(edge, shapely.buffer(no_street, 0.01))
+            edge = shapely.difference(edge, shapely.buffer(_near(no_street, region, 1.0), 0.01))
     if shapely.is_empty(edge):
         return region
     # square ends: where a street side meets a "no street" edge at an obtuse corner, a
     # flat end would leave a tooth of the block reaching the street's centre line
-    zone = shapely.buffer(edge, street_width / 2, cap_style="square", join_style="mitre")
     with np.errstate(invalid="ignore"):
-        return shapely.difference(region, zone)
+        return shapely.difference(region, street_band(edge, street_width, "square"))
+
+
+def street_band(lines, street_width: float, cap_style: str):
+    """The land within half a street of the street centre ``lines`` (mitre joins), its
+    shallow bends rounded (:func:`rounded_band_bends`, up to :data:`templates.CORNER_TURN`):
+    a given road's kinks (a real road is digitised as a polyline) and the bends of the
+    split streets would otherwise give every lot along them a corner of 145-170° at each,
+    which Table 1's p_angle counts (on Helsinki, 83 such corners along the given roads
+    carried 22 % of its sum); the band is never narrower than half a street."""
+    band = shapely.buffer(lines, street_width / 2, cap_style=cap_style, join_style="mitre")
+    return rounded_band_bends(band, street_width / 2, _templates.CORNER_TURN)
 
 
 def access_frontage(lots, region, street_width: float, no_access=None) -> np.ndarray:
@@ -950,7 +961,7 @@ def access_frontage(lots, region, street_width: float, no_access=None) -> np.nda
     edge = _access_edge(region, no_access)
     if shapely.is_empty(edge):
         return np.zeros(len(lots))
-    band = shapely.buffer(edge, street_width / 2 + 0.05, cap_style="flat", join_style="mitre")
+    band = shapely.buffer(street_band(edge, street_width, "flat"), 0.05, join_style="mitre")
     with np.errstate(invalid="ignore"):
         inside = shapely.intersection(shapely.boundary(lots), band)
     # a side leaving the street crosses the 5 cm band: to the decimetre, the rest is frontage
@@ -1183,8 +1194,23 @@ def _access_edge(region, *no_access):
     with np.errstate(invalid="ignore"):
         for lines in no_access:
             if lines is not None:
-                edge = shapely.difference(edge, shapely.buffer(lines, _ON_OUTLINE))
+                edge = shapely.difference(
+                    edge, shapely.buffer(_near(lines, region, 1.0), _ON_OUTLINE))
     return edge
+
+
+def _near(lines, region, margin: float):
+    """The parts of ``lines`` whose bounds come within ``margin`` (m) of the region's: the
+    no-street edges are one geometry for the whole town, and buffering all of it for each
+    region was a third of the split's time; the parts far away change no buffer near it."""
+    parts = shapely.get_parts(lines)
+    x0, y0, x1, y1 = shapely.bounds(region)
+    b = shapely.bounds(parts)
+    close = (b[:, 0] <= x1 + margin) & (b[:, 2] >= x0 - margin) & \
+        (b[:, 1] <= y1 + margin) & (b[:, 3] >= y0 - margin)
+    if close.all():
+        return lines
+    return shapely.geometrycollections(parts[close])
 
 
 def _end_dirs(lines) -> np.ndarray:
