@@ -8,7 +8,7 @@
 - :func:`unit`: unit vectors; :func:`group_starts` / :func:`group_ends`: runs of equal keys;
 - :func:`ring_turns`: the signed turn at each vertex of a closed ring;
 - :func:`rounded_bends`: a polygon's shallow bends drawn as arcs (shapely smooths nothing);
-  :func:`rounded_band_bends`: a street band's, growing it only.
+  :func:`rounded_band_bends`: a street band's, never narrowing it.
 
 shapely's ``oriented_envelope`` loops over geometries in Python on GEOS 3.11 and gives no
 side lengths or directions; ``shapely.ops.substring`` works on one line at a time: these
