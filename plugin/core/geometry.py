@@ -355,8 +355,9 @@ def rounded_bends(polygon, max_turn: float, reach: float, step: float = 5.0):
     """The polygon with each vertex whose outline turns by more than ``step`` and at most
     ``max_turn`` degrees (a bend of a curved side, not a corner) replaced by a quadratic
     Bézier arc from ``reach`` metres before it to ``reach`` metres after it (at most 0.4 of
-    either edge), sampled so that no vertex of the arc turns by more than ``step``
-    degrees. Sharper corners, and flatter bends, stay as they are; the outline moves by
+    either edge), sampled in ceil(turn / step) even steps of its parameter, so that a
+    vertex of the arc turns by about ``step`` degrees (a 20-degree bend in 5-degree steps:
+    2.5, 5.0, 5.1, 5.0, 2.5). Sharper corners, and flatter bends, stay as they are; the outline moves by
     about ``reach * sin(turn / 2) / 2`` at a bend (the arc's polyline a little more). A
     result that would not be valid (the arcs of two bends of a narrow neck crossing) is
     not returned: the polygon comes back as it was. Written here because shapely smooths
@@ -399,7 +400,7 @@ def rounded_band_bends(band, half_width: float, max_turn: float, step: float = 5
     ``half_width`` round the bend touches the sides (``half_width * tan(turn / 2) / 2``
     from the tip), which cuts the tip off but keeps outside that circle, its chords
     included. The land beside the band then has no corner at a bend that Yang's Table 1
-    counts (its arcs turn by at most ``step`` at a vertex) and never reaches into the
+    counts (its arcs turn by about ``step`` at a vertex) and never reaches into the
     street's half width.
 
     >>> bent = shapely.LineString([(0, 0), (50, 0), (100, 15)])   # a bend of 16.7°
