@@ -377,14 +377,24 @@ def rounded_bends(polygon, max_turn: float, reach: float, step: float = 5.0):
     """
     # near-repeated vertices (a buffer's seams) would give their bends no direction
     polygon = shapely.remove_repeated_points(polygon, 0.01)
-    rings = [shapely.get_exterior_ring(polygon)] + [
-        shapely.get_interior_ring(polygon, i)
-        for i in range(shapely.get_num_interior_rings(polygon))]
     rounded = [_rounded_ring(shapely.get_coordinates(r), max_turn, reach, step)
-               for r in rings]
+               for r in _rings(polygon)]
     if all(r is None for r in rounded):
         return polygon
-    xy = [shapely.get_coordinates(r) if new is None else new for r, new in zip(rings, rounded)]
+    return _with_rings(polygon, rounded)
+
+
+def _rings(polygon) -> list:
+    """The exterior ring and the holes of a polygon."""
+    return [shapely.get_exterior_ring(polygon)] + [
+        shapely.get_interior_ring(polygon, i)
+        for i in range(shapely.get_num_interior_rings(polygon))]
+
+
+def _with_rings(polygon, new: list):
+    """The polygon with the rings that ``new`` gives coordinates for (None: as it was)
+    replaced; the polygon as it was when the result is not valid."""
+    xy = [shapely.get_coordinates(r) if n is None else n for r, n in zip(_rings(polygon), new)]
     # holes as rings: their vertex counts differ, so they make no (k, n, 2) coordinate array
     out = shapely.polygons(xy[0], holes=[shapely.linearrings(h) for h in xy[1:]] or None)
     return out if shapely.is_valid(out) else polygon
@@ -421,12 +431,7 @@ def rounded_band_bends(band, half_width: float, max_turn: float, step: float = 5
     out = []
     for part in shapely.get_parts(band):
         part = shapely.geometry.polygon.orient(part, 1.0)
-        rings = [shapely.get_exterior_ring(part)] + [
-            shapely.get_interior_ring(part, i)
-            for i in range(shapely.get_num_interior_rings(part))]
-        new = [_rounded_ring(shapely.get_coordinates(shapely.remove_repeated_points(r, 0.01)),
-                             max_turn, reach, step) for r in rings]
-        xy = [shapely.get_coordinates(r) if n is None else n for r, n in zip(rings, new)]
-        poly = shapely.polygons(xy[0], holes=[shapely.linearrings(h) for h in xy[1:]] or None)
-        out.append(poly if shapely.is_valid(poly) else part)
+        out.append(_with_rings(part, [
+            _rounded_ring(shapely.get_coordinates(shapely.remove_repeated_points(r, 0.01)),
+                          max_turn, reach, step) for r in _rings(part)]))
     return shapely.union_all(out) if len(out) != 1 else out[0]
