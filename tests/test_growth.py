@@ -182,6 +182,29 @@ def test_a_part_of_the_boundary_no_sketch_reaches_is_linked():
     assert res.stats["links"] == 0 and shapely.intersects(res.geometry, east).sum() > 10
 
 
+def test_a_piece_in_an_arm_of_a_concave_boundary_is_linked_inside_it():
+    """Two arms joined at the top by a 40 m strip, the sketched road in the west arm: with
+    this seed the east arm grows a network of its own, and the straight road that joined it
+    before crossed the bay between the arms, outside the boundary. Now its link bends along
+    the arms (straight legs): every road inside the boundary, one piece with the sketch."""
+    from urban_synthesis.plugin.network import invariants
+
+    west, east = shapely.box(0, 0, 250, 700), shapely.box(550, 0, 800, 700)
+    boundary = shapely.union_all([west, east, shapely.box(0, 660, 800, 700)])
+    sketch = np.array([shapely.LineString([(125, 0), (125, 650)])])
+    res = growth.grow_roads(boundary, major_roads=sketch, seed=2)
+    g = res.geometry
+    assert res.stats["links"] >= 1
+    assert shapely.covers(boundary.buffer(1.0), g).all()
+    legs = g[res.pattern == "link"]
+    assert len(legs) > res.stats["links"] and (shapely.get_num_coordinates(legs) == 2).all()
+    assert_planar(g)
+    new = g[invariants.new_streets(g, sketch)]
+    check = invariants.check_network(new, sketch, area=boundary, target=boundary)
+    assert check.floating_pieces == 0 and check.violations()["outside_target"] == 0
+    assert shapely.intersects(g, east).sum() > 10
+
+
 def test_sketched_major_roads_are_kept_and_bound_quarters():
     sketch = [shapely.LineString([(-100, 500), (1100, 520)]),
               shapely.LineString([(480, -50), (520, 1050)])]

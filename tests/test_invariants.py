@@ -234,3 +234,30 @@ def test_real_streets_keep_the_invariants_of_their_own_arterials():
     v = I.check_network(moved, given).violations()
     assert v["crossings_given"] > 20 and v["floating_pieces"] > 5
 
+
+
+def test_a_piece_in_the_other_arm_of_a_concave_target_is_linked_along_the_arms():
+    """A target shaped like an upturned U: the anchored road in the west arm, a floating
+    street in the east arm. A straight link would cross the bay between the arms, outside
+    the target: without ``bent`` the piece stays unlinked; with it the link runs up the east
+    arm, across the top and down the west arm onto the road, inside the target, crossing
+    nothing, planar and in one piece with the road."""
+    from urban_synthesis.plugin.network.links import allowed_area, link_floating_pieces
+
+    target = shapely.union_all([shapely.box(0, 0, 100, 500), shapely.box(300, 0, 400, 500),
+                                shapely.box(0, 430, 400, 500)])
+    road, street = L([(50, 0), (50, 380)]), L([(350, 60), (350, 300)])
+    links, keep = link_floating_pieces([road, street], [True, False], inside=target,
+                                       drop_unlinked=False)
+    assert len(links) == 0 and keep.all()
+    links, keep = link_floating_pieces([road, street], [True, False], inside=target,
+                                       bent=True)
+    assert len(links) == 1 and keep.all()
+    link = links[0]
+    assert len(link.coords) >= 3                     # it turns at the arms' corners
+    assert shapely.covers(allowed_area(target), link)
+    assert not shapely.intersects(link, shapely.box(110, 0, 290, 420))   # not across the bay
+    assert shapely.distance(shapely.get_point(link, 0), street) < 1e-6
+    assert shapely.distance(shapely.get_point(link, -1), road) < 1e-6
+    c = I.check_network([street, link], [road], target=target)
+    assert c.ok and c.n_components == 1 and c.floating_pieces == 0

@@ -16,12 +16,15 @@ from typing import Callable, Optional, Tuple
 import numpy as np
 import shapely
 from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
+from scipy.sparse.csgraph import connected_components, dijkstra
+from shapely.geometry.polygon import orient
+from shapely.ops import substring
 
 from . import street_graph as _roads
-from .invariants import EDGE_DISTANCE, connected_pieces
+from .invariants import CORRIDOR_HALF_WIDTH, EDGE_DISTANCE, connected_pieces
 
-__all__ = ["link_floating_pieces", "join_pieces", "meets_only_at_ends", "allowed_area"]
+__all__ = ["link_floating_pieces", "join_pieces", "meets_only_at_ends", "allowed_area",
+           "path_inside"]
 
 #: Nodes of a piece tried as a link's start, nearest to the anchored network first.
 NODES_TRIED = 32
@@ -29,6 +32,8 @@ NODES_TRIED = 32
 #: m: how far a new street may leave the target (one along its outline): the invariants'
 #: own tolerance for a street leaving it (``check_network(target=...)``).
 OUTSIDE_TOLERANCE = EDGE_DISTANCE
+#: m: a bent link (:func:`path_inside`) turns this far inside the target's outline.
+PATH_MARGIN = 5.0
 
 
 def allowed_area(target):
@@ -42,6 +47,60 @@ def allowed_area(target):
     area = shapely.buffer(target, OUTSIDE_TOLERANCE)
     shapely.prepare(area)
     return area
+
+
+def path_inside(area, starts: np.ndarray, ends: np.ndarray, within=None):
+    """The shortest polyline inside ``area`` from one of the points ``starts`` (k, 2) to one
+    of ``ends`` (m, 2): a visibility graph over the points and the corners of the area
+    shrunk by :data:`PATH_MARGIN` (simplified by a tenth of it), searched with Dijkstra.
+    ``within``: where a leg may run (default :func:`allowed_area`). None when no path
+    exists (the two lie in parts of the area apart). No library does this for a polygon
+    (shapely has no shortest path inside one), hence by hand.
+
+    Around the inner corner of an L:
+
+    >>> ell = shapely.Polygon([(0, 0), (100, 0), (100, 100), (80, 100), (80, 20), (0, 20)])
+    >>> path = path_inside(ell, np.array([[5.0, 10.0]]), np.array([[90.0, 95.0]]))
+    >>> len(path.coords), round(path.length), shapely.covers(allowed_area(ell), path)
+    (3, 156, True)
+    """
+    within = allowed_area(area) if within is None else within
+    starts, ends = np.atleast_2d(starts), np.atleast_2d(ends)
+    shrunk = shapely.simplify(shapely.buffer(area, -PATH_MARGIN), PATH_MARGIN / 10)
+    pts = np.concatenate([starts, ends, _reflex_corners(shrunk)])
+    n, k = len(pts), len(starts)
+    i, j = np.triu_indices(n, 1)
+    legs = shapely.linestrings(np.stack([pts[i], pts[j]], axis=1))
+    ok = shapely.covers(within, legs)
+    w = np.hypot(*(pts[i[ok]] - pts[j[ok]]).T)
+    graph = coo_matrix((np.r_[w, w] + 1e-9, (np.r_[i[ok], j[ok]], np.r_[j[ok], i[ok]])),
+                       shape=(n, n)).tocsr()
+    dist, pred, source = dijkstra(graph, indices=np.arange(k), min_only=True,
+                                  return_predecessors=True)
+    end_ids = np.arange(k, k + len(ends))
+    best = int(end_ids[np.argmin(dist[end_ids])])
+    if not np.isfinite(dist[best]):
+        return None
+    chain = [best]
+    while chain[-1] != source[best]:
+        chain.append(int(pred[chain[-1]]))
+    return shapely.LineString(pts[chain[::-1]])
+
+
+def _reflex_corners(area) -> np.ndarray:
+    """The corners of a polygon(s) where its inside turns more than half round (a shortest
+    path inside bends only there): (k, 2)."""
+    out = [np.empty((0, 2))]
+    for part in shapely.get_parts(area):
+        # exterior counter-clockwise, holes clockwise: the inside lies left of every ring
+        part = orient(part, 1.0)
+        for ring in [part.exterior, *part.interiors]:
+            c = shapely.get_coordinates(ring)[:-1]
+            if len(c) < 3:
+                continue
+            a, b = c - np.roll(c, 1, axis=0), np.roll(c, -1, axis=0) - c
+            out.append(c[a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0] < 0])   # a right turn
+    return np.concatenate(out)
 
 
 def meets_only_at_ends(link, lines) -> bool:
@@ -63,8 +122,8 @@ def meets_only_at_ends(link, lines) -> bool:
 def link_floating_pieces(lines, anchored, accept: Optional[Callable] = None,
                          drop_unlinked: bool = True, ends_on=None,
                          max_length: Optional[Callable[[float], float]] = None,
-                         pieces=None, both_ways: bool = False, inside=None
-                         ) -> Tuple[np.ndarray, np.ndarray]:
+                         pieces=None, both_ways: bool = False, inside=None,
+                         bent: bool = False) -> Tuple[np.ndarray, np.ndarray]:
     """Links that join every piece of a noded network to its anchored pieces.
 
     Each piece (connected component) with no anchored line gets the shortest straight street
@@ -91,6 +150,10 @@ def link_floating_pieces(lines, anchored, accept: Optional[Callable] = None,
     inside : Polygon(s), optional, the target: a link stays in it (within
         :data:`OUTSIDE_TOLERANCE`; between two arms of a concave target a straight link
         would cross land outside it)
+    bent : bool, with ``inside``: where no straight link is left, a piece in an arm of the
+        target is joined by the shortest polyline inside it (:func:`path_inside`, from the
+        piece's nodes nearest to the anchored network to that network's nodes nearest to
+        the piece), clear of the other streets as a straight link is
 
     Returns
     -------
@@ -192,6 +255,9 @@ def link_floating_pieces(lines, anchored, accept: Optional[Callable] = None,
                                       math.inf if best is None else best[0])
                 if found is not None:
                     best = (found[0], comp, found[1])
+        if best is None and bent and inside is not None:
+            best = _nearest_bent(inside, within, g, edge_comp, anchored, takes_link, clear,
+                                 accept)
         if best is None:
             break  # no piece can be linked without crossing a street
         _, comp, link = best
@@ -200,6 +266,67 @@ def link_floating_pieces(lines, anchored, accept: Optional[Callable] = None,
     if drop_unlinked:
         keep[src[~anchored[edge_comp]]] = False
     return np.asarray(links, dtype=object), keep
+
+
+def _nearest_bent(inside, within, g, edge_comp, anchored, takes_link, clear, accept):
+    """The shortest clear bent link (:func:`path_inside`) from a piece not anchored to the
+    anchored network, between the :data:`NODES_TRIED` nodes of each nearest to the other:
+    (length, piece, link) or None."""
+    at = anchored[edge_comp] & takes_link
+    anchor_xy = g.nodes[np.unique(np.r_[g.u[at], g.v[at]])]
+    if not len(anchor_xy):
+        return None
+    anchor_tree = shapely.STRtree(shapely.points(anchor_xy))
+    best = None
+    for comp in np.flatnonzero(~anchored):
+        own = (edge_comp == comp) & takes_link
+        if not own.any():
+            continue
+        xy = g.nodes[np.unique(np.r_[g.u[own], g.v[own]])]
+        _, d = anchor_tree.query_nearest(shapely.points(xy), return_distance=True,
+                                         all_matches=False)
+        starts = xy[np.argsort(d, kind="stable")[:NODES_TRIED]]
+        own_tree = shapely.STRtree(shapely.points(starts))
+        _, d = own_tree.query_nearest(shapely.points(anchor_xy), return_distance=True,
+                                      all_matches=False)
+        ends = anchor_xy[np.argsort(d, kind="stable")[:NODES_TRIED]]
+        path = path_inside(inside, starts, ends, within)
+        link = None if path is None else _first_reach(path, g.geometry[edge_comp == comp],
+                                                      g.geometry[at])
+        if link is None or (best is not None and link.length >= best[0]):
+            continue
+        if clear(link) and (accept is None or accept(link)):
+            best = (float(link.length), int(comp), link)
+    return best
+
+
+def _first_reach(path, own, anchored):
+    """The stretch of a bent path from its last contact with its own piece (``own``) to
+    where it first comes within a street's corridor of the anchored network (``anchored``)
+    after it, then square onto that street (a path that followed the street's side there
+    would double it); None where it reaches none."""
+    def positions(lines):
+        hit = shapely.intersection(lines[shapely.intersects(lines, path)], path)
+        pts = shapely.get_parts(shapely.get_parts(hit))
+        pts = shapely.get_coordinates(pts) if len(pts) else np.empty((0, 2))
+        return shapely.line_locate_point(path, shapely.points(pts)) if len(pts) else \
+            np.empty(0), pts
+
+    s_own, _ = positions(own)
+    s0 = float(s_own.max()) if len(s_own) else 0.0
+    steps = np.arange(s0, path.length, 1.0)
+    near, d = shapely.STRtree(anchored).query_nearest(
+        shapely.line_interpolate_point(path, steps), return_distance=True, all_matches=False)
+    reached = np.flatnonzero(d <= CORRIDOR_HALF_WIDTH)
+    if not len(reached):
+        return None
+    k = int(reached[0])
+    head = substring(path, s0, float(steps[k]))
+    to_street = shapely.shortest_line(shapely.get_point(head, -1), anchored[near[1][k]])
+    coords = np.concatenate([shapely.get_coordinates(head)[:-1],
+                             shapely.get_coordinates(to_street)])
+    coords = coords[np.r_[True, np.hypot(*np.diff(coords, axis=0).T) > 1e-9]]
+    return shapely.LineString(coords) if len(coords) > 1 else None
 
 
 def join_pieces(lines, ends_on=None, max_length: Optional[Callable[[float], float]] = None,

@@ -1189,7 +1189,7 @@ def grow_roads(boundary, *, settings: Optional[GrowthSettings] = None, major_roa
     n_dead = 0
     if s.remove_dead_ends:
         result, n_dead = remove_dead_ends(result)
-    result, n_links = link_pieces(result, s.minor_width, s.max_slope, dem, obst)
+    result, n_links = link_pieces(result, s.minor_width, s.max_slope, dem, obst, area)
     progress.step(1.0)
     result.stats.update({
         "segments": g.n_grown, "major_segments": g.grown[MAJOR],
@@ -1291,31 +1291,49 @@ def remove_dead_ends(result: "GrowthResult"):
 
 
 def link_pieces(result: "GrowthResult", width: float, max_slope: float = np.inf,
-                dem: Optional[DemGrid] = None, obstacles=None):
+                dem: Optional[DemGrid] = None, obstacles=None, inside=None):
     """Join the pieces of the network that reach no sketched road (without a sketch: the
-    longest piece) by the shortest straight road that crosses nothing, is no steeper than
+    longest piece) by the shortest road that crosses nothing, is no steeper than
     ``max_slope`` on the DEM and enters no obstacle (:func:`links.link_floating_pieces`;
-    level minor, pattern 'link', ``width``). A piece that no such road reaches stays as it
-    is. Where the boundary's parts lie apart the link leaves the boundary: the only road
-    that does. The lines a link ends on are split there, so the edges stay noded and
-    straight. Returns (result, links added)."""
+    level minor, pattern 'link', ``width``): straight where a straight road inside
+    ``inside`` (the boundary) reaches the piece, else bent along the boundary's arm
+    (:func:`links.path_inside`; a straight road across the bay between two arms of a
+    concave boundary would leave it). Only a piece in a part of the boundary apart from
+    the rest is joined by a straight road that leaves the boundary, the only road that
+    does; a piece that no such road reaches stays as it is. A bent link is one road of
+    straight legs, and the lines a link ends on are split there, so the edges stay noded
+    and straight. Returns (result, links added)."""
     def buildable(link) -> bool:
         if dem is not None and segment_slopes([link], dem)[0] > max_slope:
             return False
         return obstacles is None or shapely.intersection(link, obstacles).length < 1e-6
 
-    links, _ = link_floating_pieces(result.geometry, result.pattern == "sketch",
-                                    accept=buildable, drop_unlinked=False)
-    if not len(links):
-        return result, 0
-    lines = np.concatenate([result.geometry, links])
-    level = np.r_[result.level, np.full(len(links), MINOR)]
-    pattern = np.r_[result.pattern, np.full(len(links), "link", dtype=object)]
-    width_all = np.r_[result.width, np.full(len(links), float(width))]
-    pieces, parent = renode(lines, np.r_[np.zeros(len(result.geometry), bool),
-                                         np.ones(len(links), bool)], level, min_length=1e-9)
-    return GrowthResult(pieces, level[parent], pattern[parent].astype(object),
-                        width_all[parent], result.stats), len(links)
+    n_links = 0
+    # inside the boundary first; then, for what is left, across it (parts apart)
+    for within in ((inside, None) if inside is not None else (None,)):
+        links, _ = link_floating_pieces(result.geometry, result.pattern == "sketch",
+                                        accept=buildable, drop_unlinked=False, inside=within,
+                                        bent=within is not None)
+        if not len(links):
+            continue
+        n_links += len(links)
+        legs = _legs(links)
+        lines = np.concatenate([result.geometry, legs])
+        level = np.r_[result.level, np.full(len(legs), MINOR)]
+        pattern = np.r_[result.pattern, np.full(len(legs), "link", dtype=object)]
+        width_all = np.r_[result.width, np.full(len(legs), float(width))]
+        pieces, parent = renode(lines, np.r_[np.zeros(len(result.geometry), bool),
+                                             np.ones(len(legs), bool)], level, min_length=1e-9)
+        result = GrowthResult(pieces, level[parent], pattern[parent].astype(object),
+                              width_all[parent], result.stats)
+    return result, n_links
+
+
+def _legs(lines) -> np.ndarray:
+    """The straight segments of lines, one line each."""
+    xy, idx = shapely.get_coordinates(lines, return_index=True)
+    same = idx[1:] == idx[:-1]
+    return shapely.linestrings(np.stack([xy[:-1][same], xy[1:][same]], axis=1))
 
 
 # --------------------------------------------------------------------------- stage helpers
