@@ -304,7 +304,16 @@ def _first_reach(path, own, anchored):
     """The stretch of a bent path from its last contact with its own piece (``own``) to
     where it first comes within a street's corridor of the anchored network (``anchored``)
     after it, then square onto that street (a path that followed the street's side there
-    would double it); None where it reaches none."""
+    would double it); None where it reaches none.
+
+    A path that starts in the street's corridor goes square onto it from its start:
+
+    >>> road = shapely.LineString([(0, 0), (100, 0)])
+    >>> own = np.array([shapely.LineString([(40, 5), (60, 5)])])
+    >>> path = shapely.LineString([(50, 5), (50, 60), (90, 60)])
+    >>> _first_reach(path, own, np.array([road])).wkt
+    'LINESTRING (50 5, 50 0)'
+    """
     def positions(lines):
         hit = shapely.intersection(lines[shapely.intersects(lines, path)], path)
         pts = shapely.get_parts(shapely.get_parts(hit))
@@ -321,10 +330,11 @@ def _first_reach(path, own, anchored):
     if not len(reached):
         return None
     k = int(reached[0])
-    head = substring(path, s0, float(steps[k]))
-    to_street = shapely.shortest_line(shapely.get_point(head, -1), anchored[near[1][k]])
-    coords = np.concatenate([shapely.get_coordinates(head)[:-1],
-                             shapely.get_coordinates(to_street)])
+    # the path up to there (only its start where that is already in the corridor)
+    head = shapely.get_coordinates(substring(path, s0, float(steps[k]))) if k else \
+        shapely.get_coordinates(shapely.line_interpolate_point(path, s0))
+    to_street = shapely.shortest_line(shapely.Point(head[-1]), anchored[near[1][k]])
+    coords = np.concatenate([head[:-1], shapely.get_coordinates(to_street)])
     coords = coords[np.r_[True, np.hypot(*np.diff(coords, axis=0).T) > 1e-9]]
     return shapely.LineString(coords) if len(coords) > 1 else None
 
