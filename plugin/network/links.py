@@ -24,7 +24,7 @@ from . import street_graph as _roads
 from .invariants import CORRIDOR_HALF_WIDTH, EDGE_DISTANCE, connected_pieces
 
 __all__ = ["link_floating_pieces", "join_pieces", "meets_only_at_ends", "allowed_area",
-           "path_inside"]
+           "path_inside", "PathsInside"]
 
 #: Nodes of a piece tried as a link's start, nearest to the anchored network first.
 NODES_TRIED = 32
@@ -51,11 +51,8 @@ def allowed_area(target):
 
 def path_inside(area, starts: np.ndarray, ends: np.ndarray, within=None):
     """The shortest polyline inside ``area`` from one of the points ``starts`` (k, 2) to one
-    of ``ends`` (m, 2): a visibility graph over the points and the corners of the area
-    shrunk by :data:`PATH_MARGIN` (simplified by a tenth of it), searched with Dijkstra.
-    ``within``: where a leg may run (default :func:`allowed_area`). None when no path
-    exists (the two lie in parts of the area apart). No library does this for a polygon
-    (shapely has no shortest path inside one), hence by hand.
+    of ``ends`` (m, 2) (:class:`PathsInside`); None when no path exists (the two lie in
+    parts of the area apart).
 
     Around the inner corner of an L:
 
@@ -64,27 +61,55 @@ def path_inside(area, starts: np.ndarray, ends: np.ndarray, within=None):
     >>> len(path.coords), round(path.length), shapely.covers(allowed_area(ell), path)
     (3, 156, True)
     """
-    within = allowed_area(area) if within is None else within
-    starts, ends = np.atleast_2d(starts), np.atleast_2d(ends)
-    shrunk = shapely.simplify(shapely.buffer(area, -PATH_MARGIN), PATH_MARGIN / 10)
-    pts = np.concatenate([starts, ends, _reflex_corners(shrunk)])
-    n, k = len(pts), len(starts)
-    i, j = np.triu_indices(n, 1)
-    legs = shapely.linestrings(np.stack([pts[i], pts[j]], axis=1))
-    ok = shapely.covers(within, legs)
-    w = np.hypot(*(pts[i[ok]] - pts[j[ok]]).T)
-    graph = coo_matrix((np.r_[w, w] + 1e-9, (np.r_[i[ok], j[ok]], np.r_[j[ok], i[ok]])),
-                       shape=(n, n)).tocsr()
-    dist, pred, source = dijkstra(graph, indices=np.arange(k), min_only=True,
-                                  return_predecessors=True)
-    end_ids = np.arange(k, k + len(ends))
-    best = int(end_ids[np.argmin(dist[end_ids])])
-    if not np.isfinite(dist[best]):
-        return None
-    chain = [best]
-    while chain[-1] != source[best]:
-        chain.append(int(pred[chain[-1]]))
-    return shapely.LineString(pts[chain[::-1]])
+    return PathsInside(area, within).shortest(starts, ends)
+
+
+class PathsInside:
+    """Shortest paths inside a polygon(s): a visibility graph over the reflex corners of the
+    area shrunk by :data:`PATH_MARGIN` (simplified by a tenth of it; a shortest path bends
+    only at reflex corners), searched with Dijkstra. The legs between corners are found
+    once; each query adds only its own points' legs. ``within``: where a leg may run
+    (default :func:`allowed_area`). No library does this for a polygon (shapely has no
+    shortest path inside one), hence by hand."""
+
+    def __init__(self, area, within=None):
+        self.within = allowed_area(area) if within is None else within
+        shrunk = shapely.simplify(shapely.buffer(area, -PATH_MARGIN), PATH_MARGIN / 10)
+        self.corners = _reflex_corners(shrunk)
+        i, j = np.triu_indices(len(self.corners), 1)
+        ok = self._visible(self.corners[i], self.corners[j])
+        self._legs = (i[ok], j[ok])
+
+    def _visible(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        if not len(a):
+            return np.zeros(0, bool)
+        return shapely.covers(self.within, shapely.linestrings(np.stack([a, b], axis=1)))
+
+    def shortest(self, starts: np.ndarray, ends: np.ndarray):
+        """The shortest path from one of ``starts`` to one of ``ends``, or None."""
+        starts, ends = np.atleast_2d(starts), np.atleast_2d(ends)
+        k, m, c = len(starts), len(ends), len(self.corners)
+        pts = np.concatenate([starts, ends, self.corners])
+        # legs: corner to corner (found once), and from each query point to everything
+        q_i, q_j = np.meshgrid(np.arange(k + m), np.arange(k + m + c), indexing="ij")
+        keep = q_j > q_i
+        q_i, q_j = q_i[keep], q_j[keep]
+        ok = self._visible(pts[q_i], pts[q_j])
+        i = np.r_[q_i[ok], self._legs[0] + k + m]
+        j = np.r_[q_j[ok], self._legs[1] + k + m]
+        w = np.hypot(*(pts[i] - pts[j]).T) + 1e-9
+        n = k + m + c
+        graph = coo_matrix((np.r_[w, w], (np.r_[i, j], np.r_[j, i])), shape=(n, n)).tocsr()
+        dist, pred, source = dijkstra(graph, indices=np.arange(k), min_only=True,
+                                      return_predecessors=True)
+        end_ids = np.arange(k, k + m)
+        best = int(end_ids[np.argmin(dist[end_ids])])
+        if not np.isfinite(dist[best]):
+            return None
+        chain = [best]
+        while chain[-1] != source[best]:
+            chain.append(int(pred[chain[-1]]))
+        return shapely.LineString(pts[chain[::-1]])
 
 
 def _reflex_corners(area) -> np.ndarray:
@@ -229,6 +254,7 @@ def link_floating_pieces(lines, anchored, accept: Optional[Callable] = None,
                 return float(d[k]), link
         return None
 
+    paths = None   # the target's visibility graph, built at the first bent link
     while not anchored.all():
         # the anchored network as its edges (its union, rebuilt per link, cost seconds on a
         # 36 km² StreetGAN network): the nearest edge is the nearest point
@@ -256,8 +282,8 @@ def link_floating_pieces(lines, anchored, accept: Optional[Callable] = None,
                 if found is not None:
                     best = (found[0], comp, found[1])
         if best is None and bent and inside is not None:
-            best = _nearest_bent(inside, within, g, edge_comp, anchored, takes_link, clear,
-                                 accept)
+            paths = paths or PathsInside(inside, within)
+            best = _nearest_bent(paths, g, edge_comp, anchored, takes_link, clear, accept)
         if best is None:
             break  # no piece can be linked without crossing a street
         _, comp, link = best
@@ -268,7 +294,7 @@ def link_floating_pieces(lines, anchored, accept: Optional[Callable] = None,
     return np.asarray(links, dtype=object), keep
 
 
-def _nearest_bent(inside, within, g, edge_comp, anchored, takes_link, clear, accept):
+def _nearest_bent(paths, g, edge_comp, anchored, takes_link, clear, accept):
     """The shortest clear bent link (:func:`path_inside`) from a piece not anchored to the
     anchored network, between the :data:`NODES_TRIED` nodes of each nearest to the other:
     (length, piece, link) or None."""
@@ -290,7 +316,7 @@ def _nearest_bent(inside, within, g, edge_comp, anchored, takes_link, clear, acc
         _, d = own_tree.query_nearest(shapely.points(anchor_xy), return_distance=True,
                                       all_matches=False)
         ends = anchor_xy[np.argsort(d, kind="stable")[:NODES_TRIED]]
-        path = path_inside(inside, starts, ends, within)
+        path = paths.shortest(starts, ends)
         link = None if path is None else _first_reach(path, g.geometry[edge_comp == comp],
                                                       g.geometry[at])
         if link is None or (best is not None and link.length >= best[0]):
