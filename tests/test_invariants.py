@@ -261,3 +261,15 @@ def test_a_piece_in_the_other_arm_of_a_concave_target_is_linked_along_the_arms()
     assert shapely.distance(shapely.get_point(link, -1), road) < 1e-6
     c = I.check_network([street, link], [road], target=target)
     assert c.ok and c.n_components == 1 and c.floating_pieces == 0
+
+
+def test_a_finely_toothed_target_keeps_the_bent_links_graph_small():
+    """A strip with 1,200 teeth: its outline shrunk for the bent links has about 6,000
+    reflex corners (each valley an arc), whose legs (18 million pairs) would be checked one
+    by one; the graph keeps at most MAX_PATH_CORNERS, the outline simplified further."""
+    from urban_synthesis.plugin.network.links import MAX_PATH_CORNERS, PathsInside
+
+    top = [xy for i in range(1200) for xy in ((20 * i, 40.0), (20 * i + 10, 90.0))]
+    comb = shapely.Polygon([(0, 0), (24000, 0), (24000, 40)] + top[::-1])
+    assert comb.is_valid
+    assert len(PathsInside(comb).corners) <= MAX_PATH_CORNERS

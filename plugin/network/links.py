@@ -34,6 +34,8 @@ NODES_TRIED = 32
 OUTSIDE_TOLERANCE = EDGE_DISTANCE
 #: m: a bent link (:func:`path_inside`) turns this far inside the target's outline.
 PATH_MARGIN = 5.0
+#: Most corners a bent link's visibility graph holds (their legs are checked pairwise).
+MAX_PATH_CORNERS = 800
 
 
 def allowed_area(target):
@@ -66,16 +68,23 @@ def path_inside(area, starts: np.ndarray, ends: np.ndarray, within=None):
 
 class PathsInside:
     """Shortest paths inside a polygon(s): a visibility graph over the reflex corners of the
-    area shrunk by :data:`PATH_MARGIN` (simplified by a tenth of it; a shortest path bends
-    only at reflex corners), searched with Dijkstra. The legs between corners are found
+    area shrunk by :data:`PATH_MARGIN` (simplified by a tenth of it, or more where it keeps
+    over :data:`MAX_PATH_CORNERS`; a shortest path bends only at reflex corners), searched
+    with Dijkstra. The legs between corners are found
     once; each query adds only its own points' legs. ``within``: where a leg may run
     (default :func:`allowed_area`). No library does this for a polygon (shapely has no
     shortest path inside one), hence by hand."""
 
     def __init__(self, area, within=None):
         self.within = allowed_area(area) if within is None else within
-        shrunk = shapely.simplify(shapely.buffer(area, -PATH_MARGIN), PATH_MARGIN / 10)
-        self.corners = _reflex_corners(shrunk)
+        shrunk = shapely.buffer(area, -PATH_MARGIN)
+        tolerance = PATH_MARGIN / 10
+        # a finely digitised boundary is simplified further, so that the legs between its
+        # corners stay countable (a leg is checked inside, so no path can leave the area)
+        while len(corners := _reflex_corners(shapely.simplify(shrunk, tolerance))) > \
+                MAX_PATH_CORNERS:
+            tolerance *= 2
+        self.corners = corners
         i, j = np.triu_indices(len(self.corners), 1)
         ok = self._visible(self.corners[i], self.corners[j])
         self._legs = (i[ok], j[ok])

@@ -1298,9 +1298,9 @@ def link_pieces(result: "GrowthResult", width: float, max_slope: float = np.inf,
     level minor, pattern 'link', ``width``): straight where a straight road inside
     ``inside`` (the boundary) reaches the piece, else bent along the boundary's arm
     (:func:`links.path_inside`; a straight road across the bay between two arms of a
-    concave boundary would leave it). Only a piece in a part of the boundary apart from
-    the rest is joined by a straight road that leaves the boundary, the only road that
-    does; a piece that no such road reaches stays as it is. A bent link is one road of
+    concave boundary would leave it). Only a piece that no road inside reaches (in a part
+    of the boundary apart from the rest) is joined by a straight road that leaves the
+    boundary, the only road that does; a piece that no such road reaches stays as it is. A bent link is one road of
     straight legs, and the lines a link ends on are split there, so the edges stay noded
     and straight. Returns (result, links added)."""
     def buildable(link) -> bool:
@@ -1310,10 +1310,10 @@ def link_pieces(result: "GrowthResult", width: float, max_slope: float = np.inf,
 
     n_links = 0
     # inside the boundary first; then, for what is left, across it (parts apart)
-    for within in ((inside, None) if inside is not None else (None,)):
+    for region in ((inside, None) if inside is not None else (None,)):
         links, _ = link_floating_pieces(result.geometry, result.pattern == "sketch",
-                                        accept=buildable, drop_unlinked=False, inside=within,
-                                        bent=within is not None)
+                                        accept=buildable, drop_unlinked=False, inside=region,
+                                        bent=region is not None)
         if not len(links):
             continue
         n_links += len(links)
