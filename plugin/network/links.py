@@ -4,7 +4,9 @@ The fidelity issue asks every road synthesis for one network connected to the gi
 A method that fills faces closed only by a target's outline (fragments), or grows in a part
 of a target that no given road reaches (growroads), leaves pieces that touch nothing; each
 gets the shortest straight street that joins it to the network that is anchored (reaches
-the given roads) and crosses no other street. This module is the one home of that rule.
+the given roads) and crosses no other street; where a target's outline is given and no
+straight street inside it is left, a method may ask for a street bent along the target's
+arm (:class:`PathsInside`, growroads). This module is the one home of that rule.
 
 Nothing here imports QGIS.
 """
