@@ -31,7 +31,7 @@ import numpy as np
 import shapely
 
 from ..core import coordinates
-from ..core.geometry import minimum_rectangles
+from ..core.geometry import minimum_rectangles, two_point_segments
 
 __all__ = ["REACH", "SERVE", "fold", "main_axis", "street_segments", "nearest_street",
            "street_angle", "relative_angle", "align_to_frontage", "street_points",
@@ -54,18 +54,9 @@ def main_axis(polygons: Sequence) -> np.ndarray:
 
 
 def street_segments(lines: Sequence) -> np.ndarray:
-    """Two-point segments of lines or polygon outlines (the streets a footprint may face)."""
-    geoms = np.asarray(lines, dtype=object)
-    geoms = geoms[~shapely.is_empty(geoms)] if len(geoms) else geoms
-    if not len(geoms):
-        return np.zeros(0, dtype=object)
-    geoms = np.where(shapely.get_type_id(geoms) >= 3, shapely.boundary(geoms), geoms)
-    parts = shapely.get_parts(shapely.get_parts(geoms))
-    xy, idx = shapely.get_coordinates(parts, return_index=True)
-    same = idx[1:] == idx[:-1]
-    a, b = xy[:-1][same], xy[1:][same]
-    keep = np.hypot(*(b - a).T) > 1e-9
-    return shapely.linestrings(np.stack([a[keep], b[keep]], axis=1))
+    """Two-point segments of lines or polygon outlines (the streets a footprint may face;
+    :func:`core.geometry.two_point_segments`)."""
+    return two_point_segments(lines)
 
 
 def nearest_street(geoms: Sequence, segments: np.ndarray

@@ -24,10 +24,31 @@ import shapely
 
 __all__ = ["group_starts", "group_ends", "unit", "substrings", "pinned_ends",
            "polygon_parts", "largest_polygons", "minimum_rectangles", "minimum_rectangle_corners",
-           "longest_edge_directions", "ring_turns", "rounded_bends", "rounded_band_bends"]
+           "longest_edge_directions", "ring_turns", "rounded_bends", "rounded_band_bends",
+           "two_point_segments"]
 
 
 # --------------------------------------------------------------------------- arrays
+
+def two_point_segments(lines: Sequence) -> np.ndarray:
+    """The straight segments of lines or polygon outlines, one two-point line each (empty
+    geometries and zero-length segments left out).
+
+    >>> [g.wkt for g in two_point_segments([shapely.LineString([(0, 0), (1, 0), (1, 2)])])]
+    ['LINESTRING (0 0, 1 0)', 'LINESTRING (1 0, 1 2)']
+    """
+    geoms = np.asarray(lines, dtype=object)
+    geoms = geoms[~shapely.is_empty(geoms)] if len(geoms) else geoms
+    if not len(geoms):
+        return np.zeros(0, dtype=object)
+    geoms = np.where(shapely.get_type_id(geoms) >= 3, shapely.boundary(geoms), geoms)
+    parts = shapely.get_parts(shapely.get_parts(geoms))
+    xy, idx = shapely.get_coordinates(parts, return_index=True)
+    same = idx[1:] == idx[:-1]
+    a, b = xy[:-1][same], xy[1:][same]
+    keep = np.hypot(*(b - a).T) > 1e-9
+    return shapely.linestrings(np.stack([a[keep], b[keep]], axis=1))
+
 
 def group_starts(keys: np.ndarray) -> np.ndarray:
     """True where a run of equal values in ``keys`` begins.
@@ -357,7 +378,8 @@ def rounded_bends(polygon, max_turn: float, reach: float, step: float = 5.0):
     Bézier arc from ``reach`` metres before it to ``reach`` metres after it (at most 0.4 of
     either edge), sampled in ceil(turn / step) even steps of its parameter, so that a
     vertex of the arc turns by about ``step`` degrees (a 20-degree bend in 5-degree steps:
-    2.5, 5.0, 5.1, 5.0, 2.5). Sharper corners, and flatter bends, stay as they are; the outline moves by
+    2.5, 5.0, 5.1, 5.0, 2.5). Sharper corners, and flatter bends, stay as they are; the
+    outline moves by
     about ``reach * sin(turn / 2) / 2`` at a bend (the arc's polyline a little more). A
     result that would not be valid (the arcs of two bends of a narrow neck crossing) is
     not returned: the polygon comes back as it was. Written here because shapely smooths

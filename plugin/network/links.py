@@ -72,10 +72,10 @@ class PathsInside:
     """Shortest paths inside a polygon(s): a visibility graph over the reflex corners of the
     area shrunk by :data:`PATH_MARGIN` (simplified by a tenth of it, or more where it keeps
     over :data:`MAX_PATH_CORNERS`; a shortest path bends only at reflex corners), searched
-    with Dijkstra. The legs between corners are found
-    once; each query adds only its own points' legs. ``within``: where a leg may run
-    (default :func:`allowed_area`). No library does this for a polygon (shapely has no
-    shortest path inside one), hence by hand."""
+    with Dijkstra. The legs between corners are found once; each query adds only its own
+    points' legs. ``within``: where a leg may run (default :func:`allowed_area`). No
+    library does this for a polygon (shapely has no shortest path inside one), hence by
+    hand."""
 
     def __init__(self, area, within=None):
         self.within = allowed_area(area) if within is None else within
@@ -351,15 +351,10 @@ def _first_reach(path, own, anchored):
     >>> _first_reach(path, own, np.array([road])).wkt
     'LINESTRING (50 5, 50 0)'
     """
-    def positions(lines):
-        hit = shapely.intersection(lines[shapely.intersects(lines, path)], path)
-        pts = shapely.get_parts(shapely.get_parts(hit))
-        pts = shapely.get_coordinates(pts) if len(pts) else np.empty((0, 2))
-        return shapely.line_locate_point(path, shapely.points(pts)) if len(pts) else \
-            np.empty(0), pts
-
-    s_own, _ = positions(own)
-    s0 = float(s_own.max()) if len(s_own) else 0.0
+    touch = shapely.get_coordinates(shapely.intersection(own[shapely.intersects(own, path)],
+                                                        path))
+    s0 = float(shapely.line_locate_point(path, shapely.points(touch)).max()) if len(touch) \
+        else 0.0
     steps = np.arange(s0, path.length, 1.0)
     near, d = shapely.STRtree(anchored).query_nearest(
         shapely.line_interpolate_point(path, steps), return_distance=True, all_matches=False)

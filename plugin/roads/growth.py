@@ -67,7 +67,7 @@ import pandas as pd
 import shapely
 
 from ..core.progress import InputError, Progress, ensure
-from ..core.geometry import minimum_rectangles
+from ..core.geometry import minimum_rectangles, two_point_segments
 from ..network.blocks import planar_faces
 from ..network.links import link_floating_pieces
 from ..network.street_graph import clean_network, node_lines, renode
@@ -1300,9 +1300,9 @@ def link_pieces(result: "GrowthResult", width: float, max_slope: float = np.inf,
     (:func:`links.path_inside`; a straight road across the bay between two arms of a
     concave boundary would leave it). Only a piece that no road inside reaches (in a part
     of the boundary apart from the rest) is joined by a straight road that leaves the
-    boundary, the only road that does; a piece that no such road reaches stays as it is. A bent link is one road of
-    straight legs, and the lines a link ends on are split there, so the edges stay noded
-    and straight. Returns (result, links added)."""
+    boundary, the only road that does; a piece that no such road reaches stays as it is.
+    A bent link is one road of straight legs, and the lines a link ends on are split
+    there, so the edges stay noded and straight. Returns (result, links added)."""
     def buildable(link) -> bool:
         if dem is not None and segment_slopes([link], dem)[0] > max_slope:
             return False
@@ -1317,7 +1317,7 @@ def link_pieces(result: "GrowthResult", width: float, max_slope: float = np.inf,
         if not len(links):
             continue
         n_links += len(links)
-        legs = _legs(links)
+        legs = two_point_segments(links)
         lines = np.concatenate([result.geometry, legs])
         level = np.r_[result.level, np.full(len(legs), MINOR)]
         pattern = np.r_[result.pattern, np.full(len(legs), "link", dtype=object)]
@@ -1327,13 +1327,6 @@ def link_pieces(result: "GrowthResult", width: float, max_slope: float = np.inf,
         result = GrowthResult(pieces, level[parent], pattern[parent].astype(object),
                               width_all[parent], result.stats)
     return result, n_links
-
-
-def _legs(lines) -> np.ndarray:
-    """The straight segments of lines, one line each."""
-    xy, idx = shapely.get_coordinates(lines, return_index=True)
-    same = idx[1:] == idx[:-1]
-    return shapely.linestrings(np.stack([xy[:-1][same], xy[1:][same]], axis=1))
 
 
 # --------------------------------------------------------------------------- stage helpers
