@@ -35,7 +35,8 @@ Run ``.venv/bin/python tests/benchmarks/bench_fidelity.py`` (``--quick``: three 
 one seed; ``--towns Vaduz,Mauren``, ``--methods fragments``, ``--seeds 2``). Writes
 ``tests/benchmarks/results/fidelity.json``, the tables in
 ``tests/benchmarks/results/fidelity.md`` and one picture per target in
-``docs/fidelity_<town>.png`` (real | each method | best baseline).
+``docs/fidelity_<town>.png`` (real | each method | best baseline); with ``--out`` elsewhere, the
+tables and pictures go beside that JSON and the committed ones are left alone.
 
 © OpenStreetMap contributors, ODbL: every picture carries the attribution.
 """
@@ -497,7 +498,9 @@ def main(argv=None):
     ap.add_argument("--no-pictures", action="store_true")
     ap.add_argument("--fill-quantile", type=float, default=90.0,
                     help="fragments: example block-area quantile no face may exceed empty")
-    ap.add_argument("--out", default=str(RESULTS))
+    ap.add_argument("--out", default=str(RESULTS),
+                    help="the JSON to write; elsewhere than the committed one, its tables "
+                         "(.md) and pictures are written beside it")
     ap.add_argument("--gan-model", default=None,
                     help="judge this StreetGAN generator (.onnx, card next to it) on the "
                          "towns it was not trained on, instead of the shipped ones")
@@ -515,10 +518,14 @@ def main(argv=None):
     args = ap.parse_args(argv)
     if args.gan_model:
         GAN_CANDIDATES[:] = [str(Path(args.gan_model).resolve())]
+    out = Path(args.out)
+    # a run written elsewhere (a trial) leaves the committed tables and pictures alone
+    tables_path = TABLES if out.resolve() == RESULTS.resolve() else out.with_suffix(".md")
+    pictures = DOCS if out.resolve() == RESULTS.resolve() else out.parent
     if args.tables_only:
-        results = json.loads(Path(args.out).read_text())
-        TABLES.write_text(tables(results))
-        print(TABLES.read_text())
+        results = json.loads(out.read_text())
+        tables_path.write_text(tables(results))
+        print(tables_path.read_text())
         return results
     seeds = list(range(1 if args.quick else args.seeds))
     methods = [m for m in args.methods.split(",") if m]
@@ -526,7 +533,7 @@ def main(argv=None):
     towns = liechtenstein_towns() + [helsinki_town(), bubenec_town()]
     wanted = [s for s in args.towns.split(",") if s] or (list(QUICK_TOWNS) if args.quick else
                                                          [t.name for t in towns])
-    earlier = json.loads(Path(args.out).read_text()) if args.update else None
+    earlier = json.loads(out.read_text()) if args.update else None
     if earlier is not None:
         args.no_pictures = True
     results = {"benchmark": "fidelity", "seeds": seeds, "methods": methods,
@@ -595,18 +602,17 @@ def main(argv=None):
                        for m in methods if "score" in entry["methods"].get(m, {})}
                 sub[f"{best} (best baseline)"] = ("median rel. error "
                                                   f"{entry['baselines'][best]['score']['median_error']:.2f}")
-                draw(target, panels, DOCS / f"fidelity_{target.name.lower()}.png", sub)
+                draw(target, panels, pictures / f"fidelity_{target.name.lower()}.png", sub)
     if earlier is not None:
         results["methods"] = [m for m in METHOD_ORDER if m in methods
                               or m in earlier.get("methods", [])]
         results["targets"] = {**earlier["targets"], **results["targets"]}
     results["seconds"] = time.perf_counter() - t0
-    out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(results, indent=1, default=float))
-    TABLES.write_text(tables(results))
+    tables_path.write_text(tables(results))
     print(tables(results))
-    print(f"wrote {out} and {TABLES} in {results['seconds']:.0f} s")
+    print(f"wrote {out} and {tables_path} in {results['seconds']:.0f} s")
     return results
 
 
