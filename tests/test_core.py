@@ -90,3 +90,22 @@ def test_rounded_bends_keeps_holes_of_any_vertex_count():
     counts = sorted(len(r.coords) for r in out.interiors)
     assert counts[0] == 5 and counts[1] > 17   # the square as it was, the 16-gon rounded
     assert shapely.hausdorff_distance(out, region) < 1.0
+
+
+def test_first_hits_are_the_nearest_crossings_shapely_finds():
+    # a concave outline with a hole: rays from inside meet it once or many times
+    rng = np.random.default_rng(4)
+    region = shapely.Polygon([(0, 0), (100, 0), (100, 60), (60, 60), (60, 20), (40, 20),
+                              (40, 60), (0, 60)], [[(10, 10), (20, 10), (20, 20), (10, 20)]])
+    outline = shapely.boundary(region)
+    origins = np.column_stack([rng.uniform(0, 100, 300), rng.uniform(0, 60, 300)])
+    origins = origins[shapely.contains_xy(region, *origins.T)]
+    angle = rng.uniform(0, 2 * np.pi, len(origins))
+    directions = np.column_stack([np.cos(angle), np.sin(angle)])
+    got = geometry.first_hits(origins, directions, [outline], reach=50.0, start=0.01)
+    rays = shapely.linestrings(np.stack([origins + 0.01 * directions,
+                                         origins + 50.0 * directions], axis=1))
+    expected = shapely.distance(shapely.points(origins), shapely.intersection(rays, outline))
+    assert np.isnan(got).sum() == np.isnan(expected).sum() > 0  # some rays end short of it
+    np.testing.assert_allclose(got[~np.isnan(got)], expected[~np.isnan(expected)],
+                               rtol=0, atol=1e-9)

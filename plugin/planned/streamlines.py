@@ -39,6 +39,7 @@ import numpy as np
 import shapely
 from scipy.spatial import Delaunay, cKDTree
 
+from ..core.geometry import first_hits
 from .cross_field import SINGULAR_NORM, CrossField
 
 __all__ = ["DIVERGENCE_P", "CONTINUITY_DIST", "CONTINUITY_ANGLE", "Candidates",
@@ -338,15 +339,13 @@ def score_streamlines(cands: Candidates, field: CrossField, region, opt, ends=No
     # strips between the streamline and the boundary fit on the left and on the right
     boundary = shapely.boundary(region)
     reach = float(np.hypot(*(np.subtract(*np.reshape(shapely.bounds(region), (2, 2)))))) + 1.0
-    pts = shapely.points(xy)
     side = []
     for sign in (1.0, -1.0):
-        rays = shapely.linestrings(np.stack([xy + sign * 0.01 * normal,
-                                             xy + sign * reach * normal], axis=1))
-        with np.errstate(invalid="ignore"):
-            hit = shapely.intersection(rays, boundary)
-        d = shapely.distance(pts, hit)
-        side.append(np.where(np.isfinite(d), d, shapely.distance(boundary, pts)))
+        d = first_hits(xy, sign * normal, [boundary], reach, start=0.01)
+        missed = ~np.isfinite(d)
+        if missed.any():
+            d[missed] = shapely.distance(boundary, shapely.points(xy[missed]))
+        side.append(d)
     pointwise = np.sqrt(opt(side[0]) * opt(side[1]))
     count = np.bincount(owner, minlength=n)
     dbs = np.bincount(owner, pointwise, minlength=n) / np.maximum(count, 1)
