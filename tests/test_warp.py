@@ -141,3 +141,15 @@ def test_points_a_fraction_of_a_millimetre_from_an_edge_are_reproduced():
     pts = np.array([poly[0] + 0.3 * e + s * 2e-4 * normal for s in (-1, 1)])
     lam = warp.mean_value_coordinates(pts, poly)
     assert np.allclose(lam @ poly, pts, atol=1e-6)
+
+
+def test_the_blas_free_product_sums_in_the_same_order_as_the_elementwise_one():
+    # the reference it replaced: (n, k, 2) products summed over k; equal to the last bit,
+    # so that no warped vertex (and no decision after it) moved
+    rng = np.random.default_rng(1)
+    a = rng.random((3000, 257))
+    a /= a.sum(axis=1, keepdims=True)
+    b = rng.normal(0, 500, (257, 2))
+    reference = (a[:, :, None] * b[None, :, :]).sum(axis=1)
+    assert np.array_equal(warp.blas_free_product(a, b), reference)
+    assert np.array_equal(warp.blas_free_product(a, b, chunk=100), reference)

