@@ -238,6 +238,26 @@ def test_drawn_template_is_warped_as_drawn():
     bent = templates.warp_drawn(shapely.Polygon([(0, 0), (60, -22), (120, 0), (140, 70),
                                                  (60, 120), (-20, 70)]), t)
     assert len(bent.lots) == 6 and np.radians(40) < bent.energy < np.radians(40) + 0.1
+
+
+def test_a_drawn_template_is_prepared_once_and_again_when_its_drawing_changes():
+    """warp_drawn keeps what it computes of a template alone (its outline, corners and
+    sampled parcels) by the template's drawing: the same result as computed afresh, and a
+    template whose parcel coordinates are redrawn in place (the template is frozen, its
+    coordinate lists are not) is prepared again: twice as large, it no longer fits."""
+    from shapely import affinity
+
+    outline, geoms, labels = drawn_pentagon_template()
+    (t,) = templates.templates_from_drawn(geoms, ["pentagon"] * 6, labels)
+    block = affinity.rotate(affinity.scale(outline, 1.1, 0.95), 30)
+    kept = templates.warp_drawn(block, t)
+    templates._FRAMES.clear()
+    fresh = templates.warp_drawn(block, t)
+    assert kept.energy == fresh.energy
+    assert all(a.equals_exact(b, 0.0) for a, b in zip(kept.lots, fresh.lots))
+    for ring in t.parcels:
+        ring[:] = [[2 * x, 2 * y] for x, y in ring]
+    assert templates.warp_drawn(block, t) is None
     # three rows are no strip: drawn too, not an error
     rows3 = [shapely.box(i * 18, j * 30, (i + 1) * 18, (j + 1) * 30)
              for i in range(3) for j in range(3)]

@@ -644,14 +644,15 @@ class _Splitter:
         out = {t.name: _templates.fit_energy(region, t, s.parcel_length, s.parcel_width,
                                              s.street_width, shape)
                for t in self.lib if t.kind not in ("rows", "drawn")}
-        parts = None   # the block a drawn template fills (made once, for the first)
+        block = None   # the net block and its no-access zone, made once for all templates
         for t in self.lib:
+            if t.kind in ("rows", "drawn") and block is None:
+                block = self.net_block_of(region, self.no_street, self.no_frontage)
+            parts = block[0] if block is not None else None
             if t.kind == "rows":
-                out[t.name] = self.row_energy(region, t, self.no_street, self.no_frontage)
+                out[t.name] = self.row_energy(region, t, self.no_street, self.no_frontage,
+                                              block)
             elif t.kind == "drawn":
-                if parts is None:
-                    parts = _parcels._polygon_parts([net_block(region, s.street_width,
-                                                               self.no_street)], 1.0)
                 warp = _templates.warp_drawn(parts[0], t, cut=False,
                                              entrance_ok=self.entrance_ok) \
                     if len(parts) == 1 else None
@@ -666,17 +667,25 @@ class _Splitter:
             self.no_frontage, shapely.points(np.asarray(points).reshape(-1, 2)),
             self.s.street_width).any()
 
-    def row_energy(self, region, t, no_street, no_frontage) -> float:
-        """Warp energy of the row template ``t`` on a region whose sides along
-        ``no_street`` are "no street" edges and along ``no_frontage`` give no access
-        (inf when it does not fit or its edge labels do not agree)."""
+    def net_block_of(self, region, no_street, no_frontage):
+        """(parts of the region's net block, the zone where its sides give no access or
+        None): what every template's energy on the region starts from."""
         s = self.s
         parts = _parcels._polygon_parts([net_block(region, s.street_width, no_street)], 1.0)
-        if len(parts) != 1:
-            return math.inf
         near = None if no_frontage is None else shapely.buffer(
             _near(no_frontage, region, s.street_width), s.street_width / 2 + 1.0)
-        return _rows_energy(parts[0], t, s, near)
+        return parts, near
+
+    def row_energy(self, region, t, no_street, no_frontage, block=None) -> float:
+        """Warp energy of the row template ``t`` on a region whose sides along
+        ``no_street`` are "no street" edges and along ``no_frontage`` give no access
+        (inf when it does not fit or its edge labels do not agree); ``block``: the
+        region's :meth:`net_block_of` with the same lines, when made already."""
+        parts, near = block if block is not None else \
+            self.net_block_of(region, no_street, no_frontage)
+        if len(parts) != 1:
+            return math.inf
+        return _rows_energy(parts[0], t, self.s, near)
 
     def pick_template(self, energies, exclude=(), boost=None):
         """A template for a region, drawn by probability x exp(-energy / 0.1) among those

@@ -397,11 +397,97 @@ def _drawn_template(name: str, geoms: np.ndarray, labels: np.ndarray) -> Templat
 
 def drawn_outline(template: Template):
     """The outline of a drawn template (the union of its parcels, template frame)."""
-    return shapely.union_all(_drawn_parcels(template), grid_size=1e-6)
+    return _drawn_frame(template).outline
 
 
 def _drawn_parcels(template: Template) -> np.ndarray:
     return np.array([shapely.Polygon(p) for p in template.parcels], dtype=object)
+
+
+@dataclass(frozen=True)
+class _DrawnSide:
+    """What :func:`warp_drawn` needs of a drawn template as drawn or mirrored (``flip``)."""
+
+    flip: np.ndarray
+    parcels: np.ndarray       # the parcels, mirrored with the template
+    outline: shapely.Geometry
+    ring: np.ndarray          # the outline's corners (:func:`region_corners`)
+    corners: np.ndarray
+    label: np.ndarray         # +1 convex, -1 concave corner
+    sides: list               # the outline between corners
+    verts: np.ndarray         # every parcel's ring, at most DRAWN_SAMPLE_SPACING apart
+    face: np.ndarray          # the parcel of each of verts
+    centred: np.ndarray       # verts less their parcel's mean
+    ends: np.ndarray          # where each parcel's verts end (np.split)
+    root_area: np.ndarray     # sqrt of each parcel's area
+
+
+@dataclass(frozen=True)
+class _DrawnFrame:
+    """A drawn template's outline, size, labels, street entrances and both sides."""
+
+    outline: shapely.Geometry
+    long: float
+    short: float
+    parcels: np.ndarray
+    labels: np.ndarray
+    entrances: np.ndarray
+    sides: tuple
+
+
+#: Drawn templates prepared for :func:`warp_drawn`, by content (a layout evaluates every
+#: drawn template on every region: the union of its parcels cost 5 % of a town's split).
+_FRAMES: "dict" = {}
+_MAX_FRAMES = 64
+
+
+def _drawn_frame(template: Template) -> _DrawnFrame:
+    """The template-only part of :func:`warp_drawn`, computed once per drawn layout (keyed
+    by its parcels, labels and streets, so a template changed in place is prepared anew)."""
+    key = (tuple(np.asarray(p, dtype=float).tobytes() for p in template.parcels),
+           tuple(template.parcel_labels),
+           tuple(np.asarray(xy, dtype=float).tobytes() for xy in template.streets))
+    frame = _FRAMES.get(key)
+    if frame is None:
+        frame = _prepare_drawn(template)
+        if len(_FRAMES) >= _MAX_FRAMES:
+            _FRAMES.pop(next(iter(_FRAMES)))
+        _FRAMES[key] = frame
+    return frame
+
+
+def _prepare_drawn(template: Template) -> _DrawnFrame:
+    parcels_ = _drawn_parcels(template)
+    outline = shapely.union_all(parcels_, grid_size=1e-6)
+    (t_long,), (t_short,), _ = minimum_rectangles([outline]) \
+        if shapely.get_type_id(outline) == 3 else ((np.nan,), (np.nan,), None)
+    labels = np.asarray(template.parcel_labels or ("R",) * len(parcels_), dtype=object)
+    # where the template's own streets leave its outline (they join the street around)
+    t_edge = shapely.boundary(outline)
+    street_ends = np.array([xy[k] for xy in template.streets for k in (0, -1)]
+                           ).reshape(-1, 2)
+    entrances = street_ends[shapely.dwithin(shapely.points(street_ends), t_edge, 1e-3)] \
+        if len(street_ends) else street_ends
+    sides = []
+    for flip in ((np.array([1.0, 1.0]), np.array([-1.0, 1.0]))   # as drawn, mirrored
+                 if shapely.get_type_id(outline) == 3 else ()):
+        parcels_m = shapely.transform(parcels_, lambda xy: xy * flip)
+        t_outline = shapely.union_all(parcels_m, grid_size=1e-6)
+        t_ring, t_idx, t_turn = region_corners(t_outline)
+        dense = shapely.segmentize(parcels_m, DRAWN_SAMPLE_SPACING)
+        rings = [shapely.get_coordinates(shapely.get_exterior_ring(p))[:-1] for p in dense]
+        sides.append(_DrawnSide(
+            flip, parcels_m, t_outline, t_ring, t_idx, np.sign(t_turn[t_idx]),
+            _sides(t_ring, t_idx), np.concatenate(rings),
+            np.repeat(np.arange(len(rings)), [len(r) for r in rings]),
+            np.concatenate([r - r.mean(axis=0) for r in rings]),
+            np.cumsum([len(r) for r in rings])[:-1],
+            np.sqrt(np.maximum(shapely.area(dense), 1e-9))))
+    for a in [parcels_, labels, entrances] + [v for side in sides for v in vars(side).values()
+                                              if isinstance(v, np.ndarray)]:
+        a.setflags(write=False)   # shared by every call: read only
+    return _DrawnFrame(outline, float(t_long), float(t_short), parcels_, labels, entrances,
+                       tuple(sides))
 
 
 # --------------------------------------------------------------------------- selection
@@ -939,30 +1025,22 @@ def warp_drawn(block, template: Template, cut: bool = True,
     """
     if block is None or shapely.get_type_id(block) != 3 or not template.parcels:
         return None
-    outline = drawn_outline(template)
-    if shapely.get_type_id(outline) != 3:
+    frame = _drawn_frame(template)
+    if shapely.get_type_id(frame.outline) != 3:
         return None
-    (t_long,), (t_short,), _ = minimum_rectangles([outline])
     (b_long,), (b_short,), _ = minimum_rectangles([block])
-    sx, sy = b_long / max(t_long, 1e-9), b_short / max(t_short, 1e-9)
+    sx, sy = b_long / max(frame.long, 1e-9), b_short / max(frame.short, 1e-9)
     (wlo, whi), (dlo, dhi) = template.width_scale, template.depth_scale
     if not (wlo <= sx <= whi and dlo <= sy <= dhi):
         return None
     b_ring, b_idx, b_turn = region_corners(block)
-    parcels_ = _drawn_parcels(template)
-    labels = np.asarray(template.parcel_labels or ("R",) * len(parcels_), dtype=object)
-    # where the template's own streets leave its outline (they join the street around)
-    t_edge = shapely.boundary(outline)
-    street_ends = np.array([xy[k] for xy in template.streets for k in (0, -1)]
-                           ).reshape(-1, 2)
-    entrances = street_ends[shapely.dwithin(shapely.points(street_ends), t_edge, 1e-3)] \
-        if len(street_ends) else street_ends
+    parcels_, labels, entrances = frame.parcels, frame.labels, frame.entrances
     best = None
-    for flip in (np.array([1.0, 1.0]), np.array([-1.0, 1.0])):   # as drawn, mirrored
-        parcels_m = shapely.transform(parcels_, lambda xy: xy * flip)
-        t_outline = shapely.union_all(parcels_m, grid_size=1e-6)
-        t_ring, t_idx, t_turn = region_corners(t_outline)
-        k = len(t_idx)
+    for side in frame.sides:   # as drawn, mirrored
+        flip, parcels_m, t_outline, t_sides = side.flip, side.parcels, side.outline, side.sides
+        t_label, verts, face, centred = side.label, side.verts, side.face, side.centred
+        ends, root_area = side.ends, side.root_area
+        k = len(side.corners)
         if k < 3 or k > len(b_ring):
             continue
         # the block's k sharpest vertices take the template's corners (more corners: the
@@ -970,18 +1048,9 @@ def warp_drawn(block, template: Template, cut: bool = True,
         # other vertices fill in), as the row templates' frame does with four
         keep = np.sort(np.argsort(-np.abs(b_turn), kind="stable")[:k])
         penalty = float(np.radians(np.abs(b_turn[np.setdiff1d(b_idx, keep)])).sum())
-        # corner labels: +1 convex, -1 concave, 0 a block vertex filling in (either)
-        t_label = np.sign(t_turn[t_idx])
+        # corner labels (the template's: +1 convex, -1 concave), 0 a block vertex filling
+        # in (either); every parcel registered to its drawn shape at once (below)
         b_label = np.where(np.abs(b_turn[keep]) > CORNER_TURN, np.sign(b_turn[keep]), 0.0)
-        t_sides = _sides(t_ring, t_idx)
-        dense = shapely.segmentize(parcels_m, DRAWN_SAMPLE_SPACING)
-        rings = [shapely.get_coordinates(shapely.get_exterior_ring(p))[:-1] for p in dense]
-        verts = np.concatenate(rings)
-        # every parcel registered to its drawn shape at once
-        face = np.repeat(np.arange(len(rings)), [len(r) for r in rings])
-        centred = np.concatenate([r - r.mean(axis=0) for r in rings])
-        ends = np.cumsum([len(r) for r in rings])[:-1]
-        root_area = np.sqrt(np.maximum(shapely.area(dense), 1e-9))
         for shift in range(k):
             on = np.roll(b_label, -shift)
             if ((on != 0) & (on != t_label)).any():
@@ -995,7 +1064,7 @@ def warp_drawn(block, template: Template, cut: bool = True,
                 dst.append(_along(bs, f))
             src, dst = np.concatenate(src), np.concatenate(dst)
             moved = warp_points(verts, src, dst)
-            reg = _register_faces(centred, moved, face, len(rings), wlo, whi, dlo, dhi)
+            reg = _register_faces(centred, moved, face, len(root_area), wlo, whi, dlo, dhi)
             sq = np.split(((reg - moved) ** 2).sum(axis=1), ends)
             rms = np.sqrt([float(v.mean()) for v in sq])
             energy = float(np.mean(rms / root_area)) + penalty
