@@ -94,6 +94,21 @@ def assert_planar(lines, z_layer=None, tol=1e-6):
     assert not bad.any(), f"{int(bad.sum())} pairs of edges cross or overlap away from a node"
 
 
+def assert_no_gaps(lines, reach=0.5):
+    """No line end lies beside another line without touching it: within ``reach`` m of a
+    line, an end is on it (to round-off, 1e-9 m). A gap under the invariants' snap
+    tolerance counts as a junction for them, but a GIS network tool sees a dangle there."""
+    lines = np.asarray(lines, dtype=object)
+    ends = np.concatenate([shapely.get_point(lines, 0), shapely.get_point(lines, -1)])
+    owner = np.r_[np.arange(len(lines)), np.arange(len(lines))]
+    e, l = shapely.STRtree(lines).query(ends, predicate="dwithin", distance=reach)
+    other = owner[e] != l
+    gap = shapely.distance(ends[e[other]], lines[l[other]])
+    assert not (gap > 1e-9).any(), \
+        f"{int((gap > 1e-9).sum())} line ends {gap[gap > 1e-9].min():.1e}-" \
+        f"{gap[gap > 1e-9].max():.1e} m beside a line"
+
+
 def layer_features(layer):
     """A QGIS layer's features as (rows: list of dicts with NULL as None, shapely geometries)."""
     from qgis.PyQt.QtCore import QVariant

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import shapely
 
-from helpers import assert_planar
+from helpers import assert_no_gaps, assert_planar
 from urban_synthesis.plugin.measure import fidelity
 from urban_synthesis.plugin.network.crossings import match_crossings
 
@@ -52,6 +52,20 @@ def test_t_junctions_become_straight_crossings_up_to_the_share():
                                    np.random.default_rng(0), reach=150.0)
     assert made == 4
     assert fidelity.fidelity_statistics(out, AREA)["degree4_share"] == pytest.approx(4 / 18)
+
+
+def test_a_crossing_street_starts_exactly_at_its_junction():
+    """The cleaned graph's nodes are rounded to the millimetre: the street that goes on
+    across starts at the junction of the lines themselves, not up to 0.7 mm beside it."""
+    lines, is_new = _ladder()
+    off = np.array([0.000437, 0.000381])   # off the millimetre grid
+    lines = shapely.transform(lines, lambda xy: xy + off)
+    pieces, parent = _noded(lines, is_new)
+    out, new, (made, _) = match_crossings(pieces, is_new[parent], 0.9, AREA,
+                                         np.random.default_rng(0), reach=150.0)
+    assert made == 4
+    assert_planar(out)
+    assert_no_gaps(out)
 
 
 def test_no_street_ends_on_a_given_road_or_out_of_reach():

@@ -236,6 +236,22 @@ def test_real_streets_keep_the_invariants_of_their_own_arterials():
 
 
 
+def test_a_link_starts_exactly_at_its_piece():
+    """A link leaves its piece at the end of one of its lines as the lines have it (the
+    graph's nodes are rounded to the millimetre): no gap beside the piece's street."""
+    from helpers import assert_no_gaps
+    from urban_synthesis.plugin.network.links import link_floating_pieces
+
+    road = shapely.LineString([(0.000437, 0.000381), (100.000437, 0.000381)])
+    piece = shapely.LineString([(40.000437, 30.000381), (60.000437, 30.000381)])
+    links, keep = link_floating_pieces([road, piece], [True, False])
+    assert len(links) == 1 and keep.all()
+    start = shapely.get_point(links[0], 0)
+    assert shapely.distance(start, shapely.boundary(piece)) == 0.0
+    assert shapely.distance(shapely.get_point(links[0], -1), road) < 1e-9
+    assert_no_gaps(np.array([road, piece, links[0]], dtype=object))
+
+
 def test_a_piece_in_the_other_arm_of_a_concave_target_is_linked_along_the_arms():
     """A target shaped like an upturned U: the anchored road in the west arm, a floating
     street in the east arm. A straight link would cross the bay between the arms, outside

@@ -122,6 +122,18 @@ def match_crossings(lines, is_new, share: float, area, rng: np.random.Generator,
     order = np.argsort(inc_node, kind="stable")
     start = np.searchsorted(inc_node[order], np.arange(len(nodes)))
 
+    line_ends = shapely.get_coordinates(np.concatenate([shapely.get_point(lines, 0),
+                                                        shapely.get_point(lines, -1)]))
+    end_tree = shapely.STRtree(shapely.points(line_ends))
+
+    def junction_point(k) -> np.ndarray:
+        """The junction as the lines have it: the line end nearest the cleaned graph's node
+        (a node is rounded to the millimetre, or merged within SNAP_TOLERANCE; a street
+        started from it would stop up to that far beside the junction, a gap to any GIS
+        network tool)."""
+        near = end_tree.query_nearest(shapely.Point(nodes[k]), all_matches=False)
+        return line_ends[near[0]] if len(near) else nodes[k]
+
     def across(k) -> bool:
         nonlocal new_ts
         rows = order[start[k]:start[k] + 3]
@@ -134,7 +146,7 @@ def match_crossings(lines, is_new, share: float, area, rng: np.random.Generator,
         through = np.delete(d, stem, axis=0)
         if (through @ -d[stem] >= cos_min).any():
             return False   # straight on would run along the street it crosses (a bend)
-        p = nodes[k]
+        p = junction_point(k)
         ray = shapely.LineString([p, p - reach * d[stem]])
         hits = tree.query(ray, predicate="intersects")
         best = None   # the first street the ray meets beyond the junction: (t, line, point)
