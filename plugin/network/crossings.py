@@ -24,7 +24,8 @@ from .invariants import (SNAP_TOLERANCE, corridor_of, counted_nodes, crossing_sh
                          doubles_a_street)
 from .links import meets_only_at_ends
 from .small_blocks import fewer_crossings
-from .street_graph import JUNCTION_TOLERANCE, clean_network, collapse_short_pieces, renode
+from .street_graph import (JUNCTION_TOLERANCE, clean_network, collapse_short_pieces,
+                           junction_points, renode)
 
 __all__ = ["match_crossings", "t_stem", "STRAIGHT_THROUGH", "MIN_ANGLE"]
 
@@ -122,17 +123,9 @@ def match_crossings(lines, is_new, share: float, area, rng: np.random.Generator,
     order = np.argsort(inc_node, kind="stable")
     start = np.searchsorted(inc_node[order], np.arange(len(nodes)))
 
-    line_ends = shapely.get_coordinates(np.concatenate([shapely.get_point(lines, 0),
-                                                        shapely.get_point(lines, -1)]))
-    end_tree = shapely.STRtree(shapely.points(line_ends))
-
-    def junction_point(k) -> np.ndarray:
-        """The junction as the lines have it: the line end nearest the cleaned graph's node
-        (a node is rounded to the millimetre, or merged within SNAP_TOLERANCE; a street
-        started from it would stop up to that far beside the junction, a gap to any GIS
-        network tool)."""
-        near = end_tree.query_nearest(shapely.Point(nodes[k]), all_matches=False)
-        return line_ends[near[0]] if len(near) else nodes[k]
+    # a street going on across starts at the junction as the lines have it: the cleaned
+    # graph's nodes are rounded, or merged within SNAP_TOLERANCE
+    junction = junction_points(nodes, lines)
 
     def across(k) -> bool:
         nonlocal new_ts
@@ -146,7 +139,7 @@ def match_crossings(lines, is_new, share: float, area, rng: np.random.Generator,
         through = np.delete(d, stem, axis=0)
         if (through @ -d[stem] >= cos_min).any():
             return False   # straight on would run along the street it crosses (a bend)
-        p = junction_point(k)
+        p = junction[k]
         ray = shapely.LineString([p, p - reach * d[stem]])
         hits = tree.query(ray, predicate="intersects")
         best = None   # the first street the ray meets beyond the junction: (t, line, point)

@@ -230,7 +230,8 @@ def link_floating_pieces(lines, anchored, accept: Optional[Callable] = None,
         n_comp, edge_comp = int(label.max()) + 1 if len(label) else 0, label.ravel()
     if n_comp <= 1:
         return np.empty(0, dtype=object), keep
-    g = _with_exact_nodes(g)
+    # links start at the junctions as the lines have them (the nodes are rounded)
+    g = replace(g, nodes=_roads.junction_points(g.nodes, g.geometry))
     anchored = np.zeros(n_comp, bool)
     anchored[edge_comp[anchored_line[src]]] = True
     # metres of street per piece: the longest anchors when nothing is anchored
@@ -305,22 +306,6 @@ def link_floating_pieces(lines, anchored, accept: Optional[Callable] = None,
     if drop_unlinked:
         keep[src[~anchored[edge_comp]]] = False
     return np.asarray(links, dtype=object), keep
-
-
-def _with_exact_nodes(g):
-    """The graph with each node at the exact end point of a line that meets there.
-
-    ``graph_from_lines`` gives node coordinates rounded to the millimetre (its node key); a
-    link drawn from a rounded node starts up to 0.7 mm beside its street's end: a dangle and
-    a gap to any GIS network tool, and the renoding then cut a sub-millimetre piece off the
-    link where the street's end was snapped into it (18 such gaps on the fragment
-    synthesis of Vaduz, seed 0)."""
-    ends = np.concatenate([shapely.get_coordinates(shapely.get_point(g.geometry, 0)),
-                           shapely.get_coordinates(shapely.get_point(g.geometry, -1))])
-    ids = np.r_[g.u, g.v]
-    nodes = np.array(g.nodes, dtype=float, copy=True)
-    nodes[ids] = ends   # one of the line ends at each node (equal to the millimetre)
-    return replace(g, nodes=nodes)
 
 
 def _nearest_bent(paths, g, edge_comp, anchored, takes_link, clear, accept):
