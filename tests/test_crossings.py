@@ -66,6 +66,14 @@ def test_a_crossing_street_starts_exactly_at_its_junction():
     assert made == 4
     assert_planar(out)
     assert_no_gaps(out)
+    # every end at a junction of the input is that junction, not a point beside it
+    ends_in = shapely.points(np.unique(shapely.get_coordinates(shapely.boundary(pieces)),
+                                       axis=0))
+    ends_out = shapely.points(np.unique(shapely.get_coordinates(shapely.boundary(out)),
+                                        axis=0))
+    near = shapely.STRtree(ends_in).query(ends_out, predicate="dwithin", distance=1e-3)
+    assert len(near[0]) >= len(ends_in)
+    assert (shapely.distance(ends_out[near[0]], ends_in[near[1]]) == 0.0).all()
 
 
 def test_no_street_ends_on_a_given_road_or_out_of_reach():
