@@ -646,13 +646,15 @@ class _Splitter:
                for t in self.lib if t.kind not in ("rows", "drawn")}
         block = None   # the net block and its no-access zone, made once for all templates
         for t in self.lib:
-            if t.kind in ("rows", "drawn") and block is None:
+            if t.kind not in ("rows", "drawn"):
+                continue
+            if block is None:
                 block = self.net_block_of(region, self.no_street, self.no_frontage)
-            parts = block[0] if block is not None else None
             if t.kind == "rows":
                 out[t.name] = self.row_energy(region, t, self.no_street, self.no_frontage,
                                               block)
-            elif t.kind == "drawn":
+            else:
+                parts = block[0]
                 warp = _templates.warp_drawn(parts[0], t, cut=False,
                                              entrance_ok=self.entrance_ok) \
                     if len(parts) == 1 else None

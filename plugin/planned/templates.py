@@ -66,7 +66,7 @@ import math
 from dataclasses import asdict, dataclass, field, replace
 from functools import lru_cache
 from pathlib import Path
-from typing import List, Optional, Sequence, Tuple
+from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 import shapely
@@ -435,15 +435,16 @@ class _DrawnFrame:
     sides: tuple
 
 
-#: Drawn templates prepared for :func:`warp_drawn`, by content (a layout evaluates every
-#: drawn template on every region: the union of its parcels cost 5 % of a town's split).
-_FRAMES: "dict" = {}
+#: Drawn templates prepared for :func:`warp_drawn`, by their drawing (a layout evaluates
+#: every drawn template on every region: the union of its parcels alone cost 5 % of a
+#: town's split), the oldest of more than _MAX_FRAMES dropped.
+_FRAMES: Dict[tuple, _DrawnFrame] = {}
 _MAX_FRAMES = 64
 
 
 def _drawn_frame(template: Template) -> _DrawnFrame:
-    """The template-only part of :func:`warp_drawn`, computed once per drawn layout (keyed
-    by its parcels, labels and streets, so a template changed in place is prepared anew)."""
+    """The template-only part of :func:`warp_drawn`, computed once per drawing (keyed by
+    its parcels, labels and streets, so a template redrawn in place is prepared anew)."""
     key = (tuple(np.asarray(p, dtype=float).tobytes() for p in template.parcels),
            tuple(template.parcel_labels),
            tuple(np.asarray(xy, dtype=float).tobytes() for xy in template.streets))
