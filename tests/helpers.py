@@ -117,6 +117,20 @@ def assert_no_gaps(lines, reach=0.5, of=None):
         "m beside a line they do not touch"
 
 
+def assert_exact_junctions(lines):
+    """Every line end on another line (within 1e-6 m) is a vertex of that line to the last
+    bit: the network is noded exactly, as a tool that builds its graph from vertices (QGIS's
+    network analysis with no topology tolerance) needs it."""
+    lines = np.asarray(lines, dtype=object)
+    ends = np.concatenate([shapely.get_point(lines, 0), shapely.get_point(lines, -1)])
+    owner = np.r_[np.arange(len(lines)), np.arange(len(lines))]
+    e, l = shapely.STRtree(lines).query(ends, predicate="dwithin", distance=1e-6)
+    other = owner[e] != l
+    e, l = e[other], l[other]
+    off = shapely.distance(ends[e], shapely.extract_unique_points(lines[l])) > 0.0
+    assert not off.any(), f"{int(off.sum())} line ends on a line but at none of its vertices"
+
+
 def layer_features(layer):
     """A QGIS layer's features as (rows: list of dicts with NULL as None, shapely geometries)."""
     from qgis.PyQt.QtCore import QVariant

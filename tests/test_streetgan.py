@@ -7,7 +7,8 @@ import pytest
 import shapely
 import shapely.affinity
 
-from helpers import assert_planar, helsinki_roads, nearly_coincident_streets
+from helpers import (assert_exact_junctions, assert_planar, helsinki_roads,
+                     nearly_coincident_streets)
 from urban_synthesis.plugin.measure import metrics
 from urban_synthesis.plugin.roads import raster_graph
 from urban_synthesis.plugin.roads import streetgan
@@ -176,6 +177,8 @@ def test_given_roads_are_kept_and_joined(models):
     assert set(sides) == {-1.0, 1.0}
     assert not shapely.dwithin(motorway, new, 1.0).any()
     assert (res.level[res.given] == 0).all() and (res.level[~res.given] >= 1).all()
+    # split where the streets meet it, the arterial's pieces end at the streets' ends
+    assert_exact_junctions(res.geometry)
     # the same seed gives the same network
     again = streetgan.synthesize(target, models["streetgan_helsinki"], seed=2,
                                  given=[arterial, motorway], given_class=["primary", "motorway"])
