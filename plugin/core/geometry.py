@@ -57,8 +57,8 @@ def two_point_segments(lines: Sequence) -> np.ndarray:
     return shapely.linestrings(np.stack([a[keep], b[keep]], axis=1))
 
 
-#: Ray-segment pairs solved at once by :func:`first_hits` (memory: a few arrays this long).
-_HIT_CHUNK = 2_000_000
+#: Ray-segment pairs solved at once by :func:`first_hits` (memory: about 50 bytes each).
+_HIT_CHUNK = 500_000
 
 
 def first_hits(origins: np.ndarray, directions: np.ndarray, lines, reach: float,
