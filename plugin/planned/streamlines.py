@@ -339,13 +339,12 @@ def score_streamlines(cands: Candidates, field: CrossField, region, opt, ends=No
     # strips between the streamline and the boundary fit on the left and on the right
     boundary = shapely.boundary(region)
     reach = float(np.hypot(*(np.subtract(*np.reshape(shapely.bounds(region), (2, 2)))))) + 1.0
-    side = []
-    for sign in (1.0, -1.0):
-        d = first_hits(xy, sign * normal, [boundary], reach, start=0.01)
-        missed = ~np.isfinite(d)
-        if missed.any():
-            d[missed] = shapely.distance(boundary, shapely.points(xy[missed]))
-        side.append(d)
+    both = np.concatenate([xy, xy])   # a ray each way, cast against the outline at once
+    d = first_hits(both, np.concatenate([normal, -normal]), [boundary], reach, start=0.01)
+    missed = ~np.isfinite(d)
+    if missed.any():
+        d[missed] = shapely.distance(boundary, shapely.points(both[missed]))
+    side = np.split(d, 2)
     pointwise = np.sqrt(opt(side[0]) * opt(side[1]))
     count = np.bincount(owner, minlength=n)
     dbs = np.bincount(owner, pointwise, minlength=n) / np.maximum(count, 1)
