@@ -94,6 +94,16 @@ def assert_planar(lines, z_layer=None, tol=1e-6):
     assert not bad.any(), f"{int(bad.sum())} pairs of edges cross or overlap away from a node"
 
 
+def _ends_beside(lines, reach):
+    """(ends, owner, e, l): the lines' end points, the line of each, and the pairs of an end
+    ``e`` within ``reach`` m of another line ``l``."""
+    ends = np.concatenate([shapely.get_point(lines, 0), shapely.get_point(lines, -1)])
+    owner = np.r_[np.arange(len(lines)), np.arange(len(lines))]
+    e, l = shapely.STRtree(lines).query(ends, predicate="dwithin", distance=reach)
+    other = owner[e] != l
+    return ends, owner, e[other], l[other]
+
+
 def assert_no_gaps(lines, reach=0.5, of=None):
     """No dangle beside a line: a line end that touches no other line (to round-off, 1e-9
     m) lies no nearer than ``reach`` m to one. A gap under the invariants' snap tolerance
@@ -101,11 +111,7 @@ def assert_no_gaps(lines, reach=0.5, of=None):
     mask): only these lines' ends (the synthesised streets among given roads, whose OSM data
     has gaps of its own)."""
     lines = np.asarray(lines, dtype=object)
-    ends = np.concatenate([shapely.get_point(lines, 0), shapely.get_point(lines, -1)])
-    owner = np.r_[np.arange(len(lines)), np.arange(len(lines))]
-    e, l = shapely.STRtree(lines).query(ends, predicate="dwithin", distance=reach)
-    other = owner[e] != l
-    e, l = e[other], l[other]
+    ends, owner, e, l = _ends_beside(lines, reach)
     d = shapely.distance(ends[e], lines[l])
     touching = np.zeros(len(ends), bool)
     touching[e[d <= 1e-9]] = True
@@ -122,11 +128,7 @@ def assert_exact_junctions(lines):
     bit: the network is noded exactly, as a tool that builds its graph from vertices (QGIS's
     network analysis with no topology tolerance) needs it."""
     lines = np.asarray(lines, dtype=object)
-    ends = np.concatenate([shapely.get_point(lines, 0), shapely.get_point(lines, -1)])
-    owner = np.r_[np.arange(len(lines)), np.arange(len(lines))]
-    e, l = shapely.STRtree(lines).query(ends, predicate="dwithin", distance=1e-6)
-    other = owner[e] != l
-    e, l = e[other], l[other]
+    ends, _, e, l = _ends_beside(lines, 1e-6)
     off = shapely.distance(ends[e], shapely.extract_unique_points(lines[l])) > 0.0
     assert not off.any(), f"{int(off.sum())} line ends on a line but at none of its vertices"
 
