@@ -145,8 +145,11 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
             "New road segments with level, length_m, tortuosity and origin ('walk'; 'seam' "
             "joins to existing roads; 'close' steps closing stubs; 'dead_end' streets to the "
             "example's street ends no walk reached; 'cross' crossing streets completed; "
-            "'across' a T junction's street continued across, making it a crossing; "
-            "'join' steps joining pieces of the network).")
+            "'across' a T junction's street continued across, making it a crossing, one "
+            "step onto a point or street; 'across_street' the same where the share of "
+            "4-way junctions was still under the example's: straight on to the street it "
+            "meets; 'join' steps joining pieces of the network; 'given_join' streets "
+            "joining given roads that lie apart).")
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT_INTERSECTIONS, "Intersection points used", QgsProcessing.SourceType.TypeVectorPoint,
             optional=True, createByDefault=False),

@@ -6,7 +6,7 @@ import shapely
 
 from helpers import assert_no_gaps, assert_planar
 from urban_synthesis.plugin.measure import fidelity
-from urban_synthesis.plugin.network.crossings import match_crossings
+from urban_synthesis.plugin.network.crossings import match_crossings, streets_across
 
 
 def _ladder(bottom_given=False):
@@ -52,6 +52,34 @@ def test_t_junctions_become_straight_crossings_up_to_the_share():
                                    np.random.default_rng(0), reach=150.0)
     assert made == 4
     assert fidelity.fidelity_statistics(out, AREA)["degree4_share"] == pytest.approx(4 / 18)
+
+
+def test_streets_across_are_what_match_crossings_adds_with_their_stems():
+    """The streets alone (a method that keeps its own lines, the random walk's table, adds
+    them as they are): each from the end of the T's own street it continues, straight on
+    to the street it meets, which is not split; noded, they are match_crossings' result."""
+    lines, is_new = _ladder()
+    pieces, parent = _noded(lines, is_new)
+    streets, stems = streets_across(pieces, is_new[parent], 0.1, AREA,
+                                    np.random.default_rng(0), reach=150.0)
+    out, _, (made, _) = match_crossings(pieces, is_new[parent], 0.1, AREA,
+                                        np.random.default_rng(0), reach=150.0)
+    assert len(streets) == len(stems) == made == 2
+    for street, stem in zip(streets, stems):
+        stem_line = pieces[stem]
+        start = shapely.get_point(street, 0)
+        # the stem is one of the four north-south stems, and the street starts at its end
+        assert stem_line.bounds[0] == stem_line.bounds[2] and stem_line.bounds[1] == 0
+        assert start.equals(shapely.get_point(stem_line, 0)) or \
+            start.equals(shapely.get_point(stem_line, -1))
+        # straight on south, onto the bottom street (a T on it)
+        assert street.bounds[0] == street.bounds[2] == stem_line.bounds[0]
+        assert (street.bounds[1], street.bounds[3]) == (-100, 0)
+    assert sorted(round(g.length, 6) for g in streets) == \
+        sorted(round(g.length, 6) for g in out if g.bounds[1] == -100 and g.bounds[3] == 0)
+    # at or over the share: nothing
+    none, no_stems = streets_across(pieces, is_new[parent], 0.0, AREA, np.random.default_rng(0))
+    assert len(none) == len(no_stems) == 0
 
 
 def test_a_crossing_street_starts_exactly_at_its_junction():

@@ -18,6 +18,7 @@ from typing import Optional, Tuple
 
 import numpy as np
 import shapely
+from scipy.spatial import cKDTree
 
 from .dead_ends import steer_share
 from .invariants import (SNAP_TOLERANCE, corridor_of, counted_nodes, crossing_share,
@@ -27,7 +28,7 @@ from .small_blocks import fewer_crossings
 from .street_graph import (JUNCTION_TOLERANCE, clean_network, collapse_short_pieces,
                            junction_points, renode)
 
-__all__ = ["match_crossings", "t_stem", "STRAIGHT_THROUGH", "MIN_ANGLE"]
+__all__ = ["match_crossings", "streets_across", "t_stem", "STRAIGHT_THROUGH", "MIN_ANGLE"]
 
 #: A T's two other streets run through (the street it meets) when they leave the junction
 #: at least this far from the same direction (cosine below -0.7: 134 degrees or more).
@@ -82,12 +83,49 @@ def match_crossings(lines, is_new, share: float, area, rng: np.random.Generator,
     is_new = np.asarray(is_new, dtype=bool)
     if len(lines) < 2 or not np.isfinite(share) or not is_new.any():
         return lines, is_new, (0, 0)
+    now = crossing_share(lines, area)
+    if now > share:   # too many: streets at crossings go, each merging two blocks
+        out, out_new, removed = fewer_crossings(lines, is_new, share, area,
+                                                lambda ls: crossing_share(ls, area))
+        return out, out_new, (0, removed)
+    if now == share:
+        return lines, is_new, (0, 0)
+    added, _ = streets_across(lines, is_new, share, area, rng, given, reach)
+    if not len(added):
+        return lines, is_new, (0, 0)
+    everything = np.concatenate([lines, added])
+    flags = np.r_[is_new, np.ones(len(added), bool)]
+    # where pieces overlap, a given road's piece keeps its flag
+    made = np.r_[np.zeros(len(lines), bool), np.ones(len(added), bool)]
+    pieces, parent = renode(everything, made, np.where(flags, 1, 0))
+    # round-off between ends that noding set apart: no zero-length piece of a given road
+    pieces, kept = collapse_short_pieces(pieces, JUNCTION_TOLERANCE)
+    return pieces, flags[parent][kept], (len(added), 0)
+
+
+def streets_across(lines, is_new, share: float, area, rng: np.random.Generator, given=None,
+                   reach: Optional[float] = None, at=None) -> Tuple[np.ndarray, np.ndarray]:
+    """The streets :func:`match_crossings` adds while the share is under ``share``: T's own
+    streets going on straight across the street they meet, to the first synthesised street
+    they reach (parameters as there; nothing when the share is not under ``share``).
+    ``at``, optional, (n, 2): the only junctions that may become crossings (within
+    :data:`SNAP_TOLERANCE`; the random walk's points whose capacity allows a fourth street).
+
+    Returns (streets, stems): the new straight streets, each from its junction (exactly, as
+    the lines have it) to a point on a line (which is not split), and for each the index in
+    ``lines`` of the T's own street it continues.
+    """
+    lines = np.asarray(lines, dtype=object)
+    is_new = np.asarray(is_new, dtype=bool)
+    none = np.empty(0, dtype=object), np.empty(0, dtype=np.int64)
+    if len(lines) < 2 or not np.isfinite(share) or not is_new.any():
+        return none
     g = clean_network(lines, snap_tolerance=SNAP_TOLERANCE, min_dangle_length=0.0,
                       merge_degree2=True, duplicate_tolerance=SNAP_TOLERANCE)
     nodes, u, v = np.asarray(g.nodes), np.asarray(g.u), np.asarray(g.v)
     deg = np.bincount(np.r_[u, v], minlength=len(nodes))
     counted = counted_nodes(nodes, area)
-    added = []   # the continued streets, in the order they were made
+    added, stems = [], []   # the continued streets, in the order they were made
     new_ts = 0   # their far ends: new T junctions, where they count
 
     def share_now() -> float:
@@ -95,13 +133,12 @@ def match_crossings(lines, is_new, share: float, area, rng: np.random.Generator,
         k = int(nodes_.sum()) + new_ts
         return float((nodes_ & (deg >= 4)).sum() / k) if k else 0.0
 
-    now = share_now()
-    if now > share:   # too many: streets at crossings go, each merging two blocks
-        out, out_new, removed = fewer_crossings(lines, is_new, share, area,
-                                                lambda ls: crossing_share(ls, area))
-        return out, out_new, (0, removed)
-    if now == share:
-        return lines, is_new, (0, 0)
+    if share_now() >= share:
+        return none
+    may_cross = np.ones(len(nodes), bool)
+    if at is not None:
+        gap, _ = cKDTree(np.asarray(at, dtype=float).reshape(-1, 2)).query(nodes)
+        may_cross = gap <= SNAP_TOLERANCE
     edge_new = is_new[np.asarray(g.source)]
     if reach is None:
         reach = 2.0 * float(np.median(shapely.length(g.geometry[edge_new])))
@@ -168,24 +205,14 @@ def match_crossings(lines, is_new, share: float, area, rng: np.random.Generator,
         if corridor is not None and doubles_a_street(np.array([seg]), corridor)[0]:
             return False
         added.append(seg)
+        stems.append(int(g.source[inc_edge[rows[stem]]]))
         deg[k] += 1
         new_ts += int(counted_nodes(q[None], area)[0])
         return True
 
     def t_junctions():
-        t = np.flatnonzero(counted & (deg == 3))
+        t = np.flatnonzero(counted & (deg == 3) & may_cross)
         return rng.permutation(t)
 
-    _, n_made = steer_share(share_now, float(share), lambda c: False, lambda: (), across,
-                            t_junctions)
-    if not added:
-        return lines, is_new, (0, 0)
-    new_lines = np.array(added, dtype=object)
-    everything = np.concatenate([lines, new_lines])
-    flags = np.r_[is_new, np.ones(len(new_lines), bool)]
-    # where pieces overlap, a given road's piece keeps its flag
-    made = np.r_[np.zeros(len(lines), bool), np.ones(len(new_lines), bool)]
-    pieces, parent = renode(everything, made, np.where(flags, 1, 0))
-    # round-off between ends that noding set apart: no zero-length piece of a given road
-    pieces, kept = collapse_short_pieces(pieces, JUNCTION_TOLERANCE)
-    return pieces, flags[parent][kept], (int(n_made), 0)
+    steer_share(share_now, float(share), lambda c: False, lambda: (), across, t_junctions)
+    return np.array(added, dtype=object), np.array(stems, dtype=np.int64)

@@ -76,10 +76,11 @@ from scipy.spatial import cKDTree
 from ..core import coordinates
 from ..core.geometry import pinned_ends
 from ..core.progress import InputError, Progress, ensure
-from ..network.crossings import t_stem
+from ..network.crossings import streets_across, t_stem
 from ..network.dead_ends import steer_share
 from ..network.invariants import (DEAD_END_TOLERANCE, MIN_DUPLICATE_LENGTH, corridor_of,
                                   counted_nodes)
+from ..network.invariants import dead_end_share as measured_dead_end_share
 from ..network.links import allowed_area, join_pieces
 from ..network.street_graph import node_lines
 from . import intersection_quadtree as iq
@@ -136,7 +137,11 @@ class WalkSettings:
         T junctions on the given roads, become crossings (the T's own street goes on
         straight across, one step onto the network) until the share of 4-way junctions is
         the example's (not in the paper: its walks keep about half the example's
-        crossings, as a crossing street is rarely walked both ways)
+        crossings, as a crossing street is rarely walked both ways); where the network is
+        still under the invariants' band less half its width (a grid's crossings: the
+        walk's T's on given roads' own nodes, or with no point in reach across), T's own
+        streets go on straight across to the street they meet
+        (:func:`network.crossings.streets_across`, as StreetGAN's) up to that margin
     road_slots : place junction slots along the given roads at the spacing of the
         example's level-0 streets (else new streets meet given roads only at their nodes)
     join_reach : joins look this many of the point's mean street distances far
@@ -1935,8 +1940,49 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
                 "tortuosity": 1.0, "origin": "given_join", "node_from": bridge_node[:, 0],
                 "node_to": bridge_node[:, 1]})], ignore_index=True)
             stats["n_edges"] = len(lines)
+    if settings.match_crossings and settings.max_capacity >= 4:
+        # the saturation rule kept: only a point that had four streets in the example, or a
+        # junction on a given road, takes a fourth
+        may_cross = (pts.degree >= 4) | (pts.example < 0)
+        lines, table = _streets_across(lines, table, ptab, pts, may_cross, existing_lines,
+                                       area, crossing_share, rng, stats)
     progress.step(1.0)
     return Synthesis(lines, table, pts, ptab, stats, quadtrees, ex_lines)
+
+
+def _streets_across(lines, table, ptab, pts, may_cross, existing_lines, area, share: float,
+                    rng, stats):
+    """Where the walks left the network's share of 4-way junctions (given roads included,
+    as the invariants count it) under the band of ``share`` less half its width, T's own
+    streets go on across (:func:`network.crossings.streets_across`) up to that margin, at
+    the points ``may_cross`` only; each a new edge of its stem's level, origin
+    "across_street", from its junction's point to a T on the street it meets (node -1: that
+    line is not split, as a given-road join's)."""
+    given = shapely.get_parts(np.asarray(existing_lines, dtype=object)) \
+        if existing_lines is not None and len(existing_lines) else np.empty(0, dtype=object)
+    network = np.concatenate([lines, given])
+    is_new = np.r_[np.ones(len(lines), bool), np.zeros(len(given), bool)]
+    floor = share * (1 - 0.5 * DEAD_END_TOLERANCE)
+    added, stems = streets_across(network, is_new, floor, area, rng,
+                                  given=given if len(given) else None, at=pts.xy[may_cross])
+    stats["n_streets_across"] = len(added)
+    if not len(added):
+        return lines, table
+    gap, near = cKDTree(pts.xy).query(shapely.get_coordinates(shapely.get_point(added, 0)))
+    start = np.where(gap <= _ON_POINT, near, -1)
+    connections = ptab["connections"].to_numpy().copy()
+    np.add.at(connections, start[start >= 0], 1)
+    ptab["connections"] = connections
+    lines = np.concatenate([lines, added])
+    table = pd.concat([table, pd.DataFrame({
+        "edge_id": np.arange(len(table) + 1, len(lines) + 1),
+        "level": table.level.to_numpy()[stems], "length_m": shapely.length(added),
+        "tortuosity": 1.0, "origin": "across_street", "node_from": start,
+        "node_to": -1})], ignore_index=True)
+    stats["n_edges"] = len(lines)
+    # each new T counts as a node: the dead-end share as the invariants now measure it
+    stats["dead_end_share"] = measured_dead_end_share(np.concatenate([lines, given]), area)
+    return lines, table
 
 
 def _blend_shapes(a: StreetShapes, b: StreetShapes, beta: float, rng) -> StreetShapes:
