@@ -38,6 +38,7 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
     OUTPUT = "OUTPUT"
     OUTPUT_INTERSECTIONS = "OUTPUT_INTERSECTIONS"
     OUTPUT_BLOCKS = "OUTPUT_BLOCKS"
+    OUTPUT_EXISTING = "OUTPUT_EXISTING"
 
     PLACEMENTS = [None, True, False]
     #: The most intersection points one run connects (about 250 km² at Helsinki's density).
@@ -161,6 +162,15 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
             "The faces the new streets close (block_id, area_m2, neighbours in the block "
             "graph, parcel_area: the mean parcel or block area of the example points on "
             "the outline), ready for 'Subdivide blocks into parcels'.")
+
+        self.add(QgsProcessingParameterFeatureSink(
+            self.OUTPUT_EXISTING, "Existing roads with the new junctions",
+            QgsProcessing.SourceType.TypeVectorLine, optional=True, createByDefault=False),
+            "The EXISTING_ROADS (drivable ones, one feature per part) with a vertex wherever a "
+            "new street ends on them, in the fields of the synthesized roads (origin "
+            "'given', level 0, node_from and node_to -1): merged with them, one network that "
+            "QGIS's network analysis, which joins lines only at vertices, can route through. "
+            "The input layer is not changed.")
 
     # ----------------------------------------------------------------------- reading
 
@@ -311,6 +321,16 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
             random_walk.ROAD_FIELDS, QgsWkbTypes.Type.LineString, target.source_crs, target.crs,
             feedback)
         qgis_io.style_output(context, results[self.OUTPUT], "roads_by_level.qml")
+        if parameters.get(self.OUTPUT_EXISTING) is not None:
+            if existing_lines is None:
+                raise QgsProcessingException("Existing roads with the new junctions: no "
+                                             "EXISTING_ROADS were given.")
+            given, table = random_walk.given_with_junctions(existing_lines, result.geometry)
+            results[self.OUTPUT_EXISTING] = qgis_io.write_sink(
+                self, parameters, self.OUTPUT_EXISTING, context, given, table,
+                random_walk.ROAD_FIELDS, QgsWkbTypes.Type.LineString, target.source_crs,
+                target.crs, feedback)
+            qgis_io.style_output(context, results[self.OUTPUT_EXISTING], "roads_by_level.qml")
         if parameters.get(self.OUTPUT_INTERSECTIONS) is not None:
             results[self.OUTPUT_INTERSECTIONS] = qgis_io.write_sink(
                 self, parameters, self.OUTPUT_INTERSECTIONS, context,

@@ -4,7 +4,8 @@ import pytest
 import shapely
 
 from conftest import bubenec_layer, helsinki_layer, run_qgis_process
-from helpers import assert_planar, helsinki_roads, layer_features, memory_layer
+from helpers import (assert_exact_junctions, assert_planar, helsinki_roads, layer_features,
+                     memory_layer)
 from urban_synthesis.plugin.roads import random_walk
 from urban_synthesis.plugin.network import street_graph as roads
 
@@ -195,7 +196,7 @@ def test_town_never_seen_is_one_network(qgis_processing):
         "EXAMPLE": _lines_layer(case["example"], case["example_class"], "other towns"),
         "TARGET": memory_layer("Polygon", [case["area"].wkt], "EPSG:32632"),
         "EXISTING_ROADS": _lines_layer(case["given"], case["given_class"], "arterials"),
-        "SEED": 5, "OUTPUT": "memory:"})
+        "SEED": 5, "OUTPUT": "memory:", "OUTPUT_EXISTING": "memory:"})
     rows, geoms = layer_features(out["OUTPUT"])
     # the example's dead-end share as the algorithm sees it (inside the example's hull: it
     # knows no study area of the example, so the clip ends between the towns count)
@@ -205,3 +206,15 @@ def test_town_never_seen_is_one_network(qgis_processing):
     assert check.ok, check.summary()
     assert check.floating_pieces == 0 and len(rows) > 50
     assert {"walk", "join"} & {r["origin"] for r in rows}
+    # the given roads with a vertex at every junction the new streets made on them: merged
+    # with the new streets, a network a zero-tolerance analysis routes through (without
+    # these vertices 35 new streets here end between two vertices of a given road)
+    given_rows, given = layer_features(out["OUTPUT_EXISTING"])
+    assert {r["origin"] for r in given_rows} == {"given"} and \
+        [f.name() for f in out["OUTPUT_EXISTING"].fields()] == [n for n, _ in random_walk.ROAD_FIELDS]
+    assert shapely.length(given).sum() == pytest.approx(
+        shapely.length(shapely.get_parts(case["given"])).sum(), rel=1e-9)
+    # the roads as given: a vertex added on a segment lies on it up to round-off
+    assert shapely.hausdorff_distance(shapely.union_all(given),
+                                      shapely.union_all(case["given"])) < 1e-6
+    assert_exact_junctions(np.concatenate([geoms, given]))

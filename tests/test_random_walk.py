@@ -6,8 +6,8 @@ import pytest
 import shapely
 from scipy.spatial import cKDTree
 
-from helpers import (assert_planar, bubenec, helsinki_roads, liechtenstein_town,
-                     nearly_coincident_streets)
+from helpers import (assert_exact_junctions, assert_planar, bubenec, helsinki_roads,
+                     liechtenstein_town, nearly_coincident_streets)
 from urban_synthesis.plugin.roads import intersection_quadtree as iq
 from urban_synthesis.plugin.measure import fidelity, metrics
 from urban_synthesis.plugin.network import invariants
@@ -768,3 +768,6 @@ def test_a_grid_examples_crossings_where_the_walks_leave_ts(helsinki_from_bubene
     at = res.table.node_from[across].to_numpy()
     assert (at >= 0).all()
     assert ((res.points.degree[at] >= 4) | (res.points.example[at] < 0)).all()
+    # the street met stays whole, with the T's end among its vertices
+    assert (res.table.node_to[across] == -1).all()
+    assert_exact_junctions(g)

@@ -63,7 +63,7 @@ import heapq
 import itertools
 import math
 from dataclasses import dataclass, field
-from typing import List, Optional
+from typing import List, Optional, Tuple
 
 import numpy as np
 import pandas as pd
@@ -82,11 +82,12 @@ from ..network.invariants import (DEAD_END_TOLERANCE, MIN_DUPLICATE_LENGTH, corr
                                   counted_nodes)
 from ..network.invariants import dead_end_share as measured_dead_end_share
 from ..network.links import allowed_area, join_pieces
-from ..network.street_graph import node_lines
+from ..network.street_graph import node_lines, snap_ends_onto_lines
 from . import intersection_quadtree as iq
 
 __all__ = ["WalkSettings", "Synthesis", "StreetShapes", "street_shapes", "connect_points",
-           "synthesize", "blocks_and_dual", "block_table", "dead_end_share_of",
+           "synthesize", "given_with_junctions", "blocks_and_dual", "block_table",
+           "dead_end_share_of",
            "crossing_share_of", "ROAD_FIELDS", "POINT_FIELDS", "BLOCK_FIELDS"]
 
 ROAD_FIELDS = [("edge_id", "int"), ("level", "int"), ("length_m", "float"),
@@ -1973,7 +1974,10 @@ def _streets_across(lines, table, ptab, pts, may_cross, existing_lines, area, sh
     connections = ptab["connections"].to_numpy().copy()
     np.add.at(connections, start[start >= 0], 1)
     ptab["connections"] = connections
-    lines = np.concatenate([lines, added])
+    # the street met keeps its feature, with the T's end as its vertex (a zero-tolerance
+    # network analysis joins lines only at vertices)
+    lines = snap_ends_onto_lines(np.concatenate([lines, added]),
+                                 np.r_[np.zeros(len(lines), bool), np.ones(len(added), bool)])
     table = pd.concat([table, pd.DataFrame({
         "edge_id": np.arange(len(table) + 1, len(lines) + 1),
         "level": table.level.to_numpy()[stems], "length_m": shapely.length(added),
@@ -1983,6 +1987,40 @@ def _streets_across(lines, table, ptab, pts, may_cross, existing_lines, area, sh
     # each new T counts as a node: the dead-end share as the invariants now measure it
     stats["dead_end_share"] = measured_dead_end_share(np.concatenate([lines, given]), area)
     return lines, table
+
+
+def given_with_junctions(existing_lines, lines) -> Tuple[np.ndarray, pd.DataFrame]:
+    """The given roads with every new street's end on them as a vertex: (lines, their table
+    in :data:`ROAD_FIELDS`, origin 'given', level 0, no points (-1), and ``source``: the
+    index of the input feature each came from; a multi-part feature gives one line per part).
+
+    The new streets end exactly on the given roads (:func:`synthesize` moves their ends
+    onto the roads as given) but mostly between two of their vertices; a tool that builds
+    its graph from vertices (QGIS's network analysis) joins lines only at vertices, so
+    without these the new network would touch the given roads and not be connected to
+    them. The roads stay whole, their geometry otherwise as given.
+
+    >>> road = shapely.LineString([(0, 0), (100, 0)])
+    >>> street = shapely.LineString([(40, 50), (40, 0)])
+    >>> out, table = given_with_junctions([road], [street])
+    >>> out[0].wkt, table.source.tolist(), table.origin.tolist()
+    ('LINESTRING (0 0, 40 0, 100 0)', [0], ['given'])
+    """
+    given, source = shapely.get_parts(np.asarray(existing_lines, dtype=object),
+                                      return_index=True)
+    lines = np.asarray(lines, dtype=object)
+    both = snap_ends_onto_lines(np.concatenate([given, lines]),
+                                np.r_[np.zeros(len(given), bool), np.ones(len(lines), bool)])
+    # only the given roads take vertices (a given road's end on a new street is a seam,
+    # a point of the walk already)
+    given = both[:len(given)]
+    length = shapely.length(given)
+    chord = shapely.distance(shapely.get_point(given, 0), shapely.get_point(given, -1))
+    return given, pd.DataFrame({
+        "edge_id": np.arange(1, len(given) + 1), "level": 0, "length_m": length,
+        # a ring (a roundabout) has no chord: no tortuosity (NULL)
+        "tortuosity": np.where(chord > 0, length / np.maximum(chord, 1e-9), np.nan),
+        "origin": "given", "node_from": -1, "node_to": -1, "source": source})
 
 
 def _blend_shapes(a: StreetShapes, b: StreetShapes, beta: float, rng) -> StreetShapes:
