@@ -259,7 +259,12 @@ def test_style_polygons_choose_the_database(tmp_path):
     faces, _ = blocks.block_faces(np.asarray(sketch, object))
     west = shapely.get_coordinates(shapely.centroid(faces))[:, 0] < 400
     assert list(q.database[west]) == ["styles"] and list(q.database[~west]) == ["grid"]
-    assert set(res.table.database[res.table.level >= 1]) <= {"grid", "styles"}
+    # every fragment from the database its style polygon chose (a face no fragment fits
+    # is split statistically: no database)
+    from_db = (res.table.level >= 1) & (res.table.fragment_id >= 0)
+    assert set(res.table.database[from_db]) <= {"grid", "styles"}
+    assert set(res.table.source_fragment[(res.table.level >= 1) & ~from_db]) <= \
+        {"statistics", "procedural", "link"}
     assert_valid_network(res, sketch)
 
 
@@ -598,16 +603,18 @@ def test_no_cut_runs_along_a_road_inside_the_face():
 
 
 def test_dead_end_share_is_steered_both_ways(grid_db):
-    """Too many dead ends: the levelled grid rebuilt from its arterials keeps nine (share
-    0.47 inside the arterials' faces); steered to 0 they are closed onto the nearest
-    street. Too few: the open sketch filled from the grid has none; steered to 0.3 T stems
+    """Too many dead ends: the levelled grid rebuilt from its arterials keeps sixteen, one in
+    each of its smallest faces (share 16 / 29 inside the arterials' faces; nine before
+    noding's round-off pieces of 6e-14 m were collapsed instead of dropped: the gaps they
+    left at four junctions merged faces, 17 faces filled instead of 21); steered to 0 they
+    are closed onto the nearest street. Too few: the open sketch filled from the grid has none; steered to 0.3 T stems
     are cut into cul-de-sacs until the share is within the invariants' ±30 %. The network
     stays planar and keeps every other invariant."""
     from urban_synthesis.plugin.network import invariants
 
     lines, levels = levelled_grid()
     arterials = lines[levels == 0]
-    for share, closed in ((None, 0), (0.0, 9)):
+    for share, closed in ((None, 0), (0.0, 16)):
         res = sf.synthesize(arterials, [grid_db], n_best=1, seed=0, dead_end_share=share)
         assert_valid_network(res, arterials)
         assert res.stats["dead_ends"]["closed"] == closed
@@ -615,7 +622,7 @@ def test_dead_end_share_is_steered_both_ways(grid_db):
         check = invariants.check_network(new, arterials, area=res.area,
                                          example_dead_end_share=share)
         assert check.n_violations == 0, check.summary()
-        assert check.dead_end_share == pytest.approx(0.0 if closed else 9 / 19)
+        assert check.dead_end_share == pytest.approx(0.0 if closed else 16 / 29)
     target = shapely.box(0, 0, 1200, 800)
     arterial = [shapely.LineString([(-50, 420), (1250, 380)])]
     given = shapely.get_parts(shapely.intersection(arterial[0], target))

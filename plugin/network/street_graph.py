@@ -263,12 +263,28 @@ def node_lines(lines: Sequence) -> np.ndarray:
 def renode(lines: Sequence, new: Sequence, priority: Sequence, min_length: float = 0.0):
     """A network with new lines added, noded again: the new lines' ends made vertices of the
     lines they end on (:func:`snap_ends_onto_lines`), everything noded (:func:`node_lines`),
-    pieces of ``min_length`` m or less dropped. Returns (pieces, parent): the index of the
-    line each piece came from (the lowest ``priority`` where lines overlap), for carrying
-    attributes over."""
+    pieces shorter than ``min_length`` m collapsed (:func:`collapse_short_pieces`: the
+    pieces at both their ends meet, no gap is left), zero-length ones dropped. Returns
+    (pieces, parent): the index of the line each piece came from (the lowest ``priority``
+    where lines overlap), for carrying attributes over.
+
+    Two new streets that end on a street at the same point up to round-off (3.5e-10 m
+    apart, made by two interpolations) become two of its vertices, and noding cuts a piece
+    that short between them; dropped, it left the two pairs of ends apart, a junction that a
+    zero-tolerance network analysis reads as two:
+
+    >>> road = shapely.LineString([(0, 0), (10, 0)])
+    >>> north = shapely.LineString([(5, 5), (5, 0)])
+    >>> south = shapely.LineString([(5 + 3e-10, -5), (5 + 3e-10, 0)])
+    >>> pieces, parent = renode([road, north, south], [False, True, True], [0, 1, 1], 1e-6)
+    >>> len(pieces), len(np.unique(shapely.get_coordinates(shapely.boundary(pieces)), axis=0))
+    (4, 5)
+    """
     lines = snap_ends_onto_lines(lines, new)
     pieces = node_lines(lines)
-    pieces = pieces[shapely.length(pieces) > min_length]
+    if min_length > 0:
+        pieces, _ = collapse_short_pieces(pieces, min_length)
+    pieces = pieces[shapely.length(pieces) > 0]
     parent = _attach_attributes(pieces, lines, np.arange(len(lines)),
                                 np.asarray(priority, dtype=np.int64))
     return pieces, parent
