@@ -3,6 +3,7 @@ from functools import lru_cache
 
 import numpy as np
 import shapely
+from scipy.spatial import cKDTree
 
 from conftest import BUBENEC, HELSINKI, LIECHTENSTEIN, ROOT
 
@@ -121,6 +122,28 @@ def assert_no_gaps(lines, reach=0.5, of=None):
     assert not dangle.any(), \
         f"{len(np.unique(e[dangle]))} line ends {d[dangle].min():.1e}-{d[dangle].max():.1e} " \
         "m beside a line they do not touch"
+
+
+def assert_ends_meet_exactly(lines, reach=0.5, of=None):
+    """Line ends within ``reach`` m of each other are one point to the last bit: no street
+    ends a few decimetres (or 1e-9 m) from a junction or from another street's end, and no
+    street of a few decimetres joins two junctions. The invariants merge such ends within
+    their snap tolerance; a network tool without one reads a gap or a dangle there. ``of``
+    (a mask): only pairs with one of these lines' ends (the OSM given roads have gaps of
+    their own)."""
+    lines = np.asarray(lines, dtype=object)
+    n = len(lines)
+    ends = shapely.get_coordinates(np.concatenate([shapely.get_point(lines, 0),
+                                                   shapely.get_point(lines, -1)]))
+    pairs = cKDTree(ends).query_pairs(reach, output_type="ndarray")
+    apart = (ends[pairs[:, 0]] != ends[pairs[:, 1]]).any(axis=1) if len(pairs) else \
+        np.zeros(0, bool)
+    if of is not None and len(pairs):
+        mine = np.r_[np.asarray(of, dtype=bool), np.asarray(of, dtype=bool)]
+        apart &= mine[pairs[:, 0]] | mine[pairs[:, 1]]
+    d = np.hypot(*(ends[pairs[apart, 0]] - ends[pairs[apart, 1]]).T) if apart.any() else []
+    assert not apart.any(), f"{int(apart.sum())} pairs of line ends {min(d):.1e}-{max(d):.1e} " \
+        f"m apart (of {n} lines)"
 
 
 def assert_exact_junctions(lines):

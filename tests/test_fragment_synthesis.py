@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 import shapely
 
-from helpers import (assert_no_gaps, assert_planar, bubenec, clipped_metrics,
-                     helsinki_roads, right_angle_share, sketch_cells, style_distances,
-                     STYLE_MEASURES)
+from helpers import (assert_ends_meet_exactly, assert_no_gaps, assert_planar, bubenec,
+                     clipped_metrics, helsinki_roads, right_angle_share, sketch_cells,
+                     style_distances, STYLE_MEASURES)
 from test_fragments import levelled_grid
 from urban_synthesis.plugin.network import blocks
 from urban_synthesis.plugin.retrieval import database
@@ -575,6 +575,7 @@ def test_real_town_from_its_neighbours():
     # the links that join the pieces (the lane apart among them) meet their streets exactly
     assert (res.table.source_fragment == "link").any()
     assert_no_gaps(res.geometry, of=res.table.source_fragment.to_numpy() != "arterial")
+    assert_ends_meet_exactly(res.geometry, of=res.table.source_fragment.to_numpy() != "arterial")
     real = fidelity.fidelity_statistics(target.lines, target.area)
     synth = fidelity.fidelity_statistics(np.concatenate([target.given, new]), target.area)
     assert synth["street_length_km_per_km2"] == pytest.approx(

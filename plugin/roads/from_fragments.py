@@ -64,8 +64,8 @@ from ..core.progress import InputError, Progress, ensure
 from ..network import street_graph as _roads
 from ..network.dead_ends import MIN_DANGLE, steer_attributed
 from ..network.links import join_pieces, link_floating_pieces
-from ..network.invariants import corridor_around, doubles_a_street
-from ..network.street_graph import add_streets
+from ..network.invariants import SNAP_TOLERANCE, corridor_around, doubles_a_street
+from ..network.street_graph import add_streets, close_short_gaps
 from ..network.blocks import (
     MIN_BLOCK_AREA,
     MIN_BLOCK_WIDTH,
@@ -1144,6 +1144,11 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
                                   opened=n_opened)
         progress.info(f"Dead-end share {now:.2f} (example {share:.2f}): {n_closed} dead "
                       f"end(s) closed, {n_opened} T stem(s) cut into cul-de-sacs.")
+    # what the invariants read within their tolerance, exactly: no street ending a few
+    # decimetres from a junction, no street of a few decimetres between two
+    new = (level > 0) & ~np.isin(attrs["source_fragment"], ("arterial", "boundary"))
+    geometry, keep = close_short_gaps(geometry, new, SNAP_TOLERANCE)
+    level, attrs = level[keep], {k: v[keep] for k, v in attrs.items()}
     keep = shapely.length(geometry) > 1e-6
     geometry = geometry[keep]
     table = pd.DataFrame({"level": level[keep],

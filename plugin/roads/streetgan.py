@@ -518,6 +518,14 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
                                                np.random.default_rng(seed + 1))
         is_given = ~is_new
         steered = (steered[0] + again[0], steered[1] + again[1])
+    if len(lines) > 1:
+        # what the invariants read within their tolerance, exactly: no street ending a few
+        # decimetres from a junction, no street of a few decimetres between two
+        from ..network.invariants import SNAP_TOLERANCE
+        from ..network.street_graph import close_short_gaps
+
+        lines, keep = close_short_gaps(lines, ~is_given, SNAP_TOLERANCE)
+        is_given = is_given[keep]
     t_vec = time.perf_counter() - t
     level = np.zeros(len(lines), dtype=np.int64)
     if levels and len(lines):
