@@ -83,14 +83,15 @@ def match_crossings(lines, is_new, share: float, area, rng: np.random.Generator,
     is_new = np.asarray(is_new, dtype=bool)
     if len(lines) < 2 or not np.isfinite(share) or not is_new.any():
         return lines, is_new, (0, 0)
-    now = crossing_share(lines, area)
+    graph = _CountedGraph(lines, area)
+    now = graph.share()
     if now > share:   # too many: streets at crossings go, each merging two blocks
         out, out_new, removed = fewer_crossings(lines, is_new, share, area,
                                                 lambda ls: crossing_share(ls, area))
         return out, out_new, (0, removed)
     if now == share:
         return lines, is_new, (0, 0)
-    added, _ = streets_across(lines, is_new, share, area, rng, given, reach)
+    added, _ = _streets_across(graph, lines, is_new, share, area, rng, given, reach)
     if not len(added):
         return lines, is_new, (0, 0)
     everything = np.concatenate([lines, added])
@@ -117,21 +118,43 @@ def streets_across(lines, is_new, share: float, area, rng: np.random.Generator, 
     """
     lines = np.asarray(lines, dtype=object)
     is_new = np.asarray(is_new, dtype=bool)
-    none = np.empty(0, dtype=object), np.empty(0, dtype=np.int64)
     if len(lines) < 2 or not np.isfinite(share) or not is_new.any():
-        return none
-    g = clean_network(lines, snap_tolerance=SNAP_TOLERANCE, min_dangle_length=0.0,
-                      merge_degree2=True, duplicate_tolerance=SNAP_TOLERANCE)
-    nodes, u, v = np.asarray(g.nodes), np.asarray(g.u), np.asarray(g.v)
-    deg = np.bincount(np.r_[u, v], minlength=len(nodes))
-    counted = counted_nodes(nodes, area)
+        return np.empty(0, dtype=object), np.empty(0, dtype=np.int64)
+    return _streets_across(_CountedGraph(lines, area), lines, is_new, share, area, rng,
+                           given, reach, at)
+
+
+class _CountedGraph:
+    """The network as the shares count it (:func:`invariants.crossing_share`: noded, nodes
+    within the snap tolerance merged, degree-2 chains dissolved), built once for both the
+    share and the streets across."""
+
+    def __init__(self, lines, area):
+        self.g = clean_network(lines, snap_tolerance=SNAP_TOLERANCE, min_dangle_length=0.0,
+                               merge_degree2=True, duplicate_tolerance=SNAP_TOLERANCE)
+        self.nodes = np.asarray(self.g.nodes)
+        self.u, self.v = np.asarray(self.g.u), np.asarray(self.g.v)
+        self.deg = np.bincount(np.r_[self.u, self.v], minlength=len(self.nodes))
+        self.counted = counted_nodes(self.nodes, area)
+
+    def share(self, new_ts: int = 0) -> float:
+        """The share of 4-way junctions, with ``new_ts`` T junctions made since counted."""
+        nodes = self.counted & (self.deg > 0) & (self.deg != 2)
+        k = int(nodes.sum()) + new_ts
+        return float((nodes & (self.deg >= 4)).sum() / k) if k else 0.0
+
+
+def _streets_across(graph: _CountedGraph, lines, is_new, share, area, rng, given=None,
+                    reach=None, at=None):
+    """:func:`streets_across` on the network's counted graph (its degrees are updated)."""
+    none = np.empty(0, dtype=object), np.empty(0, dtype=np.int64)
+    g, nodes, u, v = graph.g, graph.nodes, graph.u, graph.v
+    deg, counted = graph.deg, graph.counted
     added, stems = [], []   # the continued streets, in the order they were made
     new_ts = 0   # their far ends: new T junctions, where they count
 
     def share_now() -> float:
-        nodes_ = counted & (deg > 0) & (deg != 2)
-        k = int(nodes_.sum()) + new_ts
-        return float((nodes_ & (deg >= 4)).sum() / k) if k else 0.0
+        return graph.share(new_ts)
 
     if share_now() >= share:
         return none

@@ -87,8 +87,8 @@ from . import intersection_quadtree as iq
 
 __all__ = ["WalkSettings", "Synthesis", "StreetShapes", "street_shapes", "connect_points",
            "synthesize", "given_with_junctions", "blocks_and_dual", "block_table",
-           "dead_end_share_of",
-           "crossing_share_of", "ROAD_FIELDS", "POINT_FIELDS", "BLOCK_FIELDS"]
+           "dead_end_share_of", "crossing_share_of", "ROAD_FIELDS", "POINT_FIELDS",
+           "BLOCK_FIELDS"]
 
 ROAD_FIELDS = [("edge_id", "int"), ("level", "int"), ("length_m", "float"),
                ("tortuosity", "float"), ("origin", "str"), ("node_from", "int"),
