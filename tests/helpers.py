@@ -305,6 +305,18 @@ def liechtenstein_town(name):
     return liechtenstein.leave_one_out(name)
 
 
+def left_out_town(name):
+    """A Liechtenstein town of the fidelity benchmark (``tests/towns.py``) and the other
+    towns, its example: (town, others); the test is skipped without the OSM extract."""
+    import pytest
+    from towns import LI_PBF, liechtenstein_towns
+
+    if not LI_PBF.exists():
+        pytest.skip(f"{LI_PBF} is missing")
+    towns = liechtenstein_towns()
+    return next(t for t in towns if t.name == name), [t for t in towns if t.name != name]
+
+
 def load_script(name: str):
     """A script of scripts/ (not a package) imported as a module."""
     import importlib.util

@@ -7,7 +7,7 @@ import shapely
 from scipy.spatial import cKDTree
 
 from helpers import (assert_exact_junctions, assert_planar, bubenec, helsinki_roads,
-                     liechtenstein_town, nearly_coincident_streets)
+                     left_out_town, liechtenstein_town, nearly_coincident_streets)
 from urban_synthesis.plugin.roads import intersection_quadtree as iq
 from urban_synthesis.plugin.measure import fidelity, metrics
 from urban_synthesis.plugin.network import invariants
@@ -363,13 +363,9 @@ def test_no_bent_street_runs_along_a_given_road():
     given road's corridor, and a bend up to 10 m more than its chord, so a crossing street's
     parabola ran 41 m along the road (a parallel duplicate). A bend now also stays within
     the invariants' 40 m: every invariant holds."""
-    from towns import LI_PBF, bubenec_town, liechtenstein_towns
+    from towns import bubenec_town
 
-    if not LI_PBF.exists():
-        pytest.skip(f"{LI_PBF} is missing")
-    towns = liechtenstein_towns()
-    target = next(t for t in towns if t.name == "Triesen")
-    others = [t for t in towns if t.name != "Triesen"]
+    target, others = left_out_town("Triesen")
     pts = iq.points_from_roads(np.concatenate([t.lines for t in others]),
                                np.concatenate([t.road_class for t in others]))[0]
     bub = bubenec_town()
@@ -541,13 +537,7 @@ def test_one_network_on_a_town_never_seen(eschen):
 def _left_out(name):
     """A Liechtenstein town as the fidelity benchmark runs it: (target town, the other
     towns' fidelity statistics, their points, their street shapes)."""
-    from towns import LI_PBF, liechtenstein_towns
-
-    if not LI_PBF.exists():
-        pytest.skip(f"{LI_PBF} is missing")
-    towns = liechtenstein_towns()
-    target = next(t for t in towns if t.name == name)
-    others = [t for t in towns if t.name != name]
+    target, others = left_out_town(name)
     lines = np.concatenate([t.lines for t in others])
     example = fidelity.fidelity_statistics(lines, shapely.union_all([t.area for t in others]))
     pts, graph, h = iq.points_from_roads(lines, np.concatenate([t.road_class for t in others]))
@@ -684,13 +674,7 @@ def test_no_step_runs_along_a_given_road():
     a straight step of 395 m ran 135 m inside a secondary road's corridor before steps were
     checked against the given roads' corridors (the invariants' rule); now no new street
     doubles a given road, and the network stays one piece."""
-    from towns import LI_PBF, liechtenstein_towns
-
-    if not LI_PBF.exists():
-        pytest.skip(f"{LI_PBF} is missing")
-    towns = liechtenstein_towns()
-    target = next(t for t in towns if t.name == "Triesenberg")
-    others = [t for t in towns if t.name != "Triesenberg"]
+    target, others = left_out_town("Triesenberg")
     pts, graph, h = iq.points_from_roads(np.concatenate([t.lines for t in others]),
                                          np.concatenate([t.road_class for t in others]))
     res = rw.synthesize(pts, target.area, existing_lines=target.given, seed=4,

@@ -8,7 +8,7 @@ import shapely
 import shapely.affinity
 
 from helpers import (assert_ends_meet_exactly, assert_exact_junctions, assert_planar,
-                     helsinki_roads, nearly_coincident_streets)
+                     helsinki_roads, left_out_town, nearly_coincident_streets)
 from urban_synthesis.plugin.measure import metrics
 from urban_synthesis.plugin.roads import raster_graph
 from urban_synthesis.plugin.roads import streetgan
@@ -342,15 +342,10 @@ def test_no_street_ends_a_few_decimetres_from_a_junction(models):
     merge nodes within 0.5 m, but two gaps to a tool that joins lines only where they
     share a point. Such ends are one point now, and no street of a few decimetres is left
     between them."""
-    from towns import LI_PBF, liechtenstein_towns
     from urban_synthesis.plugin.measure import fidelity
     from urban_synthesis.plugin.network import invariants
 
-    if not LI_PBF.exists():
-        pytest.skip(f"{LI_PBF} is missing")
-    towns = liechtenstein_towns()
-    target = next(t for t in towns if t.name == "Balzers")
-    others = [t for t in towns if t.name != "Balzers"]
+    target, others = left_out_town("Balzers")
     stats = fidelity.fidelity_statistics(np.concatenate([t.lines for t in others]),
                                          shapely.union_all([t.area for t in others]))
     res = streetgan.synthesize(target.area, models["streetgan_helsinki"], seed=1,
