@@ -13,7 +13,8 @@ GeoPackage), then:
   example's standard deviation) and the KS statistic of segment length, node degree,
   intersection angle and block area between the original roads inside the arterials'
   faces and: the fragment synthesis (N_BEST = 3, mean of seeds 0-4), the same with
-  N_BEST = 1 (self-retrieval: exact), a plain grid of Helsinki's median block size, the
+  N_BEST = 1 (self-retrieval; also without the fill and dead-end steering of issue 15,
+  the thesis's method alone, which rebuilds the original), a plain grid of Helsinki's median block size, the
   synthesis from Bubenec's database, and the bare arterials;
 - style transfer with a real second style: a grid the plugin grows itself (growroads,
   GRID major 250 m / minor 80 m over 2 km x 2 km, seed 1, levels 0 major / 1 minor) gives
@@ -128,6 +129,11 @@ def reproduction(lines, levels, hel, bub, seeds=range(5)):
                    original) for s in seeds])
     rows["fragments, Helsinki db, N_BEST=1 (self-retrieval)"] = distances(
         clipped_metrics(sf.synthesize(arterials, [hel], n_best=1).geometry, area), original)
+    # the thesis's method alone: no fill of the faces no fragment splits, no dead-end
+    # steering (the issue-15 steps after the levels, which add streets the example lacks)
+    rows["the same without the fill (the thesis's method)"] = distances(
+        clipped_metrics(sf.synthesize(arterials, [hel], n_best=1, fill=False).geometry,
+                        area), original)
     rows[f"plain grid, {spacing:.0f} m"] = distances(
         clipped_metrics(np.concatenate([arterials, sf.grid_streets(faces, spacing)]), area),
         original)
