@@ -284,6 +284,9 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
         if existing is not None:
             existing, _ = drivable_lines(existing, None, set(roads.DRIVABLE_CLASSES), feedback)
             existing_lines = existing.geometry
+        elif parameters.get(self.OUTPUT_EXISTING) is not None:
+            raise QgsProcessingException("Existing roads with the new junctions "
+                                         "(OUTPUT_EXISTING) need EXISTING_ROADS.")
         feedback.setProgress(15)
         result = qgis_io.run_engine(
             target.name, random_walk.synthesize, points, target.geometry, existing_lines,
@@ -322,9 +325,6 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
             feedback)
         qgis_io.style_output(context, results[self.OUTPUT], "roads_by_level.qml")
         if parameters.get(self.OUTPUT_EXISTING) is not None:
-            if existing_lines is None:
-                raise QgsProcessingException("Existing roads with the new junctions: no "
-                                             "EXISTING_ROADS were given.")
             given, table = random_walk.given_with_junctions(existing_lines, result.geometry)
             results[self.OUTPUT_EXISTING] = qgis_io.write_sink(
                 self, parameters, self.OUTPUT_EXISTING, context, given, table,

@@ -158,6 +158,10 @@ def test_bad_inputs(qgis_processing, helsinki_points):
     with pytest.raises(Exception, match="weighted target.*between 0 and 1"):
         qgis_processing.run(ALG, {"EXAMPLE": helsinki_points, "EXAMPLE_B": helsinki_points,
                                   "TARGET": weights, "BLEND_FIELD": "w", "OUTPUT": "memory:"})
+    # the given roads with the new junctions, asked for with no given roads: before any work
+    with pytest.raises(Exception, match="OUTPUT_EXISTING.*EXISTING_ROADS"):
+        qgis_processing.run(ALG, {"EXAMPLE": helsinki_points, "TARGET": target,
+                                  "OUTPUT": "memory:", "OUTPUT_EXISTING": "memory:"})
 
 
 def test_qgis_process_run(tmp_path):
