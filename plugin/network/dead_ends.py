@@ -32,7 +32,7 @@ from .blocks import planar_faces
 from .invariants import (CORRIDOR_HALF_WIDTH, DEAD_END_TOLERANCE, SNAP_TOLERANCE,
                          corridor_around, counted_nodes, dead_end_share, doubles_a_street)
 from .links import meets_only_at_ends
-from .street_graph import add_streets, clean_network, renode_attributed
+from .street_graph import add_streets, clean_network, renode_attributed, synthesised
 
 __all__ = ["steer_share", "steer_dead_ends", "steer_into_band", "steer_attributed", "MIN_DANGLE",
            "CLOSE_REACH"]
@@ -193,7 +193,7 @@ def _steer_dead_ends(geometry, level, attrs, share: float, area, rng, min_dangle
     lines = np.array(geometry, dtype=object)      # the network's own lines, changed in place
     # an edge stands for its line where it is the whole of it (ends moved by the snapping)
     whole = np.abs(shapely.length(lines[src]) - shapely.length(g.geometry)) < 2 * SNAP_TOLERANCE
-    new = (level[src] > 0) & ~np.isin(attrs["source_fragment"][src], ("arterial", "boundary"))
+    new = synthesised(level, attrs["source_fragment"])[src]
     shapely.prepare(area)
 
     def counted(xy) -> np.ndarray:

@@ -37,7 +37,8 @@ __all__ = [
     "drivable_and_arterial", "parse_other_tags", "vertical_layer", "class_rank",
     "clean_network", "collapse_short_pieces", "graph_from_lines", "node_lines", "renode",
     "snap_ends_onto_lines", "weld_ends", "close_short_gaps", "move_ends_onto_lines",
-    "junction_points", "renode_attributed", "add_streets", "JUNCTION_TOLERANCE",
+    "junction_points", "synthesised", "renode_attributed", "add_streets",
+    "JUNCTION_TOLERANCE",
 ]
 
 #: OSM highway classes kept by default: what cars drive on and what forms city blocks.
@@ -777,6 +778,18 @@ def _loops_start_at_their_node(merged: np.ndarray, g: RoadGraph, comp: np.ndarra
             ring = np.roll(xy, -at[0], axis=0)
             merged[c] = shapely.linestrings(np.vstack([ring, ring[:1]]))
     return merged
+
+
+def synthesised(level: np.ndarray, source_fragment: np.ndarray) -> np.ndarray:
+    """Which lines of an attributed network (the fragment synthesis') the synthesis made:
+    above level 0, and neither a given arterial nor the boundary ring that closed the sketch.
+
+    >>> synthesised(np.array([0, 1, 1, 2]), np.array(["arterial", "f:3", "boundary", "link"],
+    ...                                               dtype=object)).tolist()
+    [False, True, False, True]
+    """
+    return (np.asarray(level) > 0) & \
+        ~np.isin(np.asarray(source_fragment, dtype=object), ("arterial", "boundary"))
 
 
 def renode_attributed(geometry: np.ndarray, level: np.ndarray, attrs: Dict[str, np.ndarray],

@@ -65,7 +65,7 @@ from ..network import street_graph as _roads
 from ..network.dead_ends import MIN_DANGLE, steer_attributed
 from ..network.links import join_pieces, link_floating_pieces
 from ..network.invariants import SNAP_TOLERANCE, corridor_around, doubles_a_street
-from ..network.street_graph import add_streets, close_short_gaps
+from ..network.street_graph import add_streets, close_short_gaps, synthesised
 from ..network.blocks import (
     MIN_BLOCK_AREA,
     MIN_BLOCK_WIDTH,
@@ -1146,7 +1146,7 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
                       f"end(s) closed, {n_opened} T stem(s) cut into cul-de-sacs.")
     # what the invariants read within their tolerance, exactly: no street ending a few
     # decimetres from a junction, no street of a few decimetres between two
-    new = (level > 0) & ~np.isin(attrs["source_fragment"], ("arterial", "boundary"))
+    new = synthesised(level, attrs["source_fragment"])
     geometry, keep = close_short_gaps(geometry, new, SNAP_TOLERANCE)
     level, attrs = level[keep], {k: v[keep] for k, v in attrs.items()}
     keep = shapely.length(geometry) > 1e-6
