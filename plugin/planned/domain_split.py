@@ -85,7 +85,7 @@ from ..core.progress import InputError, Progress, ensure
 from ..measure import metrics as _metrics
 from ..network import invariants as _invariants
 from ..network.links import meets_only_at_ends
-from ..network.street_graph import snap_ends_onto_lines
+from ..network.street_graph import JUNCTION_TOLERANCE, collapse_short_pieces, snap_ends_onto_lines
 from ..parcels import subdivision as _parcels
 from . import templates as _templates
 from .cross_field import cross_field
@@ -903,18 +903,27 @@ class _Search:
 def road_network(roads, level, kind, stub: float = 1.0):
     """The streets of a layout as a planar network: every line noded at its crossings and
     T-junctions (snap-rounded, :data:`mesh_optimisation.NODING_GRID`), each piece keeping
-    the level and kind of the line it came from; dangling pieces shorter than ``stub``
-    metres (overshoots of a junction computed in floating point) are dropped.
+    the level and kind of the line it came from; pieces under a millimetre that noding
+    leaves between two nodes a grid step apart are collapsed into one junction
+    (:func:`street_graph.collapse_short_pieces`: dropped, they would leave that gap in a
+    road); dangling pieces shorter than ``stub`` metres (overshoots of a junction computed
+    in floating point) are dropped.
 
     Returns (pieces, level, kind, number of stubs dropped).
+
+    >>> key = shapely.LineString([(0, 0), (100, 0)])
+    >>> a = shapely.LineString([(50, 0), (50, 80)])
+    >>> b = shapely.LineString([(50.00001, 0), (50.00001, -80)])
+    >>> pieces, *_ = road_network([key, a, b], [0, 1, 1], ["road"] * 3)
+    >>> len(pieces), sorted(round(float(x), 5) for x in shapely.length(pieces))
+    (4, [50.0, 50.0, 80.0, 80.0])
     """
     roads = np.asarray(roads, dtype=object)
     level = np.asarray(level)
     kind = np.asarray(kind, dtype=object)
     if len(roads) == 0:
         return roads, level, kind, 0
-    pieces = noded(roads)
-    pieces = pieces[shapely.length(pieces) > 0]
+    pieces, _ = collapse_short_pieces(noded(roads), JUNCTION_TOLERANCE)
     mid = shapely.line_interpolate_point(pieces, 0.5, normalized=True)
     pi, ri = shapely.STRtree(roads).query_nearest(mid, all_matches=True)
     # the lowest level (most important road) wins where two lines share a piece
