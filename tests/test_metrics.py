@@ -328,6 +328,22 @@ def test_study_area_counts_only_what_is_inside():
     assert len(r.distribution("blocks", "area")) == 9  # distributions keep every block
 
 
+def test_a_street_along_the_edge_of_the_area_counts_whole():
+    """A layout's outline street is built along its domain's edge: a nanometre outside it
+    here and there, it counts all the same (clipped to the exact polygon it counted
+    nothing where it lay outside)."""
+    area = shapely.box(0, 0, 300, 300)
+    shifted = grid(4)
+    # the grid's outer streets lie on the area's edge, its left and bottom ones 1 nm out
+    shifted = shapely.transform(shifted, lambda xy: np.where(xy == 0.0, -1e-9, xy))
+    assert shapely.length(shapely.intersection(shifted, area)).sum() == pytest.approx(1800)
+    r = M.compute_layout_metrics(roads=shifted, area=area)
+    assert r.scalar("roads", "street_length_km_per_km2") == pytest.approx(2.4 / 0.09)
+    # a street crossing the edge still counts only up to it
+    r = M.compute_layout_metrics(roads=grid(4, overhang=50.0), area=area)
+    assert r.scalar("roads", "street_length_km_per_km2") == pytest.approx(2.4 / 0.09)
+
+
 def test_bad_input():
     with pytest.raises(InputError, match="no layer"):
         M.compute_layout_metrics()

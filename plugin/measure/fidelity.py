@@ -67,14 +67,13 @@ EDGE_DISTANCE = 1.0
 
 
 def clip_to_area(lines: Sequence, area) -> np.ndarray:
-    """The parts of ``lines`` inside ``area``: single lines longer than a centimetre."""
+    """The parts of ``lines`` inside ``area`` (:func:`metrics.clip_lines`: a street along its
+    edge whole): single lines longer than a centimetre."""
     lines = np.asarray(lines, dtype=object).ravel()
     if not len(lines):
         return np.empty(0, dtype=object)
-    with np.errstate(invalid="ignore"):
-        parts = shapely.get_parts(shapely.intersection(lines, area))
-    parts = shapely.get_parts(parts)
-    return parts[(shapely.get_type_id(parts) == 1) & (shapely.length(parts) > 0.01)]
+    parts = _metrics.clip_lines(lines, area)
+    return parts[shapely.length(parts) > 0.01]
 
 
 def fidelity_statistics(lines: Sequence, area, min_block_area: float = _blocks.MIN_BLOCK_AREA,

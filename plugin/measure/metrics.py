@@ -50,7 +50,7 @@ __all__ = [
     "road_graph", "road_metrics", "block_faces", "block_metrics", "parcel_metrics",
     "footprint_metrics", "compute_layout_metrics", "compare", "two_sample",
     "corner_angles", "corners", "street_bearings", "intersection_angles", "network_invariants",
-    "orientation_entropy", "landuse_category",
+    "orientation_entropy", "landuse_category", "clip_lines",
 ]
 
 M2_PER_KM2 = 1e6
@@ -198,6 +198,45 @@ def _area(area, *layers) -> Tuple[Optional[shapely.Geometry], float, str]:
         raise InputError("the layers span no area (give a study area for the densities)")
     shapely.prepare(hull)
     return hull, a, "convex hull of the input"
+
+
+def clip_lines(lines, area, return_index: bool = False):
+    """The parts of ``lines`` inside ``area``, a street along its edge whole: clipped to the
+    exact polygon, a line built along the edge (a layout's outline street) lies outside it
+    by round-off here and there and loses those parts (one layout's s_l moved by 2 % with a
+    10 µm change of its noding). Clipped to the area grown by :data:`ON_EDGE` instead, with
+    each cut end moved back onto the area's edge (a street crossing it ends there).
+    ``return_index``: also the index of the line each part came from.
+
+    >>> area = shapely.box(0, 0, 100, 100)
+    >>> along = shapely.LineString([(0, -1e-9), (100, -1e-9)])
+    >>> across = shapely.LineString([(50, 50), (50, 150)])
+    >>> [round(g.length, 6) for g in clip_lines([along, across], area)]
+    [100.0, 50.0]
+    >>> [round(g.length, 6) for g in shapely.intersection([along, across], area)]
+    [0.0, 50.0]
+    """
+    lines = np.asarray(lines, dtype=object).ravel()
+    with np.errstate(invalid="ignore"):
+        parts, index = shapely.get_parts(shapely.intersection(
+            lines, shapely.buffer(area, ON_EDGE, join_style="mitre")), return_index=True)
+    parts, inner = shapely.get_parts(parts, return_index=True)   # a collection's members
+    index = index[inner]
+    single = (shapely.get_type_id(parts) == 1) & ~shapely.is_empty(parts)
+    parts, index = parts[single], index[single]
+    if not len(parts):
+        return (parts, index) if return_index else parts
+    xy = shapely.get_coordinates(parts)
+    n = shapely.get_num_coordinates(parts)
+    ends = np.unique(np.r_[np.cumsum(n) - n, np.cumsum(n) - 1])
+    edge = shapely.boundary(area)
+    pts = shapely.points(xy[ends])
+    out = ~shapely.intersects(area, pts)
+    if out.any():
+        xy[ends[out]] = shapely.get_coordinates(shapely.line_interpolate_point(
+            edge, shapely.line_locate_point(edge, pts[out])))
+    parts = shapely.linestrings(xy, indices=np.repeat(np.arange(len(parts)), n))
+    return (parts, index) if return_index else parts
 
 
 def _inside(area_geom, geoms) -> np.ndarray:
@@ -440,9 +479,9 @@ def road_metrics(roads, area=None, snap_tolerance: float = 0.5, bearing_length: 
             node_in &= ~shapely.dwithin(shapely.boundary(area_geom), pts, edge_distance)
     length_in = length.copy()
     if area_geom is not None:
-        cut = ~shapely.within(graph.geometry, area_geom)
-        with np.errstate(invalid="ignore"):
-            length_in[cut] = shapely.length(shapely.intersection(graph.geometry[cut], area_geom))
+        cut = np.flatnonzero(~shapely.within(graph.geometry, area_geom))
+        parts, index = clip_lines(graph.geometry[cut], area_geom, return_index=True)
+        length_in[cut] = np.bincount(index, shapely.length(parts), minlength=len(cut))
     bearing, piece_length = street_bearings(graph.geometry, bearing_length)
     res = MetricsResult()
     res.add_distribution("roads", "segment_length", length, "m", "Segment length")
