@@ -117,6 +117,32 @@ def test_no_street_ends_on_a_given_road_or_out_of_reach():
     assert made == 0
 
 
+def test_a_street_across_ends_on_a_given_road_that_may_take_one():
+    """StreetGAN's rule: where the first street across is a given road that takes junctions
+    (``may_end_on``), the T's street goes on to it; the given road is split at the new T
+    and its pieces stay given."""
+    lines, is_new = _ladder(bottom_given=True)
+    pieces, parent = _noded(lines, is_new)
+    new_in = is_new[parent]
+    out, new, (made, _) = match_crossings(pieces, new_in, 0.1, AREA,
+                                         np.random.default_rng(0), reach=150.0,
+                                         may_end_on=np.ones(len(pieces), bool))
+    assert made == 2
+    assert fidelity.fidelity_statistics(out, AREA)["degree4_share"] == pytest.approx(2 / 16)
+    assert_planar(out)
+    assert_no_gaps(out)
+    south = [g for g in out if g.bounds[1] == -100 and g.bounds[3] == 0]
+    assert len(south) == made and all(new[out.tolist().index(g)] for g in south)
+    # the bottom road, given, now in three pieces with a vertex at each new T
+    bottom = [g for g, n in zip(out, new) if g.bounds[1] == g.bounds[3] == -100]
+    assert len(bottom) == 3 and not any(new[out.tolist().index(g)] for g in bottom)
+    assert sum(g.length for g in bottom) == pytest.approx(500.0)
+    # a given road that may take none (a motorway) keeps the old rule: nothing ends on it
+    out, _, (made, _) = match_crossings(pieces, new_in, 0.1, AREA, np.random.default_rng(0),
+                                        reach=150.0, may_end_on=new_in)
+    assert made == 0
+
+
 def test_too_many_crossings_lose_streets_between_junctions():
     """A 5 x 4 grid of streets 100 m apart: 6 crossings among 16 counted nodes (the T's on
     its edge; its corners are bends). Down to a share of 0.25, streets at crossings go,

@@ -360,6 +360,22 @@ def test_no_street_ends_a_few_decimetres_from_a_junction(models):
     assert check.ok, check.summary()
 
 
+def test_the_given_pieces_on_a_motorway_take_no_street_across():
+    """Which noded lines a street going on across may end on: generated ones and given
+    pieces off the motorways and trunks (invariants.CONTROLLED_ACCESS)."""
+    motorway = shapely.LineString([(0, 0), (200, 0)])
+    primary = shapely.LineString([(0, 100), (200, 100)])
+    lines = np.array([shapely.LineString([(0, 0), (100, 0)]),        # motorway, piece 1
+                      shapely.LineString([(100, 0), (200, 0)]),      # motorway, piece 2
+                      shapely.LineString([(0, 100), (200, 100)]),    # primary
+                      shapely.LineString([(100, 0), (100, 100)])],   # generated, ends on both
+                     dtype=object)
+    is_given = np.array([True, True, True, False])
+    given, cls = np.array([motorway, primary], dtype=object), np.array(["motorway", "primary"])
+    closed = given[~streetgan._open_roads(cls)]
+    assert streetgan._on_roads(lines, is_given, closed).tolist() == [True, True, False, False]
+
+
 def test_new_streets_whose_noding_fails_are_snap_rounded():
     """Generated streets that defeat GEOS's floating-point noding are noded on the
     millimetre grid: planar, every street kept to that grid."""

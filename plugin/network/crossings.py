@@ -55,7 +55,7 @@ def t_stem(directions: np.ndarray) -> Optional[int]:
 
 
 def match_crossings(lines, is_new, share: float, area, rng: np.random.Generator,
-                    given=None, reach: Optional[float] = None
+                    given=None, reach: Optional[float] = None, may_end_on=None
                     ) -> Tuple[np.ndarray, np.ndarray, Tuple[int, int]]:
     """T junctions become crossings while the share of 4-way junctions is under ``share``;
     while it is over, synthesised streets at crossings are removed
@@ -64,8 +64,8 @@ def match_crossings(lines, is_new, share: float, area, rng: np.random.Generator,
     Parameters
     ----------
     lines : array of LineString, noded (the network as it will be measured)
-    is_new : bool mask: the lines this pass may continue and end on (the others are given:
-        a T onto a given road may cross it, no new street ends on one)
+    is_new : bool mask: the lines this pass may continue (the others are given: a T onto a
+        given road may cross it)
     share : the example's share of nodes of degree 4 or more among its nodes (degree != 2)
     area : the target polygon(s): nodes inside it, away from its edge, count; new streets
         stay inside it
@@ -73,6 +73,10 @@ def match_crossings(lines, is_new, share: float, area, rng: np.random.Generator,
     given : the given roads, optional: no continued street runs along one (their corridors)
     reach : m, the farthest a continued street goes (default: twice the median length of the
         new streets' edges)
+    may_end_on : bool mask, optional: the lines a continued street may end on (a new T on
+        them, which noding splits); default ``is_new``. StreetGAN adds the given roads that
+        take new junctions (not motorways or trunks): on a small target most T's lie on
+        given roads, and the first street across one is often another
 
     Returns
     -------
@@ -91,7 +95,8 @@ def match_crossings(lines, is_new, share: float, area, rng: np.random.Generator,
         return out, out_new, (0, removed)
     if now == share:
         return lines, is_new, (0, 0)
-    added, _ = _streets_across(graph, lines, is_new, share, area, rng, given, reach)
+    added, _ = _streets_across(graph, lines, is_new, share, area, rng, given, reach,
+                               may_end_on=may_end_on)
     if not len(added):
         return lines, is_new, (0, 0)
     everything = np.concatenate([lines, added])
@@ -145,7 +150,7 @@ class _CountedGraph:
 
 
 def _streets_across(graph: _CountedGraph, lines, is_new, share, area, rng, given=None,
-                    reach=None, at=None):
+                    reach=None, at=None, may_end_on=None):
     """:func:`streets_across` on the network's counted graph (its degrees are updated)."""
     none = np.empty(0, dtype=object), np.empty(0, dtype=np.int64)
     g, nodes, u, v = graph.g, graph.nodes, graph.u, graph.v
@@ -163,6 +168,7 @@ def _streets_across(graph: _CountedGraph, lines, is_new, share, area, rng, given
         gap, _ = cKDTree(np.asarray(at, dtype=float).reshape(-1, 2)).query(nodes)
         may_cross = gap <= SNAP_TOLERANCE
     edge_new = is_new[np.asarray(g.source)]
+    ends_on = is_new if may_end_on is None else np.asarray(may_end_on, dtype=bool)
     if reach is None:
         reach = 2.0 * float(np.median(shapely.length(g.geometry[edge_new])))
     cos_min = np.cos(np.radians(MIN_ANGLE))
@@ -208,8 +214,8 @@ def _streets_across(graph: _CountedGraph, lines, is_new, share, area, rng, given
                 t = float(np.dot(q - p, -d[stem]))
                 if t > 1.0 and (best is None or t < best[0]):
                     best = (t, h, q)
-        if best is None or not is_new[best[1]]:
-            return False   # nothing in reach, or the first street met is a given road
+        if best is None or not ends_on[best[1]]:
+            return False   # nothing in reach, or the first street met takes no junction
         t, h, q = best
         if any(shapely.intersects(s, shapely.LineString([p, q])) for s in added):
             return False   # a street this pass made is in the way

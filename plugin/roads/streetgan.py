@@ -409,8 +409,9 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
     crossing_share : float in [0, 1], optional, the example's share of 4-way junctions:
         the network's is steered to it (:func:`network.crossings.match_crossings`: T
         junctions become crossings, their generated street continued straight across to the
-        next generated street, or generated streets at crossings are removed, smallest
-        merged blocks first; not in the thesis); None: the junctions as read back
+        next street, generated or a given road that takes junctions (not a motorway or
+        trunk), or generated streets at crossings are removed, smallest merged blocks first;
+        not in the thesis); None: the junctions as read back
     """
     progress = ensure(progress)
     gen = model if isinstance(model, Generator) else load_model(model)
@@ -504,9 +505,10 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
     if crossing_share is not None and len(lines) > 1:
         from ..network.crossings import match_crossings
 
-        lines, is_new, crossings = match_crossings(lines, ~is_given, float(crossing_share),
-                                                   area, np.random.default_rng(seed),
-                                                   given=given_lines)
+        lines, is_new, crossings = match_crossings(
+            lines, ~is_given, float(crossing_share), area, np.random.default_rng(seed),
+            given=given_lines,
+            may_end_on=~_on_roads(lines, is_given, given_lines[~_open_roads(given_cls)]))
         is_given = ~is_new
     if dead_end_share is not None and len(lines) > 1:
         # on a small network one step moves the share far (Bubenec, about nine nodes: one
@@ -581,6 +583,19 @@ def _open_roads(given_class) -> np.ndarray:
 
     cls = np.array([str(c) for c in given_class], dtype=object)
     return ~np.isin(cls, invariants.CONTROLLED_ACCESS)
+
+
+def _on_roads(lines, is_given, roads) -> np.ndarray:
+    """Which of the given pieces among ``lines`` lie along one of ``roads`` (their middle
+    within a millimetre of it)."""
+    on = np.zeros(len(lines), dtype=bool)
+    if len(roads) and is_given.any():
+        idx = np.flatnonzero(is_given)
+        mid = shapely.line_interpolate_point(np.asarray(lines, dtype=object)[idx], 0.5,
+                                             normalized=True)
+        hit, _ = shapely.STRtree(roads).query(mid, predicate="dwithin", distance=1e-3)
+        on[idx[np.unique(hit)]] = True
+    return on
 
 
 def _cut_at_given(lines, given, half_width):
