@@ -146,9 +146,10 @@ class SynthesizeRoadsGan(AlgorithmBase):
             "The example's share of 4-way junctions among the street ends and junctions "
             "(layoutmetrics' degree4_share of the example, e.g. 0.08 for the Liechtenstein "
             "towns): while the generated network has fewer, T junctions become crossings, "
-            "their generated street continued straight across to the next generated street "
-            "(crossing nothing, inside the target, along no given road, at 25° or more to the "
-            "street it crosses); while it has more, "
+            "their generated street continued straight across to the next street, generated "
+            "or a given road that takes junctions (not a motorway or trunk), crossing nothing, "
+            "inside the target, along no given road, at 25° or more to the street it crosses; "
+            "while it has more, "
             "generated streets at crossings are removed where both their ends stay "
             "junctions, smallest merged blocks first. Empty: the junctions as read back "
             "from the image.", advanced=True)
