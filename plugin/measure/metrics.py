@@ -43,7 +43,7 @@ from ..core.geometry import minimum_rectangles
 from ..core.progress import InputError, Progress, ensure
 from ..network import blocks as _blocks
 from ..network import invariants as _invariants
-from ..network.street_graph import DRIVABLE_CLASSES, RoadGraph, clean_network
+from ..network.street_graph import DRIVABLE_CLASSES, RoadGraph, measured_graph
 
 __all__ = [
     "Scalar", "Distribution", "MetricsResult", "COMPARISON_COLUMNS",
@@ -321,9 +321,7 @@ def road_graph(lines, snap_tolerance: float = 0.5, z_layer=None,
         if len(z_layer) != len(kept):
             raise InputError(f"{len(z_layer)} vertical layers for {len(kept)} road lines")
         z_layer = z_layer[kept]
-    return clean_network(lines, z_layer=z_layer, snap_tolerance=snap_tolerance,
-                         min_dangle_length=0.0, merge_degree2=True,
-                         duplicate_tolerance=snap_tolerance, progress=progress)
+    return measured_graph(lines, snap_tolerance, z_layer, progress)
 
 
 def street_bearings(lines, step: float = 10.0) -> Tuple[np.ndarray, np.ndarray]:

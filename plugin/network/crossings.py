@@ -25,8 +25,8 @@ from .invariants import (SNAP_TOLERANCE, corridor_of, counted_nodes, crossing_sh
                          doubles_a_street)
 from .links import meets_only_at_ends
 from .small_blocks import fewer_crossings
-from .street_graph import (JUNCTION_TOLERANCE, clean_network, collapse_short_pieces,
-                           junction_points, renode)
+from .street_graph import (JUNCTION_TOLERANCE, collapse_short_pieces, junction_points,
+                           measured_graph, renode)
 
 __all__ = ["match_crossings", "streets_across", "t_stem", "STRAIGHT_THROUGH", "MIN_ANGLE"]
 
@@ -135,8 +135,7 @@ class _CountedGraph:
     share and the streets across."""
 
     def __init__(self, lines, area):
-        self.g = clean_network(lines, snap_tolerance=SNAP_TOLERANCE, min_dangle_length=0.0,
-                               merge_degree2=True, duplicate_tolerance=SNAP_TOLERANCE)
+        self.g = measured_graph(lines, SNAP_TOLERANCE)
         self.nodes = np.asarray(self.g.nodes)
         self.u, self.v = np.asarray(self.g.u), np.asarray(self.g.v)
         self.deg = np.bincount(np.r_[self.u, self.v], minlength=len(self.nodes))

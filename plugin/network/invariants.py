@@ -60,7 +60,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from ..core.progress import InputError, Progress, ensure
-from .street_graph import JUNCTION_TOLERANCE, clean_network, node_lines
+from .street_graph import JUNCTION_TOLERANCE, measured_graph, node_lines
 
 __all__ = [
     "JUNCTION_TOLERANCE", "CORRIDOR_HALF_WIDTH", "MIN_DUPLICATE_LENGTH", "JUNCTION_RADIUS",
@@ -293,8 +293,7 @@ def node_degrees(lines: Sequence, area=None, edge_distance: float = EDGE_DISTANC
     lines, _ = _lines(lines, "roads")
     if not len(lines):
         return np.zeros(0, dtype=np.int64)
-    g = clean_network(lines, snap_tolerance=snap_tolerance, min_dangle_length=0.0,
-                      merge_degree2=True, duplicate_tolerance=snap_tolerance)
+    g = measured_graph(lines, snap_tolerance)
     deg = g.degree
     count = deg != 2
     if area is not None:

@@ -35,7 +35,7 @@ from ..core.progress import InputError, Progress, ensure
 __all__ = [
     "DRIVABLE_CLASSES", "ARTERIAL_CLASSES", "CLASS_RANK", "RoadGraph",
     "drivable_and_arterial", "parse_other_tags", "vertical_layer", "class_rank",
-    "clean_network", "collapse_short_pieces", "graph_from_lines", "node_lines", "renode",
+    "clean_network", "measured_graph", "collapse_short_pieces", "graph_from_lines", "node_lines", "renode",
     "snap_ends_onto_lines", "weld_ends", "close_short_gaps", "move_ends_onto_lines",
     "junction_points", "synthesised", "renode_attributed", "add_streets",
     "JUNCTION_TOLERANCE",
@@ -628,6 +628,16 @@ def clean_network(geometries: Sequence, road_class: Optional[Sequence] = None,
         raise InputError("no road edges are left after cleaning")
     return graph
 
+
+def measured_graph(lines: Sequence, snap_tolerance: float, z_layer: Optional[Sequence] = None,
+                   progress: Optional[Progress] = None) -> RoadGraph:
+    """The street graph the statistics and shares count (``layoutmetrics``, the invariants'
+    degrees, the crossing steering): noded, nodes closer than ``snap_tolerance`` merged,
+    chains through degree-2 nodes dissolved, doubled edges dropped; no dangle pruned (a
+    network's own dead ends are part of what is measured)."""
+    return clean_network(lines, z_layer=z_layer, snap_tolerance=snap_tolerance,
+                         min_dangle_length=0.0, merge_degree2=True,
+                         duplicate_tolerance=snap_tolerance, progress=progress)
 
 def graph_from_lines(lines: np.ndarray, road_class, name, z_layer, source,
                      snap_tolerance: float = 0.0) -> RoadGraph:
