@@ -1908,7 +1908,7 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
         "example_dead_end_share": float(target_share),
         "n_straight": int((shapely.get_num_coordinates(lines) == 2).sum()),
         "n_redrawn": int(n_redrawn),
-        "mean_tortuosity": float(np.mean(length / np.maximum(chord, 1e-9))),
+        "mean_tortuosity": np.nan,   # at the end, of every street returned
         "example_mean_tortuosity": float(shapes.mean_tortuosity()) if shapes is not None
         else float(np.mean(example.tortuosity[:, 0])),
         "n_levels": int(len(np.unique(level))),
@@ -1947,6 +1947,8 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
         may_cross = (pts.degree >= 4) | (pts.example < 0)
         lines, table = _streets_across(lines, table, ptab, pts, may_cross, existing_lines,
                                        area, crossing_share, rng, stats)
+    # of every street returned: the given-road joins and the streets across are straight
+    stats["mean_tortuosity"] = float(table.tortuosity.mean())
     progress.step(1.0)
     return Synthesis(lines, table, pts, ptab, stats, quadtrees, ex_lines)
 
