@@ -36,7 +36,7 @@ __all__ = [
     "DRIVABLE_CLASSES", "ARTERIAL_CLASSES", "CLASS_RANK", "RoadGraph",
     "drivable_and_arterial", "parse_other_tags", "vertical_layer", "class_rank",
     "clean_network", "measured_graph", "collapse_short_pieces", "graph_from_lines", "node_lines", "renode",
-    "snap_ends_onto_lines", "weld_ends", "close_short_gaps", "move_ends_onto_lines",
+    "snap_ends_onto_lines", "ends_as_vertices", "split_at_ends", "weld_ends", "close_short_gaps", "move_ends_onto_lines",
     "junction_points", "synthesised", "renode_attributed", "add_streets",
     "JUNCTION_TOLERANCE",
 ]
@@ -524,6 +524,58 @@ def snap_ends_onto_lines(geometry: Sequence, new: Optional[Sequence] = None,
     pts = shapely.multipoints(shapely.get_coordinates(ends[e_i]), indices=group)
     geometry[lines] = shapely.snap(geometry[lines], pts, tolerance)
     return geometry
+
+
+def ends_as_vertices(lines: Sequence, new_lines: Sequence,
+                     tolerance: float = JUNCTION_TOLERANCE) -> np.ndarray:
+    """``lines`` with every end of ``new_lines`` that lies on one (within ``tolerance``) as
+    a vertex of it (:func:`snap_ends_onto_lines`); the new lines are not changed. A tool
+    that builds its graph from vertices (QGIS's network analysis) joins lines only there.
+
+    >>> road = shapely.LineString([(0, 0), (100, 0)])
+    >>> ends_as_vertices([road], [shapely.LineString([(40, 50), (40, 0)])])[0].wkt
+    'LINESTRING (0 0, 40 0, 100 0)'
+    """
+    lines = np.asarray(lines, dtype=object)
+    new_lines = np.asarray(new_lines, dtype=object)
+    if not len(lines) or not len(new_lines):
+        return lines.copy()
+    both = snap_ends_onto_lines(np.concatenate([lines, new_lines]),
+                                np.r_[np.zeros(len(lines), bool), np.ones(len(new_lines), bool)],
+                                tolerance)
+    return both[:len(lines)]
+
+
+def split_at_ends(lines: Sequence, new_lines: Sequence,
+                  tolerance: float = JUNCTION_TOLERANCE) -> np.ndarray:
+    """``lines`` cut where an end of ``new_lines`` lies on one (:func:`ends_as_vertices`),
+    each piece ending at that end exactly. ``lines`` are not noded with each other (a
+    bridge over a road stays one). Returns the pieces, in the order of ``lines``.
+
+    >>> road = shapely.LineString([(0, 0), (100, 0)])
+    >>> [g.wkt for g in split_at_ends([road], [shapely.LineString([(40, 50), (40, 1e-7)])])]
+    ['LINESTRING (0 0, 40 0.0000001)', 'LINESTRING (40 0.0000001, 100 0)']
+    """
+    lines = ends_as_vertices(lines, new_lines, tolerance)
+    new_lines = np.asarray(new_lines, dtype=object)
+    if not len(lines) or not len(new_lines):
+        return lines
+    ends = np.unique(shapely.get_coordinates(shapely.boundary(new_lines)), axis=0)
+    tree = cKDTree(ends)
+    pieces = []
+    for g in lines:
+        xy = shapely.get_coordinates(g)
+        # a vertex within 1e-9 m of an end was taken for it (snap_ends_onto_lines): the
+        # end's own coordinates there
+        gap, near = tree.query(xy[1:-1], distance_upper_bound=1e-9)
+        cut = np.flatnonzero(np.isfinite(gap)) + 1
+        if not len(cut):
+            pieces.append(g)
+            continue
+        xy[cut] = ends[near[cut - 1]]
+        bounds = np.r_[0, cut, len(xy) - 1]
+        pieces.extend(shapely.LineString(xy[a:b + 1]) for a, b in zip(bounds[:-1], bounds[1:]))
+    return np.asarray(pieces, dtype=object)
 
 
 def clean_network(geometries: Sequence, road_class: Optional[Sequence] = None,

@@ -82,7 +82,7 @@ from ..network.invariants import (DEAD_END_TOLERANCE, MIN_DUPLICATE_LENGTH, corr
                                   counted_nodes)
 from ..network.invariants import dead_end_share as measured_dead_end_share
 from ..network.links import allowed_area, join_pieces
-from ..network.street_graph import node_lines, snap_ends_onto_lines
+from ..network.street_graph import ends_as_vertices, node_lines, snap_ends_onto_lines
 from . import intersection_quadtree as iq
 
 __all__ = ["WalkSettings", "Synthesis", "StreetShapes", "street_shapes", "connect_points",
@@ -2010,12 +2010,9 @@ def given_with_junctions(existing_lines, lines) -> Tuple[np.ndarray, pd.DataFram
     """
     given, source = shapely.get_parts(np.asarray(existing_lines, dtype=object),
                                       return_index=True)
-    lines = np.asarray(lines, dtype=object)
-    both = snap_ends_onto_lines(np.concatenate([given, lines]),
-                                np.r_[np.zeros(len(given), bool), np.ones(len(lines), bool)])
     # only the given roads take vertices (a given road's end on a new street is a seam,
     # a point of the walk already)
-    given = both[:len(given)]
+    given = ends_as_vertices(given, lines)
     length = shapely.length(given)
     chord = shapely.distance(shapely.get_point(given, 0), shapely.get_point(given, -1))
     return given, pd.DataFrame({

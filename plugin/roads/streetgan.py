@@ -48,9 +48,7 @@ from typing import Dict, Mapping, Optional
 
 import numpy as np
 import shapely
-import shapely.ops
 
-from ..core.geometry import pinned_ends
 from ..core.paths import RESOURCES
 from ..core.progress import InputError, Progress, ensure
 from ..network.invariants import connected_pieces
@@ -665,9 +663,9 @@ def _end_directions(lines, probe: float = 10.0):
 
 def _noded_with_given(new, given):
     """New lines noded among themselves and the given roads split where new lines end on
-    them (the given roads are not noded with each other: a bridge stays a bridge).
-    Returns (lines, is_given)."""
-    from ..network.street_graph import node_lines, snap_ends_onto_lines
+    them (:func:`street_graph.split_at_ends`: the given roads are not noded with each other,
+    a bridge stays a bridge). Returns (lines, is_given)."""
+    from ..network.street_graph import node_lines, snap_ends_onto_lines, split_at_ends
 
     new = np.asarray(new, dtype=object)
     given = np.asarray(given, dtype=object)
@@ -675,36 +673,7 @@ def _noded_with_given(new, given):
         # a connector's end lies on the street it meets only up to round-off: a vertex first
         new = node_lines(snap_ends_onto_lines(new))
         new = new[shapely.length(new) > 1e-6]
-    pieces = []
-    if len(given):
-        # the new lines' ends, one per point (to the nanometre), as their lines have them
-        xy = shapely.get_coordinates(shapely.boundary(new)) if len(new) else np.zeros((0, 2))
-        xy = xy[np.sort(np.unique(np.round(xy, 9), axis=0, return_index=True)[1])]
-        ends = shapely.points(xy)
-        tree = shapely.STRtree(ends) if len(ends) else None
-        for g in given:
-            hit = tree.query(g, predicate="dwithin", distance=1e-6) if tree is not None else []
-            if len(hit):
-                with np.errstate(invalid="ignore"):
-                    t = shapely.line_locate_point(g, ends[hit])
-                order = np.argsort(t, kind="stable")
-                t, at = t[order], xy[hit[order]]
-                inner = (t > 1e-6) & (t < g.length - 1e-6)
-                t, at = t[inner], at[inner]
-                # ends that round-off set apart on the road are one junction (the same
-                # tolerance that finds them): no zero-length piece of road between them
-                one = np.r_[True, np.diff(t) > 1e-6] if len(t) else np.zeros(0, bool)
-                t, at = t[one], at[one]
-                cuts = np.r_[0.0, t, g.length]
-                road = [shapely.ops.substring(g, c0, c1) for c0, c1 in zip(cuts[:-1], cuts[1:])]
-                # each piece ends at the new street's end itself: the point substring
-                # interpolates lies beside it by round-off (1e-10 m), a gap to a network tool
-                g_xy = shapely.get_coordinates(g)
-                pieces.extend(pinned_ends(road, np.vstack([g_xy[:1], at]),
-                                          np.vstack([at, g_xy[-1:]])))
-            else:
-                pieces.append(g)
-    pieces = np.asarray(pieces, dtype=object)
+    pieces = split_at_ends(given, new)
     return np.concatenate([new, pieces]), np.r_[np.zeros(len(new), bool),
                                                  np.ones(len(pieces), bool)]
 
