@@ -19,6 +19,7 @@ duplicates, which are rare.
 from __future__ import annotations
 
 import re
+from collections import Counter
 from dataclasses import dataclass
 from typing import Dict, Optional, Sequence, Tuple
 
@@ -292,40 +293,99 @@ def renode(lines: Sequence, new: Sequence, priority: Sequence, min_length: float
     return pieces, parent
 
 
-def collapse_short_pieces(pieces: Sequence, tolerance: float) -> Tuple[np.ndarray, np.ndarray]:
+def collapse_short_pieces(pieces: Sequence, tolerance: float,
+                          anchored: Optional[Sequence] = None) -> Tuple[np.ndarray, np.ndarray]:
     """Noded pieces shorter than ``tolerance`` m dropped, the other pieces' ends at a dropped
     piece's last point moved to its first (along chains of them): round-off between two
     ends that noding set apart leaves no zero-length street and no gap. Returns (the kept
     pieces, which pieces were kept: for carrying their attributes over).
+
+    ``anchored`` (a mask, optional): pieces that neither move nor vanish (given roads). A
+    short piece that is not one of them collapses onto its end on one (between two, it is
+    kept: collapsed, it would bend a road off its line); a short anchored piece is kept and
+    the other pieces at its last point move to its first (two streets meeting a road from
+    its two sides a fraction of a metre apart become one crossing, the road as it was).
 
     >>> a, b = shapely.LineString([(0, 0), (5, 0)]), shapely.LineString([(5, 0), (5, 1e-10)])
     >>> c = shapely.LineString([(5, 1e-10), (9, 0)])
     >>> kept, keep = collapse_short_pieces([a, b, c], 1e-6)
     >>> [p.wkt for p in kept], keep.tolist()
     (['LINESTRING (0 0, 5 0)', 'LINESTRING (5 0, 9 0)'], [True, False, True])
+
+    A street's 0.5 m piece whose last point is on an anchored road collapses onto that point:
+
+    >>> west, east = shapely.LineString([(0, 0), (5, 0)]), shapely.LineString([(5, 0), (9, 0)])
+    >>> stub, street = shapely.LineString([(5, 0.5), (5, 0)]), shapely.LineString([(5, 9), (5, 0.5)])
+    >>> kept, _ = collapse_short_pieces([west, east, stub, street], 1.0, [True, True, False, False])
+    >>> [p.wkt for p in kept]
+    ['LINESTRING (0 0, 5 0)', 'LINESTRING (5 0, 9 0)', 'LINESTRING (5 9, 5 0)']
+
+    Two streets meeting that road 0.4 m apart, its piece between them anchored: one crossing.
+
+    >>> mid = shapely.LineString([(5, 0), (5.4, 0)])
+    >>> east = shapely.LineString([(5.4, 0), (9, 0)])
+    >>> north, south = shapely.LineString([(5, 9), (5, 0)]), shapely.LineString([(5.4, -9), (5.4, 0)])
+    >>> kept, keep = collapse_short_pieces([west, mid, east, north, south], 1.0, [1, 1, 1, 0, 0])
+    >>> [p.wkt for p in kept[3:]], keep.all()
+    (['LINESTRING (5 9, 5 0)', 'LINESTRING (5.4 -9, 5 0)'], True)
     """
     pieces = np.asarray(pieces, dtype=object)
     short = shapely.length(pieces) < tolerance
+    fixed_piece = np.zeros(len(pieces), bool) if anchored is None else \
+        np.asarray(anchored, dtype=bool)
     if not short.any():
         return pieces, ~short
-    first = shapely.get_coordinates(shapely.get_point(pieces[short], 0))
-    last = shapely.get_coordinates(shapely.get_point(pieces[short], -1))
-    onto = {tuple(q): tuple(p) for p, q in zip(first, last) if tuple(p) != tuple(q)}
+    first = shapely.get_coordinates(shapely.get_point(pieces, 0))
+    last = shapely.get_coordinates(shapely.get_point(pieces, -1))
+    onto_all, onto_free = {}, {}   # last point -> first point: for every piece / free ones
+    if fixed_piece.any():
+        n_fixed = Counter(map(tuple, np.r_[first[fixed_piece], last[fixed_piece]]))
+        fixed = set(n_fixed)
+        free_at = {tuple(xy) for xy in np.r_[first[~fixed_piece], last[~fixed_piece]]}
+        for i in np.flatnonzero(short):
+            p, q = tuple(first[i]), tuple(last[i])
+            if p == q:
+                continue
+            if fixed_piece[i]:
+                # kept, the road as it was; the free pieces leave the end where it goes on
+                # through one other anchored piece (a point of the road, then), for the
+                # other end: never leaving it dangling
+                if n_fixed[q] == 2 and q in free_at:
+                    onto_free[q] = p
+                elif n_fixed[p] == 2 and p in free_at:
+                    onto_free[p] = q
+                short[i] = False
+            elif p in fixed and q in fixed:
+                short[i] = False
+            elif q in fixed:
+                onto_all[p] = q
+            else:
+                onto_all[q] = p
+    else:
+        onto_all = {tuple(q): tuple(p) for p, q in zip(first[short], last[short])
+                    if tuple(p) != tuple(q)}
 
-    def target(xy):
+    def target(xy, onto):
         seen = set()
         while xy in onto and xy not in seen:
             seen.add(xy)
             xy = onto[xy]
         return xy
 
-    kept = pieces[~short].copy()
-    ends = [shapely.get_coordinates(shapely.get_point(kept, k)) for k in (0, -1)]
-    for i in np.flatnonzero([tuple(a) in onto or tuple(b) in onto for a, b in zip(*ends)]):
-        xyz = shapely.get_coordinates(kept[i], include_z=shapely.has_z(kept[i]))
+    kept_idx = np.flatnonzero(~short)
+    kept = pieces[kept_idx].copy()
+    for j, i in enumerate(kept_idx):
+        ends = (tuple(first[i]), tuple(last[i]))
+        maps = (onto_all,) if fixed_piece[i] else (onto_all, onto_free)
+        if not any(e in m for e in ends for m in maps):
+            continue
+        xyz = shapely.get_coordinates(kept[j], include_z=shapely.has_z(kept[j]))
         for k in (0, -1):
-            xyz[k, :2] = target(tuple(xyz[k, :2]))
-        kept[i] = shapely.set_coordinates(kept[i], xyz)
+            xy = tuple(xyz[k, :2])
+            for m in maps:
+                xy = target(xy, m)
+            xyz[k, :2] = xy
+        kept[j] = shapely.set_coordinates(kept[j], xyz)
     return kept, ~short
 
 

@@ -85,7 +85,8 @@ from ..core.progress import InputError, Progress, ensure
 from ..measure import metrics as _metrics
 from ..network import invariants as _invariants
 from ..network.links import meets_only_at_ends
-from ..network.street_graph import JUNCTION_TOLERANCE, collapse_short_pieces, snap_ends_onto_lines
+from ..network.street_graph import (JUNCTION_TOLERANCE, collapse_short_pieces,
+                                   snap_ends_onto_lines, weld_ends)
 from ..parcels import subdivision as _parcels
 from . import templates as _templates
 from .cross_field import cross_field
@@ -908,7 +909,9 @@ def road_network(roads, level, kind, stub: float = 1.0):
     collapsed into one junction where they lie between two (:func:`street_graph.
     collapse_short_pieces`: one junction computed twice, or two streets meeting a road
     from its two sides a fraction of a metre apart: 0.5-5 mm pieces of split streets and
-    0.5-0.8 m pieces of key roads on Mauren; dropped, they left that gap in the road).
+    0.5-0.8 m pieces of key roads on Mauren; dropped, they left that gap in the road). The
+    key roads (``level`` :data:`LEVEL_KEY`) stay on their lines: another street's short
+    piece collapses onto its end on one, and stays between two.
 
     Returns (pieces, level, kind, number of stubs dropped).
 
@@ -916,10 +919,12 @@ def road_network(roads, level, kind, stub: float = 1.0):
     >>> a = shapely.LineString([(50, 0), (50, 80)])
     >>> b = shapely.LineString([(50.4, 0), (50.4, -80)])
     >>> pieces, *_ = road_network([key, a, b], [0, 1, 1], ["road"] * 3)
-    >>> len(pieces), sorted(round(float(x), 3) for x in shapely.length(pieces))
-    (4, [50.0, 50.0, 80.0, 80.001])
-    >>> len(np.unique(shapely.get_coordinates(shapely.boundary(pieces)), axis=0))   # one junction
-    5
+    >>> sorted(round(float(x), 3) for x in shapely.length(pieces))   # the key road as it was
+    [50.0, 50.0, 80.0, 80.001]
+    >>> ends = shapely.get_coordinates(shapely.boundary(pieces))
+    >>> xy, count = np.unique(ends, axis=0, return_counts=True)
+    >>> xy[count == 4].round(6).tolist()   # one crossing
+    [[50.0, 0.0]]
     """
     roads = np.asarray(roads, dtype=object)
     level = np.asarray(level)
@@ -944,8 +949,48 @@ def road_network(roads, level, kind, stub: float = 1.0):
     dangling = (deg[:len(pieces)] == 1) | (deg[len(pieces):] == 1)
     stubs = dangling & (shapely.length(pieces) < stub)
     keep = ~stubs
-    pieces, kept = collapse_short_pieces(pieces[keep], stub)
-    return pieces, level[src][keep][kept], kind[src][keep][kept], int(stubs.sum())
+    level, kind = level[src][keep], kind[src][keep]
+    # the key roads stay on their lines: a street's piece between two collapses onto them
+    pieces, kept = collapse_short_pieces(pieces[keep], stub, anchored=level == LEVEL_KEY)
+    level, kind = level[kept], kind[kept]
+    # line ends a fraction of a metre apart, one point (four streets whose crossing was
+    # computed twice met as two bends 9 cm apart on Triesenberg)
+    pieces = weld_ends(pieces, level != LEVEL_KEY, stub / 2)
+    pieces, level, kind = _merge_through(pieces, level, kind, stub)
+    return pieces, level, kind, int(stubs.sum())
+
+
+def _merge_through(pieces, level, kind, shorter: float):
+    """Pieces shorter than ``shorter`` m merged into the piece of the same level and kind
+    that goes on from one of their ends where nothing else meets it (a key road's piece
+    between two streets that became one crossing)."""
+    short = np.flatnonzero(shapely.length(pieces) < shorter)
+    if not len(short):
+        return pieces, level, kind
+    pieces = pieces.copy()
+    ends = np.vstack([shapely.get_coordinates(shapely.get_point(pieces, 0)),
+                      shapely.get_coordinates(shapely.get_point(pieces, -1))])
+    n = len(pieces)
+    at = {}
+    for k, xy in enumerate(map(tuple, ends)):
+        at.setdefault(xy, []).append(k % n)
+    gone = np.zeros(n, bool)
+    for i in short:
+        for xy, far in ((tuple(ends[i]), tuple(ends[i + n])), (tuple(ends[i + n]), tuple(ends[i]))):
+            if len(at[xy]) != 2 or xy == far:
+                continue
+            j = at[xy][0] if at[xy][1] == i else at[xy][1]
+            if j == i or level[j] != level[i] or kind[j] != kind[i]:
+                continue
+            merged = shapely.line_merge(shapely.multilinestrings([pieces[j], pieces[i]]))
+            if shapely.get_type_id(merged) != 1:
+                continue
+            pieces[j] = merged
+            gone[i] = True
+            del at[xy]   # now inside the merged piece
+            at[far] = [j if k == i else k for k in at[far]]
+            break
+    return pieces[~gone], level[~gone], kind[~gone]
 
 
 def net_block(region, street_width: float, no_street=None):
