@@ -911,7 +911,10 @@ def road_network(roads, level, kind, stub: float = 1.0):
     from its two sides a fraction of a metre apart: 0.5-5 mm pieces of split streets and
     0.5-0.8 m pieces of key roads on Mauren; dropped, they left that gap in the road). The
     key roads (``level`` :data:`LEVEL_KEY`) stay on their lines: another street's short
-    piece collapses onto its end on one, and stays between two.
+    piece collapses onto its end on one, and stays between two; a key road's short piece
+    stays, the streets at one of its ends move to the other, and it is merged back into
+    the road (:func:`_merge_through`). Line ends under ``stub`` / 2 apart are then one
+    point (:func:`street_graph.weld_ends`; the key roads' ends stay).
 
     Returns (pieces, level, kind, number of stubs dropped).
 
@@ -977,7 +980,7 @@ def _merge_through(pieces, level, kind, shorter: float):
     gone = np.zeros(n, bool)
     for i in short:
         for xy, far in ((tuple(ends[i]), tuple(ends[i + n])), (tuple(ends[i + n]), tuple(ends[i]))):
-            if len(at[xy]) != 2 or xy == far:
+            if len(at.get(xy, ())) != 2 or xy == far:
                 continue
             j = at[xy][0] if at[xy][1] == i else at[xy][1]
             if j == i or level[j] != level[i] or kind[j] != kind[i]:
