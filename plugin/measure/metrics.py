@@ -206,7 +206,8 @@ def clip_lines(lines, area, return_index: bool = False):
     by round-off here and there and loses those parts (one layout's s_l moved by 2 % with a
     10 µm change of its noding). Clipped to the area grown by :data:`ON_EDGE` instead, with
     each cut end moved back onto the area's edge (a street crossing it ends there).
-    ``return_index``: also the index of the line each part came from.
+    The parts are 2D (the lengths measured are). ``return_index``: also the index of the
+    line each part came from.
 
     >>> area = shapely.box(0, 0, 100, 100)
     >>> along = shapely.LineString([(0, -1e-9), (100, -1e-9)])
