@@ -36,10 +36,10 @@ from ..core.progress import InputError, Progress, ensure
 __all__ = [
     "DRIVABLE_CLASSES", "ARTERIAL_CLASSES", "CLASS_RANK", "RoadGraph",
     "drivable_and_arterial", "parse_other_tags", "vertical_layer", "class_rank",
-    "clean_network", "measured_graph", "collapse_short_pieces", "graph_from_lines", "node_lines", "renode",
-    "snap_ends_onto_lines", "ends_as_vertices", "split_at_ends", "weld_ends", "close_short_gaps", "move_ends_onto_lines",
-    "junction_points", "synthesised", "renode_attributed", "add_streets",
-    "JUNCTION_TOLERANCE",
+    "clean_network", "measured_graph", "collapse_short_pieces", "graph_from_lines",
+    "node_lines", "renode", "snap_ends_onto_lines", "ends_as_vertices", "split_at_ends",
+    "weld_ends", "close_short_gaps", "move_ends_onto_lines", "junction_points", "synthesised",
+    "renode_attributed", "add_streets", "JUNCTION_TOLERANCE",
 ]
 
 #: OSM highway classes kept by default: what cars drive on and what forms city blocks.
@@ -315,7 +315,8 @@ def collapse_short_pieces(pieces: Sequence, tolerance: float,
     A street's 0.5 m piece whose last point is on an anchored road collapses onto that point:
 
     >>> west, east = shapely.LineString([(0, 0), (5, 0)]), shapely.LineString([(5, 0), (9, 0)])
-    >>> stub, street = shapely.LineString([(5, 0.5), (5, 0)]), shapely.LineString([(5, 9), (5, 0.5)])
+    >>> stub = shapely.LineString([(5, 0.5), (5, 0)])
+    >>> street = shapely.LineString([(5, 9), (5, 0.5)])
     >>> kept, _ = collapse_short_pieces([west, east, stub, street], 1.0, [True, True, False, False])
     >>> [p.wkt for p in kept]
     ['LINESTRING (0 0, 5 0)', 'LINESTRING (5 0, 9 0)', 'LINESTRING (5 9, 5 0)']
@@ -324,7 +325,8 @@ def collapse_short_pieces(pieces: Sequence, tolerance: float,
 
     >>> mid = shapely.LineString([(5, 0), (5.4, 0)])
     >>> east = shapely.LineString([(5.4, 0), (9, 0)])
-    >>> north, south = shapely.LineString([(5, 9), (5, 0)]), shapely.LineString([(5.4, -9), (5.4, 0)])
+    >>> north = shapely.LineString([(5, 9), (5, 0)])
+    >>> south = shapely.LineString([(5.4, -9), (5.4, 0)])
     >>> kept, keep = collapse_short_pieces([west, mid, east, north, south], 1.0, [1, 1, 1, 0, 0])
     >>> [p.wkt for p in kept[3:]], keep.all()
     (['LINESTRING (5 9, 5 0)', 'LINESTRING (5.4 -9, 5 0)'], True)
@@ -340,7 +342,6 @@ def collapse_short_pieces(pieces: Sequence, tolerance: float,
     onto_all, onto_free = {}, {}   # last point -> first point: for every piece / free ones
     if fixed_piece.any():
         n_fixed = Counter(map(tuple, np.r_[first[fixed_piece], last[fixed_piece]]))
-        fixed = set(n_fixed)
         free_at = {tuple(xy) for xy in np.r_[first[~fixed_piece], last[~fixed_piece]]}
         for i in np.flatnonzero(short):
             p, q = tuple(first[i]), tuple(last[i])
@@ -355,9 +356,9 @@ def collapse_short_pieces(pieces: Sequence, tolerance: float,
                 elif n_fixed[p] == 2 and p in free_at:
                     onto_free[p] = q
                 short[i] = False
-            elif p in fixed and q in fixed:
+            elif p in n_fixed and q in n_fixed:
                 short[i] = False
-            elif q in fixed:
+            elif q in n_fixed:
                 onto_all[p] = q
             else:
                 onto_all[q] = p
@@ -750,6 +751,7 @@ def measured_graph(lines: Sequence, snap_tolerance: float, z_layer: Optional[Seq
     return clean_network(lines, z_layer=z_layer, snap_tolerance=snap_tolerance,
                          min_dangle_length=0.0, merge_degree2=True,
                          duplicate_tolerance=snap_tolerance, progress=progress)
+
 
 def graph_from_lines(lines: np.ndarray, road_class, name, z_layer, source,
                      snap_tolerance: float = 0.0) -> RoadGraph:

@@ -1908,7 +1908,6 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
         "example_dead_end_share": float(target_share),
         "n_straight": int((shapely.get_num_coordinates(lines) == 2).sum()),
         "n_redrawn": int(n_redrawn),
-        "mean_tortuosity": np.nan,   # at the end, of every street returned
         "example_mean_tortuosity": float(shapes.mean_tortuosity()) if shapes is not None
         else float(np.mean(example.tortuosity[:, 0])),
         "n_levels": int(len(np.unique(level))),
