@@ -39,7 +39,7 @@ __all__ = [
     "clean_network", "measured_graph", "collapse_short_pieces", "graph_from_lines",
     "node_lines", "renode", "snap_ends_onto_lines", "ends_as_vertices", "split_at_ends",
     "weld_ends", "close_short_gaps", "move_ends_onto_lines", "junction_points", "synthesised",
-    "renode_attributed", "add_streets", "JUNCTION_TOLERANCE",
+    "renode_attributed", "add_streets", "degree2_chains", "JUNCTION_TOLERANCE",
 ]
 
 #: OSM highway classes kept by default: what cars drive on and what forms city blocks.
@@ -834,26 +834,41 @@ def _prune_dangles(g: RoadGraph, min_length: float) -> RoadGraph:
     return g
 
 
+def degree2_chains(u: np.ndarray, v: np.ndarray, n_nodes: int,
+                   key: Optional[np.ndarray] = None) -> Optional[np.ndarray]:
+    """The chains of edges through nodes of degree 2: a component label per edge (the two
+    edges at every such node joined; with ``key``, one per edge, only edges of one key), or
+    None when no two edges join.
+
+    >>> degree2_chains(np.array([0, 1, 2]), np.array([1, 2, 3]), 4).tolist()
+    [0, 0, 0]
+    >>> degree2_chains(np.array([0, 1, 2]), np.array([1, 2, 3]), 4, np.array(["a", "a", "b"])).tolist()
+    [0, 0, 1]
+    """
+    m = len(u)
+    inc_node = np.r_[u, v]
+    inc_edge = np.r_[np.arange(m), np.arange(m)]
+    sel = np.bincount(inc_node, minlength=n_nodes)[inc_node] == 2
+    order = np.argsort(inc_node[sel], kind="stable")
+    pairs = inc_edge[sel][order].reshape(-1, 2)
+    ok = pairs[:, 0] != pairs[:, 1]  # a self-loop on a degree-2 node is a ring: no join
+    if key is not None:
+        ok &= key[pairs[:, 0]] == key[pairs[:, 1]]
+    if not ok.any():
+        return None
+    adj = coo_matrix((np.ones(ok.sum()), (pairs[ok, 0], pairs[ok, 1])), shape=(m, m))
+    n_comp, comp = connected_components(adj, directed=False)
+    return comp if n_comp < m else None
+
+
 def merge_degree2_chains(g: RoadGraph) -> RoadGraph:
     """Merge edges through nodes of degree 2 (OSM splits ways at arbitrary points).
 
     Attributes of a merged edge come from its longest part.
     """
     deg = g.degree
-    m = g.n_edges
-    # for every degree-2 node, the two incident edges are joined
-    inc_node = np.concatenate([g.u, g.v])
-    inc_edge = np.concatenate([np.arange(m), np.arange(m)])
-    sel = deg[inc_node] == 2
-    order = np.argsort(inc_node[sel], kind="stable")
-    edges2 = inc_edge[sel][order]
-    e1, e2 = edges2[0::2], edges2[1::2]
-    ok = e1 != e2  # a self-loop on a degree-2 node is an isolated ring: nothing to join
-    if not ok.any():
-        return g
-    adj = coo_matrix((np.ones(ok.sum()), (e1[ok], e2[ok])), shape=(m, m))
-    n_comp, comp = connected_components(adj, directed=False)
-    if n_comp == m:
+    comp = degree2_chains(g.u, g.v, len(g.nodes))
+    if comp is None:
         return g
     lengths = g.length
     by_comp = np.argsort(comp, kind="stable")
@@ -945,27 +960,16 @@ def renode_attributed(geometry: np.ndarray, level: np.ndarray, attrs: Dict[str, 
     # merge degree-2 chains of one source
     key = np.array([f"{lvl[i]}|{attrs['source_fragment'][s]}|{attrs['query'][s]}"
                     for i, s in enumerate(src)], dtype=object)
-    m = len(geom)
-    inc_node = np.r_[u, v]
-    inc_edge = np.r_[np.arange(m), np.arange(m)]
-    deg = np.bincount(inc_node, minlength=len(g.nodes))
-    sel = deg[inc_node] == 2
-    order = np.argsort(inc_node[sel], kind="stable")
-    pairs = inc_edge[sel][order].reshape(-1, 2) if sel.any() else np.zeros((0, 2), int)
-    ok = (pairs[:, 0] != pairs[:, 1]) & (key[pairs[:, 0]] == key[pairs[:, 1]]) \
-        if len(pairs) else np.zeros(0, bool)
-    if ok.any():
-        adj = coo_matrix((np.ones(ok.sum()), (pairs[ok, 0], pairs[ok, 1])), shape=(m, m))
-        n_comp, comp = connected_components(adj, directed=False)
-        if n_comp < m:
-            by = np.argsort(comp, kind="stable")
-            merged = shapely.line_merge(shapely.multilinestrings(geom[by], indices=comp[by]))
-            single = shapely.get_type_id(merged) == 1
-            rep = by[np.r_[True, comp[by][1:] != comp[by][:-1]]]
-            # a chain that does not merge into one line (a ring) keeps its pieces
-            multi_members = np.isin(comp, np.flatnonzero(~single))
-            geom = np.concatenate([merged[single], geom[multi_members]])
-            src = np.concatenate([src[rep][single], src[multi_members]])
+    comp = degree2_chains(u, v, len(g.nodes), key)
+    if comp is not None:
+        by = np.argsort(comp, kind="stable")
+        merged = shapely.line_merge(shapely.multilinestrings(geom[by], indices=comp[by]))
+        single = shapely.get_type_id(merged) == 1
+        rep = by[np.r_[True, comp[by][1:] != comp[by][:-1]]]
+        # a chain that does not merge into one line (a ring) keeps its pieces
+        multi_members = np.isin(comp, np.flatnonzero(~single))
+        geom = np.concatenate([merged[single], geom[multi_members]])
+        src = np.concatenate([src[rep][single], src[multi_members]])
     return geom, src
 
 
