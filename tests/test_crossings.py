@@ -47,11 +47,15 @@ def test_t_junctions_become_straight_crossings_up_to_the_share():
     # each one its stem straight on south, onto the bottom street
     south = [g for g in out if g.bounds[1] == -100 and g.bounds[3] == 0]
     assert len(south) == made and all(g.bounds[0] == g.bounds[2] for g in south)
-    # a share the stems cannot reach: every stem goes on, and no more
+    # a share the stems cannot reach: every stem goes on south; then the top street's T's,
+    # with no street across in reach, go on north to the target's edge 50 m away (their
+    # ends there are where the network leaves the target, no dead ends): 8 of 18, no more
     out, _, (made, _) = match_crossings(pieces, is_new[parent], 0.9, AREA,
                                    np.random.default_rng(0), reach=150.0)
-    assert made == 4
-    assert fidelity.fidelity_statistics(out, AREA)["degree4_share"] == pytest.approx(4 / 18)
+    assert made == 8
+    assert fidelity.fidelity_statistics(out, AREA)["degree4_share"] == pytest.approx(8 / 18)
+    north = [g for g in out if g.bounds[1] == 100 and g.bounds[3] == 150]
+    assert len(north) == 4 and all(g.bounds[0] == g.bounds[2] for g in north)
 
 
 def test_streets_across_are_what_match_crossings_adds_with_their_stems():
@@ -91,7 +95,7 @@ def test_a_crossing_street_starts_exactly_at_its_junction():
     pieces, parent = _noded(lines, is_new)
     out, new, (made, _) = match_crossings(pieces, is_new[parent], 0.9, AREA,
                                          np.random.default_rng(0), reach=150.0)
-    assert made == 4
+    assert made == 8   # four south onto the bottom street, four north to the edge
     assert_planar(out)
     assert_no_gaps(out)
     # every end at a junction of the input is that junction, not a point beside it
@@ -105,16 +109,46 @@ def test_a_crossing_street_starts_exactly_at_its_junction():
 
 
 def test_no_street_ends_on_a_given_road_or_out_of_reach():
+    # the target's edge 300 m from the outer streets: out of reach too
+    far = shapely.box(-50, -400, 550, 400)
     lines, is_new = _ladder(bottom_given=True)
     pieces, parent = _noded(lines, is_new)
-    out, new, (made, _) = match_crossings(pieces, is_new[parent], 0.5, AREA,
+    out, new, (made, _) = match_crossings(pieces, is_new[parent], 0.5, far,
                                      np.random.default_rng(0), reach=150.0)
     assert made == 0 and len(out) == len(pieces)
     lines, is_new = _ladder()
     pieces, parent = _noded(lines, is_new)
-    out, new, (made, _) = match_crossings(pieces, is_new[parent], 0.5, AREA,
+    out, new, (made, _) = match_crossings(pieces, is_new[parent], 0.5, far,
                                      np.random.default_rng(0), reach=80.0)
     assert made == 0
+
+
+def test_a_street_across_goes_on_to_the_edge_when_no_street_is_in_reach():
+    """Still under the share when no T's street can go on to a street (the bottom road is
+    given, the top street's T's face the open land): a T whose street meets nothing in reach
+    goes on straight to the target's edge, where the network leaves the target (a piece cut
+    out of a city, Bubeneč), and ends on it exactly; an end there is no dead end."""
+    from urban_synthesis.plugin.network import invariants
+
+    lines, is_new = _ladder(bottom_given=True)
+    pieces, parent = _noded(lines, is_new)
+    before = invariants.dead_end_share(pieces, AREA)
+    out, new, (made, _) = match_crossings(pieces, is_new[parent], 0.5, AREA,
+                                         np.random.default_rng(0), reach=150.0)
+    assert made == 4   # the top street's four T's, north; the middle ones meet the given road
+    added = out[new & ~shapely.covered_by(out, shapely.union_all(pieces).buffer(1e-6))]
+    assert len(added) == 4
+    for street in added:
+        xy = shapely.get_coordinates(street)
+        assert xy[0, 0] == xy[-1, 0] and sorted(xy[[0, -1], 1]) == [100.0, 150.0]
+    assert (shapely.distance(shapely.boundary(AREA),
+                             shapely.points(shapely.get_coordinates(added)[1::2])) == 0).all()
+    assert invariants.crossing_share(out, AREA) == pytest.approx(4 / 14)
+    assert invariants.dead_end_share(out, AREA) == pytest.approx(before)
+    check = invariants.check_network(out[new], out[~new], None, AREA, target=AREA)
+    assert len(check.outside) == len(check.crossings_given) == 0
+    assert len(check.crossings_synthesised) == 0
+    assert_planar(out)
 
 
 def test_a_street_across_ends_on_a_given_road_that_may_take_one():
@@ -138,9 +172,12 @@ def test_a_street_across_ends_on_a_given_road_that_may_take_one():
     assert len(bottom) == 3 and not any(new[out.tolist().index(g)] for g in bottom)
     assert sum(g.length for g in bottom) == pytest.approx(500.0)
     # a given road that may take none (a motorway) keeps the old rule: nothing ends on it
-    out, _, (made, _) = match_crossings(pieces, new_in, 0.1, AREA, np.random.default_rng(0),
-                                        reach=150.0, may_end_on=new_in)
-    assert made == 0
+    # (the crossings are made to the north instead, where the target's edge is in reach)
+    out, new, (made, _) = match_crossings(pieces, new_in, 0.1, AREA, np.random.default_rng(0),
+                                          reach=150.0, may_end_on=new_in)
+    assert made == 2
+    bottom = shapely.LineString([(0, -100), (500, -100)])
+    assert not shapely.intersects(out[new], bottom).any()
 
 
 def test_too_many_crossings_lose_streets_between_junctions():

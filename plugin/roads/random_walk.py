@@ -1959,7 +1959,8 @@ def _streets_across(lines, table, ptab, pts, may_cross, existing_lines, area, sh
     streets go on across (:func:`network.crossings.streets_across`) up to that margin, at
     the points ``may_cross`` only; each a new edge of its stem's level, origin
     "across_street", from its junction's point to a T on the street it meets (node -1: that
-    line is not split, as a given-road join's)."""
+    line is not split, as a given-road join's), or, with no street in reach, to the
+    target's edge."""
     given = shapely.get_parts(np.asarray(existing_lines, dtype=object)) \
         if existing_lines is not None and len(existing_lines) else np.empty(0, dtype=object)
     network = np.concatenate([lines, given])

@@ -408,7 +408,8 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
         the network's is steered to it (:func:`network.crossings.match_crossings`: T
         junctions become crossings, their generated street continued straight across to the
         next street, generated or a given road that takes junctions (not a motorway or
-        trunk), or generated streets at crossings are removed, smallest merged blocks first;
+        trunk), else to the target's edge, or generated streets at crossings are removed,
+        smallest merged blocks first;
         not in the thesis); None: the junctions as read back
     """
     progress = ensure(progress)
