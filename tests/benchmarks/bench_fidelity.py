@@ -278,6 +278,7 @@ def measure_run(target: Town, example: Example, lines: np.ndarray, check: bool) 
     new = lines[invariants.new_streets(lines, target.given)] if len(lines) else lines
     network = np.concatenate([target.given, new])
     out = {"stats": fidelity.fidelity_statistics(network, target.area),
+           "land_in_blocks": fidelity.land_in_blocks(network, target.area),
            "km_new": float(shapely.length(fidelity.clip_to_area(new, target.area)).sum() / 1e3)}
     if check:
         c = invariants.check_network(new, target.given, target.given_class, target.area,
@@ -423,7 +424,8 @@ def summary(results: dict) -> str:
             if model and name in gan_trained_on(model) | gan_tuned_on(model):
                 continue
             row = rows.setdefault(m, {"err": [], "wins": {b: [] for b in BASELINES},
-                                      "viol": [], "towns": [], "ex": []})
+                                      "viol": [], "towns": [], "ex": [], "land": []})
+            row["land"].append(land_of(r))
             row["err"].append(r["score"]["median_error"])
             row["ex"].append(against_example(t, r))
             row["viol"].extend(r["n_violations"])
@@ -436,36 +438,54 @@ def summary(results: dict) -> str:
             row["err"].append(t["baselines"][b]["score"]["median_error"])
             row["towns"].append(name)
         row = rows.setdefault("*the example copied as is*", {"err": [], "wins": {}, "viol": [],
-                                                              "towns": []})
+                                                              "towns": [], "land": []})
         row["err"].append(example_as_is(t))
+        row["land"].append(t.get("land_in_blocks", {}).get("example", np.nan))
+        row["towns"].append(name)
+        row = rows.setdefault("*the towns' own streets*", {"err": [], "wins": {}, "viol": [],
+                                                            "towns": [], "land": []})
+        row["land"].append(t.get("land_in_blocks", {}).get("real", np.nan))
         row["towns"].append(name)
     out = ["| method | towns | median of the towns' median rel. errors | the same against the "
            "example's statistics | mean wins over grid / chords / Delaunay (of 16) | invariant "
-           "violations per run (mean) |",
-           "|---|---|---|---|---|---|"]
+           "violations per run (mean) | land in closed blocks (median town) |",
+           "|---|---|---|---|---|---|---|"]
     for m, row in rows.items():
         wins = " / ".join(f"{np.mean(row['wins'][b]):.1f}" for b in BASELINES) \
             if row["wins"] else ""
         viol = f"{np.mean(row['viol']):.1f}" if row["viol"] else ""
         ex = f"{np.median(row['ex']):.2f}" if row.get("ex") else ""
-        out.append(f"| {m} | {len(row['towns'])} | {np.median(row['err']):.2f} | {ex} | {wins} | "
-                   f"{viol} |")
+        err = f"{np.median(row['err']):.2f}" if row["err"] else ""
+        land = row.get("land", [])
+        land = f"{np.nanmedian(land):.2f}" if np.isfinite(land).any() else ""
+        out.append(f"| {m} | {len(row['towns'])} | {err} | {ex} | {wins} | {viol} | {land} |")
     return "\n".join(out)
+
+
+def land_of(r: dict) -> float:
+    """A method's mean share of the target in closed blocks over its runs (NaN: not
+    measured, a result of before 2026-12-06)."""
+    values = [run["land_in_blocks"] for run in r.get("runs", []) if "land_in_blocks" in run]
+    return float(np.mean(values)) if values else float("nan")
 
 
 def markdown(results: dict) -> str:
     out = []
     for name, t in results["targets"].items():
         tuned = " (tuned on)" if name in TUNED_ON else " (held out)"
+        land = t.get("land_in_blocks", {})
         out.append(f"#### {name}{tuned}: {t['km2']:.2f} km², example: "
                    f"{', '.join(t['example'])}\n")
+        if land:
+            out.append(f"Land in closed blocks: the town {land['real']:.2f}, its example "
+                       f"{land['example']:.2f}.\n")
         out.append("| method | median rel. error | single runs | against the example's "
                    "statistics | beats grid / chords / Delaunay (of 16) | invariant violations "
-                   "(runs) | s / km² |")
-        out.append("|---|---|---|---|---|---|---|")
+                   "(runs) | s / km² | land in closed blocks |")
+        out.append("|---|---|---|---|---|---|---|---|")
         for m, r in t["methods"].items():
             if "error" in r:
-                out.append(f"| {m} | failed: {r['error'][:60]} | | | | | |")
+                out.append(f"| {m} | failed: {r['error'][:60]} | | | | | | |")
                 continue
             wins = " / ".join(str(r["score"]["wins"].get(b, "–")) for b in BASELINES)
             viol = ", ".join(str(v) for v in r["n_violations"])
@@ -473,12 +493,13 @@ def markdown(results: dict) -> str:
             label = f"{m} ({model})" if model else m
             out.append(f"| {label} | {r['score']['median_error']:.2f} | {run_range(t, r)} | "
                        f"{against_example(t, r):.2f} | {wins} | {viol} | "
-                       f"{r['seconds_per_km2']:.1f} |")
+                       f"{r['seconds_per_km2']:.1f} | {land_of(r):.2f} |")
         for b in BASELINES:
             base = t["baselines"][b]
             out.append(f"| *{b} baseline* | {base['score']['median_error']:.2f} | "
-                       f"{run_range(t, base)} | {against_example(t, base):.2f} | | | |")
-        out.append(f"| *the example copied as is* | {example_as_is(t):.2f} | | | | | |")
+                       f"{run_range(t, base)} | {against_example(t, base):.2f} | | | | "
+                       f"{land_of(base):.2f} |")
+        out.append(f"| *the example copied as is* | {example_as_is(t):.2f} | | | | | | |")
         out.append("")
     return "\n".join(out)
 
@@ -554,7 +575,11 @@ def main(argv=None):
             entry = {"region": target.region, "km2": target.km2, "villages": target.villages,
                      "example": ex.names, "given_km": float(shapely.length(target.given).sum()
                                                            / 1e3),
-                     "real": real, "example_stats": ex.stats, "methods": {}, "baselines": {}}
+                     "real": real, "example_stats": ex.stats, "methods": {}, "baselines": {},
+                     "land_in_blocks": {
+                         "real": fidelity.land_in_blocks(target.lines, target.area),
+                         "example": fidelity.land_in_blocks(ex.lines, shapely.union_all(
+                             [t.area for t in ex.towns]))}}
             panels = {"real": target.lines}
             baseline_runs = {}
             for b in BASELINES:
