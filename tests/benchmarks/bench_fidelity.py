@@ -462,6 +462,15 @@ def summary(results: dict) -> str:
     return "\n".join(out)
 
 
+def land_of_towns(target: Town, example: Example) -> dict:
+    """The share of land in closed blocks of the town's own streets and, as the mean over
+    the example's towns, of each in its own envelope (pooled, neighbours' streets close
+    blocks across their common border: 0.78 against 0.61 on the median town)."""
+    return {"real": fidelity.land_in_blocks(target.lines, target.area),
+            "example": float(np.mean([fidelity.land_in_blocks(t.lines, t.area)
+                                      for t in example.towns]))}
+
+
 def land_of(r: dict) -> float:
     """A method's mean share of the target in closed blocks over its runs (NaN: not
     measured, a result of before 2026-12-06)."""
@@ -576,10 +585,7 @@ def main(argv=None):
                      "example": ex.names, "given_km": float(shapely.length(target.given).sum()
                                                            / 1e3),
                      "real": real, "example_stats": ex.stats, "methods": {}, "baselines": {},
-                     "land_in_blocks": {
-                         "real": fidelity.land_in_blocks(target.lines, target.area),
-                         "example": fidelity.land_in_blocks(ex.lines, shapely.union_all(
-                             [t.area for t in ex.towns]))}}
+                     "land_in_blocks": land_of_towns(target, ex)}
             panels = {"real": target.lines}
             baseline_runs = {}
             for b in BASELINES:
