@@ -94,6 +94,18 @@ def test_block_metrics_of_grid_faces():
     assert np.allclose(r.distribution("blocks", "aspect_ratio"), 1.0)
     assert r.scalar("blocks", "b_max") == r.scalar("blocks", "b_min") == pytest.approx(400.0)
     assert r.scalar("blocks", "blocks_per_km2") == pytest.approx(9 / 0.09)
+    assert r.scalar("blocks", "land_share") == pytest.approx(100.0)   # the hull: all blocks
+
+
+def test_land_share_is_the_area_in_counted_blocks():
+    """The same grid in a study area three times as wide: a third of it in blocks; a block
+    outside the area does not count."""
+    area = shapely.box(0, 0, 900, 300)
+    r = M.compute_layout_metrics(roads=grid(4), area=area)
+    assert r.scalar("blocks", "land_share") == pytest.approx(100.0 / 3)
+    outside = M.block_metrics([shapely.box(0, 0, 100, 100), shapely.box(2000, 0, 2100, 100)],
+                              area=area)
+    assert outside.scalar("blocks", "land_share") == pytest.approx(100.0 * 1e4 / 270000)
 
 
 def test_block_aspect_ratio_is_short_over_long():

@@ -116,7 +116,7 @@ def land_in_blocks(lines: Sequence, area, min_block_area: float = _blocks.MIN_BL
                    min_block_width: float = _blocks.MIN_BLOCK_WIDTH) -> float:
     """The share of ``area`` inside the blocks of the streets (the faces
     :func:`fidelity_statistics` counts as blocks, :func:`metrics.block_faces` of the lines
-    clipped to the area). Not one of the :data:`STATISTICS`, and scored by none: it tells
+    clipped to the area; ``layoutmetrics``' ``land_share`` / 100). Not one of the :data:`STATISTICS`, and scored by none: it tells
     how much of a target a network leaves open, which the block statistics (of the closed
     blocks only) do not; the fidelity benchmark reports it beside them.
 
@@ -131,7 +131,9 @@ def land_in_blocks(lines: Sequence, area, min_block_area: float = _blocks.MIN_BL
     if not len(parts):
         return 0.0
     faces = _metrics.block_faces(parts, min_block_area, min_block_width)
-    return float(shapely.area(faces).sum() / shapely.area(area)) if len(faces) else 0.0
+    if not len(faces):
+        return 0.0
+    return _metrics.block_metrics(faces, area).scalar("blocks", "land_share") / 100.0
 
 
 def statistics_of_extract(lines: Sequence) -> Dict[str, float]:

@@ -552,7 +552,8 @@ def block_metrics(blocks, area=None) -> MetricsResult:
         kind ``blocks``; distributions ``area`` (m²), ``compactness`` (area / area of the
         minimum rotated rectangle, 1 for a rectangle), ``aspect_ratio`` (short / long side
         of that rectangle, in (0, 1], the thesis's definition), ``boundary_length`` (m);
-        scalars ``count``, ``blocks_per_km2`` (b_n), ``b_max``, ``b_avg``, ``b_min`` (m).
+        scalars ``count``, ``blocks_per_km2`` (b_n), ``land_share`` (% of the area in the
+        blocks b_n counts: how much of it streets close), ``b_max``, ``b_avg``, ``b_min`` (m).
 
     References
     ----------
@@ -573,8 +574,11 @@ def block_metrics(blocks, area=None) -> MetricsResult:
     res.add_distribution("blocks", "boundary_length", boundary, "m", "Block boundary length")
     res.add_scalar("blocks", "count", len(blocks), "", "Blocks")
     km2 = area_m2 / M2_PER_KM2
-    res.add_scalar("blocks", "blocks_per_km2", _inside(area_geom, blocks).sum() / km2, "1/km²",
+    inside = _inside(area_geom, blocks)
+    res.add_scalar("blocks", "blocks_per_km2", inside.sum() / km2, "1/km²",
                    "Blocks per km² (b_n)")
+    res.add_scalar("blocks", "land_share", 100.0 * a[inside].sum() / area_m2, "%",
+                   "Share of the area in blocks")
     res.add_scalar("blocks", "b_max", boundary.max(), "m", "Max. block boundary (b_max)")
     res.add_scalar("blocks", "b_avg", boundary.mean(), "m", "Mean block boundary (b_avg)")
     res.add_scalar("blocks", "b_min", boundary.min(), "m", "Min. block boundary (b_min)")
