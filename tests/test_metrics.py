@@ -425,6 +425,7 @@ def test_report_speaks_to_a_planner_first():
     twin_summary = twin[twin.index("<h2>Summary</h2>"):twin.index("<h2>Inputs</h2>")]
     assert "What differs" not in twin_summary and "match the example" in twin_summary
     assert "about the same as the example" in twin_summary
+    assert "Share of the area in city blocks (how much of it streets close)" in twin_summary
 
 
 def test_bearings_compare_on_the_circle():

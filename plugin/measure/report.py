@@ -264,6 +264,8 @@ SUMMARY_MEASURES = {
     ("roads", "degree4_share", True): "share of four-way crossings",
     ("roads", "orientation_order", True): "how grid-like the streets are",
     ("blocks", "blocks_per_km2", True): "city blocks per km²",
+    ("blocks", "land_share", True): "share of the area in city blocks (how much of it "
+                                    "streets close)",
     ("blocks", "area", False): "block sizes",
     ("roads", "segment_length", False): "lengths of streets between junctions",
     ("parcels", "p_n_per_km2", True): "parcels per km²",
