@@ -116,9 +116,10 @@ def land_in_blocks(lines: Sequence, area, min_block_area: float = _blocks.MIN_BL
                    min_block_width: float = _blocks.MIN_BLOCK_WIDTH) -> float:
     """The share of ``area`` inside the blocks of the streets (the faces
     :func:`fidelity_statistics` counts as blocks, :func:`metrics.block_faces` of the lines
-    clipped to the area; ``layoutmetrics``' ``land_share`` / 100). Not one of the :data:`STATISTICS`, and scored by none: it tells
-    how much of a target a network leaves open, which the block statistics (of the closed
-    blocks only) do not; the fidelity benchmark reports it beside them.
+    clipped to the area; ``layoutmetrics``' ``land_share`` / 100). Not one of the
+    :data:`STATISTICS`, and scored by none: it tells how much of a target a network leaves
+    open, which the block statistics (of the closed blocks only) do not; the fidelity
+    benchmark reports it beside them.
 
     A 300 m square area with streets closing its western two thirds into blocks:
 

@@ -227,7 +227,9 @@ def _streets_across(graph: _CountedGraph, lines, is_new, share, area, rng, given
                 t = float(np.dot(q - p, -d[stem]))
                 if t > 1.0 and (best is None or t < best[0]):
                     best = (t, h, q)
-        if best is None and to_edge:
+        if to_edge:
+            if best is not None:
+                return False   # a street in reach: the first pass tried it
             q = edge_hit(p, ray, -d[stem])
             if q is None:
                 return False   # the edge is not in reach either
