@@ -1,5 +1,6 @@
-"""The README's parameter reference is what the code registers, every tool's help opens its
-entry, and the toolbox speaks one way (no doubled "optional", one spelling, search tags)."""
+"""The README's parameter reference is what the code registers, its fidelity figures are the
+committed benchmark's, every tool's help opens its entry, and the toolbox speaks one way (no
+doubled "optional", one spelling, search tags)."""
 import re
 
 from conftest import ROOT
@@ -49,3 +50,25 @@ def test_toolbox_manners(qgis_processing):
         for text in texts:
             # one spelling: American -ize (as the algorithm ids)
             assert not re.search(r"\b[Ss]ynthesis(e|ed|es|ing)\b", text), (alg.name(), text)
+
+
+def test_readme_fidelity_figures_are_the_benchmarks():
+    """The README's fidelity tables are the committed benchmark's results, as
+    ``bench_fidelity.py`` writes them: no hand-kept figure drifts from the run."""
+    import importlib.util
+    import json
+    import sys
+
+    path = ROOT / "tests" / "benchmarks" / "bench_fidelity.py"
+    spec = importlib.util.spec_from_file_location("bench_fidelity", path)
+    bench = importlib.util.module_from_spec(spec)
+    sys.modules.setdefault("bench_fidelity", bench)  # its dataclasses look their module up
+    spec.loader.exec_module(bench)
+    results = json.loads((ROOT / "tests" / "benchmarks" / "results" / "fidelity.json")
+                         .read_text(encoding="utf-8"))
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    blocks = bench.readme_blocks(results)
+    assert all(f"<!-- fidelity:{name} -->" in readme for name in blocks)
+    assert readme == bench.sync_readme(readme, blocks), (
+        "README.md's fidelity tables differ from tests/benchmarks/results/fidelity.json: run "
+        "`.venv/bin/python tests/benchmarks/bench_fidelity.py --tables-only`")

@@ -34,9 +34,11 @@ For each target town:
 Run ``.venv/bin/python tests/benchmarks/bench_fidelity.py`` (``--quick``: three towns,
 one seed; ``--towns Vaduz,Mauren``, ``--methods fragments``, ``--seeds 2``). Writes
 ``tests/benchmarks/results/fidelity.json``, the tables in
-``tests/benchmarks/results/fidelity.md`` and one picture per target in
-``docs/fidelity_<town>.png`` (real | each method | best baseline); with ``--out`` elsewhere, the
-tables and pictures go beside that JSON and the committed ones are left alone.
+``tests/benchmarks/results/fidelity.md``, the README's fidelity tables (the blocks marked
+``<!-- fidelity:NAME -->``, :func:`readme_blocks`; ``--tables-only`` rewrites them from the
+JSON) and one picture per target in ``docs/fidelity_<town>.png`` (real | each method | best
+baseline); with ``--out`` elsewhere, the tables and pictures go beside that JSON and the
+committed ones and the README are left alone.
 
 © OpenStreetMap contributors, ODbL: every picture carries the attribution.
 """
@@ -403,10 +405,77 @@ def yang_goals(results: dict) -> str:
     return "\n".join(out) if len(out) > 2 else ""
 
 
+def towns_table(results: dict, method: str) -> str:
+    """Issue 16's goals for one method, a row per town: its median relative error beside
+    each baseline's, its wins over them, how many runs keep the degree-4 share within ±30 %
+    of the example's and make one network, its invariant violations, its land in closed
+    blocks. A town the method was trained on (StreetGAN) has no row."""
+    out = [f"| town (km²) | {method.replace('_', ' ')} | grid | random chords | random Delaunay "
+           "| wins vs grid / chords / Delaunay (of 16) | degree-4 share within ±30 % of the "
+           "example's (runs) | one network (runs) | invariant violations | land in closed "
+           "blocks (the town's) |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for name, t in results["targets"].items():
+        r = t["methods"].get(method, {})
+        if "score" not in r:
+            continue
+        runs = r["runs"]
+        d4 = t["example_stats"]["degree4_share"]
+        in_band = sum(abs(run["stats"]["degree4_share"] / d4 - 1) <= 0.3 for run in runs) \
+            if d4 else 0
+        one = sum(run.get("components") == 1 for run in runs)
+        base = " | ".join(f"{t['baselines'][b]['score']['median_error']:.2f}"
+                          for b in BASELINES)
+        wins = " / ".join(str(r["score"]["wins"].get(b, "–")) for b in BASELINES)
+        real_land = t.get("land_in_blocks", {}).get("real", float("nan"))
+        out.append(f"| {name} ({t['km2']:.1f}) | {r['score']['median_error']:.2f} | {base} | "
+                   f"{wins} | {in_band} of {len(runs)} | {one} of {len(runs)} | "
+                   f"{sum(r['n_violations'])} | {land_of(r):.2f} ({real_land:.2f}) |")
+    return "\n".join(out) if len(out) > 2 else ""
+
+
+def readme_blocks(results: dict) -> Dict[str, str]:
+    """The README's figures from this benchmark, by the name of the block that holds each
+    (``<!-- fidelity:NAME -->`` ... ``<!-- /fidelity:NAME -->``): written from the results,
+    never by hand (``tests/test_readme.py`` checks them against the committed JSON)."""
+    return {"summary": summary(results), "fragments": goals(results),
+            "random_walk": towns_table(results, "random_walk"),
+            "streetgan": towns_table(results, "streetgan")}
+
+
+def sync_readme(readme: str, blocks: Dict[str, str]) -> str:
+    """``readme`` with each marked block's table replaced by ``blocks[name]``; a block the
+    README does not mark is left out, a marked block with no figures is an error."""
+    for name, table in blocks.items():
+        start, end = f"<!-- fidelity:{name} -->\n", f"<!-- /fidelity:{name} -->"
+        i = readme.find(start)
+        if i < 0:
+            continue
+        j = readme.index(end, i)
+        if not table:
+            raise ValueError(f"the README shows the fidelity block {name!r}, which these "
+                             "results do not have")
+        readme = readme[:i + len(start)] + table + "\n" + readme[j:]
+    return readme
+
+
 def tables(results: dict) -> str:
     """Everything the benchmark writes to its Markdown file."""
-    return "\n\n".join(part for part in (summary(results), goals(results),
-                                          yang_goals(results), markdown(results)) if part)
+    parts = [summary(results), goals(results), yang_goals(results)]
+    for m in ("random_walk", "streetgan"):
+        table = towns_table(results, m)
+        if table:
+            parts.append(f"Issue 16's goals side by side ({m}):\n\n{table}")
+    return "\n\n".join(part for part in (*parts, markdown(results)) if part)
+
+
+def write_tables(results: dict, tables_path: Path) -> None:
+    """The Markdown tables beside the JSON; for the committed results, the README's
+    figures too."""
+    tables_path.write_text(tables(results))
+    if tables_path.resolve() == TABLES.resolve():
+        readme = ROOT / "README.md"
+        readme.write_text(sync_readme(readme.read_text(encoding="utf-8"),
+                                      readme_blocks(results)), encoding="utf-8")
 
 
 def summary(results: dict) -> str:
@@ -555,7 +624,7 @@ def main(argv=None):
     pictures = DOCS if out.resolve() == RESULTS.resolve() else out.parent
     if args.tables_only:
         results = json.loads(out.read_text())
-        tables_path.write_text(tables(results))
+        write_tables(results, tables_path)
         print(tables_path.read_text())
         return results
     seeds = list(range(1 if args.quick else args.seeds))
@@ -642,7 +711,7 @@ def main(argv=None):
     results["seconds"] = time.perf_counter() - t0
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(results, indent=1, default=float))
-    tables_path.write_text(tables(results))
+    write_tables(results, tables_path)
     print(tables(results))
     print(f"wrote {out} and {tables_path} in {results['seconds']:.0f} s")
     return results
