@@ -75,7 +75,8 @@ class LayoutMetrics(AlgorithmBase):
             "and other non-drivable OSM classes); faces under MIN_BLOCK_AREA m² or thinner "
             "than MIN_BLOCK_WIDTH m are slivers, not blocks (0 and 0 keep every face of a plain "
             "polygonize); nodes within EDGE_DISTANCE m of the study area's boundary are clip "
-            "ends, not dead ends (0 counts them).\n\n"
+            "ends, not dead ends, and streets within it count as inside (0: every node counts, "
+            "streets are cut at the boundary).\n\n"
             "Outputs: a table with one row per measure (candidate and example values, "
             "Wasserstein distance and Kolmogorov-Smirnov statistic of every distribution) and "
             "an HTML report with histograms of example and candidate side by side. Each layer "
@@ -154,8 +155,10 @@ class LayoutMetrics(AlgorithmBase):
             self.EDGE_DISTANCE, "Clip ends at the study-area edge (m)",
             QgsProcessingParameterNumber.Type.Double, defaultValue=0.0, minValue=0.0, maxValue=1000.0),
             "Nodes closer than this to the study area's boundary are not counted in densities "
-            "and shares (the cut ends of a clipped network are not dead ends). 0 counts every "
-            "node inside the area or on its boundary.", advanced=True)
+            "and shares (the cut ends of a clipped network are not dead ends), and a street "
+            "that runs outside the boundary by up to this much counts as inside it (a layout's "
+            "outline street rounding a corner). 0 counts every node inside the area or on its "
+            "boundary.", advanced=True)
         self.add(QgsProcessingParameterNumber(
             self.SNAP_TOLERANCE, "Node snapping (m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=0.5, minValue=0.0, maxValue=10.0),

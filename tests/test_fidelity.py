@@ -34,6 +34,24 @@ def test_statistics_of_a_grid():
     assert list(s) == [k for k, _ in F.STATISTICS] and len(s) == 16
 
 
+
+def test_streets_cut_at_the_edge_are_counted_apart_from_dead_ends():
+    """The grid above: its 24 ends on the box's edge are streets cut there, none a dead end;
+    a given road's ends at the edge are not counted, nor is a cul-de-sac inside, and a street
+    ending 2 m short of the edge is a dead end, not a cut."""
+    box = shapely.box(0, 0, 650, 450)
+    lines = F.grid_baseline(box, 100.0, angle=0.0)
+    km2 = 0.2925
+    assert F.edge_ends(lines, box) == pytest.approx(24 / km2)
+    given = [g for g in lines if g.coords[0][1] == g.coords[-1][1] == 225.0]
+    assert len(given) == 1
+    assert F.edge_ends(lines, box, given) == pytest.approx(22 / km2)
+    cul_de_sac = shapely.LineString([(75, 225), (75, 260)])
+    short = shapely.LineString([(625, 175), (648, 175)])   # 2 m short of the eastern edge
+    more = np.concatenate([lines, [cul_de_sac, short]])
+    assert F.edge_ends(more, box, given) == pytest.approx(22 / km2)
+    assert F.fidelity_statistics(more, box)["dead_ends_per_km2"] == pytest.approx(2 / km2)
+
 def test_relative_errors_and_missing_statistics():
     s = F.fidelity_statistics(F.grid_baseline(BOX, 100.0, angle=0.0), BOX)
     assert all(v == 0 for v in F.relative_errors(s, s).values())

@@ -356,6 +356,31 @@ def test_a_street_along_the_edge_of_the_area_counts_whole():
     assert r.scalar("roads", "street_length_km_per_km2") == pytest.approx(2.4 / 0.09)
 
 
+
+def test_a_street_rounding_a_corner_outside_the_area_counts_within_the_edge_distance():
+    """splitdomain's outline street rounds a reflex corner of its domain up to 0.9 m outside
+    it: with EDGE_DISTANCE 1 m it counts whole and closes its blocks; cut at the exact
+    boundary (EDGE_DISTANCE 0) it lost the rounded stretch, and the blocks behind it with it."""
+    area = shapely.Polygon([(0, 0), (200, 0), (200, 100), (100, 100), (100, 200), (0, 200)])
+    # the outline, its reflex corner (100, 100) rounded 0.5 m outside, and a street across
+    outline = shapely.LineString([(0, 0), (200, 0), (200, 100), (101, 100.5), (100.5, 101),
+                                  (100, 200), (0, 200), (0, 0)])
+    across = [shapely.LineString([(0, 100), (100.75, 100.75)]),
+              shapely.LineString([(100, 0), (100.75, 100.75)])]
+    roads = [outline] + across
+    whole = shapely.length(outline) + shapely.length(across).sum()
+    kept = M.compute_layout_metrics(roads=roads, area=area, edge_distance=1.0)
+    assert kept.scalar("roads", "street_length_km_per_km2") == pytest.approx(
+        whole / 1e3 / 0.03)
+    assert kept.scalar("blocks", "count") == 3
+    cut = M.compute_layout_metrics(roads=roads, area=area)
+    assert cut.scalar("roads", "street_length_km_per_km2") < whole / 1e3 / 0.03 - 3
+    # a street across the edge still ends where it crosses it, also at a slant (the grown
+    # area cuts it 2.2 m on, and that end moved onto the edge lay 2 m off the crossing)
+    slant = shapely.LineString([(100, 50), (300, 150)])   # crosses x = 200 at y = 100
+    part, = M.clip_lines([slant], area, tolerance=1.0)
+    assert shapely.equals_exact(part, shapely.LineString([(100, 50), (200, 100)]), 1e-9)
+
 def test_bad_input():
     with pytest.raises(InputError, match="no layer"):
         M.compute_layout_metrics()

@@ -66,13 +66,23 @@ STATISTICS = (
 EDGE_DISTANCE = 1.0
 
 
-def clip_to_area(lines: Sequence, area) -> np.ndarray:
-    """The parts of ``lines`` inside ``area`` (:func:`metrics.clip_lines`: a street along its
-    edge whole): single lines longer than a centimetre."""
+def clip_to_area(lines: Sequence, area, edge_distance: float = EDGE_DISTANCE) -> np.ndarray:
+    """The parts of ``lines`` inside ``area``: single lines longer than a centimetre. A
+    street within ``edge_distance`` of the area counts as inside it, as the invariants
+    count a synthesised street inside its target (:func:`metrics.clip_lines`: a street
+    along the edge whole, each street across it ending on it).
+
+    A street along the edge that rounds a reflex corner 0.5 m outside stays one piece:
+
+    >>> area = shapely.Polygon([(0, 0), (100, 0), (100, 50), (50, 50), (50, 100), (0, 100)])
+    >>> along = shapely.LineString([(100, 50), (50.5, 50.5), (50, 100)])
+    >>> len(clip_to_area([along], area)), len(clip_to_area([along], area, 1e-3))
+    (1, 2)
+    """
     lines = np.asarray(lines, dtype=object).ravel()
     if not len(lines):
         return np.empty(0, dtype=object)
-    parts = _metrics.clip_lines(lines, area)
+    parts = _metrics.clip_lines(lines, area, tolerance=edge_distance)
     return parts[shapely.length(parts) > 0.01]
 
 
@@ -87,7 +97,7 @@ def fidelity_statistics(lines: Sequence, area, min_block_area: float = _blocks.M
     ``min_block_area`` m² or thinner than ``min_block_width`` m are slivers, not blocks).
     Statistics of an empty distribution (no block) are NaN.
     """
-    parts = clip_to_area(lines, area)
+    parts = clip_to_area(lines, area, edge_distance)
     if not len(parts):
         raise InputError("no street lies inside the area")
     m = _metrics.compute_layout_metrics(roads=parts, area=area, min_block_area=min_block_area,
@@ -128,13 +138,64 @@ def land_in_blocks(lines: Sequence, area, min_block_area: float = _blocks.MIN_BL
     >>> round(land_in_blocks(grid, shapely.box(0, 0, 300, 300)), 3)
     0.667
     """
-    parts = clip_to_area(lines, area)
-    if not len(parts):
-        return 0.0
-    faces = _metrics.block_faces(parts, min_block_area, min_block_width)
+    faces = closed_blocks(lines, area, min_block_area, min_block_width)
     if not len(faces):
         return 0.0
     return _metrics.block_metrics(faces, area).scalar("blocks", "land_share") / 100.0
+
+
+def edge_ends(lines: Sequence, area, given: Sequence = (),
+              edge_distance: float = EDGE_DISTANCE) -> float:
+    """Streets cut at the edge of ``area``, per km²: the network's ends (nodes of degree 1)
+    within ``edge_distance`` of its boundary, those of the ``given`` roads not counted (a
+    town's arterials leave it). :func:`fidelity_statistics` counts them as no dead ends (a
+    network clipped to an area ends there), so the dead-end statistics do not see them;
+    scored by none, reported beside them: a town's envelope hugs its streets, so few of its
+    own reach its edge.
+
+    A 200 m square crossed by a given road, with a street from it to the northern edge and
+    a cul-de-sac (a dead end, not at the edge):
+
+    >>> square = shapely.box(0, 0, 200, 200)
+    >>> given = [shapely.LineString([(0, 100), (200, 100)])]
+    >>> streets = [shapely.LineString([(100, 100), (100, 200)]),
+    ...            shapely.LineString([(50, 100), (50, 150)])]
+    >>> edge_ends(given + streets, square, given)
+    25.0
+    """
+    from ..network.street_graph import node_lines
+
+    parts = clip_to_area(lines, area)
+    if not len(parts):
+        return 0.0
+    pieces = node_lines(parts)
+    ends = np.round(np.concatenate([shapely.get_coordinates(shapely.get_point(pieces, 0)),
+                                    shapely.get_coordinates(shapely.get_point(pieces, -1))]),
+                    3)
+    nodes, at, degree = np.unique(ends, axis=0, return_inverse=True, return_counts=True)
+    at = at.ravel()
+    given = np.asarray(given, dtype=object).ravel()
+    on_given = (shapely.dwithin(shapely.union_all(given), shapely.line_interpolate_point(
+        pieces, 0.5, normalized=True), 1e-3) if len(given) else
+        np.zeros(len(pieces), dtype=bool))
+    # every node of the clipped network lies in the area: those not counted are at its edge
+    cut = (degree == 1) & ~_invariants.counted_nodes(nodes, area, edge_distance)
+    # a node of degree 1 is the end of one piece: count it where that piece is no given road
+    street_end = np.zeros(len(nodes), dtype=bool)
+    street_end[at[~np.concatenate([on_given, on_given])]] = True
+    return float((cut & street_end).sum() / (shapely.area(area) / 1e6))
+
+
+def closed_blocks(lines: Sequence, area, min_block_area: float = _blocks.MIN_BLOCK_AREA,
+                  min_block_width: float = _blocks.MIN_BLOCK_WIDTH) -> np.ndarray:
+    """The blocks :func:`fidelity_statistics` counts: the faces of the streets clipped to
+    ``area`` (:func:`metrics.block_faces`, traffic islands under ``min_block_area`` or
+    thinner than ``min_block_width`` left out)."""
+    parts = clip_to_area(lines, area)
+    if not len(parts):
+        return np.empty(0, dtype=object)
+    return np.asarray(_metrics.block_faces(parts, min_block_area, min_block_width),
+                      dtype=object)
 
 
 def statistics_of_extract(lines: Sequence) -> Dict[str, float]:

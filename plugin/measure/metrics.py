@@ -200,14 +200,16 @@ def _area(area, *layers) -> Tuple[Optional[shapely.Geometry], float, str]:
     return hull, a, "convex hull of the input"
 
 
-def clip_lines(lines, area, return_index: bool = False):
+def clip_lines(lines, area, return_index: bool = False, tolerance: float = ON_EDGE):
     """The parts of ``lines`` inside ``area``, a street along its edge whole: clipped to the
     exact polygon, a line built along the edge (a layout's outline street) lies outside it
     by round-off here and there and loses those parts (one layout's s_l moved by 2 % with a
-    10 µm change of its noding). Clipped to the area grown by :data:`ON_EDGE` instead, with
-    each cut end moved back onto the area's edge (a street crossing it ends there).
-    The parts are 2D (the lengths measured are). ``return_index``: also the index of the
-    line each part came from.
+    10 µm change of its noding). Clipped to the area grown by ``tolerance`` (default
+    :data:`ON_EDGE`) instead, with each cut end moved back onto the area's edge (a street
+    crossing it ends there). A larger ``tolerance`` keeps a street that runs outside the
+    edge by up to that much (splitdomain's outline street rounds the outline's reflex bends
+    up to 0.9 m outside it) in one piece. The parts are 2D (the lengths measured are).
+    ``return_index``: also the index of the line each part came from.
 
     >>> area = shapely.box(0, 0, 100, 100)
     >>> along = shapely.LineString([(0, -1e-9), (100, -1e-9)])
@@ -218,9 +220,10 @@ def clip_lines(lines, area, return_index: bool = False):
     [0.0, 50.0]
     """
     lines = np.asarray(lines, dtype=object).ravel()
+    grown = shapely.buffer(area, max(tolerance, ON_EDGE), join_style="mitre")
     with np.errstate(invalid="ignore"):
-        parts, index = shapely.get_parts(shapely.intersection(
-            lines, shapely.buffer(area, ON_EDGE, join_style="mitre")), return_index=True)
+        parts, index = shapely.get_parts(shapely.intersection(lines, grown),
+                                         return_index=True)
     parts, inner = shapely.get_parts(parts, return_index=True)   # a collection's members
     index = index[inner]
     single = (shapely.get_type_id(parts) == 1) & ~shapely.is_empty(parts)
@@ -232,12 +235,50 @@ def clip_lines(lines, area, return_index: bool = False):
     ends = np.unique(np.r_[np.cumsum(n) - n, np.cumsum(n) - 1])
     edge = shapely.boundary(area)
     pts = shapely.points(xy[ends])
-    out = ~shapely.intersects(area, pts)
+    # the ends the cut made (on the grown area's edge); a line's own end within the
+    # tolerance outside (a junction of a street that rounds a corner outside) stays
+    out = ~shapely.intersects(area, pts) & shapely.dwithin(shapely.boundary(grown), pts, 1e-6)
     if out.any():
         xy[ends[out]] = shapely.get_coordinates(shapely.line_interpolate_point(
             edge, shapely.line_locate_point(edge, pts[out])))
+    raw = parts
     parts = shapely.linestrings(xy, indices=np.repeat(np.arange(len(parts)), n))
+    if tolerance > ON_EDGE and out.any():
+        # a street across the edge ends where it crosses it, not where the grown area cut
+        # it moved sideways onto the edge (by up to the tolerance over the tangent of its
+        # angle with the edge)
+        last = np.cumsum(n) - 1
+        cut = set(ends[out].tolist())
+        for k in np.unique(np.searchsorted(last, ends[out])):
+            parts[k] = _back_to_edge(raw[k], parts[k], last[k] - n[k] + 1 in cut,
+                                     last[k] in cut, edge, lines[index[k]])
     return (parts, index) if return_index else parts
+
+
+def _back_to_edge(raw, moved, start_cut: bool, end_cut: bool, edge, line):
+    """A part of ``line`` (``raw``: as cut from the grown area) whose cut ends are taken back
+    along the line to where it crosses the area's ``edge``, the crossing nearest each such
+    end; ``moved`` (its cut ends moved onto the edge) where the line does not cross it."""
+    from shapely.ops import substring
+
+    if shapely.get_type_id(line) != 1:
+        return moved
+    crossing = shapely.get_parts(shapely.intersection(line, edge))
+    crossing = crossing[shapely.get_type_id(crossing) == 0]
+    s0 = shapely.line_locate_point(line, shapely.get_point(raw, 0))
+    s1 = shapely.line_locate_point(line, shapely.get_point(raw, -1))
+    lo, hi = min(s0, s1), max(s0, s1)
+    at = shapely.line_locate_point(line, crossing)
+    at = at[(at >= lo - 1e-9) & (at <= hi + 1e-9)]
+    if not len(at):
+        return moved
+    forward = s0 <= s1
+    a = at.min() if (start_cut if forward else end_cut) else lo
+    b = at.max() if (end_cut if forward else start_cut) else hi
+    if b - a <= 1e-9:
+        return moved
+    piece = substring(line, a, b)
+    return piece if forward else shapely.reverse(piece)
 
 
 def _inside(area_geom, geoms) -> np.ndarray:
@@ -479,7 +520,9 @@ def road_metrics(roads, area=None, snap_tolerance: float = 0.5, bearing_length: 
     length_in = length.copy()
     if area_geom is not None:
         cut = np.flatnonzero(~shapely.within(graph.geometry, area_geom))
-        parts, index = clip_lines(graph.geometry[cut], area_geom, return_index=True)
+        # a street within edge_distance of the area is where the network was cut: inside
+        parts, index = clip_lines(graph.geometry[cut], area_geom, return_index=True,
+                                  tolerance=edge_distance)
         length_in[cut] = np.bincount(index, shapely.length(parts), minlength=len(cut))
     bearing, piece_length = street_bearings(graph.geometry, bearing_length)
     res = MetricsResult()

@@ -281,6 +281,7 @@ def measure_run(target: Town, example: Example, lines: np.ndarray, check: bool) 
     network = np.concatenate([target.given, new])
     out = {"stats": fidelity.fidelity_statistics(network, target.area),
            "land_in_blocks": fidelity.land_in_blocks(network, target.area),
+           "edge_ends_per_km2": fidelity.edge_ends(network, target.area, target.given),
            "km_new": float(shapely.length(fidelity.clip_to_area(new, target.area)).sum() / 1e3)}
     if check:
         c = invariants.check_network(new, target.given, target.given_class, target.area,
@@ -295,18 +296,31 @@ def measure_run(target: Town, example: Example, lines: np.ndarray, check: bool) 
 # --------------------------------------------------------------------------- report
 
 def draw(target: Town, panels: Dict[str, np.ndarray], path: Path, subtitle: Dict[str, str]):
+    """One picture per target: a panel per network (four to a row, large enough to read a
+    street), its closed blocks shaded (what *land in closed blocks* counts), the given roads
+    in red."""
     import matplotlib
 
     matplotlib.use("Agg")
+    from matplotlib.collections import LineCollection, PolyCollection
     from matplotlib.figure import Figure
 
     n = len(panels)
+    cols = min(n, 4)
+    rows = -(-n // cols)
     x0, y0, x1, y1 = target.area.bounds
-    aspect = (y1 - y0) / max(x1 - x0, 1.0)
-    w = 3.2
-    fig = Figure(figsize=(w * n, w * min(max(aspect, 0.6), 2.2) + 0.7))
+    aspect = min(max((y1 - y0) / max(x1 - x0, 1.0), 0.6), 1.6)
+    w = 4.4
+    fig = Figure(figsize=(w * cols, (w * aspect + 0.5) * rows + 0.6))
+
+    def rings(geoms):
+        out = []
+        for part in shapely.get_parts(geoms):
+            out.append(np.asarray(part.exterior.coords)[:, :2])
+        return out
+
     for k, (name, lines) in enumerate(panels.items()):
-        ax = fig.add_subplot(1, n, k + 1)
+        ax = fig.add_subplot(rows, cols, k + 1)
         for part in shapely.get_parts(target.area):
             x, y = part.exterior.xy
             ax.fill(x, y, color="#f3efe6", lw=0)
@@ -315,27 +329,69 @@ def draw(target: Town, panels: Dict[str, np.ndarray], path: Path, subtitle: Dict
                 x, y = hole.xy
                 ax.fill(x, y, color="white", lw=0)
                 ax.plot(x, y, color="#c8a27a", lw=0.6)
+        ax.add_collection(PolyCollection(rings(fidelity.closed_blocks(lines, target.area)),
+                                         facecolors="#cfe3c2", edgecolors="none"))
         segs = [np.asarray(g.coords)[:, :2] for g in fidelity.clip_to_area(lines, target.area)]
-        from matplotlib.collections import LineCollection
-
-        ax.add_collection(LineCollection(segs, colors="#555555", linewidths=0.5))
+        ax.add_collection(LineCollection(segs, colors="#444444", linewidths=0.6))
         ax.add_collection(LineCollection([np.asarray(g.coords)[:, :2] for g in target.given],
-                                         colors="#b2182b", linewidths=1.2))
+                                         colors="#b2182b", linewidths=1.4))
         ax.set_xlim(x0, x1)
         ax.set_ylim(y0, y1)
         ax.set_aspect("equal")
         ax.set_xticks([])
         ax.set_yticks([])
-        ax.set_title(name, fontsize=10)
+        ax.set_title(name, fontsize=12)
         if name in subtitle:
-            ax.set_xlabel(subtitle[name], fontsize=8)
+            ax.set_xlabel(subtitle[name], fontsize=10)
     fig.suptitle(f"{target.name} ({target.region}, {target.km2:.2f} km²): real streets, "
-                 "syntheses from other towns (seed 0), best baseline; red: given level-0 roads",
-                 fontsize=10)
-    fig.text(0.995, 0.005, ATTRIBUTION, ha="right", va="bottom", fontsize=7, color="#444444")
-    fig.tight_layout(rect=(0, 0.02, 1, 0.95))
+                 "syntheses from other towns (seed 0), best baseline; red: given level-0 roads; "
+                 "green: closed blocks", fontsize=12)
+    fig.text(0.995, 0.005, ATTRIBUTION, ha="right", va="bottom", fontsize=8, color="#444444")
+    fig.tight_layout(rect=(0, 0.02, 1, 0.96), h_pad=2.0)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=90)
+    fig.savefig(path, dpi=80)
+
+
+def draw_target(target: Town, entry: dict, panels: Dict[str, np.ndarray], runner: "Runner",
+                seed: int, path: Path) -> None:
+    """The target's picture from the networks of one seed (``panels``: real and the
+    methods'), with its best baseline, each captioned with its median relative error over
+    every seed."""
+    best = entry["best_baseline"]
+    sub = {m: f"median rel. error {r['score']['median_error']:.2f}, land in blocks "
+              f"{land_of(r):.2f}" for m, r in entry["methods"].items()
+           if "score" in r and m in panels}
+    panels = dict(panels)
+    panels[f"{best} (best baseline)"] = np.concatenate([target.given,
+                                                       getattr(runner, best)(seed)])
+    sub[f"{best} (best baseline)"] = (
+        f"median rel. error {entry['baselines'][best]['score']['median_error']:.2f}")
+    land = entry.get("land_in_blocks", {})
+    if land:
+        sub["real"] = f"land in blocks {land['real']:.2f}"
+    draw(target, panels, path, sub)
+
+
+def pictures_only(results: dict, wanted: List[str], pictures: Path) -> None:
+    """Redraw the pictures of a committed run: seed 0 of every method it holds is run again
+    (the same seed gives the same network) and drawn beside the real streets."""
+    towns = liechtenstein_towns() + [helsinki_town(), bubenec_town()]
+    seed = results["seeds"][0]
+    with tempfile.TemporaryDirectory() as tmp:
+        for target in towns:
+            entry = results["targets"].get(target.name)
+            if entry is None or (wanted and target.name not in wanted):
+                continue
+            runner = Runner(target, example_for(target, towns), Path(tmp),
+                            results.get("fill_quantile", 90.0))
+            panels = {"real": target.lines}
+            for m, r in entry["methods"].items():
+                if "score" in r:
+                    panels[m] = np.concatenate([target.given, np.asarray(
+                        getattr(runner, m)(seed), dtype=object)])
+            draw_target(target, entry, panels, runner, seed,
+                        pictures / f"fidelity_{target.name.lower()}.png")
+            print(f"drew {target.name}")
 
 
 def example_as_is(t: dict) -> float:
@@ -408,12 +464,15 @@ def yang_goals(results: dict) -> str:
 def towns_table(results: dict, method: str) -> str:
     """Issue 16's goals for one method, a row per town: its median relative error beside
     each baseline's, its wins over them, how many runs keep the degree-4 share within ±30 %
-    of the example's and make one network, its invariant violations, its land in closed
-    blocks. A town the method was trained on (StreetGAN) has no row."""
+    of the example's and make one network (in each part of the target), its invariant
+    violations, its land in closed blocks and streets cut at the edge. A town the method was
+    trained on (StreetGAN) has no row."""
     out = [f"| town (km²) | {method.replace('_', ' ')} | grid | random chords | random Delaunay "
            "| wins vs grid / chords / Delaunay (of 16) | degree-4 share within ±30 % of the "
-           "example's (runs) | one network (runs) | invariant violations | land in closed "
-           "blocks (the town's) |", "|---|---|---|---|---|---|---|---|---|---|"]
+           "example's (runs) | one network in each part of the target (runs) | invariant "
+           "violations | land in closed "
+           "blocks (the town's) | streets cut at the edge per km² (the town's) |",
+           "|---|---|---|---|---|---|---|---|---|---|---|"]
     for name, t in results["targets"].items():
         r = t["methods"].get(method, {})
         if "score" not in r:
@@ -422,14 +481,18 @@ def towns_table(results: dict, method: str) -> str:
         d4 = t["example_stats"]["degree4_share"]
         in_band = sum(abs(run["stats"]["degree4_share"] / d4 - 1) <= 0.3 for run in runs) \
             if d4 else 0
-        one = sum(run.get("components") == 1 for run in runs)
+        # a target in parts apart (Triesenberg's envelope: two, 1 km apart, a given road in
+        # each) holds one network per part: no street inside it joins them
+        one = sum(run.get("components") == t.get("parts", 1) for run in runs)
         base = " | ".join(f"{t['baselines'][b]['score']['median_error']:.2f}"
                           for b in BASELINES)
         wins = " / ".join(str(r["score"]["wins"].get(b, "–")) for b in BASELINES)
         real_land = t.get("land_in_blocks", {}).get("real", float("nan"))
+        real_cut = t.get("edge_ends_per_km2", {}).get("real", float("nan"))
         out.append(f"| {name} ({t['km2']:.1f}) | {r['score']['median_error']:.2f} | {base} | "
                    f"{wins} | {in_band} of {len(runs)} | {one} of {len(runs)} | "
-                   f"{sum(r['n_violations'])} | {land_of(r):.2f} ({real_land:.2f}) |")
+                   f"{sum(r['n_violations'])} | {land_of(r):.2f} ({real_land:.2f}) | "
+                   f"{edge_ends_of(r):.1f} ({real_cut:.1f}) |")
     return "\n".join(out) if len(out) > 2 else ""
 
 
@@ -493,8 +556,10 @@ def summary(results: dict) -> str:
             if model and name in gan_trained_on(model) | gan_tuned_on(model):
                 continue
             row = rows.setdefault(m, {"err": [], "wins": {b: [] for b in BASELINES},
-                                      "viol": [], "towns": [], "ex": [], "land": []})
+                                      "viol": [], "towns": [], "ex": [], "land": [],
+                                      "cut": []})
             row["land"].append(land_of(r))
+            row["cut"].append(edge_ends_of(r))
             row["err"].append(r["score"]["median_error"])
             row["ex"].append(against_example(t, r))
             row["viol"].extend(r["n_violations"])
@@ -507,18 +572,23 @@ def summary(results: dict) -> str:
             row["err"].append(t["baselines"][b]["score"]["median_error"])
             row["towns"].append(name)
         row = rows.setdefault("*the example copied as is*", {"err": [], "wins": {}, "viol": [],
-                                                              "towns": [], "land": []})
+                                                              "towns": [], "land": [],
+                                                              "cut": []})
         row["err"].append(example_as_is(t))
         row["land"].append(t.get("land_in_blocks", {}).get("example", np.nan))
+        row["cut"].append(t.get("edge_ends_per_km2", {}).get("example", np.nan))
         row["towns"].append(name)
         row = rows.setdefault("*the towns' own streets*", {"err": [], "wins": {}, "viol": [],
-                                                            "towns": [], "land": []})
+                                                            "towns": [], "land": [],
+                                                            "cut": []})
         row["land"].append(t.get("land_in_blocks", {}).get("real", np.nan))
+        row["cut"].append(t.get("edge_ends_per_km2", {}).get("real", np.nan))
         row["towns"].append(name)
     out = ["| method | towns | median of the towns' median rel. errors | the same against the "
            "example's statistics | mean wins over grid / chords / Delaunay (of 16) | invariant "
-           "violations per run (mean) | land in closed blocks (median town) |",
-           "|---|---|---|---|---|---|---|"]
+           "violations per run (mean) | land in closed blocks (median town) | streets cut at the "
+           "edge per km² (median town) |",
+           "|---|---|---|---|---|---|---|---|"]
     for m, row in rows.items():
         wins = " / ".join(f"{np.mean(row['wins'][b]):.1f}" for b in BASELINES) \
             if row["wins"] else ""
@@ -527,8 +597,28 @@ def summary(results: dict) -> str:
         err = f"{np.median(row['err']):.2f}" if row["err"] else ""
         land = row.get("land", [])
         land = f"{np.nanmedian(land):.2f}" if np.isfinite(land).any() else ""
-        out.append(f"| {m} | {len(row['towns'])} | {err} | {ex} | {wins} | {viol} | {land} |")
+        cut = row.get("cut", [])
+        cut = f"{np.nanmedian(cut):.1f}" if np.isfinite(cut).any() else ""
+        out.append(f"| {m} | {len(row['towns'])} | {err} | {ex} | {wins} | {viol} | {land} | "
+                   f"{cut} |")
     return "\n".join(out)
+
+
+def edge_ends_of_towns(target: Town, example: Example) -> dict:
+    """Streets cut at the envelope's edge per km² (:func:`fidelity.edge_ends`, level-0
+    roads not counted), of the town's own streets and, as the mean over the example's
+    towns, of each in its own envelope."""
+    def of(town):
+        return fidelity.edge_ends(town.lines, town.area, town.given)
+
+    return {"real": of(target), "example": float(np.mean([of(t) for t in example.towns]))}
+
+
+def edge_ends_of(r: dict) -> float:
+    """A method's mean streets cut at the target's edge per km² over its runs (NaN: not
+    measured, a result of before 2026-12-06's fourth stop)."""
+    values = [run["edge_ends_per_km2"] for run in r.get("runs", []) if "edge_ends_per_km2" in run]
+    return float(np.mean(values)) if values else float("nan")
 
 
 def land_of_towns(target: Town, example: Example) -> dict:
@@ -555,16 +645,19 @@ def markdown(results: dict) -> str:
         land = t.get("land_in_blocks", {})
         out.append(f"#### {name}{tuned}: {t['km2']:.2f} km², example: "
                    f"{', '.join(t['example'])}\n")
+        cut = t.get("edge_ends_per_km2", {})
         if land:
             out.append(f"Land in closed blocks: the town {land['real']:.2f}, its example "
-                       f"{land['example']:.2f}.\n")
+                       f"{land['example']:.2f}."
+                       + (f" Streets cut at the edge per km²: the town {cut['real']:.1f}, its "
+                          f"example {cut['example']:.1f}." if cut else "") + "\n")
         out.append("| method | median rel. error | single runs | against the example's "
                    "statistics | beats grid / chords / Delaunay (of 16) | invariant violations "
-                   "(runs) | s / km² | land in closed blocks |")
-        out.append("|---|---|---|---|---|---|---|---|")
+                   "(runs) | s / km² | land in closed blocks | streets cut at the edge per km² |")
+        out.append("|---|---|---|---|---|---|---|---|---|")
         for m, r in t["methods"].items():
             if "error" in r:
-                out.append(f"| {m} | failed: {r['error'][:60]} | | | | | | |")
+                out.append(f"| {m} | failed: {r['error'][:60]} | | | | | | | |")
                 continue
             wins = " / ".join(str(r["score"]["wins"].get(b, "–")) for b in BASELINES)
             viol = ", ".join(str(v) for v in r["n_violations"])
@@ -572,13 +665,14 @@ def markdown(results: dict) -> str:
             label = f"{m} ({model})" if model else m
             out.append(f"| {label} | {r['score']['median_error']:.2f} | {run_range(t, r)} | "
                        f"{against_example(t, r):.2f} | {wins} | {viol} | "
-                       f"{r['seconds_per_km2']:.1f} | {land_of(r):.2f} |")
+                       f"{r['seconds_per_km2']:.1f} | {land_of(r):.2f} | "
+                       f"{edge_ends_of(r):.1f} |")
         for b in BASELINES:
             base = t["baselines"][b]
             out.append(f"| *{b} baseline* | {base['score']['median_error']:.2f} | "
                        f"{run_range(t, base)} | {against_example(t, base):.2f} | | | | "
-                       f"{land_of(base):.2f} |")
-        out.append(f"| *the example copied as is* | {example_as_is(t):.2f} | | | | | | |")
+                       f"{land_of(base):.2f} | {edge_ends_of(base):.1f} |")
+        out.append(f"| *the example copied as is* | {example_as_is(t):.2f} | | | | | | | |")
         out.append("")
     return "\n".join(out)
 
@@ -615,6 +709,9 @@ def main(argv=None):
                          "pictures: they show every method of one run)")
     ap.add_argument("--tables-only", action="store_true",
                     help="rewrite the tables from the JSON of an earlier run")
+    ap.add_argument("--pictures-only", action="store_true",
+                    help="redraw the pictures of the JSON of an earlier run (seed 0 of each "
+                         "method run again; --towns: only these)")
     args = ap.parse_args(argv)
     if args.gan_model:
         GAN_CANDIDATES[:] = [str(Path(args.gan_model).resolve())]
@@ -622,6 +719,10 @@ def main(argv=None):
     # a run written elsewhere (a trial) leaves the committed tables and pictures alone
     tables_path = TABLES if out.resolve() == RESULTS.resolve() else out.with_suffix(".md")
     pictures = DOCS if out.resolve() == RESULTS.resolve() else out.parent
+    if args.pictures_only:
+        results = json.loads(out.read_text())
+        pictures_only(results, [s for s in args.towns.split(",") if s], pictures)
+        return results
     if args.tables_only:
         results = json.loads(out.read_text())
         write_tables(results, tables_path)
@@ -652,10 +753,12 @@ def main(argv=None):
             runner.gan_min_block = not args.gan_no_min_block
             runner.gan_median_block = not args.gan_no_median_block
             entry = {"region": target.region, "km2": target.km2, "villages": target.villages,
+                     "parts": int(shapely.get_num_geometries(target.area)),
                      "example": ex.names, "given_km": float(shapely.length(target.given).sum()
                                                            / 1e3),
                      "real": real, "example_stats": ex.stats, "methods": {}, "baselines": {},
-                     "land_in_blocks": land_of_towns(target, ex)}
+                     "land_in_blocks": land_of_towns(target, ex),
+                     "edge_ends_per_km2": edge_ends_of_towns(target, ex)}
             panels = {"real": target.lines}
             baseline_runs = {}
             for b in BASELINES:
@@ -689,21 +792,16 @@ def main(argv=None):
                       + "/".join(str(sc["wins"][b]) for b in BASELINES)
                       + f"  violations {[r['n_violations'] for r in runs]}  "
                       f"{np.mean(seconds) / target.km2:.1f} s/km²")
-            best = min(BASELINES, key=lambda b: entry["baselines"][b]["score"]["median_error"])
-            panels[f"{best} (best baseline)"] = np.concatenate(
-                [target.given, getattr(runner, best)(seeds[0])])
-            entry["best_baseline"] = best
+            entry["best_baseline"] = min(
+                BASELINES, key=lambda b: entry["baselines"][b]["score"]["median_error"])
             if earlier is not None and target.name in earlier["targets"]:
                 kept = earlier["targets"][target.name]["methods"]
                 entry["methods"] = {m: entry["methods"].get(m, kept.get(m)) for m in
                                     METHOD_ORDER if m in entry["methods"] or m in kept}
             results["targets"][target.name] = entry
             if not args.no_pictures:
-                sub = {m: f"median rel. error {entry['methods'][m]['score']['median_error']:.2f}"
-                       for m in methods if "score" in entry["methods"].get(m, {})}
-                sub[f"{best} (best baseline)"] = ("median rel. error "
-                                                  f"{entry['baselines'][best]['score']['median_error']:.2f}")
-                draw(target, panels, pictures / f"fidelity_{target.name.lower()}.png", sub)
+                draw_target(target, entry, panels, runner, seeds[0],
+                            pictures / f"fidelity_{target.name.lower()}.png")
     if earlier is not None:
         results["methods"] = [m for m in METHOD_ORDER if m in methods
                               or m in earlier.get("methods", [])]
