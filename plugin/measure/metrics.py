@@ -277,7 +277,7 @@ def _back_to_edge(raw, moved, start_cut: bool, end_cut: bool, edge, line):
     b = at.max() if (end_cut if forward else start_cut) else hi
     if b - a <= 1e-9:
         return moved
-    piece = substring(line, a, b)
+    piece = shapely.force_2d(substring(line, a, b))
     return piece if forward else shapely.reverse(piece)
 
 
