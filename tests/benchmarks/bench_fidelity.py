@@ -347,7 +347,7 @@ def draw(target: Town, panels: Dict[str, np.ndarray], path: Path, subtitle: Dict
                  "syntheses from other towns (seed 0), best baseline; red: given level-0 roads; "
                  "green: closed blocks", fontsize=12)
     fig.text(0.995, 0.005, ATTRIBUTION, ha="right", va="bottom", fontsize=8, color="#444444")
-    fig.tight_layout(rect=(0, 0.02, 1, 0.96), h_pad=2.0)
+    fig.tight_layout(rect=(0, 0.02, 1, 0.96), h_pad=3.5)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=80)
 
