@@ -165,27 +165,22 @@ def edge_ends(lines: Sequence, area, given: Sequence = (),
     >>> edge_ends(given + streets, square, given)
     25.0
     """
-    from ..network.street_graph import node_lines
+    from ..network.street_graph import measured_graph
 
     parts = clip_to_area(lines, area, edge_distance)
     if not len(parts):
         return 0.0
-    pieces = node_lines(parts)
-    ends = np.round(np.concatenate([shapely.get_coordinates(shapely.get_point(pieces, 0)),
-                                    shapely.get_coordinates(shapely.get_point(pieces, -1))]),
-                    3)
-    nodes, at, degree = np.unique(ends, axis=0, return_inverse=True, return_counts=True)
-    at = at.ravel()
-    given = np.asarray(given, dtype=object).ravel()
-    on_given = (shapely.dwithin(shapely.union_all(given), shapely.line_interpolate_point(
-        pieces, 0.5, normalized=True), 1e-3) if len(given) else
-        np.zeros(len(pieces), dtype=bool))
+    # the graph the dead ends are counted on (fidelity_statistics, the invariants)
+    g = measured_graph(parts, _invariants.SNAP_TOLERANCE)
+    nodes = np.asarray(g.nodes)
     # every node of the clipped network lies in the area: those not counted are at its edge
-    cut = (degree == 1) & ~_invariants.counted_nodes(nodes, area, edge_distance)
-    # a node of degree 1 is the end of one piece: count it where that piece is no given road
-    street_end = np.zeros(len(nodes), dtype=bool)
-    street_end[at[~np.concatenate([on_given, on_given])]] = True
-    return float((cut & street_end).sum() / (shapely.area(area) / 1e6))
+    cut = (g.degree == 1) & ~_invariants.counted_nodes(nodes, area, edge_distance)
+    given = np.asarray(given, dtype=object).ravel()
+    if len(given) and cut.any():
+        # a given road's own end (merged nodes move by up to half the snap tolerance)
+        cut[cut] = ~shapely.dwithin(shapely.union_all(given), shapely.points(nodes[cut]),
+                                    _invariants.SNAP_TOLERANCE)
+    return float(cut.sum() / (shapely.area(area) / 1e6))
 
 
 def closed_blocks(lines: Sequence, area, min_block_area: float = _blocks.MIN_BLOCK_AREA,
