@@ -318,8 +318,8 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
             feedback.pushInfo(f"Existing roads: {st['n_seam_ends_connected']} of "
                               f"{st['n_seam_ends']} dead ends at the target joined the new "
                               f"streets ({st['n_seam_ends_closed']} of them as a T onto the "
-                              "nearest street, so that the streets the target cuts stay "
-                              "open no more often than the example's end); "
+                              "nearest street: the streets the target cuts stay open no "
+                              "more often than the example's streets end); "
                               f"{st['n_road_junctions']} junctions on them.")
         results = {}
         results[self.OUTPUT] = qgis_io.write_sink(
