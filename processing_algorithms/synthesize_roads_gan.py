@@ -150,7 +150,7 @@ class SynthesizeRoadsGan(AlgorithmBase):
             "or a given road that takes junctions (not a motorway or trunk), crossing nothing, "
             "inside the target, along no given road, at 25° or more to the street it crosses "
             "(where that leaves too few, a T whose street meets nothing in reach goes on to "
-            "the target's edge, where the network leaves it); "
+            "the target's edge, up to twice as far, where the network leaves it); "
             "while it has more, "
             "generated streets at crossings are removed where both their ends stay "
             "junctions, smallest merged blocks first. Empty: the junctions as read back "

@@ -109,8 +109,8 @@ def test_a_crossing_street_starts_exactly_at_its_junction():
 
 
 def test_no_street_ends_on_a_given_road_or_out_of_reach():
-    # the target's edge 300 m from the outer streets: out of reach too
-    far = shapely.box(-50, -400, 550, 400)
+    # the target's edge 400 m from the outer streets: beyond EDGE_REACH x 150 m too
+    far = shapely.box(-50, -500, 550, 500)
     lines, is_new = _ladder(bottom_given=True)
     pieces, parent = _noded(lines, is_new)
     out, new, (made, _) = match_crossings(pieces, is_new[parent], 0.5, far,
@@ -149,6 +149,25 @@ def test_a_street_across_goes_on_to_the_edge_when_no_street_is_in_reach():
     assert len(check.outside) == len(check.crossings_given) == 0
     assert len(check.crossings_synthesised) == 0
     assert_planar(out)
+
+
+def test_a_street_goes_on_to_an_edge_beyond_the_reach_of_a_street_across():
+    """The edge lies farther than the next street would (a town cut out of a city): a T
+    whose street meets nothing goes on to it up to EDGE_REACH times the reach of a street
+    across: 200 m north of the top street with a reach of 150 m, all four; 400 m, none."""
+    from urban_synthesis.plugin.network.crossings import EDGE_REACH
+
+    assert 150.0 < 200.0 <= EDGE_REACH * 150.0 < 400.0
+    lines, is_new = _ladder(bottom_given=True)
+    pieces, parent = _noded(lines, is_new)
+    for top, north in ((300.0, 4), (500.0, 0)):
+        area = shapely.box(-50, -150, 550, top)
+        out, new, (made, _) = match_crossings(pieces, is_new[parent], 0.5, area,
+                                             np.random.default_rng(0), reach=150.0)
+        assert made == north
+        added = [g for g in out if g.bounds[1] == 100 and g.bounds[3] == top]
+        assert len(added) == north and all(g.bounds[0] == g.bounds[2] for g in added)
+        assert_planar(out)
 
 
 def test_a_street_across_ends_on_a_given_road_that_may_take_one():
@@ -238,7 +257,8 @@ def test_no_street_goes_on_along_the_street_it_crosses():
     south_west = shapely.LineString([(-200, -120), (150, -120)])
     lines = np.array([west, east, shallow, square, south, south_west], dtype=object)
     lines, _ = _noded(lines, np.ones(len(lines), bool))
-    area = shapely.box(-300, -300, 300, 300)
+    # the edge out of reach (EDGE_REACH): no T goes on to it
+    area = shapely.box(-1000, -1000, 1000, 1000)
     out, is_new, (made, removed) = match_crossings(lines, np.ones(len(lines), bool), 1.0, area,
                                                    np.random.default_rng(0))
     assert made == 1 and removed == 0
