@@ -29,8 +29,8 @@ might also incorporate existing objects", ch. 4.2.8) are respected and kept:
   motorways and trunks, which are crossed only at their own junctions;
 - all lines are noded together (every contact is a junction), and generated pieces that
   reach neither a given road nor (without given roads) the largest piece are joined by
-  the shortest clear connector within :data:`JOIN_DISTANCE` road widths, or within a
-  quarter of the piece's own street length up to 400 m (:data:`PIECE_LINK_SHARE`,
+  the shortest clear connector within :data:`JOIN_DISTANCE` road widths, or within half
+  of the piece's own street length up to 400 m (:data:`PIECE_LINK_SHARE`,
   :data:`MAX_PIECE_LINK`), nearest first (a piece may join through one that joined before
   it; :mod:`network.links`), or dropped;
 - the given roads are returned whole (split at the new junctions), level 0; the generated
@@ -73,8 +73,9 @@ GIVEN_CORRIDOR = 8.0
 #: floating generated pieces are joined by connectors up to this many road widths long ...
 JOIN_DISTANCE = 2.0
 #: ... or, for a larger piece (a part of the settlement the generator drew apart from the
-#: rest), up to this share of the piece's own street length ...
-PIECE_LINK_SHARE = 0.25
+#: rest), up to this share of the piece's own street length (a quarter until 2026-12-06
+#: dropped 2.5 km of Eschen's 9.4, seed 1, and left the north of the town empty) ...
+PIECE_LINK_SHARE = 0.5
 #: ... and at most this long (m; about the longest street segments, 90th percentile, of
 #: the fidelity benchmark's towns: 250-390 m)
 MAX_PIECE_LINK = 400.0
@@ -755,7 +756,7 @@ def attach_to_given(lines, given, given_class=None, area=None, reach: float = 60
     # pieces that reach no given road (without given roads: the longest piece) are joined
     # by the shortest clear connector, nearest first, so that a joined piece anchors the
     # next (the one home of the rule, network.links), at most join_distance long (a larger
-    # piece: a quarter of its streets, up to MAX_PIECE_LINK) and never
+    # piece: PIECE_LINK_SHARE of its streets, up to MAX_PIECE_LINK) and never
     # onto a motorway or trunk; the rest is dropped
     closed_zone = shapely.union_all(shapely.buffer(closed, 0.01)) if len(closed) else None
 
