@@ -211,7 +211,8 @@ def test_a_large_piece_is_worth_a_longer_street_to_it():
     """A part of the settlement the generator drew apart from the rest (a grid of 2.4 km of
     streets, 250 m from the given road) joins by a 250 m street: up to half of its own
     streets (PIECE_LINK_SHARE), at most MAX_PIECE_LINK; a single 300 m street as far off
-    (150 m), or the same grid beyond MAX_PIECE_LINK, is dropped (connectors up to 90 m)."""
+    (it may take 150 m), or the same grid beyond MAX_PIECE_LINK, is dropped (connectors up
+    to 90 m)."""
     road = shapely.LineString([(0, 0), (1000, 0)])
     grid = [shapely.LineString([(300, y), (600, y)]) for y in (250, 350, 450, 550)] + \
         [shapely.LineString([(x, 250), (x, 550)]) for x in (300, 400, 500, 600)]
