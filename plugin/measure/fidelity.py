@@ -165,13 +165,11 @@ def edge_ends(lines: Sequence, area, given: Sequence = (),
     >>> edge_ends(given + streets, square, given)
     25.0
     """
-    from ..network.street_graph import measured_graph
-
     parts = clip_to_area(lines, area, edge_distance)
     if not len(parts):
         return 0.0
-    # the graph the dead ends are counted on (fidelity_statistics, the invariants)
-    g = measured_graph(parts, _invariants.SNAP_TOLERANCE)
+    # the graph fidelity_statistics counts the dead ends on
+    g = _metrics.road_graph(parts)
     nodes = np.asarray(g.nodes)
     # every node of the clipped network lies in the area: those not counted are at its edge
     cut = (g.degree == 1) & ~_invariants.counted_nodes(nodes, area, edge_distance)

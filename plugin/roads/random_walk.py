@@ -191,6 +191,11 @@ class WalkSettings:
             raise InputError("the seam distance must not be negative")
         return self
 
+    def reach(self, dist_mean, dist_sd):
+        """How far a step looks from a point's street slot: its mean street distance and
+        ``reach_sd`` deviations (scalars or arrays)."""
+        return dist_mean + self.reach_sd * dist_sd
+
 
 def _example_node_degrees(points: iq.PointSet) -> np.ndarray:
     """Degrees of the example points that are nodes of the example network (degree != 2).
@@ -363,7 +368,7 @@ class _Walker:
         (ascending), their offsets, distances and directions, and the distance terms of the
         step's weights: computed for all at once (the points stay where they are), where a
         step would compute them for each."""
-        reach = pts.dist_mean + self.s.reach_sd * pts.dist_sd
+        reach = self.s.reach(pts.dist_mean, pts.dist_sd)
         rows = np.flatnonzero((np.isfinite(reach) & (pts.level >= 0)).ravel())  # 2 v + slot
         owner = rows // 2
         balls = self.kd.query_ball_point(pts.xy[owner], reach.ravel()[rows],
@@ -394,7 +399,7 @@ class _Walker:
             lo, hi = self._nb_start[r], self._nb_stop[r]
             return tuple(a[lo:hi] for a in self._nb)
         mu, sd = self.p.dist_mean[v, slot], self.p.dist_sd[v, slot]
-        reach = mu + self.s.reach_sd * sd
+        reach = self.s.reach(mu, sd)
         nb = np.asarray(self.kd.query_ball_point(self.xy[v], reach, return_sorted=False),
                         dtype=np.int64)
         nb = np.sort(nb[nb != v])
@@ -1039,8 +1044,8 @@ def _close_seam_ends(w: "_Walker", points: iq.PointSet, seam, is_new, share: flo
     ahead = points.xy[seams] + 5.0 * w.slot_dir[seams, 0]
     seams = seams[shapely.contains_xy(area, ahead[:, 0], ahead[:, 1])]
     # the reach of a new point's step (its mean street distance and 2.5 deviations), typical
-    reach = float(np.nanmedian(points.dist_mean[is_new, 0]
-                               + w.s.reach_sd * points.dist_sd[is_new, 0])) \
+    reach = float(np.nanmedian(w.s.reach(points.dist_mean[is_new, 0],
+                                         points.dist_sd[is_new, 0]))) \
         if is_new.any() else math.nan
 
     def too_many_open() -> bool:
@@ -1155,7 +1160,7 @@ def connect_points(points: iq.PointSet, rng: np.random.Generator,
                     continue
                 added = w.extend(v, slot, h, relaxed="cross", origin="cross")
                 if not added:  # no free point in reach: a T onto the nearest street
-                    reach = points.dist_mean[v, slot] + s.reach_sd * points.dist_sd[v, slot]
+                    reach = s.reach(points.dist_mean[v, slot], points.dist_sd[v, slot])
                     added = int(w._join_by_split(np.array([v]), None, reach, "cross",
                                                  level=h) is not None)
                 n_crossed += added
@@ -1205,7 +1210,7 @@ def connect_points(points: iq.PointSet, rng: np.random.Generator,
         w.slot_dir[v, slot] = -d[stem]  # as if the street arrived along its stem
         added = w.extend(v, slot, h, relaxed="across", origin="across")
         if not added and split:
-            reach = w.p.dist_mean[v, slot] + s.reach_sd * w.p.dist_sd[v, slot]
+            reach = s.reach(w.p.dist_mean[v, slot], w.p.dist_sd[v, slot])
             added = int(w._join_by_split(np.array([v]), None, reach, "across",
                                          level=h) is not None)
         if not added:
@@ -1259,7 +1264,7 @@ def connect_points(points: iq.PointSet, rng: np.random.Generator,
             slot = int(np.argmax(w.cnt[v] == 1))
         if w.cnt[v, slot] != 1:
             return False
-        reach = points.dist_mean[v, slot] + s.reach_sd * points.dist_sd[v, slot]
+        reach = s.reach(points.dist_mean[v, slot], points.dist_sd[v, slot])
         h = points.level[v, slot]
         for rings in (True, False):  # a short ring rather than a stub that stays
             w.check_rings = rings
@@ -1287,7 +1292,7 @@ def connect_points(points: iq.PointSet, rng: np.random.Generator,
     # many stay unreached and the share falls below the example's; unreached dead-end
     # points then get their street, one clear step onto the nearest street (a T)
     def open_(v) -> bool:
-        reach = points.dist_mean[v, 0] + s.reach_sd * points.dist_sd[v, 0]
+        reach = s.reach(points.dist_mean[v, 0], points.dist_sd[v, 0])
         return w._join_by_split(np.array([v]), None, reach, "dead_end") is not None
 
     def unreached():
