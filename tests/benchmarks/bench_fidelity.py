@@ -615,6 +615,45 @@ def example_paragraph(results: dict) -> str:
                "points)." if apart else ""))
 
 
+#: Issue 15's (fragments) and issue 16's (random walk, StreetGAN) per-town goals: the most
+#: median relative error, and the fewest wins over each baseline (of the 16 statistics).
+GOALS = {"fragments": 0.15, "random_walk": 0.20, "streetgan": 0.20}
+GOAL_WINS = 12
+
+
+def goal_verdict(results: dict, method: str) -> str:
+    """The README's sentence on a method's per-town goal: the towns that meet it, and by
+    what each other town misses it (its error, its wins, or both), with its error and wins
+    over grid / chords / Delaunay edges. A town the method was tuned on is marked (the
+    fragments' tuning towns, the towns a StreetGAN model's read-back was chosen on)."""
+    limit = GOALS[method]
+    groups = {"met": [], "error": [], "wins": [], "both": []}
+    for name, t in results["targets"].items():
+        r = t["methods"].get(method, {})
+        if "score" not in r:
+            continue
+        err, wins = r["score"]["median_error"], r["score"]["wins"]
+        model = r["runs"][0].get("model") if r.get("runs") else None
+        tuned = " tuned on," if (method == "fragments" and name in TUNED_ON) or (
+            model and name in gan_tuned_on(model)) else ""
+        label = (f"{_town(name)} ({tuned} {err:.3f}, "
+                 + " / ".join(str(wins[b]) for b in BASELINES) + ")").replace("( ", "(")
+        err_ok, wins_ok = err <= limit, min(wins[b] for b in BASELINES) >= GOAL_WINS
+        key = "met" if err_ok and wins_ok else "wins" if err_ok else \
+            "error" if wins_ok else "both"
+        groups[key].append(label)
+
+    misses = [f"{how} on {_methods_said(groups[key])}" for key, how in
+              (("error", "by the error alone"), ("wins", "by the wins alone"),
+               ("both", "by both")) if groups[key]]
+    met = _methods_said(groups["met"]) if groups["met"] else "no town"
+    return (f"Per town, the goal (median relative error ≤ {limit:.2f} and at least "
+            f"{GOAL_WINS} of the {len(results['statistics'])} statistics nearer the town than "
+            "each baseline; error, then wins over grid / chords / Delaunay edges, in brackets) "
+            f"is met by {EXAMPLE_BASED[method]} on {met} in the committed run"
+            + (f"; it is missed {_methods_said(misses, '; ', '; ')}" if misses else "") + ".")
+
+
 def readme_blocks(results: dict) -> Dict[str, str]:
     """The README's figures from this benchmark, by the name of the block that holds each
     (``<!-- fidelity:NAME -->`` ... ``<!-- /fidelity:NAME -->``): written from the results,
@@ -622,6 +661,7 @@ def readme_blocks(results: dict) -> Dict[str, str]:
     return {"headline": headline(results), "summary": summary(results),
             "seed_spread": seed_spread(results), "reference": reference_paragraph(results),
             "against_example": example_paragraph(results), "fragments": goals(results),
+            **{f"{m}_goal": goal_verdict(results, m) for m in EXAMPLE_BASED},
             "random_walk": towns_table(results, "random_walk"),
             "streetgan": towns_table(results, "streetgan")}
 
