@@ -66,9 +66,10 @@ bench: setup $(VENV)/.bench-installed
 
 # Road synthesis judged on towns it never saw (leave-one-town-out on Liechtenstein, plus
 # Helsinki <-> Bubenec): tables in tests/benchmarks/results/fidelity.{json,md}, pictures in
-# docs/fidelity_<town>.png; about an hour on 2 cores, most of it splitdomain's three seeds
-# (FIDELITY_ARGS=--reference-seeds 1: about 20 min). FIDELITY_ARGS=--quick for three towns
-# and one seed.
+# docs/fidelity_<town>.png; about 35 minutes on 2 cores (10 seeds for the example-based
+# methods, 3 for the references growroads and splitdomain, most of the time theirs;
+# FIDELITY_ARGS=--reference-seeds 1 saves about a third). FIDELITY_ARGS=--quick for three
+# towns and one seed.
 fidelity: setup
 	QT_QPA_PLATFORM=offscreen nice -n 10 $(PY) tests/benchmarks/bench_fidelity.py $(FIDELITY_ARGS)
 

@@ -16,7 +16,8 @@ For each target town:
   primary/secondary where present) clipped to the boundary.
 - **example**: the drivable streets of the other municipalities, each clipped to its own
   envelope (for Helsinki: Bubeneč and back). Never the target's own streets.
-- **methods** (5 seeds each; the references 3, ``--reference-seeds``): fragments
+- **methods** (10 seeds each, and the baselines; the references 3, ``--reference-seeds``):
+  fragments
   (database built from the example), random walk
   (intersection points of the example, expanding the given roads), StreetGAN (the shipped
   towns generator where it never saw the town, else the Helsinki one; the example's
@@ -869,7 +870,7 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="three towns, one seed")
     ap.add_argument("--towns", default="", help="comma-separated target names")
     ap.add_argument("--methods", default=",".join(METHOD_ORDER))
-    ap.add_argument("--seeds", type=int, default=5)
+    ap.add_argument("--seeds", type=int, default=10)
     ap.add_argument("--reference-seeds", type=int, default=3,
                     help="seeds of the non-example references growroads and splitdomain "
                          "(splitdomain takes 11-28 s / km² per seed on 2 cores; issue 21's "
