@@ -153,7 +153,8 @@ class SynthesizeRoadsGan(AlgorithmBase):
             "the target's edge, up to twice as far, where the network leaves it); "
             "while it has more, "
             "generated streets at crossings are removed where both their ends stay "
-            "junctions, smallest merged blocks first. Empty: the junctions as read back "
+            "junctions, smallest merged blocks first, then, where none is left, the shortest "
+            "generated dead-end street at a crossing. Empty: the junctions as read back "
             "from the image.", advanced=True)
         self.add(QgsProcessingParameterNumber(
             self.MIN_BLOCK_AREA, "Smallest block (m², the example's 10th percentile)",

@@ -11,7 +11,8 @@ a T whose street meets nothing in reach goes on to the target's edge (up to
 :data:`EDGE_REACH` times as far), where the network leaves the target (a piece cut out of a
 city); while there are too many, the
 synthesised street at a crossing whose two blocks together are the smallest is removed
-(:func:`small_blocks.fewer_crossings`: the crossing becomes a T, two blocks one). The random
+(:func:`small_blocks.fewer_crossings`: the crossing becomes a T, two blocks one; where no
+such street is left, a synthesised dead-end street at a crossing). The random
 walk makes up crossings the same way on its points
 (``random_walk.WalkSettings.match_crossings``). Not in the papers.
 """

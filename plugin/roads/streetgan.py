@@ -410,7 +410,7 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
         junctions become crossings, their generated street continued straight across to the
         next street, generated or a given road that takes junctions (not a motorway or
         trunk), else to the target's edge, or generated streets at crossings are removed,
-        smallest merged blocks first;
+        smallest merged blocks first, then dead-end streets at crossings;
         not in the thesis); None: the junctions as read back
     """
     progress = ensure(progress)
