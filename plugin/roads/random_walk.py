@@ -1043,7 +1043,7 @@ def _close_seam_ends(w: "_Walker", points: iq.PointSet, seam, is_new, share: flo
     # a street that goes on into the target: 5 m on from its end, along it, is inside
     ahead = points.xy[seams] + 5.0 * w.slot_dir[seams, 0]
     seams = seams[shapely.contains_xy(area, ahead[:, 0], ahead[:, 1])]
-    # the reach of a new point's step (its mean street distance and 2.5 deviations), typical
+    # the reach of a typical new point's step (WalkSettings.reach)
     reach = float(np.nanmedian(w.s.reach(points.dist_mean[is_new, 0],
                                          points.dist_sd[is_new, 0]))) \
         if is_new.any() else math.nan
@@ -1051,9 +1051,9 @@ def _close_seam_ends(w: "_Walker", points: iq.PointSet, seam, is_new, share: flo
     def too_many_open() -> bool:
         return (w.cnt[seams, 0] == 1).sum() > share * len(seams)
 
-    closed = 0
     if not (np.isfinite(reach) and too_many_open()):
         return 0
+    closed = 0
     for v in rng.permutation(seams[w.cnt[seams, 0] == 1]):
         if not too_many_open():
             break

@@ -413,11 +413,20 @@ def against_example(t: dict, r: dict) -> float:
     return fidelity.score([run["stats"] for run in r["runs"]], t["example_stats"])["median_error"]
 
 
+def _run_errors(t: dict, r: dict) -> List[float]:
+    """Each run's own median relative error against the town (one seed each)."""
+    return [fidelity.score([run["stats"]], t["real"])["median_error"] for run in r["runs"]]
+
+
+def _span(values) -> str:
+    return f"{min(values):.2f}–{max(values):.2f}"
+
+
 def run_range(t: dict, r: dict) -> str:
     """The lowest and highest of the method's runs' own median relative errors (one seed
     each): how much a town's figure moves from one seed to the next."""
-    errs = [fidelity.score([run["stats"]], t["real"])["median_error"] for run in r["runs"]]
-    return f"{min(errs):.2f}–{max(errs):.2f}" if errs else ""
+    errs = _run_errors(t, r)
+    return _span(errs) if errs else ""
 
 
 def goals(results: dict) -> str:
@@ -499,15 +508,6 @@ def towns_table(results: dict, method: str) -> str:
                    f"{run_mean(r, 'land_in_blocks'):.2f} ({real_land:.2f}) | "
                    f"{run_mean(r, 'edge_ends_per_km2'):.1f} ({real_cut:.1f}) |")
     return "\n".join(out) if len(out) > 2 else ""
-
-
-def _run_errors(t: dict, r: dict) -> List[float]:
-    """Each run's own median relative error against the town (one seed each)."""
-    return [fidelity.score([run["stats"]], t["real"])["median_error"] for run in r["runs"]]
-
-
-def _span(values) -> str:
-    return f"{min(values):.2f}–{max(values):.2f}"
 
 
 def _methods_said(parts: List[str], sep: str = ", ", last: str = " and ") -> str:
