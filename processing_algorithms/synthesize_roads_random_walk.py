@@ -74,7 +74,9 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
             "Stubs close until the dead-end share is the example's (with "
             "roads as the example: measured inside their convex hull, where the streets cut "
             "at its edge are no dead ends), and "
-            "every piece is joined to the rest (or to the existing roads) or dropped: the "
+            "every piece is joined to the rest (or to the existing roads) by a step, else "
+            "by the shortest street through the target (bent along it), or dropped where "
+            "none reaches it (a part of the target apart): the "
             "result is one network whose every crossing is a junction. Segments take the "
             "shapes of the example's street segments (with roads as the example: the same "
             "tortuosity and bends), else parabolas of the points' tortuosity.\n\n"
@@ -149,8 +151,9 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
             "'across' a T junction's street continued across, making it a crossing, one "
             "step onto a point or street; 'across_street' the same where the share of "
             "4-way junctions was still under the example's: straight on to the street it "
-            "meets; 'join' steps joining pieces of the network; 'given_join' streets "
-            "joining given roads that lie apart).")
+            "meets; 'join' steps joining pieces of the network; 'piece_link' streets "
+            "through the target to pieces no step reached; 'given_join' streets joining "
+            "given roads that lie apart).")
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT_INTERSECTIONS, "Intersection points used", QgsProcessing.SourceType.TypeVectorPoint,
             optional=True, createByDefault=False),
@@ -309,7 +312,9 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
             f"{100 * st['example_crossing_share']:.0f} %), "
             f"{st['n_joins'] + st['n_join_splits']} pieces joined "
             f"({st['n_join_splits']} by a new junction on a street), "
-            f"{st['n_dropped_edges']} segments of pieces that could not be joined dropped; "
+            f"{st['n_pieces_linked']} pieces out of a step's reach linked by a street "
+            f"through the target, {st['n_dropped_edges']} segments of pieces that no such "
+            "street reaches dropped; "
             f"{st['n_small_faces_refused']} steps refused that would close a block far "
             "smaller than the example's around them. "
             f"Mean tortuosity {st['mean_tortuosity']:.3f} (example "

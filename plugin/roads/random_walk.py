@@ -27,7 +27,10 @@ result is one network (:func:`connect_points`):
   largest piece is joined to the nearest other piece by a clear step to one of its points,
   or, where no point is in reach, by a step onto the nearest visible street, which is split
   there (a new T junction: a crossing becomes a junction, never a bare crossing); a piece
-  that can be joined neither way is dropped (rejected), so no floating piece is left.
+  that no step joins (built land far from the rest, an arm of the target) is linked by the
+  shortest clear street inside the target once the streets are drawn, bent along the
+  target where it turns, and dropped (rejected) only where no such street reaches it (a
+  part of the target apart), so no floating piece is left.
 
 Each segment then becomes a polyline (fig. 5c). With the example's streets at hand
 (:func:`street_shapes`), the shape is that of an example segment of the same level and a
@@ -79,10 +82,10 @@ from ..core.geometry import pinned_ends
 from ..core.progress import InputError, Progress, ensure
 from ..network.crossings import streets_across, t_stem
 from ..network.dead_ends import steer_share
-from ..network.invariants import (DEAD_END_TOLERANCE, MIN_DUPLICATE_LENGTH, corridor_of,
-                                  counted_nodes)
+from ..network.invariants import (DEAD_END_TOLERANCE, MIN_DUPLICATE_LENGTH, connected_pieces,
+                                  corridor_of, counted_nodes)
 from ..network.invariants import dead_end_share as measured_dead_end_share
-from ..network.links import allowed_area, join_pieces
+from ..network.links import allowed_area, join_pieces, link_floating_pieces
 from ..network.street_graph import ends_as_vertices, node_lines, snap_ends_onto_lines
 from . import intersection_quadtree as iq
 
@@ -134,7 +137,8 @@ class WalkSettings:
         in the paper: its walks leave such stubs); where that leaves the share above the
         invariants' band less half its width, stubs end on streets of any level
     join_pieces : join every piece of the network to the given roads (or to the largest
-        piece) and drop what cannot be joined (the paper's REPEAT, completed)
+        piece): by a step, else by the shortest street inside the target; drop what
+        neither reaches (the paper's REPEAT, completed)
     match_crossings : after the walks, T junctions that were crossings in the example, then
         T junctions on the given roads, become crossings (the T's own street goes on
         straight across, one step onto the network) until the share of 4-way junctions is
@@ -948,30 +952,15 @@ class _Walker:
         return self._clear_of(self.xy[v], q, q_is_end=False, skip=seg) and \
             self._inside(self.xy[v], q)
 
-    def drop_piece(self, members):
-        """Remove the walk edges of a piece that cannot be joined (rejected)."""
-        inside = np.zeros(len(self.p), dtype=bool)
-        inside[members] = True
-        ends = self._edge_ends[:len(self.edges)]
-        gone = np.flatnonzero(self.edge_alive & (inside[ends[:, 0]] | inside[ends[:, 1]]))
-        self.edge_alive[gone] = False
-        for seg in self._edge_seg[gone].tolist():
-            self._kill_segment(seg)
-        self.deg[members] = 0
-        for e in gone.tolist():
-            a, b = self._edge_ends[e]
-            self.adj[a].discard(b)
-            self.adj[b].discard(a)
-        return len(gone)
-
     def join_pieces(self, anchors):
-        """Join every piece to the anchors' network (or the largest piece); drop what
-        cannot be joined. Returns counts. The pieces are found once and merged (a disjoint
-        set of their labels) as joins are made."""
-        joined = split = dropped = through_full_slots = 0
+        """Join every piece to the anchors' network (or the largest piece) by a step; what
+        no step joins is left as it is (:func:`synthesize` links it by a street through the
+        target, or drops it). Returns counts. The pieces are found once and merged (a
+        disjoint set of their labels) as joins are made."""
+        joined = split = apart = through_full_slots = 0
         label, main = self.pieces(anchors)
         if main < 0:
-            return {"n_joins": 0, "n_join_splits": 0, "n_dropped_edges": 0,
+            return {"n_joins": 0, "n_join_splits": 0, "n_pieces_apart": 0,
                     "n_joins_saturated": 0}
         merged = DisjointSet(range(label.max() + 1))
 
@@ -1017,13 +1006,10 @@ class _Walker:
                     split += 1
                     break
             else:
-                # rejected: this piece and the pieces that joined it so far
-                gone = labs[np.isin(labs, list(merged.subset(lab)))]
-                members = np.concatenate([by_label[x] for x in gone])
-                dropped += self.drop_piece(members[self.deg[members] > 0])
+                apart += 1  # no step reaches (an arm of the target, built land far away)
                 continue
             through_full_slots += saturated
-        return {"n_joins": joined, "n_join_splits": split, "n_dropped_edges": dropped,
+        return {"n_joins": joined, "n_join_splits": split, "n_pieces_apart": apart,
                 "n_joins_saturated": through_full_slots}
 
 
@@ -1166,7 +1152,7 @@ def connect_points(points: iq.PointSet, rng: np.random.Generator,
                 n_crossed += added
     progress.step(0.8)
     w.stats = {"n_seam_ends_closed": int(n_seam_closed), "n_crossings_made": int(n_crossed),
-               "n_joins": 0, "n_join_splits": 0, "n_dropped_edges": 0,
+               "n_joins": 0, "n_join_splits": 0, "n_pieces_apart": 0,
                "n_joins_saturated": 0}
     if s.join_pieces:
         anchors = np.flatnonzero(points.example < 0) if existing is not None else \
@@ -1809,6 +1795,23 @@ def _existing_state(lines, area, offset: int, seam_distance: float, example=None
     return pts, state, graph
 
 
+def _link_pieces_apart(lines, given, area):
+    """Links for the pieces no walk step joined (:meth:`_Walker.join_pieces`: they lie
+    further than a step from the rest, in an arm of the target or on built land far from
+    the given roads, as Schaan's hamlets do): the shortest clear street from each to the
+    given roads (without given roads, the largest piece) or to a piece linked before,
+    inside the target and bent along it where the target turns
+    (:func:`network.links.link_floating_pieces`, as growroads links its pieces). A piece
+    that no such street reaches (a part of the target apart) is dropped: the paper's REPEAT
+    with its rejection last. Returns (links, keep: per line of ``lines``)."""
+    network = np.concatenate([lines, given])
+    anchored = np.r_[np.zeros(len(lines), bool), np.ones(len(given), bool)]
+    links, keep = link_floating_pieces(network, anchored, drop_unlinked=True,
+                                       pieces=connected_pieces(network), inside=area,
+                                       bent=area is not None)
+    return links, keep[:len(lines)]
+
+
 def synthesize(example: iq.PointSet, target, existing_lines=None,
                example_b: Optional[iq.PointSet] = None, blend=0.0, seed: int = 0,
                settings: Optional[WalkSettings] = None, in_place: Optional[bool] = None,
@@ -1909,18 +1912,29 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
 
         lines = move_ends_onto_lines(lines, shapely.get_parts(existing_lines),
                                      ROAD_SNAP_TOLERANCE)
-    bridge, bridge_node = np.empty(0, dtype=object), np.zeros((0, 2), dtype=np.int64)
+    links = np.empty(0, dtype=object)
+    n_dropped = 0
+    if settings.join_pieces and w.stats["n_pieces_apart"]:
+        given = shapely.get_parts(existing_lines) if ex_lines is not None else \
+            np.empty(0, dtype=object)
+        links, keep = _link_pieces_apart(lines, given, area)
+        n_dropped = int((~keep).sum())
+        lines, straight = lines[keep], straight[keep]
+        a, sa, b, sb, level, origin = a[keep], sa[keep], b[keep], sb[keep], level[keep], \
+            origin[keep]
+    bridge = np.empty(0, dtype=object)
     if existing is not None:
         # the walks join their pieces to the given roads, not given roads that lie apart
         # inside the target to each other: the shortest clear street inside it does, as for
         # the other methods (network.links.join_pieces). It leaves from a point (a street
         # end or a road node) or from a street (a T, no point there: -1)
-        bridge = join_pieces(np.concatenate([lines, shapely.get_parts(existing_lines)]),
+        bridge = join_pieces(np.concatenate([lines, links, shapely.get_parts(existing_lines)]),
                              inside=area)
-        ends = np.column_stack([shapely.get_coordinates(shapely.get_point(bridge, 0)),
-                                shapely.get_coordinates(shapely.get_point(bridge, -1))])
-        gap, near = cKDTree(pts.xy).query(ends.reshape(-1, 2))
-        bridge_node = np.where(gap <= _ON_POINT, near, -1).reshape(-1, 2)
+    joins = np.concatenate([links, bridge])
+    ends = np.column_stack([shapely.get_coordinates(shapely.get_point(joins, 0)),
+                            shapely.get_coordinates(shapely.get_point(joins, -1))])
+    gap, near = cKDTree(pts.xy).query(ends.reshape(-1, 2))
+    join_node = np.where(gap <= _ON_POINT, near, -1).reshape(-1, 2)
     progress.step(0.95)
     length = shapely.length(lines)
     chord = shapely.length(straight)
@@ -1938,7 +1952,7 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
         deg[ex] += existing["degree"]
         made = np.arange(n_new + len(ex), len(pts))  # junctions made by joins
         deg[made[pts.example[made] == ROAD_SLOT]] += 2
-        np.add.at(deg, bridge_node[bridge_node >= 0], 1)
+    np.add.at(deg, join_node[join_node >= 0], 1)
     ptab["connections"] = deg
     ptab["generated"] = pts.generated.astype(np.int64)
     is_new = pts.example >= 0
@@ -1964,7 +1978,8 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
         "n_dead_ends_opened": w.stats["n_dead_ends_opened"],
         "n_joins": w.stats["n_joins"],
         "n_join_splits": w.stats["n_join_splits"],
-        "n_dropped_edges": w.stats["n_dropped_edges"],
+        "n_pieces_apart": w.stats["n_pieces_apart"], "n_pieces_linked": len(links),
+        "n_dropped_edges": n_dropped,
         "n_joins_saturated": w.stats["n_joins_saturated"],
         "n_small_faces_refused": w.stats["n_small_faces_refused"],
     }
@@ -1978,21 +1993,33 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
         slot_idx = np.flatnonzero(pts.example == ROAD_SLOT)
         stats["n_road_junctions"] = int(used[slot_idx].sum())
         stats["n_given_joined"] = len(bridge)
-        if len(bridge):
-            lines = np.concatenate([lines, bridge])
-            table = pd.concat([table, pd.DataFrame({
-                "edge_id": np.arange(len(table) + 1, len(lines) + 1),
-                "level": int(level.min()), "length_m": shapely.length(bridge),
-                "tortuosity": 1.0, "origin": "given_join", "node_from": bridge_node[:, 0],
-                "node_to": bridge_node[:, 1]})], ignore_index=True)
-            stats["n_edges"] = len(lines)
+    if len(joins):
+        # a join's end on a street (a T, node -1) is a vertex of it, as for the streets
+        # across (a zero-tolerance network analysis joins lines only at vertices)
+        lines = snap_ends_onto_lines(np.concatenate([lines, joins]),
+                                     np.r_[np.zeros(len(lines), bool), np.ones(len(joins), bool)])
+        joined = lines[len(table):]
+        table = pd.concat([table, pd.DataFrame({
+            "edge_id": np.arange(len(table) + 1, len(lines) + 1),
+            "level": int(level.min()), "length_m": shapely.length(joined),
+            "tortuosity": shapely.length(joined) / np.maximum(shapely.distance(
+                shapely.get_point(joined, 0), shapely.get_point(joined, -1)), 1e-9),
+            "origin": np.r_[np.full(len(links), "piece_link", object),
+                            np.full(len(bridge), "given_join", object)],
+            "node_from": join_node[:, 0], "node_to": join_node[:, 1]})], ignore_index=True)
+        stats["n_edges"] = len(lines)
+    if len(links) or n_dropped:  # the share as the invariants measure it, as returned
+        given = shapely.get_parts(existing_lines) if ex_lines is not None else \
+            np.empty(0, dtype=object)
+        stats["dead_end_share"] = measured_dead_end_share(np.concatenate([lines, given]), area)
     if settings.match_crossings and settings.max_capacity >= 4:
         # the saturation rule kept: only a point that had four streets in the example, or a
         # junction on a given road, takes a fourth
         may_cross = (pts.degree >= 4) | (pts.example < 0)
         lines, table = _streets_across(lines, table, ptab, pts, may_cross, existing_lines,
                                        area, crossing_share, rng, stats)
-    # of every street returned: the given-road joins and the streets across are straight
+    # of every street returned: the given-road joins and the streets across are straight,
+    # a piece's link bends only along the target
     stats["mean_tortuosity"] = float(table.tortuosity.mean())
     progress.step(1.0)
     return Synthesis(lines, table, pts, ptab, stats, quadtrees, ex_lines)
