@@ -53,8 +53,9 @@ def test_toolbox_manners(qgis_processing):
 
 
 def test_readme_fidelity_figures_are_the_benchmarks():
-    """The README's fidelity tables are the committed benchmark's results, as
-    ``bench_fidelity.py`` writes them: no hand-kept figure drifts from the run."""
+    """The README's fidelity tables and the figures in its prose (each marked block) are the
+    committed benchmark's results, as ``bench_fidelity.py`` writes them: no hand-kept figure
+    drifts from the run."""
     import importlib.util
     import json
     import sys
@@ -70,5 +71,5 @@ def test_readme_fidelity_figures_are_the_benchmarks():
     blocks = bench.readme_blocks(results)
     assert all(f"<!-- fidelity:{name} -->" in readme for name in blocks)
     assert readme == bench.sync_readme(readme, blocks), (
-        "README.md's fidelity tables differ from tests/benchmarks/results/fidelity.json: run "
+        "README.md's fidelity blocks differ from tests/benchmarks/results/fidelity.json: run "
         "`.venv/bin/python tests/benchmarks/bench_fidelity.py --tables-only`")
