@@ -69,7 +69,8 @@ bench: setup $(VENV)/.bench-installed
 # docs/fidelity_<town>.png; about 35 minutes on 2 cores (10 seeds for the example-based
 # methods, 3 for the references growroads and splitdomain, most of the time theirs;
 # FIDELITY_ARGS=--reference-seeds 1 saves about a third). FIDELITY_ARGS=--quick for three
-# towns and one seed.
+# towns and one seed, written to the system's temporary folder (urbansynth-fidelity-quick/),
+# not over the committed results.
 fidelity: setup
 	QT_QPA_PLATFORM=offscreen nice -n 10 $(PY) tests/benchmarks/bench_fidelity.py $(FIDELITY_ARGS)
 

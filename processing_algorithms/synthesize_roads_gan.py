@@ -18,6 +18,7 @@ from qgis.core import (
     QgsWkbTypes,
 )
 
+from ..plugin.network import crossings
 from ..plugin.network import street_graph as roads
 from ..plugin.qgis_glue import qgis_io
 from ..plugin.retrieval.shape_context import DemGrid
@@ -148,9 +149,10 @@ class SynthesizeRoadsGan(AlgorithmBase):
             "towns): while the generated network has fewer, T junctions become crossings, "
             "their generated street continued straight across to the next street, generated "
             "or a given road that takes junctions (not a motorway or trunk), crossing nothing, "
-            "inside the target, along no given road, at 25° or more to the street it crosses "
-            "(where that leaves too few, a T whose street meets nothing in reach goes on to "
-            "the target's edge, up to twice as far, where the network leaves it); "
+            f"inside the target, along no given road, at {crossings.MIN_ANGLE:g}° or more to "
+            "the street it crosses (where that leaves too few, a T whose street meets "
+            "nothing in reach goes on to the target's edge, up to "
+            f"{crossings.EDGE_REACH:g} times as far, where the network leaves it); "
             "while it has more, "
             "generated streets at crossings are removed where both their ends stay "
             "junctions, smallest merged blocks first, then, where none is left, the shortest "

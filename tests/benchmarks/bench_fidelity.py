@@ -33,7 +33,7 @@ For each target town:
   (:func:`plugin.network.invariants.check_network`) of every run; seconds per km².
 
 Run ``.venv/bin/python tests/benchmarks/bench_fidelity.py`` (``--quick``: three towns,
-one seed; ``--towns Vaduz,Mauren``, ``--methods fragments``, ``--seeds 2``). Writes
+one seed, written to a temporary folder; ``--towns Vaduz,Mauren``, ``--methods fragments``, ``--seeds 2``). Writes
 ``tests/benchmarks/results/fidelity.json``, the tables in
 ``tests/benchmarks/results/fidelity.md``, the README's fidelity tables and the figures in
 its prose (the blocks marked ``<!-- fidelity:NAME -->``, :func:`readme_blocks`;
@@ -69,6 +69,7 @@ from urban_synthesis.plugin.measure import fidelity  # noqa: E402
 from urban_synthesis.plugin.network import invariants  # noqa: E402
 
 RESULTS = ROOT / "tests" / "benchmarks" / "results" / "fidelity.json"
+QUICK_RESULTS = Path(tempfile.gettempdir()) / "urbansynth-fidelity-quick" / "fidelity.json"
 TABLES = ROOT / "tests" / "benchmarks" / "results" / "fidelity.md"
 DOCS = ROOT / "docs"
 ATTRIBUTION = "© OpenStreetMap contributors, ODbL"
@@ -1108,8 +1109,9 @@ def main(argv=None):
     ap.add_argument("--no-pictures", action="store_true")
     ap.add_argument("--fill-quantile", type=float, default=90.0,
                     help="fragments: example block-area quantile no face may exceed empty")
-    ap.add_argument("--out", default=str(RESULTS),
-                    help="the JSON to write; elsewhere than the committed one, its tables "
+    ap.add_argument("--out", default=None,
+                    help="the JSON to write (default the committed one; with --quick "
+                         f"{QUICK_RESULTS}); elsewhere than the committed one, its tables "
                          "(.md) and pictures are written beside it")
     ap.add_argument("--gan-model", default=None,
                     help="judge this StreetGAN generator (.onnx, card next to it) on the "
@@ -1131,7 +1133,8 @@ def main(argv=None):
     args = ap.parse_args(argv)
     if args.gan_model:
         GAN_CANDIDATES[:] = [str(Path(args.gan_model).resolve())]
-    out = Path(args.out)
+    # a quick look never replaces the committed results (and the README's figures)
+    out = Path(args.out) if args.out else QUICK_RESULTS if args.quick else RESULTS
     # a run written elsewhere (a trial) leaves the committed tables and pictures alone
     tables_path = TABLES if out.resolve() == RESULTS.resolve() else out.with_suffix(".md")
     pictures = DOCS if out.resolve() == RESULTS.resolve() else out.parent
