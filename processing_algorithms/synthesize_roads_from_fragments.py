@@ -90,7 +90,9 @@ class SynthesizeRoadsFromFragments(AlgorithmBase):
         self.add(QgsProcessingParameterFeatureSource(
             self.ARTERIALS, "Arterial roads", [QgsProcessing.SourceType.TypeVectorLine]),
             "Sketched arterials, or the level 0 roads of a real city: lines that close faces to "
-            "fill. They are noded and cleaned first.")
+            "fill. They are noded and cleaned first. With OSM classes (a 'highway' field or "
+            "tag), a new street ends on no motorway or trunk away from its junctions: it ends "
+            "short of it, or goes where its other end is a junction.")
         self.add(QgsProcessingParameterFeatureSource(
             self.BOUNDARY, "Target boundary", [QgsProcessing.SourceType.TypeVectorPolygon],
             optional=True),
@@ -170,7 +172,7 @@ class SynthesizeRoadsFromFragments(AlgorithmBase):
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         frame = qgis_io.read_source(self, parameters, self.ARTERIALS, context, feedback,
-                                    kind="lines", fields=[])
+                                    kind="lines", fields=["highway", "other_tags"])
         label = frame.name
         hull = shapely.area(shapely.convex_hull(shapely.union_all(frame.geometry))) / 1e6
         self.bound_work(f"Arterials {label} (convex hull {hull:,.1f} km²)", hull,
@@ -217,7 +219,9 @@ class SynthesizeRoadsFromFragments(AlgorithmBase):
             max_level=max_level, gamma=gamma, names=names, boundary=boundary,
             fill=self.parameterAsBool(parameters, self.FILL, context),
             fill_quantile=self.number(parameters, self.FILL_QUANTILE, context),
-            progress=qgis_io.progress_for(feedback, 12, 92))
+            progress=qgis_io.progress_for(feedback, 12, 92),
+            # motorways and trunks among them take no new junction
+            arterial_class=qgis_io.osm_tag_column(frame, "highway"))
         q = result.queries
         n_inserted = int((q.outcome == "fragment").sum())
         feedback.pushInfo(

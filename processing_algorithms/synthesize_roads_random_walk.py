@@ -103,7 +103,9 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
             optional=True),
             "Roads in or around the target to expand from (e.g. its arterials): their dead "
             "ends at the target continue into the new streets, new streets meet them only at "
-            "junctions, and the result is one network with them.")
+            "junctions, and the result is one network with them. With OSM classes (a "
+            "'highway' field or tag), a new street ends on no motorway or trunk away from its "
+            "junctions: it ends short of it, or goes where its other end is a junction.")
         self.add(QgsProcessingParameterFeatureSource(
             self.EXAMPLE_B, "Second example (blend)", types, optional=True),
             "Points or roads of a second city; its style is blended with the example's.")
@@ -283,9 +285,10 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
         existing = qgis_io.read_source(self, parameters, self.EXISTING_ROADS, context, feedback,
                                        kind="lines", target_crs=target.crs, optional=True,
                                        fields=["highway", "other_tags"])
-        existing_lines = None
+        existing_lines = existing_class = None
         if existing is not None:
-            existing, _ = drivable_lines(existing, None, set(roads.DRIVABLE_CLASSES), feedback)
+            existing, existing_class = drivable_lines(existing, None,
+                                                      set(roads.DRIVABLE_CLASSES), feedback)
             existing_lines = existing.geometry
         elif parameters.get(self.OUTPUT_EXISTING) is not None:
             raise QgsProcessingException("Existing roads with the new junctions "
@@ -296,7 +299,7 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
             points_b, blend, seed, settings, placement,
             progress=qgis_io.progress_for(feedback, 15, 90), shapes=shapes, shapes_b=shapes_b,
             # a blend mixes the two examples' shares among their points
-            dead_end_share=share if points_b is None else None)
+            dead_end_share=share if points_b is None else None, given_class=existing_class)
         st = result.stats
         feedback.pushInfo(
             f"{st['n_points']} points placed ({st['n_points_generated']} drawn from the "
@@ -326,6 +329,10 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
                               "nearest street: the streets the target cuts stay open no "
                               "more often than the example's streets end); "
                               f"{st['n_road_junctions']} junctions on them.")
+        if st.get("n_controlled_access_ended_short"):
+            feedback.pushInfo(f"{st['n_controlled_access_ended_short']} new street(s) that "
+                              "ended on a motorway or trunk away from its junctions end short "
+                              "of it, or went where their other end is a junction.")
         results = {}
         results[self.OUTPUT] = qgis_io.write_sink(
             self, parameters, self.OUTPUT, context, result.geometry, result.table,

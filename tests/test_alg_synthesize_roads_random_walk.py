@@ -5,7 +5,7 @@ import shapely
 
 from conftest import bubenec_layer, helsinki_layer, run_qgis_process
 from helpers import (assert_exact_junctions, assert_planar, helsinki_roads, layer_features,
-                     memory_layer)
+                     log_feedback, memory_layer)
 from urban_synthesis.plugin.roads import random_walk
 from urban_synthesis.plugin.network import street_graph as roads
 
@@ -222,3 +222,26 @@ def test_town_never_seen_is_one_network(qgis_processing):
     assert shapely.hausdorff_distance(shapely.union_all(given),
                                       shapely.union_all(case["given"])) < 1e-6
     assert_exact_junctions(np.concatenate([geoms, given]))
+
+
+def test_motorways_in_the_existing_roads_take_no_new_junction(qgis_processing):
+    """Vaduz through QGIS with its primary roads classed as motorways in the layer's
+    'highway' field: no new street ends on one away from its junctions (without the
+    classes the engine's walks end 30-39 streets on them, seeds 0-1), no floating piece,
+    and the log says how many were ended short."""
+    from helpers import liechtenstein_town
+    from urban_synthesis.plugin.network import invariants
+
+    case = liechtenstein_town("Vaduz")
+    cls = np.asarray(case["given_class"], dtype=object)
+    cls = np.where(cls == "primary", "motorway", cls)
+    log = log_feedback()
+    out = qgis_processing.run(ALG, {
+        "EXAMPLE": _lines_layer(case["example"], case["example_class"], "other towns"),
+        "TARGET": memory_layer("Polygon", [case["area"].wkt], "EPSG:32632"),
+        "EXISTING_ROADS": _lines_layer(case["given"], cls, "arterials"),
+        "SEED": 0, "OUTPUT": "memory:"}, feedback=log)
+    _, geoms = layer_features(out["OUTPUT"])
+    check = invariants.check_network(geoms, case["given"], cls, case["area"])
+    assert len(check.controlled_access) == 0 and check.floating_pieces == 0, check.summary()
+    assert any("motorway or trunk" in m for m in log.messages), log.messages

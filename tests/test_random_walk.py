@@ -635,6 +635,39 @@ def test_pieces_no_step_reaches_are_linked_through_the_town():
                                   [len(x) for x in at])
 
 
+def test_no_street_ends_on_a_motorway_away_from_its_junctions():
+    """Vaduz from the other towns, seed 0, with its primary roads taken for motorways: the
+    walks' junction slots on the given roads and the T's onto the nearest street ended 23
+    streets on them away from their junctions. Given the roads' classes, each ends short of
+    the road, out of its corridor: no contact, no other violation, one network, and the
+    point table still counts the streets that end at each point."""
+    target, example, pts, shapes = _left_out("Vaduz")
+    cls = np.asarray(target.given_class, dtype=object)
+    cls = np.where(cls == "primary", "motorway", cls)
+
+    def run(given_class):
+        res = rw.synthesize(pts, target.area, existing_lines=target.given, seed=0,
+                            in_place=False, shapes=shapes, given_class=given_class,
+                            dead_end_share=example["degree1_share"])
+        return res, invariants.check_network(res.geometry, target.given, cls, target.area,
+                                             example_dead_end_share=example["degree1_share"],
+                                             target=target.area)
+
+    res, check = run(cls)
+    assert check.ok, check.summary()
+    assert check.n_components == 1
+    assert res.stats["n_controlled_access_ended_short"] > 0
+    assert len(res.table) == len(res.geometry) == res.stats["n_edges"]
+    ends = np.vstack([shapely.get_coordinates(shapely.get_point(res.geometry, k))
+                      for k in (0, -1)])
+    new = np.flatnonzero(res.points.example >= 0)
+    at = cKDTree(ends).query_ball_point(res.points.xy[new], 0.01)
+    np.testing.assert_array_equal(res.point_table.connections.to_numpy()[new],
+                                  [len(x) for x in at])
+    _, unclassed = run(None)
+    assert len(unclassed.controlled_access) > 10
+
+
 def test_crossings_as_often_as_in_the_example(balzers):
     """Balzers from the other Liechtenstein towns, seed 0 (the fidelity benchmark's run): a
     crossing street is rarely walked both ways, and the walks kept 0.32 x the example's

@@ -63,6 +63,7 @@ import shapely
 from ..core.progress import InputError, Progress, ensure
 from ..network import street_graph as _roads
 from ..network.dead_ends import MIN_DANGLE, steer_attributed
+from ..network.controlled_access import end_short_of_controlled_access
 from ..network.links import join_pieces, link_floating_pieces
 from ..network.invariants import SNAP_TOLERANCE, corridor_around, doubles_a_street
 from ..network.street_graph import add_streets, close_short_gaps, synthesised
@@ -752,6 +753,25 @@ def _left_empty(geometry, max_block: float, min_area: float, min_width: float,
     return int(_empty(big, geometry).sum()) if len(big) else 0
 
 
+def _off_controlled_access(geometry, level, attrs, arterials, arterial_class, inside):
+    """Streets that end on a motorway or trunk of the arterials away from its junctions end
+    short of it; a piece cut off is linked again ('link';
+    :func:`network.controlled_access.end_short_of_controlled_access`). Returns the network
+    and the rule's counts."""
+    roads, part_of = shapely.get_parts(np.asarray(arterials, dtype=object), return_index=True)
+    cls = np.asarray(arterial_class, dtype=object)
+    if len(cls) != len(np.asarray(arterials, dtype=object)):
+        raise InputError(f"{len(cls)} road classes for "
+                         f"{len(np.asarray(arterials, dtype=object))} arterials")
+    is_new = synthesised(level, attrs["source_fragment"])
+    geometry, source, ca = end_short_of_controlled_access(geometry, is_new, roads,
+                                                          cls[part_of], inside)
+    link = {"source_fragment": "link", "database": "", "fragment_id": -1, "query": -1}
+    level = np.r_[level, int(level.max()) + 1][source]
+    attrs = {k: np.r_[v, np.array([link[k]], dtype=v.dtype)][source] for k, v in attrs.items()}
+    return geometry, level, attrs, ca
+
+
 def _link_floating(geometry, level, attrs, inside):
     """Link the pieces of the network that do not reach an arterial to the network that does
     (:func:`links.link_floating_pieces`: streets of faces closed only by the boundary, whose
@@ -856,7 +876,8 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
                max_scale: float = MAX_SCALE,
                boundary=None, fill: bool = True, fill_quantile: float = FILL_QUANTILE,
                dead_end_share: Optional[float] = None,
-               progress: Optional[Progress] = None) -> SynthesisResult:
+               progress: Optional[Progress] = None,
+               arterial_class: Optional[Sequence] = None) -> SynthesisResult:
     """Synthesise a street network inside sketched arterials from fragment databases.
 
     Parameters
@@ -894,6 +915,9 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
         result's to; default the one the databases record (:func:`example_dead_end_share`),
         no steering when none does
     progress : Progress, optional (per query fragment; raises Canceled)
+    arterial_class : OSM class per line of ``arterials``, optional: a new street that ends
+        on a motorway or trunk away from its junctions (a fragment's street warped onto its
+        face's outline) ends short of it (:mod:`network.controlled_access`)
 
     Returns
     -------
@@ -1158,6 +1182,17 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
                                   opened=n_opened)
         progress.info(f"Dead-end share {now:.2f} (example {share:.2f}): {n_closed} dead "
                       f"end(s) closed, {n_opened} T stem(s) cut into cul-de-sacs.")
+    if arterial_class is not None:
+        geometry, level, attrs, ca = _off_controlled_access(
+            geometry, level, attrs, arterials, arterial_class,
+            target if target is not None else area)
+        stats["controlled_access_ended_short"] = ca["n_ended_short"] + ca["n_removed"]
+        stats["n_dropped"] += ca["n_dropped"]
+        if stats["controlled_access_ended_short"]:
+            progress.info(f"{stats['controlled_access_ended_short']} street(s) that ended on a "
+                          f"motorway or trunk away from its junctions end short of it; "
+                          f"{ca['n_dropped']} street(s) that only such a road reached "
+                          "dropped.")
     # what the invariants read within their tolerance, exactly: no street ending a few
     # decimetres from a junction, no street of a few decimetres between two
     new = synthesised(level, attrs["source_fragment"])

@@ -80,6 +80,7 @@ from scipy.spatial import cKDTree
 from ..core import coordinates
 from ..core.geometry import pinned_ends
 from ..core.progress import InputError, Progress, ensure
+from ..network.controlled_access import end_short_of_controlled_access
 from ..network.crossings import streets_across, t_stem
 from ..network.dead_ends import steer_share
 from ..network.invariants import (DEAD_END_TOLERANCE, MIN_DUPLICATE_LENGTH, connected_pieces,
@@ -1817,7 +1818,7 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
                settings: Optional[WalkSettings] = None, in_place: Optional[bool] = None,
                progress: Optional[Progress] = None, shapes: Optional[StreetShapes] = None,
                shapes_b: Optional[StreetShapes] = None,
-               dead_end_share: Optional[float] = None) -> Synthesis:
+               dead_end_share: Optional[float] = None, given_class=None) -> Synthesis:
     """Join / expand / blend (sec. 4.2): place example points in ``target`` and connect them.
 
     Parameters
@@ -1834,6 +1835,9 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
         the example's points (:func:`dead_end_share_of`), which counts the ends of an
         example clipped to a study area as dead ends too: pass the share measured inside
         the example's area (``invariants.dead_end_share(lines, area)``) when it is known
+    given_class : OSM class per line of ``existing_lines``, optional: a new street that
+        would end on a motorway or trunk away from its junctions ends short of it
+        (:mod:`network.controlled_access`)
 
     Raises
     ------
@@ -2018,11 +2022,74 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
         may_cross = (pts.degree >= 4) | (pts.example < 0)
         lines, table = _streets_across(lines, table, ptab, pts, may_cross, existing_lines,
                                        area, crossing_share, rng, stats)
+    if given_class is not None and ex_lines is not None:
+        lines, table, ptab = _off_controlled_access(lines, table, ptab, pts, existing_lines,
+                                                    given_class, area, stats)
     # of every street returned: the given-road joins and the streets across are straight,
     # a piece's link bends only along the target
     stats["mean_tortuosity"] = float(table.tortuosity.mean())
     progress.step(1.0)
     return Synthesis(lines, table, pts, ptab, stats, quadtrees, ex_lines)
+
+
+def _off_controlled_access(lines, table, ptab, pts, existing_lines, given_class, area, stats):
+    """New streets that end on a motorway or trunk away from its junctions (a junction slot
+    on it, a T onto the nearest street) end short of it, out of its corridor; a piece cut
+    off is joined again (:func:`network.controlled_access.end_short_of_controlled_access`;
+    origin 'piece_link'). The table and the points' connections follow."""
+    roads, part_of = shapely.get_parts(np.asarray(existing_lines, dtype=object),
+                                       return_index=True)
+    if len(np.asarray(given_class)) != len(np.asarray(existing_lines, dtype=object)):
+        raise InputError(f"{len(np.asarray(given_class))} road classes for "
+                         f"{len(np.asarray(existing_lines, dtype=object))} existing roads")
+    road_class = np.asarray(given_class, dtype=object)[part_of]
+    n = len(lines)
+    network = np.concatenate([lines, roads])
+    out, source, ca = end_short_of_controlled_access(
+        network, np.r_[np.ones(n, bool), np.zeros(len(roads), bool)], roads, road_class, area)
+    stats["n_controlled_access_ended_short"] = ca["n_ended_short"] + ca["n_removed"]
+    stats["n_dropped_edges"] += ca["n_dropped"]
+    if not (ca["n_ended_short"] or ca["n_removed"]):
+        return lines, table, ptab
+    new = (source < n)
+    kept = source[new & (source >= 0)]
+    joins = out[source < 0]
+    out = out[new & (source >= 0)]
+    connections = ptab["connections"].to_numpy().copy()
+    rows = table.iloc[kept].reset_index(drop=True)
+    node = rows[["node_from", "node_to"]].to_numpy().copy()
+    gone = np.setdiff1d(np.arange(n), kept)
+    ends = table[["node_from", "node_to"]].to_numpy()[gone].ravel()
+    np.add.at(connections, ends[ends >= 0], -1)
+    # a street cut back no longer reaches the node at its cut end
+    for k in np.flatnonzero(~shapely.equals_exact(out, lines[kept], 0.0)):
+        for j, at in enumerate((0, -1)):
+            v = node[k, j]
+            if v >= 0 and shapely.distance(shapely.get_point(out[k], at),
+                                           shapely.points(pts.xy[v])) > _ON_POINT:
+                connections[v] -= 1
+                node[k, j] = -1
+    rows[["node_from", "node_to"]] = node
+    rows["length_m"] = shapely.length(out)
+    chord = shapely.distance(shapely.get_point(out, 0), shapely.get_point(out, -1))
+    rows["tortuosity"] = rows["length_m"] / np.maximum(chord, 1e-9)
+    if len(joins):
+        xy = np.column_stack([shapely.get_coordinates(shapely.get_point(joins, 0)),
+                              shapely.get_coordinates(shapely.get_point(joins, -1))])
+        gap, near = cKDTree(pts.xy).query(xy.reshape(-1, 2))
+        join_node = np.where(gap <= _ON_POINT, near, -1).reshape(-1, 2)
+        np.add.at(connections, join_node[join_node >= 0], 1)
+        rows = pd.concat([rows, pd.DataFrame({
+            "level": int(table.level.min()), "length_m": shapely.length(joins),
+            "tortuosity": 1.0, "origin": "piece_link", "node_from": join_node[:, 0],
+            "node_to": join_node[:, 1]})], ignore_index=True)
+        out = np.concatenate([out, joins])
+    rows["edge_id"] = np.arange(1, len(rows) + 1)
+    ptab = ptab.copy()
+    ptab["connections"] = connections
+    stats["n_edges"] = len(out)
+    stats["dead_end_share"] = measured_dead_end_share(np.concatenate([out, roads]), area)
+    return out, rows[table.columns], ptab
 
 
 def _streets_across(lines, table, ptab, pts, may_cross, existing_lines, area, share: float,

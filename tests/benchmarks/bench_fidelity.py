@@ -197,7 +197,8 @@ class Runner:
         # the dead ends inside closed faces (Bubenec's three fragments know none)
         res = ff.synthesize(self.target.given, [db], seed=seed, boundary=self.target.area,
                             fill_quantile=self.fill_quantile,
-                            dead_end_share=self.example.stats["degree1_share"])
+                            dead_end_share=self.example.stats["degree1_share"],
+                            arterial_class=self.target.given_class)
         fill = res.stats.get("fill", {})
         self.extra = {"outcomes": {k: int(v) for k, v in
                                    res.queries.outcome.value_counts().items()},
@@ -219,7 +220,8 @@ class Runner:
         pts, shapes = self.cached("points", example_points)
         res = rw.synthesize(pts, self.target.area, existing_lines=self.target.given,
                             seed=seed, in_place=False, shapes=shapes,
-                            dead_end_share=self.example.stats["degree1_share"])
+                            dead_end_share=self.example.stats["degree1_share"],
+                            given_class=self.target.given_class)
         return res.geometry
 
     def streetgan(self, seed: int) -> np.ndarray:
