@@ -586,6 +586,16 @@ def _assert_one_network_in_the_town(res, target, example):
     assert check.n_components == 1
 
 
+def _assert_points_count_their_streets(res):
+    """A point's connections in the point table are the streets returned that end at it."""
+    ends = np.vstack([shapely.get_coordinates(shapely.get_point(res.geometry, k))
+                      for k in (0, -1)])
+    new = np.flatnonzero(res.points.example >= 0)
+    at = cKDTree(ends).query_ball_point(res.points.xy[new], 0.01)
+    np.testing.assert_array_equal(res.point_table.connections.to_numpy()[new],
+                                  [len(x) for x in at])
+
+
 @pytest.fixture(scope="module")
 def balzers():
     return _left_out("Balzers")
@@ -627,12 +637,7 @@ def test_pieces_no_step_reaches_are_linked_through_the_town():
     assert shapely.covers(shapely.buffer(target.area, 1.0), links).all()
     assert len(res.table) == len(res.geometry) == res.stats["n_edges"]
     _assert_one_network_in_the_town(res, target, example)
-    ends = np.vstack([shapely.get_coordinates(shapely.get_point(res.geometry, k))
-                      for k in (0, -1)])
-    new = np.flatnonzero(res.points.example >= 0)
-    at = cKDTree(ends).query_ball_point(res.points.xy[new], 0.01)
-    np.testing.assert_array_equal(res.point_table.connections.to_numpy()[new],
-                                  [len(x) for x in at])
+    _assert_points_count_their_streets(res)
 
 
 def test_no_street_ends_on_a_motorway_away_from_its_junctions():
@@ -658,12 +663,7 @@ def test_no_street_ends_on_a_motorway_away_from_its_junctions():
     assert check.n_components == 1
     assert res.stats["n_controlled_access_ended_short"] > 0
     assert len(res.table) == len(res.geometry) == res.stats["n_edges"]
-    ends = np.vstack([shapely.get_coordinates(shapely.get_point(res.geometry, k))
-                      for k in (0, -1)])
-    new = np.flatnonzero(res.points.example >= 0)
-    at = cKDTree(ends).query_ball_point(res.points.xy[new], 0.01)
-    np.testing.assert_array_equal(res.point_table.connections.to_numpy()[new],
-                                  [len(x) for x in at])
+    _assert_points_count_their_streets(res)
     _, unclassed = run(None)
     assert len(unclassed.controlled_access) > 10
 
@@ -740,12 +740,7 @@ def test_given_roads_apart_are_joined():
     _assert_one_network_in_the_town(res, target, example)
     # the point table counts the joining street: a point's connections are the streets
     # ending at it (here the join leaves from a street end and ends in a T on a street)
-    ends = np.vstack([shapely.get_coordinates(shapely.get_point(res.geometry, k))
-                      for k in (0, -1)])
-    new = np.flatnonzero(res.points.example >= 0)
-    at = cKDTree(ends).query_ball_point(res.points.xy[new], 0.01)
-    np.testing.assert_array_equal(res.point_table.connections.to_numpy()[new],
-                                  [len(x) for x in at])
+    _assert_points_count_their_streets(res)
     join = res.table[res.table.origin == "given_join"]
     assert (join.node_from >= 0).any()
     assert res.stats["n_dead_ends"] == int(((res.point_table.connections == 1)

@@ -760,9 +760,6 @@ def _off_controlled_access(geometry, level, attrs, arterials, arterial_class, in
     and the rule's counts."""
     roads, part_of = shapely.get_parts(np.asarray(arterials, dtype=object), return_index=True)
     cls = np.asarray(arterial_class, dtype=object)
-    if len(cls) != len(np.asarray(arterials, dtype=object)):
-        raise InputError(f"{len(cls)} road classes for "
-                         f"{len(np.asarray(arterials, dtype=object))} arterials")
     is_new = synthesised(level, attrs["source_fragment"])
     geometry, source, ca = end_short_of_controlled_access(geometry, is_new, roads,
                                                           cls[part_of], inside)
@@ -973,6 +970,8 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
         raise InputError(f"the dead-end share must lie in [0, 1], got {dead_end_share}")
     if max_level is not None and (int(max_level) != max_level or max_level < 0):
         raise InputError(f"the maximum level must be a whole number >= 0, got {max_level}")
+    if arterial_class is not None and len(arterial_class) != len(arterials):
+        raise InputError(f"{len(arterial_class)} road classes for {len(arterials)} arterials")
     if style_polygons is not None:
         style_database = np.asarray(style_database, dtype=np.int64)
         if len(style_database) != len(style_polygons):

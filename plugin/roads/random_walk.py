@@ -1796,6 +1796,15 @@ def _existing_state(lines, area, offset: int, seam_distance: float, example=None
     return pts, state, graph
 
 
+def _points_at_ends(lines, pts) -> np.ndarray:
+    """The point each line leaves from and ends at, (n, 2); -1 where it ends on a street
+    between points (a T)."""
+    ends = np.column_stack([shapely.get_coordinates(shapely.get_point(lines, 0)),
+                            shapely.get_coordinates(shapely.get_point(lines, -1))])
+    gap, near = cKDTree(pts.xy).query(ends.reshape(-1, 2))
+    return np.where(gap <= _ON_POINT, near, -1).reshape(-1, 2)
+
+
 def _link_pieces_apart(lines, given, area):
     """Links for the pieces no walk step joined (:meth:`_Walker.join_pieces`: they lie
     further than a step from the rest, in an arm of the target or on built land far from
@@ -1878,6 +1887,10 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
     n_new = len(pts)
     existing = None
     ex_lines = None
+    if given_class is not None and (existing_lines is None or
+                                    len(given_class) != len(existing_lines)):
+        raise InputError(f"{len(given_class)} road classes for "
+                         f"{0 if existing_lines is None else len(existing_lines)} existing roads")
     if existing_lines is not None and len(existing_lines):
         seam_d = settings.seam_distance if settings.seam_distance is not None else \
             0.25 * float(np.median(example.dist_mean[:, 0]))
@@ -1916,12 +1929,12 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
 
         lines = move_ends_onto_lines(lines, shapely.get_parts(existing_lines),
                                      ROAD_SNAP_TOLERANCE)
+    given_roads = shapely.get_parts(existing_lines) if ex_lines is not None else \
+        np.empty(0, dtype=object)
     links = np.empty(0, dtype=object)
     n_dropped = 0
     if settings.join_pieces and w.stats["n_pieces_apart"]:
-        given = shapely.get_parts(existing_lines) if ex_lines is not None else \
-            np.empty(0, dtype=object)
-        links, keep = _link_pieces_apart(lines, given, area)
+        links, keep = _link_pieces_apart(lines, given_roads, area)
         n_dropped = int((~keep).sum())
         lines, straight = lines[keep], straight[keep]
         a, sa, b, sb, level, origin = a[keep], sa[keep], b[keep], sb[keep], level[keep], \
@@ -1932,13 +1945,9 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
         # inside the target to each other: the shortest clear street inside it does, as for
         # the other methods (network.links.join_pieces). It leaves from a point (a street
         # end or a road node) or from a street (a T, no point there: -1)
-        bridge = join_pieces(np.concatenate([lines, links, shapely.get_parts(existing_lines)]),
-                             inside=area)
+        bridge = join_pieces(np.concatenate([lines, links, given_roads]), inside=area)
     joins = np.concatenate([links, bridge])
-    ends = np.column_stack([shapely.get_coordinates(shapely.get_point(joins, 0)),
-                            shapely.get_coordinates(shapely.get_point(joins, -1))])
-    gap, near = cKDTree(pts.xy).query(ends.reshape(-1, 2))
-    join_node = np.where(gap <= _ON_POINT, near, -1).reshape(-1, 2)
+    join_node = _points_at_ends(joins, pts)
     progress.step(0.95)
     length = shapely.length(lines)
     chord = shapely.length(straight)
@@ -2013,9 +2022,8 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
             "node_from": join_node[:, 0], "node_to": join_node[:, 1]})], ignore_index=True)
         stats["n_edges"] = len(lines)
     if len(links) or n_dropped:  # the share as the invariants measure it, as returned
-        given = shapely.get_parts(existing_lines) if ex_lines is not None else \
-            np.empty(0, dtype=object)
-        stats["dead_end_share"] = measured_dead_end_share(np.concatenate([lines, given]), area)
+        stats["dead_end_share"] = measured_dead_end_share(np.concatenate([lines, given_roads]),
+                                                          area)
     if settings.match_crossings and settings.max_capacity >= 4:
         # the saturation rule kept: only a point that had four streets in the example, or a
         # junction on a given road, takes a fourth
@@ -2039,9 +2047,6 @@ def _off_controlled_access(lines, table, ptab, pts, existing_lines, given_class,
     origin 'piece_link'). The table and the points' connections follow."""
     roads, part_of = shapely.get_parts(np.asarray(existing_lines, dtype=object),
                                        return_index=True)
-    if len(np.asarray(given_class)) != len(np.asarray(existing_lines, dtype=object)):
-        raise InputError(f"{len(np.asarray(given_class))} road classes for "
-                         f"{len(np.asarray(existing_lines, dtype=object))} existing roads")
     road_class = np.asarray(given_class, dtype=object)[part_of]
     n = len(lines)
     network = np.concatenate([lines, roads])
@@ -2074,10 +2079,7 @@ def _off_controlled_access(lines, table, ptab, pts, existing_lines, given_class,
     chord = shapely.distance(shapely.get_point(out, 0), shapely.get_point(out, -1))
     rows["tortuosity"] = rows["length_m"] / np.maximum(chord, 1e-9)
     if len(joins):
-        xy = np.column_stack([shapely.get_coordinates(shapely.get_point(joins, 0)),
-                              shapely.get_coordinates(shapely.get_point(joins, -1))])
-        gap, near = cKDTree(pts.xy).query(xy.reshape(-1, 2))
-        join_node = np.where(gap <= _ON_POINT, near, -1).reshape(-1, 2)
+        join_node = _points_at_ends(joins, pts)
         np.add.at(connections, join_node[join_node >= 0], 1)
         rows = pd.concat([rows, pd.DataFrame({
             "level": int(table.level.min()), "length_m": shapely.length(joins),
@@ -2088,6 +2090,7 @@ def _off_controlled_access(lines, table, ptab, pts, existing_lines, given_class,
     ptab = ptab.copy()
     ptab["connections"] = connections
     stats["n_edges"] = len(out)
+    stats["n_dead_ends"] = int(((connections == 1) & (pts.example >= 0)).sum())
     stats["dead_end_share"] = measured_dead_end_share(np.concatenate([out, roads]), area)
     return out, rows[table.columns], ptab
 
