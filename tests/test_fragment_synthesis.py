@@ -163,6 +163,8 @@ def test_bad_inputs_are_input_errors(grid_db):
                       style_database=[2])
     with pytest.raises(InputError, match="gamma"):
         sf.synthesize(ring, [grid_db], gamma=2)
+    with pytest.raises(InputError, match="2 road classes for 1 arterials"):
+        sf.synthesize(ring, [grid_db], arterial_class=["motorway", "primary"])
 
 
 def test_progress_and_cancel(grid_db):

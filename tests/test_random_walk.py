@@ -422,6 +422,10 @@ def test_bad_inputs(helsinki):
         rw.synthesize(pts, shapely.box(0, 0, 1, 1), seed=0, in_place=True)
     with pytest.raises(InputError, match="min_angle"):
         rw.WalkSettings(min_angle=120).validate()
+    road = shapely.LineString(pts.xy[:2])
+    with pytest.raises(InputError, match="2 road classes for 1 existing roads"):
+        rw.synthesize(pts, shapely.box(*pts.xy.min(0), *pts.xy.max(0)), existing_lines=[road],
+                      given_class=["motorway", "primary"], seed=0)
 
 
 def test_blocks_and_dual_graph():
