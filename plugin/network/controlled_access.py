@@ -106,23 +106,25 @@ def end_short_of_controlled_access(lines: Sequence, is_new: Sequence, roads: Seq
     contact_tree = shapely.STRtree(contacts)
     out = lines.copy()
     keep = np.ones(len(lines), dtype=bool)
-    for i in new_idx:
+    # the new streets with an end at a contact, and the degree of the network at the other
+    at = np.zeros((len(lines), 2), dtype=bool)
+    for k, end in enumerate((0, -1)):
+        hit, _ = contact_tree.query(shapely.get_point(lines[new_idx], end), predicate="dwithin",
+                                    distance=END_TOLERANCE)
+        at[new_idx[hit], k] = True
+    touching = np.flatnonzero(at.any(axis=1))
+    other = shapely.get_point(lines[touching], np.where(at[touching, 0], -1, 0))
+    other_degree = dict(zip(touching.tolist(),
+                            _node_degrees(lines, other, JUNCTION_TOLERANCE).tolist()))
+    for i in touching:
         line = lines[i]
-        at = [len(contact_tree.query(shapely.get_point(line, k), predicate="dwithin",
-                                     distance=END_TOLERANCE)) > 0 for k in (0, -1)]
-        if not any(at):
-            continue
-        if all(at):
+        if at[i].all() or other_degree[i] != 2:
+            # both ends on it, or the other end is a junction (it stays one) or a dead end:
+            # the street goes, and no dead end is made (the share stays as steered)
             keep[i] = False
             stats["n_removed"] += 1
             continue
-        start = shapely.get_point(line, -1 if at[0] else 0)   # the end that stays
-        if _node_degrees(lines, np.array([start]), JUNCTION_TOLERANCE)[0] != 2:
-            # its other end is a junction (it stays one) or a dead end: the street goes,
-            # and no dead end is made (the dead-end share stays as the method steered it)
-            keep[i] = False
-            stats["n_removed"] += 1
-            continue
+        start = shapely.get_point(line, -1 if at[i, 0] else 0)   # the end that stays
         with np.errstate(invalid="ignore"):
             parts = shapely.get_parts(shapely.difference(line, corridor))
         parts = parts[shapely.dwithin(parts, start, END_TOLERANCE)] if len(parts) else parts

@@ -62,8 +62,8 @@ import shapely
 
 from ..core.progress import InputError, Progress, ensure
 from ..network import street_graph as _roads
-from ..network.dead_ends import MIN_DANGLE, steer_attributed
 from ..network.controlled_access import end_short_of_controlled_access
+from ..network.dead_ends import MIN_DANGLE, steer_attributed
 from ..network.links import join_pieces, link_floating_pieces
 from ..network.invariants import SNAP_TOLERANCE, corridor_around, doubles_a_street
 from ..network.street_graph import add_streets, close_short_gaps, synthesised
