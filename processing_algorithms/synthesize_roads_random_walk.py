@@ -332,7 +332,9 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
         if st.get("n_controlled_access_ended_short"):
             feedback.pushInfo(f"{st['n_controlled_access_ended_short']} new street(s) that "
                               "ended on a motorway or trunk away from its junctions end short "
-                              "of it, or went where their other end is a junction.")
+                              "of it, or went where their other end is a junction; "
+                              f"{st['n_controlled_access_dropped']} street(s) of pieces that "
+                              "only such a road reached dropped.")
         results = {}
         results[self.OUTPUT] = qgis_io.write_sink(
             self, parameters, self.OUTPUT, context, result.geometry, result.table,

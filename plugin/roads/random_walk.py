@@ -2053,6 +2053,7 @@ def _off_controlled_access(lines, table, ptab, pts, existing_lines, given_class,
     out, source, ca = end_short_of_controlled_access(
         network, np.r_[np.ones(n, bool), np.zeros(len(roads), bool)], roads, road_class, area)
     stats["n_controlled_access_ended_short"] = ca["n_ended_short"] + ca["n_removed"]
+    stats["n_controlled_access_dropped"] = ca["n_dropped"]
     stats["n_dropped_edges"] += ca["n_dropped"]
     if not (ca["n_ended_short"] or ca["n_removed"]):
         return lines, table, ptab
