@@ -222,6 +222,9 @@ class Runner:
                             seed=seed, in_place=False, shapes=shapes,
                             dead_end_share=self.example.stats["degree1_share"],
                             given_class=self.target.given_class)
+        # the pieces no step reached, linked through the target or dropped (README)
+        self.extra = {"pieces_linked": int(res.stats["n_pieces_linked"]),
+                      "dropped_edges": int(res.stats["n_dropped_edges"])}
         return res.geometry
 
     def streetgan(self, seed: int) -> np.ndarray:
@@ -717,6 +720,26 @@ def random_walk_runs(results: dict) -> str:
                f"**Invariant violations in {n_runs - clean} of the ") + f"{n_runs} runs.**")
 
 
+def random_walk_links(results: dict) -> str:
+    """The README's sentence on the pieces no walk step reached: how many were linked
+    through the target over all runs (the towns with most by name) and how many streets
+    were dropped."""
+    scored = _scored(results, "random_walk")
+    runs = _runs(results, "random_walk")
+    if not runs or any("pieces_linked" not in run for run in runs):
+        return ""
+    per_town = {name: sum(run["pieces_linked"] for run in r["runs"])
+                for name, (_, r) in scored.items()}
+    most = sorted((n for n in per_town.items() if n[1]), key=lambda n: (-n[1], n[0]))
+    named = [f"{_town(name)} {n}" for name, n in most[:4]]
+    rest = [n for _, n in most[4:]] + [0] * sum(n == 0 for n in per_town.values())
+    dropped = sum(run["dropped_edges"] for run in runs)
+    return (f"Pieces that no walk step reached, over the fidelity benchmark's {len(runs)} runs: "
+            f"{sum(per_town.values())} linked through the target ({', '.join(named)}"
+            + (f", the rest {min(rest)}–{max(rest)}" if rest else "") + "), "
+            + ("no street dropped." if dropped == 0 else f"{dropped} streets dropped."))
+
+
 def streetgan_degree4(results: dict) -> str:
     """The README's sentence on StreetGAN's degree-4 share: its runs within issue 16's band
     on every town it ran on, and the ranges of the towns its text goes on to speak of."""
@@ -1039,6 +1062,7 @@ def readme_blocks(results: dict) -> Dict[str, str]:
             **{f"{m}_goal": goal_verdict(results, m) for m in EXAMPLE_BASED},
             "random_walk": towns_table(results, "random_walk"),
             "random_walk_runs": random_walk_runs(results),
+            "random_walk_links": random_walk_links(results),
             "random_walk_still_off": random_walk_still_off(results),
             "streetgan": towns_table(results, "streetgan"),
             "streetgan_degree4": streetgan_degree4(results),
