@@ -23,21 +23,15 @@ from typing import Sequence, Tuple
 import numpy as np
 import shapely
 
-from .invariants import (CONTROLLED_ACCESS, CORRIDOR_HALF_WIDTH, JUNCTION_TOLERANCE,
-                         _node_degrees, check_network, connected_pieces,
-                         doubles_a_street)
+from .invariants import (CORRIDOR_HALF_WIDTH, JUNCTION_TOLERANCE, _node_degrees,
+                         check_network, connected_pieces, doubles_a_street,
+                         is_controlled_access)
 from .links import link_floating_pieces
 
-__all__ = ["is_controlled_access", "classes_on", "end_short_of_controlled_access"]
+__all__ = ["classes_on", "end_short_of_controlled_access"]
 
 #: m: a contact point and a street's end this close are one.
 END_TOLERANCE = 0.01
-
-
-def is_controlled_access(road_class: Sequence) -> np.ndarray:
-    """Which classes are motorways or trunks (their links included)."""
-    cls = np.asarray([str(c) if c is not None else "" for c in road_class], dtype=object)
-    return np.isin(cls, CONTROLLED_ACCESS)
 
 
 def classes_on(pieces: Sequence, roads: Sequence, road_class: Sequence) -> np.ndarray:

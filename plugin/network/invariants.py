@@ -66,7 +66,7 @@ __all__ = [
     "JUNCTION_TOLERANCE", "CORRIDOR_HALF_WIDTH", "MIN_DUPLICATE_LENGTH", "JUNCTION_RADIUS",
     "corridor_of",
     "DEAD_END_TOLERANCE", "EDGE_DISTANCE", "SNAP_TOLERANCE", "UNDERSHOOT_DISTANCE",
-    "CONTROLLED_ACCESS",
+    "CONTROLLED_ACCESS", "is_controlled_access",
     "CHECKS", "Contacts", "NetworkCheck", "line_contacts", "connected_pieces", "node_degrees",
     "dead_end_share",
     "crossing_share", "counted_nodes", "dead_end_share_of_extract", "crossing_share_of_extract",
@@ -104,6 +104,17 @@ CHECKS = (
     ("components", "Connected components (synthesised and given roads)", False),
     ("undershoots", "Dangling ends just short of another line", False),
 )
+
+
+def is_controlled_access(road_class: Sequence) -> np.ndarray:
+    """Which OSM classes are motorways or trunks (their links included): roads that take
+    no new junction.
+
+    >>> is_controlled_access(["motorway", "primary", None, "trunk_link"]).tolist()
+    [True, False, False, True]
+    """
+    cls = np.asarray([str(c) if c is not None else "" for c in road_class], dtype=object)
+    return np.isin(cls, CONTROLLED_ACCESS)
 
 
 def _lines(geoms, what: str, layer=None):
@@ -674,8 +685,7 @@ def check_network(synthesised: Sequence, given: Optional[Sequence] = None,
     controlled = np.empty(0, dtype=object)
     if n_s and gcls is not None:
         is_ca = np.zeros(len(lines), bool)
-        is_ca[n_s:] = np.isin(np.asarray([str(c) if c is not None else "" for c in gcls]),
-                              CONTROLLED_ACCESS)
+        is_ca[n_s:] = is_controlled_access(gcls)
         sel = (ga ^ gb) & (is_ca[con.a] | is_ca[con.b])
         if sel.any():
             pts = con.geometry[sel]

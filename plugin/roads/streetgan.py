@@ -579,10 +579,9 @@ def _given(given, given_class):
 
 def _open_roads(given_class) -> np.ndarray:
     """Given roads that may take new junctions (not motorways / trunks)."""
-    from ..network import invariants
+    from ..network.invariants import is_controlled_access
 
-    cls = np.array([str(c) for c in given_class], dtype=object)
-    return ~np.isin(cls, invariants.CONTROLLED_ACCESS)
+    return ~is_controlled_access(given_class)
 
 
 def _on_roads(lines, is_given, roads) -> np.ndarray:
