@@ -54,8 +54,8 @@ def end_short_of_controlled_access(lines: Sequence, is_new: Sequence, roads: Seq
     ----------
     lines : array of LineString, the network (new streets and given roads), metric CRS
     is_new : bool per line
-    roads, road_class : the given roads as given, and the OSM class of each (the given
-        lines of ``lines`` may be pieces of them)
+    roads, road_class : the given roads as given (lines or multilines), and the OSM class
+        of each (the given lines of ``lines`` may be pieces of them)
     area : Polygon(s), optional, the target: a joining street stays in it
 
     Returns

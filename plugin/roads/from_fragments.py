@@ -758,11 +758,9 @@ def _off_controlled_access(geometry, level, attrs, arterials, arterial_class, in
     short of it; a piece cut off is linked again ('link';
     :func:`network.controlled_access.end_short_of_controlled_access`). Returns the network
     and the rule's counts."""
-    roads, part_of = shapely.get_parts(np.asarray(arterials, dtype=object), return_index=True)
-    cls = np.asarray(arterial_class, dtype=object)
     is_new = synthesised(level, attrs["source_fragment"])
-    geometry, source, ca = end_short_of_controlled_access(geometry, is_new, roads,
-                                                          cls[part_of], inside)
+    geometry, source, ca = end_short_of_controlled_access(geometry, is_new, arterials,
+                                                          arterial_class, inside)
     link = {"source_fragment": "link", "database": "", "fragment_id": -1, "query": -1}
     level = np.r_[level, int(level.max()) + 1][source]
     attrs = {k: np.r_[v, np.array([link[k]], dtype=v.dtype)][source] for k, v in attrs.items()}

@@ -2031,8 +2031,8 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
         lines, table = _streets_across(lines, table, ptab, pts, may_cross, existing_lines,
                                        area, crossing_share, rng, stats)
     if given_class is not None and ex_lines is not None:
-        lines, table, ptab = _off_controlled_access(lines, table, ptab, pts, existing_lines,
-                                                    given_class, area, stats)
+        lines, table, ptab = _off_controlled_access(lines, table, ptab, pts, given_roads,
+                                                    existing_lines, given_class, area, stats)
     # of every street returned: the given-road joins and the streets across are straight,
     # a piece's link bends only along the target
     stats["mean_tortuosity"] = float(table.tortuosity.mean())
@@ -2040,18 +2040,18 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
     return Synthesis(lines, table, pts, ptab, stats, quadtrees, ex_lines)
 
 
-def _off_controlled_access(lines, table, ptab, pts, existing_lines, given_class, area, stats):
+def _off_controlled_access(lines, table, ptab, pts, roads, existing_lines, given_class, area,
+                           stats):
     """New streets that end on a motorway or trunk away from its junctions (a junction slot
     on it, a T onto the nearest street) end short of it, out of its corridor; a piece cut
     off is joined again (:func:`network.controlled_access.end_short_of_controlled_access`;
-    origin 'piece_link'). The table and the points' connections follow."""
-    roads, part_of = shapely.get_parts(np.asarray(existing_lines, dtype=object),
-                                       return_index=True)
-    road_class = np.asarray(given_class, dtype=object)[part_of]
+    origin 'piece_link'). ``roads``: the single parts of ``existing_lines``. The table and
+    the points' connections follow."""
     n = len(lines)
     network = np.concatenate([lines, roads])
     out, source, ca = end_short_of_controlled_access(
-        network, np.r_[np.ones(n, bool), np.zeros(len(roads), bool)], roads, road_class, area)
+        network, np.r_[np.ones(n, bool), np.zeros(len(roads), bool)], existing_lines,
+        given_class, area)
     stats["n_controlled_access_ended_short"] = ca["n_ended_short"] + ca["n_removed"]
     stats["n_controlled_access_dropped"] = ca["n_dropped"]
     stats["n_dropped_edges"] += ca["n_dropped"]
