@@ -62,7 +62,8 @@ import numpy as np
 import shapely
 
 ROOT = Path(__file__).resolve().parents[2]
-for p in (ROOT / "build" / "plugins", ROOT / "tests"):
+# the benchmarks' own folder too: issue 21's goals are bench_domain_split's
+for p in (ROOT / "build" / "plugins", ROOT / "tests", Path(__file__).resolve().parent):
     if str(p) not in sys.path:
         sys.path.insert(0, str(p))
 
@@ -480,6 +481,75 @@ def yang_goals(results: dict) -> str:
         out.append(f"| {name} | {each('p_angle', '.2f')} | {each('p_area', '.4f')} | "
                    f"{each('l_s', '.1f')} | {met} of {len(rows)} |")
     return "\n".join(out) if len(out) > 2 else ""
+
+
+def _yang_rows(results: dict) -> Dict[str, List[dict]]:
+    """Each town's splitdomain runs' Table 1 figures (p_angle, p_area, l_s), in seed order."""
+    return {name: rows for name, t in results["targets"].items()
+            if (rows := [r["yang_table1"] for r in
+                         t["methods"].get("splitdomain", {}).get("runs", [])
+                         if "yang_table1" in r])}
+
+
+def _listed(items: List[str]) -> str:
+    """Items as prose lists them: "a, b and c"."""
+    return " and ".join(filter(None, (", ".join(items[:-1]), items[-1]))) if items else ""
+
+
+def yang_goals_paragraph(results: dict) -> str:
+    """The README's paragraph on issue 21's goals on this benchmark's towns (the table of
+    :func:`yang_goals` in words): the towns that meet all three in every seed, in some, in
+    none, each with its figures, and the runs per seed."""
+    from bench_domain_split import GOALS, goals_met
+
+    rows = _yang_rows(results)
+    if not rows:
+        return ""
+    names = {"p_angle": "p_angle", "p_area": "p_area", "l_s": "streets"}
+
+    def fig(y, places=4) -> str:
+        return f"{y['p_angle']:.2f}° / {y['p_area']:.{places}f} / {y['l_s']:.1f} %"
+
+    def spans(ys, places=4) -> str:
+        return (f"{_span([y['p_angle'] for y in ys])}° / "
+                f"{_span([y['p_area'] for y in ys], places)} / "
+                f"{_span([y['l_s'] for y in ys], 1)} %")
+
+    def missed(ys) -> str:
+        keys = [k for k in GOALS if any(y[k] > GOALS[k] for y in ys)]
+        return " and ".join(names[k] for k in keys)
+
+    n_seeds = max(map(len, rows.values()))
+    every, some, never = [], [], []
+    for name, ys in rows.items():
+        met = [goals_met(y) for y in ys]
+        if all(met):
+            every.append(f"{_town(name)} ({spans(ys, 3)})")
+        elif any(met):
+            off = "; ".join(f"seed {i}: {fig(y)}, {missed([y])} above" for i, y in enumerate(ys)
+                            if not met[i])
+            some.append(f"{_town(name)} in {_in_words(sum(met))} ({fig(ys[met.index(True)])} "
+                        f"in seed {met.index(True)}; {off})")
+        else:
+            never.append(f"{_town(name)} by {missed(ys)} ({spans(ys)})")
+    per_seed = [sum(goals_met(ys[i]) for ys in rows.values() if len(ys) > i)
+                for i in range(n_seeds)]
+    runs = [y for ys in rows.values() for y in ys]
+    failed = [y for y in runs if not goals_met(y)]
+    by_goal = ", ".join(f"{names[k]} in {sum(y[k] > GOALS[k] for y in failed)}" for k in GOALS)
+    seeds = ", ".join(map(str, range(n_seeds)))
+    text = (f"splitdomain as the fidelity benchmark runs it (seeds {seeds}, the mesh "
+            "optimisation off, repair off, parks counted) meets all three goals in every seed "
+            f"on {_in_words(len(every))} of the {_in_words(len(rows))}: "
+            + _listed(every) + (f"; {'; '.join(some)}" if some else "") + ". Seed 0 meets "
+            f"them on {_in_words(per_seed[0])} towns"
+            + "".join(f", seed {i} on {_in_words(k)}" for i, k in enumerate(per_seed) if i)
+            + f": {sum(per_seed)} of {len(runs)} runs.")
+    if never:
+        text += " Never met: " + "; ".join(never) + "."
+    if failed:
+        text += f" Of the {len(failed)} runs that miss, above the goal: {by_goal}."
+    return text
 
 
 def degree4_ratios(t: dict, r: dict) -> List[float]:
@@ -1070,7 +1140,8 @@ def readme_blocks(results: dict) -> Dict[str, str]:
             "fragments_still_off": fragments_still_off(results),
             "fragments_land_in_blocks": fragments_land_in_blocks(results),
             "invariants_kept": invariants_kept(results), "inside_target": inside_target(results),
-            "land_in_blocks": land_paragraph(results), "edge_ends": edge_ends_paragraph(results)}
+            "land_in_blocks": land_paragraph(results), "edge_ends": edge_ends_paragraph(results),
+            "splitdomain_goals": yang_goals_paragraph(results)}
 
 
 def sync_readme(readme: str, blocks: Dict[str, str]) -> str:
