@@ -54,6 +54,30 @@ def test_bubenec_from_roads(qgis_processing, bubenec_blocks, method):
         assert r["undesirable"] == (r["p_angle"] > 15 or r["p_area"] > 1.2)
 
 
+@pytest.mark.parametrize("stretched", ["EPSG:3395", "EPSG:4087"])
+def test_a_crs_in_metres_that_is_not_true_is_not_worked_in(qgis_processing, stretched):
+    """World Mercator and a plate carree in metres stretch lengths by 1.47 at Vaduz (47 N):
+    the parcels are cut in true metres (the UTM zone), as from the same block in UTM, and
+    their area_m2 is their true area."""
+    from pyproj import Transformer
+
+    block = shapely.box(758500, 5223000, 758800, 5223240)   # UTM 32N
+    to = Transformer.from_crs("EPSG:32632", stretched, always_xy=True)
+    back = Transformer.from_crs(stretched, "EPSG:32632", always_xy=True)
+    counts = []
+    for crs, geom in (("EPSG:32632", block), (stretched, shapely.transform(
+            shapely.segmentize(block, 10.0), lambda xy: np.column_stack(to.transform(*xy.T))))):
+        out = qgis_processing.run(ALG, {"BLOCKS": _memory_layer("Polygon", [geom.wkt], crs),
+                                        "METHOD": 0, "SEED": 1, "OUTPUT": "memory:"})
+        rows, geoms = layer_features(out["OUTPUT"])
+        true = shapely.area(shapely.transform(
+            geoms, lambda xy: np.column_stack(back.transform(*xy.T)))) \
+            if crs != "EPSG:32632" else shapely.area(geoms)
+        assert np.allclose([r["area_m2"] for r in rows], true, rtol=0.01)
+        counts.append(len(rows))
+    assert counts[1] == pytest.approx(counts[0], rel=0.1)   # 1.47 x would give 2.2 x as many
+
+
 def test_blocks_input_keeps_block_ids_and_seed(qgis_processing):
     blocks = qgis_processing.run("urbansynth:extractblocks", {
         "ROADS": bubenec_layer("streets"), "OUTPUT": "memory:"})["OUTPUT"]

@@ -21,6 +21,12 @@ def test_working_crs_rule():
     assert not calls                     # the centre is computed only when needed
     with pytest.raises(InputError, match="not finite"):
         crs.working_crs("EPSG:4326", False, (float("nan"), 0.0))
+    # a projected CRS in metres whose scale at the data is more than 1 % off true (World
+    # Mercator, a plate carree in metres: 1.56 x at 50 degrees) is replaced as Web Mercator is
+    assert crs.working_crs("EPSG:3395", True, (14.4, 50.1), lambda: 0.56) == "EPSG:32633"
+    assert crs.working_crs("EPSG:4087", True, (14.4, 50.1), lambda: 0.56) == "EPSG:32633"
+    assert crs.working_crs("EPSG:3035", True, (-9.1, 38.7), lambda: 0.003) is None
+    assert crs.working_crs("EPSG:3395", True, (14.4, 50.1), lambda: float("nan")) is None
 
 
 def test_the_dask_runner_uses_the_same_rule():
@@ -29,6 +35,11 @@ def test_the_dask_runner_uses_the_same_rule():
     assert distributed.metric_crs("EPSG:4326", (24.9, 60.1, 25.0, 60.2)) == "EPSG:32635"
     assert distributed.metric_crs("EPSG:3857", (14.3, 50.0, 14.4, 50.1)) == "EPSG:32633"
     assert "UTM zone 35N" in distributed.metric_crs("EPSG:32635", (24.9, 60.1, 25.0, 60.2))
+    # PROJ's scale factors: World Mercator and a plate carree in metres are not true at 47 N,
+    # Europe's equal-area grid is within 0.3 % even at Lisbon
+    for stretched in ("EPSG:3395", "EPSG:4087"):
+        assert distributed.metric_crs(stretched, (9.5, 47.0, 9.6, 47.2)) == "EPSG:32632"
+    assert "LAEA" in distributed.metric_crs("EPSG:3035", (-9.2, 38.6, -9.0, 38.8))
     with pytest.raises(InputError, match="no coordinate reference system"):
         distributed.metric_crs(None, (24.9, 60.1, 25.0, 60.2))
 

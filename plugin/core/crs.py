@@ -2,11 +2,13 @@
 
 Every algorithm works in a local metric CRS and writes its results back in the input CRS
 (docs/ARCHITECTURE.md, "Data flow"). A projected CRS in metres is used as it is, except
-Web Mercator, whose scale error (1.5x at 50 degrees latitude) would make every length and
-area wrong; anything else (geographic degrees, feet, Web Mercator) is replaced by the UTM
-zone of the data's centre. Both the QGIS adapter (``qgis_glue.qgis_io``) and the QGIS-free
-Dask runner (``scale.distributed``) decide with :func:`working_crs`, each describing its
-CRS object in the plain terms below.
+where its scale at the data is more than :data:`MAX_SCALE_ERROR` off true: Web Mercator
+(1.5x at 50 degrees latitude), World Mercator, a plate carrée in metres, a national grid far
+outside its country would make every length and area wrong; those, and anything else
+(geographic degrees, feet), are replaced by the UTM zone of the data's centre. Both the QGIS
+adapter (``qgis_glue.qgis_io``) and the QGIS-free Dask runner (``scale.distributed``) decide
+with :func:`working_crs`, each describing its CRS object in the plain terms below and
+measuring its scale with its own library (QGIS's ellipsoidal distances, PROJ's factors).
 
 Examples
 --------
@@ -16,6 +18,13 @@ Examples
 'EPSG:32633'
 >>> working_crs("EPSG:32633", projected_in_metres=True, centre_lonlat=(14.4, 50.1)) is None
 True
+
+World Mercator at Prague stretches every length by 1.56: its scale, measured by the caller,
+sends the data to the UTM zone as Web Mercator's does.
+
+>>> working_crs("EPSG:3395", projected_in_metres=True, centre_lonlat=(14.4, 50.1),
+...             scale_error=lambda: 0.56)
+'EPSG:32633'
 >>> utm_zone(-70.6, -33.4)
 'EPSG:32719'
 """
@@ -26,7 +35,12 @@ from typing import Callable, Optional, Tuple, Union
 
 from .progress import InputError
 
-__all__ = ["WEB_MERCATOR", "is_web_mercator", "utm_zone", "working_crs"]
+__all__ = ["MAX_SCALE_ERROR", "WEB_MERCATOR", "is_web_mercator", "utm_zone", "working_crs"]
+
+#: A projected CRS whose point scale at the data is further than this from 1 (a share: 1 %)
+#: is not worked in: lengths and areas would be off by as much. UTM within its zone is off
+#: by at most 0.1 %, national grids within their country by about as much.
+MAX_SCALE_ERROR = 0.01
 
 #: Authority ids of Web Mercator (kept out of the working CRS: its scale error).
 WEB_MERCATOR = frozenset({"EPSG:3857", "EPSG:900913", "EPSG:3785", "EPSG:102100",
@@ -49,7 +63,8 @@ def utm_zone(lon: float, lat: float) -> str:
 
 
 def working_crs(authid: Optional[str], projected_in_metres: bool,
-                centre_lonlat: Union[LonLat, Callable[[], LonLat]]) -> Optional[str]:
+                centre_lonlat: Union[LonLat, Callable[[], LonLat]],
+                scale_error: Optional[Callable[[], float]] = None) -> Optional[str]:
     """The metric CRS the engine works in for data in a CRS.
 
     Parameters
@@ -58,6 +73,9 @@ def working_crs(authid: Optional[str], projected_in_metres: bool,
     projected_in_metres : whether the CRS is projected with metre units
     centre_lonlat : the data's centre in degrees (lon, lat), or a function returning it
         (called only when the CRS is replaced)
+    scale_error : a function returning how far the CRS's point scale at the data's centre
+        is from 1 (the larger of its scales along the meridian and the parallel; a share),
+        called for a projected CRS in metres; None: not known (the CRS is taken as true)
 
     Returns
     -------
@@ -65,6 +83,8 @@ def working_crs(authid: Optional[str], projected_in_metres: bool,
     the data's centre.
     """
     if projected_in_metres and not is_web_mercator(authid):
-        return None
+        error = scale_error() if scale_error is not None else 0.0
+        if not (math.isfinite(error) and error > MAX_SCALE_ERROR):
+            return None
     lon, lat = centre_lonlat() if callable(centre_lonlat) else centre_lonlat
     return utm_zone(float(lon), float(lat))

@@ -19,6 +19,8 @@ import shapely
 from qgis.core import (
     QgsCoordinateReferenceSystem,
     QgsCoordinateTransform,
+    QgsCsException,
+    QgsDistanceArea,
     QgsFeature,
     QgsFeatureRequest,
     QgsFeatureSink,
@@ -66,8 +68,27 @@ def stop_if_canceled(feedback) -> None:
 def working_crs(crs: QgsCoordinateReferenceSystem, extent_in_crs: QgsRectangle,
                 context) -> QgsCoordinateReferenceSystem:
     """The metric CRS the engine works in, by the plugin's rule (:func:`core.crs.working_crs`:
-    a projected CRS in metres as it is, except Web Mercator; else the UTM zone of the data's
-    centre)."""
+    a projected CRS in metres as it is, unless its scale at the data is more than 1 % off
+    true (Web Mercator, World Mercator ...); else the UTM zone of the data's centre)."""
+    def scale_error() -> float:
+        """How far 100 CRS metres east and north of the data's centre are from 100 m on the
+        CRS's ellipsoid (QGIS's own measure); 0 where it cannot tell."""
+        da = QgsDistanceArea()
+        da.setSourceCrs(crs, context.transformContext())
+        da.setEllipsoid(crs.ellipsoidAcronym() or "WGS84")
+        if not da.willUseEllipsoid():
+            return 0.0
+        c, step, errors = extent_in_crs.center(), 100.0, []
+        for dx, dy in ((step, 0.0), (0.0, step)):
+            try:
+                true = da.measureLine(QgsPointXY(c.x() - dx / 2, c.y() - dy / 2),
+                                      QgsPointXY(c.x() + dx / 2, c.y() + dy / 2))
+            except QgsCsException:
+                return 0.0
+            if math.isfinite(true) and true > 0:
+                errors.append(abs(step / true - 1.0))
+        return max(errors, default=0.0)
+
     def centre_lonlat():
         centre = extent_in_crs.center()
         wgs84 = QgsCoordinateReferenceSystem("EPSG:4326")
@@ -85,7 +106,8 @@ def working_crs(crs: QgsCoordinateReferenceSystem, extent_in_crs: QgsRectangle,
     projected_in_metres = (crs.isValid() and not crs.isGeographic()
                            and crs.mapUnits() == QgsUnitTypes.DistanceUnit.DistanceMeters)
     try:
-        code = crs_rule.working_crs(crs.authid(), projected_in_metres, centre_lonlat)
+        code = crs_rule.working_crs(crs.authid(), projected_in_metres, centre_lonlat,
+                                    scale_error)
     except InputError as exc:
         raise QgsProcessingException(f"Cannot find a metric CRS for the data: {exc}.") from exc
     return crs if code is None else QgsCoordinateReferenceSystem(code)

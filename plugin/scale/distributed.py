@@ -108,7 +108,9 @@ def _pyproj_crs(crs):
 def metric_crs(crs, bounds_lonlat) -> str:
     """The CRS the engine works in for a layer in ``crs`` (a pyproj CRS or anything it
     reads), by the plugin's rule :func:`core.crs.working_crs`: the CRS itself (as WKT) when
-    it is projected in metres and not Web Mercator, else the UTM zone of the data's centre.
+    it is projected in metres and its scale at the data's centre is within 1 % of true (not
+    Web Mercator, World Mercator ...: PROJ's scale factors), else the UTM zone of the data's
+    centre.
     ``bounds_lonlat``: (xmin, ymin, xmax, ymax) in degrees. A layer without a CRS is refused
     (its units are unknown: a guess would give silently wrong sizes)."""
     if crs is None:
@@ -120,7 +122,17 @@ def metric_crs(crs, bounds_lonlat) -> str:
         all(a.unit_name in ("metre", "meter") for a in c.axis_info[:2])
     centre = ((bounds_lonlat[0] + bounds_lonlat[2]) / 2.0,
               (bounds_lonlat[1] + bounds_lonlat[3]) / 2.0)
-    code = crs_rule.working_crs(":".join(authority) if authority else None, metres, centre)
+    def scale_error() -> float:
+        from pyproj import Proj
+
+        try:
+            f = Proj(c).get_factors(*centre)
+        except Exception:  # noqa: BLE001 - a CRS PROJ has no factors for: taken as true
+            return 0.0
+        return max(abs(f.meridional_scale - 1.0), abs(f.parallel_scale - 1.0))
+
+    code = crs_rule.working_crs(":".join(authority) if authority else None, metres, centre,
+                                scale_error)
     return c.to_wkt() if code is None else code
 
 
