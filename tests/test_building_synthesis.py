@@ -232,6 +232,18 @@ def test_fit_on_a_street():
     assert r.stats["n_placed"] == 1
 
 
+def test_a_street_drawn_on_the_parcel_side_faces_it():
+    """A parcel whose front lies on the road's centre line (blocks cut by their streets'
+    centre lines, a cadastre drawn to them) faces that road, as one a metre off does."""
+    lib = bf.default_library()
+    for gap in (0.0, 1.0):
+        street = [shapely.LineString([(-50, gap), (200, gap)])]
+        r = bf.fit_buildings([shapely.box(0, -36, 60, 0)], street, lib, min_setback=2.0)
+        assert r.stats["n_placed"] == 1 and r.stats["no_street"] == 0, gap
+        assert_constraints(r, [shapely.box(0, -36, 60, 0)], [1], np.array(street, dtype=object),
+                           lib, 20.0)
+
+
 def test_fit_on_a_slope_sinks_to_the_lowest_corner_and_skips_steep_parcels():
     """Scharl ch. 6.2: on a slope the building goes down until every vertex is on the
     ground or beneath; a parcel steeper than maxParcelSlope gets no building."""

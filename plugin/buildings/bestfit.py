@@ -224,7 +224,9 @@ class _Streets:
         out = np.zeros(n, dtype=bool)
         if n == 0 or len(self.lines) == 0:
             return out
-        start = mids + normals * 1e-3
+        # from a millimetre inside the side: a road drawn on the side itself (a parcel or
+        # block cut along the centre line) is hit at once; one outside would miss it
+        start = mids - normals * 1e-3
         rays = shapely.linestrings(np.stack([start, mids + normals * reach], axis=1))
         ri, li = self.tree.query(rays, predicate="intersects")
         if len(ri) == 0:
