@@ -1,5 +1,6 @@
 """urbansynth:subdivideparcels - blocks shrunk by their streets and subdivided into parcels."""
 import numpy as np
+import pandas as pd
 import shapely
 from qgis.core import (
     QgsProcessing,
@@ -225,8 +226,22 @@ class SubdivideParcels(AlgorithmBase):
         """The blocks' own parcel_area (and parcel_area_sd) for the engine, when present."""
         if "parcel_area" not in frame.attributes:
             return {}
-        size = {field: as_numbers(frame.attributes[field])
-                for field in PARCEL_SIZE_FIELDS if field in frame.attributes}
+        size = {}
+        for field in PARCEL_SIZE_FIELDS:
+            if field not in frame.attributes:
+                continue
+            raw = pd.Series(np.asarray(frame.attributes[field], dtype=object))
+            size[field] = as_numbers(raw)
+            # NULL or empty: the default size; a value that is there and no finite number
+            # ('x', 'inf') is an input error, not a silent default
+            given = raw.notna().to_numpy() & (raw.astype(str).str.strip() != "").to_numpy()
+            unreadable = given & ~np.isfinite(size[field])
+            if unreadable.any():
+                example = raw[unreadable].iloc[0]
+                raise QgsProcessingException(
+                    f"Layer {frame.name}: {field} is not a finite number in "
+                    f"{int(unreadable.sum())} of its blocks (e.g. {example!r}); leave it empty "
+                    "(NULL) where a block should take the default parcel size.")
         area = size["parcel_area"]
         bad = np.isfinite(area) & (area <= 0)
         if bad.any():

@@ -238,3 +238,11 @@ def test_subdivideparcels_sizes_voronoi_rows_by_the_blocks_parcel_area(qgis_proc
     with pytest.raises(QgsProcessingException, match="bad blocks.*parcel_area that is not "
                                                      "positive"):
         qgis_processing.run("urbansynth:subdivideparcels", dict(params, BLOCKS=bad))
+    # a value that is there but no number is refused, not taken for NULL (the default size)
+    for field_type, value in (("string", "x"), ("string", "inf"), ("double", float("inf"))):
+        odd = memory_layer("Polygon", wkts[:2], "EPSG:32632", name="odd blocks",
+                           fields=f"&field=parcel_area:{field_type}",
+                           rows=[("600" if field_type == "string" else 600.0,), (value,)])
+        with pytest.raises(QgsProcessingException, match="odd blocks'?: parcel_area is not a "
+                                                         "finite number in 1 of its blocks"):
+            qgis_processing.run("urbansynth:subdivideparcels", dict(params, BLOCKS=odd))
