@@ -139,6 +139,34 @@ def test_bad_input(qgis_processing):
           "no parcel")
 
 
+def test_a_layer_of_geometry_collections_gives_its_polygons(qgis_processing):
+    """A layer of collections or mixed types (a GeoPackage 'GEOMETRY' column) is read for
+    the parts of the kind a tool needs: the block inside a collection is subdivided, a
+    feature without any polygon is skipped and counted; a layer without any is refused by
+    name as having no polygons (not 'no geometry')."""
+    from qgis.core import QgsCoordinateReferenceSystem, QgsProcessingException
+
+    from helpers import log_feedback
+
+    def collections(wkts, name):
+        layer = _memory_layer("GeometryCollection", wkts, name=name)
+        layer.setCrs(QgsCoordinateReferenceSystem("EPSG:32633"))  # the URI's is not taken
+        return layer
+
+    block = "POLYGON ((0 0, 120 0, 120 60, 0 60, 0 0))"
+    mixed = collections([f"GEOMETRYCOLLECTION ({block}, LINESTRING (0 70, 120 70))",
+                         "GEOMETRYCOLLECTION (POINT (10 10))"], "mixed blocks")
+    log = log_feedback()
+    rows, geoms = layer_features(qgis_processing.run(
+        ALG, {"BLOCKS": mixed, "SEED": 1, "OUTPUT": "memory:"}, feedback=log)["OUTPUT"])
+    assert len(rows) >= 4 and shapely.covers(shapely.from_wkt(block).buffer(1e-6), geoms).all()
+    assert any("mixed blocks" in m and "1 features without polygons skipped" in m
+               for m in log.messages)
+    points_only = collections(["GEOMETRYCOLLECTION (POINT (10 10))"], "point collections")
+    with pytest.raises(QgsProcessingException, match="point collections'? has no polygons"):
+        qgis_processing.run(ALG, {"BLOCKS": points_only, "OUTPUT": "memory:"})
+
+
 def test_qgis_process_run(tmp_path):
     """One real qgis_process.bin run: exit code 0 (no native-library crash at exit)."""
     target = tmp_path / "parcels.gpkg"

@@ -187,9 +187,11 @@ def read_source(alg, parameters, name: str, context, feedback,
         if optional:
             return None
         raise QgsProcessingException(f"Layer {label} could not be loaded.")
+    mixed = False  # a layer of collections or of mixed types: its parts of ``kind`` are read
     if kind is not None:
         gtype = QgsWkbTypes.geometryType(source.wkbType())
-        if gtype != _KIND_TO_GEOMTYPE[kind]:
+        mixed = gtype == QgsWkbTypes.GeometryType.UnknownGeometry
+        if gtype != _KIND_TO_GEOMTYPE[kind] and not mixed:
             got = _GEOM_NAMES.get(gtype, "no geometry")
             raise QgsProcessingException(
                 f"Layer {label} has {got}; {kind} are needed.")
@@ -258,6 +260,8 @@ def read_source(alg, parameters, name: str, context, feedback,
             f"Layer {label} is empty: it has no features with a geometry"
             + (f" ({n_null} null geometries skipped)." if n_null else "."))
     geoms = shapely.from_wkb(np.array(wkbs, dtype=object), on_invalid="ignore")
+    if mixed:
+        geoms, rows, fids = _parts_of_kind(geoms, rows, fids, kind, label, feedback)
     if kind in ("polygons", "lines"):
         geoms, rows, fids = _apply_invalid_rule(
             invalid_geometry_rule(parameters, name, context), geoms, rows, fids, label, feedback)
@@ -352,16 +356,35 @@ def _apply_invalid_rule(rule: int, geoms, rows, fids, label: str, feedback):
 
 
 def _keep_dimension(geom, kind):
-    """make_valid may return a collection: keep only the parts of the wanted dimension."""
+    """make_valid, or a layer of collections, may give a collection: keep only the parts
+    of the wanted dimension."""
     if geom is None:
         return None
-    dim = 2 if kind == "polygons" else 1
+    dim = {"points": 0, "lines": 1, "polygons": 2}[kind]
     parts = [p for p in shapely.get_parts(geom) if shapely.get_dimensions(p) == dim]
     if not parts:
         return shapely.from_wkt("GEOMETRYCOLLECTION EMPTY")
     if dim == 2:
         return shapely.union_all(parts) if len(parts) > 1 else parts[0]
+    if dim == 0:
+        return shapely.multipoints(parts) if len(parts) > 1 else parts[0]
     return shapely.multilinestrings(parts) if len(parts) > 1 else parts[0]
+
+
+def _parts_of_kind(geoms, rows, fids, kind: str, label: str, feedback):
+    """The features of a layer of collections or mixed types, each reduced to its parts of
+    ``kind``; features without any are skipped (counted in the log), and a layer with none
+    is refused by name."""
+    kept = np.array([_keep_dimension(g, kind) for g in geoms], dtype=object)
+    has = ~(shapely.is_missing(kept) | shapely.is_empty(kept))
+    if not has.any():
+        raise QgsProcessingException(
+            f"Layer {label} has no {kind}: its geometries are collections or of mixed "
+            f"types without any {kind[:-1]}; {kind} are needed.")
+    if not has.all() and feedback is not None:
+        feedback.pushInfo(f"{label}: {int((~has).sum())} features without {kind} skipped (the "
+                          "layer holds collections or mixed geometry types).")
+    return kept[has], [r for r, k in zip(rows, has) if k], [f for f, k in zip(fids, has) if k]
 
 
 def _py(value):
