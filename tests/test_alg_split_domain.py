@@ -181,6 +181,20 @@ def test_key_areas_covering_the_region_leave_no_parcels_and_say_so(qgis_processi
     assert any("no parcels: the key areas cover the region" in w for w in log.warnings)
 
 
+def test_a_region_too_small_for_a_lot_says_so(qgis_processing):
+    """A 2 m square region: no parcel, and the log says the region is too small for a lot
+    (it said 'the parcels layer has no geometries', an output the user never gave)."""
+    from helpers import log_feedback
+
+    tiny = memory_layer("Polygon", ["POLYGON ((0 0, 2 0, 2 2, 0 2, 0 0))"], crs="EPSG:32633",
+                        name="tiny region")
+    log = log_feedback()
+    out = qgis_processing.run(ALG, {"REGION": tiny, "SEED": 1, "OUTPUT_ROADS": "memory:",
+                                    "OUTPUT_PARCELS": "memory:"}, feedback=log)
+    assert not layer_features(out["OUTPUT_PARCELS"])[0]
+    assert any("no parcels" in w and "too small for a lot" in w for w in log.warnings)
+
+
 def test_bad_input(qgis_processing, region_layer):
     from qgis.core import QgsProcessingException
 

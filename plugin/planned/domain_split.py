@@ -1856,10 +1856,24 @@ def table1(layout: Layout) -> Dict[str, float]:
     every vertex of its curve as a 0-10° "corner" and look better than it is, or, with
     the 170-180° deviation measured from 90°, far worse).
     """
+    blocks = layout.street_blocks if layout.street_blocks is not None else layout.blocks
+
+    def given(geoms):
+        return geoms if geoms is not None and len(geoms) else None
+
+    # a region too small for a lot has no parcels (and may have no street): its figures
+    # are NaN, not an error about an empty layer
     res = _metrics.compute_layout_metrics(
-        roads=layout.roads, parcels=layout.parcels,
-        blocks=layout.street_blocks if layout.street_blocks is not None else layout.blocks,
-        area=layout.domain, landuse=layout.table.land_use.to_numpy())
+        roads=given(layout.roads), parcels=given(layout.parcels), blocks=given(blocks),
+        area=layout.domain,
+        landuse=layout.table.land_use.to_numpy() if len(layout.parcels) else None)
+
+    def scalar(kind, name):
+        try:
+            return res.scalar(kind, name)
+        except KeyError:
+            return float("nan")
+
     use = layout.table.land_use.to_numpy()
     resid = use == "residential"
     designed = (layout.table.template.to_numpy() != "key_area")
@@ -1870,13 +1884,13 @@ def table1(layout: Layout) -> Dict[str, float]:
     st = layout.stats
     nan = float("nan")
     return {
-        "l_s": res.scalar("parcels", "l_s"), "l_r": res.scalar("parcels", "l_r"),
-        "l_p": res.scalar("parcels", "l_p"), "l_o": res.scalar("parcels", "l_o"),
-        "b_n": res.scalar("blocks", "blocks_per_km2"), "b_max": res.scalar("blocks", "b_max"),
-        "b_avg": res.scalar("blocks", "b_avg"), "b_min": res.scalar("blocks", "b_min"),
-        "s_l": res.scalar("roads", "street_length_km_per_km2"),
-        "s_i": res.scalar("roads", "intersections_per_km2"),
-        "s_d": res.scalar("roads", "dead_ends_per_km2"),
+        "l_s": scalar("parcels", "l_s"), "l_r": scalar("parcels", "l_r"),
+        "l_p": scalar("parcels", "l_p"), "l_o": scalar("parcels", "l_o"),
+        "b_n": scalar("blocks", "blocks_per_km2"), "b_max": scalar("blocks", "b_max"),
+        "b_avg": scalar("blocks", "b_avg"), "b_min": scalar("blocks", "b_min"),
+        "s_l": scalar("roads", "street_length_km_per_km2"),
+        "s_i": scalar("roads", "intersections_per_km2"),
+        "s_d": scalar("roads", "dead_ends_per_km2"),
         "p_n": pm.scalar("parcels", "p_n_per_km2") if pm else 0.0,
         "p_count": int(designed.sum()),
         "p_angle": pm.scalar("parcels", "p_angle") if pm else nan,
