@@ -120,3 +120,38 @@ def test_loaded_outputs_stack_buildings_above_parcels(qgis_processing, tmp_path)
     project.removeAllMapLayers()
     assert order.index("m_roads.gpkg") < order.index("a_buildings.gpkg") \
         < order.index("z_blocks.gpkg"), order
+
+
+def test_two_outputs_into_one_file_and_a_layerless_uri_are_refused(qgis_processing, tmp_path):
+    """Two outputs of one run into the same file (the random walk waited forever on the
+    GeoPackage, StreetGAN left a GeoTIFF where the roads should be) and an ogr: URI that
+    names a GeoPackage but no layer (QGIS 3.22 appends the output to its first layer: an
+    input's, once) are refused before anything is written; two layers of one GeoPackage
+    are fine."""
+    import shutil
+
+    from qgis.core import QgsProcessingException
+
+    same = tmp_path / "same.gpkg"
+    with pytest.raises(QgsProcessingException, match="OUTPUT.*OUTPUT_INTERSECTIONS.*would "
+                                                     "both be written to"):
+        qgis_processing.run(ALG, {"INPUT": bubenec_layer("streets"), "OUTPUT": str(same),
+                                  "OUTPUT_INTERSECTIONS": str(same)})
+    assert not list(tmp_path.iterdir())
+    src = tmp_path / "streets.gpkg"
+    shutil.copy(bubenec_layer("streets").split("|")[0], src)
+    before = _sha(src)
+    with pytest.raises(QgsProcessingException, match="names the file .* but no layer"):
+        qgis_processing.run(ALG, {"INPUT": f"{src}|layername=streets",
+                                  "OUTPUT": f"ogr:dbname='{src}'",
+                                  "OUTPUT_INTERSECTIONS": None})
+    assert _sha(src) == before
+    both = tmp_path / "both.gpkg"
+    qgis_processing.run(ALG, {"INPUT": bubenec_layer("streets"),
+                              "OUTPUT": f"ogr:dbname='{both}' table=\"roads\" (geom)",
+                              "OUTPUT_INTERSECTIONS": f"ogr:dbname='{both}' table=\"points\" "
+                                                      "(geom)"})
+    code, _, err = run_qgis_process("extractroadhierarchy", {
+        "INPUT": bubenec_layer("streets"), "OUTPUT": str(same),
+        "OUTPUT_INTERSECTIONS": str(same)})
+    assert code != 0 and "would both be written to" in err and "Traceback" not in err, err

@@ -48,6 +48,9 @@ __all__ = ["STAGING_PREFIX", "OutputStaging", "same_file_error"]
 STAGING_PREFIX = ".urbansynth-run-"
 
 _OGR_URI = re.compile(r"^ogr:dbname='(?P<path>(?:[^']|'')*)'\s+table=\"(?P<table>[^\"]+)\"")
+#: An ogr: URI that names a file but no layer: QGIS 3.22 writes such an output into the
+#: file's first layer (appending to it), so it is refused.
+_OGR_NO_TABLE = re.compile(r"^ogr:dbname='(?P<path>(?:[^']|'')*)'")
 
 
 @dataclass
@@ -135,17 +138,31 @@ def _same(a: Path, b: Path) -> bool:
 
 
 def same_file_error(alg, parameters, context) -> Optional[str]:
-    """The message when an output would overwrite an input, else None (checked before
-    anything is written: in the dialog, on the command line and when the run starts)."""
+    """The message when an output would overwrite an input or another output of the run,
+    or names a GeoPackage but no layer in it, else None (checked before anything is
+    written: in the dialog, on the command line and when the run starts)."""
     inputs = _inputs(alg, parameters, context)
-    if not inputs:
-        return None
+    written = []   # (definition, path, table) of the outputs so far
     for definition in alg.destinationParameterDefinitions():
         destination = _destination(alg, definition, parameters, context)
+        if destination and not _OGR_URI.match(destination) and \
+                _OGR_NO_TABLE.match(destination):
+            return (f"Output {definition.description()} ({definition.name()}) names the "
+                    f"file {_OGR_NO_TABLE.match(destination).group('path')} but no layer in "
+                    "it (table=\"...\"): QGIS would append the output to the file's first "
+                    "layer. Give a layer name, or a file of its own.")
         target = _file_of(destination) if destination else None
         if target is None:
             continue
         path, table = target
+        for other, other_path, other_table in written:
+            if (_same(path, other_path) or path.resolve() == other_path.resolve()) and \
+                    (table is None or other_table is None or table == other_table):
+                return (f"Outputs {other.description()} ({other.name()}) and "
+                        f"{definition.description()} ({definition.name()}) would both be "
+                        f"written to {path}: choose a file (or GeoPackage layer) of its own "
+                        "for each.")
+        written.append((definition, path, table))
         for source in inputs:
             if not (_same(path, source.path) or path.resolve() == source.path.resolve()):
                 continue
