@@ -1,4 +1,6 @@
 """urbansynth:buildblockdatabase - example blocks with their footprints and building attributes."""
+from pathlib import Path
+
 import numpy as np
 from qgis.core import (
     QgsProcessing,
@@ -117,7 +119,8 @@ class BuildBlockDatabase(AlgorithmBase):
                            building_attributes=attrs, source=source,
                            progress=qgis_io.progress_for(feedback, 30, 100))
         n_buildings = int(known.sum())
-        feedback.pushInfo(f"Block database written: {output} ({len(block_frame)} blocks, "
-                          f"{n_buildings} buildings).")
+        # the file's name, not ``output``: that is the run's staging copy until it succeeds
+        feedback.pushInfo(f"Block database written: {Path(output).name} ({len(block_frame)} "
+                          f"blocks, {n_buildings} buildings).")
         return {self.OUTPUT: output, self.N_BLOCKS: len(block_frame),
                 self.N_BUILDINGS: n_buildings}

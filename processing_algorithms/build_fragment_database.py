@@ -1,4 +1,6 @@
 """urbansynth:buildfragmentdatabase - road fragments per level, shape and terrain descriptors."""
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 import shapely
@@ -142,5 +144,7 @@ class BuildFragmentDatabase(AlgorithmBase):
                                   "relief_cell_m": cell if dem is not None else None,
                                   **({"dead_end_share": share} if np.isfinite(share) else {})},
                            progress=qgis_io.progress_for(feedback, 60, 100))
-        feedback.pushInfo(f"Fragment database written: {output} ({len(frags)} fragments).")
+        # the file's name, not ``output``: that is the run's staging copy until it succeeds
+        feedback.pushInfo(f"Fragment database written: {Path(output).name} ({len(frags)} "
+                          "fragments).")
         return {self.OUTPUT: output, self.N_FRAGMENTS: len(frags)}

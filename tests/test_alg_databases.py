@@ -41,6 +41,10 @@ def test_helsinki_fragment_database(qgis_processing, helsinki_roads, tmp_path):
     counts = d.table.groupby("level").size()
     assert counts.index.min() == 0 and len(counts) >= 2
     assert any(m.startswith("Level 0:") for m in log.messages)
+    # the log names the file written, not the run's staging copy (gone after the run)
+    assert any(m.startswith("Fragment database written: helsinki_fragments.gpkg")
+               for m in log.messages)
+    assert not any(".urbansynth-run-" in m for m in log.messages)
     assert d.table.is_block.any() and (~d.table.is_block).any()
     assert (d.streets.level.to_numpy() == d.table.set_index("fragment_id").level.loc[
         d.streets.fragment_id].to_numpy() + 1).all()
@@ -166,6 +170,9 @@ def test_helsinki_block_database(qgis_processing, helsinki_blocks, tmp_path):
     with_height = sum(1 for f in buildings.getFeatures() if f["in_block"] and has_height(f))
     assert d.buildings.height_m.notna().sum() == with_height > 50
     assert any("left out" in m for m in log.messages)  # buildings outside every block
+    assert any(m.startswith("Block database written: helsinki_blocks.gpkg")
+               for m in log.messages)
+    assert not any(".urbansynth-run-" in m for m in log.messages)
     # each stored block retrieves itself
     hits = 0
     for k in range(0, len(d), 5):
