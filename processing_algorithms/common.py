@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import shapely
 from qgis.core import (
     QgsProcessingAlgorithm,
     QgsProcessingException,
@@ -306,6 +307,24 @@ class AlgorithmBase(QgsProcessingAlgorithm):
             f"{st['n_blocks']} blocks from {st['n_faces']} closed faces of {frame.name} "
             f"({st['n_small']} too small and {st['n_thin']} too thin dropped).")
         return graph, result
+
+    @staticmethod
+    def require_roads_reach(roads, area, area_label: str, reach: float = 1.0):
+        """Refuse given roads (a Frame) none of which reaches the target ``area`` (within
+        ``reach`` m): the new streets would join none of them, and the run would end
+        empty, or filled far from the roads, without saying why."""
+        if roads is None or not len(roads.geometry):
+            return
+        target = shapely.union_all(np.asarray(area, dtype=object))
+        lines = shapely.union_all(roads.geometry)
+        if shapely.dwithin(target, lines, reach):
+            return
+        raise QgsProcessingException(
+            f"Layer {roads.name} lies entirely outside {area_label} (its nearest road is "
+            f"{shapely.distance(target, lines):,.0f} m away"
+            + (f", more than {reach:,.0f} m" if reach > 1.0 else "") + "): no given road "
+            "reaches the target, so none could join its new streets. Check that both layers "
+            "cover the same place.")
 
     def roads_and_arterials(self, parameters, name, context, feedback, crs):
         """Road lines of an optional layer (drivable classes when it has OSM classes) and

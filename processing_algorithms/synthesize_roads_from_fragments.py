@@ -210,9 +210,11 @@ class SynthesizeRoadsFromFragments(AlgorithmBase):
 
         boundary = None
         if self.given(parameters, self.BOUNDARY):
-            boundary = qgis_io.read_source(self, parameters, self.BOUNDARY, context, feedback,
-                                           kind="polygons", target_crs=frame.crs,
-                                           fields=[]).geometry
+            boundary_frame = qgis_io.read_source(self, parameters, self.BOUNDARY, context,
+                                                 feedback, kind="polygons",
+                                                 target_crs=frame.crs, fields=[])
+            boundary = boundary_frame.geometry
+            self.require_roads_reach(frame, boundary, f"the boundary {boundary_frame.name}")
         result = qgis_io.run_engine(
             label, synthesis_fragments.synthesize, frame.geometry, dbs, dem=dem,
             style_polygons=style_polys, style_database=style_db, n_best=n_best, seed=seed,

@@ -253,6 +253,8 @@ class SynthesizeRoadsGan(AlgorithmBase):
             frame, given_class = drivable_lines(frame, None, set(roads.DRIVABLE_CLASSES),
                                                 feedback)
             given = frame.geometry
+            self.require_roads_reach(frame, geoms, "the target extent" if label ==
+                                     "target extent" else f"the target {label}")
         feedback.setProgress(5)
         result = qgis_io.run_engine(
             f"Target {label}", streetgan.synthesize, geoms, gen, seed=seed,

@@ -290,6 +290,9 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
             existing, existing_class = drivable_lines(existing, None,
                                                       set(roads.DRIVABLE_CLASSES), feedback)
             existing_lines = existing.geometry
+            # a road whose dead end is within the seam distance of the target is continued
+            self.require_roads_reach(existing, target.geometry, f"the target {target.name}",
+                                     reach=random_walk.seam_distance(points, settings))
         elif parameters.get(self.OUTPUT_EXISTING) is not None:
             raise QgsProcessingException("Existing roads with the new junctions "
                                          "(OUTPUT_EXISTING) need EXISTING_ROADS.")

@@ -206,6 +206,15 @@ def test_errors(qgis_processing, helsinki, tmp_path):
     with pytest.raises(QgsProcessingException, match="OUTPUT_DEM needs an elevation model"):
         qgis_processing.run(ALG, {"ARTERIALS": arterials, "FRAGMENT_DB": helsinki["db"],
                                   "OUTPUT": "memory:", "OUTPUT_DEM": str(tmp_path / "x.tif")})
+    # a boundary no arterial reaches (another place, or a CRS mix-up): refused, not filled
+    far = QgsVectorLayer("Polygon?crs=EPSG:32635", "far boundary", "memory")
+    f = QgsFeature()
+    f.setGeometry(QgsGeometry.fromWkt("POLYGON((0 0, 900 0, 900 900, 0 900, 0 0))"))
+    far.dataProvider().addFeatures([f])
+    with pytest.raises(QgsProcessingException, match="lies entirely outside the boundary "
+                                                     "'?far boundary"):
+        qgis_processing.run(ALG, {"ARTERIALS": arterials, "FRAGMENT_DB": helsinki["db"],
+                                  "BOUNDARY": far, "OUTPUT": "memory:"})
 
 
 def test_cancel(qgis_processing, helsinki):

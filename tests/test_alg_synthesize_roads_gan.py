@@ -85,6 +85,16 @@ def test_errors(qgis_processing, tmp_path):
         qgis_processing.run(GAN, {"EXTENT": EXTENT, "MODEL_FILE": str(lonely), "OUTPUT": "memory:"})
     with pytest.raises(QgsProcessingException, match="SEED"):
         qgis_processing.run(GAN, {"EXTENT": EXTENT, "SEED": -1, "OUTPUT": "memory:"})
+    # given roads none of which reaches the target: refused (the run said "drew no road"
+    # and ended with the given roads alone, all outside the target)
+    target = memory_layer("Polygon", ["POLYGON((385000 6671000, 385500 6671000, 385500 "
+                                      "6671500, 385000 6671500, 385000 6671000))"],
+                          crs="EPSG:3067", name="small target")
+    far = memory_layer("LineString", ["LINESTRING(300000 6600000, 301000 6600000)"],
+                       crs="EPSG:3067", name="far roads")
+    with pytest.raises(QgsProcessingException, match="far roads'? lies entirely outside the "
+                                                     "target '?small target"):
+        qgis_processing.run(GAN, {"TARGET": target, "GIVEN_ROADS": far, "OUTPUT": "memory:"})
 
 
 def _write_geotiff(path, array, gt, epsg):

@@ -158,6 +158,12 @@ def test_bad_inputs(qgis_processing, helsinki_points):
     with pytest.raises(Exception, match="weighted target.*between 0 and 1"):
         qgis_processing.run(ALG, {"EXAMPLE": helsinki_points, "EXAMPLE_B": helsinki_points,
                                   "TARGET": weights, "BLEND_FIELD": "w", "OUTPUT": "memory:"})
+    # given roads none of which reaches the target: refused, not an empty network
+    far = memory_layer("LineString", ["LINESTRING(5000 5000, 6000 5000)"], UTM, name="far roads")
+    with pytest.raises(Exception, match="far roads'? lies entirely outside the target "
+                                        "'?my target"):
+        qgis_processing.run(ALG, {"EXAMPLE": helsinki_points, "TARGET": target,
+                                  "EXISTING_ROADS": far, "OUTPUT": "memory:"})
     # the given roads with the new junctions, asked for with no given roads: before any work
     with pytest.raises(Exception, match="OUTPUT_EXISTING.*EXISTING_ROADS"):
         qgis_processing.run(ALG, {"EXAMPLE": helsinki_points, "TARGET": target,

@@ -1693,6 +1693,15 @@ def _road_slot_points(graph, example: iq.PointSet, area, rng, min_gap_share=0.4)
     return np.array(xy), np.array(donor), np.array(edge), np.array(dist)
 
 
+def seam_distance(example: iq.PointSet, settings: Optional[WalkSettings] = None) -> float:
+    """How close (m) to the target an existing road's dead end must be to be a seam end
+    (the walks continue it): ``settings.seam_distance``, else a quarter of the example's
+    median street distance."""
+    if settings is not None and settings.seam_distance is not None:
+        return float(settings.seam_distance)
+    return 0.25 * float(np.median(example.dist_mean[:, 0]))
+
+
 def _existing_state(lines, area, offset: int, seam_distance: float, example=None, rng=None,
                     slots: bool = True):
     """Existing roads as points (their nodes and junction slots) and constraints (their
@@ -1892,8 +1901,7 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
         raise InputError(f"{len(given_class)} road classes for "
                          f"{0 if existing_lines is None else len(existing_lines)} existing roads")
     if existing_lines is not None and len(existing_lines):
-        seam_d = settings.seam_distance if settings.seam_distance is not None else \
-            0.25 * float(np.median(example.dist_mean[:, 0]))
+        seam_d = seam_distance(example, settings)
         # new points too close to an existing road would make slivers
         ex_lines = np.asarray(existing_lines, dtype=object)
         d = shapely.distance(shapely.union_all(ex_lines), shapely.points(pts.xy))
