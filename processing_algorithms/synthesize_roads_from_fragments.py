@@ -137,7 +137,9 @@ class SynthesizeRoadsFromFragments(AlgorithmBase):
         self.add(QgsProcessingParameterNumber(
             self.MAX_LEVEL, "Deepest street level", QgsProcessingParameterNumber.Type.Integer,
             optional=True, minValue=1, maxValue=synthesis_fragments.MAX_LEVELS),
-            "Stop after synthesizing streets of this level (default: as deep as the databases go).")
+            "Stop after synthesizing streets of this level (default: as deep as the databases go). "
+            "With it the fill and the dead-end steering are off: a network of these levels "
+            "only, whose faces may stay larger than the example's blocks.")
         self.add_seed(
             "The same seed with the same inputs gives the same network.")
         self.add(QgsProcessingParameterNumber(
@@ -180,6 +182,10 @@ class SynthesizeRoadsFromFragments(AlgorithmBase):
                         "split the arterials into districts and run them one by one")
         n_best = self.number(parameters, self.N_BEST, context)
         max_level = self.number(parameters, self.MAX_LEVEL, context)
+        if max_level is not None and self.parameterAsBool(parameters, self.FILL, context):
+            feedback.pushInfo(f"MAX_LEVEL {max_level}: the fill and the dead-end steering are "
+                              "off (streets of levels 1 to it only; faces larger than the "
+                              "example's blocks may stay empty).")
         seed = self.seed(parameters, context)
         gamma = self.number(parameters, self.GAMMA, context)
         cell = self.number(parameters, self.DEM_CELL_SIZE, context)

@@ -117,6 +117,25 @@ def test_max_level_stops_the_recursion(grid_db):
     assert set(res.table.level) == {0, 1}
 
 
+def test_links_take_no_level_deeper_than_max_level():
+    """A piece apart is linked to the arterials by a street a level below the deepest one,
+    but with MAX_LEVEL no deeper than it (a run asked for levels 1-2 had its links at 3)."""
+    square = shapely.box(0, 0, 400, 400)
+    arterials = shapely.get_parts(shapely.line_merge(shapely.boundary(square)))
+    piece = shapely.LineString([(150, 200), (250, 200)])
+    geometry = np.concatenate([arterials, [piece]]).astype(object)
+    n = len(geometry)
+    level = np.r_[np.zeros(len(arterials), int), [2]]
+    attrs = {"source_fragment": np.array(["arterial"] * len(arterials) + ["f:1"], dtype=object),
+             "database": np.full(n, "", dtype=object), "fragment_id": np.full(n, -1),
+             "query": np.full(n, -1)}
+    for max_level, expected in ((None, 3), (2, 2), (1, 1)):
+        g, lv, at, n_links, n_dropped = sf._link_floating(geometry, level, attrs, square,
+                                                          max_level)
+        assert n_links >= 1 and n_dropped == 0
+        assert set(lv[at["source_fragment"] == "link"]) == {expected}, max_level
+
+
 def test_very_concave_target_falls_back_to_a_procedural_split(tmp_path):
     """A square fragment with a central junction warped into a thin U: the junction would
     land outside, so the face is split procedurally instead, and everything stays inside."""

@@ -767,7 +767,7 @@ def _off_controlled_access(geometry, level, attrs, arterials, arterial_class, in
     return geometry, level, attrs, ca
 
 
-def _link_floating(geometry, level, attrs, inside):
+def _link_floating(geometry, level, attrs, inside, max_level: Optional[int] = None):
     """Link the pieces of the network that do not reach an arterial to the network that does
     (:func:`links.link_floating_pieces`: streets of faces closed only by the boundary, whose
     outline is no street), bent along the target where no straight link stays inside it
@@ -775,8 +775,9 @@ def _link_floating(geometry, level, attrs, inside):
     with up to 3.2 km of streets, leaving a face of three times the example's p90 block
     empty); a piece that cannot be linked is dropped. Then arterials apart inside the
     target, with the streets on each, are joined into one network (:func:`links.join_pieces`;
-    parts of a target apart stay apart). Every link stays ``inside``. Returns the network,
-    the number of links and the number of streets dropped."""
+    parts of a target apart stay apart). Every link stays ``inside``; it is a level below the
+    deepest street, but not below ``max_level``. Returns the network, the number of links
+    and the number of streets dropped."""
     links, keep = link_floating_pieces(geometry, attrs["source_fragment"] == "arterial",
                                        inside=inside, bent=True)
     if not keep.all():
@@ -787,6 +788,8 @@ def _link_floating(geometry, level, attrs, inside):
         if not len(links):
             return geometry, level, attrs
         lvl = int(level.max()) + 1 if len(level) else 1
+        if max_level is not None:
+            lvl = max(min(lvl, int(max_level)), 1)
         return add_streets(geometry, level, attrs, [links], [("link", "", -1, len(links), -1)],
                            lvl, 0.0)
 
@@ -888,7 +891,9 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
     n_best : int, random choice among this many best matches (1 = always the best)
     seed : int, optional, seed of the random generator (same seed, same network)
     max_level : int, optional, deepest street level to synthesise (default: as deep as
-        the databases go)
+        the databases go); with it the fill and the dead-end steering are off (a network of
+        those levels only: a face over the example's p90 may stay empty), and the links
+        that join pieces apart take that level, none deeper
     gamma : float in [0, 1], weight of the shape term against the slope term (eq. 4.2)
     names : database names for the output (default: the file names without extension)
     min_area, min_width : float, faces under these (m², m) are slivers, not queries
@@ -1161,7 +1166,7 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
         geometry, level = geometry[~on_ring], level[~on_ring]
         attrs = {k: v[~on_ring] for k, v in attrs.items()}
     geometry, level, attrs, n_links, n_dropped = _link_floating(
-        geometry, level, attrs, target if target is not None else area)
+        geometry, level, attrs, target if target is not None else area, max_level)
     stats["links"] = n_links
     stats["n_dropped"] = n_dropped
     if n_links or n_dropped:
