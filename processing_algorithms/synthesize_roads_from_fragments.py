@@ -232,11 +232,15 @@ class SynthesizeRoadsFromFragments(AlgorithmBase):
             arterial_class=qgis_io.osm_tag_column(frame, "highway"))
         q = result.queries
         n_inserted = int((q.outcome == "fragment").sum())
+        n_split = int((q.outcome == "procedural").sum())
+        n_block = int((q.outcome == "block").sum())
+        n_fill = int(q.outcome.str.startswith("fill_").sum())
+        n_rest = len(q) - n_inserted - n_split - n_block - n_fill  # each query one outcome
         feedback.pushInfo(
             f"{len(q)} query fragments: {n_inserted} filled from examples, "
-            f"{int((q.outcome == 'procedural').sum())} split procedurally, "
-            f"{int(q.outcome.isin(['block', 'unsplit', 'no_candidate']).sum())} left as blocks, "
-            f"{int(q.outcome.str.startswith('fill_').sum())} filled by the fill stage; "
+            f"{n_split} split procedurally, {n_block} kept as blocks, "
+            f"{n_fill} filled by the fill stage, {n_rest} left as they are (too small, or no "
+            "fragment or split fits); "
             f"{len(result.geometry)} road edges over {result.stats['area_km2']:.3f} km² in "
             f"{result.stats['seconds']:.1f} s.")
 

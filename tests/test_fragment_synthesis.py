@@ -624,8 +624,20 @@ def test_a_hamlet_at_the_end_of_an_arm_keeps_its_streets():
     with tempfile.TemporaryDirectory() as tmp:
         db = make_db(Path(tmp) / "ex.gpkg", np.concatenate([t.lines for t in others]),
                      np.concatenate([t.level for t in others]))
-        res = sf.synthesize(target.given, [db], seed=0, boundary=target.area)
+        log = []
+        res = sf.synthesize(target.given, [db], seed=0, boundary=target.area,
+                            progress=Progress(log=log.append))
     assert res.stats["n_dropped"] == 0
+    # each level's outcomes add up to its query fragments, those too small or that nothing
+    # fits included (they went unsaid: 'Level 0: 6 query fragments' listed 5)
+    import re
+
+    levels = [m for m in log if m.startswith("Level ")]
+    assert levels
+    for m in levels:
+        total = int(re.match(r"Level \d+: (\d+) query", m).group(1))
+        assert sum(map(int, re.findall(r"(\d+) (?:filled|kept|split|left)", m))) == total, m
+    assert any("left as they are" in m for m in levels)
     assert res.stats["fill"]["left_empty"] == 0
     g = res.geometry
     outline = shapely.get_parts(shapely.boundary(target.area))

@@ -1140,9 +1140,14 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
                                                  new_attrs, lvl + 1, min_dangle)
         counts["seconds"] = time.perf_counter() - t_level
         stats["levels"][lvl] = counts
+        # every query has one outcome: the rest are too small, or neither a fragment nor a
+        # split fits them
+        rest = counts["queries"] - counts["fragment"] - counts["block"] - counts["procedural"]
         progress.info(f"Level {lvl}: {counts['queries']} query fragments, "
                       f"{counts['fragment']} filled from examples, {counts['block']} kept as "
                       f"blocks, {counts['procedural']} split procedurally"
+                      + (f", {rest} left as they are (too small, or no fragment or split "
+                         "fits)" if rest else "")
                       + (f" ({counts['rejected']} warps rejected)" if counts["rejected"] else "")
                       + ".")
     if fill and max_level is None and np.isfinite(max_block):
