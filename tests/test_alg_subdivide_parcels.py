@@ -199,3 +199,26 @@ def test_quality_style(qgis_app):
     assert [r.filterExpression() for r in rules[:2]] == [
         '"undesirable" AND "has_street_access"', 'NOT "undesirable" AND "has_street_access"']
     assert rules[0].symbol().color().name() != rules[1].symbol().color().name()
+
+
+def test_a_shapefile_output_keeps_its_quality_style(qgis_processing, tmp_path):
+    """A shapefile cuts field names to ten characters (undesirable -> undesirabl,
+    has_street_access -> has_street): the style saved beside it names the fields as the
+    file has them, so that its rules still tell good lots from undesirable ones."""
+    from qgis.core import QgsFeatureRequest, QgsRenderContext, QgsVectorLayer
+
+    out = tmp_path / "parcels.shp"
+    qgis_processing.run(ALG, {"ROADS": bubenec_layer("streets"), "METHOD": 0, "SEED": 3,
+                              "OUTPUT": str(out)})
+    layer = QgsVectorLayer(str(out), "parcels", "ogr")   # opens with the sidecar .qml
+    names = layer.fields().names()
+    assert {"undesirabl", "has_street"} <= set(names) and "undesirable" not in names
+    rules = layer.renderer().rootRule().children()
+    assert rules[0].filterExpression() == '"undesirabl" AND "has_street"'
+    # every feature falls in one of the rules (none did: the rules named missing fields)
+    context = QgsRenderContext()
+    renderer = layer.renderer().clone()
+    renderer.startRender(context, layer.fields())
+    for feature in layer.getFeatures(QgsFeatureRequest()):
+        assert renderer.symbolsForFeature(feature, context), feature.attributes()
+    renderer.stopRender(context)

@@ -33,6 +33,39 @@ def style_output(context, dest_id: Optional[str], qml_name: str) -> None:
         attach_style(context, dest_id, str(qml))
 
 
+#: The longest field name a shapefile (dBase) keeps: longer ones are cut to it on writing.
+DBF_NAME_LENGTH = 10
+
+
+def style_for_fields(qml: str, field_names) -> str:
+    """``qml`` with every field it names that the layer lacks but holds cut to a shapefile's
+    ten characters (``undesirable`` -> ``undesirabl``) named as the layer has it, in a
+    temporary copy; ``qml`` itself when the layer has every field (a GeoPackage) or none
+    can be matched. A shipped style names the engine's fields, whose rules would otherwise
+    match nothing in a shapefile (tested in tests/test_alg_subdivide_parcels.py).
+    """
+    import re
+    import tempfile
+
+    have = set(field_names)
+    text = Path(qml).read_text(encoding="utf-8")
+    named = set(re.findall(r'(?:&quot;|(?:name|field|attr)=")([A-Za-z_][A-Za-z0-9_]*)'
+                           r'(?:&quot;|")', text))
+    renames = {}
+    for name in named - have:
+        cut = name[:DBF_NAME_LENGTH]
+        if len(name) > DBF_NAME_LENGTH and cut in have:
+            renames[name] = cut
+    if not renames:
+        return qml
+    for name, cut in renames.items():
+        text = re.sub(rf'(&quot;|(?:name|field|attr)="){re.escape(name)}(&quot;|")',
+                      rf"\g<1>{cut}\g<2>", text)
+    out = Path(tempfile.mkdtemp(prefix="urbansynth-style-")) / Path(qml).name
+    out.write_text(text, encoding="utf-8")
+    return str(out)
+
+
 def save_style_with_layer(destination: str, qml: str) -> Optional[str]:
     """Store ``qml`` with the written layer as its default style: in the GeoPackage's
     ``layer_styles`` table, or as the sidecar ``.qml`` QGIS reads for other files. Returns
@@ -42,7 +75,7 @@ def save_style_with_layer(destination: str, qml: str) -> Optional[str]:
     layer = QgsVectorLayer(destination, "output", "ogr")
     if not layer.isValid():
         return f"the output {destination} could not be opened to store its style"
-    message, ok = layer.loadNamedStyle(qml)
+    message, ok = layer.loadNamedStyle(style_for_fields(qml, layer.fields().names()))
     if not ok:
         return f"the style {qml} could not be read: {message}"
     if layer.dataProvider().storageType() == "GPKG":
@@ -68,7 +101,8 @@ def attach_style(context, dest_id: str, qml: str) -> None:
     class _Styler(QgsProcessingLayerPostProcessorInterface):
         def postProcessLayer(self, layer, ctx, feedback):  # noqa: N802
             if layer is not None and layer.isValid():
-                layer.loadNamedStyle(qml)
+                fields = layer.fields().names() if hasattr(layer, "fields") else []
+                layer.loadNamedStyle(style_for_fields(qml, fields) if fields else qml)
                 layer.triggerRepaint()
                 _stack(layer, ctx.project() or QgsProject.instance(), Path(qml).name)
 
