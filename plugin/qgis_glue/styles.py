@@ -61,7 +61,11 @@ def style_for_fields(qml: str, field_names) -> str:
     for name, cut in renames.items():
         text = re.sub(rf'(&quot;|(?:name|field|attr)="){re.escape(name)}(&quot;|")',
                       rf"\g<1>{cut}\g<2>", text)
-    out = Path(tempfile.mkdtemp(prefix="urbansynth-style-")) / Path(qml).name
+    # in Processing's temporary folder, which QGIS removes when it closes
+    from qgis.core import QgsProcessingUtils
+
+    out = Path(tempfile.mkdtemp(prefix="urbansynth-style-",
+                                dir=QgsProcessingUtils.tempFolder())) / Path(qml).name
     out.write_text(text, encoding="utf-8")
     return str(out)
 
