@@ -160,7 +160,9 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
             self.OUTPUT_INTERSECTIONS, "Intersection points used", QgsProcessing.SourceType.TypeVectorPoint,
             optional=True, createByDefault=False),
             "The attributed points placed in the target (example 0 = first, 1 = second, "
-            "-1 = existing roads) with the connections they got.")
+            "-1 = a node of the existing roads, -2 = a junction slot offered on an existing "
+            "road) with the connections they got: degree is what the point had in its "
+            "example, connections what it got here (a point or slot with 0 was not taken).")
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT_BLOCKS, "Blocks", QgsProcessing.SourceType.TypeVectorPolygon, optional=True,
             createByDefault=False),
