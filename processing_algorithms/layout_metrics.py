@@ -278,6 +278,9 @@ class LayoutMetrics(AlgorithmBase):
         table = metrics.compare(candidate, example)
         feedback.pushInfo(f"{len(table)} measures"
                           + (" compared with the example." if example is not None else "."))
+        breach = report.dead_end_breach(table) if example is not None else None
+        if breach:
+            feedback.pushWarning(f"Invariants against the example: {breach}.")
         feedback.setProgress(82)
 
         results = {}

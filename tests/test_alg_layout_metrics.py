@@ -184,3 +184,22 @@ def test_counting_choices_and_invariants(qgis_processing, tmp_path):
     from qgis.core import QgsProcessingException
     with pytest.raises(QgsProcessingException, match="needs a 'highway' or 'road_class'"):
         qgis_processing.run(ALG, {"ROADS": synthesis, "DRIVABLE_ONLY": True, "OUTPUT": "memory:"})
+
+
+def test_a_dead_end_share_beyond_the_example_band_is_logged(qgis_processing):
+    """A sound network whose dead-end share is a third under the example's: the log warns
+    (it said 'no violation', the violation count leaving the share out)."""
+    from helpers import log_feedback, memory_layer
+
+    given = memory_layer("LineString", ["LINESTRING(0 0, 400 0)"], crs="EPSG:32633",
+                         name="given")
+    layout = memory_layer("LineString", [
+        "LINESTRING(0 0, 400 0)", "LINESTRING(100 0, 100 150)", "LINESTRING(300 0, 300 150)",
+        "LINESTRING(100 150, 300 150)"], crs="EPSG:32633", name="layout")
+    tee = memory_layer("LineString", ["LINESTRING(0 0, 200 0)", "LINESTRING(100 0, 100 100)"],
+                       crs="EPSG:32633", name="a T")
+    log = log_feedback()
+    qgis_processing.run(ALG, {"ROADS": layout, "GIVEN_ROADS": given, "EXAMPLE_ROADS": tee,
+                              "OUTPUT": "memory:"}, feedback=log)
+    assert any("dead-end share 0.50 is 33 % below the example's 0.75" in w
+               for w in log.warnings), log.warnings

@@ -479,3 +479,29 @@ def test_bearing_row_reports_the_turn_between_mean_directions():
     row = M.compare(a, b).iloc[0]
     assert row.statistic == "axial_mean"
     assert row.rel_diff == pytest.approx(-8.0, abs=1e-6)
+
+
+def test_a_dead_end_share_beyond_the_example_band_is_said_in_the_summary():
+    """A sound network (every contact a junction) whose dead-end share is 33 % under the
+    example's: the violation count leaves the share out (it needs an example), so the
+    summary said 'sound' under a flagged row; it now says the share is beyond the band."""
+    from urban_synthesis.plugin.network.invariants import DEAD_END_TOLERANCE
+
+    given = [shapely.LineString([(0, 0), (400, 0)])]
+    streets = [shapely.LineString([(100, 0), (100, 150)]), shapely.LineString([(300, 0), (300, 150)]),
+               shapely.LineString([(100, 150), (300, 150)])]
+    cand = M.compute_layout_metrics(roads=given + streets, given_roads=given)
+    tee = M.compute_layout_metrics(roads=[shapely.LineString([(0, 0), (200, 0)]),
+                                          shapely.LineString([(100, 0), (100, 100)])])
+    table = M.compare(cand, tee)
+    row = table[(table.metric == "dead_end_share") & (table.statistic == "value")].iloc[0]
+    assert abs(row.rel_diff) > DEAD_END_TOLERANCE
+    text = R.render_report(cand, tee)
+    summary = text[text.index("<h2>Summary</h2>"):text.index("<h2>Inputs</h2>")]
+    assert "The street network is sound" in summary
+    assert f"beyond the ±{100 * DEAD_END_TOLERANCE:.0f} % the invariants allow" in summary
+    import html
+
+    assert html.escape(R.dead_end_breach(table)) in summary
+    # within the band: nothing said
+    assert R.dead_end_breach(M.compare(tee, tee)) is None

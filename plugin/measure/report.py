@@ -303,6 +303,23 @@ def _judge(row) -> Tuple[str, bool, float]:
     return "unlike the example's" + trend, False, wn
 
 
+def dead_end_breach(comparison: pd.DataFrame) -> Optional[str]:
+    """The sentence on the layout's dead-end share when it lies beyond the invariants' band
+    around the example's (:data:`NEAR_EXAMPLE`), else None: the one invariant that needs an
+    example, so the violation count leaves it out and the summary and the log say it."""
+    key = ("invariants", "dead_end_share")
+    rows = comparison[(comparison.kind == key[0]) & (comparison.metric == key[1])
+                      & (comparison.statistic == "value")]
+    if rows.empty:
+        return None
+    r = rows.iloc[0]
+    if not (np.isfinite(r.rel_diff) and abs(r.rel_diff) > NEAR_EXAMPLE[key]):
+        return None
+    return (f"its dead-end share {r.candidate:.2f} is {100 * abs(r.rel_diff):.0f} % "
+            f"{'above' if r.rel_diff > 0 else 'below'} the example's {r.example:.2f}, beyond "
+            f"the ±{100 * NEAR_EXAMPLE[key]:.0f} % the invariants allow")
+
+
 def summary_html(comparison: pd.DataFrame, has_example: bool) -> str:
     """The plain-language summary: what matches the example, what does not, by how much,
     and whether the street network is sound (the invariants)."""
@@ -311,9 +328,12 @@ def summary_html(comparison: pd.DataFrame, has_example: bool) -> str:
     out = ["<h2>Summary</h2>"]
     inv = rows.get(("invariants", "violations", True))
     if inv is not None and np.isfinite(inv.candidate):
+        breach = dead_end_breach(comparison) if has_example else None
         if inv.candidate == 0:
-            out.append("<p>The street network is sound: every crossing is a junction, it "
-                       "is connected to the given roads, and no new street doubles one.</p>")
+            out.append(("<p class='warn'>" if breach else "<p>")
+                       + "The street network is sound: every crossing is a junction, it "
+                       "is connected to the given roads, and no new street doubles one"
+                       + (f"; but {html.escape(breach)}.</p>" if breach else ".</p>"))
         else:
             problems = [f"{_fmt(rows[('invariants', name, True)].candidate)} × "
                         f"{html.escape(label.lower())}"
@@ -323,6 +343,8 @@ def summary_html(comparison: pd.DataFrame, has_example: bool) -> str:
                         and rows[("invariants", name, True)].candidate > 0]
             out.append("<p class='warn'><b>The street network has "
                        f"{_fmt(inv.candidate)} problems</b>: {'; '.join(problems)}.</p>")
+            if breach:
+                out.append(f"<p class='warn'>Also, {html.escape(breach)}.</p>")
     if not has_example:
         out.append("<p>No example was given: the tables below describe the layout alone.</p>")
         return "".join(out)
