@@ -80,3 +80,34 @@ def test_the_inputs_own_setting_wins(qgis_processing):
     finally:
         QgsProject.instance().removeMapLayer(buildings.id())
     assert layer.featureCount() == 9
+
+
+#: A junction polygon of a district synthesised in EPSG:4326 (Mauren), as the engine made it
+#: in UTM 32N: valid there, with four vertices a fraction of a micrometre apart, which cross
+#: its ring once the coordinates are written back in degrees.
+JUNCTION_UTM = (
+    "MULTIPOLYGON (((540686.8295413055 5228872.494258502, 540691.6917797572 5228866.141413688, "
+    "540702.8533740195 5228874.592378947, 540700.4167971073 5228877.810482652, "
+    "540700.4167978977 5228877.810481609, 540700.4167986879 5228877.810480565, "
+    "540700.4167994782 5228877.810479522, 540698.0241934168 5228880.9705131175, "
+    "540686.8625932172 5228872.519555718, 540686.8295413055 5228872.494258502)))")
+
+
+def test_polygons_written_back_in_degrees_stay_valid(qgis_app):
+    """Geometry written back to the input CRS is valid by construction: a polygon that the
+    transform to degrees leaves crossing its own ring is made valid again, its area kept."""
+    import numpy as np
+    from qgis.core import QgsCoordinateReferenceSystem as Crs
+
+    from urban_synthesis.plugin.qgis_glue import qgis_io
+
+    utm = np.array([shapely.from_wkt(JUNCTION_UTM)], dtype=object)
+    assert shapely.is_valid(utm[0])
+    degrees = qgis_io.reproject(utm, Crs("EPSG:32632"), Crs("EPSG:4326"), None)
+    assert not shapely.is_valid(degrees[0])       # what the plain transform gives
+    for multi in (True, False):
+        fixed = qgis_io.valid_after_transform(degrees, multi)
+        assert shapely.is_valid(fixed[0]) and shapely.get_type_id(fixed[0]) in (3, 6)
+        back = qgis_io.reproject(fixed, Crs("EPSG:4326"), Crs("EPSG:32632"), None)
+        assert shapely.area(back[0]) == pytest.approx(shapely.area(utm[0]), rel=1e-6)
+    assert qgis_io.valid_after_transform(utm)[0] is utm[0]    # a valid one is left as it is
