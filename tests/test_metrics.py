@@ -505,3 +505,22 @@ def test_a_dead_end_share_beyond_the_example_band_is_said_in_the_summary():
     assert html.escape(R.dead_end_breach(table)) in summary
     # within the band: nothing said
     assert R.dead_end_breach(M.compare(tee, tee)) is None
+
+
+def test_the_plugins_own_road_classes_count_as_drivable():
+    """A synthesis measured with DRIVABLE_ONLY keeps its streets: growroads' major / minor
+    and StreetGAN's given / arterial / local classes are drivable (they were taken for
+    footways and counted apart, or refused as 'no drivable class')."""
+    from urban_synthesis.plugin.network import street_graph
+    from urban_synthesis.plugin.roads import growth
+
+    assert set(growth.ROAD_CLASSES) <= set(street_graph.SYNTHESISED_CLASSES)
+    lines = grid(3, 100.0)
+    classes = (["major", "minor", "local", "given", "arterial"] * len(lines))[:len(lines)]
+    res = M.compute_layout_metrics(roads=lines, road_class=classes, drivable_only=True)
+    every = M.compute_layout_metrics(roads=lines)
+    assert res.scalar("roads", "street_length_km_per_km2") == pytest.approx(
+        every.scalar("roads", "street_length_km_per_km2"))
+    footway = M.compute_layout_metrics(roads=lines, road_class=["footway"] + classes[1:],
+                                       drivable_only=True)
+    assert any("1 lines of non-drivable" in n for n in footway.notes)

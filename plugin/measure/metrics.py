@@ -43,7 +43,8 @@ from ..core.geometry import minimum_rectangles
 from ..core.progress import InputError, Progress, ensure
 from ..network import blocks as _blocks
 from ..network import invariants as _invariants
-from ..network.street_graph import DRIVABLE_CLASSES, RoadGraph, measured_graph
+from ..network.street_graph import (DRIVABLE_CLASSES, SYNTHESISED_CLASSES, RoadGraph,
+                                    measured_graph)
 
 __all__ = [
     "Scalar", "Distribution", "MetricsResult", "COMPARISON_COLUMNS",
@@ -913,7 +914,8 @@ def compute_layout_metrics(roads=None, blocks=None, parcels=None, buildings=None
         traffic islands and dual-carriageway strips that ``extractblocks`` drops.
     road_class : OSM ``highway`` value per road line, optional
     drivable_only : bool
-        Keep only roads whose class is in :data:`street_graph.DRIVABLE_CLASSES` (no
+        Keep only roads whose class is in :data:`street_graph.DRIVABLE_CLASSES` or is one
+        this plugin's synthesis writes (:data:`street_graph.SYNTHESISED_CLASSES`) (no
         footways, paths, service roads, tracks); needs ``road_class``. Default: every line
         counts (a synthesis has no class); the notes say how many non-drivable lines count.
     edge_distance : float
@@ -964,7 +966,7 @@ def compute_layout_metrics(roads=None, blocks=None, parcels=None, buildings=None
         if road_class is not None:
             road_class = np.asarray(road_class, dtype=object)[kept]
             drivable = np.isin(np.asarray([str(c) for c in road_class], dtype=object),
-                               DRIVABLE_CLASSES)
+                               DRIVABLE_CLASSES + SYNTHESISED_CLASSES)
             if drivable_only:
                 if not drivable.any():
                     raise InputError("no road line has a drivable highway class")

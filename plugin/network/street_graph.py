@@ -34,7 +34,7 @@ from ..core.geometry import pinned_ends
 from ..core.progress import InputError, Progress, ensure
 
 __all__ = [
-    "DRIVABLE_CLASSES", "ARTERIAL_CLASSES", "CLASS_RANK", "RoadGraph",
+    "DRIVABLE_CLASSES", "SYNTHESISED_CLASSES", "ARTERIAL_CLASSES", "CLASS_RANK", "RoadGraph",
     "drivable_and_arterial", "parse_other_tags", "vertical_layer", "class_rank",
     "clean_network", "measured_graph", "collapse_short_pieces", "graph_from_lines",
     "node_lines", "renode", "snap_ends_onto_lines", "ends_as_vertices", "split_at_ends",
@@ -48,6 +48,9 @@ DRIVABLE_CLASSES = (
     "secondary", "secondary_link", "tertiary", "tertiary_link", "unclassified",
     "residential", "living_street", "road",
 )
+#: The road classes this plugin's own road synthesis writes (growroads: major, minor;
+#: StreetGAN: given, arterial, local): drivable streets too when a synthesis is measured.
+SYNTHESISED_CLASSES = ("major", "minor", "given", "arterial", "local")
 #: OSM classes taken as arterials (hierarchy level 0) by the OSM-class method.
 ARTERIAL_CLASSES = (
     "motorway", "motorway_link", "trunk", "trunk_link", "primary", "primary_link",
