@@ -194,10 +194,14 @@ class SynthesizeRoads(AlgorithmBase):
                               {"ROADS": parameters[self.EXAMPLE_ROADS], "DEM": dem,
                                "OUTPUT": QgsProcessing.TEMPORARY_OUTPUT})["OUTPUT"]
             steps.setCurrentStep(1)
-        # every method fills the district: the boundary given, or the arterials' convex hull
-        boundary = parameters.get(self.BOUNDARY)
-        if not self.given(parameters, self.BOUNDARY):
-            boundary = self._hull_layer(area, arterials, context)
+        # every method fills the district: the boundary given, or the arterials' convex hull,
+        # as a layer in the arterials' CRS: every method writes its roads in its target's
+        # CRS, so all of them write in the arterials' (a boundary in another CRS gave its
+        # own to growth's and StreetGAN's roads, and so to every output of the district)
+        name = (f"boundary {qgis_io.layer_name(self, parameters, self.BOUNDARY, context)}"
+                if self.given(parameters, self.BOUNDARY)
+                else f"convex hull of the arterials {arterials.name}")
+        boundary = self._area_layer(area, arterials, context, name)
         if method.key == "fragments":
             params = {"ARTERIALS": parameters[self.ARTERIALS], "BOUNDARY": boundary,
                       "FRAGMENT_DB": fragment_db, "DEM": dem, "SEED": seed,
@@ -221,13 +225,13 @@ class SynthesizeRoads(AlgorithmBase):
         return {self.OUTPUT: result["OUTPUT"]}
 
     @staticmethod
-    def _hull_layer(area, arterials, context):
-        """The convex hull of the arterials as a layer, named so that messages say what it
-        is, in the arterials' CRS."""
+    def _area_layer(area, arterials, context, name: str):
+        """The district (the boundary given, or the arterials' convex hull) as a layer in the
+        arterials' CRS, named so that messages say what it is."""
         hull = qgis_io.reproject(np.array([area], dtype=object), arterials.crs,
                                  arterials.source_crs, context)[0]
-        layer = QgsVectorLayer(f"Polygon?crs={arterials.source_crs.authid()}",
-                               f"convex hull of the arterials {arterials.name}", "memory")
+        layer = QgsVectorLayer(f"MultiPolygon?crs={arterials.source_crs.authid()}", name,
+                               "memory")
         if not layer.crs().isValid():
             layer.setCrs(arterials.source_crs)
         feature = QgsFeature()

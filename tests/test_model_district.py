@@ -145,3 +145,25 @@ def test_synthesize_roads_rejects_points_as_arterials(qgis_processing):
         qgis_processing.run("urbansynth:synthesizeroads", {
             "METHOD": 0, "EXAMPLE_ROADS": helsinki_layer(),
             "ARTERIALS": helsinki_layer("points"), "OUTPUT": "memory:"})
+
+
+def test_synthesize_roads_writes_in_the_arterials_crs(qgis_processing, helsinki_arterials,
+                                                      tmp_path):
+    """A district boundary in another CRS than the arterials: the roads come out in the
+    arterials' CRS whatever the method (growth wrote them in the boundary's), inside the
+    boundary."""
+    import geopandas as gpd
+
+    hierarchy, arterials = helsinki_arterials
+    sketch = _read(arterials, None)
+    hull = shapely.convex_hull(shapely.union_all(sketch.to_crs(3067).geometry.values))
+    boundary = tmp_path / "boundary.gpkg"
+    gpd.GeoDataFrame({"name": ["district"]}, geometry=[hull], crs=3067).to_file(boundary)
+    out = str(tmp_path / "roads.gpkg")
+    qgis_processing.run("urbansynth:synthesizeroads", {
+        "METHOD": 1, "ARTERIALS": arterials, "BOUNDARY": str(boundary), "SEED": 3,
+        "OUTPUT": out})
+    roads = _read(out, None)
+    assert sketch.crs != 3067 and roads.crs == sketch.crs
+    lines = roads.to_crs(3067).geometry.values
+    assert shapely.within(lines, hull.buffer(1.0)).mean() > 0.99
