@@ -72,6 +72,14 @@ def test_copy_itself_clip_and_far():
             # within one storey of the smallest footprint of the group
             assert abs(achieved - far) <= a[g].min() / ga + 1e-9
         assert r.stats["far_min"] == pytest.approx(far, abs=0.01)
+    # a block its footprints cannot fill to the target under the height limit: the shed in
+    # it goes to the limit, and the stats say the block stays short and the shed is capped
+    shed = np.array([shapely.box(0, 0, 4, 4), shapely.box(200, 0, 230, 30)], dtype=object)
+    blocks = [shapely.box(-10, -10, 120, 120), shapely.box(190, -10, 240, 40)]
+    r = bt.transfer_attributes(shed, ex, attrs, k=3, seed=1, target_far=1.0, blocks=blocks,
+                               max_height=60)
+    assert r.stats["n_blocks_short_of_far"] == 1 and r.stats["n_at_max_height"] == 1
+    assert r.table.height_m.iloc[0] <= 60 and r.table.height_m.iloc[1] < 60
     # examples without heights: types come across, heights and levels stay empty
     bare = attrs.assign(height_m=np.nan, levels=np.nan)
     r = bt.transfer_attributes(ex, ex, bare)
