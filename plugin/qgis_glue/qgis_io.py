@@ -369,7 +369,7 @@ def valid_after_transform(polygons: np.ndarray, multi: bool = True) -> np.ndarra
     if not multi:
         fixed = [max(shapely.get_parts(g), key=shapely.area) if shapely.get_num_geometries(g) > 1
                  else g for g in fixed]
-    out[bad] = np.array(fixed + [None], dtype=object)[:-1]
+    out[np.flatnonzero(bad)] = fixed
     return out
 
 
