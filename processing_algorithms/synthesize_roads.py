@@ -180,7 +180,7 @@ class SynthesizeRoads(AlgorithmBase):
 
         fragment_db = self.parameterAsFile(parameters, self.FRAGMENT_DB, context)
         need_db = method.key == "fragments" and not fragment_db
-        steps = QgsProcessingMultiStepFeedback(1 + need_db, feedback)
+        steps = _ChildSteps(1 + need_db, feedback)
 
         def run(alg_id, params):
             child = processing.run(alg_id, params, context=context, feedback=steps,
@@ -239,3 +239,13 @@ class SynthesizeRoads(AlgorithmBase):
         layer.dataProvider().addFeatures([feature])
         context.temporaryLayerStore().addMapLayer(layer)
         return layer.id()
+
+
+class _ChildSteps(QgsProcessingMultiStepFeedback):
+    """The feedback of the method run as a child: everything but ``processing.run``'s dump
+    of the child's results, which names this run's staging copies of the outputs (paths
+    gone once the run succeeds)."""
+
+    def pushInfo(self, info):  # noqa: N802 (QGIS API)
+        if not str(info).startswith("Results: "):
+            super().pushInfo(info)

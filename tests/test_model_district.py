@@ -110,6 +110,9 @@ def test_synthesize_roads_runs_each_method(qgis_processing, helsinki_arterials, 
     # growth reads no example: the analyst is told that the example roads are ignored
     unused = [w for w in log.warnings if "(EXAMPLE_ROADS) is not used" in w]
     assert len(unused) == (method == 1)
+    # the method's own log comes through, not the staging paths of its results
+    assert any(m.startswith("Method:") for m in log.messages)
+    assert not any(".urbansynth-run-" in m for m in log.messages + log.warnings)
     roads = _read(out, None)
     sketch = _read(arterials, None).to_crs(roads.crs)
     # the arterials are kept and streets are added to them (Helsinki's clipped extract closes
