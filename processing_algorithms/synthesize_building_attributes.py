@@ -238,8 +238,8 @@ class SynthesizeBuildingAttributes(AlgorithmBase):
                     f"{s['n_blocks_short_of_far']} blocks stay more than "
                     f"{100 * transfer.FAR_SHORT:.0f} % under the target floor-area "
                     f"ratio: their footprints cover too little of them; {s['n_at_max_height']} "
-                    f"footprints were raised to the maximum height ({hi:g} m). Lower "
-                    "MAX_HEIGHT or the target, or give denser footprints.")
+                    f"footprints stand at the maximum height ({hi:g} m). Lower MAX_HEIGHT "
+                    "or the target, or give denser footprints.")
             if s.get("n_outside_blocks"):
                 feedback.pushInfo(f"{s['n_outside_blocks']} footprints lie in no block and "
                                   "keep their levels.")
