@@ -467,12 +467,7 @@ def yang_goals(results: dict) -> str:
     out = [f"| target | p_angle (goal ≤ {GOALS['p_angle']:g}°) | p_area (goal ≤ "
            f"{GOALS['p_area']:g}) | streets, % of the land (goal ≤ {GOALS['l_s']:g}) | all "
            "three met (seeds) |", "|---|---|---|---|---|"]
-    for name, t in results["targets"].items():
-        rows = [r["yang_table1"] for r in t["methods"].get("splitdomain", {}).get("runs", [])
-                if "yang_table1" in r]
-        if not rows:
-            continue
-
+    for name, rows in _yang_rows(results).items():
         def each(key, fmt):
             return " / ".join(format(y[key], fmt) for y in rows)
 
