@@ -753,16 +753,24 @@ def _left_empty(geometry, max_block: float, min_area: float, min_width: float,
     return int(_empty(big, geometry).sum()) if len(big) else 0
 
 
-def _off_controlled_access(geometry, level, attrs, arterials, arterial_class, inside):
+def _link_level(level, max_level: Optional[int] = None) -> int:
+    """The level of a link that joins pieces apart: a level below the deepest street, but
+    not below ``max_level``."""
+    lvl = int(level.max()) + 1 if len(level) else 1
+    return max(min(lvl, int(max_level)), 1) if max_level is not None else lvl
+
+
+def _off_controlled_access(geometry, level, attrs, arterials, arterial_class, inside,
+                           max_level: Optional[int] = None):
     """Streets that end on a motorway or trunk of the arterials away from its junctions end
-    short of it; a piece cut off is linked again ('link';
+    short of it; a piece cut off is linked again ('link', at :func:`_link_level`;
     :func:`network.controlled_access.end_short_of_controlled_access`). Returns the network
     and the rule's counts."""
     is_new = synthesised(level, attrs["source_fragment"])
     geometry, source, ca = end_short_of_controlled_access(geometry, is_new, arterials,
                                                           arterial_class, inside)
     link = {"source_fragment": "link", "database": "", "fragment_id": -1, "query": -1}
-    level = np.r_[level, int(level.max()) + 1][source]
+    level = np.r_[level, _link_level(level, max_level)][source]
     attrs = {k: np.r_[v, np.array([link[k]], dtype=v.dtype)][source] for k, v in attrs.items()}
     return geometry, level, attrs, ca
 
@@ -775,9 +783,9 @@ def _link_floating(geometry, level, attrs, inside, max_level: Optional[int] = No
     with up to 3.2 km of streets, leaving a face of three times the example's p90 block
     empty); a piece that cannot be linked is dropped. Then arterials apart inside the
     target, with the streets on each, are joined into one network (:func:`links.join_pieces`;
-    parts of a target apart stay apart). Every link stays ``inside``; it is a level below the
-    deepest street, but not below ``max_level``. Returns the network, the number of links
-    and the number of streets dropped."""
+    parts of a target apart stay apart). Every link stays ``inside``, at
+    :func:`_link_level`. Returns the network, the number of links and the number of streets
+    dropped."""
     links, keep = link_floating_pieces(geometry, attrs["source_fragment"] == "arterial",
                                        inside=inside, bent=True)
     if not keep.all():
@@ -787,11 +795,8 @@ def _link_floating(geometry, level, attrs, inside, max_level: Optional[int] = No
     def with_links(geometry, level, attrs, links):
         if not len(links):
             return geometry, level, attrs
-        lvl = int(level.max()) + 1 if len(level) else 1
-        if max_level is not None:
-            lvl = max(min(lvl, int(max_level)), 1)
         return add_streets(geometry, level, attrs, [links], [("link", "", -1, len(links), -1)],
-                           lvl, 0.0)
+                           _link_level(level, max_level), 0.0)
 
     geometry, level, attrs = with_links(geometry, level, attrs, links)
     joins = join_pieces(geometry, inside=inside)
@@ -1192,7 +1197,7 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
     if arterial_class is not None:
         geometry, level, attrs, ca = _off_controlled_access(
             geometry, level, attrs, arterials, arterial_class,
-            target if target is not None else area)
+            target if target is not None else area, max_level)
         stats["controlled_access_ended_short"] = ca["n_ended_short"] + ca["n_removed"]
         stats["n_dropped"] += ca["n_dropped"]
         if stats["controlled_access_ended_short"]:
