@@ -9,9 +9,11 @@ import numpy as np
 import pandas as pd
 import shapely
 from qgis.core import (
+    QgsProcessing,
     QgsProcessingAlgorithm,
     QgsProcessingException,
     QgsProcessingParameterDefinition,
+    QgsProcessingParameterFeatureSource,
     QgsProcessingParameterField,
     QgsProcessingParameterNumber,
 )
@@ -280,6 +282,30 @@ class AlgorithmBase(QgsProcessingAlgorithm):
     def seed(self, parameters, context, name: str = "SEED") -> int:
         """The seed, a whole number in range (1.5 or 2^31 are refused, never rounded)."""
         return self.number(parameters, name, context)
+
+    # ----------------------------------------------------------------- areas kept clear
+
+    KEEP_CLEAR = "KEEP_CLEAR"
+
+    def add_keep_clear(self, what: str):
+        """The optional polygon layer of areas ``what`` (parcels, footprints) never cover."""
+        self.add(QgsProcessingParameterFeatureSource(
+            self.KEEP_CLEAR, "Areas to keep clear (street surfaces)",
+            [QgsProcessing.SourceType.TypeVectorPolygon], optional=True),
+            f"Polygons no {what} may cover, e.g. the street surfaces and junctions of "
+            "'Tessellate streets' merged into one layer: their widths follow each street's "
+            "class, and dead-end streets inside a block are kept clear too. Applied on top "
+            "of the street width.")
+
+    def keep_clear_areas(self, parameters, context, feedback, frame):
+        """The KEEP_CLEAR polygons in ``frame``'s working CRS, or None."""
+        clear = qgis_io.read_source(self, parameters, self.KEEP_CLEAR, context, feedback,
+                                    kind="polygons", target_crs=frame.crs, optional=True,
+                                    fields=[])
+        if clear is None:
+            return None
+        feedback.pushInfo(f"{len(clear)} areas of {clear.name} are kept clear.")
+        return clear.geometry
 
     # ----------------------------------------------------------------- roads and blocks
 

@@ -36,6 +36,7 @@ class SubdivideParcels(AlgorithmBase):
     IRREGULARITY = "IRREGULARITY"
     STREET_WIDTH = "STREET_WIDTH"
     FORCE_STREET_ACCESS = "FORCE_STREET_ACCESS"
+    BUILDINGS = "BUILDINGS"
     SEED = "SEED"
     OUTPUT = "OUTPUT"
 
@@ -55,7 +56,9 @@ class SubdivideParcels(AlgorithmBase):
             "Subdivides city blocks into building parcels (Scharl 2010, ch. 4.2.6). Blocks "
             "come from a block layer (e.g. the output of 'Extract city blocks') or are "
             "extracted from road lines; they are first shrunk by half the street width on "
-            "every side (per road with a width field), so parcels stop at the street's edge.\n\n"
+            "every side (per road with a width field), so parcels stop at the street's edge, "
+            "and lose the areas to keep clear (e.g. the street surfaces of 'Tessellate "
+            "streets').\n\n"
             "Recursive (Weber et al. 2009, CityEngine 'Recursive') cuts a lot perpendicular "
             "to its long axis near the middle until it is under the maximum area, never "
             "below the minimum area or width and, with 'Force street access', never cutting "
@@ -123,6 +126,16 @@ class SubdivideParcels(AlgorithmBase):
             "Full width of the streets (blocks shrink by half of it on every side); with "
             "Roads and a street width field, the width of roads without a value. 0 keeps "
             "the blocks as they are.")
+        self.add_keep_clear("parcel")
+        self.add(QgsProcessingParameterFeatureSource(
+            self.BUILDINGS, "Buildings to keep whole (skeleton)",
+            [QgsProcessing.SourceType.TypeVectorPolygon], optional=True),
+            "Skeleton: building footprints already in the blocks (e.g. of 'Synthesize "
+            "building footprints'); a cut across a building moves to the nearer end of it, "
+            "by up to half a lot width and never under the minimum width; the lots a "
+            "building still stands on merge into one parcel (a row of touching buildings "
+            "across lots merges them all), so that every building stands on one parcel. The "
+            "other methods ignore them.")
         self.add(QgsProcessingParameterBoolean(
             self.FORCE_STREET_ACCESS, "Force street access", defaultValue=True),
             "Recursive: a cut that would leave a lot without street frontage is not made "
@@ -189,6 +202,8 @@ class SubdivideParcels(AlgorithmBase):
             frame, block_geoms, block_ids, road_lines, road_widths = \
                 self._blocks_from_roads(parameters, context, feedback)
 
+        keep_clear = self.keep_clear_areas(parameters, context, feedback, frame)
+        keep_whole = self._buildings(parameters, context, feedback, frame, method)
         area = float(shapely.area(np.asarray(block_geoms, dtype=object)).sum())
         self.bound_work(f"Blocks {frame.name} ({area / 1e6:,.1f} km²) at a maximum parcel area "
                         f"of {number[self.MAX_AREA]:g} m²", 2 * area / number[self.MAX_AREA],
@@ -197,7 +212,8 @@ class SubdivideParcels(AlgorithmBase):
         result = qgis_io.run_engine(
             frame.name, parcels.subdivide_blocks, block_geoms, method, settings, seed=seed,
             block_ids=block_ids, street_width=street_width, roads=road_lines,
-            road_widths=road_widths, progress=qgis_io.progress_for(feedback, 30, 90), **size)
+            road_widths=road_widths, keep_clear=keep_clear, keep_whole=keep_whole,
+            progress=qgis_io.progress_for(feedback, 30, 90), **size)
         self._log(result.stats, method, feedback)
         if len(result.geometry) == 0:
             raise QgsProcessingException(
@@ -220,6 +236,21 @@ class SubdivideParcels(AlgorithmBase):
                           "taken as a street.")
         feedback.setProgress(30)
         return frame, frame.geometry, ids, None, None
+
+    def _buildings(self, parameters, context, feedback, frame, method):
+        """The BUILDINGS footprints in the blocks' working CRS, or None."""
+        buildings = qgis_io.read_source(self, parameters, self.BUILDINGS, context, feedback,
+                                        kind="polygons", target_crs=frame.crs, optional=True,
+                                        fields=[])
+        if buildings is None:
+            return None
+        if method != "skeleton":
+            feedback.pushInfo(f"{buildings.name}: only the skeleton method moves its cuts off "
+                              f"buildings ({method} ignores them).")
+            return None
+        feedback.pushInfo(f"{len(buildings)} buildings of {buildings.name} are kept whole "
+                          "where the lots allow.")
+        return buildings.geometry
 
     @staticmethod
     def _parcel_sizes(frame, method, feedback) -> dict:
@@ -300,6 +331,14 @@ class SubdivideParcels(AlgorithmBase):
         if stats["n_merged_for_access"]:
             feedback.pushInfo(f"{stats['n_merged_for_access']} lots without street frontage "
                               "were merged into a neighbour.")
+        if stats.get("n_merged_for_buildings"):
+            feedback.pushInfo(f"{stats['n_merged_for_buildings']} lots merged into a neighbour "
+                              "so that a building stands on one parcel.")
+        if stats.get("n_buildings"):
+            feedback.pushInfo(f"{stats['n_buildings_split']} of {stats['n_buildings']} buildings "
+                              "are crossed by a parcel line (no parcel holds 95 % of them): "
+                              "the line between two streets' strips, or a cut that could not "
+                              "move far enough.")
         feedback.pushInfo(f"{stats['n_undesirable']} parcels are undesirable by Yang's "
                           "criteria (p_angle > 15° or p_area > 1.2).")
 

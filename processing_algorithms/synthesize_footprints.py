@@ -61,7 +61,8 @@ class SynthesizeFootprints(AlgorithmBase):
             "(dynamic programming on 1 m steps): corner buildings stay, buildings are "
             "repeated or left out to fit a longer or shorter street, none is distorted.\n\n"
             "Every footprint lies inside its block and off the road surface (half the street "
-            "width from each centreline, plus the setback); none overlaps another; what "
+            "width from each centreline, plus the setback, and off the areas to keep clear, "
+            "e.g. the street surfaces of 'Tessellate streets'); none overlaps another; what "
             "still conflicts is trimmed or dropped. Databases come from 'Build block "
             "database'; a second one mixes styles, chosen per area by STYLE polygons.\n\n"
             "Output: footprints with the example building's height_m, levels and "
@@ -112,6 +113,7 @@ class SynthesizeFootprints(AlgorithmBase):
             self.SETBACK, "Setback (m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=0.0, minValue=0.0, maxValue=self.MAX_WIDTH),
             "Extra distance between the road surface and the footprints.")
+        self.add_keep_clear("footprint")
         self.add_seed(
             "With N best > 1 each block picks one of its best matches at random; the same "
             "seed gives the same footprints, block by block.")
@@ -160,12 +162,13 @@ class SynthesizeFootprints(AlgorithmBase):
             frame, block_geoms, block_ids, road_lines = self._blocks_from_roads(
                 parameters, context, feedback)
         choice = self._style(parameters, context, feedback, frame, block_geoms, len(examples))
+        keep_clear = self.keep_clear_areas(parameters, context, feedback, frame)
         feedback.setProgress(15)
 
         result = qgis_io.run_engine(
             frame.name, footprints.synthesize_footprints, block_geoms, examples, method,
             street_width=street_width, setback=setback, seed=seed, roads=road_lines,
-            block_database=choice, block_ids=block_ids, n_best=n_best,
+            block_database=choice, block_ids=block_ids, n_best=n_best, keep_clear=keep_clear,
             progress=qgis_io.progress_for(feedback, 15, 92))
         self._log(result, method, feedback)
         dest = qgis_io.write_sink(

@@ -31,11 +31,13 @@ DISTRICT_HELP = (
     "From the example's roads and buildings it extracts the road hierarchy, the blocks with "
     "their buildings and a block database. Then, inside the ARTERIALS sketch (and BOUNDARY), "
     "it synthesizes the streets with the method chosen by ROAD_METHOD, makes the blocks, "
-    "subdivides them into parcels with street access, fills the blocks with footprints from "
-    "the example's blocks (FOOTPRINT_METHOD transfer or resynthesis), gives the footprints "
-    "heights, levels and types like the example's buildings, turns the streets into surface "
-    "and junction polygons (draped on the DEM when one is given), and writes a metrics "
-    "report that compares the new district with the example.\n\n"
+    "turns the streets into surface and junction polygons (widths by road class; draped on "
+    "the DEM when one is given), fills the blocks with footprints from the example's blocks "
+    "(FOOTPRINT_METHOD transfer or resynthesis) clear of the street surfaces, subdivides "
+    "the blocks into parcels with street access up to the street surfaces and around the "
+    "footprints, gives the footprints heights, levels and types like the example's "
+    "buildings, and writes a metrics report that compares the new district with the "
+    "example.\n\n"
     "Every step is an Urban Synthesis tool of its own: open this model in the model designer "
     "to change their options.")
 
@@ -51,7 +53,7 @@ def _param(model, definition, help_text, x, y):
 
 
 def _child(model, child_id, alg_id, description, sources, outputs=(), x=0.0, y=0.0):
-    """A step: sources = {parameter: Source}; outputs = ((child output, model output name,
+    """A step: sources = {parameter: Source or list of Source}; outputs = ((child output, model output name,
     description),). The model's output parameters are named '<child id>:<model output name>'
     (e.g. roads:ROADS on the qgis_process command line)."""
     child = QgsProcessingModelChildAlgorithm(alg_id)
@@ -69,7 +71,7 @@ def _child(model, child_id, alg_id, description, sources, outputs=(), x=0.0, y=0
         if not (param.flags() & QgsProcessingParameterDefinition.Flag.FlagOptional):
             sources[param.name()] = Source.fromStaticValue(param.defaultValue())
     for name, source in sources.items():
-        child.addParameterSources(name, [source])
+        child.addParameterSources(name, source if isinstance(source, list) else [source])
     model_outputs = {}
     for child_output, model_name, text in outputs:
         out = QgsProcessingModelOutput(model_name)
@@ -146,12 +148,21 @@ def district_model() -> QgsProcessingModelAlgorithm:
            outputs=(("OUTPUT", "ROADS", "Roads"),), x=600, y=0)
     _child(model, "blocks", "urbansynth:extractblocks", "Blocks of the new district",
            {"ROADS": out("roads", "OUTPUT")}, outputs=(("OUTPUT", "BLOCKS", "Blocks"),), x=600, y=100)
+    # parcels and footprints keep clear of the street surfaces as tessellated (widths by
+    # class, dead ends inside blocks too): the same surfaces the district's outputs show
+    _child(model, "street_area", "native:mergevectorlayers", "Street surfaces and junctions",
+           {"LAYERS": [out("streets", "OUTPUT_SURFACES"), out("streets", "OUTPUT_JUNCTIONS")]},
+           x=900, y=100)
+    # the parcels are cut around the footprints (a footprint stands on one parcel where
+    # the lots allow): they come after the footprints
     _child(model, "parcels", "urbansynth:subdivideparcels", "Parcels",
-           {"BLOCKS": out("blocks", "OUTPUT"), "METHOD": fixed(1), "SEED": p("SEED")},
+           {"BLOCKS": out("blocks", "OUTPUT"), "METHOD": fixed(1), "SEED": p("SEED"),
+            "STREET_WIDTH": fixed(0.0), "KEEP_CLEAR": out("street_area", "OUTPUT"),
+            "BUILDINGS": out("footprints", "OUTPUT")},
            outputs=(("OUTPUT", "PARCELS", "Parcels"),), x=600, y=200)
     _child(model, "footprints", "urbansynth:synthesizefootprints", "Building footprints",
            {"BLOCKS": out("blocks", "OUTPUT"), "BLOCK_DB": out("block_db", "OUTPUT"),
-            "METHOD": p("FOOTPRINT_METHOD"),
+            "METHOD": p("FOOTPRINT_METHOD"), "KEEP_CLEAR": out("street_area", "OUTPUT"),
             "SEED": p("SEED")}, x=600, y=300)
     _child(model, "buildings", "urbansynth:synthesizebuildingattributes", "Building attributes",
            {"FOOTPRINTS": out("footprints", "OUTPUT"),
@@ -182,6 +193,10 @@ def main():
     sys.path.insert(0, str(ROOT / "build" / "plugins"))
     from urban_synthesis.plugin.qgis_glue.provider import UrbanSynthesisProvider
 
+    from qgis.analysis import QgsNativeAlgorithms
+
+    # the model uses one QGIS tool (native:mergevectorlayers) beside the provider's own
+    QgsApplication.processingRegistry().addProvider(QgsNativeAlgorithms())
     provider = UrbanSynthesisProvider()
     QgsApplication.processingRegistry().addProvider(provider)
     OUT.mkdir(parents=True, exist_ok=True)

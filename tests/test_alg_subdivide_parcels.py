@@ -114,6 +114,28 @@ def test_street_width_field(qgis_processing):
     assert shapely.is_valid(geoms).all()
 
 
+def test_parcels_stay_off_the_areas_kept_clear_in_another_crs(qgis_processing):
+    """A dead end's surface inside the block, given in degrees: no parcel takes any of it,
+    and the parcels (with no street width) fill the rest of the block."""
+    from pyproj import Transformer
+
+    block = shapely.box(500000, 5550000, 500120, 5550080)
+    dead_end = shapely.buffer(shapely.LineString([(500060, 5550080), (500060, 5550030)]), 4.0)
+    to_degrees = Transformer.from_crs("EPSG:32633", "EPSG:4326", always_xy=True)
+    in_degrees = shapely.transform(dead_end, lambda xy: np.column_stack(
+        to_degrees.transform(xy[:, 0], xy[:, 1])))
+    out = qgis_processing.run(ALG, {
+        "BLOCKS": _memory_layer("Polygon", [block.wkt]),
+        "KEEP_CLEAR": memory_layer("Polygon", [in_degrees.wkt], "EPSG:4326"),
+        "STREET_WIDTH": 0, "METHOD": 1, "OUTPUT": "memory:"})
+    rows, geoms = layer_features(out["OUTPUT"])
+    assert len(rows) >= 4
+    # the surface came through two transforms: a micrometre of round-off at most
+    assert shapely.area(shapely.intersection(geoms, dead_end)).max() < 0.01
+    assert shapely.area(shapely.union_all(geoms)) == pytest.approx(
+        shapely.area(shapely.difference(block, dead_end)), rel=1e-3)
+
+
 def test_bad_input(qgis_processing):
     from qgis.core import QgsProcessingException
 

@@ -512,6 +512,28 @@ def _transfer_checks(helsinki, target_blocks, lines, method, seed=3):
     return r, cmp
 
 
+def test_footprints_stay_off_the_areas_kept_clear(helsinki):
+    """Street surfaces as wide as each street's class (a 16 m arterial, dead ends inside
+    the blocks) are no building land, whatever the street width."""
+    from urban_synthesis.plugin.network import street_surfaces
+
+    streets = bubenec("streets").geometry.values
+    ext = blocks.extract_blocks(streets)
+    surfaces = street_surfaces.tessellate_lines(streets, widths=np.full(len(streets), 16.0))
+    clear = np.concatenate([surfaces.surfaces, surfaces.junctions])
+    for method in footprints.METHODS:
+        r = footprints.synthesize_footprints(ext.geometry, [helsinki], method,
+                                             street_width=6.0, seed=3, keep_clear=clear)
+        assert len(r.geometry) >= len(ext.geometry)
+        on_street = shapely.area(shapely.intersection(r.geometry, shapely.union_all(clear)))
+        assert on_street.max() < 1e-6, (method, (on_street > 1e-6).sum())
+        without = footprints.synthesize_footprints(ext.geometry, [helsinki], method,
+                                                   street_width=6.0, seed=3)
+        # the 8 m half-width takes land the 3 m offset left: some footprints would stand on it
+        assert shapely.area(shapely.intersection(without.geometry,
+                                                 shapely.union_all(clear))).sum() > 100
+
+
 def test_transfer_onto_bubenec(helsinki):
     streets = bubenec("streets").geometry.values
     ext = blocks.extract_blocks(streets)

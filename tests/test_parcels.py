@@ -4,6 +4,7 @@ Small hand-made blocks whose answer is known, then the Bubeneč blocks (extracte
 real streets) against Bubeneč's real cadastre parcels with Yang 2013's parcel metrics.
 """
 import doctest
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -80,6 +81,68 @@ def test_shrink_cuts_dead_ends_and_drops_slivers():
     # the 4 m neck vanishes, the 3 m x 35 m rest of the right part is under 150 m²
     assert shapely.get_type_id(kept[0]) == 3
     assert shapely.area(kept[0]) == pytest.approx(35 * 35)
+
+
+def test_lots_stay_off_the_areas_kept_clear():
+    """A 16 m arterial surface on one side and a dead end's surface inside the block (which
+    a block outlined by centrelines does not show): no lot takes any of either, and the
+    lots still fill the rest of the block."""
+    block = shapely.box(0, 0, 120, 80)
+    arterial = shapely.box(-8, -8, 128, 8)                  # 16 m wide along y = 0
+    dead_end = shapely.buffer(shapely.LineString([(60, 80), (60, 30)]), 4.0)
+    result = parcels.subdivide_blocks([block], "skeleton", settings(irregularity=0),
+                                      street_width=0, keep_clear=[arterial, dead_end])
+    lots = result.geometry
+    assert len(lots) >= 4
+    clear = shapely.union_all([arterial, dead_end])
+    assert shapely.area(shapely.intersection(lots, clear)).max() < 1e-3  # round-off only
+    assert shapely.area(shapely.union_all(lots)) == pytest.approx(
+        shapely.area(shapely.difference(block, clear)), rel=1e-6)
+    # the dead end's sides are street frontage: lots along it have access
+    assert result.table.has_street_access.all()
+
+
+def test_skeleton_lots_stay_on_their_land_at_a_thin_notch():
+    """A Mauren district block less its street surfaces (tests/data, from a district model
+    run): a 6 m surface reaches in at a sliver's angle, and the skeleton's strips drew one
+    lot 10 m² over it. Lots are cut back to the land they were made for."""
+    land = shapely.from_wkt((Path(__file__).parent / "data" /
+                             "skeleton_notch_block.wkt").read_text())
+    raw = parcels.METHODS["skeleton"].subdivide(land, parcels.SubdivisionSettings(),
+                                                np.random.default_rng([0, 0]))
+    assert shapely.area(shapely.difference(raw, land)).max() > 5     # the strips' leak
+    lots = parcels.subdivide_blocks([land], "skeleton", seed=0, street_width=0).geometry
+    assert shapely.area(shapely.difference(lots, land)).max() < 1e-3
+    assert shapely.area(shapely.union_all(lots)) > 0.999 * land.area
+
+
+def test_skeleton_cuts_move_off_the_buildings_to_keep_whole():
+    """Two rows of 12 m houses every 17 m along the long streets of a 200 x 60 m block:
+    18 m lots cut 12 of the 22 houses; told to keep them whole, the cuts pass between
+    them, no lot under the minimum width."""
+    block = shapely.box(0, 0, 200, 60)
+    houses = np.array([shapely.box(x, 4, x + 12, 14) for x in np.arange(3, 190, 17)]
+                      + [shapely.box(x, 46, x + 12, 56) for x in np.arange(8, 190, 17)])
+    s = settings(lot_width=18.0)
+    plain = parcels.subdivide_blocks([block], "skeleton", s, seed=1, street_width=0)
+    assert parcels.split_buildings(houses, plain.geometry).sum() >= 10
+    kept = parcels.subdivide_blocks([block], "skeleton", s, seed=1, street_width=0,
+                                    keep_whole=houses)
+    assert parcels.split_buildings(houses, kept.geometry).sum() == 0
+    assert kept.stats["n_buildings"] == 22 and kept.stats["n_buildings_split"] == 0
+    assert len(kept.geometry) == len(plain.geometry)
+    assert_partition(kept.geometry, block)
+    _, width, _ = blocks.minimum_rectangles(kept.geometry)
+    assert width.min() >= s.min_width - 1e-9
+    assert kept.stats["n_sized_by_block"] == 0
+    # a 45 m building no cut can pass: the lots it stands on merge into one parcel
+    hall = np.array([shapely.box(60, 4, 105, 20)])
+    merged = parcels.subdivide_blocks([block], "skeleton", s, seed=1, street_width=0,
+                                      keep_whole=hall)
+    assert parcels.split_buildings(hall, merged.geometry).sum() == 0
+    assert merged.stats["n_merged_for_buildings"] >= 2
+    assert len(merged.geometry) == len(plain.geometry) - merged.stats["n_merged_for_buildings"]
+    assert_partition(merged.geometry, block)
 
 
 def test_subdivide_shrinks_by_half_the_street_width():

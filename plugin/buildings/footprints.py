@@ -39,7 +39,7 @@ import numpy as np
 import pandas as pd
 import shapely
 
-from ..core.geometry import largest_polygons
+from ..core.geometry import largest_polygons, without_areas
 from ..core.progress import InputError, Progress, ensure
 from ..network.blocks import shape_metrics
 from ..retrieval import shape_context as sc
@@ -136,12 +136,13 @@ def prepare_examples(db: BlockDatabase, name: str = "", min_buildings: int = 1) 
 
 
 def street_offset(block, street_width: float = STREET_WIDTH, setback: float = 0.0,
-                  roads: Optional[Sequence] = None):
+                  roads: Optional[Sequence] = None, keep_clear: Optional[Sequence] = None):
     """The part of a block where footprints may stand.
 
     The block less the road surface (``street_width / 2`` from every road centreline on
     its boundary, and from dead-end streets inside it when ``roads`` are given) and the
-    ``setback`` behind it.
+    ``setback`` behind it, and less the ``keep_clear`` areas (e.g. the street surfaces and
+    junctions of 'tessellatestreets', as wide as each street's class).
     """
     inset = street_width / 2.0 + setback
     if roads is not None and len(roads):
@@ -151,6 +152,8 @@ def street_offset(block, street_width: float = STREET_WIDTH, setback: float = 0.
         area = shapely.intersection(area, shapely.buffer(block, -inset)) if inset > 0 else area
     else:
         area = shapely.buffer(block, -inset) if inset > 0 else block
+    if keep_clear is not None and len(keep_clear):
+        area = without_areas([area], keep_clear)[0]
     return shapely.make_valid(area) if not shapely.is_valid(area) else area
 
 
@@ -259,7 +262,7 @@ def synthesize_block(block, examples: Sequence[ExampleSet], method: str = "trans
                      seed: int = 0, block_index: int = 0, street_width: float = STREET_WIDTH,
                      setback: float = 0.0, roads: Optional[Sequence] = None,
                      db_choice: int = -1, n_best: int = 1, block_id: Optional[int] = None,
-                     fill: bool = True) -> BlockLayout:
+                     fill: bool = True, keep_clear: Optional[Sequence] = None) -> BlockLayout:
     """Footprints for one target block (a pure function of its arguments).
 
     Parameters
@@ -278,6 +281,8 @@ def synthesize_block(block, examples: Sequence[ExampleSet], method: str = "trans
     fill : fill the street frontage the layout leaves empty (dead-end streets inside the
         block, sides of irregular blocks) with the example's street-facing footprints, up
         to the share of frontage the example block has built (:func:`frontage.fill_frontage`)
+    keep_clear : optional polygons no footprint may cover (street surfaces and junctions
+        near the block)
 
     Returns
     -------
@@ -294,7 +299,7 @@ def synthesize_block(block, examples: Sequence[ExampleSet], method: str = "trans
     if block is None or block.area <= 0 or block.area > MAX_BLOCK_AREA:
         stats["seconds"] = time.perf_counter() - t0
         return _empty_layout(stats)
-    buildable = street_offset(block, street_width, setback, roads)
+    buildable = street_offset(block, street_width, setback, roads, keep_clear)
     if buildable.is_empty or buildable.area < MIN_AREA:
         stats["seconds"] = time.perf_counter() - t0
         return _empty_layout(stats)
@@ -406,6 +411,7 @@ def synthesize_footprints(blocks: Sequence, examples: Sequence[ExampleSet],
                           roads: Optional[Sequence] = None,
                           block_database: Optional[Sequence[int]] = None,
                           block_ids: Optional[Sequence[int]] = None, n_best: int = 1,
+                          keep_clear: Optional[Sequence] = None,
                           progress: Optional[Progress] = None) -> FootprintResult:
     """Footprints for every target block (loops :func:`synthesize_block` with progress).
 
@@ -417,6 +423,8 @@ def synthesize_footprints(blocks: Sequence, examples: Sequence[ExampleSet],
     roads : optional road centrelines (their surface, dead ends included, stays free)
     block_database : per block, the database index to use (-1 = best over all)
     block_ids : per block, the id written to the output (default 1..n)
+    keep_clear : optional polygons no footprint may cover (e.g. the street surfaces and
+        junctions of 'tessellatestreets')
 
     Returns
     -------
@@ -438,13 +446,19 @@ def synthesize_footprints(blocks: Sequence, examples: Sequence[ExampleSet],
     choice = np.full(n, -1) if block_database is None else np.asarray(block_database)
     road_arr = None if roads is None else np.asarray(roads, dtype=object)
     tree = shapely.STRtree(road_arr) if road_arr is not None and len(road_arr) else None
+    clear_arr = None if keep_clear is None else \
+        shapely.make_valid(shapely.force_2d(np.asarray(keep_clear, dtype=object)))
+    clear_tree = shapely.STRtree(clear_arr) if clear_arr is not None and len(clear_arr) \
+        else None
     geoms, tables, stats = [], [], []
     for i in range(n):
-        near = None
+        near = clear = None
         if tree is not None and blocks[i] is not None:
             near = road_arr[tree.query(blocks[i], predicate="intersects")]
+        if clear_tree is not None and blocks[i] is not None:
+            clear = clear_arr[clear_tree.query(blocks[i], predicate="intersects")]
         layout = synthesize_block(blocks[i], examples, method, seed, i, street_width, setback,
-                                  near, int(choice[i]), n_best, int(ids[i]))
+                                  near, int(choice[i]), n_best, int(ids[i]), keep_clear=clear)
         geoms.extend(layout.geometry)
         if len(layout.table):
             tables.append(layout.table)

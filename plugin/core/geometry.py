@@ -4,6 +4,7 @@
   rectangles by vectorised rotating calipers (block shape metrics, parcel cuts, the OBB
   axis of the Voronoi parcels, template frames, grid directions of road growth);
 - :func:`largest_polygons`: the largest polygon part of each (repaired) geometry;
+- :func:`without_areas`: geometries less the areas to keep clear that reach them;
 - :func:`substrings`: stretches of lines between arc lengths;
 - :func:`unit`: unit vectors; :func:`group_starts` / :func:`group_ends`: runs of equal keys;
 - :func:`ring_turns`: the signed turn at each vertex of a closed ring;
@@ -26,7 +27,7 @@ import shapely
 __all__ = ["group_starts", "group_ends", "unit", "substrings", "pinned_ends",
            "polygon_parts", "largest_polygons", "minimum_rectangles", "minimum_rectangle_corners",
            "longest_edge_directions", "ring_turns", "rounded_bends", "rounded_band_bends",
-           "two_point_segments", "first_hits"]
+           "two_point_segments", "first_hits", "without_areas"]
 
 
 # --------------------------------------------------------------------------- arrays
@@ -207,6 +208,33 @@ def polygon_parts(geoms: Sequence):
         owner = np.concatenate([owner[~nested], owner[nested][j]])
     poly = shapely.get_type_id(parts) == 3
     return parts[poly], owner[poly]
+
+
+def without_areas(geoms: Sequence, areas: Sequence) -> np.ndarray:
+    """Each geometry less the union of the ``areas`` it meets (e.g. blocks less the street
+    surfaces and junctions that reach into them), in 2D.
+
+    >>> block = shapely.box(0, 0, 10, 10)
+    >>> street = shapely.box(4, -1, 6, 11)
+    >>> [round(g.area, 6) for g in without_areas([block, shapely.box(20, 0, 21, 1)], [street])]
+    [80.0, 1.0]
+    """
+    geoms = np.asarray(geoms, dtype=object).ravel()
+    areas = shapely.force_2d(np.asarray(areas, dtype=object).ravel())
+    areas = areas[~(shapely.is_missing(areas) | shapely.is_empty(areas))]
+    out = geoms.copy()
+    if len(areas) == 0 or len(geoms) == 0:
+        return out
+    areas = shapely.make_valid(areas)
+    g_idx, a_idx = shapely.STRtree(areas).query(geoms, predicate="intersects")
+    if len(g_idx):
+        starts = np.flatnonzero(group_starts(g_idx))
+        ends = np.append(starts[1:], len(g_idx))
+        for s, e in zip(starts, ends):  # one union per geometry: the areas it meets only
+            i = g_idx[s]
+            out[i] = shapely.difference(shapely.force_2d(geoms[i]),
+                                        shapely.union_all(areas[a_idx[s:e]]))
+    return out
 
 
 def largest_polygons(geoms: Sequence) -> np.ndarray:

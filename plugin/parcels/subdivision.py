@@ -58,7 +58,7 @@ from scipy.spatial import cKDTree
 from shapely.geometry.polygon import orient
 
 from ..core.geometry import (group_starts, longest_edge_directions, minimum_rectangles,
-                             polygon_parts)
+                             polygon_parts, without_areas)
 from ..core.progress import InputError, Progress, ensure
 from ..measure import metrics as _metrics
 
@@ -117,6 +117,10 @@ CORNER_SWAP_ANGLES = (45.0, 135.0)
 MAX_FRONT_SHIFT = 0.4
 #: Skeleton: a cut this close to a bend of its street (share of the lot width) moves onto it.
 BEND_SNAP = 0.4
+#: Skeleton cuts move off a building to keep it whole by up to this share of a lot width,
+#: and pass it this far (m) clear.
+MAX_BUILDING_SHIFT = 0.5
+BUILDING_CLEARANCE = 0.5
 
 _TOUCH = 1e-3       # m: half-width of the street zone that counts as frontage
 _CRUMB = 1e-3       # m²: polygon parts smaller than this are numerical crumbs
@@ -543,7 +547,7 @@ def _merge_along_shared_edges(lots: np.ndarray, bad: np.ndarray) -> np.ndarray:
 
 @_quiet
 def shrink_blocks(blocks, half_width=DEFAULT_STREET_WIDTH / 2, roads=None,
-                  road_half_widths=None, min_area: float = 0.0) -> np.ndarray:
+                  road_half_widths=None, min_area: float = 0.0, keep_clear=None) -> np.ndarray:
     """Shrink blocks by the half-widths of the streets on their edges (Scharl 4.2.6).
 
     Parameters
@@ -561,6 +565,10 @@ def shrink_blocks(blocks, half_width=DEFAULT_STREET_WIDTH / 2, roads=None,
     min_area : float
         Pieces of a shrunk block smaller than this (m²) are dropped (a narrow neck of a
         block pinched off by the streets is no building land).
+    keep_clear : array of Polygon, optional
+        Areas no lot may take, e.g. the street surfaces and junctions of
+        'tessellatestreets' (whose widths follow each street's class): each block also
+        loses the part of them that reaches into it.
 
     Returns
     -------
@@ -616,6 +624,9 @@ def shrink_blocks(blocks, half_width=DEFAULT_STREET_WIDTH / 2, roads=None,
                     i = b_idx[s]
                     out[i] = shapely.difference(blocks[i], shapely.union_all(bands[r_idx[s:e]]))
     out = np.asarray(out, dtype=object)
+    if keep_clear is not None:
+        # polygons only before the snap: a collection snaps part by part, not as one area
+        out = _areal(without_areas(out, keep_clear))
     # drop crumbs and pinched-off necks; keep polygons only (a difference can return lines)
     out = _snap(out)
     small = shapely.area(shapely.get_parts(out)) <= max(min_area, _CRUMB)
@@ -1171,6 +1182,46 @@ def _strip_parts(sides: List[_Side], faces: np.ndarray):
     return merged, owner[kept]
 
 
+def _cuts_off_buildings(cuts: np.ndarray, buildings, strip, origin: np.ndarray,
+                        u: np.ndarray, width: float, min_width: float, lo: float,
+                        hi: float) -> np.ndarray:
+    """Cut positions along a strip's street (``origin + t u``) moved off the buildings.
+
+    A cut across the strip at ``t`` crosses a building whose part in the strip spans ``t``
+    along ``u``; such a cut moves to the nearer end of the run of buildings it meets (0.5 m
+    clear), by at most :data:`MAX_BUILDING_SHIFT` of a lot width and never leaving a lot
+    narrower than ``min_width`` (or the strip's ends closer than that): else it stays.
+    """
+    inside = shapely.intersection(np.asarray(buildings, dtype=object), strip)
+    inside = inside[shapely.area(inside) > 1.0]
+    if len(inside) == 0:
+        return cuts
+    spans = np.array([[t.min(), t.max()] for t in
+                      ((shapely.get_coordinates(g) - origin) @ u for g in inside)])
+    spans = spans[np.argsort(spans[:, 0])]
+    runs = [list(spans[0])]                        # overlapping spans merge into runs
+    for a, b in spans[1:]:
+        if a <= runs[-1][1] + 2 * BUILDING_CLEARANCE:
+            runs[-1][1] = max(runs[-1][1], b)
+        else:
+            runs.append([a, b])
+    out = np.array(cuts, dtype=float)
+    for j, t in enumerate(out):
+        hit = [r for r in runs if r[0] < t < r[1]]
+        if not hit:
+            continue
+        a, b = hit[0]
+        prev = out[j - 1] if j > 0 else lo
+        nxt = out[j + 1] if j + 1 < len(out) else hi
+        for new in sorted((a - BUILDING_CLEARANCE, b + BUILDING_CLEARANCE),
+                          key=lambda x: abs(x - t)):
+            if abs(new - t) <= MAX_BUILDING_SHIFT * width and new - prev >= min_width \
+                    and nxt - new >= min_width:
+                out[j] = new
+                break
+    return out
+
+
 def _cut_strip(strip, side: _Side, settings: SubdivisionSettings,
                rng: np.random.Generator) -> np.ndarray:
     """Cut a strip across its street into lots about ``lot_width`` wide.
@@ -1224,6 +1275,10 @@ def _cut_strip(strip, side: _Side, settings: SubdivisionSettings,
             if abs(inner[j] - at) < BEND_SNAP * width:
                 inner[j] = at
         inner = np.sort(inner)
+    whole = settings.options.get("keep_whole") if settings.options else None
+    if whole is not None and len(whole) and count > 1:
+        inner = _cuts_off_buildings(inner, whole, strip, p0, u, width, settings.min_width,
+                                    lo, hi)
     margin = 1.0 + (pu.max() - pu.min()) + (pn.max() - pn.min())
     cuts = np.concatenate([[min(pu.min(), 0.0) - margin], inner,
                            [max(pu.max(), length) + margin]])
@@ -1274,6 +1329,11 @@ def split_skeleton(block, settings: SubdivisionSettings,
     (12, 4320.0)
     """
     block = _snap(block)  # a no-op for blocks of shrink_blocks
+    if shapely.get_type_id(block) != 3:
+        # snapping pinched a neck thinner than the grid: each part is a block of its own
+        parts = _polygon_parts([block])
+        return np.concatenate([split_skeleton(p, settings, rng) for p in parts]) \
+            if len(parts) else np.empty(0, dtype=object)
     sides = street_sides(block)
     if len(sides) < 2:
         return _polygon_parts([block])
@@ -1374,12 +1434,60 @@ def _block_settings(settings: SubdivisionSettings, n: int, parcel_area,
     return out
 
 
+def merge_lots_under_buildings(lots, buildings, share: float = 0.05):
+    """Lots that one building stands on (over 1 m² and ``share`` of it on each) merge into
+    one, so that the building stands on one parcel; a building row across lots merges
+    them all. Returns (lots, number of lots merged away). A group whose union is not one
+    polygon (lots meeting only under the building's corner) stays apart.
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    lots = np.asarray(lots, dtype=object)
+    buildings = np.asarray(buildings, dtype=object)
+    b, k = shapely.STRtree(lots).query(buildings, predicate="intersects")
+    if len(b) == 0:
+        return lots, 0
+    on = shapely.area(shapely.intersection(buildings[b], lots[k]))
+    keep = on > np.maximum(1.0, share * shapely.area(buildings[b]))
+    b, k = b[keep], k[keep]
+    if len(b) == 0:
+        return lots, 0
+    # each building links the lots it stands on to the first of them
+    first = k[group_starts(b)][np.cumsum(group_starts(b)) - 1]
+    n = len(lots)
+    _, label = connected_components(coo_matrix((np.ones(len(k)), (first, k)), shape=(n, n)),
+                                    directed=False)
+    out, n_away = [], 0
+    for group in np.unique(label):
+        members = np.flatnonzero(label == group)
+        union = _clean_union(lots[members]) if len(members) > 1 else lots[members[0]]
+        if len(members) > 1 and shapely.get_type_id(union) == 3:
+            out.append(union)
+            n_away += len(members) - 1
+        else:
+            out.extend(lots[members])
+    return np.array(out, dtype=object), n_away
+
+
+def split_buildings(buildings, lots, share: float = 0.95) -> np.ndarray:
+    """Per building: True where no single lot holds ``share`` of its area (a parcel line
+    runs through it)."""
+    buildings = np.asarray(buildings, dtype=object)
+    best = np.zeros(len(buildings))
+    if len(buildings) and len(lots):
+        b, k = shapely.STRtree(lots).query(buildings, predicate="intersects")
+        np.maximum.at(best, b, shapely.area(shapely.intersection(buildings[b], lots[k])))
+    return best < share * shapely.area(buildings)
+
+
 @_quiet
 def subdivide_blocks(blocks, method: str = "recursive",
                      settings: Optional[SubdivisionSettings] = None, seed: int = 0,
                      block_ids: Optional[Sequence[int]] = None,
                      street_width: float = DEFAULT_STREET_WIDTH, roads=None,
                      road_widths=None, parcel_area=None, parcel_area_sd=None,
+                     keep_clear=None, keep_whole=None,
                      progress: Optional[Progress] = None) -> Subdivision:
     """Shrink blocks by their streets and subdivide them into lots (Scharl 4.2.6).
 
@@ -1409,6 +1517,11 @@ def subdivide_blocks(blocks, method: str = "recursive",
         blocks of 'synthesizeroadsrandomwalk'); NaN = the settings' size. They reach the
         method as ``options['mean_area']`` / ``['area_sd']`` (used by ``voronoi-obb``; the
         other methods size lots by ``max_area`` / ``lot_width``).
+    keep_clear : array of Polygon, optional
+        Areas no lot may take (street surfaces, junctions): see :func:`shrink_blocks`.
+    keep_whole : array of Polygon, optional
+        Buildings the lots should not cut through: the skeleton's cuts move off them
+        (:func:`_cuts_off_buildings`); the other methods ignore them.
     progress : Progress, optional
         Stepped once per block (cancellation raises :class:`progress.Canceled`).
 
@@ -1458,14 +1571,25 @@ def subdivide_blocks(blocks, method: str = "recursive",
             raise InputError(f"{int((w < 0).sum())} roads have a negative street width")
         road_hw = w / 2.0
     shrunk = shrink_blocks(blocks, street_width / 2.0, roads, road_hw,
-                           min_area=settings.min_area)
+                           min_area=settings.min_area, keep_clear=keep_clear)
     block_settings = _block_settings(settings, n, parcel_area, parcel_area_sd)
+    n_sized = sum(b is not None for b in block_settings)
+    whole = None
+    if keep_whole is not None:
+        whole = shapely.force_2d(np.asarray(keep_whole, dtype=object).ravel())
+        whole = whole[~(shapely.is_missing(whole) | shapely.is_empty(whole))]
+        b_idx, w_idx = shapely.STRtree(whole).query(blocks, predicate="intersects") \
+            if len(whole) else (np.zeros(0, np.int64), np.zeros(0, np.int64))
+        for i in np.unique(b_idx):
+            own = block_settings[i] or settings
+            block_settings[i] = replace(own, options=dict(own.options or {},
+                                                          keep_whole=whole[w_idx[b_idx == i]]))
     progress.step(0.05)
 
     lots: List[np.ndarray] = []
     owner: List[np.ndarray] = []
     frontage: List[np.ndarray] = []
-    n_merged = 0
+    n_merged = n_merged_for_buildings = 0
     fix_access = spec.street_access or settings.force_street_access
     for i in range(n):
         progress.step(0.05 + 0.9 * i / n)
@@ -1473,6 +1597,16 @@ def subdivide_blocks(blocks, method: str = "recursive",
         for part in _polygon_parts([shrunk[i]]):
             zone = _street_zone(part)
             got = _polygon_parts(spec.subdivide(part, block_settings[i] or settings, rng))
+            leaks = shapely.area(shapely.difference(got, part)) > _CRUMB
+            if leaks.any():
+                # a lot drawn over a thin notch of the land (a street surface reaching in at
+                # a sliver's angle: the skeleton's strips do not follow it) is cut back to it
+                got = np.concatenate([got[~leaks], _polygon_parts(
+                    shapely.intersection(got[leaks], part))])
+            own = block_settings[i].options.get("keep_whole") if block_settings[i] else None
+            if own is not None and len(got) > 1:
+                got, merged = merge_lots_under_buildings(got, own)
+                n_merged_for_buildings += merged
             front = _frontage(got, zone)
             no_access = front < settings.min_frontage
             if fix_access and no_access.any() and len(got) > 1:
@@ -1504,8 +1638,12 @@ def subdivide_blocks(blocks, method: str = "recursive",
         "n_without_access": int((~table.has_street_access).sum()),
         "n_merged_for_access": n_merged,
         "n_under_min_width": int((lot_width < settings.min_width).sum()),
-        "n_sized_by_block": sum(b is not None for b in block_settings),
+        "n_sized_by_block": n_sized,
         "n_undesirable": int(bad.sum()),
     }
+    if whole is not None:
+        stats["n_buildings"] = len(whole)
+        stats["n_buildings_split"] = int(split_buildings(whole, geometry).sum())
+        stats["n_merged_for_buildings"] = n_merged_for_buildings
     progress.step(1.0)
     return Subdivision(geometry, table, shrunk, stats)
