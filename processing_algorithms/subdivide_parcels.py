@@ -128,14 +128,13 @@ class SubdivideParcels(AlgorithmBase):
             "the blocks as they are.")
         self.add_keep_clear("parcel")
         self.add(QgsProcessingParameterFeatureSource(
-            self.BUILDINGS, "Buildings to keep whole (skeleton)",
+            self.BUILDINGS, "Buildings to keep whole",
             [QgsProcessing.SourceType.TypeVectorPolygon], optional=True),
-            "Skeleton: building footprints already in the blocks (e.g. of 'Synthesize "
-            "building footprints'); a cut across a building moves to the nearer end of it, "
-            "by up to half a lot width and never under the minimum width; the lots a "
-            "building still stands on merge into one parcel (a row of touching buildings "
-            "across lots merges them all), so that every building stands on one parcel. The "
-            "other methods ignore them.")
+            "Building footprints already in the blocks (e.g. of 'Synthesize building "
+            "footprints'), each to stand on one parcel. Skeleton: a cut across a building "
+            "moves to the nearer end of it, by up to half a lot width and never under the "
+            "minimum width. Any method: the lots a building still stands on merge into one "
+            "parcel (a row of touching buildings across lots merges them all).")
         self.add(QgsProcessingParameterBoolean(
             self.FORCE_STREET_ACCESS, "Force street access", defaultValue=True),
             "Recursive: a cut that would leave a lot without street frontage is not made "
@@ -203,7 +202,7 @@ class SubdivideParcels(AlgorithmBase):
                 self._blocks_from_roads(parameters, context, feedback)
 
         keep_clear = self.keep_clear_areas(parameters, context, feedback, frame)
-        keep_whole = self._buildings(parameters, context, feedback, frame, method)
+        keep_whole = self._buildings(parameters, context, feedback, frame)
         area = float(shapely.area(np.asarray(block_geoms, dtype=object)).sum())
         self.bound_work(f"Blocks {frame.name} ({area / 1e6:,.1f} km²) at a maximum parcel area "
                         f"of {number[self.MAX_AREA]:g} m²", 2 * area / number[self.MAX_AREA],
@@ -237,16 +236,12 @@ class SubdivideParcels(AlgorithmBase):
         feedback.setProgress(30)
         return frame, frame.geometry, ids, None, None
 
-    def _buildings(self, parameters, context, feedback, frame, method):
+    def _buildings(self, parameters, context, feedback, frame):
         """The BUILDINGS footprints in the blocks' working CRS, or None."""
         buildings = qgis_io.read_source(self, parameters, self.BUILDINGS, context, feedback,
                                         kind="polygons", target_crs=frame.crs, optional=True,
                                         fields=[])
         if buildings is None:
-            return None
-        if method != "skeleton":
-            feedback.pushInfo(f"{buildings.name}: only the skeleton method moves its cuts off "
-                              f"buildings ({method} ignores them).")
             return None
         feedback.pushInfo(f"{len(buildings)} buildings of {buildings.name} are kept whole "
                           "where the lots allow.")

@@ -233,7 +233,8 @@ class SynthesizeFootprints(AlgorithmBase):
         if len(s):
             if int(s.example.isna().sum()):
                 feedback.pushInfo(f"{int(s.example.isna().sum())} blocks got no example "
-                                  "(too small for the street width, or larger than a district).")
+                                  "(too small once the street width and the areas kept clear are taken off, or "
+                                  "larger than a district).")
             feedback.pushInfo(
                 f"{int(s.n_deleted.sum())} example footprints outside their block deleted, "
                 f"{int(s.n_conflicted.sum())} moved off the street, {int(s.n_trimmed.sum())} "

@@ -143,6 +143,11 @@ def test_skeleton_cuts_move_off_the_buildings_to_keep_whole():
     assert merged.stats["n_merged_for_buildings"] >= 2
     assert len(merged.geometry) == len(plain.geometry) - merged.stats["n_merged_for_buildings"]
     assert_partition(merged.geometry, block)
+    # any method: the recursive cuts do not move, the lots under the hall merge
+    recursive = parcels.subdivide_blocks([block], "recursive", settings(max_area=400),
+                                         seed=1, street_width=0, keep_whole=hall)
+    assert parcels.split_buildings(hall, recursive.geometry).sum() == 0
+    assert recursive.stats["n_merged_for_buildings"] >= 1
 
 
 def test_subdivide_shrinks_by_half_the_street_width():

@@ -1520,8 +1520,9 @@ def subdivide_blocks(blocks, method: str = "recursive",
     keep_clear : array of Polygon, optional
         Areas no lot may take (street surfaces, junctions): see :func:`shrink_blocks`.
     keep_whole : array of Polygon, optional
-        Buildings the lots should not cut through: the skeleton's cuts move off them
-        (:func:`_cuts_off_buildings`); the other methods ignore them.
+        Buildings each to stand on one lot: the skeleton's cuts move off them
+        (:func:`_cuts_off_buildings`), and with any method the lots a building still stands
+        on merge (:func:`merge_lots_under_buildings`).
     progress : Progress, optional
         Stepped once per block (cancellation raises :class:`progress.Canceled`).
 
