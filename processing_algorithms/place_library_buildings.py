@@ -121,10 +121,20 @@ class PlaceLibraryBuildings(AlgorithmBase):
         if s.get("too_steep"):
             feedback.pushInfo(f"{s['too_steep']} parcels are steeper than the maximum parcel "
                               "slope and stay empty.")
-        has_z = len(result.geometry) and bool(shapely.has_z(result.geometry).any())
+        if s.get("no_terrain"):
+            feedback.pushWarning(f"{s['no_terrain']} parcels stay empty because the DEM has no "
+                                 "value under them (or under their building's corners): it "
+                                 "has holes there or does not reach them.")
+        if s["n_placed"] == 0:
+            feedback.pushWarning("No parcel got a building: " + (
+                "no parcel side faces a street within the street reach (are the roads the "
+                "parcels' roads?)." if s["no_street"] == s["n_parcels"] else
+                "see the counts above."))
+        # with a DEM the buildings stand at their base height: PolygonZ whatever is placed
+        with_dem = self.given(parameters, self.DEM)
         dest = qgis_io.write_sink(self, parameters, self.OUTPUT, context, result.geometry,
                                   result.table, bestfit.PLACEMENT_FIELDS + extra,
-                                  QgsWkbTypes.Type.PolygonZ if has_z else QgsWkbTypes.Type.Polygon,
+                                  QgsWkbTypes.Type.PolygonZ if with_dem else QgsWkbTypes.Type.Polygon,
                                   parcels.source_crs, crs, feedback)
         qgis_io.style_output(context, dest, "buildings_by_height.qml")
         feedback.setProgress(100)

@@ -153,6 +153,23 @@ def test_best_fit_on_a_slope(qgis_processing, tmp_path):
     assert np.allclose(xyz[:, 2], r["base_z"]) and r["base_z"] == pytest.approx(ground.min(),
                                                                                   abs=0.01)
     assert r["sunk_m"] == pytest.approx(np.ptp(ground), abs=0.01)
+    # a DEM with no value under the gentle parcel (a hole, nodata 0): it stays empty with a
+    # warning (a NaN base height crashed the run), the output is PolygonZ all the same
+    z[(x - x0 > 10) & (x - x0 < 80)] = -9999
+    holed = tmp_path / "holed.tif"
+    ds = gdal.GetDriverByName("GTiff").Create(str(holed), cols, rows, 1, gdal.GDT_Float32)
+    ds.SetGeoTransform((x0 - 60, cell, 0.0, y0 + 20, 0.0, -cell))
+    ds.SetProjection(srs.ExportToWkt())
+    ds.GetRasterBand(1).WriteArray(z.astype(np.float32))
+    ds.GetRasterBand(1).SetNoDataValue(-9999)
+    ds = None
+    log = log_feedback()
+    out = qgis_processing.run(BESTFIT, {"PARCELS": plots, "ROADS": roads, "DEM": str(holed),
+                                        "MAX_PARCEL_SLOPE": 25, "OUTPUT": "memory:"},
+                              feedback=log)
+    assert out["OUTPUT"].wkbType() == QgsWkbTypes.Type.PolygonZ
+    assert out["OUTPUT"].featureCount() == 0
+    assert any("1 parcels stay empty because the DEM has no value" in w for w in log.warnings)
 
 
 def _ogr_layer(uri):

@@ -289,6 +289,28 @@ def test_fit_on_a_slope_sinks_to_the_lowest_corner_and_skips_steep_parcels():
     assert r.table.base_z.isna().all()
 
 
+def test_fit_where_the_dem_has_no_value_leaves_the_parcel_empty_and_says_so():
+    """A DEM with a hole over one parcel and ending inside another: neither gets a
+    building at a guessed height (they crashed on a NaN base height, or were counted as
+    too steep), the third one, on the terrain, gets its building."""
+    from urban_synthesis.plugin.retrieval.shape_context import DemGrid
+
+    cell = 1.0
+    x, y = np.meshgrid(np.arange(-60, 220, cell) + 0.5, 20 - np.arange(140) * cell - 0.5)
+    z = 100 - 0.10 * y
+    z[(x > 10) & (x < 80)] = np.nan            # a hole over the first parcel
+    z[x > 150] = np.nan                        # the DEM ends inside the third
+    dem = DemGrid(z, (-60, cell, 0, 20, 0, -cell))
+    street = [shapely.LineString([(-50, 0), (210, 0)])]
+    in_hole, on_terrain, at_edge = (shapely.box(20, -40, 70, -5), shapely.box(90, -40, 140, -5),
+                                    shapely.box(145, -40, 195, -5))
+    r = bf.fit_buildings([in_hole, on_terrain, at_edge], street, bf.default_library(),
+                         dem=dem, max_parcel_slope=0.25)
+    assert r.stats["n_placed"] == 1 and r.table.parcel_id.tolist() == [2]
+    assert r.stats["no_terrain"] == 2 and r.stats["too_steep"] == 0
+    assert np.isfinite(r.table.base_z).all()
+
+
 @pytest.fixture(scope="module")
 def bubenec_inputs():
     streets = bubenec("streets").geometry.values

@@ -367,7 +367,9 @@ def fit_buildings(parcels, roads, library: Sequence[LibraryBuilding],
         ``geometry`` placed footprints (with a DEM: Polygon Z at ``base_z``); ``table``
         with :data:`PLACEMENT_FIELDS` and the library building's attributes; ``stats``
         with ``n_parcels``, ``n_placed``, ``empty_share``, ``no_street`` (parcels with no
-        street side), ``too_steep`` (parcels over the slope limit).
+        street side), ``too_steep`` (parcels over the slope limit), ``no_terrain`` (parcels,
+        or the corners of the building chosen for them, where the DEM has no value: left
+        empty, not guessed).
     """
     progress = ensure(progress)
     parcels = np.asarray(parcels, dtype=object)
@@ -389,13 +391,16 @@ def fit_buildings(parcels, roads, library: Sequence[LibraryBuilding],
     geoms, rows = [], []
     no_street = 0
     slopes = parcel_slopes(parcels, dem) if dem is not None else np.full(len(parcels), np.nan)
-    too_steep = 0
+    too_steep = no_terrain = 0
     for pi, parcel in enumerate(parcels):
         if pi % 20 == 0:
             progress.step(pi / len(parcels))
         parts = shapely.get_parts(parcel)
         parcel = parts[np.argmax(shapely.area(parts))] if len(parts) else parcel
         if parcel.is_empty or shapely.get_type_id(parcel) != 3:
+            continue
+        if dem is not None and np.isnan(slopes[pi]):
+            no_terrain += 1  # the DEM has no value over the parcel: its slope is unknown
             continue
         if dem is not None and not (slopes[pi] <= max_parcel_slope):
             too_steep += 1  # Scharl: a parcel over maxParcelSlope is discarded
@@ -440,7 +445,10 @@ def fit_buildings(parcels, roads, library: Sequence[LibraryBuilding],
         if dem is not None:
             # Scharl: moved down so that every vertex is on the ground or beneath
             ground = dem(shapely.get_coordinates(g.exterior)[:-1])
-            base, sunk = float(np.nanmin(ground)), float(np.nanmax(ground) - np.nanmin(ground))
+            if not np.isfinite(ground).all():
+                no_terrain += 1  # a corner off the DEM: how deep to sink it is unknown
+                continue
+            base, sunk = float(ground.min()), float(ground.max() - ground.min())
             g = shapely.force_3d(g, base)
         geoms.append(g)
         rows.append({**b.attributes, "parcel_id": int(ids[pi]), "source_id": b.source_id,
@@ -451,5 +459,5 @@ def fit_buildings(parcels, roads, library: Sequence[LibraryBuilding],
     progress.step(1.0)
     n = len(parcels)
     stats = {"n_parcels": n, "n_placed": len(rows), "empty_share": 1.0 - len(rows) / n,
-             "no_street": no_street, "too_steep": too_steep}
+             "no_street": no_street, "too_steep": too_steep, "no_terrain": no_terrain}
     return BestFit(np.array(geoms, dtype=object), pd.DataFrame(rows), stats)
