@@ -236,6 +236,13 @@ class TessellateStreets(AlgorithmBase):
             f"{st['max_degree']}); {st['merged_away']} junction centres merged away; "
             f"{st['edges_without_surface']} streets lie wholly inside their junctions; "
             f"{st['cut_surfaces'] + st['cut_junctions']} polygons trimmed where they overlapped.")
+        if st.get("dem_gap_edges"):
+            feedback.pushWarning(
+                f"{st['dem_gap_edges']} of {st['edges']} streets run (partly) where the DEM has "
+                "no value: across a hole their heights are interpolated from its rim, beyond the "
+                "DEM's edge they keep the edge's height, up to "
+                f"{st['dem_gap_max_m']:,.0f} m from a cell with a value. Give a DEM without "
+                "holes that covers every street for true heights.")
         if dem is not None:
             for what, table in (("street surfaces", result.surface_table),
                                 ("junctions", result.junction_table)):

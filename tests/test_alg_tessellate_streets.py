@@ -75,6 +75,51 @@ def _write_plane(path, a=A, b=B, x0=X0 - 200, y0=Y0 + 200, cell=5.0, n=(140, 80)
     return str(path)
 
 
+def test_a_dem_with_gaps_says_so_and_gives_no_false_heights(qgis_processing, stars, tmp_path):
+    """The plane with a declared hole under the five-way star, and a second file whose hole
+    is -9999 undeclared, in two bands: heights stay on the plane across the declared hole
+    (they were 0 there), and each problem is warned of by name."""
+    from osgeo import gdal
+
+    from helpers import log_feedback
+
+    plane = _write_plane(tmp_path / "plane.tif")
+    z = gdal.Open(plane).ReadAsArray().astype(np.float32)
+    hole = np.zeros(z.shape, bool)
+    hole[30:50, 30:50] = True                         # 100 x 100 m around the star's centre
+    for name, nodata, bands in (("holed", -9999.0, 1), ("undeclared", None, 2)):
+        path = tmp_path / f"{name}.tif"
+        ds = gdal.GetDriverByName("GTiff").CreateCopy(str(path), gdal.Open(plane))
+        if bands == 2:
+            ds = None
+            ds = gdal.GetDriverByName("GTiff").Create(str(path), z.shape[1], z.shape[0], 2,
+                                                      gdal.GDT_Float32)
+            src = gdal.Open(plane)
+            ds.SetGeoTransform(src.GetGeoTransform())
+            ds.SetProjection(src.GetProjection())
+            ds.GetRasterBand(2).WriteArray(z)
+        ds.GetRasterBand(1).WriteArray(np.where(hole, -9999.0, z).astype(np.float32))
+        if nodata is not None:
+            ds.GetRasterBand(1).SetNoDataValue(nodata)
+        ds = None
+        log = log_feedback()
+        out = qgis_processing.run(ALG, {"ROADS": stars, "WIDTH_FIELD": "w", "DEM": str(path),
+                                        "OUTPUT_SURFACES": "memory:",
+                                        "OUTPUT_JUNCTIONS": "memory:"}, feedback=log)
+        xyz = shapely.get_coordinates(np.concatenate([
+            layer_features(out[k])[1] for k in ("OUTPUT_SURFACES", "OUTPUT_JUNCTIONS")]),
+            include_z=True)
+        if name == "holed":
+            np.testing.assert_allclose(
+                xyz[:, 2], 20.0 + A * (xyz[:, 0] - X0) + B * (xyz[:, 1] - Y0), atol=0.1)
+            assert any("% of the input's extent has no value" in w for w in log.warnings)
+            assert any("streets run (partly) where the DEM has no value" in w
+                       for w in log.warnings)
+        else:
+            assert any("has 2 bands: band 1" in w for w in log.warnings)
+            assert any("cells of -9999 that are not declared" in w for w in log.warnings)
+
+
 def test_helsinki_osm(qgis_processing):
     out = qgis_processing.run(ALG, {"ROADS": helsinki_layer(), "OUTPUT_SURFACES": "memory:",
                                     "OUTPUT_JUNCTIONS": "memory:"})

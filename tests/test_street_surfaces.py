@@ -243,6 +243,32 @@ def test_hill_junctions_in_tangent_plane_and_streets_draped():
     np.testing.assert_allclose(mid[:, 2], dem(mid[:, :2]), atol=1e-6)
 
 
+def test_a_dem_with_a_hole_and_an_edge_inside_the_network():
+    """z = 50 + 0.05 x + 0.10 y with a 60 m hole over a street and nothing beyond x = 250:
+    no height is NaN, zero or below the terrain's range (they were 0 and -600 m); across
+    the hole the plane is interpolated exactly (a plane is harmonic), beyond the edge the
+    edge's heights go on; the streets concerned are counted."""
+    dem = plane_dem(0.05, 0.10)
+    x0, dx, _, y1, _, dy = dem.geotransform
+    rows, cols = dem.array.shape
+    x, y = np.meshgrid(x0 + dx * (np.arange(cols) + 0.5), y1 + dy * (np.arange(rows) + 0.5))
+    holed = dem.array.copy()
+    holed[(np.abs(x - 150) < 30) & (np.abs(y - 100) < 30)] = np.nan   # a hole on a junction
+    holed[x > 250] = np.nan                                           # the DEM ends there
+    res = ss.tessellate_lines(grid_lines(), np.full(8, 10.0),
+                              dem=DemGrid(holed, dem.geotransform))
+    assert_tessellation(res)
+    xyz = shapely.get_coordinates(np.concatenate([res.surfaces, res.junctions]),
+                                  include_z=True)
+    assert np.isfinite(xyz[:, 2]).all()
+    inside = xyz[:, 0] < 240
+    np.testing.assert_allclose(xyz[inside, 2], 50 + 0.05 * xyz[inside, 0] + 0.10 * xyz[inside, 1],
+                               atol=1e-3)
+    beyond = xyz[:, 0] > 260
+    assert (xyz[beyond, 2] >= 50 + 0.05 * 245 - 1).all()
+    assert res.stats["dem_gap_edges"] >= 5 and res.stats["dem_gap_max_m"] >= 45
+
+
 # --------------------------------------------------------------------------- real data
 
 def test_helsinki_streets():

@@ -612,6 +612,21 @@ def tessellate_network(graph: RoadGraph, widths: Sequence[float],
         s_table[col] = np.nan
         j_table[col] = np.nan
     j_table["slope_pct"] = np.nan
+    dem_gaps = {}
+    if dem is not None and not np.isfinite(dem.array).all():
+        # a hole in the DEM, or its edge inside the network: holes are filled smoothly from
+        # their rim, the land beyond the edge keeps the edge's height (bilinear sampling
+        # would give NaN, which no geometry can hold), and the log says how many and how far
+        xy, k = shapely.get_coordinates(shapely.segmentize(graph.geometry, dem.cell_size),
+                                        return_index=True)
+        off = ~np.isfinite(dem(xy))
+        dem, distance = dem.filled()
+        if off.any():
+            x0, dx, _, y0, _, dy = dem.geotransform
+            col = np.clip(((xy[off, 0] - x0) / dx).astype(np.int64), 0, distance.shape[1] - 1)
+            row = np.clip(((xy[off, 1] - y0) / dy).astype(np.int64), 0, distance.shape[0] - 1)
+            dem_gaps = {"dem_gap_edges": int(len(np.unique(k[off]))),
+                        "dem_gap_max_m": float(distance[row, col].max())}
     if dem is not None:
         surfaces, jpolys, heights = _drape(dem, graph, widths, h, junction_nodes, jpolys,
                                            surfaces, centre, surf_edge, s_table, j_table,
@@ -635,7 +650,7 @@ def tessellate_network(graph: RoadGraph, widths: Sequence[float],
              "junctions": len(jpolys), "edges_without_surface": int((~has_surface).sum()),
              "cut_junctions": len(n_jcut),
              "cut_surfaces": len(np.union1d(n_scut, n_sscut)),
-             "max_degree": int(j_deg.max()) if len(j_deg) else 0}
+             "max_degree": int(j_deg.max()) if len(j_deg) else 0, **dem_gaps}
     progress.step(1.0)
     out = Tessellation(surfaces, s_table, jpolys, j_table, graph, widths, stats,
                        centres=centre[keep_s], surface_edge=surf_edge[keep_s],

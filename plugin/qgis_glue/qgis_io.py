@@ -651,6 +651,11 @@ style_output = styles.style_output  # the algorithms' one call (qgis_glue/styles
 
 # --------------------------------------------------------------------------- rasters
 
+#: Values that mark gaps in many DEMs (ESRI, SRTM, float32's lowest) and read as heights
+#: when the file does not declare them as no data.
+UNDECLARED_NODATA = (-9999.0, -32767.0, -32768.0, float(np.finfo(np.float32).min))
+
+
 def read_raster(layer, work_crs: QgsCoordinateReferenceSystem, bounds, cell_size: float,
                 feedback=None, what: str = "DEM"):
     """Warp a raster layer into the working CRS over ``bounds`` (+ a margin) with GDAL.
@@ -687,6 +692,18 @@ def read_raster(layer, work_crs: QgsCoordinateReferenceSystem, bounds, cell_size
     band = ds.GetRasterBand(1)
     grid = band.ReadAsArray().astype(np.float64)
     nodata = band.GetNoDataValue()
+    if feedback is not None:
+        if layer.bandCount() > 1:
+            feedback.pushWarning(f"{what} '{layer.name()}' has {layer.bandCount()} bands: band 1 "
+                                 "is read as the heights.")
+        # a common 'no data' code the file does not declare reads as a height
+        codes = [v for v in UNDECLARED_NODATA if (grid == v).any()]
+        if codes:
+            feedback.pushWarning(
+                f"{what} '{layer.name()}' has cells of {codes[0]:g} that are not declared as "
+                "'no data': they are read as heights. Set the raster's no-data value (Layer "
+                "Properties > Transparency, or GDAL 'Translate' with -a_nodata) if they are "
+                "gaps.")
     dem = DemGrid(grid, ds.GetGeoTransform(), nodata)
     valid = np.isfinite(dem.array)
     if not valid.any():
@@ -694,8 +711,10 @@ def read_raster(layer, work_crs: QgsCoordinateReferenceSystem, bounds, cell_size
             f"{what} '{layer.name()}' has no value over the input's extent: check that they "
             "overlap.")
     if feedback is not None and not valid.all():
-        feedback.pushInfo(f"{what}: {100 * (1 - valid.mean()):.0f} % of the input's extent has "
-                          "no value there.")
+        # a warning: every tool that reads a DEM treats cells without a value as a guess
+        # (flat, filled or left out), which the analyst should know of
+        feedback.pushWarning(f"{what} '{layer.name()}': {100 * (1 - valid.mean()):.0f} % of the "
+                             "input's extent has no value (holes, or beyond its edge).")
     return dem
 
 
