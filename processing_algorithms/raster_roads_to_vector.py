@@ -163,5 +163,6 @@ class RasterRoadsToVector(AlgorithmBase):
         dest = qgis_io.write_sink(self, parameters, self.OUTPUT, context, result.geometry, table,
                                   FIELDS, QgsWkbTypes.Type.LineString, layer.crs(), layer.crs(),
                                   feedback)
+        qgis_io.style_output(context, dest, "road_edges.qml")
         feedback.setProgress(100)
         return {self.OUTPUT: dest}

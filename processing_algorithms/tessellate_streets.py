@@ -273,6 +273,7 @@ class TessellateStreets(AlgorithmBase):
                     self, parameters, self.OUTPUT_MESH, context, geoms, t,
                     street_mesh.MESH_FIELDS, QgsWkbTypes.Type.MultiPolygonZ, frame.source_crs,
                     frame.source_crs, feedback)
+                qgis_io.style_output(context, results[self.OUTPUT_MESH], "street_mesh.qml")
             if tin_path:
                 qgis_io.run_engine(tin_path, street_mesh.write_tin_geopackage, tin_path,
                                    "street_mesh", geoms, t, street_mesh.MESH_FIELDS,

@@ -168,6 +168,29 @@ def junctions():
     layer.saveNamedStyle(str(OUT / "junctions.qml"))
 
 
+def street_mesh():
+    """The 3D street mesh of tessellatestreets: its street and junction features as the
+    surfaces and junctions are drawn (kind 'street' / 'junction')."""
+    layer = QgsVectorLayer("Polygon?field=kind:string", "street mesh", "memory")
+    cats = [QgsRendererCategory("street", QgsFillSymbol.createSimple(
+                {"color": "#bdbdbd", "outline_color": "#636363", "outline_width": "0.1"}),
+                "street"),
+            QgsRendererCategory("junction", QgsFillSymbol.createSimple(
+                {"color": "#737373", "outline_color": "#252525", "outline_width": "0.1"}),
+                "junction")]
+    layer.setRenderer(QgsCategorizedSymbolRenderer("kind", cats))
+    layer.saveNamedStyle(str(OUT / "street_mesh.qml"))
+
+
+def road_edges():
+    """Road centre lines without a hierarchy (rasterroadstovector): one dark line."""
+    layer = QgsVectorLayer("LineString?field=length_m:double", "roads", "memory")
+    sym = QgsLineSymbol.createSimple({"line_color": "#252525", "line_width": "0.4",
+                                      "capstyle": "round", "joinstyle": "round"})
+    layer.setRenderer(QgsSingleSymbolRenderer(sym))
+    layer.saveNamedStyle(str(OUT / "road_edges.qml"))
+
+
 if __name__ == "__main__":
     app = QgsApplication([], False)
     app.initQgis()
@@ -179,5 +202,7 @@ if __name__ == "__main__":
     parcels_by_quality()
     street_surfaces()
     junctions()
+    street_mesh()
+    road_edges()
     print("styles written to", OUT)
     sys.exit(0)

@@ -117,6 +117,11 @@ def test_raster_roads_to_vector_helsinki(qgis_processing, tmp_path):
     _write_geotiff(tif, img, gt, 32635)
     layer = qgis_processing.run(R2V, {"INPUT": str(tif), "OUTPUT": "memory:"})["OUTPUT"]
     assert layer.crs().authid() == "EPSG:32635"
+    from qgis.core import QgsVectorLayer
+
+    saved = qgis_processing.run(R2V, {"INPUT": str(tif), "OUTPUT": str(tmp_path / "r.gpkg")})
+    opened = QgsVectorLayer(saved["OUTPUT"], "roads", "ogr")   # kept: the symbol is its own
+    assert opened.renderer().symbol().color().name() == "#252525"   # road_edges.qml, saved
     rows, geoms = layer_features(layer)
     assert_planar(geoms)
     engine = raster_graph.raster_to_graph(img, gt)

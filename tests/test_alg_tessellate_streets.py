@@ -282,13 +282,19 @@ def test_3d_mesh_on_an_inclined_plane(qgis_processing, stars, tmp_path):
     tin = tmp_path / "mesh.gpkg"
     out = qgis_processing.run(ALG, {"ROADS": stars, "WIDTH_FIELD": "w", "DEM": dem,
                                     "Z_OFFSET": 0.2, "OUTPUT_SURFACES": "memory:",
-                                    "OUTPUT_JUNCTIONS": "memory:", "OUTPUT_MESH": "memory:",
+                                    "OUTPUT_JUNCTIONS": "memory:",
+                                    "OUTPUT_MESH": str(tmp_path / "mesh_layer.gpkg"),
                                     "OUTPUT_TIN": str(tin),
                                     "OUTPUT_OBJ": str(tmp_path / "mesh.obj")})
-    mesh = out["OUTPUT_MESH"]
+    from qgis.core import QgsVectorLayer
+
+    mesh = QgsVectorLayer(out["OUTPUT_MESH"], "mesh", "ogr")   # opens with its saved style
     assert mesh.wkbType() == QgsWkbTypes.Type.MultiPolygonZ
     rows, geoms = layer_features(mesh)
     assert len(rows) == 11 + 2 and {r["kind"] for r in rows} == {"street", "junction"}
+    # styled like the surfaces and junctions by its kind field, in the file (it had none)
+    assert mesh.renderer().type() == "categorizedSymbol"
+    assert {c.value() for c in mesh.renderer().categories()} == {"street", "junction"}
     tris = shapely.get_parts(geoms)
     xyz = shapely.get_coordinates(tris, include_z=True).reshape(-1, 4, 3)
     assert np.allclose(xyz[:, 0], xyz[:, 3])                 # closed triangles

@@ -10,7 +10,9 @@ LAYERS = {"roads_by_level.qml": "LineString?field=level:integer",
                                     "&field=has_street_access:boolean",
           "intersections.qml": "Point?field=degree:integer",
           "street_surfaces.qml": "Polygon?field=too_steep_long:boolean",
-          "junctions.qml": "Polygon?field=degree:integer"}
+          "junctions.qml": "Polygon?field=degree:integer",
+          "street_mesh.qml": "Polygon?field=kind:string",
+          "road_edges.qml": "LineString?field=length_m:double"}
 
 
 @pytest.mark.parametrize("qml", sorted(LAYERS))
