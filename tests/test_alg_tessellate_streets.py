@@ -286,8 +286,6 @@ def test_3d_mesh_on_an_inclined_plane(qgis_processing, stars, tmp_path):
                                     "OUTPUT_MESH": str(tmp_path / "mesh_layer.gpkg"),
                                     "OUTPUT_TIN": str(tin),
                                     "OUTPUT_OBJ": str(tmp_path / "mesh.obj")})
-    from qgis.core import QgsVectorLayer
-
     mesh = QgsVectorLayer(out["OUTPUT_MESH"], "mesh", "ogr")   # opens with its saved style
     assert mesh.wkbType() == QgsWkbTypes.Type.MultiPolygonZ
     rows, geoms = layer_features(mesh)
