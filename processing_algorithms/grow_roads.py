@@ -315,6 +315,16 @@ class GrowRoads(AlgorithmBase):
         if st.get("links"):
             feedback.pushInfo(f"{st['links']} road(s) added to join pieces of the network "
                               "that reached no sketched road (pattern 'link').")
+        if st.get("pieces_apart"):
+            feedback.pushWarning(
+                f"{st['pieces_apart']} piece(s) of the network stay apart from the rest: no "
+                "buildable link (no steeper than the maximum slope, clear of obstacles) "
+                "reaches them.")
+        if self.parameterAsBoolean(parameters, self.REMOVE_DEAD_ENDS, context) \
+                and st.get("dead_ends_left") and not st.get("dead_ends_removed"):
+            feedback.pushWarning(
+                f"{st['dead_ends_left']} dead ends are kept: removing them would remove every "
+                "grown road (the network is all tree, as on steep terrain).")
         if st.get("bulged_hull"):
             feedback.pushInfo("No boundary: the quarters were closed by the bulged convex hull "
                               "of the major nodes.")

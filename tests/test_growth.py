@@ -385,3 +385,20 @@ def test_bulged_hull_without_a_boundary_and_dead_ends_removed():
     assert len(kept.geometry) == len(res.geometry) + res.stats["dead_ends_removed"]
     with pytest.raises(InputError, match="no boundary"):
         growth.grow_roads(None, seed=1)
+
+
+def test_pieces_apart_and_dead_ends_left_are_counted():
+    """What the log warns of when linking or pruning could not do all (steep terrain): a
+    T of grown roads on a sketched road, and a grown road apart from it."""
+    lines = np.array([shapely.LineString([(0, 0), (50, 0)]),        # sketched (noded)
+                      shapely.LineString([(50, 0), (100, 0)]),      # sketched
+                      shapely.LineString([(50, 0), (50, 60)]),      # grown, a dead end
+                      shapely.LineString([(0, 200), (80, 200)])],   # grown, apart
+                     dtype=object)
+    result = growth.GrowthResult(lines, np.array([0, 0, 1, 1]),
+                                 np.array(["sketch", "sketch", "grid", "organic"],
+                                          dtype=object), np.full(4, 8.0), {})
+    assert growth.pieces_and_dead_ends(result) == (1, 3)
+    # without a sketch, every piece besides one is apart
+    result.pattern[:2] = "grid"
+    assert growth.pieces_and_dead_ends(result)[0] == 1

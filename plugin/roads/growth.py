@@ -60,7 +60,7 @@ import heapq
 import math
 import time
 from dataclasses import dataclass, field, replace
-from typing import Optional
+from typing import Optional, Tuple
 
 import numpy as np
 import pandas as pd
@@ -1190,6 +1190,7 @@ def grow_roads(boundary, *, settings: Optional[GrowthSettings] = None, major_roa
     if s.remove_dead_ends:
         result, n_dead = remove_dead_ends(result)
     result, n_links = link_pieces(result, s.minor_width, s.max_slope, dem, obst, area)
+    n_apart, n_dead_left = pieces_and_dead_ends(result)
     progress.step(1.0)
     result.stats.update({
         "segments": g.n_grown, "major_segments": g.grown[MAJOR],
@@ -1197,6 +1198,7 @@ def grow_roads(boundary, *, settings: Optional[GrowthSettings] = None, major_roa
         "proposals": g.proposals, "rejected": dict(sorted(g.rejected.items())),
         "quarters": len(quarters), "seeds": g.seeds, "capped": g.capped,
         "dead_ends_removed": n_dead, "links": n_links, "bulged_hull": hull is not None,
+        "pieces_apart": n_apart, "dead_ends_left": n_dead_left,
         "seconds": time.perf_counter() - t_start,
     })
     progress.info(
@@ -1262,6 +1264,41 @@ def bulged_hull(points: np.ndarray, rng: np.random.Generator, clip=None,
     return max(parts, key=lambda q: q.area) if parts else None
 
 
+def _end_nodes(geoms):
+    """Node index of each line's two ends (ends equal to 1 µm share a node)."""
+    ends = np.vstack([shapely.get_coordinates(shapely.get_point(geoms, 0)),
+                      shapely.get_coordinates(shapely.get_point(geoms, -1))])
+    _, node = np.unique(np.round(ends, 6), axis=0, return_inverse=True)
+    node = node.ravel()
+    return node[:len(geoms)], node[len(geoms):]
+
+
+def pieces_and_dead_ends(result: "GrowthResult") -> Tuple[int, int]:
+    """How many pieces of the network reach no sketched road (without a sketch: pieces
+    besides one), and how many dead ends (nodes of degree 1) its grown roads have: what
+    the log reports when linking or pruning could not do all (a part no buildable link
+    reaches, a network that is all tree, as on steep terrain)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    geoms = result.geometry
+    if len(geoms) == 0:
+        return 0, 0
+    u, v = _end_nodes(geoms)
+    n = int(max(u.max(), v.max())) + 1
+    # every node is an end of a line (the node index is dense): one component per piece
+    n_pieces, label = connected_components(
+        coo_matrix((np.ones(len(u)), (u, v)), shape=(n, n)), directed=False)
+    sketched = result.pattern == "sketch"
+    if sketched.any():
+        apart = n_pieces - len(np.unique(label[u[sketched]]))
+    else:
+        apart = n_pieces - 1
+    deg = np.bincount(np.r_[u, v], minlength=n)
+    dead = np.unique(np.r_[u[~sketched & (deg[u] == 1)], v[~sketched & (deg[v] == 1)]])
+    return int(apart), int(len(dead))
+
+
 def remove_dead_ends(result: "GrowthResult"):
     """Prune grown dead-end roads (Scharl Fig. 4.12): edges with an end of degree 1 are
     removed until none is left; sketched roads stay. Nothing is pruned when that would
@@ -1270,15 +1307,11 @@ def remove_dead_ends(result: "GrowthResult"):
     geoms = result.geometry
     if len(geoms) == 0:
         return result, 0
-    ends = np.vstack([shapely.get_coordinates(shapely.get_point(geoms, 0)),
-                      shapely.get_coordinates(shapely.get_point(geoms, -1))])
-    _, node = np.unique(np.round(ends, 6), axis=0, return_inverse=True)
-    node = node.ravel()
-    u, v = node[:len(geoms)], node[len(geoms):]
+    u, v = _end_nodes(geoms)
     keep = np.ones(len(geoms), dtype=bool)
     sketched = result.pattern == "sketch"
     while True:
-        deg = np.bincount(np.r_[u[keep], v[keep]], minlength=node.max() + 1)
+        deg = np.bincount(np.r_[u[keep], v[keep]], minlength=max(u.max(), v.max()) + 1)
         dead = keep & ~sketched & ((deg[u] == 1) | (deg[v] == 1))
         if not dead.any():
             break
