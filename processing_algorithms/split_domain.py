@@ -230,6 +230,13 @@ class SplitDomain(AlgorithmBase):
         key_roads = qgis_io.read_source(self, parameters, self.KEY_ROADS, context, feedback,
                                         kind="lines", fields=[class_field] if class_field else [],
                                         target_crs=crs, optional=True)
+        if key_roads is not None:
+            reach = shapely.buffer(shapely.union_all(region.geometry), 1.0)
+            away = int((~shapely.intersects(key_roads.geometry, reach)).sum())
+            if away:
+                feedback.pushWarning(
+                    f"{away} of {len(key_roads)} key roads of {key_roads.name} do not reach "
+                    f"the region {region.name}: they play no part in the layout.")
         key_classes = None
         if key_roads is not None and class_field:
             key_classes = qgis_io.osm_tag_column(key_roads, class_field)

@@ -195,6 +195,23 @@ def test_a_region_too_small_for_a_lot_says_so(qgis_processing):
     assert any("no parcels" in w and "too small for a lot" in w for w in log.warnings)
 
 
+def test_key_roads_away_from_the_region_are_named(qgis_processing):
+    """A key road 1 km from a 200 m region played no part without a word."""
+    from helpers import log_feedback
+
+    region = memory_layer("Polygon", ["POLYGON ((0 0, 200 0, 200 200, 0 200, 0 0))"],
+                          crs="EPSG:32633", name="square")
+    roads = memory_layer("LineString", ["LINESTRING (-50 100, 250 100)",
+                                        "LINESTRING (1000 1000, 1300 1000)"],
+                         crs="EPSG:32633", name="key roads")
+    log = log_feedback()
+    qgis_processing.run(ALG, {"REGION": region, "KEY_ROADS": roads, "SEED": 1,
+                              "OUTPUT_ROADS": "memory:", "OUTPUT_PARCELS": "memory:"},
+                        feedback=log)
+    assert any("1 of 2 key roads of 'key roads' do not reach the region" in w
+               for w in log.warnings), log.warnings
+
+
 def test_bad_input(qgis_processing, region_layer):
     from qgis.core import QgsProcessingException
 
