@@ -243,6 +243,30 @@ def test_hill_junctions_in_tangent_plane_and_streets_draped():
     np.testing.assert_allclose(mid[:, 2], dem(mid[:, :2]), atol=1e-6)
 
 
+def test_a_street_that_bends_back_past_its_end_meets_its_junctions_without_a_step():
+    """A U-shaped street between two junctions on a hill: measured along its end's
+    direction, its far legs lay 'behind' its ends and took the junction planes
+    extrapolated (steps of 3-3.6 m at the junctions, metres off the terrain)."""
+    cell = 2.0
+    x, y = np.meshgrid(-100 + cell * (np.arange(250) + 0.5), 400 - cell * (np.arange(250) + 0.5))
+    dem = DemGrid(30.0 * np.exp(-((x - 150) ** 2 + (y - 250) ** 2) / (2 * 90.0 ** 2)),
+                  (-100, cell, 0.0, 400, 0.0, -cell))
+    lines = [shapely.LineString([(0, 0), (150, 0)]),
+             shapely.LineString([(0, 0), (0, 250), (150, 250), (150, 0)]),
+             shapely.LineString([(0, 0), (0, -90)]), shapely.LineString([(150, 0), (150, -90)])]
+    res = ss.tessellate_lines(lines, np.full(4, 8.0), dem=dem)
+    assert_tessellation(res)
+    from scipy.spatial import cKDTree
+
+    jxyz = np.vstack([shapely.get_coordinates(j, include_z=True) for j in res.junctions])
+    for surface in res.surfaces:
+        sxyz = shapely.get_coordinates(surface, include_z=True)
+        d, k = cKDTree(jxyz[:, :2]).query(sxyz[:, :2])
+        np.testing.assert_allclose(sxyz[d < 1e-6, 2], jxyz[k[d < 1e-6], 2], atol=1e-6)
+        far = d > 30
+        np.testing.assert_allclose(sxyz[far, 2], dem(sxyz[far, :2]), atol=1e-6)
+
+
 def test_a_dem_with_a_hole_and_an_edge_inside_the_network():
     """z = 50 + 0.05 x + 0.10 y with a 60 m hole over a street and nothing beyond x = 250:
     no height is NaN, zero or below the terrain's range (they were 0 and -600 m); across

@@ -709,18 +709,14 @@ def _drape(dem, graph, widths, h, junction_nodes, jpolys, surfaces, centre, surf
     seg_len = shapely.length(centre)
     trans = np.minimum(0.5 * seg_len, np.maximum(2.0 * widths[surf_edge], 3.0 * cell))
 
-    # distance from each end's connecting line, measured along the street's end direction
-    # (vectorised; exact on straight ends, and only used for the blend near the ends)
-    ends = [shapely.get_coordinates(shapely.get_point(centre, i)) for i in (0, 1, -2, -1)]
-    start, dir_u = ends[0], unit(ends[1] - ends[0])
-    stop, dir_v = ends[3], unit(ends[2] - ends[3])
-
     def height(k, xy):
         """Height of points ``xy`` on street surface k: terrain, blended into the junction
-        planes within ``trans`` of either end."""
+        planes within ``trans`` of either end, the distance from an end measured along the
+        centre line (a street that bends back past its own end, a hairpin, is not taken
+        for its end there: measured along the end's direction it was, and stepped)."""
         zt = _dem_z(dem, xy)
-        su = ((xy - start[k]) * dir_u[k]).sum(1)
-        sv = ((xy - stop[k]) * dir_v[k]).sum(1)
+        su = shapely.line_locate_point(centre[k], shapely.points(xy))
+        sv = seg_len[k] - su
         wu = np.where(plane_u[k], np.clip(1.0 - su / trans[k], 0.0, 1.0), 0.0)
         wv = np.where(plane_v[k], np.clip(1.0 - sv / trans[k], 0.0, 1.0), 0.0)
         return zt + wu * (plane(u[k], xy) - zt) + wv * (plane(v[k], xy) - zt)
