@@ -365,6 +365,30 @@ def test_mesh_tiles_the_surfaces_and_skirts_the_terrain():
             assert geom.GetGeometryName() == "TIN" and geom.GetGeometryCount() == n
 
 
+def test_mesh_of_streets_trimmed_by_each_other_does_not_overlap():
+    """Two 8 m streets 4 m apart (a dual carriageway): their surfaces are trimmed where
+    they overlap, and so are their top triangles now (1,168 m² lay over each other), with
+    z still on the draped height."""
+    from urban_synthesis.plugin.network import street_mesh as sm
+
+    lines = [shapely.LineString([(0, 0), (300, 0)]), shapely.LineString([(0, 4), (300, 4)]),
+             shapely.LineString([(0, -50), (0, 50)]), shapely.LineString([(300, -50), (300, 50)])]
+    dem = plane_dem(0.05, 0.02, extent=(-100, -100, 400, 100))
+    for terrain in (None, dem):
+        t = ss.tessellate_lines(lines, np.full(4, 8.0), dem=terrain)
+        m = sm.street_mesh(t, spacing=5.0, z_offset=0.1)
+        top = m.triangles[~m.side]
+        flat = shapely.polygons(np.concatenate([top[:, :, :2], top[:, :1, :2]], axis=1))
+        union = shapely.union_all(flat)
+        assert shapely.area(flat).sum() - union.area < 1e-6 * union.area     # no overlap
+        polys = shapely.union_all(shapely.force_2d(np.concatenate([t.surfaces, t.junctions])))
+        assert abs(union.area - polys.area) < 1e-6 * polys.area
+        if terrain is not None:
+            xyz = top.reshape(-1, 3)
+            np.testing.assert_allclose(xyz[:, 2], 50 + 0.05 * xyz[:, 0] + 0.02 * xyz[:, 1] + 0.1,
+                                       atol=1e-6)
+
+
 def test_junction_corners_above_the_terrain_get_side_faces():
     """In a hollow the junction's plane (fitted to the terrain around it) lies above the
     ground at the junction's corners: those outer edges get side faces down to 0.5 m below

@@ -201,6 +201,51 @@ def _junction_triangles(polys: np.ndarray, centres: np.ndarray):
     return np.concatenate(tris), np.concatenate(owner)
 
 
+def _clipped_to_surfaces(tris: np.ndarray, owner: np.ndarray, uv: np.ndarray, surfaces):
+    """Street top triangles (n, 3, 3) cut back to their own surface polygons where those
+    were trimmed (streets overlapping each other or a junction: the strips between the
+    connecting lines ignore the trim). A triangle partly outside becomes the ear-clipped
+    pieces of its part inside, with z and (u, v) interpolated in the triangle's plane.
+    Returns (tris, owner, uv)."""
+    t2 = shapely.polygons(tris[:, [0, 1, 2, 0], :2])
+    area = np.abs(_tri_area2(tris[:, 0, :2], tris[:, 1, :2], tris[:, 2, :2])) / 2
+    strip = np.bincount(owner, weights=area, minlength=len(surfaces))
+    trimmed = strip > shapely.area(surfaces) * (1 + 1e-6) + 1e-6
+    sel = np.flatnonzero(trimmed[owner])
+    if not len(sel):
+        return tris, owner, uv
+    inside = shapely.intersection(t2[sel], surfaces[owner[sel]])
+    whole = shapely.area(inside) >= area[sel] * (1 - 1e-9)
+    cut = sel[~whole]
+    keep = np.ones(len(tris), dtype=bool)
+    keep[cut] = False
+    pieces, parent = shapely.get_parts(inside[~whole], return_index=True)
+    new_t, new_o, new_uv = [], [], []
+    for piece, i in zip(pieces, cut[parent]):
+        if shapely.get_type_id(piece) != 3 or piece.area < 1e-6:
+            continue
+        ring = np.asarray(shapely.geometry.polygon.orient(piece, 1.0).exterior.coords)[:-1, :2]
+        ears = _ear_clip(ring)
+        if not len(ears):
+            continue
+        # barycentric coordinates of the ring's vertices in the parent triangle
+        a, b, c = tris[i, 0, :2], tris[i, 1, :2], tris[i, 2, :2]
+        m = np.array([[b[0] - a[0], c[0] - a[0]], [b[1] - a[1], c[1] - a[1]]])
+        st = np.linalg.solve(m, (ring - a).T).T
+        w = np.column_stack([1 - st.sum(1), st])
+        z = w @ tris[i, :, 2]
+        tex = w @ uv[i]
+        new_t.append(np.column_stack([ring, z])[ears])
+        new_uv.append(tex[ears])
+        new_o.append(np.full(len(ears), owner[i]))
+    tris, owner, uv = tris[keep], owner[keep], uv[keep]
+    if new_t:
+        tris = np.concatenate([tris] + new_t)
+        owner = np.concatenate([owner] + new_o)
+        uv = np.concatenate([uv] + new_uv)
+    return tris, owner, uv
+
+
 def _side_faces(top: np.ndarray, ground: np.ndarray, a: np.ndarray, b: np.ndarray,
                 skirt: float) -> list:
     """The two triangles of each vertical face from the top edges a -> b (the outside on
@@ -280,10 +325,15 @@ def street_mesh(tess, spacing: float = 5.0, z_offset: float = 0.1, skirt: float 
         R3 = np.column_stack([right, zr])
         i = np.flatnonzero(k[1:] == k[:-1])            # station i and i + 1 on one street
         j = i + 1
-        tris += [np.stack([L3[i], R3[i], R3[j]], axis=1), np.stack([L3[i], R3[j], L3[j]], axis=1)]
-        owner += [k[i], k[i]]
-        side += [np.zeros(2 * len(i), dtype=bool)]
-        uv += _quad_uv(len(i), "street")   # u: 0 on the left edge, 1 on the right
+        top = np.concatenate([np.stack([L3[i], R3[i], R3[j]], axis=1),
+                              np.stack([L3[i], R3[j], L3[j]], axis=1)])
+        top_uv = np.concatenate(_quad_uv(len(i), "street"))  # u: 0 left edge, 1 right
+        top, top_owner, top_uv = _clipped_to_surfaces(
+            top, np.r_[k[i], k[i]], top_uv, shapely.force_2d(np.asarray(tess.surfaces)))
+        tris.append(top)
+        owner.append(top_owner)
+        side.append(np.zeros(len(top), dtype=bool))
+        uv.append(top_uv)
         if draped:
             tl = tess.terrain_z(left)
             tr = tess.terrain_z(right)
