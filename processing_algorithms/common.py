@@ -287,25 +287,47 @@ class AlgorithmBase(QgsProcessingAlgorithm):
 
     KEEP_CLEAR = "KEEP_CLEAR"
 
-    def add_keep_clear(self, what: str):
-        """The optional polygon layer of areas ``what`` (parcels, footprints) never cover."""
+    def add_keep_clear(self, what: str, more: str = ""):
+        """The optional polygon layer of areas ``what`` (parcels, footprints) never cover;
+        ``more``: what else the tool does with them."""
         self.add(QgsProcessingParameterFeatureSource(
             self.KEEP_CLEAR, "Areas to keep clear (street surfaces)",
             [QgsProcessing.SourceType.TypeVectorPolygon], optional=True),
             f"Polygons no {what} may cover, e.g. the street surfaces and junctions of "
             "'Tessellate streets' merged into one layer: their widths follow each street's "
             "class, and dead-end streets inside a block are kept clear too. Applied on top "
-            "of the street width.")
+            "of the street width." + (" " + more if more else ""))
 
-    def keep_clear_areas(self, parameters, context, feedback, frame):
-        """The KEEP_CLEAR polygons in ``frame``'s working CRS, or None."""
-        clear = qgis_io.read_source(self, parameters, self.KEEP_CLEAR, context, feedback,
+    def optional_polygons(self, parameters, name, context, feedback, frame, blocks, what):
+        """An optional polygon layer (KEEP_CLEAR, BUILDINGS) in ``frame``'s working CRS, or
+        None: None too when it is empty (a chained step that made nothing), and a warning
+        when none of it reaches the ``blocks``."""
+        source = self.parameterAsSource(parameters, name, context)
+        if source is not None and source.featureCount() == 0:
+            feedback.pushInfo(f"Layer {qgis_io.layer_name(self, parameters, name, context)} "
+                              f"is empty: no {what}.")
+            return None
+        layer = qgis_io.read_source(self, parameters, name, context, feedback,
                                     kind="polygons", target_crs=frame.crs, optional=True,
                                     fields=[])
-        if clear is None:
+        if layer is None:
             return None
-        feedback.pushInfo(f"{len(clear)} areas of {clear.name} are kept clear.")
-        return clear.geometry
+        blocks = np.asarray(blocks, dtype=object)
+        reach = np.unique(shapely.STRtree(blocks).query(layer.geometry,
+                                                        predicate="intersects")[0]) \
+            if len(blocks) else np.zeros(0)
+        if len(reach) == 0:
+            feedback.pushWarning(f"None of the {len(layer)} polygons of {layer.name} reaches a "
+                                 f"block: no {what}.")
+            return None
+        feedback.pushInfo(f"{len(reach)} of the {len(layer)} polygons of {layer.name} reach "
+                          f"the blocks: {what}.")
+        return layer.geometry
+
+    def keep_clear_areas(self, parameters, context, feedback, frame, blocks):
+        """The KEEP_CLEAR polygons in ``frame``'s working CRS, or None."""
+        return self.optional_polygons(parameters, self.KEEP_CLEAR, context, feedback, frame,
+                                      blocks, "areas kept clear")
 
     # ----------------------------------------------------------------- roads and blocks
 

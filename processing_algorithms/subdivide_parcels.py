@@ -126,15 +126,20 @@ class SubdivideParcels(AlgorithmBase):
             "Full width of the streets (blocks shrink by half of it on every side); with "
             "Roads and a street width field, the width of roads without a value. 0 keeps "
             "the blocks as they are.")
-        self.add_keep_clear("parcel")
+        self.add_keep_clear("parcel", "Their edges count as street frontage, as the block "
+                            "outline does: give other land to keep free (a pond, a park) "
+                            "as holes in the blocks instead.")
         self.add(QgsProcessingParameterFeatureSource(
             self.BUILDINGS, "Buildings to keep whole",
             [QgsProcessing.SourceType.TypeVectorPolygon], optional=True),
             "Building footprints already in the blocks (e.g. of 'Synthesize building "
             "footprints'), each to stand on one parcel. Skeleton: a cut across a building "
             "moves to the nearer end of it, by up to half a lot width and never under the "
-            "minimum width. Any method: the lots a building still stands on merge into one "
-            "parcel (a row of touching buildings across lots merges them all).")
+            "minimum width. Any method: the lots a building stands on (over 1 m² of it on "
+            "each) merge into one parcel, a row of touching buildings across lots merging "
+            "them all up to four times the maximum parcel area (one building's own lots may "
+            "make a larger parcel); a piece of land under the minimum area keeps a parcel "
+            "when a building stands on it. Merged parcels may exceed the maximum area.")
         self.add(QgsProcessingParameterBoolean(
             self.FORCE_STREET_ACCESS, "Force street access", defaultValue=True),
             "Recursive: a cut that would leave a lot without street frontage is not made "
@@ -201,8 +206,9 @@ class SubdivideParcels(AlgorithmBase):
             frame, block_geoms, block_ids, road_lines, road_widths = \
                 self._blocks_from_roads(parameters, context, feedback)
 
-        keep_clear = self.keep_clear_areas(parameters, context, feedback, frame)
-        keep_whole = self._buildings(parameters, context, feedback, frame)
+        keep_clear = self.keep_clear_areas(parameters, context, feedback, frame, block_geoms)
+        keep_whole = self.optional_polygons(parameters, self.BUILDINGS, context, feedback,
+                                            frame, block_geoms, "buildings kept whole")
         area = float(shapely.area(np.asarray(block_geoms, dtype=object)).sum())
         self.bound_work(f"Blocks {frame.name} ({area / 1e6:,.1f} km²) at a maximum parcel area "
                         f"of {number[self.MAX_AREA]:g} m²", 2 * area / number[self.MAX_AREA],
@@ -216,8 +222,11 @@ class SubdivideParcels(AlgorithmBase):
         self._log(result.stats, method, feedback)
         if len(result.geometry) == 0:
             raise QgsProcessingException(
-                f"{frame.name}: no parcel: every block is narrower than its streets or smaller "
-                "than the minimum parcel area (lower the street width or the minimum area).")
+                f"{frame.name}: no parcel: every block is narrower than its streets"
+                + (", covered by the areas to keep clear," if keep_clear is not None else "")
+                + " or smaller than the minimum parcel area (lower the street width or the "
+                "minimum area" + (", or check the areas to keep clear" if keep_clear is not None
+                                  else "") + ").")
         dest = qgis_io.write_sink(
             self, parameters, self.OUTPUT, context, result.geometry, result.table,
             parcels.PARCEL_FIELDS, QgsWkbTypes.Type.Polygon, frame.source_crs, frame.crs, feedback)
@@ -235,17 +244,6 @@ class SubdivideParcels(AlgorithmBase):
                           "taken as a street.")
         feedback.setProgress(30)
         return frame, frame.geometry, ids, None, None
-
-    def _buildings(self, parameters, context, feedback, frame):
-        """The BUILDINGS footprints in the blocks' working CRS, or None."""
-        buildings = qgis_io.read_source(self, parameters, self.BUILDINGS, context, feedback,
-                                        kind="polygons", target_crs=frame.crs, optional=True,
-                                        fields=[])
-        if buildings is None:
-            return None
-        feedback.pushInfo(f"{len(buildings)} buildings of {buildings.name} are kept whole "
-                          "where the lots allow.")
-        return buildings.geometry
 
     @staticmethod
     def _parcel_sizes(frame, method, feedback) -> dict:
@@ -314,10 +312,15 @@ class SubdivideParcels(AlgorithmBase):
             feedback.pushInfo(f"{stats['n_empty_blocks']} blocks are narrower than their "
                               "streets (or smaller than the minimum area after shrinking) and "
                               "get no parcel.")
-        if stats["n_over_max_area"]:
-            feedback.pushInfo(f"{stats['n_over_max_area']} parcels stay larger than the maximum "
-                              "area: every cut would have made a piece too small, too thin or "
-                              "without street access.")
+        over = stats["n_over_max_area"] - stats.get("n_over_max_area_merged", 0)
+        if over > 0:
+            feedback.pushInfo(f"{over} parcels stay larger than the maximum area: every cut "
+                              "would have made a piece too small, too thin or without street "
+                              "access.")
+        if stats.get("n_over_max_area_merged"):
+            feedback.pushInfo(f"{stats['n_over_max_area_merged']} parcels are larger than the "
+                              "maximum area because lots merged so that a building stands on "
+                              "one parcel.")
         if stats["n_without_access"]:
             feedback.pushInfo(f"{stats['n_without_access']} parcels have no street frontage.")
         if stats.get("n_under_min_width"):
@@ -330,10 +333,12 @@ class SubdivideParcels(AlgorithmBase):
             feedback.pushInfo(f"{stats['n_merged_for_buildings']} lots merged into a neighbour "
                               "so that a building stands on one parcel.")
         if stats.get("n_buildings"):
-            feedback.pushInfo(f"{stats['n_buildings_split']} of {stats['n_buildings']} buildings "
-                              "are crossed by a parcel line (no parcel holds 95 % of them): "
-                              "the line between two streets' strips, or a cut that could not "
-                              "move far enough.")
+            feedback.pushInfo(
+                f"{stats['n_buildings_split']} of the {stats['n_buildings_on_lots']} buildings on "
+                "parcel land are crossed by a parcel line (no parcel holds 95 % of them): on "
+                "the line between two streets' strips, or in a row longer than a merged "
+                f"parcel may be ({stats['n_buildings'] - stats['n_buildings_on_lots']} of the "
+                f"{stats['n_buildings']} buildings stand mostly outside the parcels).")
         feedback.pushInfo(f"{stats['n_undesirable']} parcels are undesirable by Yang's "
                           "criteria (p_angle > 15° or p_area > 1.2).")
 

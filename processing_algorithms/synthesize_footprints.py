@@ -113,7 +113,7 @@ class SynthesizeFootprints(AlgorithmBase):
             self.SETBACK, "Setback (m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=0.0, minValue=0.0, maxValue=self.MAX_WIDTH),
             "Extra distance between the road surface and the footprints.")
-        self.add_keep_clear("footprint")
+        self.add_keep_clear("footprint", "The setback is kept from them too.")
         self.add_seed(
             "With N best > 1 each block picks one of its best matches at random; the same "
             "seed gives the same footprints, block by block.")
@@ -162,7 +162,7 @@ class SynthesizeFootprints(AlgorithmBase):
             frame, block_geoms, block_ids, road_lines = self._blocks_from_roads(
                 parameters, context, feedback)
         choice = self._style(parameters, context, feedback, frame, block_geoms, len(examples))
-        keep_clear = self.keep_clear_areas(parameters, context, feedback, frame)
+        keep_clear = self.keep_clear_areas(parameters, context, feedback, frame, block_geoms)
         feedback.setProgress(15)
 
         result = qgis_io.run_engine(

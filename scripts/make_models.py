@@ -38,7 +38,9 @@ DISTRICT_HELP = (
     "footprints, gives the footprints heights, levels and types like the example's "
     "buildings, and writes a metrics report that compares the new district with the "
     "example.\n\n"
-    "Every step is an Urban Synthesis tool of its own: open this model in the model designer "
+    "Parcels merge where a building stands on several lots, so some are larger than the "
+    "maximum parcel area. Every step is a Processing tool of its own (Urban Synthesis's, "
+    "and QGIS's 'Merge vector layers' for the street area): open this model in the model designer "
     "to change their options.")
 
 
@@ -109,7 +111,8 @@ def district_model() -> QgsProcessingModelAlgorithm:
         "arterials leave open with it); default the arterials' hull.",
         0, 240)
     _param(model, QgsProcessingParameterRasterLayer("DEM", "Terrain (DEM)", optional=True),
-           "Optional terrain: steers the road synthesis and drapes the street surfaces.", 0, 320)
+           "Optional terrain: steers the road synthesis (fragments and growth; StreetGAN does "
+           "not use it) and drapes the street surfaces.", 0, 320)
     _param(model, QgsProcessingParameterEnum(
         "ROAD_METHOD", "Road synthesis method",
         options=["Fragments of the example (thesis ch. 4.1)",

@@ -136,6 +136,33 @@ def test_parcels_stay_off_the_areas_kept_clear_in_another_crs(qgis_processing):
         shapely.area(shapely.difference(block, dead_end)), rel=1e-3)
 
 
+def test_keep_clear_and_buildings_layers_that_are_empty_or_elsewhere(qgis_processing):
+    """An empty optional layer (a chained step that made nothing) is nothing to keep clear
+    or whole, not an error; one that reaches no block is warned of; one that covers every
+    block is named in the error."""
+    from qgis.core import QgsProcessingException
+
+    from helpers import log_feedback
+
+    block = _memory_layer("Polygon", ["POLYGON ((0 0, 120 0, 120 80, 0 80, 0 0))"])
+    empty = _memory_layer("Polygon", [], name="no surfaces")
+    far = _memory_layer("Polygon", ["POLYGON ((5000 0, 5010 0, 5010 10, 5000 10, 5000 0))"],
+                        name="far surfaces")
+    cover = _memory_layer("Polygon", ["POLYGON ((-1 -1, 121 -1, 121 81, -1 81, -1 -1))"],
+                          name="all surface")
+    base = {"BLOCKS": block, "STREET_WIDTH": 0, "METHOD": 1, "OUTPUT": "memory:"}
+    log = log_feedback()
+    out = qgis_processing.run(ALG, dict(base, KEEP_CLEAR=empty, BUILDINGS=empty), feedback=log)
+    assert out["OUTPUT"].featureCount() > 1
+    assert any("is empty: no areas kept clear" in m for m in log.messages)
+    log = log_feedback()
+    qgis_processing.run(ALG, dict(base, KEEP_CLEAR=far, BUILDINGS=far), feedback=log)
+    assert any("None of the 1 polygons of 'far surfaces' reaches a block" in w
+               for w in log.warnings)
+    with pytest.raises(QgsProcessingException, match="covered by the areas to keep clear"):
+        qgis_processing.run(ALG, dict(base, KEEP_CLEAR=cover))
+
+
 def test_bad_input(qgis_processing):
     from qgis.core import QgsProcessingException
 

@@ -150,6 +150,28 @@ def test_skeleton_cuts_move_off_the_buildings_to_keep_whole():
     assert recursive.stats["n_merged_for_buildings"] >= 1
 
 
+
+def test_lots_merge_under_a_large_building_but_rows_stop_at_the_limit():
+    """An 8,100 m² building on 20-odd lots, each under 5 % of it (the first rule merged
+    none of them), stands on one parcel; a row of touching 17 m houses along a 600 m block
+    merges its lots only up to MERGE_LIMIT x the maximum area per parcel (the first rule
+    chained them into parcels of hectares), the houses cut by the group ends counted."""
+    block = shapely.box(0, 0, 200, 60)
+    big = np.array([shapely.box(8, 4, 192, 48)])
+    s = settings(lot_width=18.0)
+    one = parcels.subdivide_blocks([block], "skeleton", s, seed=1, street_width=0,
+                                   keep_whole=big)
+    assert parcels.split_buildings(big, one.geometry).sum() == 0
+    long_block = shapely.box(0, 0, 600, 40)
+    row = np.array([shapely.box(x, 3, x + 17, 15) for x in np.arange(0, 595, 17)])
+    r = parcels.subdivide_blocks([long_block], "skeleton", s, seed=1, street_width=0,
+                                 keep_whole=row)
+    assert shapely.area(r.geometry).max() <= parcels.MERGE_LIMIT * s.max_area * (1 + 1e-9)
+    assert len(r.geometry) >= 5
+    assert r.stats["n_buildings_split"] == parcels.split_buildings(row, r.geometry).sum() > 0
+    assert_partition(r.geometry, long_block)
+
+
 def test_subdivide_shrinks_by_half_the_street_width():
     result = parcels.subdivide_blocks([shapely.box(0, 0, 112, 52)], "recursive",
                                       settings(max_area=500, irregularity=0), street_width=12)

@@ -142,7 +142,8 @@ def street_offset(block, street_width: float = STREET_WIDTH, setback: float = 0.
     The block less the road surface (``street_width / 2`` from every road centreline on
     its boundary, and from dead-end streets inside it when ``roads`` are given) and the
     ``setback`` behind it, and less the ``keep_clear`` areas (e.g. the street surfaces and
-    junctions of 'tessellatestreets', as wide as each street's class).
+    junctions of 'tessellatestreets', as wide as each street's class) and the ``setback``
+    around them.
     """
     inset = street_width / 2.0 + setback
     if roads is not None and len(roads):
@@ -153,7 +154,8 @@ def street_offset(block, street_width: float = STREET_WIDTH, setback: float = 0.
     else:
         area = shapely.buffer(block, -inset) if inset > 0 else block
     if keep_clear is not None and len(keep_clear):
-        area = without_areas([area], keep_clear)[0]
+        clear = np.asarray(keep_clear, dtype=object)
+        area = without_areas([area], shapely.buffer(clear, setback) if setback > 0 else clear)[0]
     return shapely.make_valid(area) if not shapely.is_valid(area) else area
 
 

@@ -121,6 +121,10 @@ BEND_SNAP = 0.4
 #: and pass it this far (m) clear.
 MAX_BUILDING_SHIFT = 0.5
 BUILDING_CLEARANCE = 0.5
+#: Lots merged so that a building stands on one parcel make no parcel larger than this
+#: many times the maximum parcel area (unless one building's own lots are larger): rows
+#: of touching buildings would otherwise merge into parcels of hectares.
+MERGE_LIMIT = 4.0
 
 _TOUCH = 1e-3       # m: half-width of the street zone that counts as frontage
 _CRUMB = 1e-3       # m²: polygon parts smaller than this are numerical crumbs
@@ -1434,51 +1438,88 @@ def _block_settings(settings: SubdivisionSettings, n: int, parcel_area,
     return out
 
 
-def merge_lots_under_buildings(lots, buildings, share: float = 0.05):
-    """Lots that one building stands on (over 1 m² and ``share`` of it on each) merge into
-    one, so that the building stands on one parcel; a building row across lots merges
-    them all. Returns (lots, number of lots merged away). A group whose union is not one
-    polygon (lots meeting only under the building's corner) stays apart.
+def merge_lots_under_buildings(lots, buildings, max_group_area: float = np.inf):
+    """Lots that one building stands on (over 1 m² of it on each) merge into one, so that
+    the building stands on one parcel; buildings in a row across lots merge them all, up
+    to ``max_group_area``: a building whose merge would make a larger parcel than that
+    (and than its own lots together) stays across its lots. Buildings are taken largest
+    first. Returns (lots, number of lots merged away, per output lot whether it was
+    merged). A group whose union is not one polygon (lots meeting only under a building's
+    corner) stays apart.
     """
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
     lots = np.asarray(lots, dtype=object)
     buildings = np.asarray(buildings, dtype=object)
+    none = (lots, 0, np.zeros(len(lots), dtype=bool))
     b, k = shapely.STRtree(lots).query(buildings, predicate="intersects")
     if len(b) == 0:
-        return lots, 0
+        return none
     on = shapely.area(shapely.intersection(buildings[b], lots[k]))
-    keep = on > np.maximum(1.0, share * shapely.area(buildings[b]))
-    b, k = b[keep], k[keep]
+    b, k = b[on > 1.0], k[on > 1.0]
     if len(b) == 0:
-        return lots, 0
-    # each building links the lots it stands on to the first of them
-    first = k[group_starts(b)][np.cumsum(group_starts(b)) - 1]
-    n = len(lots)
-    _, label = connected_components(coo_matrix((np.ones(len(k)), (first, k)), shape=(n, n)),
-                                    directed=False)
-    out, n_away = [], 0
+        return none
+    # union-find over the lots, building by building, largest first, within the size limit
+    parent = np.arange(len(lots))
+    area = shapely.area(lots)
+
+    def root(i):
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    for building in np.unique(b)[np.argsort(-shapely.area(buildings[np.unique(b)]),
+                                            kind="stable")]:
+        groups = {root(i) for i in k[b == building]}
+        if len(groups) < 2:
+            continue
+        total = sum(area[g] for g in groups)
+        own = area[k[b == building]].sum()
+        if total > max(max_group_area, own) * (1 + 1e-9):   # (sums in another order)
+            continue
+        first, *rest = sorted(groups)
+        for g in rest:
+            parent[g] = first
+        area[first] = total
+    label = np.array([root(i) for i in range(len(lots))])
+    out, merged, n_away = [], [], 0
     for group in np.unique(label):
         members = np.flatnonzero(label == group)
         union = _clean_union(lots[members]) if len(members) > 1 else lots[members[0]]
         if len(members) > 1 and shapely.get_type_id(union) == 3:
             out.append(union)
+            merged.append(True)
             n_away += len(members) - 1
         else:
             out.extend(lots[members])
-    return np.array(out, dtype=object), n_away
+            merged.extend([False] * len(members))
+    return np.array(out, dtype=object), n_away, np.array(merged, dtype=bool)
+
+
+def _on_lots(buildings, lots):
+    """Per building: its area on lots, and on the lot holding most of it."""
+    buildings = np.asarray(buildings, dtype=object)
+    best = np.zeros(len(buildings))
+    total = np.zeros(len(buildings))
+    if len(buildings) and len(lots):
+        b, k = shapely.STRtree(lots).query(buildings, predicate="intersects")
+        on = shapely.area(shapely.intersection(buildings[b], lots[k]))
+        np.maximum.at(best, b, on)
+        np.add.at(total, b, on)
+    return total, best
+
+
+def on_parcel_land(buildings, lots) -> np.ndarray:
+    """Per building: True where half of it or more stands on lots (not outside the blocks
+    or on land kept clear)."""
+    return _on_lots(buildings, lots)[0] >= 0.5 * shapely.area(buildings)
 
 
 def split_buildings(buildings, lots, share: float = 0.95) -> np.ndarray:
-    """Per building: True where no single lot holds ``share`` of its area (a parcel line
-    runs through it)."""
-    buildings = np.asarray(buildings, dtype=object)
-    best = np.zeros(len(buildings))
-    if len(buildings) and len(lots):
-        b, k = shapely.STRtree(lots).query(buildings, predicate="intersects")
-        np.maximum.at(best, b, shapely.area(shapely.intersection(buildings[b], lots[k])))
-    return best < share * shapely.area(buildings)
+    """Per building: True where it stands on parcel land (:func:`on_parcel_land`) and no
+    single lot holds ``share`` of its area (a parcel line runs through it)."""
+    total, best = _on_lots(buildings, lots)
+    area = shapely.area(buildings)
+    return (total >= 0.5 * area) & (best < share * area)
 
 
 @_quiet
@@ -1571,8 +1612,11 @@ def subdivide_blocks(blocks, method: str = "recursive",
         if (w < 0).any():
             raise InputError(f"{int((w < 0).sum())} roads have a negative street width")
         road_hw = w / 2.0
+    # with buildings to keep whole, a piece of land under the minimum area stays if a
+    # building stands on it (it gets a parcel of its own, not none)
     shrunk = shrink_blocks(blocks, street_width / 2.0, roads, road_hw,
-                           min_area=settings.min_area, keep_clear=keep_clear)
+                           min_area=settings.min_area if keep_whole is None else 0.0,
+                           keep_clear=keep_clear)
     block_settings = _block_settings(settings, n, parcel_area, parcel_area_sd)
     n_sized = sum(b is not None for b in block_settings)
     whole = None
@@ -1590,12 +1634,25 @@ def subdivide_blocks(blocks, method: str = "recursive",
     lots: List[np.ndarray] = []
     owner: List[np.ndarray] = []
     frontage: List[np.ndarray] = []
-    n_merged = n_merged_for_buildings = 0
+    n_merged = n_merged_for_buildings = n_merged_over_max = 0
     fix_access = spec.street_access or settings.force_street_access
     for i in range(n):
         progress.step(0.05 + 0.9 * i / n)
         rng = np.random.default_rng([int(seed), i])
-        for part in _polygon_parts([shrunk[i]]):
+        own = block_settings[i].options.get("keep_whole") if block_settings[i] else None
+        parts = _polygon_parts([shrunk[i]])
+        if keep_whole is not None:
+            small = shapely.area(parts) <= max(settings.min_area, _CRUMB)
+            if small.any():
+                held = np.zeros(len(parts), dtype=bool)
+                if own is not None and len(own):
+                    p_idx, w_idx = shapely.STRtree(own).query(parts, predicate="intersects")
+                    on = shapely.area(shapely.intersection(parts[p_idx], own[w_idx])) > 1.0
+                    held[p_idx[on]] = True
+                parts = parts[~small | held]
+                shrunk[i] = parts[0] if len(parts) == 1 else \
+                    shapely.multipolygons(parts) if len(parts) else shapely.Polygon()
+        for part in parts:
             zone = _street_zone(part)
             got = _polygon_parts(spec.subdivide(part, block_settings[i] or settings, rng))
             leaks = shapely.area(shapely.difference(got, part)) > _CRUMB
@@ -1604,10 +1661,12 @@ def subdivide_blocks(blocks, method: str = "recursive",
                 # a sliver's angle: the skeleton's strips do not follow it) is cut back to it
                 got = np.concatenate([got[~leaks], _polygon_parts(
                     shapely.intersection(got[leaks], part))])
-            own = block_settings[i].options.get("keep_whole") if block_settings[i] else None
             if own is not None and len(got) > 1:
-                got, merged = merge_lots_under_buildings(got, own)
-                n_merged_for_buildings += merged
+                got, n_away, merged = merge_lots_under_buildings(
+                    got, own, MERGE_LIMIT * settings.max_area)
+                n_merged_for_buildings += n_away
+                n_merged_over_max += int((merged & (shapely.area(got) > settings.max_area
+                                                    * (1 + 1e-6))).sum())
             front = _frontage(got, zone)
             no_access = front < settings.min_frontage
             if fix_access and no_access.any() and len(got) > 1:
@@ -1644,7 +1703,9 @@ def subdivide_blocks(blocks, method: str = "recursive",
     }
     if whole is not None:
         stats["n_buildings"] = len(whole)
+        stats["n_buildings_on_lots"] = int(on_parcel_land(whole, geometry).sum())
         stats["n_buildings_split"] = int(split_buildings(whole, geometry).sum())
         stats["n_merged_for_buildings"] = n_merged_for_buildings
+        stats["n_over_max_area_merged"] = n_merged_over_max
     progress.step(1.0)
     return Subdivision(geometry, table, shrunk, stats)
