@@ -134,10 +134,11 @@ class SubdivideParcels(AlgorithmBase):
             [QgsProcessing.SourceType.TypeVectorPolygon], optional=True),
             "Building footprints already in the blocks (e.g. of 'Synthesize building "
             "footprints'), each to stand on one parcel. Skeleton: a cut across a building "
-            "moves to the nearer end of it, by up to half a lot width and never under the "
-            "minimum width. Any method: the lots a building stands on (over 1 m² of it on "
+            "moves to the nearest end of a building that lies in no building (on the party "
+            "wall of two that touch), by up to half a lot width and never under the minimum "
+            "width. Any method: the lots a building stands on (over 1 m² of it on "
             "each) merge into one parcel, a row of touching buildings across lots merging "
-            "them all up to four times the maximum parcel area (one building's own lots may "
+            "them all up to 16 times the maximum parcel area (one building's own lots may "
             "make a larger parcel); a piece of land under the minimum area keeps a parcel "
             "when a building stands on it. Merged parcels may exceed the maximum area.")
         self.add(QgsProcessingParameterBoolean(
