@@ -389,6 +389,22 @@ def test_mesh_of_streets_trimmed_by_each_other_does_not_overlap():
                                        atol=1e-6)
 
 
+def test_a_dead_end_street_is_closed_by_a_side_face():
+    """On a DEM the street floats z_offset above the ground: its left and right edges had
+    side faces, its dead end's last cross-section none (an open gap under its end)."""
+    from urban_synthesis.plugin.network import street_mesh as sm
+
+    lines = [shapely.LineString([(0, 0), (200, 0)]), shapely.LineString([(100, 0), (100, 80)])]
+    t = ss.tessellate_lines(lines, np.full(2, 8.0), dem=plane_dem(0.05, 0.02))
+    m = sm.street_mesh(t, spacing=5.0, z_offset=0.1)
+    walls = m.triangles[m.side]
+    # the three dead ends: (0, 0), (200, 0), (100, 80); a wall across each, 8 m wide
+    for fixed, value in ((0, 0.0), (0, 200.0), (1, 80.0)):   # the axis the wall lies on
+        at = walls[np.all(np.abs(walls[:, :, fixed] - value) < 1e-6, axis=1)]
+        assert len(at) == 2, (fixed, value)
+        assert np.ptp(at[:, :, 1 - fixed]) == pytest.approx(8.0)
+
+
 def test_junction_corners_above_the_terrain_get_side_faces():
     """In a hollow the junction's plane (fitted to the terrain around it) lies above the
     ground at the junction's corners: those outer edges get side faces down to 0.5 m below

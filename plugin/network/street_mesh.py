@@ -22,7 +22,8 @@ rotated into the terrain's tangent plane (Fig. 5.3).
   ``z_offset``; a ring that is not star-shaped around its centre (cut where streets
   overlapped) is ear-clipped instead (hand-written: shapely 2.0 has no constrained
   triangulation and no other library here does it; rings are a few dozen vertices);
-* **side faces**: along both street edges and along the junction rings' outer edges (the
+* **side faces**: along both street edges, across a dead end's last cross-section, and
+  along the junction rings' outer edges (the
   corner fills between the street heads; not the connecting lines a street continues
   from), wherever the edge lies more than ``min_gap`` above the terrain, a quad (two
   triangles) from the edge down to ``skirt`` metres below the terrain. A junction lies in
@@ -337,13 +338,26 @@ def street_mesh(tess, spacing: float = 5.0, z_offset: float = 0.1, skirt: float 
         if draped:
             tl = tess.terrain_z(left)
             tr = tess.terrain_z(right)
-            for top, ground, a, b in ((L3, tl, j, i), (R3, tr, i, j)):
+            # a dead end's last cross-section is an outer edge too (its street ends there)
+            edge = tess.surface_edge
+            dead = tess.graph.degree == 1
+            first = np.flatnonzero(step == 0)
+            last = first + count - 1
+            at_u = first[dead[tess.graph.u[edge]]]
+            at_v = last[dead[tess.graph.v[edge]]]
+            both = np.vstack([L3, R3])
+            ground = np.r_[tl, tr]
+            n_st = len(L3)
+            for top, ground_, a, b in ((L3, tl, j, i), (R3, tr, i, j),
+                                       # outward: behind the start, ahead of the end
+                                       (both, ground, at_u, n_st + at_u),
+                                       (both, ground, n_st + at_v, at_v)):
                 # outward: the left edge runs backwards, the right edge forwards
-                gap = np.nan_to_num(top[:, 2] - ground, nan=0.0)
+                gap = np.nan_to_num(top[:, 2] - ground_, nan=0.0)
                 up = (gap[a] > min_gap) | (gap[b] > min_gap)
                 a, b = a[up], b[up]
-                tris += _side_faces(top, ground, a, b, skirt)
-                owner += [k[a], k[a]]
+                tris += _side_faces(top, ground_, a, b, skirt)
+                owner += [k[a % n_st], k[a % n_st]]
                 side += [np.ones(2 * len(a), dtype=bool)]
                 uv += _quad_uv(len(a), "side")
     n_j = len(tess.junctions)
