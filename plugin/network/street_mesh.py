@@ -74,6 +74,8 @@ __all__ = ["MESH_FIELDS", "TEXTURE_ROWS", "StreetMesh", "street_mesh", "tin_wkb"
 #: v of the texture row of each kind of face (Scharl 5.3: one row for the streets, one for
 #: the junctions; a third here for the side faces), the middle of its third of the image.
 TEXTURE_ROWS = {"street": 5 / 6, "junction": 1 / 2, "side": 1 / 6}
+#: m²: triangles no larger than this are left out of the mesh (degenerate slivers)
+MIN_TRIANGLE_AREA = 1e-6
 
 #: Attributes of a mesh feature.
 MESH_FIELDS = [("mesh_id", "int"), ("kind", "str"), ("source_id", "int"),
@@ -393,6 +395,13 @@ def street_mesh(tess, spacing: float = 5.0, z_offset: float = 0.1, skirt: float 
     owner = np.concatenate(owner).astype(np.int64) if owner else np.zeros(0, np.int64)
     side = np.concatenate(side) if side else np.zeros(0, bool)
     uv = np.concatenate(uv) if uv else np.zeros((0, 3, 2))
+    # degenerate triangles (two corners within a millimetre: stations where a junction's
+    # connecting line meets a fan, round-off of the clipping) are no faces: an OBJ with a
+    # repeated vertex in a face trips 3D software
+    area3 = 0.5 * np.linalg.norm(np.cross(triangles[:, 1] - triangles[:, 0],
+                                          triangles[:, 2] - triangles[:, 0]), axis=1)
+    ok = area3 > MIN_TRIANGLE_AREA
+    triangles, owner, side, uv = triangles[ok], owner[ok], side[ok], uv[ok]
     order = np.argsort(owner, kind="stable")
     triangles, owner, side, uv = triangles[order], owner[order], side[order], uv[order]
     n = n_s + n_j
