@@ -216,6 +216,35 @@ def test_a_layer_of_geometry_collections_gives_its_polygons(qgis_processing):
         qgis_processing.run(ALG, {"BLOCKS": points_only, "OUTPUT": "memory:"})
 
 
+def test_points_in_a_polygon_layer_are_skipped_and_counted(qgis_processing, tmp_path):
+    """A GeoJSON file QGIS types as polygons may hold points too: they were counted as
+    areas to keep clear ('4 areas'); they are skipped, counted, and the polygon is used."""
+    import json
+
+    from qgis.core import QgsVectorLayer
+
+    from helpers import log_feedback
+
+    path = tmp_path / "surfaces.geojson"
+    square = {"type": "Polygon", "coordinates": [[[50, -5], [60, -5], [60, 70], [50, 70],
+                                                  [50, -5]]]}
+    point = {"type": "Point", "coordinates": [5, 5]}
+    path.write_text(json.dumps({
+        "type": "FeatureCollection",
+        "crs": {"type": "name", "properties": {"name": "urn:ogc:def:crs:EPSG::32633"}},
+        "features": [{"type": "Feature", "properties": {}, "geometry": g}
+                     for g in (square, point, point, point)]}))
+    clear = QgsVectorLayer(str(path), "surfaces", "ogr")
+    log = log_feedback()
+    rows, geoms = layer_features(qgis_processing.run(ALG, {
+        "BLOCKS": _memory_layer("Polygon", ["POLYGON ((0 0, 120 0, 120 60, 0 60, 0 0))"]),
+        "KEEP_CLEAR": clear, "STREET_WIDTH": 0, "METHOD": 1, "OUTPUT": "memory:"},
+        feedback=log)["OUTPUT"])
+    assert shapely.area(shapely.intersection(geoms, shapely.box(50, 0, 60, 60))).max() < 1e-6
+    assert any("3 features without polygons skipped" in m for m in log.messages)
+    assert any("1 of the 1 polygons of 'surfaces'" in m for m in log.messages)
+
+
 def test_qgis_process_run(tmp_path):
     """One real qgis_process.bin run: exit code 0 (no native-library crash at exit)."""
     target = tmp_path / "parcels.gpkg"

@@ -260,6 +260,11 @@ def read_source(alg, parameters, name: str, context, feedback,
             f"Layer {label} is empty: it has no features with a geometry"
             + (f" ({n_null} null geometries skipped)." if n_null else "."))
     geoms = shapely.from_wkb(np.array(wkbs, dtype=object), on_invalid="ignore")
+    if kind in ("polygons", "lines") and not mixed:
+        # a layer typed as polygons may still hold points (GeoJSON): read as a mixed one
+        read = ~shapely.is_missing(geoms)
+        mixed = bool((shapely.get_dimensions(geoms[read])
+                      != (2 if kind == "polygons" else 1)).any())
     if mixed:
         geoms, rows, fids = _parts_of_kind(geoms, rows, fids, kind, label, feedback)
     if kind in ("polygons", "lines"):
