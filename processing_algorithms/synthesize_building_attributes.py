@@ -63,7 +63,9 @@ class SynthesizeBuildingAttributes(AlgorithmBase):
         line = [QgsProcessing.SourceType.TypeVectorLine]
         self.add(QgsProcessingParameterFeatureSource(self.FOOTPRINTS, "Footprints", poly),
                  "Building footprints to attribute, e.g. from 'Synthesize footprints' or a "
-                 "real layer with missing heights.")
+                 "real layer with missing heights. A layer with a 'building' field (OSM "
+                 "multipolygons) gives only its polygons with a building value; the others "
+                 "(forests, water, boundaries) are skipped and counted.")
         self.add(QgsProcessingParameterFeatureSource(
             self.EXAMPLE_BUILDINGS, "Example buildings", poly),
             "Buildings with heights or levels: an OSM multipolygons layer (height, "
@@ -131,8 +133,9 @@ class SynthesizeBuildingAttributes(AlgorithmBase):
         if hi <= lo:
             raise QgsProcessingException(f"The maximum height ({hi:g} m) must be larger than "
                                          f"the minimum height ({lo:g} m).")
-        footprints = qgis_io.read_source(self, parameters, self.FOOTPRINTS, context, feedback,
-                                         kind="polygons")
+        footprints = self._only_buildings(
+            qgis_io.read_source(self, parameters, self.FOOTPRINTS, context, feedback,
+                                kind="polygons"), feedback)
         crs = footprints.crs
         examples, attrs = self._examples(parameters, context, feedback, crs)
         feedback.setProgress(10)
@@ -182,16 +185,7 @@ class SynthesizeBuildingAttributes(AlgorithmBase):
             target_crs=crs, fields=["building", "other_tags", "height_m", "levels",
                                     "building_type", hf, lf, *building_attributes.TAG_FIELDS],
             required_fields=[f for f in (hf, lf) if f])
-        if "building" in frame.attributes:
-            value = frame.attributes["building"].to_numpy(dtype=object)
-            keep = np.array([v is not None and str(v).strip() not in ("", "no") for v in value])
-            if not keep.any():
-                raise QgsProcessingException(f"Layer {frame.name} has no polygon with a "
-                                             "'building' value.")
-            if not keep.all():
-                feedback.pushInfo(f"{frame.name}: {int((~keep).sum())} polygons without a "
-                                  "'building' value skipped.")
-                frame = qgis_io.subset(frame, keep)
+        frame = self._only_buildings(frame, feedback)
         a = frame.attributes
         height = a[hf] if hf else (a["height_m"] if "height_m" in a else None)
         levels = a[lf] if lf else (a["levels"] if "levels" in a else None)
@@ -217,6 +211,24 @@ class SynthesizeBuildingAttributes(AlgorithmBase):
         return frame, attrs
 
     @staticmethod
+    def _only_buildings(frame, feedback):
+        """The polygons with a 'building' value (not 'no') when the layer has that field (OSM
+        multipolygons hold forests, water and boundaries too), the others skipped and
+        counted; every polygon of a layer without it."""
+        if "building" not in frame.attributes:
+            return frame
+        value = frame.attributes["building"].to_numpy(dtype=object)
+        keep = np.array([v is not None and str(v).strip() not in ("", "no") for v in value])
+        if not keep.any():
+            raise QgsProcessingException(f"Layer {frame.name} has no polygon with a "
+                                         "'building' value.")
+        if not keep.all():
+            feedback.pushInfo(f"{frame.name}: {int((~keep).sum())} polygons without a "
+                              "'building' value skipped.")
+            frame = qgis_io.subset(frame, keep)
+        return frame
+
+    @staticmethod
     def _log(s, lo, hi, far, feedback):
         if s["no_heights"]:
             feedback.reportError(
@@ -238,8 +250,14 @@ class SynthesizeBuildingAttributes(AlgorithmBase):
                     f"{s['n_blocks_short_of_far']} blocks stay more than "
                     f"{100 * transfer.FAR_SHORT:.0f} % under the target floor-area "
                     f"ratio: their footprints cover too little of them; {s['n_at_max_height']} "
-                    f"footprints stand at the maximum height ({hi:g} m). Lower MAX_HEIGHT "
-                    "or the target, or give denser footprints.")
+                    f"footprints stand at the maximum height ({hi:g} m). Raise MAX_HEIGHT "
+                    "or lower the target, or give denser footprints.")
+            if s.get("n_blocks_over_far"):
+                feedback.pushWarning(
+                    f"{s['n_blocks_over_far']} blocks (or the district) stay more than "
+                    f"{100 * transfer.FAR_SHORT:.0f} % over the target floor-area ratio: their "
+                    f"footprints cover more than it at the minimum height ({lo:g} m). Raise the "
+                    "target or lower MIN_HEIGHT, or give sparser footprints.")
             if s.get("n_outside_blocks"):
                 feedback.pushInfo(f"{s['n_outside_blocks']} footprints lie in no block and "
                                   "keep their levels.")

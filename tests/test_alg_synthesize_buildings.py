@@ -65,6 +65,27 @@ def test_example_without_heights_says_so(qgis_processing):
     assert not any("with a height (features" in m for m in log.messages)
 
 
+def test_footprints_that_are_no_buildings_are_skipped_and_far_overshoot_warned(
+        qgis_processing, helsinki_buildings):
+    """OSM multipolygons as footprints: forests, water and boundaries got 15 m heights (one
+    boundary 37 km² of floor area); they are skipped and counted. A target FAR the
+    footprints exceed at one storey is warned of (it was an info line)."""
+    from qgis.core import QgsVectorLayer
+
+    blocks, buildings = helsinki_buildings
+    log = log_feedback()
+    out = qgis_processing.run(ATTRIBUTES, {
+        "FOOTPRINTS": helsinki_layer("multipolygons"), "EXAMPLE_BUILDINGS": buildings,
+        "TARGET_FAR": 0.01, "OUTPUT": "memory:"}, feedback=log)
+    layer = out["OUTPUT"]
+    source = QgsVectorLayer(helsinki_layer("multipolygons"), "mp", "ogr")
+    n_in = sum(1 for f in source.getFeatures() if f.hasGeometry())
+    assert 0 < layer.featureCount() < n_in
+    assert all(r["building"] not in (None, "", "no") for r in layer_features(layer)[0])
+    assert any("polygons without a 'building' value skipped" in m for m in log.messages)
+    assert any("over the target floor-area ratio" in w for w in log.warnings), log.warnings
+
+
 def test_far_per_block(qgis_processing, helsinki_buildings):
     blocks, buildings = helsinki_buildings
     out = qgis_processing.run(ATTRIBUTES, {

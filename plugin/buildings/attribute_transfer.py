@@ -348,10 +348,12 @@ def transfer_attributes(footprints, examples, example_attributes: pd.DataFrame,
         stats["far_min"], stats["far_max"] = (min(far), max(far)) if far else (np.nan, np.nan)
         # a block whose footprints cannot hold the target under the height limit: its
         # footprints go to that limit (a shed of 15 m² in a 1.5 ha block to 100 storeys) and
-        # it stays short of the target; the log says how many, so that the analyst can lower
-        # the limit or the target
+        # it stays short of the target; the log says how many, so that the analyst can raise
+        # the limit or lower the target; one whose footprints exceed the target at their
+        # lowest storeys stays over it
         placed = group >= 0
         stats["n_blocks_short_of_far"] = int(sum(f < (1 - FAR_SHORT) * target_far for f in far))
+        stats["n_blocks_over_far"] = int(sum(f > (1 + FAR_SHORT) * target_far for f in far))
         stats["n_at_max_height"] = int((placed & (levels >= max_lv) & (max_lv > min_lv)).sum())
         stats["far_mean"] = float(np.mean(far)) if far else np.nan
     stats["n_with_height"] = int(pd.notna(table["height_m"]).sum())
