@@ -337,7 +337,7 @@ class AlgorithmBase(QgsProcessingAlgorithm):
         classes keeps every line) and its road classes (None without classes)."""
         frame = qgis_io.read_source(
             self, parameters, name, context, feedback, kind="lines",
-            fields=[class_field or "highway", "other_tags", *fields],
+            fields=[class_field or "highway", "other_tags", "road_class", *fields],
             required_fields=required_fields)
         classes = set(street_graph.DRIVABLE_CLASSES) if classes is None else classes
         return drivable_lines(frame, class_field, classes, feedback)
@@ -484,6 +484,13 @@ def drivable_lines(frame, class_field, classes, feedback):
     An explicitly chosen class field that does not exist is an error.
     """
     road_class = qgis_io.osm_tag_column(frame, class_field or "highway")
+    if road_class is None and class_field in (None, "", "highway") \
+            and "road_class" in frame.attributes:
+        # the classes of 'Extract road hierarchy' (and the synthesis tools) kept as road_class;
+        # the synthesis tools' own classes (major, minor, local ...) are streets too
+        road_class = frame.attributes["road_class"].to_numpy(dtype=object)
+        if classes:
+            classes = set(classes) | set(street_graph.SYNTHESISED_CLASSES)
     if road_class is not None and all(c is None or c == "" for c in road_class):
         road_class = None
     if road_class is None:
