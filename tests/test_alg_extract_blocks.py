@@ -53,6 +53,31 @@ def test_a_hierarchy_of_every_line_keeps_its_classes_for_the_blocks(qgis_process
     assert abs(blocks.featureCount() - helsinki["OUTPUT"].featureCount()) <= 3
 
 
+def test_a_layer_merged_with_itself_gives_the_same_blocks(qgis_processing):
+    """Every street and building twice (a layer merged with itself): the same blocks with
+    the same building counts, and the log says how many doubles were skipped (a doubled
+    street split a block in two, and every block counted its buildings twice)."""
+    from helpers import log_feedback
+
+    def doubled(layer):
+        return qgis_processing.run("native:mergevectorlayers", {
+            "LAYERS": [layer, layer], "OUTPUT": "memory:"})["OUTPUT"]
+
+    once = qgis_processing.run("urbansynth:extractblocks", {
+        "ROADS": bubenec_layer("streets"), "BUILDINGS": bubenec_layer("buildings"),
+        "OUTPUT": "memory:"})["OUTPUT"]
+    log = log_feedback()
+    twice = qgis_processing.run("urbansynth:extractblocks", {
+        "ROADS": doubled(bubenec_layer("streets")),
+        "BUILDINGS": doubled(bubenec_layer("buildings")), "OUTPUT": "memory:"},
+        feedback=log)["OUTPUT"]
+    rows_once, rows_twice = layer_features(once)[0], layer_features(twice)[0]
+    assert len(rows_twice) == len(rows_once)
+    assert [r["n_buildings"] for r in rows_twice] == [r["n_buildings"] for r in rows_once]
+    assert sum("with the same geometry as an earlier one skipped" in m
+               for m in log.messages) == 2
+
+
 def test_helsinki_buildings(helsinki):
     layer = helsinki["OUTPUT_BUILDINGS"]
     assert layer.crs().authid() == "EPSG:4326"

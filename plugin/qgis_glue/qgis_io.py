@@ -179,7 +179,9 @@ def read_source(alg, parameters, name: str, context, feedback,
     more than the algorithms themselves. Null geometries are skipped; invalid ones stop the
     run or are skipped as Processing's invalid features filtering says
     (:func:`invalid_geometry_rule`), and with "do not filter" they are repaired
-    (``make_valid``), with a count in the log. The source is never modified.
+    (``make_valid``), with a count in the log. Lines and polygons drawn twice (the same
+    geometry, in either direction) are read once, with a count in the log. The source is
+    never modified.
     """
     source = alg.parameterAsSource(parameters, name, context)
     label = layer_name(alg, parameters, name, context)
@@ -315,6 +317,19 @@ def read_source(alg, parameters, name: str, context, feedback,
                 feedback.pushInfo(f"{label}: {int(empty.sum())} geometries could not be repaired and were skipped.")
             if len(geoms) == 0:
                 raise QgsProcessingException(f"Layer {label} has no valid geometry.")
+    if kind in ("polygons", "lines") and len(geoms) > 1:
+        # a feature drawn twice (a layer merged with itself, an import run twice) would
+        # count twice: a street twice, a block cut along a doubled line, two buildings
+        twice = pd.Series(shapely.to_wkb(shapely.normalize(geoms), output_dimension=2)
+                          ).duplicated().to_numpy()
+        if twice.any():
+            keep = ~twice
+            geoms = geoms[keep]
+            rows = [r for r, k in zip(rows, keep) if k]
+            fids = [f for f, k in zip(fids, keep) if k]
+            if feedback is not None:
+                feedback.pushInfo(f"{label}: {int(twice.sum())} features with the same geometry "
+                                  "as an earlier one skipped.")
     attrs = pd.DataFrame([[_py(v) for v in r] for r in rows], columns=field_names)
     return Frame(geoms, attrs, np.asarray(fids), src_crs, target_crs, label)
 
