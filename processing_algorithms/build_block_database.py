@@ -2,6 +2,7 @@
 from pathlib import Path
 
 import numpy as np
+import shapely
 from qgis.core import (
     QgsProcessing,
     QgsProcessingException,
@@ -78,6 +79,25 @@ class BuildBlockDatabase(AlgorithmBase):
                                              fields=[id_field, *database.BUILDING_FIELDS])
         feedback.setProgress(25)
 
+        if id_field and id_field not in block_frame.attributes:
+            if id_field != "block_id":   # a field named by the user: a typo is an error
+                raise QgsProcessingException(
+                    f"Layer {label} has no field '{id_field}' (fields: "
+                    f"{', '.join(block_frame.attributes.columns) or 'none'}).")
+            feedback.pushInfo(f"{label} has no field 'block_id': blocks are numbered 1..n and "
+                              "buildings assigned by location.")
+        parts, owner = shapely.get_parts(block_frame.geometry, return_index=True)
+        if len(parts) > len(block_frame):
+            # a block is one face (a dissolved layer holds many): each part is a block of its
+            # own, numbered anew, its buildings found by location
+            n_multi = int((np.bincount(owner) > 1).sum())
+            feedback.pushInfo(f"{label}: {n_multi} blocks of several parts split into "
+                              f"{len(parts)} blocks of one face each; blocks are numbered 1..n "
+                              "and buildings assigned by location.")
+            block_frame = qgis_io.Frame(parts, block_frame.attributes.iloc[owner].reset_index(
+                drop=True).drop(columns=[c for c in (id_field,) if c], errors="ignore"),
+                block_frame.fids[owner], block_frame.source_crs, block_frame.crs,
+                block_frame.name)
         block_ids = None
         if id_field and id_field in block_frame.attributes:
             # the blocks' own ids, when they are usable, so that buildings can refer to them
@@ -99,6 +119,17 @@ class BuildBlockDatabase(AlgorithmBase):
                 feedback.pushInfo(f"{b_label}: no building names one of the blocks in "
                                   f"'{id_field}'; buildings are assigned by location.")
                 by_field = False
+            elif not known.all():
+                # the others (an id of no block here, or none) are placed by location
+                index, _ = blocks.assign_to_blocks(block_frame.geometry,
+                                                   building_frame.geometry[~known])
+                located = index >= 0
+                bid[np.flatnonzero(~known)[located]] = block_ids[index[located]]
+                if located.any():
+                    feedback.pushInfo(f"{b_label}: {int(located.sum())} buildings name no block "
+                                      f"of {label} in '{id_field}' and are assigned by "
+                                      "location.")
+                known = np.isin(bid, block_ids) & np.isfinite(bid)
         if not by_field:
             index, _ = blocks.assign_to_blocks(block_frame.geometry, building_frame.geometry)
             known = index >= 0

@@ -199,6 +199,37 @@ def test_bubenec_block_database_assigns_by_location(qgis_processing, tmp_path):
     assert (d.table.coverage[d.table.n_buildings > 0] > 0.05).all()
 
 
+def test_a_dissolved_block_layer_gives_one_block_per_face(qgis_processing, helsinki_blocks,
+                                                           tmp_path):
+    """Helsinki's blocks dissolved into one multi-part feature, its buildings still naming
+    their old blocks: each part is a block, the buildings found by location (it stored the
+    largest part and said 'N of M buildings lie in no block'); a block id field that is not there
+    is an error naming it (it fell back silently)."""
+    from qgis.core import QgsProcessingException
+
+    from urban_synthesis.plugin.retrieval import database
+
+    blocks, buildings = helsinki_blocks
+    one = qgis_processing.run("native:dissolve", {"INPUT": blocks, "OUTPUT": "memory:"})["OUTPUT"]
+    assert one.featureCount() == 1
+    log = log_feedback()
+    res = qgis_processing.run("urbansynth:buildblockdatabase", {
+        "BLOCKS": one, "BUILDINGS": buildings, "OUTPUT": str(tmp_path / "d.gpkg")},
+        feedback=log)
+    d = database.load_block_database(tmp_path / "d.gpkg")
+    whole = qgis_processing.run("urbansynth:buildblockdatabase", {
+        "BLOCKS": blocks, "BUILDINGS": buildings, "OUTPUT": str(tmp_path / "w.gpkg")})
+    # the blocks touch: the dissolved feature's parts are the blocks' connected groups
+    n_parts = next(one.getFeatures()).geometry().constGet().numGeometries()
+    assert n_parts > 1 and len(d) == n_parts
+    assert res["N_BUILDINGS"] >= 0.95 * whole["N_BUILDINGS"]
+    assert any("split into" in m and "one face each" in m for m in log.messages)
+    with pytest.raises(QgsProcessingException, match="no field 'blok_id'"):
+        qgis_processing.run("urbansynth:buildblockdatabase", {
+            "BLOCKS": blocks, "BUILDINGS": buildings, "BLOCK_ID_FIELD": "blok_id",
+            "OUTPUT": str(tmp_path / "e.gpkg")})
+
+
 def test_block_errors(qgis_processing, tmp_path):
     from qgis.core import QgsProcessingException, QgsVectorLayer
 
