@@ -155,3 +155,22 @@ def test_two_outputs_into_one_file_and_a_layerless_uri_are_refused(qgis_processi
         "INPUT": bubenec_layer("streets"), "OUTPUT": str(same),
         "OUTPUT_INTERSECTIONS": str(same)})
     assert code != 0 and "would both be written to" in err and "Traceback" not in err, err
+
+
+def test_a_new_layer_beside_a_bare_path_input_is_written(qgis_processing, tmp_path):
+    """An input given as a bare GeoPackage path reads the file's first layer: a new layer
+    of another name in that file is no overwrite (it was refused as 'would overwrite layer
+    roads of the input'); the first layer's own name still is, and the input is kept."""
+    from qgis.core import QgsProcessingException, QgsVectorLayer
+
+    roads = tmp_path / "roads.gpkg"
+    qgis_processing.run(ALG, {"INPUT": bubenec_layer("streets"),
+                              "OUTPUT": f"ogr:dbname='{roads}' table=\"hierarchy\" (geom)"})
+    before = QgsVectorLayer(str(roads), "in", "ogr").featureCount()
+    qgis_processing.run("urbansynth:extractblocks", {
+        "ROADS": str(roads), "OUTPUT": f"ogr:dbname='{roads}' table=\"blocks\" (geom)"})
+    assert QgsVectorLayer(f"{roads}|layername=blocks", "b", "ogr").featureCount() > 5
+    assert QgsVectorLayer(f"{roads}|layername=hierarchy", "h", "ogr").featureCount() == before
+    with pytest.raises(QgsProcessingException, match="would overwrite layer 'hierarchy'"):
+        qgis_processing.run("urbansynth:extractblocks", {
+            "ROADS": str(roads), "OUTPUT": f"ogr:dbname='{roads}' table=\"hierarchy\" (geom)"})

@@ -126,8 +126,27 @@ def _inputs(alg, parameters, context) -> List[_Input]:
             continue
         parts = QgsProviderRegistry.instance().decodeUri(layer.providerType(), layer.source())
         if parts.get("path"):
-            out.append(_Input(name, Path(parts["path"]), parts.get("layerName") or None))
+            path = Path(parts["path"])
+            layer_name = parts.get("layerName") or None
+            if layer_name is None and layer.providerType() == "ogr":
+                # a bare file path reads the file's first layer: that layer is the input, a
+                # new layer beside it in the same GeoPackage is not
+                layer_name = _first_layer(path)
+            out.append(_Input(name, path, layer_name))
     return out
+
+
+def _first_layer(path: Path) -> Optional[str]:
+    """The name of a vector file's first layer (what QGIS reads from a bare path), None for
+    a file of one unnamed layer or one OGR cannot open."""
+    from osgeo import ogr
+
+    if path.suffix.lower() != ".gpkg":
+        return None        # a shapefile, a GeoJSON: the file is the layer
+    ds = ogr.Open(str(path))
+    if ds is None or ds.GetLayerCount() == 0:
+        return None
+    return ds.GetLayer(0).GetName()
 
 
 def _same(a: Path, b: Path) -> bool:
