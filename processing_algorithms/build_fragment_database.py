@@ -128,8 +128,9 @@ class BuildFragmentDatabase(AlgorithmBase):
             feedback.pushInfo(f"Level {level}: {n} fragments "
                               f"({counts['blocks_per_level'].get(level, 0)} city blocks).")
         if counts["n_unassigned_streets"]:
-            feedback.pushInfo(f"{counts['n_unassigned_streets']} streets of level >= 1 lie in "
-                              "no closed fragment (open edges of the network) and are not stored.")
+            feedback.pushInfo(f"{counts['n_unassigned_streets']} street edges (between "
+                              "junctions) of level >= 1 lie in no closed fragment (open edges "
+                              "of the network) and are not stored.")
         # the fragments hold no dead end outside a closed face: the synthesis steers its
         # share to the example's, recorded here
         share = invariants.dead_end_share_of_extract(lines)

@@ -166,3 +166,17 @@ def test_helsinki_fragments_invariants():
         assert (filled <= shapely.area(parent) + 1e-3).all()
     assert (f.street_level == t.level.to_numpy()[f.street_fragment] + 1).all()
     assert (t.aspect_ratio > 0).all() and (t.aspect_ratio <= 1).all()
+
+
+def test_relief_of_a_fragment_off_the_dem_is_unknown_not_flat():
+    """A DEM covering only the west: a fragment in the east had relief 0 (flat) beside a
+    NULL slope and elevation; its relief is unknown too. The one on the DEM keeps its
+    relief (a 10 % slope over 50 m: 5 m, less half a relief cell at each side)."""
+    x = np.arange(0, 100, 1.0) + 0.5
+    z = np.tile(0.1 * x, (100, 1))
+    z[:, 60:] = np.nan
+    dem = DemGrid(z, (0, 1.0, 0, 100, 0, -1.0))
+    west, east = shapely.box(5, 20, 55, 70), shapely.box(70, 20, 95, 70)
+    relief, slope, elevation, _, _ = fr.relief_patches(np.array([west, east]), dem)
+    assert relief[0] == pytest.approx(5.0 - 0.1 * fr.RELIEF_CELL_SIZE, abs=0.05)
+    assert np.isnan(relief[1]) and np.isnan(elevation[1]) and np.isnan(slope[1])

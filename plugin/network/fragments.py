@@ -165,7 +165,7 @@ def relief_patches(polygons: Sequence, dem: DemGrid, cell_size: float = RELIEF_C
 
     Returns
     -------
-    relief : float array, max - min elevation inside (the thesis's "relative elevation
+    relief : float array, max - min elevation inside, NaN off the DEM (the thesis's "relative elevation
         change" used by the retrieval prefilter)
     mean_slope : float array, mean slope magnitude (rise / run) inside
     elevation : float array, mean elevation inside
@@ -215,6 +215,8 @@ def relief_patches(polygons: Sequence, dem: DemGrid, cell_size: float = RELIEF_C
         pts = shapely.get_coordinates(shapely.point_on_surface(polygons[thin]))
         elevation[thin] = dem(pts)
         mean_slope[thin] = DemGrid(dem.slope(), dem.geotransform)(pts)
+        # one off the DEM has no relief: unknown (NaN, as its slope and elevation), not flat
+        relief[thin & ~np.isfinite(elevation)] = np.nan
     patches = [p.reshape(rr, cc).astype(np.float32)
                for p, rr, cc in zip(np.split(z, np.cumsum(n_cells)[:-1]), rows, cols)]
     transforms = np.column_stack([b[:, 0], cs, np.zeros(k), b[:, 3], np.zeros(k), -cs])
