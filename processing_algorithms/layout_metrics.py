@@ -167,8 +167,11 @@ class LayoutMetrics(AlgorithmBase):
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT, "Layout metrics table", QgsProcessing.SourceType.TypeVector),
             "One row per measure: kind, metric, statistic, unit, candidate and example values, "
-            "relative difference, Wasserstein distance (raw and divided by the example's "
-            "standard deviation), Kolmogorov-Smirnov statistic and p-value, sample sizes.")
+            "rel_diff (the relative difference (candidate - example) / |example|; for street "
+            "bearings, statistic axial_mean, the turn in degrees between the two mean "
+            "directions, -90..90, as a relative difference of directions means nothing), "
+            "Wasserstein distance (raw and divided by the example's standard deviation), "
+            "Kolmogorov-Smirnov statistic and p-value, sample sizes.")
         self.add(QgsProcessingParameterFileDestination(
             self.OUTPUT_HTML, "Layout metrics report", "HTML files (*.html)", optional=True,
             createByDefault=True),
