@@ -230,6 +230,25 @@ def test_a_dissolved_block_layer_gives_one_block_per_face(qgis_processing, helsi
             "OUTPUT": str(tmp_path / "e.gpkg")})
 
 
+def test_a_shapefile_chain_keeps_the_fields_it_can_tell_apart(qgis_processing, tmp_path):
+    """Blocks and buildings written as shapefiles cut field names to ten characters: the
+    database reads height_estimated from 'height_est' (it was lost without a word), and
+    says it cannot tell building_type from building_tag (both 'building_t')."""
+    from urban_synthesis.plugin.retrieval import database
+
+    qgis_processing.run("urbansynth:extractblocks", {
+        "ROADS": helsinki_layer("lines"), "BUILDINGS": helsinki_layer("multipolygons"),
+        "OUTPUT": str(tmp_path / "blocks.shp"), "OUTPUT_BUILDINGS": str(tmp_path / "b.shp")})
+    log = log_feedback()
+    qgis_processing.run("urbansynth:buildblockdatabase", {
+        "BLOCKS": str(tmp_path / "blocks.shp"), "BUILDINGS": str(tmp_path / "b.shp"),
+        "OUTPUT": str(tmp_path / "db.gpkg")}, feedback=log)
+    d = database.load_block_database(tmp_path / "db.gpkg")
+    assert d.buildings.height_estimated.notna().sum() > 50
+    assert any("'height_estimated' read from 'height_est'" in m for m in log.messages)
+    assert any("cannot be told apart" in m and "building_tag" in m for m in log.messages)
+
+
 def test_block_errors(qgis_processing, tmp_path):
     from qgis.core import QgsProcessingException, QgsVectorLayer
 

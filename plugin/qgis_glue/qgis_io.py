@@ -200,6 +200,18 @@ def read_source(alg, parameters, name: str, context, feedback,
     all_names = [f.name() for f in source.fields()]
     field_names = all_names if fields is None else \
         [f for f in dict.fromkeys(fields) if f and f in all_names]
+    # a field asked for by its full name that a shapefile (dBase: 10 characters) holds cut
+    # short: read under its full name (building_type from 'building_t')
+    cut = styles.DBF_NAME_LENGTH
+    wanted = [] if fields is None else [f for f in dict.fromkeys(fields) if f]
+    shorts = pd.Series([f[:cut] for f in wanted]).value_counts()
+    # two names cut to the same ten characters cannot be told apart: neither is guessed
+    cut_short = {f[:cut]: f for f in wanted
+                 if len(f) > cut and f not in all_names and f[:cut] in all_names
+                 and f[:cut] not in wanted and shorts[f[:cut]] == 1}
+    alike = [f for f in wanted if len(f) > cut and f not in all_names and f[:cut] in all_names
+             and shorts[f[:cut]] > 1]
+    field_names += [short for short in cut_short if short not in field_names]
     field_idx = [all_names.index(f) for f in field_names]
     missing = [f for f in required_fields if f not in all_names]
     if missing:
@@ -331,6 +343,16 @@ def read_source(alg, parameters, name: str, context, feedback,
                 feedback.pushInfo(f"{label}: {int(twice.sum())} features with the same geometry "
                                   "as an earlier one skipped.")
     attrs = pd.DataFrame([[_py(v) for v in r] for r in rows], columns=field_names)
+    if alike and feedback is not None:
+        feedback.pushInfo(f"{label}: " + ", ".join(f"'{f}'" for f in alike) + " are cut to "
+                          "the same 10 characters in a shapefile and cannot be told apart: "
+                          "they are not read (a GeoPackage keeps whole field names).")
+    if cut_short:
+        attrs = attrs.rename(columns=cut_short)
+        if feedback is not None:
+            feedback.pushInfo(f"{label}: " + ", ".join(f"'{full}' read from '{short}'"
+                                                       for short, full in cut_short.items())
+                              + " (field names cut to 10 characters, as a shapefile keeps them).")
     return Frame(geoms, attrs, np.asarray(fids), src_crs, target_crs, label)
 
 
