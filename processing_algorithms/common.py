@@ -430,7 +430,7 @@ class AlgorithmBase(QgsProcessingAlgorithm):
         field = self.parameterAsString(parameters, "STYLE_FIELD", context) or "database"
         style = qgis_io.read_source(self, parameters, "STYLE", context, feedback,
                                     kind="polygons", target_crs=target_crs, optional=True,
-                                    fields=[field])
+                                    fields=[field], read_twice=True)
         if style is None:
             return None
         if field not in style.attributes:

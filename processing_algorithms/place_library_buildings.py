@@ -156,7 +156,8 @@ class PlaceLibraryBuildings(AlgorithmBase):
             return bestfit.default_library()
         frame = qgis_io.read_source(
             self, parameters, self.BUILDING_LIBRARY, context, feedback, kind="polygons",
-            target_crs=crs, repair=False, required_fields=["street_access_sides", "blind_sides"])
+            target_crs=crs, repair=False, required_fields=["street_access_sides", "blind_sides"],
+            read_twice=True)
         a = frame.attributes
         return qgis_io.run_engine(
             f"Layer {frame.name}", bestfit.library_from_table, frame.geometry,

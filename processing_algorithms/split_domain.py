@@ -333,7 +333,8 @@ class SplitDomain(AlgorithmBase):
         optional = ["probability", "min_count", "max_count"]
         frame = qgis_io.read_source(self, parameters, self.TEMPLATE_LAYER, context, feedback,
                                     kind="polygons", fields=["template", "label"] + optional,
-                                    required_fields=["template", "label"], target_crs=crs)
+                                    required_fields=["template", "label"], target_crs=crs,
+                                    read_twice=True)
         settings = {k: frame.attributes[k].to_numpy(dtype=object) for k in optional
                     if k in frame.attributes}
         lib = qgis_io.run_engine(frame.name, templates.templates_from_drawn, frame.geometry,

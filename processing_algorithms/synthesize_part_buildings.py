@@ -224,7 +224,8 @@ class SynthesizePartBuildings(AlgorithmBase):
         """The parts database (a Building parts layer, else a built-in one) and its name."""
         if self.given(parameters, self.BUILDING_PARTS):
             frame = qgis_io.read_source(self, parameters, self.BUILDING_PARTS, context,
-                                        feedback, kind="polygons", target_crs=crs)
+                                        feedback, kind="polygons", target_crs=crs,
+                                        read_twice=True)   # a library: entries may share a shape
             table = frame.attributes.drop(columns=[c for c in frame.attributes
                                                    if c.lower() == "fid"])
             try:   # the engine's message names the layer already

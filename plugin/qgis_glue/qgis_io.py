@@ -170,7 +170,8 @@ def read_source(alg, parameters, name: str, context, feedback,
                 repair: bool = True, optional: bool = False,
                 progress_range: tuple = (0.0, 5.0),
                 expression: Optional[str] = None,
-                fields: Optional[Sequence[str]] = None) -> Optional[Frame]:
+                fields: Optional[Sequence[str]] = None,
+                read_twice: bool = False) -> Optional[Frame]:
     """Read a feature source parameter into a :class:`Frame` in a metric working CRS.
 
     Raises a QgsProcessingException naming the layer for: a missing layer, the wrong geometry
@@ -180,8 +181,9 @@ def read_source(alg, parameters, name: str, context, feedback,
     run or are skipped as Processing's invalid features filtering says
     (:func:`invalid_geometry_rule`), and with "do not filter" they are repaired
     (``make_valid``), with a count in the log. Lines and polygons drawn twice (the same
-    geometry, in either direction) are read once, with a count in the log. The source is
-    never modified.
+    geometry, in either direction) are read once, with a count in the log, unless
+    ``read_twice`` (a library of shapes, where two entries may share one outline). The
+    source is never modified.
     """
     source = alg.parameterAsSource(parameters, name, context)
     label = layer_name(alg, parameters, name, context)
@@ -329,7 +331,7 @@ def read_source(alg, parameters, name: str, context, feedback,
                 feedback.pushInfo(f"{label}: {int(empty.sum())} geometries could not be repaired and were skipped.")
             if len(geoms) == 0:
                 raise QgsProcessingException(f"Layer {label} has no valid geometry.")
-    if kind in ("polygons", "lines") and len(geoms) > 1:
+    if kind in ("polygons", "lines") and len(geoms) > 1 and not read_twice:
         # a feature drawn twice (a layer merged with itself, an import run twice) would
         # count twice: a street twice, a block cut along a doubled line, two buildings
         twice = pd.Series(shapely.to_wkb(shapely.normalize(geoms), output_dimension=2)
