@@ -300,10 +300,7 @@ def read_source(alg, parameters, name: str, context, feedback,
             feedback.pushInfo(f"{label}: {len(unreadable)} unreadable geometries repaired by QGIS"
                               + (f", {int(bad.sum())} skipped." if bad.any() else "."))
         if bad.any():
-            keep = ~bad
-            geoms = geoms[keep]
-            rows = [r for r, k in zip(rows, keep) if k]
-            fids = [f for f, k in zip(fids, keep) if k]
+            geoms, rows, fids = _kept(~bad, geoms, rows, fids)
             if len(geoms) == 0:
                 raise QgsProcessingException(f"Layer {label} has no readable geometry.")
     if target_crs is None:
@@ -323,10 +320,7 @@ def read_source(alg, parameters, name: str, context, feedback,
                 feedback.pushInfo(f"{label}: {int(invalid.sum())} invalid geometries repaired.")
         empty = shapely.is_empty(geoms) | shapely.is_missing(geoms)
         if empty.any():
-            keep = ~empty
-            geoms = geoms[keep]
-            rows = [r for r, k in zip(rows, keep) if k]
-            fids = [f for f, k in zip(fids, keep) if k]
+            geoms, rows, fids = _kept(~empty, geoms, rows, fids)
             if feedback is not None:
                 feedback.pushInfo(f"{label}: {int(empty.sum())} geometries could not be repaired and were skipped.")
             if len(geoms) == 0:
@@ -337,10 +331,7 @@ def read_source(alg, parameters, name: str, context, feedback,
         twice = pd.Series(shapely.to_wkb(shapely.normalize(geoms), output_dimension=2)
                           ).duplicated().to_numpy()
         if twice.any():
-            keep = ~twice
-            geoms = geoms[keep]
-            rows = [r for r, k in zip(rows, keep) if k]
-            fids = [f for f, k in zip(fids, keep) if k]
+            geoms, rows, fids = _kept(~twice, geoms, rows, fids)
             if feedback is not None:
                 feedback.pushInfo(f"{label}: {int(twice.sum())} features with the same geometry "
                                   "as an earlier one skipped.")
@@ -395,8 +386,7 @@ def _apply_invalid_rule(rule: int, geoms, rows, fids, label: str, feedback):
                           "skipped (Processing's invalid features filtering).")
     if not keep.any():
         raise QgsProcessingException(f"Layer {label} has no valid geometry.")
-    return (geoms[keep], [r for r, k in zip(rows, keep) if k],
-            [f for f, k in zip(fids, keep) if k])
+    return _kept(keep, geoms, rows, fids)
 
 
 def valid_after_transform(polygons: np.ndarray, multi: bool = True) -> np.ndarray:
@@ -433,6 +423,13 @@ def _keep_dimension(geom, kind):
     return shapely.multilinestrings(parts) if len(parts) > 1 else parts[0]
 
 
+def _kept(keep, geoms, rows, fids):
+    """The features of a reading where ``keep`` is True: geometries, attribute rows, ids."""
+    keep = np.asarray(keep, dtype=bool)
+    return (geoms[keep], [r for r, k in zip(rows, keep) if k],
+            [f for f, k in zip(fids, keep) if k])
+
+
 def _parts_of_kind(geoms, rows, fids, kind: str, label: str, feedback):
     """The features of a layer of collections or mixed types, each reduced to its parts of
     ``kind``; features without any are skipped (counted in the log), and a layer with none
@@ -446,7 +443,7 @@ def _parts_of_kind(geoms, rows, fids, kind: str, label: str, feedback):
     if not has.all() and feedback is not None:
         feedback.pushInfo(f"{label}: {int((~has).sum())} features without {kind} skipped (the "
                           "layer holds collections or mixed geometry types).")
-    return kept[has], [r for r, k in zip(rows, has) if k], [f for f, k in zip(fids, has) if k]
+    return _kept(has, kept, rows, fids)
 
 
 def _py(value):
