@@ -448,8 +448,8 @@ def synthesize_footprints(blocks: Sequence, examples: Sequence[ExampleSet],
     choice = np.full(n, -1) if block_database is None else np.asarray(block_database)
     road_arr = None if roads is None else np.asarray(roads, dtype=object)
     tree = shapely.STRtree(road_arr) if road_arr is not None and len(road_arr) else None
-    clear_arr = None if keep_clear is None else \
-        shapely.make_valid(shapely.force_2d(np.asarray(keep_clear, dtype=object)))
+    # the areas near each block, made 2D and valid where they are used (street_offset)
+    clear_arr = None if keep_clear is None else np.asarray(keep_clear, dtype=object)
     clear_tree = shapely.STRtree(clear_arr) if clear_arr is not None and len(clear_arr) \
         else None
     geoms, tables, stats = [], [], []

@@ -210,14 +210,15 @@ def _clipped_to_surfaces(tris: np.ndarray, owner: np.ndarray, uv: np.ndarray, su
     connecting lines ignore the trim). A triangle partly outside becomes the ear-clipped
     pieces of its part inside, with z and (u, v) interpolated in the triangle's plane.
     Returns (tris, owner, uv)."""
-    t2 = shapely.polygons(tris[:, [0, 1, 2, 0], :2])
     area = np.abs(_tri_area2(tris[:, 0, :2], tris[:, 1, :2], tris[:, 2, :2])) / 2
     strip = np.bincount(owner, weights=area, minlength=len(surfaces))
     trimmed = strip > shapely.area(surfaces) * (1 + 1e-6) + 1e-6
     sel = np.flatnonzero(trimmed[owner])
     if not len(sel):
         return tris, owner, uv
-    inside = shapely.intersection(t2[sel], surfaces[owner[sel]])
+    # polygons of the triangles of trimmed streets only (most streets are not)
+    t2 = shapely.polygons(tris[sel][:, [0, 1, 2, 0], :2])
+    inside = shapely.intersection(t2, surfaces[owner[sel]])
     whole = shapely.area(inside) >= area[sel] * (1 - 1e-9)
     cut = sel[~whole]
     keep = np.ones(len(tris), dtype=bool)

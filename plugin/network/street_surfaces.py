@@ -39,6 +39,7 @@ from scipy.spatial import cKDTree
 from ..core import coordinates
 from ..core.geometry import pinned_ends, substrings, unit
 from ..core.progress import InputError, Progress, ensure
+from ..retrieval.shape_context import DemGrid
 from .street_graph import RoadGraph, clean_network
 
 __all__ = [
@@ -622,11 +623,9 @@ def tessellate_network(graph: RoadGraph, widths: Sequence[float],
         off = ~np.isfinite(dem(xy))
         dem, distance = dem.filled()
         if off.any():
-            x0, dx, _, y0, _, dy = dem.geotransform
-            col = np.clip(((xy[off, 0] - x0) / dx).astype(np.int64), 0, distance.shape[1] - 1)
-            row = np.clip(((xy[off, 1] - y0) / dy).astype(np.int64), 0, distance.shape[0] - 1)
+            reach = DemGrid(distance, dem.geotransform)(xy[off])   # sampled as the DEM is
             dem_gaps = {"dem_gap_edges": int(len(np.unique(k[off]))),
-                        "dem_gap_max_m": float(distance[row, col].max())}
+                        "dem_gap_max_m": float(reach.max())}
     if dem is not None:
         surfaces, jpolys, heights = _drape(dem, graph, widths, h, junction_nodes, jpolys,
                                            surfaces, centre, surf_edge, s_table, j_table,

@@ -620,15 +620,7 @@ def shrink_blocks(blocks, half_width=DEFAULT_STREET_WIDTH / 2, roads=None,
         keep = (hw > 0) & ~(shapely.is_missing(roads) | shapely.is_empty(roads))
         bands = shapely.buffer(roads[keep], hw[keep], cap_style="round", join_style="mitre",
                                mitre_limit=10.0)
-        out = blocks.copy()
-        if len(bands):
-            b_idx, r_idx = shapely.STRtree(bands).query(blocks, predicate="intersects")
-            if len(b_idx):
-                starts = np.flatnonzero(group_starts(b_idx))
-                ends = np.append(starts[1:], len(b_idx))
-                for s, e in zip(starts, ends):  # one union per block: its own streets only
-                    i = b_idx[s]
-                    out[i] = shapely.difference(blocks[i], shapely.union_all(bands[r_idx[s:e]]))
+        out = without_areas(blocks, bands)   # each block less its own streets' bands
     out = np.asarray(out, dtype=object)
     if keep_clear is not None:
         # polygons only before the snap: a collection snaps part by part, not as one area
@@ -1514,18 +1506,25 @@ def _on_lots(buildings, lots):
     return total, best
 
 
+def _on_parcels(buildings, lots, share: float = 0.95):
+    """Per building: whether it stands on parcel land (half of it or more on lots, not
+    outside the blocks or on land kept clear), and whether it is split there (no single
+    lot holds ``share`` of its area: a parcel line runs through it)."""
+    total, best = _on_lots(buildings, lots)
+    area = shapely.area(buildings)
+    on_land = total >= 0.5 * area
+    return on_land, on_land & (best < share * area)
+
+
 def on_parcel_land(buildings, lots) -> np.ndarray:
-    """Per building: True where half of it or more stands on lots (not outside the blocks
-    or on land kept clear)."""
-    return _on_lots(buildings, lots)[0] >= 0.5 * shapely.area(buildings)
+    """Per building: True where half of it or more stands on lots (:func:`_on_parcels`)."""
+    return _on_parcels(buildings, lots)[0]
 
 
 def split_buildings(buildings, lots, share: float = 0.95) -> np.ndarray:
-    """Per building: True where it stands on parcel land (:func:`on_parcel_land`) and no
-    single lot holds ``share`` of its area (a parcel line runs through it)."""
-    total, best = _on_lots(buildings, lots)
-    area = shapely.area(buildings)
-    return (total >= 0.5 * area) & (best < share * area)
+    """Per building: True where it stands on parcel land and a parcel line runs through it
+    (:func:`_on_parcels`)."""
+    return _on_parcels(buildings, lots, share)[1]
 
 
 @_quiet
@@ -1709,8 +1708,9 @@ def subdivide_blocks(blocks, method: str = "recursive",
     }
     if whole is not None:
         stats["n_buildings"] = len(whole)
-        stats["n_buildings_on_lots"] = int(on_parcel_land(whole, geometry).sum())
-        stats["n_buildings_split"] = int(split_buildings(whole, geometry).sum())
+        on_land, split = _on_parcels(whole, geometry)
+        stats["n_buildings_on_lots"] = int(on_land.sum())
+        stats["n_buildings_split"] = int(split.sum())
         stats["n_merged_for_buildings"] = n_merged_for_buildings
         stats["n_over_max_area_merged"] = n_merged_over_max
     progress.step(1.0)
