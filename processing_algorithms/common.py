@@ -178,7 +178,7 @@ class AlgorithmBase(QgsProcessingAlgorithm):
     def checkParameterValues(self, parameters, context):  # noqa: N802 (QGIS API)
         # numbers and field types first: QGIS's own message names neither range nor type
         message = self.declaration_error(parameters, context) or \
-            outputs.same_file_error(self, parameters, context)
+            outputs.destination_error(self, parameters, context)
         if message:
             return False, message
         ok, message = super().checkParameterValues(parameters, context)

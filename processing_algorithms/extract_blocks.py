@@ -165,6 +165,8 @@ class ExtractBlocks(AlgorithmBase):
             n_est = int(attrs["height_estimated"].fillna(False).sum())
             feedback.pushInfo(f"Buildings: {n_h} of {len(buildings)} have a height "
                               f"({n_est} estimated from levels x {storey:g} m).")
+            self._warn_unreadable(parameters, context, feedback, buildings.name,
+                                  heights, levels)
             table = result.buildings.join(attrs)
             results[self.OUTPUT_BUILDINGS] = self._write_features(
                 parameters, self.BUILDINGS, self.OUTPUT_BUILDINGS, context, feedback, buildings,
@@ -197,6 +199,22 @@ class ExtractBlocks(AlgorithmBase):
             raise QgsProcessingException(
                 f"Layer {frame.name} has a 'building' field but no feature with a value in it.")
         return qgis_io.subset(frame, keep)
+
+    def _warn_unreadable(self, parameters, context, feedback, label, heights, levels):
+        """Values of the cadastre fields that are no height or number of storeys."""
+        for name, values, parse, what in (
+                (self.HEIGHT_FIELD, heights, building_attributes.parse_height,
+                 "height in metres"),
+                (self.LEVELS_FIELD, levels, building_attributes.parse_levels,
+                 "number of storeys")):
+            bad = [] if values is None else building_attributes.unreadable_values(values, parse)
+            if bad:
+                shown = ", ".join(repr(v) for v in bad[:3])
+                feedback.pushWarning(
+                    f"Layer {label}: {len(bad)} value(s) of field "
+                    f"'{self.parameterAsString(parameters, name, context)}' are no {what} "
+                    f"(e.g. {shown}): those buildings take it from their OSM tags or "
+                    "estimate it from the other field, else have none.")
 
     def _cadastre_fields(self, parameters, context, frame):
         values = []
@@ -242,6 +260,12 @@ class ExtractBlocks(AlgorithmBase):
             n, k = stats["n_parcels"], stats["n_parcels_in_blocks"]
             feedback.pushInfo(f"{k} of {n} parcels lie in a block; the other {n - k} keep an "
                               "empty block_id (street parcels, parcels across blocks, outside).")
+        for what in ("buildings", "parcels"):
+            if stats.get(f"n_{what}") and not stats[f"n_{what}_in_blocks"]:
+                feedback.pushWarning(
+                    f"None of the {stats[f'n_{what}']} {what} lies in a block: the layer "
+                    "covers another area than the roads' closed blocks (a different town or "
+                    "extract, or a layer without a CRS read in the wrong one?).")
 
 
 def _text(value):

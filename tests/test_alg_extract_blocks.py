@@ -4,7 +4,7 @@ import pytest
 import shapely
 
 from conftest import BUBENEC, bubenec_layer, helsinki_layer, run_qgis_process
-from helpers import layer_features, memory_layer
+from helpers import layer_features, log_feedback, memory_layer
 
 
 def _memory_layer(kind, wkts=(), crs="EPSG:3857", **kwargs):
@@ -153,6 +153,37 @@ def test_cadastre_height_and_levels_fields(qgis_processing):
     assert [r["height_estimated"] for r in rows] == [False, True, None]
     assert [r["levels"] for r in rows] == [4.0, 4.0, None]   # round(12.5 / 3.5) = 4
     assert rows[0]["vyska"] == 12.5 and rows[1]["podlazi"] == 4  # source fields kept
+
+
+def test_unreadable_cadastre_values_and_buildings_off_the_blocks_are_warned(qgis_processing):
+    """A cadastre field with a negative or an absurd value gave those buildings no height
+    and said nothing; buildings of another area than the roads were an info line."""
+    roads_layer = _memory_layer("LineString", GRID_WKT, crs="EPSG:32633")
+    buildings = _memory_layer(
+        "Polygon", ["POLYGON ((10 10, 30 10, 30 30, 10 30, 10 10))",
+                    "POLYGON ((110 10, 130 10, 130 30, 110 30, 110 10))",
+                    "POLYGON ((10 110, 30 110, 30 130, 10 130, 10 110))"],
+        crs="EPSG:32633", fields="&field=vyska:double&field=podlazi:integer",
+        rows=[(5000.0, 3), (-4.0, -2), (9.0, None)])
+    log = log_feedback()
+    out = qgis_processing.run("urbansynth:extractblocks", {
+        "ROADS": roads_layer, "BUILDINGS": buildings, "HEIGHT_FIELD": "vyska",
+        "LEVELS_FIELD": "podlazi", "OUTPUT": "memory:", "OUTPUT_BUILDINGS": "memory:"},
+        feedback=log)
+    rows, _ = layer_features(out["OUTPUT_BUILDINGS"])
+    assert [r["height_m"] for r in rows] == [9.0, None, 9.0]   # 3 storeys x 3 m; nothing; 9
+    assert any("2 value(s) of field 'vyska' are no height in metres (e.g. 5000.0, -4.0)" in w
+               for w in log.warnings), log.warnings
+    assert any("1 value(s) of field 'podlazi' are no number of storeys (e.g. -2.0)" in w
+               for w in log.warnings), log.warnings
+    far = _memory_layer("Polygon", ["POLYGON ((5010 10, 5030 10, 5030 30, 5010 30, 5010 10))"],
+                        crs="EPSG:32633")
+    log = log_feedback()
+    qgis_processing.run("urbansynth:extractblocks", {
+        "ROADS": roads_layer, "BUILDINGS": far, "OUTPUT": "memory:",
+        "OUTPUT_BUILDINGS": "memory:"}, feedback=log)
+    assert any("None of the 1 buildings lies in a block" in w for w in log.warnings), \
+        log.warnings
 
 
 def test_missing_class_field_is_rejected(qgis_processing):

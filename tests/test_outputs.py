@@ -174,3 +174,27 @@ def test_a_new_layer_beside_a_bare_path_input_is_written(qgis_processing, tmp_pa
     with pytest.raises(QgsProcessingException, match="would overwrite layer 'hierarchy'"):
         qgis_processing.run("urbansynth:extractblocks", {
             "ROADS": str(roads), "OUTPUT": f"ogr:dbname='{roads}' table=\"hierarchy\" (geom)"})
+
+
+def test_a_file_output_named_for_another_type_is_refused(qgis_processing, tmp_path):
+    """A file output is written in its declared format whatever its name: a fragment
+    database named .txt was a GeoPackage that a text editor or QGIS's 'Add layer' then
+    misread. Such a name is refused before anything is written; the declared extension
+    (any case) is written."""
+    from qgis.core import QgsProcessingException
+
+    roads = tmp_path / "roads.gpkg"
+    qgis_processing.run(ALG, {"INPUT": bubenec_layer("streets"), "OUTPUT": str(roads),
+                              "OUTPUT_INTERSECTIONS": None})
+    with pytest.raises(QgsProcessingException,
+                       match=r"Fragment database \(OUTPUT\) is written as GeoPackage.*db\.txt "
+                             r"does not end in \.gpkg"):
+        qgis_processing.run("urbansynth:buildfragmentdatabase",
+                            {"ROADS": str(roads), "OUTPUT": str(tmp_path / "db.txt")})
+    assert not (tmp_path / "db.txt").exists()
+    code, _, err = run_qgis_process("buildfragmentdatabase", {
+        "ROADS": str(roads), "OUTPUT": str(tmp_path / "db")})
+    assert code != 0 and "does not end in .gpkg" in err and "Traceback" not in err, err
+    qgis_processing.run("urbansynth:buildfragmentdatabase",
+                        {"ROADS": str(roads), "OUTPUT": str(tmp_path / "db.GPKG")})
+    assert (tmp_path / "db.GPKG").stat().st_size > 0

@@ -256,6 +256,17 @@ def _first_present(*candidates):
     return None
 
 
+def unreadable_values(values: Sequence, parse) -> list:
+    """The values given but not readable by ``parse`` (:func:`parse_height` or
+    :func:`parse_levels`): text that is no number, negatives, absurd sizes. Such a value is
+    no height (NaN) to :func:`building_attributes`; the caller says how many there were.
+
+    >>> unreadable_values(["12", None, "tall", -3, 8.5], parse_height)
+    ['tall', -3]
+    """
+    return [v for v in values if not _is_missing(v) and math.isnan(parse(v))]
+
+
 def building_attributes(n: int, building: Optional[Sequence] = None,
                         other_tags: Optional[Sequence] = None,
                         tags: Optional[Mapping[str, Sequence]] = None,

@@ -42,7 +42,7 @@ from qgis.core import (
 
 from . import styles
 
-__all__ = ["STAGING_PREFIX", "OutputStaging", "same_file_error"]
+__all__ = ["STAGING_PREFIX", "OutputStaging", "destination_error"]
 
 #: Name prefix of the staging folders (hidden: a file manager does not show them).
 STAGING_PREFIX = ".urbansynth-run-"
@@ -156,10 +156,25 @@ def _same(a: Path, b: Path) -> bool:
         return False
 
 
-def same_file_error(alg, parameters, context) -> Optional[str]:
+def _file_type_error(definition, destination: str) -> Optional[str]:
+    """The message when a file output's name does not end in its declared type's extension
+    (a GeoPackage named .txt), else None: the file is written in the declared format
+    whatever it is called, and the GUI adds the extension where qgis_process does not."""
+    if not isinstance(definition, QgsProcessingParameterFileDestination):
+        return None
+    extensions = [e.lower() for e in re.findall(r"\*(\.[A-Za-z0-9]+)", definition.fileFilter())]
+    if not extensions or Path(destination).suffix.lower() in extensions:
+        return None
+    return (f"Output {definition.description()} ({definition.name()}) is written as "
+            f"{definition.fileFilter()}, but {destination} does not end in "
+            f"{' or '.join(extensions)}: name it so, or another program will misread it.")
+
+
+def destination_error(alg, parameters, context) -> Optional[str]:
     """The message when an output would overwrite an input or another output of the run,
-    or names a GeoPackage but no layer in it, else None (checked before anything is
-    written: in the dialog, on the command line and when the run starts)."""
+    names a GeoPackage but no layer in it, or a file whose extension is not its type's,
+    else None (checked before anything is written: in the dialog, on the command line and
+    when the run starts)."""
     inputs = _inputs(alg, parameters, context)
     written = []   # (definition, path, table) of the outputs so far
     for definition in alg.destinationParameterDefinitions():
@@ -191,6 +206,9 @@ def same_file_error(alg, parameters, context) -> Optional[str]:
             return (f"Output {definition.description()} ({definition.name()}) would "
                     f"overwrite {what}the input {source.name} ({source.path}): inputs are "
                     "never modified; choose another output file.")
+        message = _file_type_error(definition, destination)
+        if message:
+            return message
     return None
 
 
@@ -209,7 +227,7 @@ class OutputStaging:
     def prepare(self) -> dict:
         """Refuse an output that is an input; return the parameters with every file
         output redirected into its staging folder."""
-        message = same_file_error(self.alg, self.parameters, self.context)
+        message = destination_error(self.alg, self.parameters, self.context)
         if message:
             raise QgsProcessingException(message)
         staged_parameters = dict(self.parameters)
