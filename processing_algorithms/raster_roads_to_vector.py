@@ -48,7 +48,8 @@ class RasterRoadsToVector(AlgorithmBase):
             "cross, Zhang-Suen thinning, the skeleton's pixel graph without its 0.5 px² "
             "artefact triangles, chains between nodes of degree other than 2, five rounds of "
             "smoothing, Douglas-Peucker simplification and removal of short dead ends.\n\n"
-            "Roads are pixels brighter than the threshold. Lengths are in the raster's units "
+            "Roads are pixels brighter than the threshold; no-data pixels are background. "
+            "Lengths are in the raster's units "
             "(use a projected raster in metres); the raster is read at its own resolution.\n\n"
             "Output: road edges with edge_id, length_m, node_from, node_to, in the raster's CRS."
         )
@@ -126,7 +127,9 @@ class RasterRoadsToVector(AlgorithmBase):
         if not valid.any():
             raise QgsProcessingException(f"Raster '{layer.name()}' band {band} holds no value "
                                          "(every pixel is no-data).")
-        above = float((array[valid] > threshold).mean())
+        # no-data pixels are background, never road (a road mask written with the background
+        # as no-data, gdal_rasterize -a_nodata 0, has only road values left)
+        above = float((array[valid] > threshold).sum()) / array.size
         low, high = float(np.nanmin(array)), float(np.nanmax(array))
         if above == 0.0:
             raise QgsProcessingException(
@@ -137,8 +140,11 @@ class RasterRoadsToVector(AlgorithmBase):
                 f"Raster '{layer.name()}': every pixel is above the threshold {threshold:g} "
                 f"(values {low:g} .. {high:g}), so roads cannot be told from the background: "
                 "set THRESHOLD between the background and the road values.")
+        no_data = int(array.size - valid.sum())
         feedback.pushInfo(f"{array.shape[0]} x {array.shape[1]} px, {100 * above:.1f} % "
-                          f"above the threshold (values {low:g} .. {high:g}).")
+                          f"above the threshold (values {low:g} .. {high:g})"
+                          + (f"; {no_data} no-data pixels taken as background." if no_data
+                             else "."))
         result = qgis_io.run_engine(
             f"Raster '{layer.name()}'", raster_graph.raster_to_graph, array, gt,
             threshold=threshold, simplify=self.number(parameters, self.SIMPLIFY, context),

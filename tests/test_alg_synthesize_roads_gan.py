@@ -314,3 +314,27 @@ def test_qgis_process_crossing_share_on_a_town(tmp_path):
     assert check.ok, check.summary()
     assert fidelity.fidelity_statistics(geoms, case["area"])["degree4_share"] == \
         pytest.approx(example["degree4_share"], rel=0.3)
+
+
+def test_raster_mask_with_no_data_background(qgis_processing, tmp_path):
+    """A 0/1 road mask whose background is no-data (gdal_rasterize -a_nodata 0): the no-data
+    pixels are background, not "every pixel above the threshold" (it was refused so)."""
+    from osgeo import gdal
+
+    mask = np.zeros((300, 300), np.uint8)
+    for k in range(20, 300, 60):
+        mask[k - 3:k + 4, :] = 1
+        mask[:, k - 3:k + 4] = 1
+    plain, holed = tmp_path / "mask.tif", tmp_path / "mask_nodata.tif"
+    gt = (500000.0, 3.0, 0.0, 5500900.0, 0.0, -3.0)
+    _write_geotiff(plain, mask, gt, 32633)
+    _write_geotiff(holed, mask, gt, 32633)
+    ds = gdal.Open(str(holed), gdal.GA_Update)
+    ds.GetRasterBand(1).SetNoDataValue(0)
+    ds = None
+    want = layer_features(qgis_processing.run(
+        R2V, {"INPUT": str(plain), "THRESHOLD": 0, "OUTPUT": "memory:"})["OUTPUT"])[1]
+    got = layer_features(qgis_processing.run(
+        R2V, {"INPUT": str(holed), "THRESHOLD": 0, "OUTPUT": "memory:"})["OUTPUT"])[1]
+    assert len(want) > 20 and len(got) == len(want)
+    assert np.isclose(shapely.length(got).sum(), shapely.length(want).sum())
