@@ -114,6 +114,32 @@ def test_model_errors(tmp_path, models):
         gen.run(np.zeros((1, 100, 1, 5), np.float32))
 
 
+@pytest.mark.parametrize("key, value, message", [
+    (("cell_size_m",), 0, "cell_size_m must be a number above 0, not 0"),
+    (("cell_size_m",), -3, "cell_size_m must be a number above 0, not -3"),
+    (("scale",), 0, "scale must be a whole number of 1 or more, not 0"),
+    (("scale",), "abc", "scale must be a whole number of 1 or more, not 'abc'"),
+    (("input",), "x", "input must be a JSON object, not 'x'"),
+    (("line_width_px",), 0, "line_width_px must be a whole number of 1 or more"),
+    (("postprocess", "erosions"), -1, "postprocess.erosions must be a whole number of 0 or more"),
+    (("postprocess", "min_dead_end_m"), "25",
+     "postprocess.min_dead_end_m must be a number of 0 or more"),
+])
+def test_model_card_with_unusable_numbers_is_refused(tmp_path, key, value, message):
+    """A hand-edited card: a zero scale was a ZeroDivisionError, a string a TypeError or
+    AttributeError ("a defect of Urban Synthesis"), a zero or negative cell size blamed the
+    target ("the cell size must be a positive number of metres, not None")."""
+    path = _copy(tmp_path)
+    card = json.loads(path.with_suffix(".json").read_text())
+    holder = card
+    for k in key[:-1]:
+        holder = holder.setdefault(k, {})
+    holder[key[-1]] = value
+    path.with_suffix(".json").write_text(json.dumps(card))
+    with pytest.raises(InputError, match=f"model card model.json: {message}"):
+        streetgan.load_model(path)
+
+
 def _window_metrics(lines, window):
     parts = shapely.get_parts(shapely.intersection(np.asarray(lines, dtype=object), window))
     parts = parts[(shapely.get_type_id(parts) == 1) & (shapely.length(parts) > 0.01)]

@@ -7,8 +7,8 @@ up-convolutions; m = 25 -> 769 px). This module runs it with onnxruntime (no PyT
 
 - :func:`load_model` opens a generator and its JSON model card (``<name>.json`` next to the
   ``.onnx`` file) and checks both: a missing or corrupt file, a checksum that does not match
-  the card, an input that is not 100-channel noise or an output that is not one channel are
-  errors that say so;
+  the card, a card number the run cannot use (a zero cell size, a string), an input that
+  is not 100-channel noise or an output that is not one channel are errors that say so;
 - :func:`generate` draws the noise for any pixel size from a seed and runs the generator in
   one pass or in overlapping tiles of the same noise field; the generator is local (an
   output pixel sees about two noise cells either side), so tiles with a margin of
@@ -161,6 +161,49 @@ def _resolve(model) -> Path:
     return p
 
 
+#: The numbers a model card may hold: key path, whole number or not, least value, and
+#: whether the least value itself is allowed (0 erosions is; a 0 m cell is not).
+_CARD_NUMBERS = ((("cell_size_m",), False, 0.0, False),
+                 (("line_width_px",), True, 1, True),
+                 (("scale",), True, 1, True),
+                 (("input", "channels"), True, 1, True),
+                 (("postprocess", "erosions"), True, 0, True),
+                 (("postprocess", "dilations"), True, 0, True),
+                 (("postprocess", "min_dead_end_m"), False, 0.0, True))
+
+
+def _check_card(card: dict, name: str) -> None:
+    """Refuse a model card whose numbers the generator and the read-back cannot use (a
+    string, a zero cell size or scale, negative morphology), naming the card and the key.
+
+    >>> _check_card({"cell_size_m": 3.0, "postprocess": {"erosions": 1}}, "m.json")
+    >>> try:
+    ...     _check_card({"cell_size_m": 0}, "m.json")
+    ... except InputError as exc:
+    ...     print(exc)
+    the model card m.json: cell_size_m must be a number above 0, not 0
+    """
+    for keys, whole, least, inclusive in _CARD_NUMBERS:
+        holder, what = card, ".".join(keys)
+        for key in keys[:-1]:
+            holder = holder.get(key, {})
+            if not isinstance(holder, dict):
+                raise InputError(f"the model card {name}: {key} must be a JSON object, not "
+                                 f"{holder!r}")
+        if keys[-1] not in holder:
+            continue
+        value = holder[keys[-1]]
+        number = isinstance(value, (int, float)) and not isinstance(value, bool) and \
+            math.isfinite(value)
+        if whole and number and value != int(value):
+            number = False
+        if not number or value < least or (value == least and not inclusive):
+            kind = "a whole number" if whole else "a number"
+            bound = f"of {least:g} or more" if inclusive else f"above {least:g}"
+            raise InputError(f"the model card {name}: {what} must be {kind} {bound}, not "
+                             f"{value!r}")
+
+
 def load_model(model, threads: int = 0, card: Optional[dict] = None) -> Generator:
     """Open a shipped model by name, or an ``.onnx`` file with its card next to it.
 
@@ -170,8 +213,9 @@ def load_model(model, threads: int = 0, card: Optional[dict] = None) -> Generato
     Raises
     ------
     InputError
-        Missing file or card, unreadable card, checksum mismatch (a corrupt or replaced
-        file), a file onnxruntime cannot load, an input that is not (batch, channels, m, n)
+        Missing file or card, unreadable card or one whose numbers cannot be used
+        (:func:`_check_card`), checksum mismatch (a corrupt or replaced file), a file
+        onnxruntime cannot load, an input that is not (batch, channels, m, n)
         noise with the card's channel count, or an output that is not one channel.
     """
     path = _resolve(model)
@@ -187,6 +231,7 @@ def load_model(model, threads: int = 0, card: Optional[dict] = None) -> Generato
             raise ValueError("not a JSON object")
     except (ValueError, OSError) as exc:
         raise InputError(f"the model card {card_path} cannot be read: {exc}") from exc
+    _check_card(card, card_path.name)
     data = path.read_bytes()
     sha = card.get("onnx_sha256")
     if sha and hashlib.sha256(data).hexdigest() != sha:
