@@ -845,3 +845,21 @@ def test_a_grid_examples_crossings_where_the_walks_leave_ts(helsinki_from_bubene
     # the street met stays whole, with the T's end among its vertices
     assert (res.table.node_to[across] == -1).all()
     assert_exact_junctions(g)
+
+
+def test_a_target_in_two_parts_apart_gets_a_network_in_each(bubenec_points):
+    """Two squares 400 m apart, no given roads: only the piece of the longest streets
+    anchored, so every street of the other square, which no link inside the target can
+    reach, was dropped (seeds 2 and 3 left the first square empty, 4 and 5 the second).
+    Each part now anchors its own longest piece: streets in both, one network in each."""
+    x0, y0 = 385000.0, 6671000.0
+    first = shapely.box(x0, y0, x0 + 500, y0 + 500)
+    second = shapely.box(x0 + 900, y0, x0 + 1300, y0 + 400)
+    target = shapely.MultiPolygon([first, second])
+    for seed in (2, 4):
+        res = rw.synthesize(bubenec_points, target, seed=seed)
+        assert res.stats["n_dropped_edges"] == 0
+        for part in (first, second):
+            inside = res.geometry[shapely.intersects(res.geometry, part)]
+            assert len(inside) >= 5
+            assert len(set(invariants.connected_pieces(inside).tolist())) == 1

@@ -233,6 +233,17 @@ def test_a_floating_piece_joins_through_a_piece_that_joined_first():
     assert stats["n_joined"] == 2 and stats["dropped_m"] == pytest.approx(300.0)
 
 
+def test_a_target_in_two_parts_apart_gets_a_network_in_each(models):
+    """Two squares 400 m apart, no given roads: the longest piece anchored and no link
+    inside the target reaches the other square, so all its streets were dropped (the first
+    square left empty on seeds 1 and 2). Each part now anchors its own longest piece."""
+    first = shapely.box(0, 0, 500, 500)
+    second = shapely.box(900, 0, 1300, 400)
+    res = streetgan.synthesize(shapely.MultiPolygon([first, second]), "streetgan_towns", seed=1)
+    for part in (first, second):
+        assert shapely.intersects(res.geometry, part).sum() >= 5
+
+
 def test_a_large_piece_is_worth_a_longer_street_to_it():
     """A part of the settlement the generator drew apart from the rest (a grid of 2.4 km of
     streets, 250 m from the given road) joins by a 250 m street: up to half of its own

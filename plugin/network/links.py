@@ -175,8 +175,11 @@ def link_floating_pieces(lines, anchored, accept: Optional[Callable] = None,
     Each piece (connected component) with no anchored line gets the shortest straight street
     from one of its nodes to the anchored network that touches no other street on its way;
     pieces are linked nearest first, so a linked piece anchors the next. Without any
-    anchored line the longest piece anchors. A piece that no such street reaches cannot be
-    joined: it is left out, or kept as it is with ``drop_unlinked`` False.
+    anchored line the longest piece anchors; with ``inside`` in parts apart and
+    ``drop_unlinked``, so does the longest piece of each part that holds no anchored line
+    (no link reaches a part apart: its streets were all left out). A piece that no such
+    street reaches cannot be joined: it is left out, or kept as it is with ``drop_unlinked``
+    False.
 
     Parameters
     ----------
@@ -219,6 +222,14 @@ def link_floating_pieces(lines, anchored, accept: Optional[Callable] = None,
     ...                                    ends_on=[False, True, True])
     >>> [round(x.length, 6) for x in links], keep.tolist()
     ([50.0], [True, True, True])
+
+    Two parts of a target apart, nothing anchored: each keeps its own network.
+
+    >>> far = shapely.LineString([(500, 0), (560, 0)]); near = shapely.LineString([(500, 30), (560, 30)])
+    >>> parts = shapely.union_all([shapely.box(-5, -5, 105, 40), shapely.box(495, -5, 565, 40)])
+    >>> links, keep = link_floating_pieces([a, b, far, near], [False] * 4, inside=parts)
+    >>> [round(x.length, 6) for x in links], keep.tolist()
+    ([30.0, 30.0], [True, True, True, True])
     """
     geometry = np.asarray(lines, dtype=object)
     anchored_line = np.asarray(anchored, dtype=bool)
@@ -245,10 +256,24 @@ def link_floating_pieces(lines, anchored, accept: Optional[Callable] = None,
     anchored[edge_comp[anchored_line[src]]] = True
     # metres of street per piece: the longest anchors when nothing is anchored
     piece_m = np.bincount(edge_comp, weights=shapely.length(g.geometry), minlength=n_comp)
+    edges = np.asarray(g.geometry, dtype=object)
+    within = None
+    if inside is not None:
+        within = allowed_area(inside)
+    if drop_unlinked and within is not None:
+        # a part of the target apart that holds no anchored line anchors its own longest
+        # piece: no link reaches it, and its streets were all dropped (one network per part)
+        parts = shapely.get_parts(within)
+        if len(parts) > 1:
+            part_tree = shapely.STRtree(parts)
+            on_edge, on_part = part_tree.query(edges, predicate="intersects")
+            for k in range(len(parts)):
+                own = np.unique(edge_comp[on_edge[on_part == k]])
+                if len(own) and not anchored[own].any():
+                    anchored[own[np.argmax(piece_m[own])]] = True
     if not anchored.any():
         anchored[np.argmax(piece_m)] = True
     links = []
-    edges = np.asarray(g.geometry, dtype=object)
     edge_tree = shapely.STRtree(edges)
 
     def clear(link) -> bool:  # the streets near it from a tree, not all of them per link
@@ -257,9 +282,6 @@ def link_floating_pieces(lines, anchored, accept: Optional[Callable] = None,
 
     takes_link = np.ones(len(edges), bool) if ends_on is None else \
         np.asarray(ends_on, dtype=bool)[src]
-    within = None
-    if inside is not None:
-        within = allowed_area(inside)
 
     def nearest_clear(starts, ends, ends_tree, longest, bound):
         """The shortest clear link from one of the points ``starts`` to the lines ``ends``

@@ -29,8 +29,9 @@ result is one network (:func:`connect_points`):
   there (a new T junction: a crossing becomes a junction, never a bare crossing); a piece
   that no step joins (built land far from the rest, an arm of the target) is linked by the
   shortest clear street inside the target once the streets are drawn, bent along the
-  target where it turns, and dropped (rejected) only where no such street reaches it (a
-  part of the target apart), so no floating piece is left.
+  target where it turns, and dropped (rejected) only where no such street reaches it, so
+  no floating piece is left (a part of the target apart that no given road reaches keeps
+  its own network: its longest piece anchors).
 
 Each segment then becomes a polyline (fig. 5c). With the example's streets at hand
 (:func:`street_shapes`), the shape is that of an example segment of the same level and a
@@ -1821,7 +1822,8 @@ def _link_pieces_apart(lines, given, area):
     given roads (without given roads, the largest piece) or to a piece linked before,
     inside the target and bent along it where the target turns
     (:func:`network.links.link_floating_pieces`, as growroads links its pieces). A piece
-    that no such street reaches (a part of the target apart) is dropped: the paper's REPEAT
+    that no such street reaches is dropped (a part of the target apart with no given road
+    anchors its own longest piece): the paper's REPEAT
     with its rejection last. Returns (links, keep: per line of ``lines``)."""
     network = np.concatenate([lines, given])
     anchored = np.r_[np.zeros(len(lines), bool), np.ones(len(given), bool)]
