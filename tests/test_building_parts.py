@@ -40,6 +40,25 @@ def assert_no_overlaps(geoms, tol=1e-6):
         assert inter.max() < tol, inter.max()
 
 
+def test_a_tower_stands_on_its_site_not_in_its_courtyard(sky):
+    """A courtyard block (80 x 60 m, a 40 x 20 m courtyard in the middle) and an L: the
+    floors were centred on the centroid, in the courtyard or outside the L, so the whole
+    tower stood off its site. They now stand on the point furthest inside the site; a
+    site that covers its centroid keeps the centroid (the thesis's plot)."""
+    courtyard = shapely.box(0, 0, 80, 60).difference(shapely.box(20, 20, 60, 40))
+    ell = shapely.Polygon([(0, 0), (100, 0), (100, 30), (30, 30), (30, 100), (0, 100)])
+    for site in (courtyard, ell):
+        assert not site.covers(site.centroid)
+        res = bp.stack_floors(sky, 40.0, site=site)
+        centres = shapely.centroid(res.geometry)
+        assert shapely.within(centres, site).all()
+        floors = shapely.union_all(res.geometry)
+        assert floors.intersection(site).area >= 0.95 * floors.area
+    res = bp.stack_floors(sky, 40.0, site=SITE)
+    np.testing.assert_allclose(shapely.get_coordinates(shapely.centroid(res.geometry)),
+                               np.tile(SITE.centroid.coords[0], (len(res.geometry), 1)))
+
+
 def test_skyscraper_library_matches_the_thesis_database(sky):
     assert len(sky) == 18
     assert 75 <= sky.n_transitions <= 85          # thesis: 80 transitions

@@ -54,7 +54,8 @@ from . import sequences
 from .sequences import Constraint, InfeasibleError, KeyPoint
 
 __all__ = ["PART_KINDS", "PartsLibrary", "PartsResult", "library_from_table",
-           "skyscraper_library", "terrace_library", "stack_floors", "build_along_skeleton"]
+           "skyscraper_library", "terrace_library", "stack_floors", "tower_centre",
+           "build_along_skeleton"]
 
 #: Part kinds: floors stack vertically; the others follow a skeleton in plan; T-parts sit
 #: at the T-junctions of a skeleton network (:mod:`structures`).
@@ -443,7 +444,7 @@ def stack_floors(library: PartsLibrary, height_m: float, *, far=None, site_area=
     k : int
         Number of solutions (the k best, in non-decreasing cost).
     site : shapely Polygon, optional
-        The plot: floors are centred on its centroid (default: the origin).
+        The plot: floors are centred on :func:`tower_centre` (default: the origin).
     area_resolution : float
         Grid of the floor-area resource (default 1 m², the thesis's); a coarser grid
         (e.g. 10 m²) makes wide FAR intervals much faster, rounding each part's area to it.
@@ -480,7 +481,7 @@ def stack_floors(library: PartsLibrary, height_m: float, *, far=None, site_area=
             f"no tower of {height_m:g} m" + (f" with a floor area in [{area[0]:g}, "
                                              f"{area[1]:g}] m²" if area else "")
             + f" can be stacked from the {len(floors)} floor parts: {err}") from None
-    centre = (0.0, 0.0) if site is None else shapely.centroid(site).coords[0]
+    centre = (0.0, 0.0) if site is None else tower_centre(site)
     t = sub.table
     E = np.concatenate([s.sequence for s in sols]).astype(np.int64)
     start = np.concatenate([s.starts for s in sols])
@@ -493,6 +494,25 @@ def stack_floors(library: PartsLibrary, height_m: float, *, far=None, site_area=
         geoms.append(coordinates.translate([fp], (centre[0] - c[0], centre[1] - c[1]))[0])
     return PartsResult(np.array(geoms, dtype=object), _parts_table(sols, t, E, start, start),
                        _summary(sols, R, names, site_area), sols)
+
+
+def tower_centre(site) -> Tuple[float, float]:
+    """Where a tower's floors are centred on its site: the centroid, or, where the centroid
+    lies outside the site (a courtyard block, an L or a crescent), the point furthest inside
+    it (the pole of inaccessibility).
+
+    >>> tower_centre(shapely.box(0, 0, 40, 40))
+    (20.0, 20.0)
+    >>> ring = shapely.box(0, 0, 80, 60).difference(shapely.box(20, 20, 60, 40))
+    >>> shapely.Point(tower_centre(ring)).within(ring)
+    True
+    """
+    from shapely.ops import polylabel
+
+    centroid = shapely.centroid(site)
+    if shapely.covers(site, centroid):
+        return centroid.coords[0]
+    return polylabel(site, tolerance=0.01).coords[0]
 
 
 def _skeleton_line(skeleton, front: str):
