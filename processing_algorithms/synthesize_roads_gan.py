@@ -119,9 +119,10 @@ class SynthesizeRoadsGan(AlgorithmBase):
         self.add(QgsProcessingParameterNumber(
             self.MIN_DEAD_END, "Shortest dead end kept (m)", QgsProcessingParameterNumber.Type.Double,
             optional=True, minValue=0.0, maxValue=1000.0),
-            "Dead-end streets this long or shorter are removed. Empty: the model's value from "
-            "its card (the thesis's 25 m; 120 m for the grid model, whose example has no dead "
-            "ends).", advanced=True)
+            "Dead-end streets this long or shorter are removed (metres at any cell size). "
+            "Empty: the model's value from its card (the thesis's 25 m; 120 m for the grid "
+            "model, whose example has no dead ends), scaled with the network where CELL_SIZE "
+            "is not the model's.", advanced=True)
         self.add(QgsProcessingParameterNumber(
             self.MAX_GAP, "Close gaps up to (m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=0.0, minValue=0.0, maxValue=500.0),

@@ -244,6 +244,28 @@ def test_a_target_in_two_parts_apart_gets_a_network_in_each(models):
         assert shapely.intersects(res.geometry, part).sum() >= 5
 
 
+def test_a_dead_end_length_given_in_metres_stays_metres_at_another_cell_size():
+    """CELL_SIZE 6 m (twice the model's 3 m) with MIN_DEAD_END 50 m: the given 50 m was
+    scaled with the network to 100 m, so a spur of about 80 m was removed. A length the
+    user gives is metres; only the card's own length scales with the cell size."""
+    def road_with_a_spur(gen, rows, cols, seed, tile, progress):
+        img = np.zeros((rows, cols), np.float32)
+        r, c = rows // 2, cols // 2
+        img[r - 2:r + 3, :] = 255            # a road across, 5 px wide
+        img[r - 16:r, c - 2:c + 3] = 255     # a spur 16 px (96 m) up from its centre line
+        return img
+
+    def edges(min_dead_end):
+        return streetgan.synthesize(shapely.box(0, 0, 600, 600), "streetgan_towns",
+                                    cell_size=6.0, min_dead_end=min_dead_end, levels=False,
+                                    generate_fn=road_with_a_spur).geometry
+
+    assert len(edges(50.0)) == 3            # the road on both sides of the spur, the spur
+    assert len(edges(100.0)) == 1           # the spur is under 100 m
+    # the card's 25 m is the model's length: doubled with the network (the spur stays)
+    assert len(edges(None)) == 3
+
+
 def test_a_large_piece_is_worth_a_longer_street_to_it():
     """A part of the settlement the generator drew apart from the rest (a grid of 2.4 km of
     streets, 250 m from the given road) joins by a 250 m street: up to half of its own

@@ -424,9 +424,11 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
     cell_size : metres per pixel; default the model's (3 m: the scale it learnt)
     margin : metres generated around the target's bounds and cut away after vectorising,
         so that the image border does not leave stubs inside the target
-    max_gap, min_dead_end, from_edge : see :func:`plugin.roads.raster_graph.raster_to_graph`;
-        ``min_dead_end`` None takes the model card's ``postprocess.min_dead_end_m``
-        (chosen on validation seeds when the model was made), else the thesis's 25 m;
+    max_gap, min_dead_end, from_edge : see :func:`plugin.roads.raster_graph.raster_to_graph`
+        (metres, whatever the cell size); ``min_dead_end`` None takes the model card's
+        ``postprocess.min_dead_end_m`` (chosen on validation seeds when the model was made),
+        else the thesis's 25 m, scaled by ``cell_size`` over the model's cell size as the
+        whole network is;
         the road mask's erosions and dilations are the card's ``postprocess.erosions`` /
         ``dilations`` (else the thesis's 1 and 5, made for 15 px lines)
     tile : noise cells per tile (None: one pass)
@@ -489,9 +491,9 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
     t = time.perf_counter()
     scale = cell / gen.cell_size  # lengths in the model's pixels stay the thesis's
     width = gen.line_width_px * cell
-    if min_dead_end is None:
-        min_dead_end = float(gen.card.get("postprocess", {}).get("min_dead_end_m",
-                                                                 DEFAULT_MIN_DEAD_END))
+    if min_dead_end is None:   # the card's length is the model's, in its pixels
+        min_dead_end = scale * float(gen.card.get("postprocess", {}).get(
+            "min_dead_end_m", DEFAULT_MIN_DEAD_END))
     merge = gen.merge_distance(cell) if merge_junctions is None else float(merge_junctions)
     corridor = 0.5 * width + GIVEN_CORRIDOR
     open_given = given_lines[_open_roads(given_cls)] if len(given_lines) else given_lines
@@ -510,7 +512,7 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
     # the mask's morphology suits the line width the model drew (thesis: 1 and 5 for 15 px)
     rg = raster_graph.raster_to_graph(image, gt, **gen.morphology,
                                       simplify=3.0 * scale,
-                                      min_dead_end=min_dead_end * scale, max_gap=max_gap * scale,
+                                      min_dead_end=min_dead_end, max_gap=max_gap,
                                       from_edge=from_edge, merge_junctions=merge,
                                       progress=progress.sub(0.5, 0.85))
     lines = rg.geometry
