@@ -51,7 +51,8 @@ class RasterRoadsToVector(AlgorithmBase):
             "Roads are pixels brighter than the threshold; no-data pixels are background. "
             "Lengths are in the raster's units "
             "(use a projected raster in metres); the raster is read at its own resolution.\n\n"
-            "Output: road edges with edge_id, length_m, node_from, node_to, in the raster's CRS."
+            "Output: road edges with edge_id, length_m (metres on the ground, also for a "
+            "raster in feet or Web Mercator), node_from, node_to, in the raster's CRS."
         )
 
     def initAlgorithm(self, config=None):  # noqa: N802
@@ -163,8 +164,17 @@ class RasterRoadsToVector(AlgorithmBase):
                 "to no road edge (only pieces shorter than the shortest dead end kept, "
                 f"{self.number(parameters, self.MIN_DEAD_END, context):g}): lower "
                 "MIN_DEAD_END or check the threshold.")
+        # length_m in true metres: a raster in feet or in Web Mercator (1.5 x at 50°) is
+        # measured in the working CRS, as the other tools measure (docs/ARCHITECTURE.md)
+        work = qgis_io.working_crs(layer.crs(), layer.extent(), context)
+        lengths = shapely.length(qgis_io.reproject(result.geometry, layer.crs(), work, context))
+        if work != layer.crs():
+            feedback.pushInfo(
+                f"Raster '{layer.name()}' is in {qgis_io.crs_label(layer.crs())}, whose units "
+                "are not metres on the ground here: SIMPLIFY, MIN_DEAD_END and MAX_GAP are in "
+                f"its units; length_m is measured in {qgis_io.crs_label(work)}.")
         table = pd.DataFrame({"edge_id": np.arange(n),
-                              "length_m": shapely.length(result.geometry) if n else [],
+                              "length_m": lengths if n else [],
                               "node_from": g.u if n else [], "node_to": g.v if n else []})
         dest = qgis_io.write_sink(self, parameters, self.OUTPUT, context, result.geometry, table,
                                   FIELDS, QgsWkbTypes.Type.LineString, layer.crs(), layer.crs(),

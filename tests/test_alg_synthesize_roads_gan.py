@@ -338,3 +338,25 @@ def test_raster_mask_with_no_data_background(qgis_processing, tmp_path):
         R2V, {"INPUT": str(holed), "THRESHOLD": 0, "OUTPUT": "memory:"})["OUTPUT"])[1]
     assert len(want) > 20 and len(got) == len(want)
     assert np.isclose(shapely.length(got).sum(), shapely.length(want).sum())
+
+
+@pytest.mark.parametrize("epsg, origin, metres_per_unit", [
+    (2263, (900000.0, 200000.0), 1200 / 3937),            # New York Long Island, US feet
+    (3857, (1600000.0, 6460900.0), np.cos(np.radians(50.1))),   # Web Mercator at 50° N
+])
+def test_raster_lengths_are_metres_on_the_ground(qgis_processing, tmp_path, epsg, origin,
+                                                 metres_per_unit):
+    """length_m of a raster in US feet held feet (3.28 x the metres), of one in Web Mercator
+    Mercator metres (1.56 x at 50° N); it is now measured in the working CRS, as every
+    other tool measures, and the geometry stays in the raster's CRS."""
+    mask = np.zeros((300, 300), np.uint8)
+    for k in range(20, 300, 60):
+        mask[k - 3:k + 4, :] = 255
+        mask[:, k - 3:k + 4] = 255
+    tif = tmp_path / f"roads_{epsg}.tif"
+    _write_geotiff(tif, mask, (origin[0], 3.0, 0.0, origin[1], 0.0, -3.0), epsg)
+    layer = qgis_processing.run(R2V, {"INPUT": str(tif), "OUTPUT": "memory:"})["OUTPUT"]
+    assert layer.crs().authid() == f"EPSG:{epsg}"
+    rows, geoms = layer_features(layer)
+    ratio = np.array([r["length_m"] for r in rows]) / shapely.length(geoms)
+    np.testing.assert_allclose(ratio, metres_per_unit, rtol=0.01)
