@@ -295,7 +295,7 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
             # a road whose dead end is within the seam distance of the target is continued
             self.require_roads_reach(existing, target.geometry, f"the target {target.name}",
                                      reach=random_walk.seam_distance(points, settings))
-        elif parameters.get(self.OUTPUT_EXISTING) is not None:
+        elif self.given(parameters, self.OUTPUT_EXISTING):
             raise QgsProcessingException("Existing roads with the new junctions "
                                          "(OUTPUT_EXISTING) need EXISTING_ROADS.")
         feedback.setProgress(15)
@@ -346,20 +346,20 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
             random_walk.ROAD_FIELDS, QgsWkbTypes.Type.LineString, target.source_crs, target.crs,
             feedback)
         qgis_io.style_output(context, results[self.OUTPUT], "roads_by_level.qml")
-        if parameters.get(self.OUTPUT_EXISTING) is not None:
+        if self.given(parameters, self.OUTPUT_EXISTING):
             given, table = random_walk.given_with_junctions(existing_lines, result.geometry)
             results[self.OUTPUT_EXISTING] = qgis_io.write_sink(
                 self, parameters, self.OUTPUT_EXISTING, context, given, table,
                 random_walk.ROAD_FIELDS, QgsWkbTypes.Type.LineString, target.source_crs,
                 target.crs, feedback)
             qgis_io.style_output(context, results[self.OUTPUT_EXISTING], "roads_by_level.qml")
-        if parameters.get(self.OUTPUT_INTERSECTIONS) is not None:
+        if self.given(parameters, self.OUTPUT_INTERSECTIONS):
             results[self.OUTPUT_INTERSECTIONS] = qgis_io.write_sink(
                 self, parameters, self.OUTPUT_INTERSECTIONS, context,
                 shapely.points(result.points.xy), result.point_table, random_walk.POINT_FIELDS,
                 QgsWkbTypes.Type.Point, target.source_crs, target.crs, feedback)
             qgis_io.style_output(context, results[self.OUTPUT_INTERSECTIONS], "intersections.qml")
-        if parameters.get(self.OUTPUT_BLOCKS) is not None:
+        if self.given(parameters, self.OUTPUT_BLOCKS):
             faces, table = random_walk.block_table(result)
             feedback.pushInfo(f"{len(faces)} blocks closed by the new streets.")
             results[self.OUTPUT_BLOCKS] = qgis_io.write_sink(

@@ -259,7 +259,7 @@ class TessellateStreets(AlgorithmBase):
             if parameters.get(self.OUTPUT_TIN) else ""
         obj_path = self.parameterAsFileOutput(parameters, self.OUTPUT_OBJ, context) \
             if parameters.get(self.OUTPUT_OBJ) else ""
-        if parameters.get(self.OUTPUT_MESH) is not None or tin_path or obj_path:
+        if self.given(parameters, self.OUTPUT_MESH) or tin_path or obj_path:
             mesh = qgis_io.run_engine(
                 label, street_mesh.street_mesh, result,
                 spacing=self.number(parameters, self.MESH_SPACING, context),
@@ -268,7 +268,7 @@ class TessellateStreets(AlgorithmBase):
             feedback.pushInfo(f"3D mesh: {len(mesh.triangles)} triangles "
                               f"({int(mesh.side.sum())} in side faces) in {len(t)} features.")
             geoms = qgis_io.reproject(mesh.geometries(), frame.crs, frame.source_crs, context)
-            if parameters.get(self.OUTPUT_MESH) is not None:
+            if self.given(parameters, self.OUTPUT_MESH):
                 results[self.OUTPUT_MESH] = qgis_io.write_sink(
                     self, parameters, self.OUTPUT_MESH, context, geoms, t,
                     street_mesh.MESH_FIELDS, QgsWkbTypes.Type.MultiPolygonZ, frame.source_crs,

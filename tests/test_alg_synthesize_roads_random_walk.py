@@ -168,6 +168,10 @@ def test_bad_inputs(qgis_processing, helsinki_points):
     with pytest.raises(Exception, match="OUTPUT_EXISTING.*EXISTING_ROADS"):
         qgis_processing.run(ALG, {"EXAMPLE": helsinki_points, "TARGET": target,
                                   "OUTPUT": "memory:", "OUTPUT_EXISTING": "memory:"})
+    # an output left empty (as a model or a script passes a skipped one) is not asked for
+    out = qgis_processing.run(ALG, {"EXAMPLE": helsinki_points, "TARGET": target,
+                                    "OUTPUT": "memory:", "OUTPUT_EXISTING": ""})
+    assert out["OUTPUT"].featureCount() > 0 and "OUTPUT_EXISTING" not in out
 
 
 def test_qgis_process_run(tmp_path):
