@@ -267,3 +267,20 @@ def test_real_blocks_of_bubenec():
         assert res.summary.length_m.iloc[0] == pytest.approx(skeleton.length, abs=0.1)
         assert (res.table.kind == "corner").sum() >= 4
     assert made >= 4 and made + refused == len(extraction.geometry) == 7
+
+
+def test_a_ring_narrower_than_the_parts_is_refused_not_built_into_its_courtyard():
+    """A polygon skeleton is filled inward by the parts' depth: a perimeter block whose
+    courtyard lies 8 m from its outline took 12 m terrace parts, 800 m² of them standing in
+    the courtyard, and nothing said so. Such a polygon is now infeasible, named; 8 m parts
+    fill it, inside it and without overlaps."""
+    ring = shapely.box(0, 0, 80, 60).difference(shapely.box(8, 8, 72, 52))
+    with pytest.raises(InfeasibleError, match=r"narrower than its parts' depth \(12 m\).*"
+                                              r"800 m² of them would stand outside it"):
+        bp.build_along_skeleton(ring, bp.terrace_library(depth=12.0))
+    result = bp.build_along_skeleton(ring, bp.terrace_library(depth=8.0))
+    placed = result.geometry[result.table["solution"].to_numpy() == 1]
+    union = shapely.union_all(placed)
+    assert shapely.area(shapely.difference(union, ring)) < 1e-6
+    assert shapely.area(placed).sum() == pytest.approx(union.area, abs=1e-6)
+    assert union.area == pytest.approx(ring.area, rel=0.02)

@@ -706,9 +706,28 @@ def build_along_skeleton(skeleton, library: PartsLibrary, *, front: str = "right
     trimmed = geoms.copy()
     trimmed[has_prev] = shapely.difference(geoms[has_prev], geoms[prev[has_prev]])
     geoms = trimmed
+    if isinstance(skeleton, shapely.Polygon):
+        _require_room(skeleton, geoms[sol_of == 0], float(t["depth_m"].to_numpy(float)[E].max()))
     table = _parts_table(kept, t, E, start, base=np.zeros(len(E)))
     return PartsResult(np.asarray(geoms, dtype=object), table,
                        _summary(kept, R, names, site_area), kept)
+
+
+def _require_room(polygon, placed: np.ndarray, depth: float):
+    """Refuse a polygon skeleton its parts do not fit in: where it is narrower than the
+    parts' depth, they stood in its courtyard or beyond its far side (a ring 8 m wide with
+    12 m parts: 800 m² of the building in the courtyard), or over the parts of the
+    opposite side."""
+    union = shapely.union_all(placed)
+    outside = shapely.area(shapely.difference(union, polygon))
+    overlap = float(shapely.area(placed).sum() - shapely.area(union))
+    if outside > 1.0 or overlap > 1.0:
+        raise InfeasibleError(
+            f"the polygon is narrower than its parts' depth ({depth:g} m) in places: "
+            + (f"{outside:,.0f} m² of them would stand outside it (in its courtyard or beyond "
+               "its far side)" if outside > 1.0 else
+               f"{overlap:,.0f} m² of them would overlap across it")
+            + "; thinner parts fit")
 
 
 def _parts_table(sols, t: pd.DataFrame, E: np.ndarray, start: np.ndarray,
