@@ -96,7 +96,9 @@ class SplitDomain(AlgorithmBase):
         self.add(QgsProcessingParameterField(
             self.KEY_AREA_USE_FIELD, "Land-use field of the key areas",
             parentLayerParameterName=self.KEY_AREAS, optional=True),
-            "Text field with the land use of each key area (default: park).", advanced=True)
+            "Text field with the land use of each key area (default: park). Areas of one use "
+            "are merged; where areas of different uses overlap, the first in the layer keeps "
+            "the overlap.", advanced=True)
         self.add(QgsProcessingParameterEnum(
             self.TEMPLATES, "Templates", options=[label for _, label in self.SUBSETS],
             defaultValue=0),

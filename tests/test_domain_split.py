@@ -632,6 +632,34 @@ def test_key_roads_and_key_areas(bubenec_hull):
         assert shapely.area(shapely.intersection(lay.parcels[res], park)).sum() < 1e-6
 
 
+def test_key_areas_keep_the_land_use_of_their_own_feature():
+    """A key area's use was taken by the position of a part of the areas' union: two
+    disjoint areas could swap their uses, and any overlap (or an area outside the region)
+    made every use 'park'. Each use now stays with its features; where uses overlap, the
+    first in the layer keeps the overlap and the parcels do not overlap."""
+    region = [shapely.box(0, 0, 300, 200)]
+    school, lake = shapely.box(200, 20, 260, 80), shapely.box(20, 20, 80, 80)
+    outside = shapely.box(1000, 0, 1050, 50)
+    lay = domain_split.split_domain(region, key_areas=[school, lake, outside],
+                                    key_area_use=["school", "lake", "church"], seed=1)
+    t = lay.table
+    key = (t.template == "key_area").to_numpy()
+    found = {u: g for u, g in zip(t.land_use[key], lay.parcels[key])}
+    assert set(found) == {"school", "lake"}
+    assert abs(found["school"].symmetric_difference(school).area) < 1e-6
+    assert abs(found["lake"].symmetric_difference(lake).area) < 1e-6
+    park = shapely.box(50, 50, 120, 110)
+    lay = domain_split.split_domain(region, key_areas=[lake, park],
+                                    key_area_use=["school", None], seed=1)
+    t = lay.table
+    key = (t.template == "key_area").to_numpy()
+    assert sorted(t.land_use[key]) == ["park", "school"]
+    school_lot = lay.parcels[key][(t.land_use[key] == "school").to_numpy()][0]
+    assert abs(school_lot.area - lake.area) < 1e-6
+    assert abs(shapely.union_all(lay.parcels[key]).area
+               - shapely.area(lay.parcels[key]).sum()) < 1e-6
+
+
 def test_bad_input():
     with pytest.raises(InputError, match="region"):
         domain_split.split_domain([shapely.LineString([(0, 0), (1, 1)])])

@@ -268,10 +268,52 @@ def _polygonal(geoms, what: str) -> shapely.Geometry:
 LIMITED_ACCESS = frozenset({"motorway", "motorway_link"})
 
 
+def key_area_parcels(key_areas, key_area_use, domain):
+    """The key areas inside ``domain`` as parcels, each with the land use of its feature.
+
+    Key areas of one use are merged (two overlapping parks are one park); where areas of
+    different uses overlap, the use that comes first in the layer keeps the overlap, so
+    that the parcels never overlap. A missing use is 'park'. The uses follow the features,
+    not the parts of their union: a part's use was once taken by position, and any key area
+    outside the region, split in two or overlapping another made every use 'park' (or
+    swapped two uses).
+
+    Returns (polygons, uses).
+
+    >>> import shapely
+    >>> polys, uses = key_area_parcels(
+    ...     [shapely.box(60, 0, 80, 20), shapely.box(0, 0, 20, 20), shapely.box(10, 0, 30, 20)],
+    ...     ["lake", "school", None], shapely.box(0, 0, 100, 100))
+    >>> [(u, shapely.area(p)) for u, p in zip(uses, polys)]
+    [('lake', 400.0), ('school', 400.0), ('park', 200.0)]
+    """
+    areas = np.asarray(key_areas, dtype=object).ravel()
+    raw = (np.asarray(key_area_use, dtype=object).ravel() if key_area_use is not None
+           else np.full(len(areas), None, dtype=object))
+    if len(raw) != len(areas):
+        raise InputError(f"{len(raw)} land uses for {len(areas)} key areas")
+    _polygonal(areas, "key areas layer")  # some geometry, all of it polygons
+    uses = np.array(["park" if u is None or (isinstance(u, float) and math.isnan(u))
+                     or not str(u).strip() else str(u) for u in raw], dtype=object)
+    ok = np.array([g is not None and not shapely.is_empty(g) for g in areas], dtype=bool)
+    polys, poly_uses, taken = [], [], shapely.Polygon()
+    for use in dict.fromkeys(uses[ok]):
+        area = shapely.union_all(_parcels._polygon_parts(
+            shapely.make_valid(areas[ok & (uses == use)])))
+        with np.errstate(invalid="ignore"):
+            own = shapely.difference(shapely.intersection(area, domain), taken)
+        parts = _parcels._polygon_parts([own], 1.0)
+        polys += list(parts)
+        poly_uses += [use] * len(parts)
+        taken = shapely.union(taken, area)
+    return np.asarray(polys, dtype=object), np.asarray(poly_uses, dtype=object)
+
+
 def prepare_domain(region, key_roads=None, key_areas=None, street_width: float = 15.0,
                    key_road_classes=None, max_extension: float = 400.0,
-                   outline_streets: bool = True, beside_reach: float = 0.0):
-    """Work regions, the fixed street lines and the key-area polygons.
+                   outline_streets: bool = True, beside_reach: float = 0.0,
+                   key_area_use=None):
+    """Work regions, the fixed street lines and the key-area polygons with their uses.
 
     A key road that ends inside the region (a dangling street of a real network) is
     continued straight ahead to the next street or the region outline when that is at
@@ -286,10 +328,11 @@ def prepare_domain(region, key_roads=None, key_areas=None, street_width: float =
     outline fronts on it), and the outline street's ends there are joined to the key road
     (:func:`_outline_beside_key_roads`).
 
-    Returns (faces, fixed_lines, fixed_kinds, key_polys, domain, no_access).
+    Returns (faces, fixed_lines, fixed_kinds, key_polys, key_uses, domain, no_access)
+    (``key_polys`` and their uses: :func:`key_area_parcels`).
     """
     domain = _polygonal(region, "region")
-    key_polys = np.empty(0, dtype=object)
+    key_polys = key_uses = np.empty(0, dtype=object)
     work = domain
     if outline_streets:
         # the street along the outline is laid as a curve where the outline only bends (a
@@ -302,7 +345,7 @@ def prepare_domain(region, key_roads=None, key_areas=None, street_width: float =
         keys = _polygonal(key_areas, "key areas layer")
         with np.errstate(invalid="ignore"):
             keys = shapely.intersection(keys, domain)
-        key_polys = _parcels._polygon_parts([keys], 1.0)
+        key_polys, key_uses = key_area_parcels(key_areas, key_area_use, domain)
         work = shapely.difference(work, keys)
     outline = shapely.get_parts(shapely.line_merge(shapely.boundary(work)))
     lines = list(outline)
@@ -347,7 +390,8 @@ def prepare_domain(region, key_roads=None, key_areas=None, street_width: float =
     if len(faces) == 0:
         raise InputError("the region is empty once the key areas are removed" if len(key_polys)
                          else "the region encloses no area to lay out")
-    return faces, np.asarray(lines, dtype=object), np.asarray(kinds), key_polys, domain, no_access
+    return (faces, np.asarray(lines, dtype=object), np.asarray(kinds), key_polys, key_uses,
+            domain, no_access)
 
 
 def _outline_beside_key_roads(lines, kinds, keys, reach: float, nearest: float,
@@ -1353,9 +1397,10 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
     rows_depth = _shallowest_rows(lib, s.parcel_length)
     if not math.isfinite(rows_depth):
         rows_depth = s.parcel_length
-    faces, fixed, fixed_kinds, key_polys, domain, no_access = prepare_domain(
+    faces, fixed, fixed_kinds, key_polys, key_uses, domain, no_access = prepare_domain(
         region, key_roads, key_areas, s.street_width, key_road_classes,
-        outline_streets=s.outline_streets, beside_reach=s.street_width + rows_depth)
+        outline_streets=s.outline_streets, beside_reach=s.street_width + rows_depth,
+        key_area_use=key_area_use)
     work_area = float(shapely.area(domain))
     L, W, S = s.parcel_length, s.parcel_width, s.street_width
     splitter = _Splitter(lib, s, rng)
@@ -1565,12 +1610,8 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
             front_all.append(front)
     # key areas are parcels of their own use
     if len(key_polys):
-        uses = np.asarray(key_area_use if key_area_use is not None else ["park"] * len(key_polys),
-                          dtype=object)
-        if len(uses) != len(key_polys):
-            uses = np.full(len(key_polys), "park", dtype=object)
         lots_all.append(key_polys)
-        use_all += [str(u) if u not in (None, "") else "park" for u in uses]
+        use_all += list(key_uses)
         tmpl_all += ["key_area"] * len(key_polys)
         front_all.append(np.full(len(key_polys), np.nan))
     geoms = np.concatenate(lots_all) if lots_all else np.empty(0, dtype=object)
