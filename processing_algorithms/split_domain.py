@@ -108,7 +108,8 @@ class SplitDomain(AlgorithmBase):
             self.TEMPLATE_LAYER, "Template layer (drawn templates)",
             [QgsProcessing.SourceType.TypeVectorPolygon], optional=True),
             "User templates drawn in QGIS: one polygon per parcel or area, a text field "
-            "'template' (the template each belongs to) and 'label' with the paper's labels: "
+            "'template' (the template each belongs to) and 'label' with the paper's labels "
+            "(one letter; a feature without one is a parcel, any other label is refused): "
             "R parcel, P park, A area (a region of the next level, filled with parcel rows "
             "or parcelled: Yang's hierarchical templates), S the template's own street drawn "
             "as its surface "

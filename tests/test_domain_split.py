@@ -205,6 +205,22 @@ def test_templates_from_drawn_recognises_rows():
         templates.templates_from_drawn(park, ["c"], ["P"])
 
 
+def test_drawn_template_labels_and_names_are_checked():
+    """A label was read by its first letter: 'parcel' made a park and 'X' or a code a
+    template no region could take (the layout fell back to rule-based parcels without a
+    word); a feature without a template name became the template 'None'. Labels are one
+    of R, P, A, S in either case (none: R), and both mistakes are refused by name."""
+    double = [shapely.box(i * 18, j * 30, (i + 1) * 18, (j + 1) * 30)
+              for i in range(3) for j in range(2)]
+    (t,) = templates.templates_from_drawn(double, ["d"] * 6, ["r", " R ", None, "", "R", "R"])
+    assert (t.kind, t.rows) == ("rows", 2)
+    for label in ("parcel", "X", 1):
+        with pytest.raises(InputError, match=f"template 'd': label '{label}' is none of R"):
+            templates.templates_from_drawn(double, ["d"] * 6, ["R"] * 5 + [label])
+    with pytest.raises(InputError, match="2 of 6 features have no template name"):
+        templates.templates_from_drawn(double, ["d"] * 4 + [None, ""], ["R"] * 6)
+
+
 def test_drawn_template_is_warped_as_drawn():
     """A template that is no strip (five lots round a park) is kept as drawn and warped
     onto a block of the same corners by mean value coordinates: the lots tile the block,

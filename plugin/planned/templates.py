@@ -90,6 +90,8 @@ LIBRARY_PATH = RESOURCES / "templates" / "library.json"
 WARP_ITERATIONS = 30
 #: Template kinds: parcel rows, spike (cul-de-sac), loop, area (park), drawn (as drawn).
 KINDS = ("rows", "spike", "loop", "park", "drawn")
+#: The labels of a drawn template's features (Yang's): a feature without one is a parcel.
+DRAWN_LABELS = {"R": "parcel", "P": "park", "A": "area", "S": "street"}
 #: Named subsets of the shipped library (the toolbox's TEMPLATES enum, in this order).
 LIBRARY_SUBSETS = {
     "all": ("parcel_strip", "double_strip", "spike", "loop", "park"),
@@ -264,16 +266,35 @@ def templates_from_drawn(geoms: Sequence, names: Sequence, labels: Sequence,
     (Yang's user probability and k1 / k2 counts): a template takes the first value given
     among its features (None or NaN: the default).
 
+    A feature without a label (None or empty) is a parcel (R); a label is one of the four
+    letters, in either case. Any other label (a word such as 'parcel', which was read by its
+    first letter as a park, or a code) and a feature without a template name are refused.
+
     Raises
     ------
     InputError
-        No group with parcels, a drawn group whose parcels do not form one polygon, a
+        A feature without a template name, a label that is none of R, P, A, S, no group
+        with parcels, a drawn group whose parcels do not form one polygon, a
         drawn street that does not reach the template's outline, or a setting that is no
         number, negative, or a minimum count above the maximum.
     """
+    def given(v):
+        return v is not None and not (isinstance(v, float) and math.isnan(v)) \
+            and str(v).strip() != ""
+
     geoms = np.asarray(geoms, dtype=object)
+    unnamed = sum(not given(n) for n in names)
+    if unnamed:
+        raise InputError(f"{unnamed} of {len(names)} features have no template name (field "
+                         "'template'): each feature names the template it belongs to")
     names = np.asarray([str(n) for n in names], dtype=object)
-    labels = np.asarray([str(v).strip().upper()[:1] if v is not None else "R" for v in labels])
+    raw = [str(v).strip() if given(v) else "R" for v in labels]
+    for name, lab in zip(names, raw):
+        if lab.upper() not in DRAWN_LABELS:
+            raise InputError(
+                f"template {name!r}: label {lab!r} is none of "
+                + ", ".join(f"{k} ({v})" for k, v in DRAWN_LABELS.items()))
+    labels = np.asarray([lab.upper() for lab in raw])
     out = []
     for name in dict.fromkeys(names):
         sel = names == name
