@@ -304,3 +304,24 @@ def test_rule_based_parcels_follow_the_choice(qgis_processing, choice):
     assert used == {domain_split.FALLBACK_PARCELS[choice]}
     assert shapely.is_valid(geoms).all()
     assert abs(shapely.union_all(geoms).area - shapely.area(geoms).sum()) < 1.0
+
+
+def test_selected_features_only_name_the_layer_and_its_selection(qgis_processing):
+    """With "Selected features only" (a QgsProcessingFeatureSourceDefinition) the messages
+    named the parameter, not the layer: an empty selection said "Layer 'Region' is empty"
+    of a layer that was neither called so nor empty."""
+    from qgis.core import (QgsProcessingException, QgsProcessingFeatureSourceDefinition,
+                           QgsProject)
+
+    region = memory_layer("Polygon", ["POLYGON ((0 0, 200 0, 200 200, 0 200, 0 0))"],
+                          crs="EPSG:32633", name="my districts")
+    QgsProject.instance().addMapLayer(region)
+    try:
+        region.removeSelection()
+        with pytest.raises(QgsProcessingException,
+                           match=r"Layer 'my districts' \(selected features\) is empty"):
+            qgis_processing.run(ALG, {
+                "REGION": QgsProcessingFeatureSourceDefinition(region.id(), True),
+                "OUTPUT_ROADS": "memory:", "OUTPUT_PARCELS": "memory:"})
+    finally:
+        QgsProject.instance().removeMapLayer(region.id())

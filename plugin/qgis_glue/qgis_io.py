@@ -30,6 +30,7 @@ from qgis.core import (
     QgsPointXY,
     QgsProcessingException,
     QgsProcessingFeatureSource,
+    QgsProcessingFeatureSourceDefinition,
     QgsProcessingFeedback,
     QgsProject,
     QgsRectangle,
@@ -148,18 +149,34 @@ class Frame:
 
 
 def layer_name(alg, parameters, name, context) -> str:
-    """A name for messages: the layer's name, else the parameter's description."""
+    """A name for messages: the layer's name, else the parameter's description.
+
+    A layer given with "Selected features only" (a QgsProcessingFeatureSourceDefinition,
+    which parameterAsVectorLayer does not resolve on 3.22) is named too, and said to be
+    its selection: "layer 'Region' is empty" named no layer of the user's, and the layer
+    was not empty, its selection was.
+    """
     layer = None
     try:
         layer = alg.parameterAsVectorLayer(parameters, name, context)
     except Exception:  # noqa: BLE001 - sources that are not layers (e.g. feature iterators)
         layer = None
+    value = parameters.get(name) if isinstance(parameters, dict) else None
+    definition = value if isinstance(value, QgsProcessingFeatureSourceDefinition) else None
+    if layer is None and definition is not None:
+        try:
+            layer = alg.parameterAsVectorLayer(
+                {name: definition.source.staticValue()}, name, context)
+        except Exception:  # noqa: BLE001 - an expression-based source: no layer to name
+            layer = None
+    selected = " (selected features)" if definition is not None and \
+        definition.selectedFeaturesOnly else ""
     if layer is not None and layer.name():
         # 'Helsinki' is both the lines and the multipolygons of one .osm.pbf: say which
         sub = layer.source().split("|layername=")
         if len(sub) > 1 and sub[1].split("|")[0] and sub[1].split("|")[0] != layer.name():
-            return f"'{layer.name()} ({sub[1].split('|')[0]})'"
-        return f"'{layer.name()}'"
+            return f"'{layer.name()} ({sub[1].split('|')[0]})'{selected}"
+        return f"'{layer.name()}'{selected}"
     definition = alg.parameterDefinition(name)
     return f"'{definition.description()}'" if definition is not None else f"'{name}'"
 
