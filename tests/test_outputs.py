@@ -102,6 +102,28 @@ def test_outputs_open_styled_in_a_new_project(qgis_processing, tmp_path):
     assert not [k for k in styles.STYLE_REQUESTS if str(tmp_path) in k]
 
 
+def test_a_nested_runs_layer_in_an_existing_geopackage_opens_styled(qgis_processing,
+                                                                      tmp_path):
+    """synthesizeroads runs its method as a child, whose own staging stores the style in
+    the parent's staging GeoPackage; the parent copied only the layer into an existing
+    GeoPackage, not its layer_styles row: the output opened unstyled."""
+    from osgeo import gdal
+    from qgis.core import QgsVectorLayer
+
+    gpkg = tmp_path / "district.gpkg"
+    gdal.VectorTranslate(str(gpkg), bubenec_layer("streets").split("|")[0],
+                         options=gdal.VectorTranslateOptions(format="GPKG",
+                                                             layers=["streets"]))
+    qgis_processing.run("urbansynth:synthesizeroads", {
+        "METHOD": 1, "ARTERIALS": f"{gpkg}|layername=streets", "SEED": 1,
+        "OUTPUT": f"ogr:dbname='{gpkg}' table=\"grown\" (geom)"})
+    grown = QgsVectorLayer(f"{gpkg}|layername=grown", "grown", "ogr")
+    assert grown.featureCount() > 10
+    assert grown.renderer().type() == "categorizedSymbol"
+    assert grown.renderer().classAttribute() == "level"
+    assert not list(tmp_path.glob(".urbansynth-run-*"))
+
+
 def test_loaded_outputs_stack_buildings_above_parcels(qgis_processing, tmp_path):
     """Outputs loaded on completion are placed by kind, whatever their file names: roads
     over buildings over blocks over parcels."""

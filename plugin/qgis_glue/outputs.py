@@ -363,6 +363,7 @@ class OutputStaging:
             return                           # the output was not written (optional)
         if item.table is not None and item.final_path.exists():
             self._copy_layer(item)
+            self._copy_style(item)
             return
         for path in written:
             os.replace(path, item.final_path.parent / path.name)
@@ -382,6 +383,26 @@ class OutputStaging:
                 f"Output {item.name}: the layer '{item.table}' could not be written into "
                 f"{item.final_path}: {gdal.GetLastErrorMsg() or 'unknown GDAL error'}.")
         result = None
+
+    def _copy_style(self, item: _Staged):
+        """The default style stored with the staged layer, stored with its copy too: an
+        algorithm run inside this one (synthesizeroads' method) commits its own staged
+        output, style included, into this run's staging GeoPackage, and _copy_layer copies
+        the layer but not the GeoPackage's layer_styles table (the output, added to an
+        existing GeoPackage, opened unstyled)."""
+        from qgis.core import QgsVectorLayer
+
+        staged = QgsVectorLayer(f"{item.temp_path}|layername={item.table}", "staged", "ogr")
+        if not staged.isValid() or not staged.listStylesInDatabase()[0]:
+            return
+        qml = item.staging / f"{item.table}.qml"
+        _, ok = staged.saveNamedStyle(str(qml))   # the default style it loaded
+        if not ok:
+            return
+        warning = styles.save_style_with_layer(f"{item.final_path}|layername={item.table}",
+                                               str(qml))
+        if warning and self.feedback is not None:
+            self.feedback.pushWarning(f"Output {item.final}: {warning}.")
 
     def discard(self):
         """Remove everything written (the destinations stay as they were)."""
