@@ -293,6 +293,15 @@ class SplitDomain(AlgorithmBase):
             elif st["search_attempts"] > 1:
                 feedback.pushInfo(f"Variation {v}: every min_count met after "
                                   f"{st['search_attempts']} searches.")
+        for name, length, depth in domain_split.unused_drawn_templates(lib, layouts):
+            t = next(t for t in lib if t.name == name)
+            feedback.pushWarning(
+                f"Drawn template '{name}' ({length:,.0f} x {depth:,.0f} m) was used in no "
+                f"variation: a template warped as drawn takes only a block "
+                f"{t.width_scale[0]:g}-{t.width_scale[1]:g} x its length and "
+                f"{t.depth_scale[0]:g}-{t.depth_scale[1]:g} x its depth (the parcel sizes do "
+                "not scale it), chosen by its warp energy: draw it at the size of the blocks "
+                "it should fill.")
         feedback.setProgress(88)
 
         road_geoms = np.concatenate([lay.roads for lay in layouts])

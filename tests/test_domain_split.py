@@ -519,6 +519,22 @@ def test_split_domain_uses_a_drawn_template():
 
 # --------------------------------------------------------------------------- optimisation
 
+def test_a_drawn_template_no_region_takes_is_named():
+    """A template warped as drawn is not scaled to the parcel size: one drawn ten times too
+    large fits no region and the layout fell back to rule-based parcels without a word.
+    ``unused_drawn_templates`` names it with its size (the algorithm warns)."""
+    rows3 = [shapely.box(i * 18, j * 30, (i + 1) * 18, (j + 1) * 30)
+             for i in range(4) for j in range(3)]
+    big = [shapely.affinity.scale(g, 10, 10, origin=(0, 0)) for g in rows3]
+    lib = templates.templates_from_drawn(rows3 + big, ["three"] * 12 + ["big"] * 12,
+                                         ["R"] * 24)
+    layouts = domain_split.split_variations([shapely.box(0, 0, 300, 200)], 1, seed=1,
+                                            templates=lib)
+    assert "three" in layouts[0].stats["templates"]
+    ((name, length, depth),) = domain_split.unused_drawn_templates(lib, layouts)
+    assert name == "big" and (round(length), round(depth)) == (900, 720)
+
+
 def test_mesh_optimisation_fits_strips_and_fairs_roads():
     outline = shapely.box(0, 0, 300, 150)
     # a wobbly street splitting the box into blocks of ~70 and ~80 m; the preferred width

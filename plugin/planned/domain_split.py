@@ -94,7 +94,7 @@ from .mesh_optimisation import NODING_GRID, faces_of, noded, optimise_roads
 from .streamlines import score_streamlines, seed_points, trace_streamlines, width_fit
 
 __all__ = ["SplitSettings", "Layout", "ROAD_FIELDS", "PARCEL_FIELDS", "METRIC_FIELDS",
-           "split_domain", "split_variations", "table1", "prepare_domain", "no_street_joints"]
+           "split_domain", "split_variations", "table1", "unused_drawn_templates", "prepare_domain", "no_street_joints"]
 
 #: Output attributes (name, type) of the roads, parcels and metrics tables.
 ROAD_FIELDS = [("road_id", "int"), ("level", "int"), ("kind", "str"), ("variation", "int"),
@@ -1875,6 +1875,26 @@ def split_variations(region, variations: int = 1, seed: int = 0, progress=None,
         out.append(split_domain(region, seed=seed, variation=v,
                                 progress=progress.sub((v - 1) / variations, v / variations),
                                 **kwargs))
+    return out
+
+
+def unused_drawn_templates(templates: Sequence, layouts: Sequence[Layout]) -> List[tuple]:
+    """The templates warped as drawn (kind 'drawn', a user's drawing) that no layout used,
+    as (name, length, depth) of the drawing in metres (its minimum rectangle).
+
+    A drawn template takes a region within its ``width_scale`` of its length and its
+    ``depth_scale`` of its depth and is not scaled to the parcel size: one drawn far larger
+    or smaller than the layout's blocks fits no region, and the layout used the other
+    templates or rule-based parcels without a word.
+    """
+    used = set()
+    for lay in layouts:
+        used |= set(lay.stats.get("templates", {}))
+    out = []
+    for t in templates:
+        if t.kind == "drawn" and t.name not in used:
+            length, depth, _ = minimum_rectangles([_templates.drawn_outline(t)])
+            out.append((t.name, float(length[0]), float(depth[0])))
     return out
 
 
