@@ -112,11 +112,9 @@ class SplitDomain(AlgorithmBase):
             "(one letter; a feature without one is a parcel, any other label is refused): "
             "R parcel, P park, A area (a region of the next level, filled with parcel rows "
             "or parcelled: Yang's hierarchical templates), S the template's own street drawn "
-            "as its surface "
-            "(a cul-de-sac of any shape with its turning head, or a loop street as a ring "
-            "with its connector; S alone marks the built-in spike). Rows of parcels are "
-            "recognised "
-            "from the drawing (one row: strip, two rows: double strip) and repeat along any "
+            "as its surface (a cul-de-sac of any shape with its turning head, or a loop "
+            "street as a ring with its connector; S alone marks the built-in spike). Rows of "
+            "parcels are recognised from the drawing (one row: strip, two rows: double strip) and repeat along any "
             "street; any other template (more rows, a private park among the parcels, any "
             "shape) is warped as drawn onto a region corner to corner (a region's extra "
             "corners cost their turn), within 0.75-1.35 x its length and 0.8-1.25 x its "
@@ -293,15 +291,8 @@ class SplitDomain(AlgorithmBase):
             elif st["search_attempts"] > 1:
                 feedback.pushInfo(f"Variation {v}: every min_count met after "
                                   f"{st['search_attempts']} searches.")
-        for name, length, depth in domain_split.unused_drawn_templates(lib, layouts):
-            t = next(t for t in lib if t.name == name)
-            feedback.pushWarning(
-                f"Drawn template '{name}' ({length:,.0f} x {depth:,.0f} m) was used in no "
-                f"variation: a template warped as drawn takes only a block "
-                f"{t.width_scale[0]:g}-{t.width_scale[1]:g} x its length and "
-                f"{t.depth_scale[0]:g}-{t.depth_scale[1]:g} x its depth (the parcel sizes do "
-                "not scale it), chosen by its warp energy: draw it at the size of the blocks "
-                "it should fill.")
+        for warning in domain_split.unused_drawn_templates(lib, layouts):
+            feedback.pushWarning(warning)
         feedback.setProgress(88)
 
         road_geoms = np.concatenate([lay.roads for lay in layouts])

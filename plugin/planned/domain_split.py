@@ -1878,9 +1878,9 @@ def split_variations(region, variations: int = 1, seed: int = 0, progress=None,
     return out
 
 
-def unused_drawn_templates(templates: Sequence, layouts: Sequence[Layout]) -> List[tuple]:
-    """The templates warped as drawn (kind 'drawn', a user's drawing) that no layout used,
-    as (name, length, depth) of the drawing in metres (its minimum rectangle).
+def unused_drawn_templates(templates: Sequence, layouts: Sequence[Layout]) -> List[str]:
+    """A warning for each template warped as drawn (kind 'drawn', a user's drawing) that no
+    layout used, naming it and its drawn size (its minimum rectangle, m).
 
     A drawn template takes a region within its ``width_scale`` of its length and its
     ``depth_scale`` of its depth and is not scaled to the parcel size: one drawn far larger
@@ -1894,7 +1894,13 @@ def unused_drawn_templates(templates: Sequence, layouts: Sequence[Layout]) -> Li
     for t in templates:
         if t.kind == "drawn" and t.name not in used:
             length, depth, _ = minimum_rectangles([_templates.drawn_outline(t)])
-            out.append((t.name, float(length[0]), float(depth[0])))
+            out.append(
+                f"Drawn template '{t.name}' ({length[0]:,.0f} x {depth[0]:,.0f} m) was used in "
+                f"no variation: a template warped as drawn takes only a block "
+                f"{t.width_scale[0]:g}-{t.width_scale[1]:g} x its length and "
+                f"{t.depth_scale[0]:g}-{t.depth_scale[1]:g} x its depth (the parcel sizes do "
+                "not scale it), chosen by its warp energy: draw it at the size of the blocks "
+                "it should fill.")
     return out
 
 
