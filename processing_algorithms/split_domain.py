@@ -278,8 +278,9 @@ class SplitDomain(AlgorithmBase):
                 f"{m['p_angle']:.2f}°, p_area {m['p_area']:.3f}, {m['undesirable']} "
                 f"undesirable; {st['n_no_access']} parcels without street access "
                 f"({st['n_inner_parks']} lots cut off from the street kept as inner greens, "
-                f"{st['n_pocket_parks']} pocket parks from the optional repair); road mesh "
-                f"optimisation: {st['optimisation'].get('iterations', 0)} iterations, "
+                f"{st['n_pocket_parks']} pocket parks from the optional repair); "
+                f"{st['n_ended_short_of_motorways']} streets ended short of a motorway; road "
+                f"mesh optimisation: {st['optimisation'].get('iterations', 0)} iterations, "
                 f"{'kept' if st['optimisation'].get('kept') else 'not kept'} (it is kept "
                 f"when it lowers the warp distortion); times split "
                 f"{st['time_split_s']:.1f} s, optimise {st['time_optimise_s']:.1f} s.")

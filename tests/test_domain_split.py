@@ -987,7 +987,10 @@ def test_repair_is_optional_and_the_parks_count():
 
 def test_motorways_take_no_junction_and_dangles_are_continued():
     """Key roads of a limited-access class split the region but no new street ends on
-    them; a key road ending inside the region is continued to the next street."""
+    them, the outline street neither (it ended on the motorway where the outline crosses
+    it: four junctions on it; it ends outside its corridor now); a key road ending inside
+    the region is continued to the next street, here to the motorway's corridor (it met
+    the motorway: a junction on it)."""
     region = shapely.box(0, 0, 600, 400)
     motorway = shapely.LineString([(-10, 200), (610, 200)])
     dangle = shapely.LineString([(300, 0), (300, 120)])       # ends 80 m short of it
@@ -997,11 +1000,19 @@ def test_motorways_take_no_junction_and_dangles_are_continued():
     roads, kind = lay.roads, lay.road_kind
     on_motorway = shapely.dwithin(roads, motorway, 0.01) & ~shapely.within(
         roads, motorway.buffer(0.01))
-    # only the outline and the continued key road touch the motorway: no split street
-    assert set(kind[on_motorway]) <= {"outline", "key"}
+    # no street touches the motorway; the outline and the continuation end 8 m off it
+    assert not on_motorway.any()
+    outline = roads[np.isin(kind, ("outline", "key"))]
+    outline_ends = np.r_[shapely.get_point(outline, 0), shapely.get_point(outline, -1)]
+    assert shapely.distance(outline_ends, motorway).min() == pytest.approx(8.0, abs=0.01)
+    from urban_synthesis.plugin.network import invariants
+    new = invariants.new_streets(roads, [motorway, dangle])
+    contacts = invariants.check_network(roads[new], [motorway, dangle],
+                                        ["motorway", "residential"]).controlled_access
+    assert len(contacts) == 0
     key = shapely.union_all(roads[kind == "key"])
-    assert key.length == pytest.approx(200.0, abs=0.01)     # 120 m + 80 m continued
-    assert shapely.dwithin(key, shapely.Point(300, 200), 1e-6)
+    assert key.length == pytest.approx(192.0, abs=0.01)     # 120 m + 80 m continued - 8 m
+    assert shapely.dwithin(key, shapely.Point(300, 192), 1e-6)
     assert_planar(roads)
     res = (lay.table.land_use == "residential").to_numpy()
     # every lot reaches a street other than the motorway (which gives no access)

@@ -28,7 +28,7 @@ from .invariants import (CORRIDOR_HALF_WIDTH, JUNCTION_TOLERANCE, _node_degrees,
                          is_controlled_access)
 from .links import link_floating_pieces
 
-__all__ = ["classes_on", "end_short_of_controlled_access"]
+__all__ = ["classes_on", "end_short_of_controlled_access", "ended_short"]
 
 #: m: a contact point and a street's end this close are one.
 END_TOLERANCE = 0.01
@@ -43,6 +43,17 @@ def classes_on(pieces: Sequence, roads: Sequence, road_class: Sequence) -> np.nd
         return np.empty(0, dtype=object)
     mid = shapely.line_interpolate_point(pieces, 0.5, normalized=True)
     return cls[shapely.STRtree(np.asarray(roads, dtype=object)).nearest(mid)]
+
+
+def ended_short(line, start, corridor):
+    """The part of ``line`` from its end ``start`` to where it enters ``corridor`` (a
+    controlled-access road's corridor), None when nothing of it is left."""
+    with np.errstate(invalid="ignore"):
+        parts = shapely.get_parts(shapely.difference(line, corridor))
+    parts = parts[shapely.dwithin(parts, start, END_TOLERANCE)] if len(parts) else parts
+    if not len(parts) or parts[0].length <= END_TOLERANCE:
+        return None
+    return parts[0]
 
 
 def end_short_of_controlled_access(lines: Sequence, is_new: Sequence, roads: Sequence,
@@ -118,15 +129,12 @@ def end_short_of_controlled_access(lines: Sequence, is_new: Sequence, roads: Seq
             keep[i] = False
             stats["n_removed"] += 1
             continue
-        start = shapely.get_point(line, -1 if at[i, 0] else 0)   # the end that stays
-        with np.errstate(invalid="ignore"):
-            parts = shapely.get_parts(shapely.difference(line, corridor))
-        parts = parts[shapely.dwithin(parts, start, END_TOLERANCE)] if len(parts) else parts
-        if not len(parts) or parts[0].length <= END_TOLERANCE:
+        short = ended_short(line, shapely.get_point(line, -1 if at[i, 0] else 0), corridor)
+        if short is None:
             keep[i] = False
             stats["n_removed"] += 1
             continue
-        out[i] = parts[0]
+        out[i] = short
         stats["n_ended_short"] += 1
     out, source, is_new = out[keep], source[keep], is_new[keep]
     # a piece that met the network only on the motorway is linked again, not onto one nor

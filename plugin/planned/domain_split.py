@@ -14,7 +14,8 @@ Pipeline of :func:`split_domain` (one layout) and :func:`split_variations` (k la
    Where the outline runs beside a key road a street width to a street plus the shallowest
    row of parcels from it, it is no street: no row would fit between the two streets, so
    the land up to the outline fronts on the key road (:func:`_outline_beside_key_roads`).
-   Key roads of a motorway class take no junction and give no frontage.
+   Key roads of a motorway class take no junction and give no frontage (the outline
+   street and key roads' continuations end short of them).
 2. **Hierarchical splitting with backtracking** (sec. 3-5, :class:`_Search`): a region is
    replaced by a template when one matches: row templates are warped onto it
    (:func:`templates.warp_rows`, registration / regression) and their **warp energy**
@@ -84,6 +85,7 @@ from ..core.geometry import (minimum_rectangles, rounded_band_bends, rounded_ben
 from ..core.progress import InputError, Progress, ensure
 from ..measure import metrics as _metrics
 from ..network import invariants as _invariants
+from ..network.controlled_access import ended_short
 from ..network.links import meets_only_at_ends
 from ..network.street_graph import (JUNCTION_TOLERANCE, collapse_short_pieces,
                                    snap_ends_onto_lines, weld_ends)
@@ -624,6 +626,48 @@ def _cut_continuations(roads, level, kind, key_roads, tolerance: float = 0.01):
                 out_level.append(lv)
                 out_kind.append(k)
     return np.asarray(out, dtype=object), np.asarray(out_level), np.asarray(out_kind, dtype=object)
+
+
+def _ended_short_of_limited_access(roads, level, kind, key_roads, tolerance: float = 0.01):
+    """Streets that end on a motorway key road away from its junctions with the other key
+    roads end short of it, outside its corridor (the invariants' width), as side streets
+    end at a motorway's fence; one with both ends on it goes. The split streets already
+    keep off motorways; the region's outline street still ended on one where the outline
+    crosses it (a motorway across the region: four junctions on it), and so did a key road's
+    continuation (:func:`_cut_continuations`) that met one. The rule's geometry is
+    :func:`network.controlled_access.ended_short`'s.
+
+    Returns (roads, level, kind, number of streets ended short or removed)."""
+    limited = kind == "limited"
+    if not limited.any():
+        return roads, level, kind, 0
+    motorways = shapely.union_all(roads[limited])
+    # a key road's continuation is a new street: it does not lie on the roads given
+    given = shapely.buffer(shapely.union_all(np.asarray(key_roads, dtype=object).ravel()),
+                           tolerance)
+    continued = (kind == "key") & ~shapely.within(roads, given)
+    others = roads[(kind == "key") & ~continued]
+    # the motorways' own junctions: where another key road ends on them (a motorway's end
+    # at the region's edge is none)
+    junctions = shapely.multipoints(np.r_[shapely.get_point(others, 0),
+                                          shapely.get_point(others, -1)])
+    corridor = shapely.buffer(motorways, _invariants.CORRIDOR_HALF_WIDTH)
+    keep = np.ones(len(roads), dtype=bool)
+    roads = roads.copy()
+    n = 0
+    for i in np.flatnonzero(~np.isin(kind, ("key", "limited")) | continued):
+        ends = shapely.get_point(roads[i], [0, -1])
+        on = shapely.dwithin(ends, motorways, tolerance) & \
+            ~shapely.dwithin(ends, junctions, tolerance)
+        if not on.any():
+            continue
+        n += 1
+        short = None if on.all() else ended_short(roads[i], ends[1 if on[0] else 0], corridor)
+        if short is None:
+            keep[i] = False
+        else:
+            roads[i] = short
+    return roads[keep], level[keep], kind[keep], n
 
 
 def _outline_of(barrier, line):
@@ -1650,12 +1694,15 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
     if key_roads is not None and len(key_roads):
         # after the noding, which merges lines through their shared ends again
         roads, level, kind = _cut_continuations(roads, level, kind, key_roads)
+    roads, level, kind, n_short = _ended_short_of_limited_access(
+        np.asarray(roads, dtype=object), np.asarray(level), np.asarray(kind, dtype=object),
+        [] if key_roads is None else key_roads)
     stats = {
         "n_regions": n_done, "n_splits": splitter.n_split, "n_rejected_splits": splitter.n_rejected,
         "n_backtracked": n_backtracked, "n_blocks": len(leaves),
         "search_attempts": attempt, "min_count_short": int(n_short),
         "n_no_access_rejected": splitter.n_no_access, "n_stubs_dropped": n_stubs,
-        "n_outline_beside_key_roads": n_beside,
+        "n_outline_beside_key_roads": n_beside, "n_ended_short_of_motorways": n_short,
         "templates": dict(Counter(leaf[1] for leaf in leaves)),
         "n_parcels": int(residential.sum()),
         "n_no_access": int((residential & ~table.has_street_access.to_numpy(bool)).sum()),
