@@ -1,5 +1,6 @@
 """urbansynth:layoutmetrics - quality and similarity metrics of a layout against its example."""
 import numpy as np
+import pandas as pd
 import shapely
 from qgis.core import (
     QgsCoordinateReferenceSystem,
@@ -194,6 +195,12 @@ class LayoutMetrics(AlgorithmBase):
                 kwargs["road_z_layer"] = qgis_io.osm_vertical_layers(frame)
                 kwargs["road_class"] = self._road_class(frame)
             names.append(f"{arg}: {frame.name} ({len(frame)} features)")
+            variations = frame.attributes.get("variation", pd.Series(dtype=object)).nunique()
+            if variations > 1:   # splitdomain's VARIATIONS: layouts over each other
+                feedback.pushWarning(
+                    f"Layer {frame.name} holds {variations} variations (field 'variation'): "
+                    "they are measured as one network over itself. Measure one at a time "
+                    "(select \"variation\" = 1 and use Selected features only).")
             if arg == "parcels" and landuse_field:
                 if landuse_field in frame.attributes:
                     kwargs["landuse"] = frame.attributes[landuse_field].to_numpy(dtype=object)

@@ -203,3 +203,24 @@ def test_a_dead_end_share_beyond_the_example_band_is_logged(qgis_processing):
                               "OUTPUT": "memory:"}, feedback=log)
     assert any("dead-end share 0.50 is 33 % below the example's 0.75" in w
                for w in log.warnings), log.warnings
+
+
+def test_a_layer_of_several_variations_is_warned_of(qgis_processing):
+    """splitdomain's VARIATIONS > 1 writes every layout into one layer (field 'variation'):
+    measured as one network over itself, silently; the log now says so and how to pick
+    one."""
+    from helpers import log_feedback, memory_layer
+
+    wkts = ["LINESTRING(0 0, 400 0)", "LINESTRING(100 0, 100 150)",
+            "LINESTRING(0 0, 400 0)", "LINESTRING(200 0, 200 150)"]
+    layout = memory_layer("LineString", wkts, crs="EPSG:32633", name="layouts",
+                          fields="&field=variation:integer", rows=[(1,), (1,), (2,), (2,)])
+    log = log_feedback()
+    qgis_processing.run(ALG, {"ROADS": layout, "OUTPUT": "memory:"}, feedback=log)
+    assert any("'layouts' holds 2 variations (field 'variation')" in w for w in log.warnings), \
+        log.warnings
+    one = memory_layer("LineString", wkts[:2], crs="EPSG:32633", name="one",
+                       fields="&field=variation:integer", rows=[(1,), (1,)])
+    log = log_feedback()
+    qgis_processing.run(ALG, {"ROADS": one, "OUTPUT": "memory:"}, feedback=log)
+    assert not any("variations" in w for w in log.warnings), log.warnings
