@@ -265,11 +265,11 @@ class SplitDomain(AlgorithmBase):
             rows.append(dict(variation=v, **m))
             st = lay.stats
             if not st["n_parcels"]:
-                feedback.pushWarning(
-                    f"Variation {v}: no parcels: the key areas cover the region, or what is "
-                    "left of it (all of it without key areas) is too small for a lot (the "
-                    "streets and key areas are written; the metrics of this variation are "
-                    "empty).")
+                feedback.pushWarning(f"Variation {v}: no parcels: " + (
+                    "the key areas cover the region, or what is left of it is too small for "
+                    "a lot (the streets and key areas are written;" if key_areas is not None
+                    else "the region is too small for a lot (its streets are written;")
+                    + " the metrics of this variation are empty).")
             feedback.pushInfo(
                 f"Variation {v}: {st['n_splits']} streamline splits "
                 f"({st['n_rejected_splits']} candidates rejected), {st['n_blocks']} blocks "

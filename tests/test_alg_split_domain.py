@@ -192,7 +192,8 @@ def test_a_region_too_small_for_a_lot_says_so(qgis_processing):
     out = qgis_processing.run(ALG, {"REGION": tiny, "SEED": 1, "OUTPUT_ROADS": "memory:",
                                     "OUTPUT_PARCELS": "memory:"}, feedback=log)
     assert not layer_features(out["OUTPUT_PARCELS"])[0]
-    assert any("no parcels" in w and "too small for a lot" in w for w in log.warnings)
+    assert any("no parcels: the region is too small for a lot" in w for w in log.warnings)
+    assert not any("key areas" in w for w in log.warnings)      # none was given
 
 
 def test_key_roads_away_from_the_region_are_named(qgis_processing):
