@@ -284,3 +284,16 @@ def test_a_ring_narrower_than_the_parts_is_refused_not_built_into_its_courtyard(
     assert shapely.area(shapely.difference(union, ring)) < 1e-6
     assert shapely.area(placed).sum() == pytest.approx(union.area, abs=1e-6)
     assert union.area == pytest.approx(ring.area, rel=0.02)
+
+
+def test_a_tower_wider_than_its_site_is_refused_not_built_over_its_neighbours():
+    """Floor parts are squares 20-32 m wide centred on the site: on a plot 15 m wide they
+    stood 2.5 m over the neighbours' land on both sides (a quarter of each floor), unsaid.
+    A few m² over a courtyard's corner stay allowed (the test above)."""
+    lib = bp.skyscraper_library()
+    with pytest.raises(InfeasibleError, match=r"floors do not fit on the site: 100 m² of a "
+                                              r"floor 20 m wide would stand beyond it"):
+        bp.stack_floors(lib, 80.0, site=shapely.box(0, 0, 100, 15))
+    wide = shapely.box(0, 0, 60, 60)
+    result = bp.stack_floors(lib, 80.0, site=wide)
+    assert shapely.area(shapely.difference(result.geometry, wide)).max() < 1e-9

@@ -492,8 +492,21 @@ def stack_floors(library: PartsLibrary, height_m: float, *, far=None, site_area=
               shapely.box(-depth[e] / 2, -depth[e] / 2, depth[e] / 2, depth[e] / 2))
         c = shapely.centroid(fp).coords[0]
         geoms.append(coordinates.translate([fp], (centre[0] - c[0], centre[1] - c[1]))[0])
+    if site is not None:
+        # a floor wider than its site stood over the neighbours' land, unsaid; a corner of
+        # one over a courtyard or past an L's bend (a few m²) is a cantilever, not that
+        over = shapely.area(shapely.difference(np.array(geoms, dtype=object), site))
+        if (over / shapely.area(np.array(geoms, dtype=object))).max() > TOWER_OVERHANG:
+            raise InfeasibleError(
+                f"the tower's floors do not fit on the site: {over.max():,.0f} m² of a floor "
+                f"{depth[E[np.argmax(over)]]:g} m wide would stand beyond it; a wider site or "
+                "narrower floor parts fit")
     return PartsResult(np.array(geoms, dtype=object), _parts_table(sols, t, E, start, start),
                        _summary(sols, R, names, site_area), sols)
+
+
+#: largest share of a tower floor's area that may stand beyond its site
+TOWER_OVERHANG = 0.05
 
 
 def tower_centre(site) -> Tuple[float, float]:
