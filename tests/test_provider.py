@@ -62,3 +62,32 @@ def test_metadata_is_complete():
         assert general.get(key), key
     assert general["hasProcessingProvider"] == "yes"
     assert (ROOT / general["icon"]).exists()
+
+
+def test_shipped_model_says_which_packages_are_missing(qgis_processing, monkeypatch):
+    """With the engine's packages missing the model's steps are stand-ins: the model says what
+    to install (listed as '(needs …)', refused by its parameter check, and a run from another
+    model stops with the same sentence), never an import traceback."""
+    from qgis.core import QgsApplication, QgsProcessingContext, QgsProcessingException
+
+    from urban_synthesis.plugin.qgis_glue import dependencies, provider
+
+    model = QgsApplication.processingRegistry().algorithmById("urbansynth:synthesizedistrict")
+    assert model is not None and "needs" not in model.displayName()
+    monkeypatch.setattr(dependencies, "missing_packages", lambda: ["pandas"])
+    context = QgsProcessingContext()
+    ok, message = model.createInstance().checkParameterValues({}, context)
+    assert not ok
+    assert "pandas" in message and "Install Python dependencies" in message
+    try:
+        model.createInstance().processAlgorithm({}, context, None)
+    except QgsProcessingException as error:
+        assert type(error) is QgsProcessingException  # QGIS prints any other with a traceback
+        assert "pandas" in str(error) and "Install Python dependencies" in str(error)
+    else:
+        raise AssertionError("the model ran without its packages")
+    shown = provider.ShippedModel()
+    assert shown.fromFile(str(provider.MODELS / "synthesize_district.model3"))
+    shown.missing = ("pandas",)
+    assert shown.displayName().endswith("(needs pandas)")
+    assert shown.createInstance().displayName() == shown.displayName()

@@ -27,10 +27,14 @@ class ShippedModel(QgsProcessingModelAlgorithm):
     """A model of resources/models: shown under its display name (help content key
     DISPLAY_NAME) in the provider's own group of that name (a .model3 file keeps the group
     name only), and run with the plugin's output rule (:mod:`outputs`): its outputs appear
-    only when every step succeeded, and a cancel is reported as one."""
+    only when every step succeeded, and a cancel is reported as one. Like every tool, it
+    says which packages it needs while the engine's are missing."""
+
+    missing = ()  # the engine's packages missing when the provider loaded it
 
     def displayName(self):  # noqa: N802
-        return self.helpContent().get("DISPLAY_NAME") or self.name()
+        name = self.helpContent().get("DISPLAY_NAME") or self.name()
+        return f"{name} (needs {', '.join(self.missing)})" if self.missing else name
 
     def groupId(self):  # noqa: N802
         return self.group().lower()
@@ -39,9 +43,21 @@ class ShippedModel(QgsProcessingModelAlgorithm):
         clone = ShippedModel()
         clone.loadVariant(self.toVariant())
         clone.setSourceFilePath(self.sourceFilePath())
+        clone.missing = self.missing
         return clone
 
+    def checkParameterValues(self, parameters, context):  # noqa: N802
+        # its steps stand in as UnavailableAlgorithm when packages are missing: say so here,
+        # before the run (which would stop on an import error)
+        missing = dependencies.missing_packages()
+        if missing:
+            return False, dependencies.missing_message(missing)
+        return super().checkParameterValues(parameters, context)
+
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        missing = dependencies.missing_packages()  # models in models: no parameter check
+        if missing:
+            raise QgsProcessingException(dependencies.missing_message(missing))
         from . import qgis_io  # the engine's packages: not needed to list the provider
 
         staging = outputs.OutputStaging(self, parameters, context)
@@ -164,7 +180,7 @@ class UrbanSynthesisProvider(QgsProcessingProvider):
         # are only once it is registered: the models are loaded by a refresh right after.
         registry = QgsApplication.processingRegistry()
         if registry.providerById(self.id()) is not None:
-            self._load_models()
+            self._load_models(missing)
         elif not getattr(self, "_refresh_when_added", False):
             self._refresh_when_added = True
             registry.providerAdded.connect(self._provider_added)
@@ -174,9 +190,10 @@ class UrbanSynthesisProvider(QgsProcessingProvider):
             QgsApplication.processingRegistry().providerAdded.disconnect(self._provider_added)
             self.refreshAlgorithms()
 
-    def _load_models(self):
+    def _load_models(self, missing=()):
         for path in sorted(MODELS.glob("*.model3")):
             model = ShippedModel()
+            model.missing = tuple(missing)
             if model.fromFile(str(path)):
                 model.updateDestinationParameters()
                 # parameter help is kept in the model's help content (see make_models.py)
