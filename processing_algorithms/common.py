@@ -21,7 +21,7 @@ from qgis.PyQt.QtCore import QCoreApplication
 from qgis.PyQt.QtGui import QIcon
 
 from ..plugin.core.ids import whole_ids
-from ..plugin.core.progress import Canceled, InputError
+from ..plugin.core.progress import Canceled, InputError, MissingPackage
 from ..plugin.network import blocks as block_rules
 from ..plugin.network import street_graph
 from ..plugin.qgis_glue import outputs, qgis_io
@@ -77,6 +77,8 @@ def clear_error(alg, exc: BaseException, feedback) -> BaseException:
         return exc
     if isinstance(exc, Canceled):
         return qgis_io.ProcessingCanceled()
+    if isinstance(exc, MissingPackage):
+        return qgis_io.missing_package_error(exc)
     if isinstance(exc, InputError):
         return QgsProcessingException(f"{alg.displayName()}: {exc}")
     if isinstance(exc, MemoryError):

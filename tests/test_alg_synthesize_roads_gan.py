@@ -360,3 +360,32 @@ def test_raster_lengths_are_metres_on_the_ground(qgis_processing, tmp_path, epsg
     rows, geoms = layer_features(layer)
     ratio = np.array([r["length_m"] for r in rows]) / shapely.length(geoms)
     np.testing.assert_allclose(ratio, metres_per_unit, rtol=0.01)
+
+
+def test_missing_onnxruntime_or_opencv_says_how_to_install(qgis_processing, tmp_path,
+                                                            monkeypatch):
+    """A QGIS whose Python has shapely and pandas but not onnxruntime or OpenCV (OSGeo4W, for
+    one) lists these tools as available: a run says to use the plugin's installer, never a
+    pip command line for the plugin's requirements.txt nor 'a defect of Urban Synthesis'."""
+    import sys
+
+    monkeypatch.setitem(sys.modules, "onnxruntime", None)  # import onnxruntime: ImportError
+    with pytest.raises(QgsProcessingException) as gan:
+        qgis_processing.run(GAN, {"EXTENT": EXTENT, "MODEL": 0, "OUTPUT": "memory:"})
+    monkeypatch.setitem(sys.modules, "cv2", None)
+    raster = tmp_path / "roads.tif"
+    from osgeo import gdal
+
+    ds = gdal.GetDriverByName("GTiff").Create(str(raster), 40, 30, 1, gdal.GDT_Byte)
+    ds.SetGeoTransform((X0, 3.0, 0.0, Y0 + 90, 0.0, -3.0))
+    ds.SetProjection("EPSG:3067")
+    road = np.zeros((30, 40), np.uint8)
+    road[8:23] = 255  # one street across, 15 px wide
+    ds.GetRasterBand(1).WriteArray(road)
+    ds = None
+    with pytest.raises(QgsProcessingException) as r2v:
+        qgis_processing.run(R2V, {"INPUT": str(raster), "OUTPUT": "memory:"})
+    for error, package in ((gan, "onnxruntime"), (r2v, "opencv-contrib-python-headless")):
+        message = str(error.value)
+        assert package in message and "Install Python dependencies" in message, message
+        assert "requirements.txt" not in message and "defect" not in message, message

@@ -248,3 +248,29 @@ def test_junction_clusters_merge_into_crossings():
     assert (shapely.distance(crossings, union) < 7.5).all()
     # no block is lost to the merge
     assert len(metrics.block_faces(merged.geometry)) == 16
+
+
+def test_missing_opencv_or_onnxruntime_is_a_missing_package(monkeypatch, tmp_path):
+    """The packages the engine imports only where it needs them raise MissingPackage, naming
+    the package to install (the QGIS tools turn it into the installer's advice)."""
+    import sys
+
+    from urban_synthesis.plugin.core.progress import MissingPackage
+    from urban_synthesis.plugin.network import street_mesh
+
+    monkeypatch.setitem(sys.modules, "cv2", None)
+    monkeypatch.setitem(sys.modules, "onnxruntime", None)
+    for call, package in ((rg._cv2, "opencv-contrib-python-headless"),
+                          (lambda: street_mesh.write_obj(tmp_path / "m.obj", None),
+                           "opencv-contrib-python-headless"),
+                          (lambda: streetgan_session(), "onnxruntime")):
+        with pytest.raises(MissingPackage) as error:
+            call()
+        assert error.value.distribution == package and package in str(error.value)
+        assert isinstance(error.value, InputError)  # the command line reports it as bad input
+
+
+def streetgan_session():
+    from urban_synthesis.plugin.roads import streetgan
+
+    return streetgan.load_model(streetgan.shipped_models()[0])

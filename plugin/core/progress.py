@@ -6,11 +6,30 @@ so that work stops promptly wherever it is. ``qgis_io`` adapts a QgsProcessingFe
 """
 from __future__ import annotations
 
+import importlib
 from typing import Callable, Optional
 
 
 class InputError(ValueError):
     """Bad input the user can fix (empty layer, missing field, absurd parameter)."""
+
+
+class MissingPackage(InputError):
+    """A package the engine imports only where it needs it (OpenCV, onnxruntime) is not
+    installed. ``distribution`` is its name on the package index: the QGIS glue turns this
+    into the plugin's own advice (its dependency installer), not a pip command line."""
+
+    def __init__(self, what: str, distribution: str):
+        super().__init__(f"{what} is not installed (Python package {distribution})")
+        self.distribution = distribution
+
+
+def require(module: str, distribution: str, what: str = ""):
+    """Import ``module`` where a method needs it; :class:`MissingPackage` when it is missing."""
+    try:
+        return importlib.import_module(module)
+    except ImportError as exc:
+        raise MissingPackage(what or distribution, distribution) from exc
 
 
 class Canceled(RuntimeError):

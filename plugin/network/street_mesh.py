@@ -71,7 +71,7 @@ import numpy as np
 import pandas as pd
 import shapely
 
-from ..core.progress import InputError
+from ..core.progress import InputError, require
 
 __all__ = ["MESH_FIELDS", "TEXTURE_ROWS", "StreetMesh", "street_mesh", "tin_wkb",
            "write_tin_geopackage", "road_texture", "write_obj"]
@@ -667,7 +667,7 @@ def write_obj(path: str, mesh: StreetMesh, crs_name: str = "") -> dict:
     so that a millimetre survives single-precision readers. Vertices and texture
     coordinates are shared by the triangles that use them; faces are grouped as streets,
     junctions and side faces. Returns the paths written and the origin."""
-    import cv2   # here: only this writer needs OpenCV
+    cv2 = require("cv2", "opencv-contrib-python-headless", "OpenCV")  # only this writer needs it
 
     path = Path(path)
     mtl = path.with_suffix(".mtl")

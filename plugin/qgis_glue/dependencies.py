@@ -39,7 +39,7 @@ RUNTIME_PACKAGES: Dict[str, str] = {
 #: packages QGIS itself loads binaries of: never replaced, only pinned
 QGIS_OWNED = ("numpy",)
 REQUIREMENTS = PLUGIN_ROOT / "requirements.txt"
-HELP = ("Install them with Plugins > Urban Synthesis > Install Python dependencies (or run "
+HELP = ("Install {} with Plugins > Urban Synthesis > Install Python dependencies (or run "
         "'urbansynth:installdependencies'); see the README, section 'Install'.")
 
 
@@ -83,7 +83,8 @@ def _shapely_2() -> bool:
 
 def missing_message(missing: Sequence[str]) -> str:
     return (f"Urban Synthesis needs the Python package{'s' if len(missing) > 1 else ''} "
-            f"{', '.join(missing)}, which QGIS's Python does not have. {HELP}")
+            f"{', '.join(missing)}, which QGIS's Python does not have. "
+            + HELP.format("them" if len(missing) > 1 else "it"))
 
 
 def pinned_versions(path: Path = REQUIREMENTS) -> Dict[str, str]:

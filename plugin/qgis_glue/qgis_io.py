@@ -41,8 +41,8 @@ from qgis.PyQt.QtCore import QVariant
 
 from ..core import coordinates
 from ..core import crs as crs_rule
-from . import styles
-from ..core.progress import Canceled, InputError, Progress
+from . import dependencies, styles
+from ..core.progress import Canceled, InputError, MissingPackage, Progress
 
 _GEOM_NAMES = {QgsWkbTypes.GeometryType.PointGeometry: "points", QgsWkbTypes.GeometryType.LineGeometry: "lines",
                QgsWkbTypes.GeometryType.PolygonGeometry: "polygons"}
@@ -639,13 +639,23 @@ def progress_for(feedback: Optional[QgsProcessingFeedback], start: float = 0.0,
 
 def run_engine(label: str, fn, *args, **kwargs):
     """Call an engine function: its :class:`InputError` becomes a QgsProcessingException
-    naming ``label``, its :class:`Canceled` a :class:`ProcessingCanceled`."""
+    naming ``label``, its :class:`Canceled` a :class:`ProcessingCanceled`, a package it
+    lacks the plugin's advice to install it (:func:`missing_package_error`)."""
     try:
         return fn(*args, **kwargs)
     except Canceled as exc:
         raise ProcessingCanceled(str(exc) or "Canceled by the user.") from exc
+    except MissingPackage as exc:
+        raise missing_package_error(exc) from exc
     except InputError as exc:
         raise QgsProcessingException(f"{label}: {exc}") from exc
+
+
+def missing_package_error(exc: MissingPackage) -> QgsProcessingException:
+    """What a method says when a package it imports where it needs it (OpenCV, onnxruntime)
+    is missing: the installer, as a tool whose packages are missing says (a QGIS whose
+    Python has shapely and pandas lists these tools as available)."""
+    return QgsProcessingException(dependencies.missing_message([exc.distribution]))
 
 
 def field_values(frame: Frame, field: Optional[str], default=None) -> np.ndarray:

@@ -39,7 +39,7 @@ import numpy as np
 import shapely
 
 from ..core.geometry import pinned_ends
-from ..core.progress import InputError, Progress, ensure
+from ..core.progress import InputError, Progress, ensure, require
 
 __all__ = ["rasterize_lines", "raster_to_graph", "RasterGraph", "road_mask", "skeleton", "pixel_graph",
            "chains", "smooth_chain", "merge_junction_clusters", "polygon_centre_lines",
@@ -53,11 +53,7 @@ _CROSS = None
 
 
 def _cv2():
-    try:
-        import cv2
-    except ImportError as exc:  # pragma: no cover - requirements.txt installs it
-        raise InputError("OpenCV (opencv-contrib-python-headless) is not installed: "
-                         "pip install -r requirements.txt") from exc
+    cv2 = require("cv2", "opencv-contrib-python-headless", "OpenCV")
     if not hasattr(cv2, "ximgproc"):  # pragma: no cover
         raise InputError("OpenCV lacks the contrib module ximgproc: install "
                          "opencv-contrib-python-headless, not opencv-python")

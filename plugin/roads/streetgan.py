@@ -50,7 +50,7 @@ import numpy as np
 import shapely
 
 from ..core.paths import RESOURCES
-from ..core.progress import InputError, Progress, ensure
+from ..core.progress import InputError, Progress, ensure, require
 from ..network.invariants import connected_pieces
 from ..network.links import join_pieces, link_floating_pieces
 from . import raster_graph
@@ -237,10 +237,7 @@ def load_model(model, threads: int = 0, card: Optional[dict] = None) -> Generato
     if sha and hashlib.sha256(data).hexdigest() != sha:
         raise InputError(f"the model file {path} is corrupt: its checksum does not match "
                          f"the one in {card_path.name}")
-    try:
-        import onnxruntime as ort
-    except ImportError as exc:  # pragma: no cover - requirements.txt installs it
-        raise InputError("onnxruntime is not installed: pip install -r requirements.txt") from exc
+    ort = require("onnxruntime", "onnxruntime")
     opts = ort.SessionOptions()
     opts.log_severity_level = 3
     # idle worker threads sleep instead of spinning: the same output, and on a shared
@@ -676,7 +673,7 @@ def _cut_at_given(lines, given, half_width):
 
 def _blank_corridors(image, gt, lines, corridor):
     """The image with every pixel within ``corridor`` m of a given road set to 0 (black)."""
-    import cv2
+    cv2 = raster_graph._cv2()
 
     cell = abs(gt[1])
     mask, _ = raster_graph.rasterize_lines(lines, cell_size=cell, width_px=1,
