@@ -29,8 +29,9 @@ def test_every_algorithm_is_documented(qgis_processing):
 def test_toolbox_table_matches_the_algorithms(qgis_processing):
     """The table that lists algorithms even when their packages are missing says what the
     classes say: same ids, display names and groups, in the provider."""
-    from qgis.core import QgsApplication
+    from qgis.core import QgsApplication, QgsProcessingAlgorithm
 
+    from urban_synthesis.plugin.qgis_glue.provider import UnavailableAlgorithm
     from urban_synthesis.plugin.qgis_glue.toolbox import ALGORITHMS, GROUPS, algorithm_id
 
     provider = QgsApplication.processingRegistry().providerById("urbansynth")
@@ -39,6 +40,10 @@ def test_toolbox_table_matches_the_algorithms(qgis_processing):
         assert alg is not None, module
         assert (alg.displayName(), alg.groupId(), alg.group()) == \
             (display_name, group_id, GROUPS[group_id])
+        # a deprecated one stays out of the toolbox while its packages are missing too
+        stand_in = UnavailableAlgorithm(module, display_name, group_id, ["shapely"])
+        hidden = QgsProcessingAlgorithm.Flag.FlagHideFromToolbox
+        assert bool(stand_in.flags() & hidden) == bool(alg.flags() & hidden), module
 
 
 def test_missing_package_keeps_the_algorithm_listed_with_a_clear_message(qgis_processing):

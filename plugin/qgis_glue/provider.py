@@ -15,7 +15,7 @@ from qgis.PyQt.QtGui import QIcon
 
 from ..core.paths import RESOURCES
 from . import dependencies, outputs
-from .toolbox import ALGORITHMS, GROUPS, TAGS, algorithm_id, help_url
+from .toolbox import ALGORITHMS, DEPRECATED, GROUPS, TAGS, algorithm_id, help_url
 
 ICON = RESOURCES / "icons" / "urbansynth.svg"
 
@@ -117,6 +117,11 @@ class UnavailableAlgorithm(QgsProcessingAlgorithm):
 
     def icon(self):
         return QIcon(str(ICON))
+
+    def flags(self):
+        if self.name() in DEPRECATED:  # hidden as the algorithm itself is
+            return super().flags() | QgsProcessingAlgorithm.Flag.FlagDeprecated
+        return super().flags()
 
     def shortHelpString(self):  # noqa: N802
         return dependencies.missing_message(self._missing)

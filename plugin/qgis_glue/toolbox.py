@@ -46,6 +46,11 @@ ALGORITHMS = (
 )
 
 
+#: Deprecated algorithms: they run (old models, command lines) but are not listed, also while
+#: their packages are missing.
+DEPRECATED = frozenset({"synthesizebuildings"})
+
+
 def algorithm_id(module: str) -> str:
     """The algorithm id of a module: its name without underscores (docs/ARCHITECTURE.md,
     "The toolbox contract")."""
