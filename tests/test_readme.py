@@ -73,3 +73,34 @@ def test_readme_fidelity_figures_are_the_benchmarks():
     assert readme == bench.sync_readme(readme, blocks), (
         "README.md's fidelity blocks differ from tests/benchmarks/results/fidelity.json: run "
         "`.venv/bin/python tests/benchmarks/bench_fidelity.py --tables-only`")
+
+
+def _shell_blocks(text):
+    """The README's command blocks: fenced ones and those indented by four spaces."""
+    blocks = re.findall(r"^```(?:bash|sh)?\n(.*?)^```", text, flags=re.S | re.M)
+    blocks += ["\n".join(line[4:] for line in m.group(0).splitlines())
+               for m in re.finditer(r"(?:(?<=\n\n)|^)(?: {4}.*\S.*\n)+", text)]
+    return blocks
+
+
+def test_readme_qgis_process_blocks_run_as_written():
+    """A block that calls qgis_process.bin itself (not scripts/qgis-process, which sets up
+    everything) runs as pasted into a fresh shell: every variable it uses is set in it, a
+    headless QGIS is told so, and a clean profile gets the plugin's packages before a tool
+    runs (a trial pasted the install check: with XDG_DATA_HOME unset it unzipped into
+    /QGIS/..., with it set unzip could not make the profile's folders, and the run would have
+    stopped on the missing packages)."""
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    blocks = [b for b in _shell_blocks(readme)
+              if re.search(r"^\s*(export .*\n\s*)?qgis_process\.bin ", b, flags=re.M)]
+    assert blocks, "the README's headless install check is gone"
+    for block in blocks:
+        set_here = set(re.findall(r"\b([A-Z_][A-Z0-9_]*)=", block))
+        used = set(re.findall(r"\$\{?([A-Z_][A-Z0-9_]*)", block))
+        assert used <= set_here | {"HOME", "PATH"}, (used - set_here, block)
+        assert "QT_QPA_PLATFORM=offscreen" in block, block
+        for folder in re.findall(r"unzip .* -d (\S+)", block):  # unzip makes one level only
+            assert f"mkdir -p {folder}" in block, block
+        runs = re.findall(r"qgis_process\.bin run (urbansynth:\w+)", block)
+        if "unzip" in block and runs:  # a clean profile: QGIS's Python lacks the packages
+            assert runs[0] == "urbansynth:installdependencies", block
