@@ -39,10 +39,10 @@ class BuildBlockDatabase(AlgorithmBase):
             "Stores example city blocks with their building footprints and attributes in a "
             "GeoPackage example database for footprint synthesis by example (Hartmann, ch. 5.1 "
             "and 5.2).\n\n"
-            "Use the blocks and buildings written by 'Extract blocks'. Buildings are matched to "
-            "blocks by the block id field; when the buildings have no such field they are "
-            "assigned by location (the block holding most of their area). Buildings outside "
-            "every block are left out.\n\n"
+            "Use the blocks and buildings written by 'Extract city blocks'. Buildings are "
+            "matched to blocks by the block id field; when the buildings have no such field "
+            "they are assigned by location (the block holding most of their area). Buildings "
+            "outside every block are left out.\n\n"
             "The database holds the blocks (area, perimeter, aspect ratio, compactness, number "
             "of buildings, coverage), the footprints (block_id, height_m, levels, building_type "
             "...) and 100 boundary samples with scale-aware shape-context histograms per block."
@@ -51,11 +51,11 @@ class BuildBlockDatabase(AlgorithmBase):
     def initAlgorithm(self, config=None):  # noqa: N802
         self.add(QgsProcessingParameterFeatureSource(
             self.BLOCKS, "Blocks", [QgsProcessing.SourceType.TypeVectorPolygon]),
-            "City block polygons, e.g. the blocks output of 'Extract blocks'.")
+            "City block polygons, e.g. the blocks output of 'Extract city blocks'.")
         self.add(QgsProcessingParameterFeatureSource(
             self.BUILDINGS, "Buildings", [QgsProcessing.SourceType.TypeVectorPolygon]),
-            "Building footprints, e.g. the buildings output of 'Extract blocks' (with block_id, "
-            "height_m, levels, building_type).")
+            "Building footprints, e.g. the buildings output of 'Extract city blocks' (with "
+            "block_id, height_m, levels, building_type).")
         self.add(QgsProcessingParameterString(
             self.BLOCK_ID_FIELD, "Block id field", defaultValue="block_id", optional=True),
             "Field naming the block in both layers. Blocks without it are numbered 1..n; "

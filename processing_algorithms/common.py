@@ -296,9 +296,9 @@ class AlgorithmBase(QgsProcessingAlgorithm):
             self.KEEP_CLEAR, "Areas to keep clear (street surfaces)",
             [QgsProcessing.SourceType.TypeVectorPolygon], optional=True),
             f"Polygons no {what} may cover, e.g. the street surfaces and junctions of "
-            "'Tessellate streets' merged into one layer: their widths follow each street's "
-            "class, and dead-end streets inside a block are kept clear too. Applied on top "
-            "of the street width." + (" " + more if more else ""))
+            "'Tessellate streets (surfaces and junctions)' merged into one layer: their widths "
+            "follow each street's class, and dead-end streets inside a block are kept clear "
+            "too. Applied on top of the street width." + (" " + more if more else ""))
 
     def optional_polygons(self, parameters, name, context, feedback, frame, blocks, what):
         """An optional polygon layer (KEEP_CLEAR, BUILDINGS) in ``frame``'s working CRS, or

@@ -92,8 +92,8 @@ class LayoutMetrics(AlgorithmBase):
             "Extract road hierarchy). They are noded into a street graph; nothing is filtered.")
         self.add(QgsProcessingParameterFeatureSource(
             self.BLOCKS, "Blocks", poly, optional=True),
-            "City blocks. When missing, blocks are the faces of the road graph (as Extract "
-            "blocks makes them).")
+            "City blocks. When missing, blocks are the faces of the road graph (as 'Extract "
+            "city blocks' makes them).")
         self.add(QgsProcessingParameterFeatureSource(
             self.PARCELS, "Parcels", poly, optional=True),
             "Parcels (cadastre plots or a subdivision) for the Yang et al. 2013 parcel measures.")
@@ -146,7 +146,7 @@ class LayoutMetrics(AlgorithmBase):
             self.MIN_BLOCK_AREA, "Smallest block (m²)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=400.0, minValue=0.0, maxValue=1e6),
             "Faces of the road graph smaller than this are traffic islands, not blocks (as in "
-            "Extract blocks); the log counts them. 0 keeps every face.")
+            "'Extract city blocks'); the log counts them. 0 keeps every face.")
         self.add(QgsProcessingParameterNumber(
             self.MIN_BLOCK_WIDTH, "Thinnest block (m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=8.0, minValue=0.0, maxValue=1000.0),

@@ -58,7 +58,7 @@ class SubdivideParcels(AlgorithmBase):
             "extracted from road lines; they are first shrunk by half the street width on "
             "every side (per road with a width field), so parcels stop at the street's edge, "
             "and lose the areas to keep clear (e.g. the street surfaces of 'Tessellate "
-            "streets').\n\n"
+            "streets (surfaces and junctions)').\n\n"
             "Recursive (Weber et al. 2009, CityEngine 'Recursive') cuts a lot perpendicular "
             "to its long axis near the middle until it is under the maximum area, never "
             "below the minimum area or width and, with 'Force street access', never cutting "
@@ -101,7 +101,8 @@ class SubdivideParcels(AlgorithmBase):
             "or two rows of parcels along the block's oriented bounding box, spacing jittered "
             "with a Gaussian, each parcel with street access and at least the minimum width; "
             "parcel size from the blocks' parcel_area field (e.g. the blocks of 'Synthesize "
-            "roads (random walk)'), else lot width² x 1.5 (Aliaga et al. 2008, sec. 3.1.2).")
+            "roads by random walks (intersection points)'), else lot width² x 1.5 (Aliaga et "
+            "al. 2008, sec. 3.1.2).")
         self.add(QgsProcessingParameterNumber(
             self.MAX_AREA, "Maximum parcel area (m²)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=parcels.DEFAULT_MAX_AREA, minValue=1.0, maxValue=self.MAX_AREA_LIMIT),

@@ -62,8 +62,8 @@ class SynthesizeBuildingAttributes(AlgorithmBase):
         poly = [QgsProcessing.SourceType.TypeVectorPolygon]
         line = [QgsProcessing.SourceType.TypeVectorLine]
         self.add(QgsProcessingParameterFeatureSource(self.FOOTPRINTS, "Footprints", poly),
-                 "Building footprints to attribute, e.g. from 'Synthesize footprints' or a "
-                 "real layer with missing heights. A layer with a 'building' field (OSM "
+                 "Building footprints to attribute, e.g. from 'Synthesize building footprints' "
+                 "or a real layer with missing heights. A layer with a 'building' field (OSM "
                  "multipolygons) gives only its polygons with a building value; the others "
                  "(forests, water, boundaries) are skipped and counted.")
         self.add(QgsProcessingParameterFeatureSource(

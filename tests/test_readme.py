@@ -104,3 +104,20 @@ def test_readme_qgis_process_blocks_run_as_written():
         runs = re.findall(r"qgis_process\.bin run (urbansynth:\w+)", block)
         if "unzip" in block and runs:  # a clean profile: QGIS's Python lacks the packages
             assert runs[0] == "urbansynth:installdependencies", block
+
+
+def test_help_names_tools_as_the_toolbox_shows_them(qgis_processing):
+    """A tool named in another tool's help ('e.g. the blocks of ...') is named as the toolbox
+    lists it, so that a search finds it: not 'Extract blocks' for 'Extract city blocks'."""
+    from qgis.core import QgsApplication
+
+    registry = QgsApplication.processingRegistry()
+    ours = registry.providerById("urbansynth").algorithms()
+    shown = {a.displayName() for a in registry.algorithms()}
+    verbs = {a.displayName().split()[0] for a in ours}
+    for alg in ours:
+        texts = [alg.shortHelpString() or ""] + [p.help() or "" for p in alg.parameterDefinitions()]
+        for text in texts:
+            for name in re.findall(r"'([A-Z][^']+)'", text):
+                if name.split()[0] in verbs:
+                    assert name in shown, (alg.name(), name)
