@@ -96,3 +96,19 @@ def test_shipped_model_says_which_packages_are_missing(qgis_processing, monkeypa
     shown.missing = ("pandas",)
     assert shown.displayName().endswith("(needs pandas)")
     assert shown.createInstance().displayName() == shown.displayName()
+
+
+def test_changelog_names_every_tool():
+    """The plugin manager shows the changelog: every tool of the toolbox table is named in it,
+    by its id or as the toolbox lists it (the parenthesis aside), so that a tool added, split
+    or renamed since a release is in it."""
+    import re
+
+    from urban_synthesis.plugin.qgis_glue.toolbox import ALGORITHMS, algorithm_id
+
+    meta = configparser.ConfigParser()
+    meta.read(ROOT / "metadata.txt")
+    changelog = meta["general"]["changelog"].lower()
+    for module, _, display_name, _ in ALGORITHMS:
+        name = re.sub(r"\s*\(.*\)$", "", display_name).lower()
+        assert algorithm_id(module) in changelog or name in changelog, display_name
