@@ -387,6 +387,11 @@ def test_mesh_of_streets_trimmed_by_each_other_does_not_overlap():
             xyz = top.reshape(-1, 3)
             np.testing.assert_allclose(xyz[:, 2], 50 + 0.05 * xyz[:, 0] + 0.02 * xyz[:, 1] + 0.1,
                                        atol=1e-6)
+            # no side face between the two carriageways, where one surface abuts the other
+            # (each street's inner edge had a wall standing in the pavement)
+            walls = m.triangles[m.side]
+            mid = shapely.points(walls[:, :, :2].mean(1))
+            assert shapely.distance(mid, polys.boundary).max() < 0.01
 
 
 def test_the_mesh_of_bent_streets_covers_their_surface_once():
