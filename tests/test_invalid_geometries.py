@@ -59,7 +59,7 @@ def test_do_not_filter_repairs(qgis_processing):
 
     layer, log = _run(qgis_processing, QgsFeatureRequest.InvalidGeometryCheck.GeometryNoCheck)
     assert layer.featureCount() == 10
-    assert "1 invalid geometries repaired" in log
+    assert "1 invalid geometry repaired" in log
     assert all(f.geometry().isGeosValid() for f in layer.getFeatures())
 
 

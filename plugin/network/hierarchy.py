@@ -285,8 +285,10 @@ def assign_levels(graph: RoadGraph, streets: Streets, method: str = "both",
         dist = dijkstra(adj, directed=False, indices=extra, unweighted=True, min_only=True)
         fill = missing & np.isfinite(dist)
         level[fill] = dist[fill].astype(np.int64) + 1
-        progress.info(f"{len(extra)} parts of the network are not connected to an arterial; "
-                      "their longest street starts at level 1.")
+        progress.info(f"{len(extra)} part{'s' if len(extra) > 1 else ''} of the network "
+                      f"{'are' if len(extra) > 1 else 'is'} not connected to an arterial; "
+                      f"{'their' if len(extra) > 1 else 'its'} longest street starts at "
+                      "level 1.")
     progress.step(1.0)
     return level, seed_kind
 

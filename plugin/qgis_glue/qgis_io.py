@@ -334,7 +334,8 @@ def read_source(alg, parameters, name: str, context, feedback,
             fixed = np.array([_keep_dimension(g, kind) for g in fixed], dtype=object)
             geoms[invalid] = fixed
             if feedback is not None:
-                feedback.pushInfo(f"{label}: {int(invalid.sum())} invalid geometries repaired.")
+                feedback.pushInfo(f"{label}: {int(invalid.sum())} invalid "
+                                  f"geometr{'ies' if invalid.sum() > 1 else 'y'} repaired.")
         empty = shapely.is_empty(geoms) | shapely.is_missing(geoms)
         if empty.any():
             geoms, rows, fids = _kept(~empty, geoms, rows, fids)
