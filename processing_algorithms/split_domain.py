@@ -123,8 +123,7 @@ class SplitDomain(AlgorithmBase):
             "value among its features): 'probability' (how common it is, default 1), "
             "'max_count' and 'min_count' (at most / at least this many per layout: Yang's k1 "
             "and k2; a minimum is met by repeating the search, up to 8 times, and the log says "
-            "when it could not be).",
-            advanced=True)
+            "when it could not be).", advanced=True)
         self.add(QgsProcessingParameterNumber(
             self.PARCEL_LENGTH, "Parcel length (depth, m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=30.0, minValue=1.0, maxValue=1000.0),
