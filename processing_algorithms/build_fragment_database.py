@@ -64,7 +64,8 @@ class BuildFragmentDatabase(AlgorithmBase):
             self.LEVEL_FIELD, "Level field", defaultValue="level",
             parentLayerParameterName=self.ROADS, type=QgsProcessingParameterField.DataType.Numeric,
             optional=True),
-            "Integer street level (0 = arterial, larger = more local); 'level' when left empty.")
+            "Integer street level (0 = arterial, larger = more local); 'level' when left empty. "
+            "Only the order counts: levels 1, 2, 3 or 10, 20, 30 are stored as 0, 1, 2.")
         self.add(QgsProcessingParameterRasterLayer(
             self.DEM, "Elevation model", optional=True),
             "A DEM in any CRS: adds the relief change, mean slope, slope descriptors and a "
@@ -124,6 +125,13 @@ class BuildFragmentDatabase(AlgorithmBase):
                                    min_area=min_area, min_width=min_width, dem=dem,
                                    cell_size=cell, progress=qgis_io.progress_for(feedback, 15, 60))
         counts = frags.counts
+        values = counts["level_values"]
+        if values != list(range(len(values))):
+            shown = ", ".join(map(str, values[:6])) + (f", ... {values[-1]}"
+                                                       if len(values) > 6 else "")
+            feedback.pushInfo(f"{label}: levels {shown} of field '{level_field}' are the "
+                              f"levels 0 to {len(values) - 1} of the database (only their "
+                              "order counts).")
         for level, n in counts["per_level"].items():
             feedback.pushInfo(f"Level {level}: {n} fragments "
                               f"({counts['blocks_per_level'].get(level, 0)} city blocks).")

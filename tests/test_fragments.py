@@ -95,6 +95,25 @@ def test_slivers_are_dropped_and_no_fragment_is_an_error():
         fr.extract_fragments(lines, levels[:-1])
 
 
+def test_only_the_order_of_the_levels_counts():
+    """Levels 3, 5, 7, 9 or 10, 20, 30, 40 are the levels 0..3 of a hierarchy: a value between
+    them that no street has made every fragment of the level above it a block (and stored
+    each face twice), and levels near 2^40 looped for hours."""
+    lines, levels = levelled_grid()
+    f = fr.extract_fragments(lines, levels)
+    for given in (levels * 2 + 3, levels * 10 + 10, levels + 2 ** 40):
+        g = fr.extract_fragments(lines, given)
+        assert g.counts["per_level"] == f.counts["per_level"]
+        assert g.counts["blocks_per_level"] == f.counts["blocks_per_level"]
+        assert g.table["level"].tolist() == f.table["level"].tolist()
+        assert g.street_level.tolist() == f.street_level.tolist()
+        assert g.counts["level_values"] == sorted(set(given.tolist()))
+        assert g.counts["n_unassigned_streets"] == 0
+    assert f.counts["level_values"] == [0, 1, 2, 3]
+    with pytest.raises(InputError, match=r"one level \(7\)"):
+        fr.extract_fragments(lines, np.full(len(lines), 7))
+
+
 def test_relief_statistics_and_patches():
     lines, levels = levelled_grid()
     # plane z = 0.1 x + 0.2 y on 5 m cells over the grid (north-up: rows go south)

@@ -240,7 +240,8 @@ def extract_fragments(lines: Sequence, levels: Sequence, min_area: float = MIN_B
         together per level, so merged street features work as well as graph edges.
     levels : int array
         Street level per line, 0 = arterial. Negative or missing levels are not allowed
-        (filter them out first).
+        (filter them out first). Only their order counts: the k-th smallest value present
+        is level k of the fragments (``counts["level_values"]`` lists the values).
     min_area, min_width : float
         Faces smaller than ``min_area`` (m²) or with a mean width ``2 area / perimeter``
         under ``min_width`` (m) are slivers of dual carriageways and junctions, dropped as
@@ -294,10 +295,17 @@ def extract_fragments(lines: Sequence, levels: Sequence, min_area: float = MIN_B
     levels = levels.astype(np.int64)
     ok = ~(shapely.is_missing(lines) | shapely.is_empty(lines))
     lines, levels = lines[ok], levels[ok]
-    max_level = int(levels.max()) if len(levels) else 0
+    # only the order of the levels counts: 1, 2, 3 or 3, 5, 7 or 10, 20, 30 are the levels
+    # 0, 1, 2 of the database (a level between them that no street has made every fragment
+    # of the level above it a block, and levels of 2^40 looped for hours)
+    level_values, levels = np.unique(levels, return_inverse=True)
+    levels = levels.reshape(-1).astype(np.int64)
+    max_level = len(level_values) - 1
     if max_level < 1:
-        raise InputError("all streets have level 0: fragments need at least two street levels "
-                         "(a level l fragment holds the streets of level l + 1)")
+        raise InputError("all streets have one level"
+                         + (f" ({int(level_values[0])})" if len(level_values) else "")
+                         + ": fragments need at least two street levels (a level l fragment "
+                         "holds the streets of level l + 1)")
 
     # faces of every level <= l subgraph, l = 0 .. L (level L faces only decide is_block)
     faces_by_level: List[np.ndarray] = []
@@ -376,6 +384,8 @@ def extract_fragments(lines: Sequence, levels: Sequence, min_area: float = MIN_B
         "n_unassigned_streets": int((levels >= 1).sum()) - len(np.unique(np.concatenate(s_src))),
         "n_faces_dropped": int(dropped),
         "max_level": max_level,
+        # the level values given, in order: database level k is level_values[k]
+        "level_values": [int(v) for v in level_values],
     }
     return Fragments(geometry, table, np.concatenate(s_geom).astype(object),
                      np.concatenate(s_frag).astype(np.int64),
