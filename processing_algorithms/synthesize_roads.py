@@ -5,6 +5,8 @@ from collections import namedtuple
 import numpy as np
 import shapely
 from qgis.core import (
+    QgsCoordinateTransform,
+    QgsCsException,
     QgsFeature,
     QgsGeometry,
     QgsProcessing,
@@ -191,7 +193,8 @@ class SynthesizeRoads(AlgorithmBase):
         dem = parameters.get(self.DEM)
         if need_db:
             fragment_db = run("urbansynth:buildfragmentdatabase",
-                              {"ROADS": parameters[self.EXAMPLE_ROADS], "DEM": dem,
+                              {"ROADS": parameters[self.EXAMPLE_ROADS],
+                               "DEM": self._example_dem(parameters, context, feedback),
                                "OUTPUT": QgsProcessing.TEMPORARY_OUTPUT})["OUTPUT"]
             steps.setCurrentStep(1)
         # every method fills the district: the boundary given, or the arterials' convex hull,
@@ -223,6 +226,32 @@ class SynthesizeRoads(AlgorithmBase):
             or QgsProcessing.TEMPORARY_OUTPUT
         result = run(method.algorithm, params)
         return {self.OUTPUT: result["OUTPUT"]}
+
+    def _example_dem(self, parameters, context, feedback):
+        """The DEM the example's fragment database is built with: the DEM is the district's
+        terrain, and the example's only where it reaches the example roads (the same town).
+        A DEM of another place is left out, with a warning (the database was built on it and
+        stopped: 'no value over the input's extent')."""
+        layer = self.parameterAsRasterLayer(parameters, self.DEM, context)
+        if layer is None:
+            return None
+        example = self.parameterAsSource(parameters, self.EXAMPLE_ROADS, context)
+        if not layer.crs().isValid() or not example.sourceCrs().isValid():
+            return parameters[self.DEM]  # the child names the layer without a CRS
+        try:
+            extent = QgsCoordinateTransform(layer.crs(), example.sourceCrs(),
+                                            context.transformContext()) \
+                .transformBoundingBox(layer.extent())
+        except QgsCsException:
+            extent = None
+        if extent is not None and extent.intersects(example.sourceExtent()):
+            return parameters[self.DEM]
+        name = qgis_io.layer_name(self, parameters, self.EXAMPLE_ROADS, context)
+        feedback.pushWarning(
+            f"The DEM '{layer.name()}' does not reach the example roads {name}: their fragment "
+            "database is built without relief, so the terrain does not steer the choice of "
+            "fragments (give a FRAGMENT_DB built with the example's own DEM for that).")
+        return None
 
     @staticmethod
     def _area_layer(area, arterials, context, name: str):

@@ -181,3 +181,38 @@ def test_synthesize_roads_writes_in_the_arterials_crs(qgis_processing, helsinki_
     assert sketch.crs != 3067 and roads.crs == sketch.crs
     lines = roads.to_crs(3067).geometry.values
     assert shapely.within(lines, hull.buffer(1.0)).mean() > 0.99
+
+
+def test_synthesize_roads_builds_the_example_database_without_a_dem_of_another_place(
+        qgis_processing, helsinki_arterials, tmp_path):
+    """The DEM is the district's terrain. An example from another place (here Helsinki's
+    roads moved a degree east) was given it to build its fragment database from, and the run
+    stopped: "DEM has no value over the input's extent" (the district model with a DEM and
+    an example city elsewhere always did). The database is now built without relief, with a
+    warning naming the DEM and the example."""
+    import geopandas as gpd
+    from osgeo import gdal, osr
+
+    hierarchy, arterials = helsinki_arterials
+    example = tmp_path / "elsewhere.gpkg"
+    far = _read(hierarchy, None)
+    far["geometry"] = far.translate(xoff=1.0)
+    gpd.GeoDataFrame(far, crs=far.crs).to_file(example)
+    x0, y0, x1, y1 = _read(arterials, None).to_crs(3067).total_bounds
+    dem = tmp_path / "district_dem.tif"
+    ds = gdal.GetDriverByName("GTiff").Create(str(dem), 60, 60, 1, gdal.GDT_Float32)
+    ds.SetGeoTransform((x0 - 100, (x1 - x0 + 200) / 60, 0, y1 + 100, 0, -(y1 - y0 + 200) / 60))
+    srs = osr.SpatialReference()
+    srs.ImportFromEPSG(3067)
+    ds.SetProjection(srs.ExportToWkt())
+    ds.GetRasterBand(1).WriteArray(np.add.outer(np.arange(60.0), np.arange(60.0)).astype(np.float32))
+    ds = None
+    log = log_feedback()
+    out = str(tmp_path / "roads.gpkg")
+    qgis_processing.run("urbansynth:synthesizeroads", {
+        "METHOD": 0, "EXAMPLE_ROADS": str(example), "ARTERIALS": arterials, "DEM": str(dem),
+        "SEED": 3, "OUTPUT": out}, feedback=log)
+    warned = [w for w in log.warnings if "does not reach the example roads" in w]
+    assert len(warned) == 1 and "district_dem" in warned[0] and "elsewhere" in warned[0]
+    roads = _read(out, None)
+    assert (roads["level"] >= 1).any()
