@@ -485,14 +485,11 @@ def drivable_lines(frame, class_field, classes, feedback):
     such field, not in OSM ``other_tags`` either, or all empty): then every line is kept.
     An explicitly chosen class field that does not exist is an error.
     """
-    road_class = qgis_io.osm_tag_column(frame, class_field or "highway")
-    if road_class is None and class_field in (None, "", "highway") \
-            and "road_class" in frame.attributes:
+    road_class, read_from = qgis_io.road_classes(frame, class_field)
+    if read_from == "road_class" and classes:
         # the classes of 'Extract road hierarchy' (and the synthesis tools) kept as road_class;
         # the synthesis tools' own classes (major, minor, local ...) are streets too
-        road_class = frame.attributes["road_class"].to_numpy(dtype=object)
-        if classes:
-            classes = set(classes) | set(street_graph.SYNTHESISED_CLASSES)
+        classes = set(classes) | set(street_graph.SYNTHESISED_CLASSES)
     if road_class is not None and all(c is None or c == "" for c in road_class):
         road_class = None
     if road_class is None:

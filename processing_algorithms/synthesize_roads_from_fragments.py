@@ -91,8 +91,9 @@ class SynthesizeRoadsFromFragments(AlgorithmBase):
             self.ARTERIALS, "Arterial roads", [QgsProcessing.SourceType.TypeVectorLine]),
             "Sketched arterials, or the level 0 roads of a real city: lines that close faces to "
             "fill. They are noded and cleaned first. With OSM classes (a 'highway' field or "
-            "tag), a new street ends on no motorway or trunk away from its junctions: it ends "
-            "short of it, or goes where its other end is a junction.")
+            "tag, or the road_class of 'Extract road hierarchy'), a new street ends on no "
+            "motorway or trunk away from its junctions: it ends short of it, or goes where its "
+            "other end is a junction.")
         self.add(QgsProcessingParameterFeatureSource(
             self.BOUNDARY, "Target boundary", [QgsProcessing.SourceType.TypeVectorPolygon],
             optional=True),
@@ -174,7 +175,7 @@ class SynthesizeRoadsFromFragments(AlgorithmBase):
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         frame = qgis_io.read_source(self, parameters, self.ARTERIALS, context, feedback,
-                                    kind="lines", fields=["highway", "other_tags"])
+                                    kind="lines", fields=list(qgis_io.ROAD_CLASS_FIELDS))
         label = frame.name
         hull = shapely.area(shapely.convex_hull(shapely.union_all(frame.geometry))) / 1e6
         self.bound_work(f"Arterials {label} (convex hull {hull:,.1f} km²)", hull,
@@ -229,7 +230,7 @@ class SynthesizeRoadsFromFragments(AlgorithmBase):
             fill_quantile=self.number(parameters, self.FILL_QUANTILE, context),
             progress=qgis_io.progress_for(feedback, 12, 92),
             # motorways and trunks among them take no new junction
-            arterial_class=qgis_io.osm_tag_column(frame, "highway"))
+            arterial_class=qgis_io.road_classes(frame)[0])
         q = result.queries
         n_inserted = int((q.outcome == "fragment").sum())
         n_split = int((q.outcome == "procedural").sum())

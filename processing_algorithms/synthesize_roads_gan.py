@@ -249,7 +249,7 @@ class SynthesizeRoadsGan(AlgorithmBase):
         given, given_class = None, None
         frame = qgis_io.read_source(self, parameters, self.GIVEN_ROADS, context, feedback,
                                     kind="lines", target_crs=work, optional=True,
-                                    fields=["highway", "other_tags"])
+                                    fields=list(qgis_io.ROAD_CLASS_FIELDS))
         if frame is not None:
             frame, given_class = drivable_lines(frame, None, set(roads.DRIVABLE_CLASSES),
                                                 feedback)

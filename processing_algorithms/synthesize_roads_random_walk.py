@@ -104,7 +104,8 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
             "Roads in or around the target to expand from (e.g. its arterials): their dead "
             "ends at the target continue into the new streets, new streets meet them only at "
             "junctions, and the result is one network with them. With OSM classes (a "
-            "'highway' field or tag), a new street ends on no motorway or trunk away from its "
+            "'highway' field or tag, or the road_class of 'Extract road hierarchy'), a new "
+            "street ends on no motorway or trunk away from its "
             "junctions: it ends short of it, or goes where its other end is a junction.")
         self.add(QgsProcessingParameterFeatureSource(
             self.EXAMPLE_B, "Second example (blend)", types, optional=True),
@@ -286,7 +287,7 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
         self._bound(target, points, points_b)
         existing = qgis_io.read_source(self, parameters, self.EXISTING_ROADS, context, feedback,
                                        kind="lines", target_crs=target.crs, optional=True,
-                                       fields=["highway", "other_tags"])
+                                       fields=list(qgis_io.ROAD_CLASS_FIELDS))
         existing_lines = existing_class = None
         if existing is not None:
             existing, existing_class = drivable_lines(existing, None,

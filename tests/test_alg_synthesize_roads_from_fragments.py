@@ -278,3 +278,30 @@ def test_boundary_closes_the_sketch_and_the_fill_is_logged(qgis_processing, hels
     # the faces left empty are counted on the network returned, after the links
     empty = [m for m in log.messages if "left empty" in m]
     assert fill and empty and empty[0].endswith("left empty: 0.")
+
+
+@pytest.mark.parametrize("field", ["highway", "road_class"])
+def test_no_new_street_ends_on_a_trunk_whichever_field_holds_its_class(qgis_processing,
+                                                                       helsinki, field):
+    """Arterials taken from 'Extract road hierarchy' (its level-0 roads, as the demo and the
+    district model take them) hold their OSM class in 'road_class', not 'highway': their
+    trunk took new streets ending on it away from its junctions (9 on this sketch), as if
+    the layer had no classes. The tools that filter classes read 'road_class' already."""
+    from helpers import memory_layer
+
+    sketch = ["LINESTRING (500000 5200000, 501200 5200000)",
+              "LINESTRING (501200 5200000, 501200 5201000, 500000 5201000, 500000 5200000)",
+              "LINESTRING (500600 5200000, 500600 5201000)"]
+    arterials = memory_layer("LineString", sketch, "EPSG:32632", f"&field={field}:string",
+                             [["trunk"], ["secondary"], ["secondary"]])
+    res = qgis_processing.run(ALG, {"ARTERIALS": arterials, "FRAGMENT_DB": helsinki["db"],
+                                    "SEED": 1, "OUTPUT": "memory:"})
+    geoms, attrs = layer_arrays(res["OUTPUT"])
+    new = geoms[np.array(attrs["level"]) > 0]
+    assert len(new) > 50
+    ends = shapely.points(np.concatenate([shapely.get_coordinates(shapely.get_point(new, k))
+                                          for k in (0, -1)]))
+    trunk = shapely.from_wkt(sketch[0])
+    junctions = shapely.MultiPoint([(500000, 5200000), (500600, 5200000), (501200, 5200000)])
+    on_trunk = shapely.dwithin(ends, trunk, 0.01) & ~shapely.dwithin(ends, junctions, 1.0)
+    assert not on_trunk.any()

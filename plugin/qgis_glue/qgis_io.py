@@ -690,6 +690,25 @@ def osm_tag_column(frame: Frame, key: str) -> Optional[np.ndarray]:
     return None
 
 
+#: The fields :func:`road_classes` reads: ask read_source for them.
+ROAD_CLASS_FIELDS = ("highway", "other_tags", "road_class")
+
+
+def road_classes(frame: Frame, class_field: Optional[str] = None):
+    """The road class of each line and the field it was read from: ``class_field`` (a field,
+    or a key of OSM's ``other_tags``; default ``highway``), else, for the default, the
+    ``road_class`` field that 'Extract road hierarchy' and the synthesis tools write (their
+    level-0 roads are the arterials a synthesis is usually given). (None, None) when the
+    layer holds neither. Read the frame with :data:`ROAD_CLASS_FIELDS`.
+    """
+    values = osm_tag_column(frame, class_field or "highway")
+    if values is not None:
+        return values, class_field or "highway"
+    if class_field in (None, "", "highway") and "road_class" in frame.attributes:
+        return frame.attributes["road_class"].to_numpy(dtype=object), "road_class"
+    return None, None
+
+
 def osm_vertical_layers(frame: Frame) -> np.ndarray:
     """OSM vertical layer per feature from layer / bridge / tunnel fields or other_tags."""
     from ..network.street_graph import parse_other_tags, vertical_layer
