@@ -198,6 +198,31 @@ def test_a_new_layer_beside_a_bare_path_input_is_written(qgis_processing, tmp_pa
             "ROADS": str(roads), "OUTPUT": f"ogr:dbname='{roads}' table=\"hierarchy\" (geom)"})
 
 
+def test_a_raster_output_named_for_another_type_is_refused(qgis_processing, tmp_path):
+    """Every raster output is written as a GeoTIFF (qgis_io.write_geotiff / write_image),
+    whatever its name: the generator image or the fragments' relief named .asc or .gpkg
+    was a GeoTIFF under that name, which other programs misread. Refused before anything
+    is written, as a file output of another type is; .tif and .TIFF pass."""
+    from qgis.core import QgsApplication, QgsProcessingContext, QgsProcessingException
+
+    from urban_synthesis.plugin.qgis_glue import outputs
+
+    params = {"TARGET": bubenec_layer("plots"), "OUTPUT": "memory:"}
+    for name in ("generator.asc", "generator.gpkg"):
+        with pytest.raises(QgsProcessingException,
+                           match=r"Generator image \(OUTPUT_RASTER\) is written as GeoTIFF.*"
+                                 rf"{name} does not end in \.tif or \.tiff"):
+            qgis_processing.run("urbansynth:synthesizeroadsgan",
+                                {**params, "OUTPUT_RASTER": str(tmp_path / name)})
+        assert not (tmp_path / name).exists()
+    alg = QgsApplication.processingRegistry().createAlgorithmById(
+        "urbansynth:synthesizeroadsgan")
+    for name in ("generator.tif", "generator.TIFF"):
+        assert outputs.destination_error(
+            alg, {**params, "OUTPUT_RASTER": str(tmp_path / name)},
+            QgsProcessingContext()) is None
+
+
 def test_a_file_output_named_for_another_type_is_refused(qgis_processing, tmp_path):
     """A file output is written in its declared format whatever its name: a fragment
     database named .txt was a GeoPackage that a text editor or QGIS's 'Add layer' then

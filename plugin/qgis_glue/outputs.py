@@ -44,6 +44,9 @@ from . import styles
 
 __all__ = ["STAGING_PREFIX", "OutputStaging", "destination_error"]
 
+#: The format every raster output is written in (a raster destination is named so).
+RASTER_FORMAT = "GeoTIFF (*.tif *.tiff)"
+
 #: Name prefix of the staging folders (hidden: a file manager does not show them).
 STAGING_PREFIX = ".urbansynth-run-"
 
@@ -158,15 +161,21 @@ def _same(a: Path, b: Path) -> bool:
 
 def _file_type_error(definition, destination: str) -> Optional[str]:
     """The message when a file output's name does not end in its declared type's extension
-    (a GeoPackage named .txt), else None: the file is written in the declared format
-    whatever it is called, and the GUI adds the extension where qgis_process does not."""
-    if not isinstance(definition, QgsProcessingParameterFileDestination):
+    (a GeoPackage named .txt, a raster named .asc), else None: the file is written in the
+    declared format whatever it is called (every raster output as a GeoTIFF:
+    ``qgis_io.write_geotiff``, ``qgis_io.write_image``), and the GUI adds the extension
+    where qgis_process does not."""
+    if isinstance(definition, QgsProcessingParameterRasterDestination):
+        written_as = RASTER_FORMAT
+    elif isinstance(definition, QgsProcessingParameterFileDestination):
+        written_as = definition.fileFilter()
+    else:
         return None
-    extensions = [e.lower() for e in re.findall(r"\*(\.[A-Za-z0-9]+)", definition.fileFilter())]
+    extensions = [e.lower() for e in re.findall(r"\*(\.[A-Za-z0-9]+)", written_as)]
     if not extensions or Path(destination).suffix.lower() in extensions:
         return None
     return (f"Output {definition.description()} ({definition.name()}) is written as "
-            f"{definition.fileFilter()}, but {destination} does not end in "
+            f"{written_as}, but {destination} does not end in "
             f"{' or '.join(extensions)}: name it so, or another program will misread it.")
 
 
