@@ -80,8 +80,8 @@ class ExtractRoadHierarchy(AlgorithmBase):
             self.CLASS_FIELD, "Road class field", defaultValue="highway",
             parentLayerParameterName=self.INPUT, optional=True),
             "Field with the road class (OSM 'highway'). If the layer lacks it, an OSM "
-            "'other_tags' field is searched; without classes, all lines are used and arterials "
-            "are chosen topologically.")
+            "'other_tags' field is searched, then the road_class this tool writes; without "
+            "classes, all lines are used and arterials are chosen topologically.")
         self.add(QgsProcessingParameterString(
             self.CLASSES, "Drivable classes (comma-separated, empty = all)",
             defaultValue=",".join(roads.DRIVABLE_CLASSES), optional=True),
@@ -136,7 +136,7 @@ class ExtractRoadHierarchy(AlgorithmBase):
         class_field = self.parameterAsString(parameters, self.CLASS_FIELD, context)
         frame = qgis_io.read_source(self, parameters, self.INPUT, context, feedback, kind="lines",
                                     fields=[class_field or "highway", "name", "layer", "bridge",
-                                            "tunnel", "other_tags"])
+                                            "tunnel", *qgis_io.ROAD_CLASS_FIELDS])
         label = frame.name
         classes = parse_class_list(self.parameterAsString(parameters, self.CLASSES, context))
         method = self.METHOD_KEYS[self.parameterAsEnum(parameters, self.METHOD, context)]

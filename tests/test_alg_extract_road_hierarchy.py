@@ -33,6 +33,27 @@ def test_helsinki_hierarchy(qgis_processing, tmp_path):
     assert all(r["level_a"] is not None for r in prow)
 
 
+def test_its_own_output_keeps_its_classes(qgis_processing, tmp_path):
+    """The hierarchy's output holds the OSM classes in 'road_class'. Read again (a town cut
+    out of it, a second run with other settings), it was taken as a layer without classes:
+    2 topological arterials instead of Helsinki's 22 primaries and secondaries. The road
+    class rule (highway, else road_class) was not given the field to read."""
+    first = qgis_processing.run("urbansynth:extractroadhierarchy", {
+        "INPUT": helsinki_layer("lines"), "OUTPUT": str(tmp_path / "roads.gpkg"),
+        "OUTPUT_INTERSECTIONS": None})["OUTPUT"]
+    log = log_feedback()
+    again = qgis_processing.run("urbansynth:extractroadhierarchy", {
+        "INPUT": first, "OUTPUT": "memory:", "OUTPUT_INTERSECTIONS": None}, feedback=log)
+    assert not any("no road classes" in m for m in log.messages)
+    rows, _ = layer_features(again["OUTPUT"])
+    from qgis.core import QgsVectorLayer
+
+    before, _ = layer_features(QgsVectorLayer(first, "first run", "ogr"))
+    assert sum(r["level"] == 0 for r in before) > 20
+    assert sorted((r["level"], r["road_class"]) for r in rows) == \
+        sorted((r["level"], r["road_class"]) for r in before)
+
+
 def test_bubenec_without_classes_uses_topological_levels(qgis_processing):
     out = qgis_processing.run("urbansynth:extractroadhierarchy", {
         "INPUT": bubenec_layer("streets"), "PARCELS": bubenec_layer("plots"),
