@@ -179,6 +179,8 @@ class ExtractRoadHierarchy(AlgorithmBase):
         if self.OUTPUT_INTERSECTIONS in parameters and parameters[self.OUTPUT_INTERSECTIONS] is not None:
             table = hierarchy.intersection_attributes(graph, h.streets, h.street_level,
                                                       parcels=parcels, parcel_radius=radius)
+            if parcels is not None:
+                self._report_parcels(table, parcels_frame.name, label, radius, feedback)
             points = shapely.points(graph.nodes)
             results[self.OUTPUT_INTERSECTIONS] = qgis_io.write_sink(
                 self, parameters, self.OUTPUT_INTERSECTIONS, context, points, table,
@@ -186,3 +188,17 @@ class ExtractRoadHierarchy(AlgorithmBase):
             qgis_io.style_output(context, results[self.OUTPUT_INTERSECTIONS], "intersections.qml")
         feedback.setProgress(100)
         return results
+
+    @staticmethod
+    def _report_parcels(table, parcels_name, label, radius, feedback):
+        """Say which intersections found no parcel within the radius: parcels of another
+        place (or CRS mix-up) left every parcel_area empty without a word."""
+        near = np.isfinite(table["parcel_area"].to_numpy(dtype=np.float64, na_value=np.nan))
+        if not near.any():
+            feedback.pushWarning(
+                f"No parcel of {parcels_name} lies within {radius:g} m of an intersection of "
+                f"{label}: parcel_area stays empty. Check that both layers cover the same "
+                "place.")
+        elif not near.all():
+            feedback.pushInfo(f"{int((~near).sum())} of {len(near)} intersections have no "
+                              f"parcel within {radius:g} m: their parcel_area stays empty.")

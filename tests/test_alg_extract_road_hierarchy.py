@@ -69,6 +69,26 @@ def test_bubenec_without_classes_uses_topological_levels(qgis_processing):
     assert len(areas) > len(prow) / 2 and 100 < np.median(areas) < 5000
 
 
+def test_parcels_of_another_place_are_named_in_a_warning(qgis_processing):
+    """Parcels that no intersection has within PARCEL_RADIUS (another town, or a layer in
+    the wrong place) left every parcel_area empty without a word."""
+    from qgis.core import NULL
+
+    log = log_feedback()
+    out = qgis_processing.run("urbansynth:extractroadhierarchy", {
+        "INPUT": helsinki_layer("lines"), "PARCELS": bubenec_layer("plots"),
+        "OUTPUT": "memory:", "OUTPUT_INTERSECTIONS": "memory:"}, feedback=log)
+    rows, _ = layer_features(out["OUTPUT_INTERSECTIONS"])
+    assert all(r["parcel_area"] in (None, NULL) for r in rows)
+    warned = [w for w in log.warnings if "No parcel of" in w]
+    assert len(warned) == 1 and "bubenec (plots)" in warned[0] and "100 m" in warned[0]
+    log = log_feedback()
+    qgis_processing.run("urbansynth:extractroadhierarchy", {
+        "INPUT": bubenec_layer("streets"), "PARCELS": bubenec_layer("plots"),
+        "OUTPUT": "memory:", "OUTPUT_INTERSECTIONS": "memory:"}, feedback=log)
+    assert not any("No parcel of" in w for w in log.warnings)
+
+
 def test_input_is_not_modified(qgis_processing, tmp_path):
     from qgis.core import QgsVectorLayer
 
