@@ -160,7 +160,8 @@ class SynthesizeRoadsFromFragments(AlgorithmBase):
         self.add(dem_out, "The DEM with the relief of the inserted fragments merged in "
                           "(needs a DEM and a database built with one).")
         self.addOutput(QgsProcessingOutputNumber(self.N_EDGES, "Number of road edges"))
-        self.addOutput(QgsProcessingOutputNumber(self.N_INSERTED, "Fragments inserted"))
+        self.addOutput(QgsProcessingOutputNumber(
+            self.N_INSERTED, "Fragments inserted (by level and by the fill)"))
 
     def _databases(self, parameters, context):
         paths, names = self.database_paths(parameters, context, self.FRAGMENT_DB,
@@ -236,6 +237,8 @@ class SynthesizeRoadsFromFragments(AlgorithmBase):
         n_split = int((q.outcome == "procedural").sum())
         n_block = int((q.outcome == "block").sum())
         n_fill = int(q.outcome.str.startswith("fill_").sum())
+        # the fill stage inserts example fragments too (at scale or scaled)
+        n_fill_fragments = int(q.outcome.isin(["fill_fragment", "fill_scaled"]).sum())
         n_rest = len(q) - n_inserted - n_split - n_block - n_fill  # each query one outcome
         feedback.pushInfo(
             f"{len(q)} query fragments: {n_inserted} filled from examples, "
@@ -250,7 +253,7 @@ class SynthesizeRoadsFromFragments(AlgorithmBase):
                                   QgsWkbTypes.Type.LineString, frame.source_crs, frame.crs, feedback)
         qgis_io.style_output(context, dest, "roads_by_level.qml")
         outputs = {self.OUTPUT: dest, self.N_EDGES: len(result.geometry),
-                   self.N_INSERTED: n_inserted}
+                   self.N_INSERTED: n_inserted + n_fill_fragments}
         if dem_out:
             if not any(d.relief is not None for d in dbs):
                 feedback.pushInfo("No database has relief: OUTPUT_DEM is the input DEM resampled.")

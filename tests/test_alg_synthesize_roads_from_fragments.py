@@ -79,6 +79,9 @@ def test_helsinki_synthesis_through_processing(qgis_processing, helsinki):
     assert set(level) >= {0, 1}
     src = np.array(attrs["source_fragment"], dtype=object)
     assert set(src[level == 0]) == {"arterial"}
+    # every example fragment in the output was counted (the fill's were not)
+    inserted = {s for s in src if s.startswith("helsinki_fragments:")}
+    assert res["N_INSERTED"] >= len(inserted) > 0
     made = ("procedural", "statistics", "link", "close", "cul-de-sac")
     assert all(s.startswith("helsinki_fragments:") or s in made for s in src[level > 0])
     assert any(m.startswith("Level 0:") for m in log.messages)
