@@ -245,3 +245,28 @@ def test_a_file_output_named_for_another_type_is_refused(qgis_processing, tmp_pa
     qgis_processing.run("urbansynth:buildfragmentdatabase",
                         {"ROADS": str(roads), "OUTPUT": str(tmp_path / "db.GPKG")})
     assert (tmp_path / "db.GPKG").stat().st_size > 0
+
+
+def test_a_new_layer_in_an_input_database_is_refused_by_what_it_would_do(qgis_processing,
+                                                                        tmp_path):
+    """A fragment database is an input file read whole: an output layer of a new name in it
+    would modify it and is refused, with a message that says so (it said 'would overwrite
+    layer roads of the input' of a layer that did not exist)."""
+    from qgis.core import QgsProcessingException
+
+    roads = tmp_path / "roads.gpkg"
+    qgis_processing.run(ALG, {"INPUT": bubenec_layer("streets"), "OUTPUT": str(roads),
+                              "OUTPUT_INTERSECTIONS": None})
+    db = tmp_path / "db.gpkg"
+    qgis_processing.run("urbansynth:buildfragmentdatabase", {"ROADS": str(roads),
+                                                           "OUTPUT": str(db)})
+    before = _sha(db)
+    arterials = memory_layer("LineString", ["LINESTRING(1605000 6460000, 1606000 6460000)"],
+                             "EPSG:3857", name="arterials")
+    with pytest.raises(QgsProcessingException,
+                       match=r"would write layer 'new_roads' into the input .*db\.gpkg\), a "
+                             r"file read whole"):
+        qgis_processing.run("urbansynth:synthesizeroadsfromfragments", {
+            "ARTERIALS": arterials, "FRAGMENT_DB": str(db),
+            "OUTPUT": f"ogr:dbname='{db}' table=\"new_roads\" (geom)"})
+    assert _sha(db) == before

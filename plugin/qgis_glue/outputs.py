@@ -211,6 +211,12 @@ def destination_error(alg, parameters, context) -> Optional[str]:
                 continue
             if table is not None and source.layer is not None and table != source.layer:
                 continue                     # another layer of the same GeoPackage
+            if table is not None and source.layer is None:
+                # a file read whole (a database): a new layer in it modifies it too
+                return (f"Output {definition.description()} ({definition.name()}) would "
+                        f"write layer '{table}' into the input {source.name} "
+                        f"({source.path}), a file read whole: inputs are never modified; "
+                        "choose another output file.")
             what = f"layer '{table}' of " if table else ""
             return (f"Output {definition.description()} ({definition.name()}) would "
                     f"overwrite {what}the input {source.name} ({source.path}): inputs are "
