@@ -644,8 +644,11 @@ def retarget_layout(elements: Sequence, source: np.ndarray, target: np.ndarray,
         scaled[members] = _valid(warp_geometries(
             _scale_along(elements[members], seg.u, guide_scale), source, target,
             max_segment=WARP_SEGMENT))
-        seq, is_row = _synthesize_group(seg, members, kinds, elements, guides, scaled,
-                                        buildable, blocked, inset, step, alpha)
+        # GEOS reports round-off on touching guides and lots as 'invalid value' warnings
+        # (printed to the user's console); the overlays' results are sound
+        with np.errstate(invalid="ignore"):
+            seq, is_row = _synthesize_group(seg, members, kinds, elements, guides, scaled,
+                                            buildable, blocked, inset, step, alpha)
         if not seq:
             continue
         for i, poly in seq:
