@@ -436,6 +436,26 @@ def test_the_mesh_of_bent_streets_covers_their_surface_once():
             assert length == pytest.approx(closed.boundary.length, rel=5e-3)
 
 
+def test_a_hairpin_turning_back_on_itself_has_no_face_off_its_surface():
+    """A street that turns by 179.95° has its bend's inner corner 9 km away: a side face
+    ran out to it. Every face of the mesh now lies on the street's surface, which the top
+    faces still cover once."""
+    from urban_synthesis.plugin.network import street_mesh as sm
+
+    turn = np.radians(0.05)
+    line = shapely.LineString([(0, 0), (100, 0),
+                               (100 - 80 * np.cos(turn), 80 * np.sin(turn))])
+    t = ss.tessellate_lines([line], np.full(1, 8.0),
+                            dem=plane_dem(0.05, 0.02, extent=(-100, -100, 300, 200)))
+    m = sm.street_mesh(t, spacing=5.0)
+    surface = shapely.union_all(shapely.force_2d(t.surfaces))
+    assert shapely.distance(shapely.points(m.triangles.reshape(-1, 3)[:, :2]),
+                            surface).max() < 1e-6
+    top = m.triangles[~m.side]
+    flat = shapely.polygons(np.concatenate([top[:, :, :2], top[:, :1, :2]], axis=1))
+    assert shapely.area(flat).sum() == pytest.approx(surface.area, rel=1e-6)
+
+
 def test_a_dead_end_street_is_closed_by_a_side_face():
     """On a DEM the street floats z_offset above the ground: its left and right edges had
     side faces, its dead end's last cross-section none (an open gap under its end)."""

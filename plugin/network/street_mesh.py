@@ -301,10 +301,12 @@ def _replaced(tris, owner, uv, which, shapes):
 def _on_outline(a: np.ndarray, b: np.ndarray, own: np.ndarray, paved: np.ndarray) -> np.ndarray:
     """Whether each edge a -> b of a street or junction (``own``: its index in ``paved``,
     the street surfaces then the junctions) is an outer edge of the paved area: its middle
-    lies neither inside its own surface by more than a centimetre nor within a centimetre
-    of another's. Otherwise the side face would stand inside the pavement: on a hairpin's
-    inner edge, which its other leg covers; between two streets or a street and a junction
-    that abut (a connecting line, a surface trimmed where it overlapped the other)."""
+    lies on its own surface's outline (within a centimetre of it, not inside it) and
+    within a centimetre of no other surface. Otherwise the side face would stand inside
+    the pavement -- on a hairpin's inner edge, which its other leg covers; between two
+    streets or a street and a junction that abut (a connecting line, a surface trimmed
+    where it overlapped the other) -- or off it: an edge to a hairpin's inner corner,
+    which lies beyond its legs (a side face 9 km long on a 179.95° hairpin)."""
     mid = 0.5 * (a + b)
     # a centimetre box round each middle: intersects and contains on prepared polygons are
     # much cheaper than distances (0.6 M side faces on the benchmark's DEM grid)
@@ -312,9 +314,9 @@ def _on_outline(a: np.ndarray, b: np.ndarray, own: np.ndarray, paved: np.ndarray
     shapely.prepare(paved)
     i, p = shapely.STRtree(paved).query(box, predicate="intersects")
     mine = p == own[i]
-    inside = np.zeros(len(i), dtype=bool)
-    inside[mine] = shapely.contains_properly(paved[p[mine]], box[i[mine]])
-    return ~np.isin(np.arange(len(mid)), i[~mine | inside])
+    on_own = np.zeros(len(mid), dtype=bool)
+    on_own[i[mine][~shapely.contains_properly(paved[p[mine]], box[i[mine]])]] = True
+    return on_own & ~np.isin(np.arange(len(mid)), i[~mine])
 
 
 def _side_faces(top: np.ndarray, ground: np.ndarray, a: np.ndarray, b: np.ndarray,
