@@ -69,7 +69,8 @@ class BuildFragmentDatabase(AlgorithmBase):
         self.add(QgsProcessingParameterRasterLayer(
             self.DEM, "Elevation model", optional=True),
             "A DEM in any CRS: adds the relief change, mean slope, slope descriptors and a "
-            "relief patch to every fragment (thesis ch. 4.1, terrain term).")
+            "relief patch to every fragment (thesis ch. 4.1, terrain term). Heights in metres, or "
+            "in the unit the raster declares (band unit or vertical CRS: feet are converted).")
         self.add(QgsProcessingParameterNumber(
             self.MIN_AREA, "Minimum fragment area (m²)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=blocks.MIN_BLOCK_AREA, minValue=0.0, maxValue=1e6),

@@ -180,7 +180,8 @@ class GrowRoads(AlgorithmBase):
             self.DEM, "Elevation model", optional=True),
             "A DEM in any CRS, resampled bilinearly to the boundary's working CRS: grown "
             "segments steeper than the maximum slope turn (by up to 45°) or are dropped. "
-            "Areas without heights count as flat.")
+            "Areas without heights count as flat. Heights in metres, or in the unit the raster "
+            "declares (band unit or vertical CRS: feet are converted).")
         self.add(QgsProcessingParameterNumber(
             self.MAX_SLOPE, "Maximum slope (%)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=100 * d.max_slope, minValue=0.1, maxValue=100.0),
@@ -272,7 +273,8 @@ class GrowRoads(AlgorithmBase):
         if density_layer is not None:
             cell = qgis_io.raster_cell_size(density_layer, crs, bounds, context)
             try:
-                density = qgis_io.read_raster(density_layer, crs, bounds, cell)
+                density = qgis_io.read_raster(density_layer, crs, bounds, cell,
+                                               what="Density raster", heights=False)
             except QgsProcessingException as exc:
                 raise QgsProcessingException(
                     f"Density raster '{density_layer.name()}' has no value over the boundary "
@@ -281,7 +283,8 @@ class GrowRoads(AlgorithmBase):
         if obstacle_raster is not None:
             cell = qgis_io.raster_cell_size(obstacle_raster, crs, bounds, context)
             try:
-                grid = qgis_io.read_raster(obstacle_raster, crs, bounds, cell)
+                grid = qgis_io.read_raster(obstacle_raster, crs, bounds, cell,
+                                           what="Obstacle raster", heights=False)
             except QgsProcessingException as exc:
                 raise QgsProcessingException(
                     f"Obstacle raster '{obstacle_raster.name()}' has no value over the boundary "

@@ -109,7 +109,9 @@ class TessellateStreets(AlgorithmBase):
         self.add(QgsProcessingParameterRasterLayer(
             self.DEM, "Elevation model", optional=True),
             "A DEM in any CRS, resampled bilinearly to the working CRS: outputs get Z, "
-            "junctions the terrain's tangent plane, and slopes are measured.")
+            "junctions the terrain's tangent plane, and slopes are measured. Heights in metres, "
+            "or in the unit the raster declares (band unit or vertical CRS: feet are "
+            "converted).")
         self.add(QgsProcessingParameterNumber(
             self.MERGE_DISTANCE, "Junction merge distance (m)",
             QgsProcessingParameterNumber.Type.Double, defaultValue=3.0, minValue=0.0,

@@ -154,6 +154,44 @@ def test_helsinki_osm(qgis_processing):
     assert np.mean([e in ids for e in ends]) > 0.6
 
 
+def test_a_dem_in_feet_gives_heights_and_slopes_in_metres(qgis_processing, stars, tmp_path):
+    """The plane's heights written in US survey feet, the unit declared by the band's unit
+    type or by the file's compound CRS (ETRS-TM35FIN + a vertical CRS in feet): z and slopes
+    are those of the plane in metres (they were 3.28 times too high and too steep), and the
+    log says what was converted."""
+    from osgeo import gdal, osr
+
+    from helpers import log_feedback
+
+    plane = _write_plane(tmp_path / "plane.tif")
+    feet = 1200.0 / 3937.0
+    z = gdal.Open(plane).ReadAsArray().astype(np.float64) / feet
+    results = {}
+    for how in ("unit type", "vertical CRS"):
+        path = tmp_path / f"feet_{how.replace(' ', '_')}.tif"
+        ds = gdal.GetDriverByName("GTiff").CreateCopy(str(path), gdal.Open(plane))
+        ds.GetRasterBand(1).WriteArray(z.astype(np.float32))
+        if how == "unit type":
+            ds.GetRasterBand(1).SetUnitType("US survey foot")
+        else:
+            srs = osr.SpatialReference()
+            srs.SetFromUserInput("EPSG:3067+6360")   # + NAVD88 height (ftUS)
+            ds.SetSpatialRef(srs)
+        ds = None
+        log = log_feedback()
+        out = qgis_processing.run(ALG, {"ROADS": stars, "WIDTH_FIELD": "w", "DEM": str(path),
+                                        "OUTPUT_SURFACES": "memory:",
+                                        "OUTPUT_JUNCTIONS": "memory:"}, feedback=log)
+        rows, sg = layer_features(out["OUTPUT_SURFACES"])
+        xyz = shapely.get_coordinates(sg, include_z=True)
+        np.testing.assert_allclose(xyz[:, 2], 20 + A * (xyz[:, 0] - X0) + B * (xyz[:, 1] - Y0),
+                                   atol=0.01)
+        assert max(r["slope_long_pct"] for r in rows) < 100 * np.hypot(A, B) + 0.05
+        assert any("converted to metres" in i for i in log.messages), how
+        results[how] = sorted(r["slope_long_pct"] for r in rows)
+    np.testing.assert_allclose(results["unit type"], results["vertical CRS"], atol=1e-6)
+
+
 def test_degree_5_and_6_on_an_inclined_plane(qgis_processing, stars, tmp_path):
     dem = _write_plane(tmp_path / "plane.tif")
     out = qgis_processing.run(ALG, {"ROADS": stars, "WIDTH_FIELD": "w", "DEM": dem,

@@ -35,7 +35,8 @@ from typing import Callable, Optional, Tuple, Union
 
 from .progress import InputError
 
-__all__ = ["MAX_SCALE_ERROR", "WEB_MERCATOR", "is_web_mercator", "utm_zone", "working_crs"]
+__all__ = ["MAX_SCALE_ERROR", "WEB_MERCATOR", "is_web_mercator", "metres_per_unit", "utm_zone",
+           "working_crs"]
 
 #: A projected CRS whose point scale at the data is further than this from 1 (a share: 1 %)
 #: is not worked in: lengths and areas would be off by as much. UTM within its zone is off
@@ -88,3 +89,42 @@ def working_crs(authid: Optional[str], projected_in_metres: bool,
             return None
     lon, lat = centre_lonlat() if callable(centre_lonlat) else centre_lonlat
     return utm_zone(float(lon), float(lat))
+
+
+#: Names of length units as rasters declare them (GDAL's band unit type, a vertical CRS's
+#: unit) -> metres per unit; the keys are lower case with runs of spaces, '-' and '_' as one
+#: space. The empty name (nothing declared) is metres, as every DEM format defaults to.
+_METRES_PER_UNIT = {
+    "": 1.0, "m": 1.0, "metre": 1.0, "meter": 1.0, "metres": 1.0, "meters": 1.0,
+    "cm": 0.01, "centimetre": 0.01, "centimeter": 0.01, "centimetres": 0.01,
+    "centimeters": 0.01, "dm": 0.1, "decimetre": 0.1, "decimeter": 0.1,
+    "mm": 0.001, "millimetre": 0.001, "millimeter": 0.001,
+    "ft": 0.3048, "foot": 0.3048, "feet": 0.3048, "international foot": 0.3048,
+    "international feet": 0.3048, "intl foot": 0.3048,
+    "us survey foot": 1200.0 / 3937.0, "us survey feet": 1200.0 / 3937.0,
+    "us ft": 1200.0 / 3937.0, "ftus": 1200.0 / 3937.0, "foot us": 1200.0 / 3937.0,
+    "us foot": 1200.0 / 3937.0, "survey foot": 1200.0 / 3937.0,
+}
+
+
+def metres_per_unit(name: Optional[str]) -> Optional[float]:
+    """Metres per unit of a length unit named as a raster declares it (a DEM band's unit
+    type, a vertical CRS's unit): 1 for metres and for no name, None for a name that is
+    not a known length unit. Heights in feet make every slope 3.28 times too steep when
+    they are read as metres.
+
+    Examples
+    --------
+    >>> metres_per_unit("m"), metres_per_unit(""), metres_per_unit(None)
+    (1.0, 1.0, 1.0)
+    >>> metres_per_unit("ft")
+    0.3048
+    >>> round(metres_per_unit("US survey foot"), 10)
+    0.3048006096
+    >>> metres_per_unit("us-ft") == metres_per_unit("US_survey_foot")
+    True
+    >>> metres_per_unit("kg/m2") is None
+    True
+    """
+    key = " ".join(str(name or "").lower().replace("-", " ").replace("_", " ").split())
+    return _METRES_PER_UNIT.get(key)

@@ -744,13 +744,40 @@ style_output = styles.style_output  # the algorithms' one call (qgis_glue/styles
 UNDECLARED_NODATA = (-9999.0, -32767.0, -32768.0, float(np.finfo(np.float32).min))
 
 
+def height_unit(source: str):
+    """(metres per unit, unit name) of the heights in band 1 of a raster file: the band's
+    declared unit type, else the unit of a vertical CRS in the file's CRS (a compound CRS
+    such as NAD83 / New York + NAVD88 height (ftUS)), else metres (the name is then '');
+    the factor is None for a unit that is not a known length
+    (:func:`core.crs.metres_per_unit`)."""
+    from osgeo import gdal
+
+    try:
+        ds = gdal.OpenEx(source, gdal.OF_RASTER | gdal.OF_READONLY)
+    except RuntimeError:  # exceptions enabled by someone else; the warp reports it
+        ds = None
+    if ds is None or ds.RasterCount < 1:
+        return 1.0, ""
+    name = (ds.GetRasterBand(1).GetUnitType() or "").strip()
+    if not name:
+        srs = ds.GetSpatialRef()
+        if srs is not None and (srs.IsCompound() or srs.IsVertical()):
+            name = (srs.GetAttrValue("VERT_CS|UNIT") or "").strip() or \
+                ("metre" if srs.GetTargetLinearUnits("VERT_CS") == 1.0 else "")
+    ds = None
+    return crs_rule.metres_per_unit(name), name
+
+
 def read_raster(layer, work_crs: QgsCoordinateReferenceSystem, bounds, cell_size: float,
-                feedback=None, what: str = "DEM"):
+                feedback=None, what: str = "DEM", heights: bool = True):
     """Warp a raster layer into the working CRS over ``bounds`` (+ a margin) with GDAL.
 
     The engine works on a numpy grid with a geotransform (a :class:`DemGrid`); GDAL (the
     same library QGIS uses) reprojects and resamples the raster bilinearly into an
     in-memory dataset first. ``what`` names the raster in messages (DEM, density ...).
+    ``heights``: the values are heights, returned in metres whatever unit the raster
+    declares (:func:`height_unit`; feet would make every slope 3.28 times too steep);
+    False for other values (density, obstacles), read as they are.
     """
     from osgeo import gdal
 
@@ -792,6 +819,19 @@ def read_raster(layer, work_crs: QgsCoordinateReferenceSystem, bounds, cell_size
                 "'no data': they are read as heights. Set the raster's no-data value (Layer "
                 "Properties > Transparency, or GDAL 'Translate' with -a_nodata) if they are "
                 "gaps.")
+    if heights:
+        factor, unit = height_unit(source)
+        if factor is None:
+            if feedback is not None:
+                feedback.pushWarning(f"{what} '{layer.name()}' declares its heights in "
+                                     f"'{unit}', not a known length unit: they are read as "
+                                     "metres.")
+        elif factor != 1.0:
+            # nodata cells are NaN already (dstNodata); the no-data code is no height
+            grid = np.where(np.isfinite(grid), grid * factor, grid)
+            if feedback is not None:
+                feedback.pushInfo(f"{what} '{layer.name()}': heights in {unit} "
+                                  f"({factor:.10g} m), converted to metres.")
     dem = DemGrid(grid, ds.GetGeoTransform(), nodata)
     valid = np.isfinite(dem.array)
     if not valid.any():
