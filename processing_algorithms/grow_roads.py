@@ -122,7 +122,9 @@ class GrowRoads(AlgorithmBase):
         self.add(QgsProcessingParameterPoint(
             self.CENTER, "Centre of the radial pattern", optional=True),
             "Spokes and rings of the radial pattern are around this point; default: the "
-            "boundary's centroid.")
+            "boundary's centroid. Read in its own CRS ('x,y [EPSG:code]'), else the "
+            "project's, else the boundary's; a centre further from the boundary than its "
+            "diagonal is refused.")
         self.add(QgsProcessingParameterNumber(
             self.MAJOR_SEGMENT_LENGTH, "Major segment length (m)",
             QgsProcessingParameterNumber.Type.Double, defaultValue=d.major_length, minValue=5.0,
@@ -251,16 +253,16 @@ class GrowRoads(AlgorithmBase):
                                      kind="lines", target_crs=crs, optional=True, fields=[])
         obstacles = qgis_io.read_source(self, parameters, self.OBSTACLES, context, feedback,
                                         kind="polygons", target_crs=crs, optional=True, fields=[])
-        center = None
-        if parameters.get(self.CENTER) not in (None, ""):
-            point = self.parameterAsPoint(parameters, self.CENTER, context, crs)
-            center = (point.x(), point.y())
-        feedback.setProgress(5)
-
         bounds = shapely.total_bounds(frame.geometry)
         if boundary is None:  # around the sketch, as the engine grows there
             reach = settings.major_length
             bounds = (bounds[0] - reach, bounds[1] - reach, bounds[2] + reach, bounds[3] + reach)
+        center = None
+        if parameters.get(self.CENTER) not in (None, ""):
+            center = qgis_io.point_parameter(
+                self, parameters, self.CENTER, context, crs, frame.source_crs,
+                "The centre of the radial pattern", feedback, near=bounds, near_label=label)
+        feedback.setProgress(5)
         dem = None
         dem_layer = self.parameterAsRasterLayer(parameters, self.DEM, context)
         if dem_layer is not None:

@@ -93,7 +93,9 @@ class SynthesizeRoadsGan(AlgorithmBase):
             "Area to fill with roads; several polygons are merged. Give this or an extent.")
         self.add(QgsProcessingParameterExtent(self.EXTENT, "Target extent",
                                               optional=True),
-            "A rectangle to fill with roads when no target polygon is given.")
+            "A rectangle to fill with roads when no target polygon is given, with its CRS "
+            "('xmin,xmax,ymin,ymax [EPSG:code]'; else the project's): one without a CRS "
+            "is refused.")
         self.add(QgsProcessingParameterFeatureSource(
             self.GIVEN_ROADS, "Given roads (kept)", [QgsProcessing.SourceType.TypeVectorLine],
             optional=True),
@@ -202,8 +204,8 @@ class SynthesizeRoadsGan(AlgorithmBase):
         if parameters.get(self.EXTENT) in (None, ""):
             raise QgsProcessingException("Give a target polygon layer (TARGET) or an extent "
                                          "(EXTENT).")
-        rect = self.parameterAsExtent(parameters, self.EXTENT, context)
-        crs = self.parameterAsExtentCrs(parameters, self.EXTENT, context)
+        rect, crs = qgis_io.extent_parameter(self, parameters, self.EXTENT, context,
+                                             "target extent")
         if rect.isNull() or rect.width() <= 0 or rect.height() <= 0:
             raise QgsProcessingException("The target extent has no area.")
         work = qgis_io.working_crs(crs, rect, context)

@@ -200,3 +200,34 @@ def test_no_boundary_grows_around_the_sketch_in_a_bulged_hull(qgis_processing):
     assert len(kept) > len(geoms)
     with pytest.raises(QgsProcessingException, match="boundary polygon or sketched"):
         qgis_processing.run("urbansynth:growroads", {"OUTPUT": "memory:"})
+
+
+def test_a_radial_centre_without_a_crs_is_read_in_the_boundarys_crs(qgis_processing):
+    """CENTER given as the boundary's own longitude and latitude, without '[EPSG:4326]',
+    grows the same network as with it (it was read in the working UTM zone: a point 24 m
+    east of the zone's origin, thousands of km from the boundary, and the spokes ran off
+    towards it); a centre far from the boundary in the CRS it is read in is refused."""
+    from qgis.core import QgsProcessingException
+
+    from helpers import log_feedback
+
+    lon, lat = 24.93, 60.16
+    square = memory_layer("Polygon", [
+        f"POLYGON(({lon} {lat}, {lon + 0.018} {lat}, {lon + 0.018} {lat + 0.009}, "
+        f"{lon} {lat + 0.009}, {lon} {lat}))"], "EPSG:4326")
+    centre = f"{lon + 0.006},{lat + 0.003}"
+    runs, notes = {}, {}
+    for given in (centre, centre + " [EPSG:4326]"):
+        log = log_feedback()
+        out = qgis_processing.run("urbansynth:growroads", {
+            "BOUNDARY": square, "MAJOR_PATTERN": 2, "MINOR_PATTERN": 2, "CENTER": given,
+            "SEED": 3, "MAX_SEGMENTS": 300, "OUTPUT": "memory:"}, feedback=log)
+        runs[given] = sorted(shapely.to_wkt(g, rounding_precision=7)
+                             for g in layer_features(out["OUTPUT"])[1])
+        notes[given] = any("has no CRS: read in EPSG:4326" in m for m in log.messages)
+    assert runs[centre] == runs[centre + " [EPSG:4326]"]
+    assert notes == {centre: True, centre + " [EPSG:4326]": False}
+    with pytest.raises(QgsProcessingException, match=r"centre of the radial pattern.*lies"):
+        qgis_processing.run("urbansynth:growroads", {
+            "BOUNDARY": square, "MAJOR_PATTERN": 2, "CENTER": f"{lon},{lat} [EPSG:3067]",
+            "SEED": 3, "MAX_SEGMENTS": 300, "OUTPUT": "memory:"})

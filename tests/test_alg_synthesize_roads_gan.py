@@ -389,3 +389,14 @@ def test_missing_onnxruntime_or_opencv_says_how_to_install(qgis_processing, tmp_
         message = str(error.value)
         assert package in message and "Install Python dependencies" in message, message
         assert "requirements.txt" not in message and "defect" not in message, message
+
+
+def test_an_extent_without_a_crs_is_refused(qgis_processing):
+    """An EXTENT without '[EPSG:...]' (a command line, a model) and no project CRS: its
+    numbers were taken as metres of no CRS and the roads written with an undefined CRS."""
+    from qgis.core import QgsProcessingException
+
+    with pytest.raises(QgsProcessingException, match="target extent has no coordinate "
+                                                     "reference system"):
+        qgis_processing.run(GAN, {"EXTENT": EXTENT.split(" [")[0], "MODEL": 0, "SEED": 3,
+                                  "OUTPUT": "memory:"})

@@ -133,6 +133,53 @@ def usable_crs(crs: QgsCoordinateReferenceSystem) -> bool:
     return bool(crs.toProj()) and not crs.description().lower().startswith("undefined")
 
 
+def extent_parameter(alg, parameters, name: str, context, label: str):
+    """An extent parameter and its CRS: its own (``'xmin,xmax,ymin,ymax [EPSG:3067]'``, a
+    layer's), else the project's. An extent with neither is refused, as a layer without a
+    CRS is (:func:`read_source`): its numbers were taken as metres of no CRS and the output
+    was written with an undefined one."""
+    rect = alg.parameterAsExtent(parameters, name, context)
+    crs = alg.parameterAsExtentCrs(parameters, name, context)
+    if not usable_crs(crs):
+        raise QgsProcessingException(
+            f"The {label} has no coordinate reference system (CRS), so its units are "
+            "unknown: give it with its CRS, as 'xmin,xmax,ymin,ymax [EPSG:code]' (the "
+            "dialog's extent does that), or run in a project with a CRS.")
+    return rect, crs
+
+
+def point_parameter(alg, parameters, name: str, context, work_crs, default_crs, label: str,
+                    feedback=None, near=None, near_label: str = "the layer"):
+    """A point parameter in the working CRS: from its own CRS (``'x,y [EPSG:4326]'``),
+    else the project's, else ``default_crs`` (the layer it belongs to; said in the log).
+    A point without a CRS was taken in the working CRS, which the user never sees: the
+    boundary's own coordinates put the centre hundreds of kilometres away. ``near``:
+    bounds (working CRS) the point may lie at most their diagonal away from, else it is
+    refused (a wrong CRS)."""
+    point = alg.parameterAsPoint(parameters, name, context)
+    crs = alg.parameterAsPointCrs(parameters, name, context)
+    if not usable_crs(crs):
+        crs = default_crs
+        if feedback is not None:
+            feedback.pushInfo(f"{label} has no CRS: read in {crs_label(crs)}, the CRS of "
+                              "its layer (give 'x,y [EPSG:code]' for another).")
+    if crs != work_crs:
+        try:
+            point = QgsCoordinateTransform(crs, work_crs, context.transformContext()
+                                           ).transform(point)
+        except QgsCsException as exc:
+            raise QgsProcessingException(
+                f"{label} ({point.x():g}, {point.y():g}) cannot be transformed from "
+                f"{crs_label(crs)} to {crs_label(work_crs)}: check its CRS.") from exc
+    if near is not None:
+        far = shapely.distance(shapely.box(*near), shapely.Point(point.x(), point.y()))
+        if not far <= math.hypot(near[2] - near[0], near[3] - near[1]):
+            raise QgsProcessingException(
+                f"{label}, read in {crs_label(crs)}, lies {far:,.0f} m from {near_label}: "
+                "check its coordinates and CRS ('x,y [EPSG:code]').")
+    return point.x(), point.y()
+
+
 @dataclass
 class Frame:
     """Features of one layer in the working CRS."""
