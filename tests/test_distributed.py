@@ -193,6 +193,33 @@ def test_engine_errors(district, tmp_path):
         distributed.footprints_serial(b, distributed.FootprintJob(job.examples, None, "x"))
 
 
+def test_a_layer_without_a_crs_is_refused_by_name(tmp_path):
+    """Roads or example buildings without a CRS (a shapefile without its .prj, a GeoPackage
+    layer of srs_id 0) beside blocks with one: they were used as if in the working CRS
+    (roads in feet or degrees lay nowhere near the blocks, and the run went on without
+    them); now refused by name, as the QGIS tools refuse them."""
+    import geopandas as gpd
+
+    from urban_synthesis.plugin.scale import cli
+
+    line = shapely.LineString([(385000, 6671000), (385300, 6671000)])
+    square = shapely.box(385000, 6671000, 385100, 6671100)
+    shp = tmp_path / "roads_no_prj.shp"
+    gpd.GeoDataFrame({"highway": ["residential"]}, geometry=[line]).to_file(shp)
+    assert not shp.with_suffix(".prj").exists()
+    undefined = tmp_path / "undefined.gpkg"
+    pyogrio.write_dataframe(gpd.GeoDataFrame({"building": ["yes"]}, geometry=[square]),
+                            undefined, layer="buildings")          # srs_id 0 in the file
+    with pytest.raises(InputError, match="roads_no_prj.*no coordinate reference system"):
+        distributed.read_lines(distributed.parse_source(str(shp)), "EPSG:32635")
+    with pytest.raises(InputError, match="roads_no_prj.*no coordinate reference system"):
+        cli._read_roads(str(shp), "EPSG:32635")
+    with pytest.raises(InputError, match="undefined.*no coordinate reference system"):
+        cli._read_buildings(str(undefined), "EPSG:32635")
+    with pytest.raises(InputError, match="undefined.*no coordinate reference system"):
+        distributed.read_blocks(distributed.parse_source(str(undefined)))
+
+
 # --------------------------------------------------------------------------- StreetGAN tiles
 
 def test_gan_tiles_equal_serial_image_and_network(client):

@@ -199,7 +199,7 @@ def _read_buildings(spec: str, work_crs: str):
     if "building" in df.columns:
         df = df[df.building.notna()]
     df = df[df.geometry.notna()]
-    g = distributed._to_metric(df, work_crs)
+    g = distributed._to_metric(df, work_crs, src)
     g = shapely.make_valid(g)
     g = np.array([shapely.union_all([p for p in shapely.get_parts(x)
                                      if shapely.get_type_id(p) == 3]) for x in g], dtype=object)
@@ -235,7 +235,7 @@ def _read_roads(spec: str, work_crs: str):
     keep, art = roads.drivable_and_arterial(
         df["highway"].to_numpy(dtype=object) if "highway" in df.columns else None,
         df["level"].to_numpy(dtype=object) if "level" in df.columns else None, len(df))
-    g = distributed._to_metric(df, work_crs)
+    g = distributed._to_metric(df, work_crs, src)
     return g[keep], g[art]
 
 

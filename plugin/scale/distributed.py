@@ -166,12 +166,22 @@ def read_layer(source: Source, fids: Optional[Sequence[int]] = None, columns=Non
     return df
 
 
-def _to_metric(df, work_crs: str) -> np.ndarray:
+def _layer_crs(df, source):
+    """The CRS of a read layer; a layer without one, or with GeoPackage's placeholders for
+    none ('Undefined geographic SRS', srs_id 0; 'Undefined Cartesian SRS', -1), is refused
+    by name, as the QGIS adapter refuses it (``qgis_io.usable_crs``): a secondary layer
+    (roads, example buildings) without a CRS was used as if in the working CRS, roads in
+    feet or degrees silently nowhere near the blocks."""
+    if df.crs is None or str(df.crs.name or "").lower().startswith("undefined"):
+        raise InputError(f"{source}: the layer has no coordinate reference system (CRS), so "
+                         "its units are unknown: assign its CRS and run again")
+    return df.crs
+
+
+def _to_metric(df, work_crs: str, source="the layer") -> np.ndarray:
     """Geometries in the working CRS (the same call in the serial and the partition run,
     so coordinates agree to the bit)."""
-    if df.crs is None:
-        return np.asarray(df.geometry.values, dtype=object)
-    if _pyproj_crs(df.crs) == _pyproj_crs(work_crs):
+    if _pyproj_crs(_layer_crs(df, source)) == _pyproj_crs(work_crs):
         return np.asarray(df.geometry.values, dtype=object)
     return np.asarray(df.geometry.to_crs(work_crs).values, dtype=object)
 
@@ -200,13 +210,11 @@ def _block_ids(df) -> np.ndarray:
 def _polygon_table(source: str, df, ids: np.ndarray, work_crs) -> "BlockTable":
     """Polygons of a read layer in the metric working CRS (chosen from the data when
     ``work_crs`` is None), with their feature ids and output ids."""
-    crs = df.crs.to_wkt() if df.crs is not None else None
+    crs = _layer_crs(df, source).to_wkt()
     if work_crs is None:
-        lonlat = df.geometry.to_crs(4326).total_bounds if df.crs is not None \
-            else df.geometry.total_bounds
-        work_crs = metric_crs(df.crs, lonlat)
-    return BlockTable(source, df.index.to_numpy(dtype=np.int64), _to_metric(df, work_crs),
-                      ids, crs, work_crs)
+        work_crs = metric_crs(df.crs, df.geometry.to_crs(4326).total_bounds)
+    return BlockTable(source, df.index.to_numpy(dtype=np.int64),
+                      _to_metric(df, work_crs, source), ids, crs, work_crs)
 
 
 def read_blocks(source: Source, work_crs: Optional[str] = None) -> BlockTable:
@@ -230,7 +238,7 @@ def read_lines(source: Source, work_crs: str) -> np.ndarray:
         raise InputError(f"{source}: the layer holds no road")
     if not set(shapely.get_type_id(df.geometry.values).tolist()) <= {1, 5}:
         raise InputError(f"{source}: roads must be lines")
-    return _to_metric(df, work_crs)
+    return _to_metric(df, work_crs, source)
 
 
 # --------------------------------------------------------------------------- partitions
@@ -337,7 +345,7 @@ def _run_partition(source: Source, work_crs: str, fids, index, ids, choice,
                    job: FootprintJob) -> List:
     """A Dask task: read this partition's blocks from the source, synthesise them."""
     df = read_layer(source, fids=fids)
-    return _run_blocks(job, _to_metric(df, work_crs), index, ids, choice)
+    return _run_blocks(job, _to_metric(df, work_crs, source), index, ids, choice)
 
 
 def _merge(parts: Sequence[List], seconds: float) -> footprints.FootprintResult:
@@ -527,12 +535,10 @@ def read_area(source: Source, work_crs: Optional[str] = None):
         raise InputError(f"{source}: the layer holds no polygon")
     if not set(shapely.get_type_id(df.geometry.values).tolist()) <= {3, 6}:
         raise InputError(f"{source}: the target must be polygons")
-    crs = df.crs.to_wkt() if df.crs is not None else None
+    crs = _layer_crs(df, source).to_wkt()
     if work_crs is None:
-        lonlat = df.geometry.to_crs(4326).total_bounds if df.crs is not None \
-            else df.geometry.total_bounds
-        work_crs = metric_crs(df.crs, lonlat)
-    return _to_metric(df, work_crs), crs, work_crs
+        work_crs = metric_crs(df.crs, df.geometry.to_crs(4326).total_bounds)
+    return _to_metric(df, work_crs, source), crs, work_crs
 
 
 def write_lines(path: str, geometry, table: pd.DataFrame, work_crs: str, crs: Optional[str],
@@ -642,7 +648,7 @@ def _attr_features(source: Source, work_crs: str, fids, core_pos, shared: _Attri
     """A Dask task: read a partition and its halo, compute the core's features."""
     from ..buildings import attribute_transfer as bt
 
-    g = _to_metric(read_layer(source, fids=fids, columns=[]), work_crs)
+    g = _to_metric(read_layer(source, fids=fids, columns=[]), work_crs, source)
     fp = g[core_pos]
     f_t = bt.target_features(fp, g, shared.roads, shared.arterials, shared.model)
     return f_t, shapely.area(fp)
