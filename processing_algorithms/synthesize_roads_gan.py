@@ -209,6 +209,7 @@ class SynthesizeRoadsGan(AlgorithmBase):
         if rect.isNull() or rect.width() <= 0 or rect.height() <= 0:
             raise QgsProcessingException("The target extent has no area.")
         work = qgis_io.working_crs(crs, rect, context)
+        feedback.pushInfo(qgis_io.working_crs_note("The target extent", crs, work))
         box = shapely.box(rect.xMinimum(), rect.yMinimum(), rect.xMaximum(), rect.yMaximum())
         box = shapely.segmentize(box, max(rect.width(), rect.height()) / 50)
         geoms = qgis_io.reproject(np.array([box], dtype=object), crs, work, context)

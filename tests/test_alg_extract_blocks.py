@@ -266,3 +266,41 @@ def test_qgis_process_writes_geopackage(tmp_path):
     assert set(df.columns) >= {"block_id", "area_m2", "compactness", "aspect_ratio"}
     assert len(pyogrio.read_dataframe(buildings_out)) == 144
     assert result is not None and "OUTPUT" in result.get("results", {})
+
+
+@pytest.mark.parametrize("crs, said", [
+    ("EPSG:4326", "is in EPSG:4326 (WGS 84) (not in metres): worked in EPSG:32635"),
+    ("EPSG:3857", "(more than 1 % off true scale here): worked in EPSG:32635"),
+    ("EPSG:3067", "worked in its own CRS, EPSG:3067"),
+])
+def test_the_log_names_the_working_crs(qgis_processing, crs, said):
+    """Every length and area is measured in the working CRS: the log says which one it is
+    and why (it said nothing), and which CRS a second layer is projected to."""
+    from qgis.core import (QgsCoordinateReferenceSystem, QgsCoordinateTransform, QgsGeometry,
+                           QgsProject)
+
+    tr = QgsCoordinateTransform(QgsCoordinateReferenceSystem("EPSG:3067"),
+                                QgsCoordinateReferenceSystem(crs), QgsProject.instance())
+    x0, y0 = 385000.0, 6671000.0        # central Helsinki in ETRS-TM35FIN
+    grid = [f"LINESTRING({x0 + 100 * i} {y0}, {x0 + 100 * i} {y0 + 300})" for i in range(4)] + \
+        [f"LINESTRING({x0} {y0 + 100 * j}, {x0 + 300} {y0 + 100 * j})" for j in range(4)]
+    wkts = []
+    for w in grid:
+        g = QgsGeometry.fromWkt(w)
+        g.transform(tr)
+        wkts.append(g.asWkt(9))
+    house = f"POLYGON(({x0 + 20} {y0 + 20}, {x0 + 40} {y0 + 20}, {x0 + 40} {y0 + 40}, " \
+            f"{x0 + 20} {y0 + 40}, {x0 + 20} {y0 + 20}))"
+    log = log_feedback()
+    qgis_processing.run("urbansynth:extractblocks", {
+        "ROADS": _memory_layer("LineString", wkts, crs, name="grid"), "CLASSES": "",
+        "BUILDINGS": _memory_layer("Polygon", [house], "EPSG:3067", name="house"),
+        "OUTPUT": "memory:", "OUTPUT_BUILDINGS": "memory:"}, feedback=log)
+    assert any(m.startswith("'grid'") and said in m for m in log.messages), log.messages
+    work = said.split("worked in ")[-1].split(" ")[-1].rstrip(",")
+    if crs == "EPSG:3067":
+        assert any(m.startswith("'house'") and "worked in its own CRS, EPSG:3067" in m
+                   for m in log.messages)
+    else:
+        assert any(m.startswith("'house'") and f"projected to the working CRS, {work}" in m
+                   for m in log.messages), log.messages

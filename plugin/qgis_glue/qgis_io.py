@@ -118,8 +118,23 @@ def crs_label(crs: QgsCoordinateReferenceSystem) -> str:
     """A CRS for messages: 'EPSG:3857 (WGS 84 / Pseudo-Mercator)', or what it is without one."""
     if not crs.isValid():
         return "no CRS"
-    name = crs.description() or crs.toProj() or "an unnamed CRS"
+    name = crs.description() if crs.description() not in ("", "unknown") else \
+        crs.toProj() or "an unnamed CRS"
     return f"{crs.authid()} ({name})" if crs.authid() else f"'{name}'"
+
+
+def working_crs_note(label: str, src: QgsCoordinateReferenceSystem,
+                     work: QgsCoordinateReferenceSystem, chosen: bool = True) -> str:
+    """The log line saying which CRS a layer is worked in: every length, area and
+    distance in metres is measured there."""
+    if src == work:
+        return f"{label}: worked in its own CRS, {crs_label(work)}."
+    why = "not in metres" if src.isGeographic() or \
+        src.mapUnits() != QgsUnitTypes.DistanceUnit.DistanceMeters else \
+        "more than 1 % off true scale here"
+    return (f"{label} is in {crs_label(src)} ({why}): worked in {crs_label(work)}."
+            if chosen else
+            f"{label} is in {crs_label(src)}: projected to the working CRS, {crs_label(work)}.")
 
 
 def usable_crs(crs: QgsCoordinateReferenceSystem) -> bool:
@@ -291,6 +306,7 @@ def read_source(alg, parameters, name: str, context, feedback,
             f"Layer {label} has no coordinate reference system (CRS), so its units are "
             "unknown. Assign its CRS (Layer Properties > Source, or Processing 'Assign "
             "projection') and run again.")
+    chosen = target_crs is None  # this layer decides the working CRS (else it follows one)
     if target_crs is None:
         extent = source.sourceExtent()
         if extent.isNull() or extent.isEmpty() and extent.width() == 0 and extent.height() == 0:
@@ -370,6 +386,8 @@ def read_source(alg, parameters, name: str, context, feedback,
     if target_crs is None:
         b = shapely.total_bounds(geoms)
         target_crs = working_crs(src_crs, QgsRectangle(*b), context)
+    if feedback is not None:
+        feedback.pushInfo(working_crs_note(label, src_crs, target_crs, chosen))
     if target_crs != src_crs:
         geoms = _transform(geoms, src_crs, target_crs, context, label)
     if n_null and feedback is not None:
