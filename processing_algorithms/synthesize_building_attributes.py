@@ -137,12 +137,12 @@ class SynthesizeBuildingAttributes(AlgorithmBase):
             qgis_io.read_source(self, parameters, self.FOOTPRINTS, context, feedback,
                                 kind="polygons"), feedback)
         crs = footprints.crs
-        examples, attrs = self._examples(parameters, context, feedback, crs)
+        examples, attrs = self._examples(parameters, context, feedback, footprints)
         feedback.setProgress(10)
         road_lines, arterials = self.roads_and_arterials(parameters, self.ROADS, context,
                                                          feedback, crs)
         ex_lines, ex_arterials = self.roads_and_arterials(parameters, self.EXAMPLE_ROADS,
-                                                          context, feedback, crs)
+                                                          context, feedback, examples.crs)
         if (road_lines is None) != (ex_lines is None):
             feedback.pushInfo("Road distances are used only with both Roads and Example roads.")
         blocks = None
@@ -175,17 +175,19 @@ class SynthesizeBuildingAttributes(AlgorithmBase):
         feedback.setProgress(100)
         return {self.OUTPUT: dest}
 
-    def _examples(self, parameters, context, feedback, crs):
+    def _examples(self, parameters, context, feedback, footprints):
         """The example buildings (only those with a 'building' value when the layer has
-        that field) and their attributes (height, levels, type, roof)."""
+        that field) and their attributes (height, levels, type, roof), in their own working
+        CRS, or the footprints' where they overlap (:func:`qgis_io.example_in_place`)."""
         hf = self.parameterAsString(parameters, self.HEIGHT_FIELD, context)
         lf = self.parameterAsString(parameters, self.LEVELS_FIELD, context)
         frame = qgis_io.read_source(
             self, parameters, self.EXAMPLE_BUILDINGS, context, feedback, kind="polygons",
-            target_crs=crs, fields=["building", "other_tags", "height_m", "levels",
-                                    "building_type", hf, lf, *building_attributes.TAG_FIELDS],
+            fields=["building", "other_tags", "height_m", "levels", "building_type", hf, lf,
+                    *building_attributes.TAG_FIELDS],
             required_fields=[f for f in (hf, lf) if f])
-        frame = self._only_buildings(frame, feedback)
+        frame = qgis_io.example_in_place(self._only_buildings(frame, feedback),
+                                         footprints.geometry, footprints.crs, context, feedback)
         a = frame.attributes
         height = a[hf] if hf else (a["height_m"] if "height_m" in a else None)
         levels = a[lf] if lf else (a["levels"] if "levels" in a else None)

@@ -187,12 +187,7 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
                                     fields=_POINT_FIELDS + ["highway", "other_tags"])
         # an example elsewhere keeps its own metric CRS (it is shifted onto the target anyway);
         # one that overlaps the target is used in the target's CRS, so it can stay in place
-        if frame.crs != work_crs:
-            box = shapely.box(*shapely.total_bounds(qgis_io.reproject(
-                target_src, work_crs, frame.crs, context)))
-            if shapely.intersects(box, shapely.box(*shapely.total_bounds(frame.geometry))):
-                frame.geometry = qgis_io.reproject(frame.geometry, frame.crs, work_crs, context)
-                frame.crs = work_crs
+        frame = qgis_io.example_in_place(frame, target_src, work_crs, context, feedback)
         kinds = set(shapely.get_type_id(frame.geometry).tolist())
         if kinds <= {0, 4}:
             geoms = shapely.get_parts(frame.geometry)

@@ -51,6 +51,36 @@ def test_attributes_on_helsinki(qgis_processing, helsinki_buildings):
     assert d["wasserstein_norm"] < 0.35
 
 
+def test_examples_elsewhere_are_measured_in_their_own_crs(qgis_processing,
+                                                          helsinki_buildings):
+    """Prague footprints attributed from Helsinki's buildings: the same buildings, in the
+    same metres, labelled with their own UTM zone (35N) or with zone 18N (northern
+    Canada), give the same attributes: each example is measured in its own working CRS.
+    Both were projected into the footprints' zone (33N), the Canadian ones across 90
+    degrees of longitude, which tore their shapes and context apart."""
+    from qgis.core import (QgsCoordinateReferenceSystem, QgsCoordinateTransform, QgsProject)
+
+    _, buildings = helsinki_buildings
+    tr = QgsCoordinateTransform(buildings.crs(), QgsCoordinateReferenceSystem("EPSG:32635"),
+                                QgsProject.instance())
+    wkts, rows = [], []
+    for f in buildings.getFeatures():
+        g = f.geometry()
+        g.transform(tr)
+        wkts.append(g.asWkt(3))
+        rows.append([f["height_m"], f["levels"], f["building_type"]])
+    fields = "&field=height_m:double&field=levels:integer&field=building_type:string"
+    runs = {}
+    for zone in ("EPSG:32635", "EPSG:32618"):
+        examples = memory_layer("MultiPolygon", wkts, zone, fields, rows, name="helsinki")
+        out = qgis_processing.run(ATTRIBUTES, {
+            "FOOTPRINTS": bubenec_layer("buildings"), "EXAMPLE_BUILDINGS": examples,
+            "SEED": 2, "OUTPUT": "memory:"})
+        runs[zone] = [(r["source_id"], r["height_m"], round(r["similarity"], 9))
+                      for r in layer_features(out["OUTPUT"])[0]]
+    assert runs["EPSG:32635"] == runs["EPSG:32618"]
+
+
 def test_example_without_heights_says_so(qgis_processing):
     """Bubeneč's buildings have no heights: types come across, heights stay empty, and
     the log says so instead of claiming heights were attributed."""

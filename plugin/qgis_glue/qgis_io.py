@@ -432,6 +432,25 @@ def read_source(alg, parameters, name: str, context, feedback,
     return Frame(geoms, attrs, np.asarray(fids), src_crs, target_crs, label)
 
 
+def example_in_place(frame: Frame, target_geoms, work_crs, context, feedback=None) -> Frame:
+    """An example layer read in its own working CRS, moved into the target's working CRS
+    when their extents overlap (the same town: it is used in place, e.g. neighbour
+    heights, a random walk that stays where it is); an example elsewhere keeps its own.
+    Projected into a target's UTM zone, an example 16 degrees of longitude away had its
+    lengths 1 % and areas 2 % off; one on another continent was torn apart."""
+    if frame.crs == work_crs:
+        return frame
+    box = shapely.box(*shapely.total_bounds(reproject(
+        np.asarray(target_geoms, dtype=object), work_crs, frame.crs, context)))
+    if shapely.intersects(box, shapely.box(*shapely.total_bounds(frame.geometry))):
+        frame.geometry = reproject(frame.geometry, frame.crs, work_crs, context, frame.name)
+        frame.crs = work_crs
+        if feedback is not None:
+            feedback.pushInfo(f"{frame.name} overlaps the target: used in the target's "
+                              f"working CRS, {crs_label(work_crs)}.")
+    return frame
+
+
 def invalid_geometry_rule(parameters, name: str, context) -> int:
     """What to do with an input's invalid geometries: the input's own setting (the
     dialog's per-input "Invalid feature filtering") or Processing's (Settings > Options >
