@@ -96,7 +96,7 @@ class PlaceLibraryBuildings(AlgorithmBase):
                                       kind="polygons", fields=["parcel_id"])
         crs = parcels.crs
         road_lines, _ = self.roads_and_arterials(parameters, self.ROADS, context, feedback, crs)
-        library = self._library(parameters, context, feedback, crs)
+        library = self._library(parameters, context, feedback)
         ids = whole_ids(parcels.attributes["parcel_id"]) \
             if "parcel_id" in parcels.attributes else None
         result = qgis_io.run_engine(
@@ -150,14 +150,14 @@ class PlaceLibraryBuildings(AlgorithmBase):
         cell = qgis_io.raster_cell_size(layer, frame.crs, bounds, context)
         return qgis_io.read_raster(layer, frame.crs, bounds, cell, feedback)
 
-    def _library(self, parameters, context, feedback, crs):
+    def _library(self, parameters, context, feedback):
         if not self.given(parameters, self.BUILDING_LIBRARY):
             feedback.pushInfo("Building library: the built-in library of twelve buildings.")
             return bestfit.default_library()
         frame = qgis_io.read_source(
             self, parameters, self.BUILDING_LIBRARY, context, feedback, kind="polygons",
-            target_crs=crs, repair=False, required_fields=["street_access_sides", "blind_sides"],
-            read_twice=True)
+            repair=False, required_fields=["street_access_sides", "blind_sides"],
+            read_twice=True)   # any position: its own working CRS keeps its sizes
         a = frame.attributes
         return qgis_io.run_engine(
             f"Layer {frame.name}", bestfit.library_from_table, frame.geometry,

@@ -159,7 +159,7 @@ class SynthesizePartBuildings(AlgorithmBase):
         self.bound_work(f"Layer {frame.name} (its longest skeleton {longest:,.0f} m)",
                         longest, self.MAX_SKELETON_M, "m of building along one skeleton",
                         "split long skeletons into the buildings they stand for")
-        library, label = self._library(parameters, context, feedback, frame.crs)
+        library, label = self._library(parameters, context, feedback)
         towers = set(library.table["kind"]) == {"floor"}
         if towers and kind != "polygons":
             raise QgsProcessingException(
@@ -220,12 +220,13 @@ class SynthesizePartBuildings(AlgorithmBase):
         feedback.setProgress(100)
         return {self.OUTPUT: dest}
 
-    def _library(self, parameters, context, feedback, crs):
+    def _library(self, parameters, context, feedback):
         """The parts database (a Building parts layer, else a built-in one) and its name."""
         if self.given(parameters, self.BUILDING_PARTS):
+            # any position: read in its own working CRS (projected into the target's zone
+            # a library drawn elsewhere changed size); entries may share a shape
             frame = qgis_io.read_source(self, parameters, self.BUILDING_PARTS, context,
-                                        feedback, kind="polygons", target_crs=crs,
-                                        read_twice=True)   # a library: entries may share a shape
+                                        feedback, kind="polygons", read_twice=True)
             table = frame.attributes.drop(columns=[c for c in frame.attributes
                                                    if c.lower() == "fid"])
             try:   # the engine's message names the layer already

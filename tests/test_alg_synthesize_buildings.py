@@ -251,6 +251,27 @@ def test_library_layer(qgis_processing):
     assert rows[0]["rotation"] == pytest.approx(0.0)
 
 
+def test_a_library_drawn_anywhere_keeps_its_size(qgis_processing):
+    """The 12 x 10 m house of a library drawn in a metric CRS elsewhere (any position, the
+    help says; here UTM zone 31N at the equator), placed on a plot in Prague: 120 m² (it
+    was projected into the plot's UTM zone, 33N, 10.5 degrees of longitude east of it,
+    and came out 8 % larger)."""
+    crs = "EPSG:32633"
+    x0, y0 = 458000.0, 5551000.0                  # Prague-Bubeneč in UTM 33N
+    roads = memory_layer("LineString", [f"LINESTRING ({x0} {y0}, {x0 + 300} {y0})"], crs)
+    plot = memory_layer("Polygon", [f"POLYGON (({x0 + 10} {y0 - 5}, {x0 + 40} {y0 - 5}, "
+                                    f"{x0 + 40} {y0 - 40}, {x0 + 10} {y0 - 40}, "
+                                    f"{x0 + 10} {y0 - 5}))"], crs)
+    lib = memory_layer("Polygon", ["POLYGON ((0 0, 0 10, 12 10, 12 0, 0 0))"], "EPSG:32631",
+                       fields="&field=street_access_sides:string&field=blind_sides:string",
+                       rows=[("1", "3")])
+    out = qgis_processing.run(BESTFIT, {"PARCELS": plot, "ROADS": roads,
+                                        "BUILDING_LIBRARY": lib, "OUTPUT": "memory:"})
+    rows, geoms = layer_features(out["OUTPUT"])
+    assert len(rows) == 1
+    assert shapely.area(geoms[0]) == pytest.approx(120.0, rel=1e-6)
+
+
 def test_bad_input(qgis_processing):
     from qgis.core import QgsProcessingException
 

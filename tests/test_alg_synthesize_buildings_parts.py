@@ -158,15 +158,19 @@ def test_terrace_around_a_block_with_far_interval(qgis_processing):
         assert rows_s[0]["building_far"] == pytest.approx(area / BLOCK.area)
 
 
-def test_parts_layer(qgis_processing):
-    """A user's parts database as a polygon layer with only the required fields."""
+@pytest.mark.parametrize("parts_crs", [CRS, "EPSG:32618"])
+def test_parts_layer(qgis_processing, parts_crs):
+    """A user's parts database as a polygon layer with only the required fields; drawn at
+    (0, 0) of UTM zone 18N too (any position, here off Ecuador): its parts keep their
+    sizes (they were projected into the skeleton's zone, 33N, 94 degrees of longitude
+    away, where PROJ cannot take them: the run failed)."""
     boxes = [shapely.box(0, 0, 6, 10), shapely.box(0, 0, 8, 10), shapely.box(0, 0, 4, 10),
              shapely.box(0, 0, 4, 10), shapely.box(0, 0, 20, 10)]
     fields = "&field=kind:string&field=length_m:double&field=height_m:double"
     values = [("straight", 6, 9), ("Straight", 8, 12), ("end_left", 4, 9), ("end_right", 4, 9),
               ("corner", 20, 12)]
-    parts = memory_layer("Polygon", [b.wkt for b in boxes], CRS, fields=fields, rows=values,
-                         name="my parts")
+    parts = memory_layer("Polygon", [b.wkt for b in boxes], parts_crs, fields=fields,
+                         rows=values, name="my parts")
     skel = memory_layer("LineString", [_at(shapely.LineString([(0, 0), (40, 0), (40, 30)])).wkt],
                         CRS)
     _, rows, geoms = _run(qgis_processing, SKELETON=skel, BUILDING_PARTS=parts, K_SOLUTIONS=2)
