@@ -249,7 +249,7 @@ class SplitDomain(AlgorithmBase):
         key_use = None
         if key_areas is not None and use_field:
             key_use = key_areas.attributes[use_field].to_numpy(dtype=object)
-        lib = self._templates(parameters, context, feedback, crs)
+        lib = self._templates(parameters, context, feedback)
         feedback.setProgress(5)
 
         layouts = qgis_io.run_engine(
@@ -327,7 +327,7 @@ class SplitDomain(AlgorithmBase):
         feedback.setProgress(100)
         return results
 
-    def _templates(self, parameters, context, feedback, crs):
+    def _templates(self, parameters, context, feedback):
         """The shipped library subset, or the templates drawn in the template layer."""
         given = parameters.get(self.TEMPLATE_LAYER)
         if given is None or given == "":
@@ -337,8 +337,8 @@ class SplitDomain(AlgorithmBase):
         optional = ["probability", "min_count", "max_count"]
         frame = qgis_io.read_source(self, parameters, self.TEMPLATE_LAYER, context, feedback,
                                     kind="polygons", fields=["template", "label"] + optional,
-                                    required_fields=["template", "label"], target_crs=crs,
-                                    read_twice=True)
+                                    required_fields=["template", "label"],
+                                    read_twice=True)   # drawn anywhere: its own working CRS
         settings = {k: frame.attributes[k].to_numpy(dtype=object) for k in optional
                     if k in frame.attributes}
         lib = qgis_io.run_engine(frame.name, templates.templates_from_drawn, frame.geometry,

@@ -95,6 +95,30 @@ def test_drawn_templates(qgis_processing, region_layer):
     assert "double" in used and used <= {"double", "recursive"}
 
 
+def test_a_template_drawn_in_a_crs_far_away_is_used_as_drawn(qgis_processing):
+    """Templates are drawn anywhere: five lots round a park drawn at (0, 0) of UTM zone
+    18N (off Ecuador) fill a region in Prague exactly as when drawn in the region's own
+    zone (the template was projected into zone 33N, 94 degrees of longitude away, which
+    PROJ refused: the run failed)."""
+    outline, pentagon, labels = drawn_pentagon_template()
+    poly = shapely.affinity.translate(shapely.affinity.scale(outline, 1.1, 1.1), 500000,
+                                      5550000)
+    runs = {}
+    for crs in ("EPSG:32633", "EPSG:32618"):
+        out = qgis_processing.run(ALG, {
+            "REGION": memory_layer("Polygon", [poly.wkt], crs="EPSG:32633", name="region"),
+            "TEMPLATE_LAYER": memory_layer(
+                "Polygon", [g.wkt for g in pentagon], crs=crs,
+                fields="&field=template:string&field=label:string",
+                rows=[("court", lab) for lab in labels], name="my templates"),
+            "SEED": 1, "OUTPUT_ROADS": "memory:", "OUTPUT_PARCELS": "memory:"})
+        rows, geoms = layer_features(out["OUTPUT_PARCELS"])
+        runs[crs] = sorted((r["template"], r["land_use"], round(float(a), 3))
+                           for r, a in zip(rows, shapely.area(geoms)))
+    assert sum(t == "court" for t, _, _ in runs["EPSG:32633"]) == 6
+    assert runs["EPSG:32618"] == runs["EPSG:32633"]
+
+
 def test_a_drawn_template_warped_as_drawn(qgis_processing):
     """Through Processing: a template drawn as five lots round a private park (no strip)
     fills a pentagonal region as drawn, the park kept; a court drawn with its own bent
