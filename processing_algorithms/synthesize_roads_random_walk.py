@@ -1,5 +1,4 @@
 """urbansynth:synthesizeroadsrandomwalk - join / expand / blend by attributed intersections."""
-import numpy as np
 import shapely
 from qgis.core import (
     QgsProcessing,
@@ -204,7 +203,7 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
         elif kinds <= {1, 5}:
             frame, road_class = drivable_lines(frame, None, set(roads.DRIVABLE_CLASSES),
                                                feedback)
-            points, shapes = qgis_io.run_engine(frame.name, self._points_from_roads,
+            points, shapes = qgis_io.run_engine(frame.name, random_walk.example_from_roads,
                                                 frame.geometry, road_class, index)
             # the share the network invariants hold the result to (the fragment database's)
             share = invariants.dead_end_share_of_extract(frame.geometry)
@@ -230,31 +229,12 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
                         self.MAX_POINTS, "intersection points",
                         "split the target into districts and run them one by one")
 
-    @staticmethod
-    def _points_from_roads(lines, road_class, index):
-        points, graph, h = intersection_quadtree.points_from_roads(lines, road_class,
-                                                                  example=index)
-        return points, random_walk.street_shapes(graph, h.edge_level)
-
     def _blend(self, parameters, context, target, field):
         beta = self.number(parameters, self.BLEND, context)
         if not field:
             return beta
-        values = np.array([_number(v) for v in target.attributes[field]], dtype=float)
-        values = np.where(np.isfinite(values), values, beta)
-        if (values < 0).any() or (values > 1).any():
-            raise QgsProcessingException(f"Layer {target.name}: blend weights in '{field}' "
-                                         "must be between 0 and 1.")
-        polys = target.geometry
-        tree = shapely.STRtree(polys)
-
-        def weight(xy):
-            out = np.full(len(xy), beta)
-            pi, gi = tree.query(shapely.points(xy), predicate="intersects")
-            out[pi] = values[gi]
-            return out
-
-        return weight
+        return qgis_io.run_engine(target.name, intersection_quadtree.blend_by_polygons,
+                                  target.geometry, target.attributes[field], beta)
 
     # ----------------------------------------------------------------------- run
 
@@ -366,9 +346,3 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
         feedback.setProgress(100)
         return results
 
-
-def _number(value):
-    try:
-        return float(value)
-    except (TypeError, ValueError):
-        return float("nan")

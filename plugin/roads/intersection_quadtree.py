@@ -791,6 +791,30 @@ def interpolate_attributes(own: PointSet, other: PointSet, weight) -> PointSet:
     return out
 
 
+def blend_by_polygons(polygons, weights, default: float):
+    """The weight of example B at any location (a function for :func:`blend_points`): the
+    weight of the polygon it lies in (a target layer's field, one value per polygon), else
+    ``default``; a weight that is no number is ``default`` too.
+
+    >>> w = blend_by_polygons([shapely.box(0, 0, 10, 10)], ["0.8"], 0.25)
+    >>> w(np.array([[5.0, 5.0], [50.0, 5.0]])).tolist()
+    [0.8, 0.25]
+    """
+    values = pd.to_numeric(pd.Series(list(weights), dtype=object), errors="coerce")
+    values = values.fillna(default).to_numpy(dtype=float)
+    if (values < 0).any() or (values > 1).any():
+        raise InputError("blend weights must be between 0 and 1")
+    tree = shapely.STRtree(np.asarray(polygons, dtype=object))
+
+    def weight(xy):
+        out = np.full(len(xy), float(default))
+        at, poly = tree.query(shapely.points(xy), predicate="intersects")
+        out[at] = values[poly]
+        return out
+
+    return weight
+
+
 def blend_points(a: PointSet, b: PointSet, beta: Union[float, np.ndarray, callable],
                  rng: np.random.Generator, patch: float = 5.0) -> PointSet:
     """Blend two point sets placed over the same target (sec. 4.2, figs. 10-12).

@@ -1331,6 +1331,13 @@ class StreetShapes:
         return float(self.tortuosity.mean()) if len(self) else 1.0
 
 
+def example_from_roads(lines, road_class=None, example: int = 0):
+    """An example's intersection points and street shapes from its road lines
+    (:func:`intersection_quadtree.points_from_roads`, :func:`street_shapes`)."""
+    points, graph, h = iq.points_from_roads(lines, road_class, example=example)
+    return points, street_shapes(graph, h.edge_level)
+
+
 def street_shapes(graph, edge_level, simplify: float = 0.002) -> StreetShapes:
     """The segments of an example road graph as normalised shapes (:class:`StreetShapes`).
 
