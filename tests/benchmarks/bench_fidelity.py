@@ -210,15 +210,11 @@ class Runner:
         return res.geometry
 
     def random_walk(self, seed: int) -> np.ndarray:
-        from urban_synthesis.plugin.roads import intersection_quadtree as iq
         from urban_synthesis.plugin.roads import random_walk as rw
 
-        def example_points():
-            points, graph, h = iq.points_from_roads(self.example.lines, self.example.road_class)
-            return points, rw.street_shapes(graph, h.edge_level)
-
         # as synthesizeroadsrandomwalk does: the example's points and street shapes
-        pts, shapes = self.cached("points", example_points)
+        pts, shapes = self.cached("points", lambda: rw.example_from_roads(
+            self.example.lines, self.example.road_class))
         res = rw.synthesize(pts, self.target.area, existing_lines=self.target.given,
                             seed=seed, in_place=False, shapes=shapes,
                             dead_end_share=self.example.stats["degree1_share"],
