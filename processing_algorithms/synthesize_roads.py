@@ -1,5 +1,6 @@
 """urbansynth:synthesizeroads - one entry point that runs the road synthesis method chosen by
 METHOD (the district model uses it so that the method is a model parameter)."""
+import re
 from collections import namedtuple
 
 import numpy as np
@@ -17,6 +18,7 @@ from qgis.core import (
     QgsProcessingParameterFeatureSource,
     QgsProcessingParameterFile,
     QgsProcessingParameterRasterLayer,
+    QgsProcessingUtils,
     QgsVectorLayer,
 )
 
@@ -192,10 +194,14 @@ class SynthesizeRoads(AlgorithmBase):
 
         dem = parameters.get(self.DEM)
         if need_db:
+            # named after the example: the roads' 'database' field and the log name it
+            example = qgis_io.layer_name(self, parameters, self.EXAMPLE_ROADS, context)
             fragment_db = run("urbansynth:buildfragmentdatabase",
                               {"ROADS": parameters[self.EXAMPLE_ROADS],
                                "DEM": self._example_dem(parameters, context, feedback),
-                               "OUTPUT": QgsProcessing.TEMPORARY_OUTPUT})["OUTPUT"]
+                               "OUTPUT": QgsProcessingUtils.generateTempFilename(
+                                   (re.sub(r"\W+", "_", example).strip("_") or "example")
+                                   + "_fragments.gpkg")})["OUTPUT"]
             steps.setCurrentStep(1)
         # every method fills the district: the boundary given, or the arterials' convex hull,
         # as a layer in the arterials' CRS: every method writes its roads in its target's

@@ -125,6 +125,8 @@ def test_synthesize_roads_runs_each_method(qgis_processing, helsinki_arterials, 
     assert any(m.startswith("Method:") for m in log.messages)
     assert not any(".urbansynth-run-" in m for m in log.messages + log.warnings)
     roads = _read(out, None)
+    if method == 0:   # the database built from the example is named after it, not 'OUTPUT'
+        assert set(roads["database"].dropna()) - {""} == {"roads_fragments"}
     sketch = _read(arterials, None).to_crs(roads.crs)
     # the arterials are kept and streets are added to them (Helsinki's clipped extract closes
     # few arterial faces, so the fragment refill is sparse)
