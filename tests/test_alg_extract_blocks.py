@@ -130,15 +130,21 @@ GRID_WKT = [f"LINESTRING (0 {y}, 200 {y})" for y in (0, 100, 200)] + \
     [f"LINESTRING ({x} 0, {x} 200)" for x in (0, 100, 200)]
 
 
-def test_cadastre_height_and_levels_fields(qgis_processing):
-    """A metric cadastre: heights and storeys from fields named by the user."""
-    roads_layer = _memory_layer("LineString", GRID_WKT, crs="EPSG:32633")
-    buildings = _memory_layer(
+def _cadastre(rows):
+    """Three buildings, one in each of three blocks of the grid, with a height ('vyska')
+    and a number of storeys ('podlazi') per row."""
+    return _memory_layer(
         "Polygon", ["POLYGON ((10 10, 30 10, 30 30, 10 30, 10 10))",
                     "POLYGON ((110 10, 130 10, 130 30, 110 30, 110 10))",
                     "POLYGON ((10 110, 30 110, 30 130, 10 130, 10 110))"],
         crs="EPSG:32633", fields="&field=vyska:double&field=podlazi:integer",
-        rows=[(12.5, None), (None, 4), (None, None)])
+        rows=rows)
+
+
+def test_cadastre_height_and_levels_fields(qgis_processing):
+    """A metric cadastre: heights and storeys from fields named by the user."""
+    roads_layer = _memory_layer("LineString", GRID_WKT, crs="EPSG:32633")
+    buildings = _cadastre([(12.5, None), (None, 4), (None, None)])
     out = qgis_processing.run("urbansynth:extractblocks", {
         "ROADS": roads_layer, "BUILDINGS": buildings, "HEIGHT_FIELD": "vyska",
         "LEVELS_FIELD": "podlazi", "STOREY_HEIGHT": 3.5, "OUTPUT": "memory:",
@@ -159,12 +165,7 @@ def test_unreadable_cadastre_values_and_buildings_off_the_blocks_are_warned(qgis
     """A cadastre field with a negative or an absurd value gave those buildings no height
     and said nothing; buildings of another area than the roads were an info line."""
     roads_layer = _memory_layer("LineString", GRID_WKT, crs="EPSG:32633")
-    buildings = _memory_layer(
-        "Polygon", ["POLYGON ((10 10, 30 10, 30 30, 10 30, 10 10))",
-                    "POLYGON ((110 10, 130 10, 130 30, 110 30, 110 10))",
-                    "POLYGON ((10 110, 30 110, 30 130, 10 130, 10 110))"],
-        crs="EPSG:32633", fields="&field=vyska:double&field=podlazi:integer",
-        rows=[(5000.0, 3), (-4.0, -2), (9.0, None)])
+    buildings = _cadastre([(5000.0, 3), (-4.0, -2), (9.0, None)])
     log = log_feedback()
     out = qgis_processing.run("urbansynth:extractblocks", {
         "ROADS": roads_layer, "BUILDINGS": buildings, "HEIGHT_FIELD": "vyska",
