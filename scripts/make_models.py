@@ -124,7 +124,21 @@ def district_model() -> QgsProcessingModelAlgorithm:
         options=["Transfer of the most similar example block (thesis ch. 5.1)",
                  "Guided re-synthesis (thesis ch. 5.2)"], defaultValue=0),
         "How the blocks are filled with building footprints.", 0, 480)
+    from urban_synthesis.plugin.parcels import subdivision as parcels
     from urban_synthesis.processing_algorithms.common import fill_quantile_parameter
+
+    # subdivideparcels' METHOD enum, in its order (new methods are appended to it)
+    methods = list(parcels.method_names())
+    parcel_method = QgsProcessingParameterEnum(
+        "PARCEL_METHOD", "Parcel method", options=[parcels.METHODS[k].label for k in methods],
+        defaultValue=methods.index("skeleton"))
+    parcel_method.setFlags(parcel_method.flags()
+                           | QgsProcessingParameterDefinition.Flag.FlagAdvanced)
+    _param(model, parcel_method, "How the blocks are cut into parcels (see 'Subdivide blocks "
+           "into parcels'). Skeleton (Vanegas et al. 2012, the default) gives every parcel a "
+           "street frontage; Voronoi along the OBB axis (Aliaga et al. 2008) gives fewer, "
+           "squarer parcels (the demo's district: 229 against 331, 45 % undesirable by "
+           "Yang's test against 61 %).", 0, 500)
 
     fill = fill_quantile_parameter()
     fill.setFlags(fill.flags() | QgsProcessingParameterDefinition.Flag.FlagAdvanced)
@@ -159,7 +173,7 @@ def district_model() -> QgsProcessingModelAlgorithm:
     # the parcels are cut around the footprints (a footprint stands on one parcel where
     # the lots allow): they come after the footprints
     _child(model, "parcels", "urbansynth:subdivideparcels", "Parcels",
-           {"BLOCKS": out("blocks", "OUTPUT"), "METHOD": fixed(1), "SEED": p("SEED"),
+           {"BLOCKS": out("blocks", "OUTPUT"), "METHOD": p("PARCEL_METHOD"), "SEED": p("SEED"),
             "STREET_WIDTH": fixed(0.0), "KEEP_CLEAR": out("street_area", "OUTPUT"),
             "BUILDINGS": out("footprints", "OUTPUT")},
            outputs=(("OUTPUT", "PARCELS", "Parcels"),), x=600, y=200)

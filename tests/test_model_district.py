@@ -27,7 +27,7 @@ def test_model_is_listed_with_documented_parameters(qgis_processing):
     assert alg is not None, "the shipped model is not registered"
     names = {p.name() for p in alg.parameterDefinitions()}
     assert {"EXAMPLE_ROADS", "EXAMPLE_BUILDINGS", "ARTERIALS", "BOUNDARY", "DEM", "ROAD_METHOD",
-            "FOOTPRINT_METHOD", "SEED"} <= names
+            "FOOTPRINT_METHOD", "PARCEL_METHOD", "SEED"} <= names
     assert set(OUTPUTS) | {"metrics:REPORT"} <= names
     # every step of the model resolves to a registered algorithm
     for child in alg.childAlgorithms().values():
@@ -44,12 +44,13 @@ def test_model_passes_qgis_validation(qgis_processing):
 
 
 def test_model_runs_end_to_end_on_bubenec(tmp_path):
-    """Bubeneč's own streets as the arterial sketch, footprints by re-synthesis."""
+    """Bubeneč's own streets as the arterial sketch, footprints by re-synthesis, parcels
+    by Voronoi rows (the model's methods other than the defaults)."""
     gpkg = tmp_path / "district.gpkg"
     params = {"EXAMPLE_ROADS": bubenec_layer("streets"),
               "EXAMPLE_BUILDINGS": bubenec_layer("buildings"),
               "ARTERIALS": bubenec_layer("streets"), "ROAD_METHOD": 0,
-              "FOOTPRINT_METHOD": 1, "SEED": 2,
+              "FOOTPRINT_METHOD": 1, "PARCEL_METHOD": 2, "SEED": 2,
               "metrics:REPORT": str(tmp_path / "report.html")}
     for name, table in OUTPUTS.items():
         params[name] = f"ogr:dbname='{gpkg}' table=\"{table}\" (geom)"
@@ -75,6 +76,7 @@ def test_model_runs_end_to_end_on_bubenec(tmp_path):
                                                 buildings.geometry.values[j[pairs]]))
     assert overlap.sum() < 1e-3
     assert shapely.is_valid(parcels.geometry.values).all()
+    assert set(parcels["method"]) == {"voronoi-obb"}
     assert parcels["has_street_access"].astype(bool).mean() > 0.95
     surfaces = _read(gpkg, "street_surfaces")
     assert len(surfaces) > 0 and shapely.is_valid(surfaces.geometry.values).all()
