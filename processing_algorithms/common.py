@@ -22,6 +22,7 @@ from qgis.PyQt.QtGui import QIcon
 
 from ..plugin.core.ids import whole_ids
 from ..plugin.core.progress import Canceled, InputError, MissingPackage
+from ..plugin.core.seeds import MAX_SEED
 from ..plugin.network import blocks as block_rules
 from ..plugin.network import street_graph
 from ..plugin.qgis_glue import outputs, qgis_io
@@ -31,8 +32,6 @@ from ..plugin.qgis_glue.toolbox import GROUPS
 ICON = Path(__file__).resolve().parent.parent / "resources" / "icons" / "urbansynth.svg"
 
 
-#: Seeds are 32-bit integers in QGIS (parameterAsInt): larger values would wrap silently.
-MAX_SEED = 2 ** 31 - 1
 #: QGIS's "no bound" of a Number parameter is +-DBL_MAX.
 _UNBOUNDED = 1e300
 

@@ -2,7 +2,8 @@
 handles its output files.
 
 - An output that is also an input (the same file, or the same layer of a GeoPackage) is
-  refused before anything is written: the README promises inputs are never modified.
+  refused before anything is written: the README promises inputs are never modified
+  (the rule: ``core.destinations.overwrite_error``, shared with the command line).
 - Every file output is written under a temporary name -- a hidden staging folder next to
   the destination, ``.urbansynth-run-XXXX/<the file's own name>``, so that GeoPackage
   layer names and shapefile sidecars come out right -- and moved into place only when the
@@ -40,6 +41,9 @@ from qgis.core import (
     QgsProviderRegistry,
 )
 
+from ..core.destinations import STAGING_PREFIX
+from ..core.destinations import Input as _Input
+from ..core.destinations import overwrite_error
 from . import styles
 
 __all__ = ["STAGING_PREFIX", "OutputStaging", "destination_error"]
@@ -47,8 +51,6 @@ __all__ = ["STAGING_PREFIX", "OutputStaging", "destination_error"]
 #: The format every raster output is written in (a raster destination is named so).
 RASTER_FORMAT = "GeoTIFF (*.tif *.tiff)"
 
-#: Name prefix of the staging folders (hidden: a file manager does not show them).
-STAGING_PREFIX = ".urbansynth-run-"
 
 _OGR_URI = re.compile(r"^ogr:dbname='(?P<path>(?:[^']|'')*)'\s+table=\"(?P<table>[^\"]+)\"")
 #: An ogr: URI that names a file but no layer: QGIS 3.22 writes such an output into the
@@ -65,13 +67,6 @@ class _Staged:
     staging: Path        # the staging folder
     temp: str            # the destination the algorithm writes to
     temp_path: Path      # its file
-
-
-@dataclass
-class _Input:
-    name: str
-    path: Path
-    layer: Optional[str]
 
 
 def _destination(alg, definition, parameters, context) -> Optional[str]:
@@ -206,21 +201,10 @@ def destination_error(alg, parameters, context) -> Optional[str]:
                         f"written to {path}: choose a file (or GeoPackage layer) of its own "
                         "for each.")
         written.append((definition, path, table))
-        for source in inputs:
-            if not (_same(path, source.path) or path.resolve() == source.path.resolve()):
-                continue
-            if table is not None and source.layer is not None and table != source.layer:
-                continue                     # another layer of the same GeoPackage
-            if table is not None and source.layer is None:
-                # a file read whole (a database): a new layer in it modifies it too
-                return (f"Output {definition.description()} ({definition.name()}) would "
-                        f"write layer '{table}' into the input {source.name} "
-                        f"({source.path}), a file read whole: inputs are never modified; "
-                        "choose another output file.")
-            what = f"layer '{table}' of " if table else ""
-            return (f"Output {definition.description()} ({definition.name()}) would "
-                    f"overwrite {what}the input {source.name} ({source.path}): inputs are "
-                    "never modified; choose another output file.")
+        message = overwrite_error(f"Output {definition.description()} ({definition.name()})",
+                                  path, table, inputs)
+        if message:
+            return message
         message = _file_type_error(definition, destination)
         if message:
             return message

@@ -18,7 +18,14 @@ a local Dask cluster of N single-threaded worker processes; ``--scheduler`` conn
 running cluster instead. The result is the same in every case (:mod:`distributed`).
 Sources are read with pyogrio: a GeoPackage ``file:layer`` or ``file|layername=layer``, or
 PostGIS ``PG:dbname=... |layername=schema.table``.
-Exit status: 0 done, 2 bad input (the message names the layer or file), 1 other errors.
+``--out`` is a GeoPackage ``file.gpkg`` or ``file.gpkg:layer``: the layer is replaced, the
+file's other layers are kept; it is written under a temporary name and moved into place
+when complete, and refused before any work when it would modify an input
+(:func:`core.destinations.overwrite_error`, the rule of the QGIS tools).
+Progress goes to stderr in steps of 10 % (not with ``--quiet``), the summary to stdout as
+one JSON line.
+Exit status: 0 done, 2 bad input (the message names the layer or file), 1 other errors,
+130 interrupted (Ctrl-C: nothing written).
 """
 from __future__ import annotations
 
@@ -34,7 +41,9 @@ import pandas as pd
 import shapely
 
 from ..buildings import footprints
-from ..core.progress import InputError
+from ..core.destinations import Input, overwrite_error
+from ..core.progress import InputError, Progress
+from ..core.seeds import MAX_SEED, check_seed
 from ..retrieval import database
 from . import distributed
 
@@ -56,27 +65,42 @@ def build_parser() -> argparse.ArgumentParser:
     f.add_argument("--db", action="append", required=True,
                    help="block database GeoPackage from 'Build block database' (repeat for "
                         "several: each block takes the best match of all)")
-    f.add_argument("--method", choices=footprints.METHODS, default="transfer")
-    f.add_argument("--seed", type=int, default=1)
+    f.add_argument("--method", choices=footprints.METHODS, default="transfer",
+                   help="transfer: the best-matching example block's footprints copied in "
+                        "and relaxed (ch. 5.1); resynthesis: a new layout composed from the "
+                        "example's footprints per street segment (ch. 5.2) (default "
+                        "%(default)s)")
+    _seed_arg(f)
     f.add_argument("--street-width", type=float, default=footprints.STREET_WIDTH,
-                   help="full road width in m (default %(default)s)")
-    f.add_argument("--setback", type=float, default=0.0)
+                   help="full road width in m, kept free around --roads (default "
+                        "%(default)s)")
+    f.add_argument("--setback", type=float, default=0.0,
+                   help="extra distance in m behind the road surface kept free (default "
+                        "%(default)s)")
     f.add_argument("--n-best", type=int, default=1,
-                   help="random choice among the n best example blocks")
-    f.add_argument("--min-example-buildings", type=int, default=1)
-    f.add_argument("--out", required=True, help="output GeoPackage (layer 'footprints')")
+                   help="random choice among the n best example blocks (default "
+                        "%(default)s: always the best)")
+    f.add_argument("--min-example-buildings", type=int, default=1,
+                   help="example blocks with fewer footprints are not used (default "
+                        "%(default)s)")
+    f.add_argument("--out", required=True, help="output GeoPackage: file.gpkg (layer "
+                   "'footprints') or file.gpkg:layer; written in the CRS of --blocks")
     _cluster_args(f)
 
     g = sub.add_parser("gan", help="StreetGAN road network over a target area (thesis ch. "
                        "4.2): generator tiles on the workers, graph extraction here")
     g.add_argument("--target", required=True, help="target area polygons (their union)")
     g.add_argument("--model", default="streetgan_helsinki",
-                   help="shipped model name or .onnx file with its .json card")
-    g.add_argument("--seed", type=int, default=1)
-    g.add_argument("--tile", type=int, default=24, help="noise cells per tile")
+                   help="shipped model name or .onnx file with its .json card (default "
+                        "%(default)s)")
+    _seed_arg(g)
+    g.add_argument("--tile", type=int, default=24,
+                   help="noise cells per generator tile, one task each (default "
+                        "%(default)s; the image does not depend on it)")
     g.add_argument("--cell-size", type=float, help="metres per pixel (default: the "
                    "model's)")
-    g.add_argument("--out", required=True, help="output GeoPackage (layer 'roads')")
+    g.add_argument("--out", required=True, help="output GeoPackage: file.gpkg (layer "
+                   "'roads') or file.gpkg:layer; written in the CRS of --target")
     _cluster_args(g)
 
     a = sub.add_parser("attributes", help="height, levels, type and roof of footprints "
@@ -87,44 +111,116 @@ def build_parser() -> argparse.ArgumentParser:
                         "height_m / levels / building_type / roof_shape fields)")
     a.add_argument("--roads", help="roads around the footprints (with --example-roads)")
     a.add_argument("--example-roads", help="roads around the examples")
-    a.add_argument("--k", type=int, default=9, help="candidates per footprint")
-    a.add_argument("--seed", type=int, default=1)
-    a.add_argument("--choice-mode", choices=("medoid", "random"), default="medoid")
-    a.add_argument("--min-height", type=float, default=0.0)
-    a.add_argument("--max-height", type=float, default=1000.0)
-    a.add_argument("--out", required=True, help="output GeoPackage (layer 'buildings')")
+    a.add_argument("--k", type=int, default=9,
+                   help="candidate example buildings per footprint (default %(default)s)")
+    _seed_arg(a, "(random choice mode)")
+    a.add_argument("--choice-mode", choices=("medoid", "random"), default="medoid",
+                   help="medoid: the candidate of similarity-weighted median height; random: "
+                        "one drawn by similarity (default %(default)s)")
+    a.add_argument("--min-height", type=float, default=0.0,
+                   help="lowest height in m given to a building (default %(default)s)")
+    a.add_argument("--max-height", type=float, default=1000.0,
+                   help="highest height in m given to a building (default %(default)s)")
+    a.add_argument("--out", required=True, help="output GeoPackage: file.gpkg (layer "
+                   "'buildings') or file.gpkg:layer; written in the CRS of --footprints")
     _cluster_args(a)
     return p
 
 
+def _seed_arg(p, what=""):
+    p.add_argument("--seed", type=int, default=1,
+                   help=f"random seed {what + ' ' if what else ''}0 .. {MAX_SEED}: the same "
+                        "seed gives the same result (default %(default)s)")
+
+
 def _cluster_args(p):
     p.add_argument("--workers", type=int, default=0,
-                   help="0 = in this process; N = local Dask cluster of N processes")
+                   help="0 = in this process (default); N = local Dask cluster of N "
+                        "processes")
     p.add_argument("--scheduler", help="address of a running Dask scheduler "
                    "(tcp://host:8786); overrides --workers")
     p.add_argument("--partitions", type=int, help="number of partitions (default 4 per "
-                   "worker; gan: one per tile)")
-    p.add_argument("--quiet", action="store_true")
+                   "worker; gan: one per tile, this option is not used)")
+    p.add_argument("--quiet", action="store_true",
+                   help="no progress on stderr and no summary line on stdout")
+
+
+def _check_args(args):
+    """Numbers every subcommand shares, checked before any work."""
+    check_seed(args.seed)
+    if args.workers < 0:
+        raise InputError("--workers must be 0 or more")
+    if args.partitions is not None and args.partitions < 1:
+        raise InputError("--partitions must be at least 1")
+
+
+def _inputs(*options) -> list:
+    """(option name, source spec or list of database paths read whole) -> the files the
+    run reads, for :func:`core.destinations.overwrite_error`."""
+    out = []
+    for name, spec, whole in options:
+        for one in (spec if isinstance(spec, (list, tuple)) else [spec]):
+            if not one:
+                continue
+            src = distributed.parse_source(one)
+            if src.path.upper().startswith("PG:"):
+                continue
+            out.append(Input(name, Path(src.path),
+                             None if whole else distributed.layer_name(src)))
+    return out
+
+
+def _destination(args, default_layer: str, inputs: list) -> distributed.Source:
+    """``--out`` as (GeoPackage, layer), refused before any work when it would modify an
+    input or cannot be written."""
+    out = distributed.parse_output(args.out, default_layer)
+    message = overwrite_error(f"--out {args.out}", Path(out.path), out.layer, inputs)
+    if message:
+        raise InputError(message)
+    return out
+
+
+def _progress(args, what: str):
+    """Progress on stderr in steps of 10 % (None with --quiet)."""
+    if args.quiet:
+        return None
+    last = [-1]
+
+    def report(percent):
+        step = int(percent // 10) * 10
+        if step > last[0]:
+            last[0] = step
+            print(f"{what}: {step} %", file=sys.stderr, flush=True)
+
+    return Progress(report)
 
 
 @contextlib.contextmanager
 def _client(args):
     """A Dask client for --scheduler / --workers N (None for a serial run)."""
-    if args.workers < 0:
-        raise InputError("--workers must be 0 or more")
     if not (args.scheduler or args.workers > 0):
         yield None
         return
     from distributed import Client, LocalCluster
 
     if args.scheduler:
-        client, cluster = Client(args.scheduler), None
+        try:
+            client, cluster = Client(args.scheduler), None
+        except (OSError, ValueError, TypeError) as exc:
+            raise InputError(f"--scheduler {args.scheduler}: cannot connect to a Dask "
+                             f"scheduler there ({exc})") from exc
     else:
         cluster = LocalCluster(n_workers=args.workers, threads_per_worker=1,
                                processes=True, dashboard_address=None)
         client = Client(cluster)
     try:
         yield client
+    except KeyboardInterrupt:
+        # the workers are stopped below; their warnings about it are no news on Ctrl-C
+        import logging
+
+        logging.getLogger("distributed").setLevel(logging.CRITICAL)
+        raise
     finally:
         client.close()
         if cluster is not None:
@@ -148,6 +244,9 @@ def _run(args, serial, on_dask):
 def _footprints(args) -> dict:
     if args.n_best < 1:
         raise InputError("--n-best must be at least 1")
+    out = _destination(args, "footprints", _inputs(("--blocks", args.blocks, False),
+                                                   ("--roads", args.roads, False),
+                                                   ("--db", args.db, True)))
     blocks = distributed.read_blocks(distributed.parse_source(args.blocks))
     roads = None
     if args.roads:
@@ -160,11 +259,13 @@ def _footprints(args) -> dict:
                                                     args.min_example_buildings))
     job = distributed.FootprintJob(examples, roads, args.method, args.seed,
                                    args.street_width, args.setback, args.n_best)
+    progress = _progress(args, "footprints")
     result, seconds, mode = _run(
-        args, lambda: distributed.footprints_serial(blocks, job),
-        lambda client: distributed.footprints_distributed(client, blocks, job,
-                                                          n_partitions=args.partitions))
-    n = distributed.write_footprints(args.out, result, blocks.work_crs, blocks.crs)
+        args, lambda: distributed.footprints_serial(blocks, job, progress=progress),
+        lambda client: distributed.footprints_distributed(
+            client, blocks, job, n_partitions=args.partitions, progress=progress))
+    n = distributed.write_footprints(out.path, result, blocks.work_crs, blocks.crs,
+                                     layer=out.layer)
     return {"mode": mode, "blocks": len(blocks), "footprints": n,
             "seconds": round(seconds, 3), "out": str(args.out)}
 
@@ -174,16 +275,19 @@ def _gan(args) -> dict:
 
     if args.tile is not None and args.tile < 1:
         raise InputError("--tile must be at least 1 noise cell")
+    out = _destination(args, "roads", _inputs(("--target", args.target, False)))
     area, crs, work_crs = distributed.read_area(distributed.parse_source(args.target))
     gen = streetgan.load_model(args.model)
+    progress = _progress(args, "gan")
     result, seconds, mode = _run(
         args, lambda: streetgan.synthesize(area, gen, args.seed, tile=args.tile,
-                                           cell_size=args.cell_size),
+                                           cell_size=args.cell_size, progress=progress),
         lambda client: distributed.gan_synthesize_distributed(
-            client, area, gen, args.seed, tile=args.tile, cell_size=args.cell_size))
-    n = distributed.write_lines(args.out, result.geometry,
+            client, area, gen, args.seed, tile=args.tile, cell_size=args.cell_size,
+            progress=progress))
+    n = distributed.write_lines(out.path, result.geometry,
                                 pd.DataFrame({"level": result.level.astype(np.int64)}),
-                                work_crs, crs, layer="roads")
+                                work_crs, crs, layer=out.layer)
     return {"mode": mode, "pixels": result.stats["pixels"], "edges": n,
             "generate_s": result.stats["generate_s"], "seconds": round(seconds, 3),
             "out": str(args.out)}
@@ -242,6 +346,9 @@ def _read_roads(spec: str, work_crs: str):
 def _attributes(args) -> dict:
     from ..buildings import attribute_transfer as bt
 
+    out = _destination(args, "buildings", _inputs(
+        ("--footprints", args.footprints, False), ("--examples", args.examples, False),
+        ("--roads", args.roads, False), ("--example-roads", args.example_roads, False)))
     fp = distributed.read_footprints(distributed.parse_source(args.footprints))
     ex, attrs, ex_ids = _read_buildings(args.examples, fp.work_crs)
     rl = art = erl = eart = None
@@ -252,16 +359,17 @@ def _attributes(args) -> dict:
     job = distributed.AttributeJob(ex, attrs, ex_ids, rl, art, erl, eart, k=args.k,
                                    seed=args.seed, min_height=args.min_height,
                                    max_height=args.max_height, choice_mode=args.choice_mode)
+    progress = _progress(args, "attributes")
     result, seconds, mode = _run(
-        args, lambda: distributed.attributes_serial(fp, job),
-        lambda client: distributed.attributes_distributed(client, fp, job,
-                                                          n_partitions=args.partitions))
+        args, lambda: distributed.attributes_serial(fp, job, progress=progress),
+        lambda client: distributed.attributes_distributed(
+            client, fp, job, n_partitions=args.partitions, progress=progress))
     table = result.table.copy()
     for name, kind in bt.OUTPUT_FIELDS:
         if kind == "str":
             table[name] = table[name].astype(object)
-    n = distributed.write_lines(args.out, fp.geometry, table, fp.work_crs, fp.crs,
-                                layer="buildings")
+    n = distributed.write_lines(out.path, fp.geometry, table, fp.work_crs, fp.crs,
+                                layer=out.layer)
     return {"mode": mode, "footprints": n, "donors": int(result.stats["n_donors"]),
             "features": result.stats["features"], "seconds": round(seconds, 3),
             "out": str(args.out)}
@@ -273,10 +381,14 @@ COMMANDS = {"footprints": _footprints, "gan": _gan, "attributes": _attributes}
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     try:
+        _check_args(args)
         summary = COMMANDS[args.command](args)
     except InputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print(f"interrupted: nothing was written ({args.out} is as it was)", file=sys.stderr)
+        return 130
     if not args.quiet:
         print(json.dumps(summary))
     return 0

@@ -48,6 +48,9 @@ Hartmann, S., thesis ch. 5.1 / 5.2 (footprints per block); Dask distributed,
 """
 from __future__ import annotations
 
+import os
+import shutil
+import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -59,6 +62,7 @@ import shapely
 
 from ..buildings import footprints
 from ..core import crs as crs_rule
+from ..core.destinations import STAGING_PREFIX
 from ..core.ids import ids_or_numbers
 from ..core.progress import InputError, Progress, ensure
 
@@ -67,7 +71,8 @@ __all__ = ["Source", "parse_source", "metric_crs", "read_layer", "BlockTable", "
            "footprints_serial", "footprints_distributed", "write_footprints",
            "gan_generate_distributed", "gan_synthesize_distributed",
            "read_area", "write_lines", "AttributeJob", "read_footprints", "halo_partitions",
-           "attributes_serial", "attributes_distributed"]
+           "attributes_serial", "attributes_distributed", "layer_name", "parse_output",
+           "write_layer"]
 
 
 
@@ -164,6 +169,100 @@ def read_layer(source: Source, fids: Optional[Sequence[int]] = None, columns=Non
     if fids is not None:
         df = df.loc[np.asarray(fids, dtype=np.int64)]   # in the order asked for
     return df
+
+
+def layer_name(source: Source) -> Optional[str]:
+    """The layer :func:`read_layer` reads: the one named, else a GeoPackage's first layer;
+    None for a file of one unnamed layer (a shapefile, a GeoJSON), a connection string or
+    a file that cannot be opened (the file is then taken as read whole)."""
+    if source.layer is not None:
+        return source.layer
+    if source.path.upper().startswith("PG:") or \
+            Path(source.path).suffix.lower() != ".gpkg":
+        return None
+    import pyogrio
+
+    try:
+        layers = pyogrio.list_layers(source.path)
+    except Exception:  # noqa: BLE001 - unreadable: reported where it is read
+        return None
+    return str(layers[0, 0]) if len(layers) else None
+
+
+def parse_output(spec: str, default_layer: str) -> Source:
+    """An output GeoPackage and its layer: ``file.gpkg``, ``file.gpkg:layer`` or
+    ``file.gpkg|layername=layer`` (the layer defaults to ``default_layer``). Refused
+    before any work: a name not ending in .gpkg (the file is written as a GeoPackage
+    whatever it is called), a connection string, and a folder that cannot be written."""
+    src = parse_source(spec)
+    if not src.path or src.path.upper().startswith("PG:"):
+        raise InputError(f"--out {spec}: the output is a GeoPackage file (file.gpkg or "
+                         "file.gpkg:layer)")
+    if Path(src.path).suffix.lower() != ".gpkg":
+        raise InputError(f"--out {spec}: the output is written as a GeoPackage, but "
+                         f"{src.path} does not end in .gpkg: name it so, or another "
+                         "program will misread it")
+    if Path(src.path).is_dir():
+        raise InputError(f"--out {spec}: {src.path} is a folder, not a GeoPackage file")
+    probe = Path(src.path).absolute().parent
+    while not probe.exists() and probe != probe.parent:
+        probe = probe.parent
+    if not probe.is_dir() or not os.access(probe, os.W_OK | os.X_OK):
+        raise InputError(f"--out {spec}: the folder {Path(src.path).absolute().parent} "
+                         f"cannot be written ({probe} is "
+                         f"{'not a folder' if not probe.is_dir() else 'read-only'})")
+    return Source(src.path, src.layer or default_layer)
+
+
+def write_layer(gdf, path: str, layer: str) -> int:
+    """Write a GeoDataFrame to a layer of a GeoPackage, replacing a layer of that name and
+    keeping the file's other layers; returns the feature count.
+
+    Nothing is half-written: the file is written in a hidden staging folder next to it
+    (a copy of the existing file, when there is one) and moved into place in one step
+    (``os.replace``) when it is complete. A failure or Ctrl-C leaves the destination as it
+    was and removes the staging folder and any folder this call created."""
+    from pyogrio.errors import DataLayerError, DataSourceError
+
+    final = Path(path)
+    folder = final.absolute().parent
+    made = []
+    probe = folder
+    while not probe.exists() and probe != probe.parent:
+        made.append(probe)
+        probe = probe.parent
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        staging = Path(tempfile.mkdtemp(prefix=STAGING_PREFIX, dir=folder))
+    except OSError as exc:
+        _remove_empty(made)
+        raise InputError(f"{final}: the folder {folder} cannot be written "
+                         f"({exc.strerror or exc})") from exc
+    try:
+        temp = staging / final.name
+        if final.exists():
+            shutil.copy2(final, temp)    # the file's other layers are kept
+        try:
+            gdf.to_file(temp, layer=layer, driver="GPKG", engine="pyogrio")
+        except (DataLayerError, DataSourceError) as exc:
+            hint = " (the file exists: is it a GeoPackage?)" if final.exists() else ""
+            raise InputError(f"{final}: layer '{layer}' cannot be written{hint}: "
+                             f"{exc}") from exc
+        os.replace(temp, final)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        _remove_empty(made)
+        raise
+    shutil.rmtree(staging, ignore_errors=True)
+    return len(gdf)
+
+
+def _remove_empty(folders):
+    for f in folders:                    # deepest first
+        try:
+            f.rmdir()
+        except OSError:
+            pass
 
 
 def _layer_crs(df, source):
@@ -443,9 +542,7 @@ def write_footprints(path: str, result: footprints.FootprintResult, work_crs: st
     gdf = gpd.GeoDataFrame(table, geometry=list(result.geometry), crs=work_crs)
     if crs is not None and _pyproj_crs(crs) != _pyproj_crs(work_crs):
         gdf = gdf.to_crs(crs)
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    gdf.to_file(path, layer=layer, driver="GPKG", engine="pyogrio")
-    return len(gdf)
+    return write_layer(gdf, path, layer)
 
 
 # --------------------------------------------------------------------------- StreetGAN tiles
@@ -549,9 +646,7 @@ def write_lines(path: str, geometry, table: pd.DataFrame, work_crs: str, crs: Op
     gdf = gpd.GeoDataFrame(table.reset_index(drop=True), geometry=list(geometry), crs=work_crs)
     if crs is not None and _pyproj_crs(crs) != _pyproj_crs(work_crs):
         gdf = gdf.to_crs(crs)
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    gdf.to_file(path, layer=layer, driver="GPKG", engine="pyogrio")
-    return len(gdf)
+    return write_layer(gdf, path, layer)
 
 
 # --------------------------------------------------------------------------- building attributes
@@ -634,14 +729,15 @@ def _check_attributes(job: AttributeJob):
         raise InputError(f"the height range {job.min_height:g}..{job.max_height:g} m is empty")
 
 
-def attributes_serial(footprints_: BlockTable, job: AttributeJob):
+def attributes_serial(footprints_: BlockTable, job: AttributeJob,
+                      progress: Optional[Progress] = None):
     """The single-process reference: :func:`building_attribute_transfer.transfer_attributes`
     on the whole layer (no target FAR)."""
     from ..buildings import attribute_transfer as bt
 
     _check_attributes(job)
     return bt.transfer_attributes(footprints_.geometry, job.examples, job.example_attributes,
-                                  **job.engine_kwargs())
+                                  progress=progress, **job.engine_kwargs())
 
 
 def _attr_features(source: Source, work_crs: str, fids, core_pos, shared: _AttributeShared):
