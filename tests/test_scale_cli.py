@@ -205,3 +205,19 @@ def test_parse_output():
                                                                                   "x")
     with pytest.raises(distributed.InputError, match="GeoPackage"):
         distributed.parse_output("PG:dbname=x", "roads")
+
+
+def test_footprints_without_geometry_are_named(tmp_path):
+    """A footprint layer with a NULL geometry was refused as 'footprints must be polygons
+    (found Polygon, none)': polygons were found; the message now says which features
+    have no geometry."""
+    import geopandas as gpd
+
+    src = tmp_path / "fp.gpkg"
+    squares = [shapely.box(385000 + 20 * i, 6671500, 385010 + 20 * i, 6671510) for i in range(4)]
+    squares[2] = None
+    gpd.GeoDataFrame({"n": range(4)}, geometry=squares, crs=32635).to_file(
+        src, layer="fp", driver="GPKG", engine="pyogrio")
+    with pytest.raises(distributed.InputError,
+                       match=r"fp.gpkg:fp: 1 footprint\(s\) have no geometry \(feature id 3\)"):
+        distributed.read_footprints(distributed.Source(str(src), "fp"))

@@ -700,10 +700,16 @@ def read_footprints(source: Source, work_crs: Optional[str] = None) -> BlockTabl
     df = read_layer(source, columns=[])
     if len(df) == 0:
         raise InputError(f"{source}: the layer holds no footprint")
-    if df.geometry.isna().any() or not set(
-            shapely.get_type_id(df.geometry.values).tolist()) <= {3, 6}:
+    missing = df.geometry.isna().to_numpy() | shapely.is_empty(df.geometry.values)
+    if missing.any():
+        # one output row per footprint: a footprint without an outline cannot be given one
+        ids = df.index[missing].tolist()
+        raise InputError(f"{source}: {len(ids)} footprint(s) have no geometry (feature id "
+                         f"{', '.join(map(str, ids[:10]))}{' ...' if len(ids) > 10 else ''}):"
+                         " remove them or give them their outline")
+    if not set(shapely.get_type_id(df.geometry.values).tolist()) <= {3, 6}:
         raise InputError(f"{source}: footprints must be polygons (found "
-                         f"{', '.join(sorted(set(df.geometry.geom_type.fillna('none'))))})")
+                         f"{', '.join(sorted(set(df.geometry.geom_type)))})")
     return _polygon_table(source, df, np.arange(1, len(df) + 1, dtype=np.int64), work_crs)
 
 
