@@ -8,6 +8,7 @@ process (the exit status is its return value).
 """
 import hashlib
 
+import numpy as np
 import pyogrio
 import pytest
 import shapely
@@ -161,6 +162,7 @@ def test_seed_out_of_range_is_refused(inputs, tmp_path, capsys, seed):
 def test_unreachable_scheduler_is_a_clear_error(inputs, tmp_path, capsys):
     """A --scheduler nobody listens on ended in distributed's OSError traceback."""
     import dask
+    import distributed as _  # noqa: F401 - its config defaults in place before the set
 
     out = tmp_path / "x.gpkg"
     with dask.config.set({"distributed.comm.timeouts.connect": "1s"}):
@@ -221,3 +223,36 @@ def test_footprints_without_geometry_are_named(tmp_path):
     with pytest.raises(distributed.InputError,
                        match=r"fp.gpkg:fp: 1 footprint\(s\) have no geometry \(feature id 3\)"):
         distributed.read_footprints(distributed.Source(str(src), "fp"))
+
+
+def test_a_relative_source_is_found_by_workers_in_another_folder(tmp_path, monkeypatch):
+    """Workers of a --scheduler cluster run in a folder of their own; the tasks re-read
+    their partition by the path the driver was given, so '--blocks demo.gpkg:blocks' ran
+    on the driver and failed on the workers ('demo.gpkg: no such file')."""
+    import geopandas as gpd
+    import pandas as pd
+    from distributed import Client, LocalCluster
+
+    from urban_synthesis.plugin.buildings import attributes as building_attributes
+
+    xy = [(385000 + 25 * (i % 6), 6671500 + 25 * (i // 6)) for i in range(24)]
+    geoms = [shapely.box(x, y, x + 10 + i % 4, y + 12) for i, (x, y) in enumerate(xy)]
+    gpd.GeoDataFrame({"n": range(24)}, geometry=geoms, crs=32635).to_file(
+        tmp_path / "fp.gpkg", layer="fp", driver="GPKG", engine="pyogrio")
+    cluster = LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
+                           dashboard_address=None)   # its worker stays in this folder
+    client = Client(cluster)
+    try:
+        monkeypatch.chdir(tmp_path)
+        fp = distributed.read_footprints(distributed.Source("fp.gpkg", "fp"))
+        attrs = building_attributes.building_attributes(
+            24, height=[float(5 + i) for i in range(24)])
+        job = distributed.AttributeJob(np.array(geoms, dtype=object), attrs, k=3)
+        serial = distributed.attributes_serial(fp, job)
+        dist = distributed.attributes_distributed(client, fp, job, n_partitions=2)
+        pd.testing.assert_frame_equal(serial.table, dist.table, check_exact=True)
+    finally:
+        client.close()
+        cluster.close()
+    assert distributed.for_workers(distributed.Source("PG:dbname=x", "t")).path == \
+        "PG:dbname=x"

@@ -71,7 +71,8 @@ __all__ = ["Source", "parse_source", "metric_crs", "read_layer", "BlockTable", "
            "footprints_serial", "footprints_distributed", "write_footprints",
            "gan_generate_distributed", "gan_synthesize_distributed",
            "read_area", "write_lines", "AttributeJob", "read_footprints", "halo_partitions",
-           "attributes_serial", "attributes_distributed", "layer_name", "parse_output",
+           "attributes_serial", "attributes_distributed", "for_workers", "layer_name",
+           "parse_output",
            "write_layer"]
 
 
@@ -169,6 +170,15 @@ def read_layer(source: Source, fids: Optional[Sequence[int]] = None, columns=Non
     if fids is not None:
         df = df.loc[np.asarray(fids, dtype=np.int64)]   # in the order asked for
     return df
+
+
+def for_workers(source: Source) -> Source:
+    """The source as the workers re-read it: a relative file path made absolute here (a
+    worker of a --scheduler cluster runs in a folder of its own: 'demo.gpkg' was 'no such
+    file' there); connection strings as they are."""
+    if source.path.upper().startswith("PG:") or Path(source.path).is_absolute():
+        return source
+    return Source(str(Path(source.path).absolute()), source.layer)
 
 
 def layer_name(source: Source) -> Optional[str]:
@@ -507,7 +517,7 @@ def footprints_distributed(client, blocks: BlockTable, job: FootprintJob,
         n_partitions = 4 * workers
     parts = spatial_partitions(blocks.geometry, n_partitions)
     shared = client.scatter(job, broadcast=True, hash=False)
-    futures = [client.submit(_run_partition, blocks.source, blocks.work_crs,
+    futures = [client.submit(_run_partition, for_workers(blocks.source), blocks.work_crs,
                              blocks.fids[p], p, blocks.block_ids[p], choice[p], shared,
                              pure=False, retries=retries) for p in parts]
     done, results = 0, []
@@ -816,7 +826,7 @@ def attributes_distributed(client, footprints_: BlockTable, job: AttributeJob,
     feats, model_f, matches = [], None, []
     try:
         for core, halo in parts:
-            feats.append(client.submit(_attr_features, footprints_.source,
+            feats.append(client.submit(_attr_features, for_workers(footprints_.source),
                                        footprints_.work_crs, footprints_.fids[halo],
                                        np.searchsorted(halo, core), shared, pure=False,
                                        retries=retries))
