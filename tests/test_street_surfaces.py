@@ -438,22 +438,28 @@ def test_the_mesh_of_bent_streets_covers_their_surface_once():
 
 def test_a_hairpin_turning_back_on_itself_has_no_face_off_its_surface():
     """A street that turns by 179.95° has its bend's inner corner 9 km away: a side face
-    ran out to it. Every face of the mesh now lies on the street's surface, which the top
-    faces still cover once."""
+    ran out to it, and the top faces cut back from it took their heights from there (26 m
+    off the drape on a 178° hairpin on a curved slope). Every face of the mesh now lies on
+    the street's surface, which the top faces still cover once, at the draped height."""
     from urban_synthesis.plugin.network import street_mesh as sm
 
-    turn = np.radians(0.05)
-    line = shapely.LineString([(0, 0), (100, 0),
-                               (100 - 80 * np.cos(turn), 80 * np.sin(turn))])
-    t = ss.tessellate_lines([line], np.full(1, 8.0),
-                            dem=plane_dem(0.05, 0.02, extent=(-100, -100, 300, 200)))
-    m = sm.street_mesh(t, spacing=5.0)
-    surface = shapely.union_all(shapely.force_2d(t.surfaces))
-    assert shapely.distance(shapely.points(m.triangles.reshape(-1, 3)[:, :2]),
-                            surface).max() < 1e-6
-    top = m.triangles[~m.side]
-    flat = shapely.polygons(np.concatenate([top[:, :, :2], top[:, :1, :2]], axis=1))
-    assert shapely.area(flat).sum() == pytest.approx(surface.area, rel=1e-6)
+    x, y = np.meshgrid(np.arange(-300, 500, 2.0) + 1, 300 - np.arange(600) * 2.0 - 1)
+    dem = DemGrid(100 + 0.002 * (x - 50) ** 2 + 5 * np.sin(y / 15), (-300, 2.0, 0, 300, 0, -2.0))
+    for degrees in (178.0, 179.95):
+        turn = np.radians(180 - degrees)
+        line = shapely.LineString([(0, 0), (100, 0),
+                                   (100 - 80 * np.cos(turn), 80 * np.sin(turn))])
+        t = ss.tessellate_lines([line], np.full(1, 8.0), dem=dem)
+        m = sm.street_mesh(t, spacing=5.0, z_offset=0.1)
+        surface = shapely.union_all(shapely.force_2d(t.surfaces))
+        assert shapely.distance(shapely.points(m.triangles.reshape(-1, 3)[:, :2]),
+                                surface).max() < 1e-6
+        top = m.triangles[~m.side]
+        flat = shapely.polygons(np.concatenate([top[:, :, :2], top[:, :1, :2]], axis=1))
+        assert shapely.area(flat).sum() == pytest.approx(surface.area, rel=1e-6)
+        xyz = top.reshape(-1, 3)
+        drape = t.surface_z(np.zeros(len(xyz), dtype=int), xyz[:, :2]) + 0.1
+        np.testing.assert_allclose(xyz[:, 2], drape, atol=1e-3)
 
 
 def test_a_dead_end_street_is_closed_by_a_side_face():

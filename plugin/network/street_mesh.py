@@ -216,12 +216,12 @@ def _trimmed(area: np.ndarray, owner: np.ndarray, surfaces: np.ndarray) -> np.nd
     return strip > shapely.area(surfaces) * (1 + 1e-6) + 1e-6
 
 
-def _clipped_to_surfaces(tris: np.ndarray, owner: np.ndarray, uv: np.ndarray, surfaces):
+def _clipped_to_surfaces(tris: np.ndarray, owner: np.ndarray, uv: np.ndarray, surfaces,
+                         z_of=None):
     """Street top triangles (n, 3, 3) cut back to their own surface polygons where those
     were trimmed (streets overlapping each other or a junction: the strips between the
     connecting lines ignore the trim). A triangle partly outside becomes the ear-clipped
-    pieces of its part inside, with z and (u, v) interpolated in the triangle's plane.
-    Returns (tris, owner, uv)."""
+    pieces of its part inside (:func:`_replaced`). Returns (tris, owner, uv)."""
     area = np.abs(_tri_area2(tris[:, 0, :2], tris[:, 1, :2], tris[:, 2, :2])) / 2
     sel = np.flatnonzero(_trimmed(area, owner, surfaces)[owner])
     if not len(sel):
@@ -233,10 +233,10 @@ def _clipped_to_surfaces(tris: np.ndarray, owner: np.ndarray, uv: np.ndarray, su
     # surface's arc to the last digit) stays whole
     whole = shapely.area(inside) >= area[sel] * (1 - 1e-6)
     cut = sel[~whole]
-    return _replaced(tris, owner, uv, cut, inside[~whole])
+    return _replaced(tris, owner, uv, cut, inside[~whole], z_of)
 
 
-def _without_folds(tris: np.ndarray, owner: np.ndarray, uv: np.ndarray, may_fold):
+def _without_folds(tris: np.ndarray, owner: np.ndarray, uv: np.ndarray, may_fold, z_of=None):
     """Street top triangles with no two of one street over each other: a triangle that
     overlaps earlier ones of its street (where a street bends back on itself -- a hairpin,
     a bend whose inner corner lies beyond the next bend or the street's end -- its strip
@@ -262,17 +262,20 @@ def _without_folds(tris: np.ndarray, owner: np.ndarray, uv: np.ndarray, may_fold
                        dtype=object)
     with np.errstate(invalid="ignore"):
         rest = shapely.difference(t2[later], earlier)
-    return _replaced(tris, owner, uv, sel[later], rest)
+    return _replaced(tris, owner, uv, sel[later], rest, z_of)
 
 
-def _replaced(tris, owner, uv, which, shapes):
+def _replaced(tris, owner, uv, which, shapes, z_of=None):
     """The triangles ``which`` replaced by the ear-clipped parts of ``shapes`` (their parts
-    to keep, polygons within them), with z and (u, v) interpolated in each triangle's
-    plane. Returns (tris, owner, uv)."""
+    to keep, polygons within them), with (u, v) interpolated in each triangle's plane and z
+    too, or from ``z_of(owner, xy)`` (the drape) when given: a triangle of a bend's fan
+    reaches to the bend's inner corner, beyond the surface on a hairpin (kilometres on one
+    of 179.9°), and z interpolated from there was metres off the drape. Returns (tris,
+    owner, uv)."""
     keep = np.ones(len(tris), dtype=bool)
     keep[which] = False
     pieces, parent = shapely.get_parts(shapes, return_index=True)
-    new_t, new_o, new_uv = [], [], []
+    new_xy, new_z, new_o, new_uv = [], [], [], []
     for piece, i in zip(pieces, which[parent]):
         if shapely.get_type_id(piece) != 3 or piece.area < MIN_TRIANGLE_AREA:
             continue
@@ -285,15 +288,17 @@ def _replaced(tris, owner, uv, which, shapes):
         m = np.array([[b[0] - a[0], c[0] - a[0]], [b[1] - a[1], c[1] - a[1]]])
         st = np.linalg.solve(m, (ring - a).T).T
         w = np.column_stack([1 - st.sum(1), st])
-        z = w @ tris[i, :, 2]
-        tex = w @ uv[i]
-        new_t.append(np.column_stack([ring, z])[ears])
-        new_uv.append(tex[ears])
+        new_xy.append(ring[ears])
+        new_z.append((w @ tris[i, :, 2])[ears])
+        new_uv.append((w @ uv[i])[ears])
         new_o.append(np.full(len(ears), owner[i]))
     tris, owner, uv = tris[keep], owner[keep], uv[keep]
-    if new_t:
-        tris = np.concatenate([tris] + new_t)
-        owner = np.concatenate([owner] + new_o)
+    if new_xy:
+        xy, own = np.concatenate(new_xy), np.concatenate(new_o)
+        z = np.concatenate(new_z) if z_of is None else \
+            z_of(np.repeat(own, 3), xy.reshape(-1, 2)).reshape(-1, 3)
+        tris = np.concatenate([tris, np.concatenate([xy, z[:, :, None]], axis=2)])
+        owner = np.concatenate([owner, own])
         uv = np.concatenate([uv] + new_uv)
     return tris, owner, uv
 
@@ -486,8 +491,11 @@ def street_mesh(tess, spacing: float = 5.0, z_offset: float = 0.1, skirt: float 
                         np.stack([L3[i], R3[j], L3[j]], axis=1)], axis=1).reshape(-1, 3, 3)
         top_uv = np.stack(_quad_uv(len(i), "street"), axis=1).reshape(-1, 3, 2)  # u: 0 left
         flat_surfaces = shapely.force_2d(np.asarray(tess.surfaces))
-        top, top_owner, top_uv = _without_folds(top, np.repeat(k[i], 2), top_uv, may_fold)
-        top, top_owner, top_uv = _clipped_to_surfaces(top, top_owner, top_uv, flat_surfaces)
+        drape = (lambda own, xy: tess.surface_z(own, xy) + z_offset) if draped else None
+        top, top_owner, top_uv = _without_folds(top, np.repeat(k[i], 2), top_uv, may_fold,
+                                                drape)
+        top, top_owner, top_uv = _clipped_to_surfaces(top, top_owner, top_uv, flat_surfaces,
+                                                      drape)
         tris.append(top)
         owner.append(top_owner)
         side.append(np.zeros(len(top), dtype=bool))
