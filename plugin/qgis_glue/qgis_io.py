@@ -936,12 +936,16 @@ def raster_cell_size(layer, work_crs, bounds, context, max_cells: int = 2048,
     ``min_cell`` m, and coarse enough that the input's extent spans at most ``max_cells``
     cells."""
     ext = layer.extent()
-    native = max(layer.rasterUnitsPerPixelX(), layer.rasterUnitsPerPixelY())
-    try:  # the resolution in metres: the length of one pixel's diagonal, transformed
+    px, py = layer.rasterUnitsPerPixelX(), layer.rasterUnitsPerPixelY()
+    native = max(px, py)
+    try:  # the resolution in metres: one pixel's two sides, transformed, as one square's
+        # (the bounding box of the pixel's diagonal made a 5 m pixel in degrees 8 m cells)
         tr = QgsCoordinateTransform(layer.crs(), work_crs, context.transformContext())
         c = ext.center()
-        box = tr.transformBoundingBox(QgsRectangle(c.x(), c.y(), c.x() + native, c.y() + native))
-        native_m = max(box.width(), box.height())
+        corner = tr.transform(QgsPointXY(c.x(), c.y()))
+        side_x = corner.distance(tr.transform(QgsPointXY(c.x() + px, c.y())))
+        side_y = corner.distance(tr.transform(QgsPointXY(c.x(), c.y() + py)))
+        native_m = math.sqrt(side_x * side_y)
     except Exception:  # noqa: BLE001 - an unknown CRS: trust the number as metres
         native_m = native
     span = max(bounds[2] - bounds[0], bounds[3] - bounds[1])
