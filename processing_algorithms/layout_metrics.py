@@ -182,13 +182,17 @@ class LayoutMetrics(AlgorithmBase):
     # ------------------------------------------------------------------ helpers
 
     def _read_set(self, parameters, context, feedback, layers, area_name, landuse_field):
-        """Read one layer set (candidate or example) into engine arguments, one metric CRS."""
-        kwargs, names, crs = {}, [], None
+        """Read one layer set (candidate or example) into engine arguments, one metric CRS,
+        and the names of the layers given empty (left out, as if not given)."""
+        kwargs, names, crs, empty = {}, [], None, []
         for name, arg, kind in layers:
             if not self.given(parameters, name):
                 continue
             frame = qgis_io.read_source(self, parameters, name, context, feedback, kind=kind,
-                                        target_crs=crs)
+                                        target_crs=crs, optional=True)
+            if frame is None:   # empty: a model step before made nothing
+                empty.append(qgis_io.layer_name(self, parameters, name, context))
+                continue
             crs = frame.crs
             kwargs[arg] = frame.geometry
             if arg == "roads":  # bridges and tunnels cross without an intersection
@@ -209,7 +213,10 @@ class LayoutMetrics(AlgorithmBase):
                                       "shares for it.")
         if kwargs and self.given(parameters, area_name):
             area = qgis_io.read_source(self, parameters, area_name, context, feedback,
-                                       kind="polygons", target_crs=crs)
+                                       kind="polygons", target_crs=crs, optional=True)
+        else:
+            area = None
+        if area is not None:
             layers = np.concatenate([np.asarray(v, dtype=object) for k, v in kwargs.items()
                                      if k in ("roads", "blocks", "parcels", "buildings")])
             if not shapely.intersects(shapely.union_all(area.geometry),
@@ -220,7 +227,7 @@ class LayoutMetrics(AlgorithmBase):
                     "(or none: their convex hull is used).")
             kwargs["area"] = area.geometry
             names.append(f"study area: {area.name}")
-        return kwargs, names, crs
+        return kwargs, names, crs, empty
 
     @staticmethod
     def _road_class(frame):
@@ -246,16 +253,20 @@ class LayoutMetrics(AlgorithmBase):
             min_block_width=self.number(parameters, self.MIN_BLOCK_WIDTH, context),
             edge_distance=self.number(parameters, self.EDGE_DISTANCE, context),
             snap_tolerance=self.number(parameters, self.SNAP_TOLERANCE, context))
-        cand_args, cand_names, cand_crs = self._read_set(
+        cand_args, cand_names, cand_crs, empty = self._read_set(
             parameters, context, feedback, self.CANDIDATE, self.STUDY_AREA, landuse_field)
         if not cand_args:
             raise QgsProcessingException(
+                "No layer to measure: " + ", ".join(f"layer {n} is empty" for n in empty) + "."
+                if empty else
                 "No layer to measure could be loaded: check Roads, Blocks, Parcels and Buildings.")
+        given = None
         if self.given(parameters, self.GIVEN_ROADS):
+            given = qgis_io.read_source(self, parameters, self.GIVEN_ROADS, context, feedback,
+                                        kind="lines", target_crs=cand_crs, optional=True)
+        if given is not None:
             if "roads" not in cand_args:
                 raise QgsProcessingException("Given roads need Roads to check against them.")
-            given = qgis_io.read_source(self, parameters, self.GIVEN_ROADS, context, feedback,
-                                        kind="lines", target_crs=cand_crs)
             cand_args.update(given_roads=given.geometry, given_class=self._road_class(given),
                              given_z_layer=qgis_io.osm_vertical_layers(given))
             cand_names.append(f"given roads: {given.name} ({len(given)} features)")
@@ -271,7 +282,7 @@ class LayoutMetrics(AlgorithmBase):
             feedback.pushInfo(f"Layout: {note}")
 
         example = None
-        ex_args, ex_names, ex_crs = self._read_set(
+        ex_args, ex_names, ex_crs, _ = self._read_set(
             parameters, context, feedback, self.EXAMPLE, self.EXAMPLE_STUDY_AREA, landuse_field)
         if ex_args:
             # an example without classes (a synthesis) keeps all its lines

@@ -145,10 +145,10 @@ class SynthesizeBuildingAttributes(AlgorithmBase):
                                                           context, feedback, examples.crs)
         if (road_lines is None) != (ex_lines is None):
             feedback.pushInfo("Road distances are used only with both Roads and Example roads.")
-        blocks = None
-        if self.given(parameters, self.BLOCKS):
-            blocks = qgis_io.read_source(self, parameters, self.BLOCKS, context, feedback,
-                                         kind="polygons", target_crs=crs).geometry
+        blocks = qgis_io.read_source(self, parameters, self.BLOCKS, context, feedback,
+                                     kind="polygons", target_crs=crs, optional=True)
+        if blocks is not None:
+            blocks = blocks.geometry
         result = qgis_io.run_engine(
             examples.name, transfer.transfer_attributes, footprints.geometry, examples.geometry,
             attrs, example_ids=examples.fids, roads=road_lines, arterials=arterials,

@@ -155,7 +155,9 @@ class SynthesizeRoads(AlgorithmBase):
                                        optional=True, fields=[])
         if boundary is not None:
             area = shapely.union_all(boundary.geometry)
+            area_name = f"boundary {boundary.name}"
         else:
+            area_name = f"convex hull of the arterials {arterials.name}"
             area = shapely.convex_hull(shapely.union_all(arterials.geometry))
             if shapely.area(area) <= 0:
                 raise QgsProcessingException(
@@ -175,11 +177,11 @@ class SynthesizeRoads(AlgorithmBase):
                               f"{stats['degree4_share']:.2f}, blocks "
                               f"{stats['block_area_p10']:,.0f} m² (10th percentile) and "
                               f"{stats['block_area_p50']:,.0f} m² (median).")
-        return self._child_method(parameters, context, feedback, method, arterials, area, seed,
-                                  held_to)
+        return self._child_method(parameters, context, feedback, method, arterials, area,
+                                  area_name, seed, held_to)
 
-    def _child_method(self, parameters, context, feedback, method, arterials, area, seed,
-                      held_to=None):
+    def _child_method(self, parameters, context, feedback, method, arterials, area, area_name,
+                      seed, held_to=None):
         import processing  # QGIS's Processing plugin, present wherever algorithms run
 
         fragment_db = self.parameterAsFile(parameters, self.FRAGMENT_DB, context)
@@ -207,10 +209,7 @@ class SynthesizeRoads(AlgorithmBase):
         # as a layer in the arterials' CRS: every method writes its roads in its target's
         # CRS, so all of them write in the arterials' (a boundary in another CRS gave its
         # own to growth's and StreetGAN's roads, and so to every output of the district)
-        name = (f"boundary {qgis_io.layer_name(self, parameters, self.BOUNDARY, context)}"
-                if self.given(parameters, self.BOUNDARY)
-                else f"convex hull of the arterials {arterials.name}")
-        boundary = self._area_layer(area, arterials, context, name)
+        boundary = self._area_layer(area, arterials, context, area_name)
         if method.key == "fragments":
             params = {"ARTERIALS": parameters[self.ARTERIALS], "BOUNDARY": boundary,
                       "FRAGMENT_DB": fragment_db, "DEM": dem, "SEED": seed,

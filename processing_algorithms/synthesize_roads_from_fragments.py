@@ -217,10 +217,10 @@ class SynthesizeRoadsFromFragments(AlgorithmBase):
         feedback.setProgress(12)
 
         boundary = None
-        if self.given(parameters, self.BOUNDARY):
-            boundary_frame = qgis_io.read_source(self, parameters, self.BOUNDARY, context,
-                                                 feedback, kind="polygons",
-                                                 target_crs=frame.crs, fields=[])
+        boundary_frame = qgis_io.read_source(self, parameters, self.BOUNDARY, context,
+                                             feedback, kind="polygons", target_crs=frame.crs,
+                                             fields=[], optional=True)
+        if boundary_frame is not None:
             boundary = boundary_frame.geometry
             self.require_roads_reach(frame, boundary, f"the boundary {boundary_frame.name}")
         result = qgis_io.run_engine(

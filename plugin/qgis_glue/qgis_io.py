@@ -259,7 +259,9 @@ def read_source(alg, parameters, name: str, context, feedback,
     more than the algorithms themselves. Null geometries are skipped; invalid ones stop the
     run or are skipped as Processing's invalid features filtering says
     (:func:`invalid_geometry_rule`), and with "do not filter" they are repaired
-    (``make_valid``), with a count in the log. Lines and polygons drawn twice (the same
+    (``make_valid``), with a count in the log. An ``optional`` input that is not given, or
+    holds no feature with a geometry (a model step that made nothing), gives None (the
+    latter with a warning naming the layer and the parameter). Lines and polygons drawn twice (the same
     geometry, in either direction) are read once, with a count in the log, unless
     ``read_twice`` (a library of shapes, where two entries may share one outline). The
     source is never modified.
@@ -351,6 +353,17 @@ def read_source(alg, parameters, name: str, context, feedback,
         # OSM driver serves a file's layers from one dataset and a second reader of the same
         # .pbf waited on it once (tests/test_model_chain.py)
         features.close()
+    if not wkbs and optional:
+        # an optional input that holds nothing (a chained step of a model that made
+        # nothing, an empty selection) is one not given: the run goes on without it
+        if feedback is not None:
+            definition = alg.parameterDefinition(name)
+            what = f"{definition.description()} ({name})" if definition is not None else name
+            feedback.pushWarning(
+                f"Layer {label} is empty"
+                + (f" ({n_null} null geometries skipped)" if n_null else "")
+                + f": the run goes on without {what}, as if it were not given.")
+        return None
     if not wkbs:
         raise QgsProcessingException(
             f"Layer {label} is empty: it has no features with a geometry"
