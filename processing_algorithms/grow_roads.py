@@ -215,6 +215,10 @@ class GrowRoads(AlgorithmBase):
             frame = qgis_io.read_source(self, parameters, self.MAJOR_ROADS, context, feedback,
                                         kind="lines", fields=[], optional=True)
             if frame is None:
+                for name in (self.BOUNDARY, self.MAJOR_ROADS):
+                    if self.given(parameters, name):  # given empty: refused by its name
+                        qgis_io.read_source(self, parameters, name, context, feedback,
+                                            fields=[])
                 raise QgsProcessingException(
                     "Give a boundary polygon or sketched major roads: without either there "
                     "is no place to grow roads.")

@@ -182,16 +182,15 @@ class LayoutMetrics(AlgorithmBase):
     # ------------------------------------------------------------------ helpers
 
     def _read_set(self, parameters, context, feedback, layers, area_name, landuse_field):
-        """Read one layer set (candidate or example) into engine arguments, one metric CRS,
-        and the names of the layers given empty (left out, as if not given)."""
-        kwargs, names, crs, empty = {}, [], None, []
+        """Read one layer set (candidate or example) into engine arguments, one metric CRS
+        (a layer given empty is left out, as if not given)."""
+        kwargs, names, crs = {}, [], None
         for name, arg, kind in layers:
             if not self.given(parameters, name):
                 continue
             frame = qgis_io.read_source(self, parameters, name, context, feedback, kind=kind,
                                         target_crs=crs, optional=True)
             if frame is None:   # empty: a model step before made nothing
-                empty.append(qgis_io.layer_name(self, parameters, name, context))
                 continue
             crs = frame.crs
             kwargs[arg] = frame.geometry
@@ -227,7 +226,7 @@ class LayoutMetrics(AlgorithmBase):
                     "(or none: their convex hull is used).")
             kwargs["area"] = area.geometry
             names.append(f"study area: {area.name}")
-        return kwargs, names, crs, empty
+        return kwargs, names, crs
 
     @staticmethod
     def _road_class(frame):
@@ -253,12 +252,13 @@ class LayoutMetrics(AlgorithmBase):
             min_block_width=self.number(parameters, self.MIN_BLOCK_WIDTH, context),
             edge_distance=self.number(parameters, self.EDGE_DISTANCE, context),
             snap_tolerance=self.number(parameters, self.SNAP_TOLERANCE, context))
-        cand_args, cand_names, cand_crs, empty = self._read_set(
+        cand_args, cand_names, cand_crs = self._read_set(
             parameters, context, feedback, self.CANDIDATE, self.STUDY_AREA, landuse_field)
         if not cand_args:
+            for name, _, _ in self.CANDIDATE:
+                if self.given(parameters, name):  # every one given empty: refused by its name
+                    qgis_io.read_source(self, parameters, name, context, feedback, fields=[])
             raise QgsProcessingException(
-                "No layer to measure: " + ", ".join(f"layer {n} is empty" for n in empty) + "."
-                if empty else
                 "No layer to measure could be loaded: check Roads, Blocks, Parcels and Buildings.")
         given = None
         if self.given(parameters, self.GIVEN_ROADS):
@@ -282,7 +282,7 @@ class LayoutMetrics(AlgorithmBase):
             feedback.pushInfo(f"Layout: {note}")
 
         example = None
-        ex_args, ex_names, ex_crs, _ = self._read_set(
+        ex_args, ex_names, ex_crs = self._read_set(
             parameters, context, feedback, self.EXAMPLE, self.EXAMPLE_STUDY_AREA, landuse_field)
         if ex_args:
             # an example without classes (a synthesis) keeps all its lines
