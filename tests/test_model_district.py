@@ -220,3 +220,22 @@ def test_synthesize_roads_builds_the_example_database_without_a_dem_of_another_p
     assert len(warned) == 1 and "district_dem" in warned[0] and "elsewhere" in warned[0]
     roads = _read(out, None)
     assert (roads["level"] >= 1).any()
+
+
+def test_model_refuses_an_empty_mandatory_layer_by_name(qgis_processing, tmp_path):
+    """An empty example buildings layer: its steps run an empty optional input as not given,
+    so without the model's own check the run failed far from it ('Example block database:
+    Buildings (BUILDINGS) is needed'), naming no layer of the user's."""
+    from qgis.core import QgsProcessingException
+
+    from helpers import memory_layer
+
+    params = {"EXAMPLE_ROADS": bubenec_layer("streets"), "ARTERIALS": bubenec_layer("streets"),
+              "EXAMPLE_BUILDINGS": memory_layer("Polygon", [], name="no buildings"),
+              "ROAD_METHOD": 1}
+    for name in OUTPUTS:
+        params[name] = str(tmp_path / f"{name.split(':')[1]}.gpkg")
+    with pytest.raises(QgsProcessingException,
+                       match=r"'no buildings' is empty: Example buildings \(EXAMPLE_BUILDINGS\)"):
+        qgis_processing.run("urbansynth:synthesizedistrict", params)
+    assert not list(tmp_path.iterdir())

@@ -52,7 +52,33 @@ class ShippedModel(QgsProcessingModelAlgorithm):
         missing = dependencies.missing_packages()
         if missing:
             return False, dependencies.missing_message(missing)
+        message = self.empty_input_error(parameters, context)
+        if message:
+            return False, message
         return super().checkParameterValues(parameters, context)
+
+    def empty_input_error(self, parameters, context):
+        """The message when a mandatory input layer of the model holds no feature, else
+        None. Its steps run an empty optional input as one not given, so the step that
+        needed it would fail far from it ('Example block database: Buildings is needed')."""
+        from qgis.core import QgsProcessingParameterDefinition, QgsProcessingParameterFeatureSource
+
+        from . import qgis_io
+
+        for definition in self.parameterDefinitions():
+            if not isinstance(definition, QgsProcessingParameterFeatureSource) or \
+                    definition.flags() & QgsProcessingParameterDefinition.Flag.FlagOptional:
+                continue
+            try:
+                source = self.parameterAsSource(parameters, definition.name(), context)
+            except Exception:  # noqa: BLE001 - an unreadable layer is reported by its step
+                continue
+            # featureCount() is -1 where the provider does not know (an .osm.pbf)
+            if source is not None and source.featureCount() == 0:
+                return (f"Layer {qgis_io.layer_name(self, parameters, definition.name(), context)}"
+                        f" is empty: {definition.description()} ({definition.name()}) needs "
+                        "features.")
+        return None
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         missing = dependencies.missing_packages()  # models in models: no parameter check
@@ -60,6 +86,9 @@ class ShippedModel(QgsProcessingModelAlgorithm):
             raise QgsProcessingException(dependencies.missing_message(missing))
         from . import qgis_io  # the engine's packages: not needed to list the provider
 
+        message = self.empty_input_error(parameters, context)  # models in models: no check
+        if message:
+            raise QgsProcessingException(message)
         staging = outputs.OutputStaging(self, parameters, context)
         staged = staging.prepare()
         recorder = _StepErrors(feedback)
