@@ -26,6 +26,7 @@ from ..plugin.measure import fidelity
 from ..plugin.qgis_glue import qgis_io
 from ..plugin.roads import streetgan
 from .common import AlgorithmBase, fill_quantile_parameter
+from .synthesize_roads_from_fragments import bound_district
 
 #: One METHOD: its label and the algorithm that runs it. New methods are
 #: appended (the enum index is what models and command lines store).
@@ -150,6 +151,8 @@ class SynthesizeRoads(AlgorithmBase):
         # with the user's layer names, before any step runs
         arterials = qgis_io.read_source(self, parameters, self.ARTERIALS, context, feedback,
                                         kind="lines", fields=[])
+        if method.key == "fragments":   # before a fragment database is built for it
+            bound_district(self, arterials)
         boundary = qgis_io.read_source(self, parameters, self.BOUNDARY, context, feedback,
                                        kind="polygons", target_crs=arterials.crs,
                                        optional=True, fields=[])

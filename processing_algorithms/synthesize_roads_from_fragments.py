@@ -178,10 +178,7 @@ class SynthesizeRoadsFromFragments(AlgorithmBase):
         frame = qgis_io.read_source(self, parameters, self.ARTERIALS, context, feedback,
                                     kind="lines", fields=list(qgis_io.ROAD_CLASS_FIELDS))
         label = frame.name
-        hull = shapely.area(shapely.convex_hull(shapely.union_all(frame.geometry))) / 1e6
-        self.bound_work(f"Arterials {label} (convex hull {hull:,.1f} km²)", hull,
-                        self.MAX_AREA_KM2, "km² of district",
-                        "split the arterials into districts and run them one by one")
+        bound_district(self, frame)
         n_best = self.number(parameters, self.N_BEST, context)
         max_level = self.number(parameters, self.MAX_LEVEL, context)
         if max_level is not None and self.parameterAsBool(parameters, self.FILL, context):
@@ -261,3 +258,14 @@ class SynthesizeRoadsFromFragments(AlgorithmBase):
             outputs[self.OUTPUT_DEM] = dem_out
         feedback.setProgress(100)
         return outputs
+
+
+def bound_district(alg, arterials):
+    """The fragment synthesis' work limit, one home: the convex hull of the ``arterials`` (a
+    Frame in the working CRS) up to MAX_AREA_KM2. Checked by this tool and, before it builds
+    a fragment database from the example (seconds to minutes on a large one), by
+    'Synthesize roads (choose the method)'."""
+    hull = shapely.area(shapely.convex_hull(shapely.union_all(arterials.geometry))) / 1e6
+    alg.bound_work(f"Arterials {arterials.name} (convex hull {hull:,.1f} km²)", hull,
+                   SynthesizeRoadsFromFragments.MAX_AREA_KM2, "km² of district",
+                   "split the arterials into districts and run them one by one")

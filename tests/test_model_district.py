@@ -239,3 +239,24 @@ def test_model_refuses_an_empty_mandatory_layer_by_name(qgis_processing, tmp_pat
                        match=r"'no buildings' is empty: Example buildings \(EXAMPLE_BUILDINGS\)"):
         qgis_processing.run("urbansynth:synthesizedistrict", params)
     assert not list(tmp_path.iterdir())
+
+
+def test_synthesize_roads_bounds_the_fragments_before_building_a_database(
+        qgis_processing, helsinki_arterials, tmp_path):
+    """Arterials whose hull is over the fragments' 50 km²: refused before the fragment
+    database is built from the example (it was built first, seconds to minutes for a
+    large example, and then refused by the fragment tool)."""
+    from qgis.core import QgsProcessingException
+
+    from helpers import log_feedback, memory_layer
+
+    arterials = memory_layer("LineString", ["LINESTRING (0 0, 10000 0)",
+                                            "LINESTRING (0 10000, 10000 10000)"],
+                             "EPSG:32633", name="far apart")
+    log = log_feedback()
+    with pytest.raises(QgsProcessingException,
+                       match=r"Arterials 'far apart' \(convex hull 100\.0 km²\).*more than the 50"):
+        qgis_processing.run("urbansynth:synthesizeroads", {
+            "METHOD": 0, "EXAMPLE_ROADS": helsinki_arterials[0], "ARTERIALS": arterials,
+            "OUTPUT": str(tmp_path / "roads.gpkg")}, feedback=log)
+    assert not any("Fragment database" in m for m in log.messages), log.messages
