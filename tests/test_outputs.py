@@ -270,3 +270,25 @@ def test_a_new_layer_in_an_input_database_is_refused_by_what_it_would_do(qgis_pr
             "ARTERIALS": arterials, "FRAGMENT_DB": str(db),
             "OUTPUT": f"ogr:dbname='{db}' table=\"new_roads\" (geom)"})
     assert _sha(db) == before
+
+
+def test_a_second_run_into_the_same_geopackage_layer_does_not_wait_for_a_dialog(tmp_path):
+    """Batch mode: the same tool run twice into one GeoPackage layer. QGIS 3.22 asks 'A
+    matching style already exists ... overwrite it?' in a modal message box before it
+    stores a style over the first run's: the second run waited for an answer forever
+    (qgis_process, a script) and would open a dialog from Processing's worker thread in
+    the desktop. The old style is replaced: one default style per layer."""
+    import sqlite3
+
+    gpkg = tmp_path / "runs.gpkg"
+    out = f"ogr:dbname='{gpkg}' table=\"hierarchy\" (geom)"
+    for run in range(2):
+        # a guard, not a timing: the run takes seconds, the old code never ended
+        code, _, err = run_qgis_process("extractroadhierarchy", {
+            "INPUT": bubenec_layer("streets"), "OUTPUT": out}, timeout=240)
+        assert code == 0, err
+    with sqlite3.connect(gpkg) as db:
+        styles = db.execute("SELECT f_table_name, useAsDefault FROM layer_styles").fetchall()
+        n = db.execute("SELECT COUNT(*) FROM hierarchy").fetchone()[0]
+    assert styles == [("hierarchy", 1)]
+    assert n > 5

@@ -83,11 +83,24 @@ def save_style_with_layer(destination: str, qml: str) -> Optional[str]:
     if not ok:
         return f"the style {qml} could not be read: {message}"
     if layer.dataProvider().storageType() == "GPKG":
+        _drop_stored_style(layer, layer.name())
         error = layer.saveStyleToDatabase(layer.name(), "Urban Synthesis default style",
                                           True, "")
         return f"the style could not be stored in {destination}: {error}" if error else None
     message, ok = layer.saveNamedStyle(str(Path(destination.split("|")[0]).with_suffix(".qml")))
     return None if ok else f"the style could not be saved next to {destination}: {message}"
+
+
+def _drop_stored_style(layer, name: str) -> None:
+    """Delete the style ``name`` stored for ``layer``'s table in its GeoPackage (the one an
+    earlier run into the same table stored). QGIS 3.22 asks 'A matching style already
+    exists ... overwrite it?' in a modal message box before it saves over one: a second run
+    into the same GeoPackage layer waited for an answer forever (qgis_process, scripts) or
+    opened a dialog from Processing's worker thread."""
+    n_related, ids, names, _, _ = layer.listStylesInDatabase()
+    for style_id, style_name in list(zip(ids, names))[:n_related]:
+        if style_name == name:
+            layer.deleteStyleFromDatabase(style_id)
 
 
 #: Where a styled output goes in the layer list, top first (points over lines over
