@@ -30,6 +30,7 @@ from qgis.core import (
     QgsPointXY,
     QgsProcessingException,
     QgsProcessingFeatureSource,
+    QgsProcessingParameterDefinition,
     QgsProcessingFeatureSourceDefinition,
     QgsProcessingFeedback,
     QgsProject,
@@ -353,11 +354,15 @@ def read_source(alg, parameters, name: str, context, feedback,
         # OSM driver serves a file's layers from one dataset and a second reader of the same
         # .pbf waited on it once (tests/test_model_chain.py)
         features.close()
-    if not wkbs and optional:
+    definition = alg.parameterDefinition(name)
+    declared_optional = definition is None or bool(
+        definition.flags() & QgsProcessingParameterDefinition.Flag.FlagOptional)
+    if not wkbs and optional and declared_optional:
         # an optional input that holds nothing (a chained step of a model that made
-        # nothing, an empty selection) is one not given: the run goes on without it
+        # nothing, an empty selection) is one not given: the run goes on without it (a
+        # helper shared with tools that need the layer reads it optional=True too: there
+        # an empty one is refused by its name, as any needed layer is)
         if feedback is not None:
-            definition = alg.parameterDefinition(name)
             what = f"{definition.description()} ({name})" if definition is not None else name
             feedback.pushWarning(
                 f"Layer {label} is empty"
