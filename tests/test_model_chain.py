@@ -6,11 +6,37 @@ import pytest
 from conftest import bubenec_layer, helsinki_layer
 
 
+def add_child(model, alg_id, child_id, sources, outputs):
+    """A step of ``model`` as the model designer adds it: every parameter not given in
+    ``sources`` keeps its default; ``outputs`` names model outputs by the step's output."""
+    from qgis.core import (QgsApplication, QgsProcessingModelChildAlgorithm,
+                           QgsProcessingModelChildParameterSource as Source,
+                           QgsProcessingModelOutput)
+
+    c = QgsProcessingModelChildAlgorithm(alg_id)
+    c.setChildId(child_id)
+    alg = QgsApplication.processingRegistry().algorithmById(alg_id)
+    for definition in alg.parameterDefinitions():
+        if definition.isDestination() or definition.name() in sources:
+            continue
+        if definition.defaultValue() is not None:
+            c.addParameterSources(definition.name(),
+                                  [Source.fromStaticValue(definition.defaultValue())])
+    for name, src in sources.items():
+        c.addParameterSources(name, [src])
+    model_outputs = {}
+    for out_name, child_output in outputs.items():
+        o = QgsProcessingModelOutput(out_name)
+        o.setChildId(child_id)
+        o.setChildOutputName(child_output)
+        model_outputs[out_name] = o
+    c.setModelOutputs(model_outputs)
+    model.addChildAlgorithm(c)
+
+
 def build_model():
     from qgis.core import (
-        QgsProcessing, QgsProcessingModelAlgorithm, QgsProcessingModelChildAlgorithm,
-        QgsProcessingModelChildParameterSource as Source, QgsProcessingModelOutput,
-        QgsProcessingModelParameter, QgsProcessingParameterFeatureSource,
+        QgsProcessing, QgsProcessingModelAlgorithm, QgsProcessingModelChildParameterSource as Source, QgsProcessingModelParameter, QgsProcessingParameterFeatureSource,
     )
 
     model = QgsProcessingModelAlgorithm("Example databases from OSM", "urbansynth tests")
@@ -21,27 +47,7 @@ def build_model():
         QgsProcessingModelParameter("buildings"))
 
     def child(alg_id, child_id, sources, outputs):
-        from qgis.core import QgsApplication
-
-        c = QgsProcessingModelChildAlgorithm(alg_id)
-        c.setChildId(child_id)
-        # the model designer's dialog fills every other parameter with its default
-        alg = QgsApplication.processingRegistry().algorithmById(alg_id)
-        for definition in alg.parameterDefinitions():
-            if definition.isDestination() or definition.name() in sources:
-                continue
-            if definition.defaultValue() is not None:
-                c.addParameterSources(definition.name(), [Source.fromStaticValue(definition.defaultValue())])
-        for name, src in sources.items():
-            c.addParameterSources(name, [src])
-        model_outputs = {}
-        for out_name, child_output in outputs.items():
-            o = QgsProcessingModelOutput(out_name)
-            o.setChildId(child_id)
-            o.setChildOutputName(child_output)
-            model_outputs[out_name] = o
-        c.setModelOutputs(model_outputs)
-        model.addChildAlgorithm(c)
+        add_child(model, alg_id, child_id, sources, outputs)
 
     child("urbansynth:extractroadhierarchy", "hierarchy",
           {"INPUT": Source.fromModelParameter("roads")}, {"hierarchy_roads": "OUTPUT"})
@@ -83,9 +89,9 @@ def test_an_optional_input_a_step_left_empty_is_not_given(qgis_processing, tmp_p
     optional input: the next step runs without it and says so, where every tool stopped
     the whole model with 'Layer ... is empty'."""
     from qgis.core import (
-        QgsApplication, QgsProcessing, QgsProcessingModelAlgorithm,
-        QgsProcessingModelChildAlgorithm, QgsProcessingModelChildParameterSource as Source,
-        QgsProcessingModelOutput, QgsProcessingModelParameter,
+        QgsProcessing, QgsProcessingModelAlgorithm,
+        QgsProcessingModelChildParameterSource as Source,
+        QgsProcessingModelParameter,
         QgsProcessingParameterFeatureSource,
     )
 
@@ -112,23 +118,7 @@ def test_an_optional_input_a_step_left_empty_is_not_given(qgis_processing, tmp_p
             "VALUE": Source.fromStaticValue("1e12")}, {}),
     )
     for alg_id, child_id, sources, outputs in steps:
-        child = QgsProcessingModelChildAlgorithm(alg_id)
-        child.setChildId(child_id)
-        for definition in QgsApplication.processingRegistry().algorithmById(
-                alg_id).parameterDefinitions():   # the defaults, as the designer fills them
-            if not definition.isDestination() and definition.defaultValue() is not None:
-                child.addParameterSources(definition.name(),
-                                          [Source.fromStaticValue(definition.defaultValue())])
-        for name, source in sources.items():
-            child.addParameterSources(name, [source])
-        model_outputs = {}
-        for out_name, child_output in outputs.items():
-            output = QgsProcessingModelOutput(out_name)
-            output.setChildId(child_id)
-            output.setChildOutputName(child_output)
-            model_outputs[out_name] = output
-        child.setModelOutputs(model_outputs)
-        model.addChildAlgorithm(child)
+        add_child(model, alg_id, child_id, sources, outputs)
     assert model.validate()[0], model.validate()[1]
     log = log_feedback()
     out = tmp_path / "metrics.gpkg"

@@ -22,9 +22,10 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterable, Optional
+from typing import Iterable, List, Optional
 
-__all__ = ["STAGING_PREFIX", "Input", "same_file", "overwrite_error"]
+__all__ = ["STAGING_PREFIX", "Input", "same_file", "overwrite_error", "make_folders",
+           "remove_empty_folders"]
 
 #: Name prefix of the hidden folders outputs are written in before they are moved into
 #: place (``qgis_glue.outputs.OutputStaging``, ``scale.distributed.write_layer``).
@@ -70,3 +71,39 @@ def overwrite_error(label: str, path: Path, table: Optional[str],
         return (f"{label} would overwrite {what}the input {source.name} ({source.path}): "
                 "inputs are never modified; choose another output file.")
     return None
+
+
+def make_folders(folder: Path) -> List[Path]:
+    """Create ``folder`` with its missing parents; return the folders created, deepest
+    first, for :func:`remove_empty_folders` when the run fails (an output in a new folder
+    leaves no empty folder behind). Raises OSError (nothing created is left) when one
+    cannot be made.
+
+    >>> import tempfile
+    >>> base = Path(tempfile.mkdtemp())
+    >>> made = make_folders(base / "a" / "b")
+    >>> [folder.name for folder in made]
+    ['b', 'a']
+    >>> remove_empty_folders(made); (base / "a").exists()
+    False
+    """
+    missing = []
+    probe = Path(folder)
+    while not probe.exists() and probe != probe.parent:
+        missing.append(probe)
+        probe = probe.parent
+    try:
+        Path(folder).mkdir(parents=True, exist_ok=True)
+    except OSError:
+        remove_empty_folders(missing)
+        raise
+    return missing
+
+
+def remove_empty_folders(folders: Iterable[Path]) -> None:
+    """Remove each folder (deepest first) when it is empty; leave it otherwise."""
+    for folder in folders:
+        try:
+            Path(folder).rmdir()
+        except OSError:
+            pass

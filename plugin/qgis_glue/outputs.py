@@ -43,7 +43,7 @@ from qgis.core import (
 
 from ..core.destinations import STAGING_PREFIX
 from ..core.destinations import Input as _Input
-from ..core.destinations import overwrite_error
+from ..core.destinations import make_folders, overwrite_error, remove_empty_folders
 from . import styles
 
 __all__ = ["STAGING_PREFIX", "OutputStaging", "destination_error"]
@@ -266,18 +266,12 @@ class OutputStaging:
             self.parameters[definition.name()], definition, temp)
 
     def _make_folder(self, folder: Path, definition):
-        missing = []
-        probe = folder
-        while not probe.exists() and probe != probe.parent:
-            missing.append(probe)
-            probe = probe.parent
         try:
-            folder.mkdir(parents=True, exist_ok=True)
+            self._made_dirs.extend(make_folders(folder))
         except OSError as exc:
             raise QgsProcessingException(
                 f"Output {definition.description()} ({definition.name()}): the folder "
                 f"{folder} cannot be created: {exc.strerror or exc}.") from exc
-        self._made_dirs.extend(missing)
 
     @staticmethod
     def _redirect(value, definition, temp: str):
@@ -409,11 +403,7 @@ class OutputStaging:
         for key in [k for k in styles.STYLE_REQUESTS
                     if any(str(item.staging) in k for item in self.staged)]:
             styles.STYLE_REQUESTS.pop(key, None)
-        for folder in self._made_dirs:
-            try:
-                folder.rmdir()               # only the folders this run created, if empty
-            except OSError:
-                pass
+        remove_empty_folders(self._made_dirs)   # only the folders this run created
 
     def _remove_staging(self):
         for item in self.staged:

@@ -62,7 +62,7 @@ import shapely
 
 from ..buildings import footprints
 from ..core import crs as crs_rule
-from ..core.destinations import STAGING_PREFIX
+from ..core.destinations import STAGING_PREFIX, make_folders, remove_empty_folders
 from ..core.ids import ids_or_numbers
 from ..core.progress import InputError, Progress, ensure
 
@@ -237,15 +237,11 @@ def write_layer(gdf, path: str, layer: str) -> int:
     final = Path(path)
     folder = final.absolute().parent
     made = []
-    probe = folder
-    while not probe.exists() and probe != probe.parent:
-        made.append(probe)
-        probe = probe.parent
     try:
-        folder.mkdir(parents=True, exist_ok=True)
+        made = make_folders(folder)
         staging = Path(tempfile.mkdtemp(prefix=STAGING_PREFIX, dir=folder))
     except OSError as exc:
-        _remove_empty(made)
+        remove_empty_folders(made)
         raise InputError(f"{final}: the folder {folder} cannot be written "
                          f"({exc.strerror or exc})") from exc
     try:
@@ -261,18 +257,10 @@ def write_layer(gdf, path: str, layer: str) -> int:
         os.replace(temp, final)
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
-        _remove_empty(made)
+        remove_empty_folders(made)
         raise
     shutil.rmtree(staging, ignore_errors=True)
     return len(gdf)
-
-
-def _remove_empty(folders):
-    for f in folders:                    # deepest first
-        try:
-            f.rmdir()
-        except OSError:
-            pass
 
 
 def _layer_crs(df, source):
