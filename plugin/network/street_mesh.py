@@ -303,9 +303,18 @@ def _replaced(tris, owner, uv, which, shapes, z_of=None):
     return tris, owner, uv
 
 
-def _on_outline(a: np.ndarray, b: np.ndarray, own: np.ndarray, paved: np.ndarray) -> np.ndarray:
-    """Whether each edge a -> b of a street or junction (``own``: its index in ``paved``,
-    the street surfaces then the junctions) is an outer edge of the paved area: its middle
+def _paved(tess):
+    """The street surfaces then the junctions, 2D and prepared, with their STRtree: what
+    :func:`_on_outline` tests every side face's edge against (built once per mesh)."""
+    paved = shapely.force_2d(np.r_[np.asarray(tess.surfaces, dtype=object),
+                                   np.asarray(tess.junctions, dtype=object)])
+    shapely.prepare(paved)
+    return paved, shapely.STRtree(paved)
+
+
+def _on_outline(a: np.ndarray, b: np.ndarray, own: np.ndarray, paved) -> np.ndarray:
+    """Whether each edge a -> b of a street or junction (``own``: its index in the
+    polygons of ``paved``, :func:`_paved`) is an outer edge of the paved area: its middle
     lies on its own surface's outline (within a centimetre of it, not inside it) and
     within a centimetre of no other surface. Otherwise the side face would stand inside
     the pavement -- on a hairpin's inner edge, which its other leg covers; between two
@@ -316,11 +325,11 @@ def _on_outline(a: np.ndarray, b: np.ndarray, own: np.ndarray, paved: np.ndarray
     # a centimetre box round each middle: intersects and contains on prepared polygons are
     # much cheaper than distances (0.6 M side faces on the benchmark's DEM grid)
     box = shapely.box(mid[:, 0] - 0.01, mid[:, 1] - 0.01, mid[:, 0] + 0.01, mid[:, 1] + 0.01)
-    shapely.prepare(paved)
-    i, p = shapely.STRtree(paved).query(box, predicate="intersects")
+    polygons, tree = paved
+    i, p = tree.query(box, predicate="intersects")
     mine = p == own[i]
     on_own = np.zeros(len(mid), dtype=bool)
-    on_own[i[mine][~shapely.contains_properly(paved[p[mine]], box[i[mine]])]] = True
+    on_own[i[mine][~shapely.contains_properly(polygons[p[mine]], box[i[mine]])]] = True
     return on_own & ~np.isin(np.arange(len(mid)), i[~mine])
 
 
@@ -474,6 +483,7 @@ def street_mesh(tess, spacing: float = 5.0, z_offset: float = 0.1, skirt: float 
     n_s = len(centres)
     widths = tess.widths[tess.surface_edge] if n_s else np.zeros(0)
     tris, owner, side, uv = [], [], [], []
+    paved = _paved(tess) if draped else None     # the side faces' outline test
     if n_s:
         k, left, right, may_fold = _stations(centres, widths / 2.0, spacing)
         if draped:
@@ -513,8 +523,6 @@ def street_mesh(tess, spacing: float = 5.0, z_offset: float = 0.1, skirt: float 
             both = np.vstack([L3, R3])
             ground = np.r_[tl, tr]
             n_st = len(L3)
-            paved = shapely.force_2d(np.r_[np.asarray(tess.surfaces, dtype=object),
-                                           np.asarray(tess.junctions, dtype=object)])
             for top, ground_, a, b in ((L3, tl, j, i), (R3, tr, i, j),
                                        # outward: behind the start, ahead of the end
                                        (both, ground, at_u, n_st + at_u),
@@ -548,8 +556,6 @@ def street_mesh(tess, spacing: float = 5.0, z_offset: float = 0.1, skirt: float 
             gap = np.nan_to_num(top[:, 2] - tess.terrain_z(xy), nan=0.0)
             up = (gap > min_gap) | (gap[nxt] > min_gap)
             # not an edge a street continues from (its connecting line)
-            paved = shapely.force_2d(np.r_[np.asarray(tess.surfaces, dtype=object),
-                                           np.asarray(tess.junctions, dtype=object)])
             up[up] = _on_outline(xy[up], xy[nxt[up]], n_s + jr[up], paved)
             a = np.flatnonzero(up)                   # the outside is right of a -> nxt
             tris += _side_faces(top, tess.terrain_z(xy), a, nxt[a], skirt)
