@@ -1,4 +1,6 @@
 """urbansynth:extractblocks - city blocks from roads; footprints and parcels assigned to blocks."""
+import numpy as np
+import pandas as pd
 import shapely
 from qgis.core import (
     QgsProcessing,
@@ -121,11 +123,13 @@ class ExtractBlocks(AlgorithmBase):
             self.OUTPUT_BUILDINGS, "Buildings with blocks and attributes",
             QgsProcessing.SourceType.TypeVectorPolygon, optional=True, createByDefault=True),
             "The footprints with their fields plus block_id, in_block, height_m, "
-            "height_estimated, levels, building_type and the raw tag values.")
+            "height_estimated, levels, building_type and the raw tag values; without "
+            "features (its fields only) when no BUILDINGS are given.")
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT_PARCELS, "Parcels with blocks", QgsProcessing.SourceType.TypeVectorPolygon,
             optional=True, createByDefault=True),
-            "The parcels with their fields plus block_id and in_block.")
+            "The parcels with their fields plus block_id and in_block; without features "
+            "when no PARCELS are given.")
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         min_area = self.number(parameters, self.MIN_BLOCK_AREA, context)
@@ -173,11 +177,19 @@ class ExtractBlocks(AlgorithmBase):
                 table, BUILDING_FIELDS)
             qgis_io.style_output(context, results[self.OUTPUT_BUILDINGS],
                                  "buildings_by_height.qml")
+        else:
+            results[self.OUTPUT_BUILDINGS] = self._write_empty(
+                parameters, self.BUILDINGS, self.OUTPUT_BUILDINGS, context, feedback,
+                BUILDING_FIELDS, frame)
         feedback.setProgress(90)
         if parcels is not None:
             results[self.OUTPUT_PARCELS] = self._write_features(
                 parameters, self.PARCELS, self.OUTPUT_PARCELS, context, feedback, parcels,
                 result.parcels, MEMBERSHIP_FIELDS)
+        else:
+            results[self.OUTPUT_PARCELS] = self._write_empty(
+                parameters, self.PARCELS, self.OUTPUT_PARCELS, context, feedback,
+                MEMBERSHIP_FIELDS, frame)
         feedback.setProgress(100)
         return results
 
@@ -247,6 +259,17 @@ class ExtractBlocks(AlgorithmBase):
         return qgis_io.write_sink(self, parameters, name, context, frame.geometry, out,
                                   carried + fields, QgsWkbTypes.Type.MultiPolygon, frame.source_crs,
                                   frame.crs, feedback)
+
+    def _write_empty(self, parameters, source_name, name, context, feedback, fields, frame):
+        """An output whose input is missing or empty, written empty with its fields when it
+        was requested: a model step that reads it gets a layer, not a missing file."""
+        dest = qgis_io.write_sink(self, parameters, name, context, np.empty(0, dtype=object),
+                                  pd.DataFrame(), fields, QgsWkbTypes.Type.MultiPolygon,
+                                  frame.source_crs, frame.crs, feedback)
+        if dest is not None:
+            feedback.pushInfo(f"No {source_name.lower()} given (or the layer is empty): "
+                              f"{name} is written without features.")
+        return dest
 
     @staticmethod
     def _log(stats, feedback):

@@ -187,6 +187,36 @@ def test_unreadable_cadastre_values_and_buildings_off_the_blocks_are_warned(qgis
         log.warnings
 
 
+@pytest.mark.parametrize("given", ["empty layer", "not given"])
+def test_outputs_of_a_missing_optional_input_are_written_empty(qgis_processing, tmp_path,
+                                                               given):
+    """Buildings and parcels left out, or given as empty layers: their requested outputs
+    are still written, without features but with their fields, so that a model step that
+    reads them gets a layer (they were not written: the next step failed on a missing
+    file)."""
+    roads_layer = _memory_layer("LineString", GRID_WKT, crs="EPSG:32633")
+    params = {"ROADS": roads_layer, "OUTPUT": "memory:",
+              "OUTPUT_BUILDINGS": str(tmp_path / "buildings.gpkg"),
+              "OUTPUT_PARCELS": str(tmp_path / "parcels.gpkg")}
+    if given == "empty layer":
+        params["BUILDINGS"] = _memory_layer("Polygon", crs="EPSG:32633")
+        params["PARCELS"] = _memory_layer("Polygon", crs="EPSG:32633")
+    log = log_feedback()
+    out = qgis_processing.run("urbansynth:extractblocks", params, feedback=log)
+    for key, field in (("OUTPUT_BUILDINGS", "height_m"), ("OUTPUT_PARCELS", "block_id")):
+        from qgis.core import QgsVectorLayer
+
+        layer = QgsVectorLayer(out[key], key, "ogr")
+        assert layer.isValid() and layer.featureCount() == 0, key
+        assert field in layer.fields().names(), layer.fields().names()
+        assert layer.crs().authid() == "EPSG:32633"
+        assert any(f"{key} is written without features" in m for m in log.messages), log.messages
+    # a next step reads it like any layer
+    assert qgis_processing.run("native:buffer", {
+        "INPUT": out["OUTPUT_BUILDINGS"], "DISTANCE": 1.0,
+        "OUTPUT": "memory:"})["OUTPUT"].featureCount() == 0
+
+
 def test_missing_class_field_is_rejected(qgis_processing):
     from qgis.core import QgsProcessingException
 
