@@ -251,8 +251,9 @@ class TessellateStreets(AlgorithmBase):
                 n_long = int(table["too_steep_long"].fillna(False).astype(bool).sum())
                 n_lat = int(table["too_steep_lat"].fillna(False).astype(bool).sum())
                 if n_long or n_lat:
-                    feedback.pushWarning(f"{n_long} {what} steeper than {max_long:g} % along "
-                                         f"and {n_lat} steeper than {max_lat:g} % across.")
+                    feedback.pushWarning(f"{what.capitalize()}: {n_long} steeper than "
+                                         f"{max_long:g} % along, {n_lat} steeper than "
+                                         f"{max_lat:g} % across (too_steep_long, _lat).")
 
         # PolygonZ with a DEM (write_sink keeps z through the reprojection)
         wkb = QgsWkbTypes.Type.MultiPolygonZ if dem is not None else QgsWkbTypes.Type.MultiPolygon
