@@ -135,8 +135,9 @@ class ExtractRoadHierarchy(AlgorithmBase):
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         class_field = self.parameterAsString(parameters, self.CLASS_FIELD, context)
         frame = qgis_io.read_source(self, parameters, self.INPUT, context, feedback, kind="lines",
-                                    fields=[class_field or "highway", "name", "layer", "bridge",
-                                            "tunnel", *qgis_io.ROAD_CLASS_FIELDS])
+                                    fields=[class_field or "highway", "name",
+                                            *qgis_io.VERTICAL_LAYER_FIELDS,
+                                            *qgis_io.ROAD_CLASS_FIELDS])
         label = frame.name
         classes = parse_class_list(self.parameterAsString(parameters, self.CLASSES, context))
         method = self.METHOD_KEYS[self.parameterAsEnum(parameters, self.METHOD, context)]

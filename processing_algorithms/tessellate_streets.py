@@ -187,7 +187,7 @@ class TessellateStreets(AlgorithmBase):
             self, parameters, self.ROADS, context, feedback, kind="lines",
             required_fields=[width_field] if width_field else (),
             fields=[width_field, "width_m", "width", class_field or "highway", "road_class",
-                    "level", "oneway", "layer", "bridge", "tunnel", "other_tags"])
+                    "level", "oneway", *qgis_io.VERTICAL_LAYER_FIELDS])
         label = frame.name
         classes = parse_class_list(self.parameterAsString(parameters, self.CLASSES, context))
         default_width = self.number(parameters, self.DEFAULT_WIDTH, context)

@@ -811,13 +811,23 @@ def road_classes(frame: Frame, class_field: Optional[str] = None):
     return None, None
 
 
+#: Fields that hold a line's vertical layer: OSM's (``layer``, ``bridge``, ``tunnel``, or in
+#: ``other_tags``) and the one extractroadhierarchy writes (``osm_layer``), so that a chain
+#: of tools keeps a bridge off the street it passes over. Read a frame with these to use
+#: :func:`osm_vertical_layers`.
+VERTICAL_LAYER_FIELDS = ("layer", "bridge", "tunnel", "other_tags", "osm_layer")
+
+
 def osm_vertical_layers(frame: Frame) -> np.ndarray:
-    """OSM vertical layer per feature from layer / bridge / tunnel fields or other_tags."""
+    """OSM vertical layer per feature from layer / bridge / tunnel fields or other_tags, else
+    from the ``osm_layer`` field of extractroadhierarchy's output (:data:`VERTICAL_LAYER_FIELDS`)."""
     from ..network.street_graph import parse_other_tags, vertical_layer
 
     keys = ("layer", "bridge", "tunnel")
     n = len(frame)
     cols = {k: frame.attributes[k].to_numpy(dtype=object) for k in keys if k in frame.attributes}
+    if "layer" not in cols and "osm_layer" in frame.attributes:
+        cols["layer"] = frame.attributes["osm_layer"].to_numpy(dtype=object)
     tags = frame.attributes["other_tags"].to_numpy(dtype=object) \
         if "other_tags" in frame.attributes else np.full(n, None, dtype=object)
     out = np.zeros(n, dtype=np.int64)
