@@ -72,8 +72,10 @@ class LayoutMetrics(AlgorithmBase):
             "given): crossings without a junction, floating pieces, streets inside a given "
             "road's corridor, motorway / trunk contacts away from their junctions, dead-end "
             "share (flagged beyond ±30 % of the example's).\n\n"
-            "Counting choices, all visible: roads are every line (DRIVABLE_ONLY drops footways "
-            "and other non-drivable OSM classes); faces under MIN_BLOCK_AREA m² or thinner "
+            "Counting choices, all visible: roads are every line with a class, or every line "
+            "of a layer without classes (an OSM layer's lines without 'highway' are rivers, "
+            "railways, boundaries: left out; DRIVABLE_ONLY drops footways and other "
+            "non-drivable OSM classes too); faces under MIN_BLOCK_AREA m² or thinner "
             "than MIN_BLOCK_WIDTH m are slivers, not blocks (0 and 0 keep every face of a plain "
             "polygonize); nodes within EDGE_DISTANCE m of the study area's boundary are clip "
             "ends, not dead ends, and streets within it count as inside (0: every node counts, "
@@ -141,7 +143,8 @@ class LayoutMetrics(AlgorithmBase):
             self.DRIVABLE_ONLY, "Drivable streets only", defaultValue=False),
             "Keep only road lines whose OSM class (field 'highway', else 'road_class') is "
             "drivable: no footways, paths, cycleways, service roads or tracks. Off: every line "
-            "counts, and the log says how many non-drivable lines are counted.")
+            "with a class counts, and the log says how many non-drivable lines are counted "
+            "(lines without a class, where others have one, are never streets).")
         self.add(QgsProcessingParameterNumber(
             self.MIN_BLOCK_AREA, "Smallest block (m²)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=400.0, minValue=0.0, maxValue=1e6),

@@ -524,3 +524,23 @@ def test_the_plugins_own_road_classes_count_as_drivable():
     footway = M.compute_layout_metrics(roads=lines, road_class=["footway"] + classes[1:],
                                        drivable_only=True)
     assert any("1 lines of non-drivable" in n for n in footway.notes)
+
+
+def test_lines_without_a_class_beside_classed_ones_are_not_streets():
+    """An OSM 'lines' layer holds rivers, railways, power lines and country borders without a
+    'highway' class; measured with the defaults they counted as streets (Liechtenstein: 263
+    of them, 650 km, and the border made the study area 1,220 km² instead of 251). They are
+    left out, the notes say so; a layer without any class still counts every line."""
+    lines = grid(3, 100.0)
+    classes = ["residential"] * len(lines)
+    far = shapely.LineString([(0, 0), (5000, 5000)])        # a border far out
+    plain = M.compute_layout_metrics(roads=lines, road_class=classes)
+    res = M.compute_layout_metrics(roads=np.r_[lines, [far, far.reverse()]],
+                                   road_class=classes + [None, ""],
+                                   road_z_layer=[0] * (len(lines) + 2))
+    for name in ("street_length_km_per_km2", "intersections_per_km2"):
+        assert res.scalar("roads", name) == pytest.approx(plain.scalar("roads", name))
+    assert any("2 lines without a road class left out" in n for n in res.notes)
+    unclassed = M.compute_layout_metrics(roads=lines, road_class=[None] * len(lines))
+    assert unclassed.scalar("roads", "street_length_km_per_km2") == pytest.approx(
+        plain.scalar("roads", "street_length_km_per_km2"))

@@ -877,6 +877,26 @@ def network_invariants(roads, z_layer=None, given_roads=None, given_class=None,
 
 # --------------------------------------------------------------------------- top level
 
+def _classed_lines(roads, z_layer, road_class, notes):
+    """Leave out the lines without a road class in a layer whose other lines have one: in an
+    OSM 'lines' layer they are rivers, railways, power lines and boundaries, not streets
+    (Liechtenstein's country border made the study area 1,220 km² instead of 169). A layer
+    without any class keeps every line (returns ``road_class`` None)."""
+    none = np.array([c is None or (isinstance(c, float) and c != c) or not str(c).strip()
+                     for c in road_class], dtype=bool)
+    if none.all():
+        return roads, z_layer, None
+    if none.any():
+        n = int(none.sum())
+        notes.append(f"Roads: {n} line{'s' if n > 1 else ''} without a road class left out "
+                     "(not streets: in an OpenStreetMap 'lines' layer, rivers, railways, "
+                     "power lines, boundaries ...).")
+        keep = ~none
+        roads, road_class = roads[keep], road_class[keep]
+        z_layer = None if z_layer is None else z_layer[keep]
+    return roads, z_layer, road_class
+
+
 def compute_layout_metrics(roads=None, blocks=None, parcels=None, buildings=None, area=None,
                            landuse=None, road_z_layer=None, road_half_width: float = 3.0,
                            snap_tolerance: float = 0.5, bearing_length: float = 10.0,
@@ -918,6 +938,8 @@ def compute_layout_metrics(roads=None, blocks=None, parcels=None, buildings=None
         this plugin's synthesis writes (:data:`street_graph.SYNTHESISED_CLASSES`) (no
         footways, paths, service roads, tracks); needs ``road_class``. Default: every line
         counts (a synthesis has no class); the notes say how many non-drivable lines count.
+        Either way, lines without a class where others have one are not streets (an OSM
+        layer's rivers, railways, boundaries) and are left out.
     edge_distance : float
         Nodes this close (m) to the study-area boundary are clip ends, not dead ends (see
         :func:`road_metrics`); default 0 counts them like any node.
@@ -965,6 +987,9 @@ def compute_layout_metrics(roads=None, blocks=None, parcels=None, buildings=None
             road_z_layer = np.asarray(road_z_layer)[kept]
         if road_class is not None:
             road_class = np.asarray(road_class, dtype=object)[kept]
+            roads, road_z_layer, road_class = _classed_lines(roads, road_z_layer, road_class,
+                                                             res.notes)
+        if road_class is not None:
             drivable = np.isin(np.asarray([str(c) for c in road_class], dtype=object),
                                DRIVABLE_CLASSES + SYNTHESISED_CLASSES)
             if drivable_only:
