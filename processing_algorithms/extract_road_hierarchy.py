@@ -15,6 +15,7 @@ from qgis.core import (
 from ..plugin.network import hierarchy
 from ..plugin.network import street_graph as roads
 from ..plugin.qgis_glue import qgis_io
+from ..plugin.core.text import counted
 from .common import AlgorithmBase, drivable_lines, parse_class_list
 
 ROAD_FIELDS = [
@@ -158,13 +159,14 @@ class ExtractRoadHierarchy(AlgorithmBase):
         graph = qgis_io.run_engine(label, roads.clean_network, frame.geometry, road_class, name,
                                    z_layer, snap_tolerance=snap, min_dangle_length=dangle,
                                    progress=qgis_io.progress_for(feedback, 5, 40))
-        feedback.pushInfo(f"Street graph: {graph.n_edges} edges, {len(graph.nodes)} nodes.")
+        feedback.pushInfo(f"Street graph: {counted(graph.n_edges, 'edge')}, "
+                          f"{counted(len(graph.nodes), 'node')}.")
         h = qgis_io.run_engine(label, hierarchy.road_hierarchy, graph, method, arterial or
                                roads.ARTERIAL_CLASSES, share, deflection,
                                progress=qgis_io.progress_for(feedback, 40, 70))
         counts = ", ".join(f"level {lv}: {n}" for lv, n in enumerate(
             np.bincount(h.street_level)) if n)
-        feedback.pushInfo(f"{h.streets.n} streets ({counts}).")
+        feedback.pushInfo(f"{counted(h.streets.n, 'street')} ({counts}).")
 
         parcels = None
         parcels_frame = qgis_io.read_source(self, parameters, self.PARCELS, context, feedback,

@@ -11,6 +11,7 @@ from qgis.core import (
 
 from ..plugin.imagery import aerial_image
 from ..plugin.qgis_glue import qgis_io
+from ..plugin.core.text import counted
 from .common import AlgorithmBase
 
 
@@ -149,17 +150,18 @@ class SynthesizeAerialImage(AlgorithmBase):
     @staticmethod
     def _log(stats, feedback, with_roads: bool, with_example_roads: bool):
         feedback.pushInfo(
-            f"{stats['n_matched']} of {stats['n_parcels']} parcels filled from "
-            f"{stats['n_example_used']} of {stats['n_example_on_image']} example parcels on the "
+            f"{stats['n_matched']} of {counted(stats['n_parcels'], 'parcel')} filled from "
+            f"{stats['n_example_used']} of "
+            f"{counted(stats['n_example_on_image'], 'example parcel')} on the "
             f"image (median stretch {stats['median_stretch']:.2f}).")
         if stats["n_unmatched"]:
             feedback.pushInfo(
-                f"{stats['n_unmatched']} parcels have no example parcel of a similar size and "
-                "shape facing the street alike (within the largest stretch) and are left "
+                f"{counted(stats['n_unmatched'], 'parcel')}: no example parcel of a similar "
+                "size and shape facing the street alike (within the largest stretch); left "
                 "transparent.")
         skipped = stats["n_example_parcels"] - stats["n_example_on_image"]
         if skipped:
-            feedback.pushInfo(f"{skipped} example parcels are not wholly on the image and are "
+            feedback.pushInfo(f"{counted(skipped, 'example parcel')} not wholly on the image: "
                               "not used.")
         if stats["roads_painted"]:
             feedback.pushInfo(f"{stats['n_road_pixels']} road pixels painted from the example "

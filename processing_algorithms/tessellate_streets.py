@@ -19,6 +19,7 @@ from qgis.core import (
 from ..plugin.network import street_graph as roads
 from ..plugin.network import street_mesh, street_surfaces
 from ..plugin.qgis_glue import qgis_io
+from ..plugin.core.text import counted
 from .common import AlgorithmBase, drivable_lines, parse_class_list
 
 
@@ -215,7 +216,8 @@ class TessellateStreets(AlgorithmBase):
         graph = qgis_io.run_engine(label, roads.clean_network, frame.geometry, class_for_width,
                                    None, z_layer, snap_tolerance=snap, min_dangle_length=0.0,
                                    progress=qgis_io.progress_for(feedback, 5, 25))
-        feedback.pushInfo(f"Street graph: {graph.n_edges} edges, {len(graph.nodes)} nodes.")
+        feedback.pushInfo(f"Street graph: {counted(graph.n_edges, 'edge')}, "
+                          f"{counted(len(graph.nodes), 'node')}.")
 
         dem = None
         dem_layer = self.parameterAsRasterLayer(parameters, self.DEM, context)
@@ -234,10 +236,13 @@ class TessellateStreets(AlgorithmBase):
             progress=qgis_io.progress_for(feedback, 25, 90))
         st = result.stats
         feedback.pushInfo(
-            f"{st['surfaces']} street surfaces and {st['junctions']} junctions (largest degree "
-            f"{st['max_degree']}); {st['merged_away']} junction centres merged away; "
-            f"{st['edges_without_surface']} streets lie wholly inside their junctions; "
-            f"{st['cut_surfaces'] + st['cut_junctions']} polygons trimmed where they overlapped.")
+            f"{counted(st['surfaces'], 'street surface')} and "
+            f"{counted(st['junctions'], 'junction')} (largest degree {st['max_degree']}); "
+            f"{counted(st['merged_away'], 'junction centre')} merged away; "
+            f"{counted(st['edges_without_surface'], 'street')} wholly inside "
+            f"{'its junction' if st['edges_without_surface'] == 1 else 'their junctions'}; "
+            f"{counted(st['cut_surfaces'] + st['cut_junctions'], 'polygon')} trimmed where "
+            "they overlapped.")
         if st.get("dem_gap_edges"):
             feedback.pushWarning(
                 f"{st['dem_gap_edges']} of {st['edges']} streets run (partly) where the DEM has "
@@ -268,8 +273,9 @@ class TessellateStreets(AlgorithmBase):
                 spacing=self.number(parameters, self.MESH_SPACING, context),
                 z_offset=self.number(parameters, self.Z_OFFSET, context))
             t = mesh.table
-            feedback.pushInfo(f"3D mesh: {len(mesh.triangles)} triangles "
-                              f"({int(mesh.side.sum())} in side faces) in {len(t)} features.")
+            feedback.pushInfo(f"3D mesh: {counted(len(mesh.triangles), 'triangle')} "
+                              f"({int(mesh.side.sum())} in side faces) in "
+                              f"{counted(len(t), 'feature')}.")
             geoms = qgis_io.reproject(mesh.geometries(), frame.crs, frame.source_crs, context)
             if self.given(parameters, self.OUTPUT_MESH):
                 results[self.OUTPUT_MESH] = qgis_io.write_sink(

@@ -155,6 +155,32 @@ def test_null_and_invalid_geometries_are_skipped_or_repaired(qgis_processing):
     assert any("null" in m for m in fb.messages)
 
 
+def test_the_log_counts_in_the_right_number(qgis_processing):
+    """'1 features with the same geometry ...', '1 features with a null or empty geometry
+    ...' (every .osm.pbf of Liechtenstein's run said the first): one feature, one line, one
+    geometry in the singular, several in the plural."""
+    from helpers import memory_layer
+
+    wkts = ["LINESTRING(0 0, 200 0)", "LINESTRING(100 -100, 100 100)", "LINESTRING(0 0, 200 0)",
+            "LINESTRING(100 -100, 100 100)", "LINESTRING(200 0, 0 0)",
+            "LINESTRING(300 0, 300 50)"]
+    for n, roads in ((1, wkts[:3] + [None]), (3, wkts)):
+        layer = memory_layer("LineString", [w for w in roads if w], "EPSG:3067",
+                             "&field=highway:string", [["primary"]] * 6, name="twice")
+        if None in roads:
+            from qgis.core import QgsFeature
+
+            layer.dataProvider().addFeatures([QgsFeature(layer.fields())])
+        fb = log_feedback()
+        qgis_processing.run("urbansynth:extractroadhierarchy", {
+            "INPUT": layer, "OUTPUT": "memory:", "OUTPUT_INTERSECTIONS": None}, feedback=fb)
+        log = "\n".join(fb.messages)
+        assert f"{n} feature{'s' if n > 1 else ''} with the same geometry as an earlier one" in log
+        if n == 1:
+            assert "1 feature with a null or empty geometry skipped" in log
+        assert "1 features" not in log and "1 lines" not in log and "1 streets" not in log
+
+
 def test_cancel_stops_the_algorithm(qgis_processing):
     from qgis.core import QgsProcessingException, QgsProcessingFeedback
 

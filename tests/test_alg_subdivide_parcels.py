@@ -209,7 +209,7 @@ def test_a_layer_of_geometry_collections_gives_its_polygons(qgis_processing):
     rows, geoms = layer_features(qgis_processing.run(
         ALG, {"BLOCKS": mixed, "SEED": 1, "OUTPUT": "memory:"}, feedback=log)["OUTPUT"])
     assert len(rows) >= 4 and shapely.covers(shapely.from_wkt(block).buffer(1e-6), geoms).all()
-    assert any("mixed blocks" in m and "1 features without polygons skipped" in m
+    assert any("mixed blocks" in m and "1 feature without polygons skipped" in m
                for m in log.messages)
     points_only = collections(["GEOMETRYCOLLECTION (POINT (10 10))"], "point collections")
     with pytest.raises(QgsProcessingException, match="point collections'? has no polygons"):

@@ -75,7 +75,7 @@ def test_geotiff_in_the_parcels_crs_with_alpha_and_overviews(qgis_processing, la
     alpha = ds.GetRasterBand(2).ReadAsArray()
     assert 0.3 < (alpha > 0).mean() < 0.95
     log = "\n".join(feedback.messages)
-    assert "1 parcels have no example parcel" in log  # the 400 x 300 m one
+    assert "1 parcel: no example parcel" in log  # the 400 x 300 m one
     assert "road pixels painted" in log
     assert f"of {layers['n_lots']} parcels filled" in log
     # the large unmatched parcel is transparent: its centre (Web Mercator) has alpha 0

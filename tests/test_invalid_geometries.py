@@ -51,7 +51,7 @@ def test_skip_leaves_the_invalid_feature_out(qgis_processing):
 
     layer, log = _run(qgis_processing, QgsFeatureRequest.InvalidGeometryCheck.GeometrySkipInvalid)
     assert layer.featureCount() == 9
-    assert "1 features with an invalid geometry skipped" in log
+    assert "1 feature with an invalid geometry skipped" in log
 
 
 def test_do_not_filter_repairs(qgis_processing):

@@ -523,7 +523,7 @@ def test_the_plugins_own_road_classes_count_as_drivable():
         every.scalar("roads", "street_length_km_per_km2"))
     footway = M.compute_layout_metrics(roads=lines, road_class=["footway"] + classes[1:],
                                        drivable_only=True)
-    assert any("1 lines of non-drivable" in n for n in footway.notes)
+    assert any("1 line of non-drivable" in n for n in footway.notes)
 
 
 def test_lines_without_a_class_beside_classed_ones_are_not_streets():

@@ -41,6 +41,7 @@ from scipy import stats
 
 from ..core.geometry import minimum_rectangles
 from ..core.progress import InputError, Progress, ensure
+from ..core.text import counted
 from ..network import blocks as _blocks
 from ..network import invariants as _invariants
 from ..network.street_graph import (DRIVABLE_CLASSES, SYNTHESISED_CLASSES, RoadGraph,
@@ -887,8 +888,7 @@ def _classed_lines(roads, z_layer, road_class, notes):
     if none.all():
         return roads, z_layer, None
     if none.any():
-        n = int(none.sum())
-        notes.append(f"Roads: {n} line{'s' if n > 1 else ''} without a road class left out "
+        notes.append(f"Roads: {counted(none.sum(), 'line')} without a road class left out "
                      "(not streets: in an OpenStreetMap 'lines' layer, rivers, railways, "
                      "power lines, boundaries ...).")
         keep = ~none
@@ -997,12 +997,13 @@ def compute_layout_metrics(roads=None, blocks=None, parcels=None, buildings=None
                     raise InputError("no road line has a drivable highway class")
                 roads = roads[drivable]
                 road_z_layer = None if road_z_layer is None else road_z_layer[drivable]
-                res.notes.append(f"Roads: {int((~drivable).sum())} lines of non-drivable "
-                                 "classes (footways, paths, service roads ...) left out.")
+                res.notes.append(f"Roads: {counted((~drivable).sum(), 'line')} of "
+                                 "non-drivable classes (footways, paths, service roads ...) "
+                                 "left out.")
             elif not drivable.all():
-                res.notes.append(f"Roads: {int((~drivable).sum())} lines of non-drivable "
-                                 "classes (footways, paths, service roads ...) are counted "
-                                 "as streets.")
+                res.notes.append(f"Roads: {counted((~drivable).sum(), 'line')} of "
+                                 "non-drivable classes (footways, paths, service roads ...) "
+                                 "counted as streets.")
         elif drivable_only:
             raise InputError("drivable streets only needs a road class (highway) per line")
     blocks = None if blocks is None else _as_array(blocks, "blocks", 2, res.notes)

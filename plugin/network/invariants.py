@@ -60,6 +60,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from ..core.progress import InputError, Progress, ensure
+from ..core.text import counted
 from .street_graph import JUNCTION_TOLERANCE, measured_graph, node_lines
 
 __all__ = [
@@ -552,8 +553,8 @@ class NetworkCheck:
         share = (f"dead-end share {self.dead_end_share:.2f}"
                  + (f" (example {self.example_dead_end_share:.2f})"
                     if self.example_dead_end_share is not None else ""))
-        head = (f"{self.n_synthesised} synthesised lines against {self.n_given} given: "
-                f"{self.n_components} connected component(s), {share}")
+        head = (f"{counted(self.n_synthesised, 'synthesised line')} against {self.n_given} "
+                f"given: {counted(self.n_components, 'connected component')}, {share}")
         return head + (": no violation." if not bad else ": " + ", ".join(bad) + ".")
 
 

@@ -44,6 +44,7 @@ from ..core import coordinates
 from ..core import crs as crs_rule
 from . import dependencies, styles
 from ..core.progress import Canceled, InputError, MissingPackage, Progress
+from ..core.text import counted
 
 _GEOM_NAMES = {QgsWkbTypes.GeometryType.PointGeometry: "points", QgsWkbTypes.GeometryType.LineGeometry: "lines",
                QgsWkbTypes.GeometryType.PolygonGeometry: "polygons"}
@@ -395,7 +396,8 @@ def read_source(alg, parameters, name: str, context, feedback,
                 geoms[i] = shapely.from_wkb(bytes(fixed.asWkb()), on_invalid="ignore")
         bad = shapely.is_missing(geoms)
         if feedback is not None:
-            feedback.pushInfo(f"{label}: {len(unreadable)} unreadable geometries repaired by QGIS"
+            feedback.pushInfo(f"{label}: {counted(len(unreadable), 'unreadable geometry')} "
+                              "repaired by QGIS"
                               + (f", {int(bad.sum())} skipped." if bad.any() else "."))
         if bad.any():
             geoms, rows, fids = _kept(~bad, geoms, rows, fids)
@@ -409,7 +411,8 @@ def read_source(alg, parameters, name: str, context, feedback,
     if target_crs != src_crs:
         geoms = _transform(geoms, src_crs, target_crs, context, label)
     if n_null and feedback is not None:
-        feedback.pushInfo(f"{label}: {n_null} features with a null or empty geometry skipped.")
+        feedback.pushInfo(f"{label}: {counted(n_null, 'feature')} with a null or empty "
+                          "geometry skipped.")
     if repair and kind in ("polygons", "lines"):
         invalid = ~shapely.is_valid(geoms)
         if invalid.any():
@@ -417,13 +420,14 @@ def read_source(alg, parameters, name: str, context, feedback,
             fixed = np.array([_keep_dimension(g, kind) for g in fixed], dtype=object)
             geoms[invalid] = fixed
             if feedback is not None:
-                feedback.pushInfo(f"{label}: {int(invalid.sum())} invalid "
-                                  f"geometr{'ies' if invalid.sum() > 1 else 'y'} repaired.")
+                feedback.pushInfo(f"{label}: {counted(invalid.sum(), 'invalid geometry')} "
+                                  "repaired.")
         empty = shapely.is_empty(geoms) | shapely.is_missing(geoms)
         if empty.any():
             geoms, rows, fids = _kept(~empty, geoms, rows, fids)
             if feedback is not None:
-                feedback.pushInfo(f"{label}: {int(empty.sum())} geometries could not be repaired and were skipped.")
+                feedback.pushInfo(f"{label}: {counted(empty.sum(), 'geometry')} could not be "
+                                  "repaired: skipped.")
             if len(geoms) == 0:
                 raise QgsProcessingException(f"Layer {label} has no valid geometry.")
     if kind in ("polygons", "lines") and len(geoms) > 1 and not read_twice:
@@ -434,8 +438,8 @@ def read_source(alg, parameters, name: str, context, feedback,
         if twice.any():
             geoms, rows, fids = _kept(~twice, geoms, rows, fids)
             if feedback is not None:
-                feedback.pushInfo(f"{label}: {int(twice.sum())} features with the same geometry "
-                                  "as an earlier one skipped.")
+                feedback.pushInfo(f"{label}: {counted(twice.sum(), 'feature')} with the same "
+                                  "geometry as an earlier one skipped.")
     attrs = pd.DataFrame([[_py(v) for v in r] for r in rows], columns=field_names)
     if alike and feedback is not None:
         feedback.pushInfo(f"{label}: " + ", ".join(f"'{f}'" for f in alike) + " are cut to "
@@ -502,7 +506,7 @@ def _apply_invalid_rule(rule: int, geoms, rows, fids, label: str, feedback):
             "repairs them, or to 'Skip' to leave them out.")
     keep = ~invalid
     if feedback is not None:
-        feedback.pushInfo(f"{label}: {int(invalid.sum())} features with an invalid geometry "
+        feedback.pushInfo(f"{label}: {counted(invalid.sum(), 'feature')} with an invalid geometry "
                           "skipped (Processing's invalid features filtering).")
     if not keep.any():
         raise QgsProcessingException(f"Layer {label} has no valid geometry.")
@@ -561,7 +565,7 @@ def _parts_of_kind(geoms, rows, fids, kind: str, label: str, feedback):
             f"Layer {label} has no {kind}: its geometries are collections or of mixed "
             f"types without any {kind[:-1]}; {kind} are needed.")
     if not has.all() and feedback is not None:
-        feedback.pushInfo(f"{label}: {int((~has).sum())} features without {kind} skipped (the "
+        feedback.pushInfo(f"{label}: {counted((~has).sum(), 'feature')} without {kind} skipped (the "
                           "layer holds collections or mixed geometry types).")
     return _kept(has, kept, rows, fids)
 
