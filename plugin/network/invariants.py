@@ -293,19 +293,21 @@ def _unique_points(points: np.ndarray, tolerance: float) -> np.ndarray:
 
 
 def node_degrees(lines: Sequence, area=None, edge_distance: float = EDGE_DISTANCE,
-                 snap_tolerance: float = SNAP_TOLERANCE) -> np.ndarray:
+                 snap_tolerance: float = SNAP_TOLERANCE, z_layer=None) -> np.ndarray:
     """Degrees of the nodes of degree != 2 of a noded street network, as its shares count.
 
-    Lines are noded at crossings, nodes closer than ``snap_tolerance`` merged and chains
-    through degree-2 nodes dissolved: the street graph of ``layoutmetrics`` (its default
+    Lines are noded at crossings (within their vertical layer ``z_layer`` when given: a
+    bridge makes no node with the street under it), nodes closer than ``snap_tolerance``
+    merged and chains through degree-2 nodes dissolved: the street graph of ``layoutmetrics`` (its default
     0.5 m); with ``area``, only nodes inside it (or on its boundary, within the millimetre
     the nodes are rounded to) and at least ``edge_distance`` m from its boundary count (the
     ends of a network clipped to the area are not dead ends).
     """
-    lines, _ = _lines(lines, "roads")
+    lines, layer = _lines(lines, "roads", z_layer)
     if not len(lines):
         return np.zeros(0, dtype=np.int64)
-    g = measured_graph(lines, snap_tolerance)
+    # lines of different vertical layers (bridges, tunnels) cross without a node
+    g = measured_graph(lines, snap_tolerance, layer if layer.any() else None)
     deg = g.degree
     count = deg != 2
     if area is not None:
@@ -314,7 +316,7 @@ def node_degrees(lines: Sequence, area=None, edge_distance: float = EDGE_DISTANC
 
 
 def dead_end_share(lines: Sequence, area=None, edge_distance: float = EDGE_DISTANCE,
-                   snap_tolerance: float = SNAP_TOLERANCE) -> float:
+                   snap_tolerance: float = SNAP_TOLERANCE, z_layer=None) -> float:
     """Share of dead ends among the nodes of degree != 2 of a noded street network (counted
     as :func:`node_degrees` counts them: ``layoutmetrics``' ``dead_end_share``).
 
@@ -322,7 +324,7 @@ def dead_end_share(lines: Sequence, area=None, edge_distance: float = EDGE_DISTA
     -------
     float in [0, 1], NaN when no node counts.
     """
-    deg = node_degrees(lines, area, edge_distance, snap_tolerance)
+    deg = node_degrees(lines, area, edge_distance, snap_tolerance, z_layer)
     return float((deg == 1).mean()) if len(deg) else float("nan")
 
 
@@ -730,7 +732,7 @@ def check_network(synthesised: Sequence, given: Optional[Sequence] = None,
             # a street along the outline may wiggle out by a little more (a rounded bend)
             outside = pieces[shapely.length(pieces) > max(edge_distance, tolerance)]
 
-    share = dead_end_share(lines, area, edge_distance) if n else float("nan")
+    share = dead_end_share(lines, area, edge_distance, z_layer=layer) if n else float("nan")
     progress.step(1.0)
     return NetworkCheck(crossings_given, crossings_synthesised, overlaps, duplicates, controlled,
                         undershoots, int(n_comp), floating, share,
