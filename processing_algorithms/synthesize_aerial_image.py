@@ -50,7 +50,9 @@ class SynthesizeAerialImage(AlgorithmBase):
             "painted from the example's road pixels along and across the roads.\n\n"
             "Parcels without an example parcel within the largest stretch stay transparent "
             "and are counted in the log. The output is a GeoTIFF in the parcels' CRS with "
-            "the example's bands, an alpha band and overviews."
+            "the example's bands, an alpha band and overviews; it covers the parcels and the "
+            "new roads (those far beyond the parcels are left out where the image would "
+            "otherwise be too large)."
         )
 
     def initAlgorithm(self, config=None):  # noqa: N802
@@ -133,7 +135,7 @@ class SynthesizeAerialImage(AlgorithmBase):
         image = qgis_io.read_image(image_layer, example.crs, bounds, cell, "Example image")
         feedback.pushInfo(f"Example image '{image_layer.name()}' read at {cell:.2f} m per pixel "
                           f"({image.shape[1]} x {image.shape[0]} pixels, "
-                          f"{image.array.shape[2]} bands).")
+                          f"{counted(image.array.shape[2], 'band')}).")
         feedback.setProgress(25)
 
         result = qgis_io.run_engine(
@@ -166,7 +168,13 @@ class SynthesizeAerialImage(AlgorithmBase):
         if stats["roads_painted"]:
             feedback.pushInfo(f"{stats['n_road_pixels']} road pixels painted from the example "
                               "roads.")
-        elif with_roads:
+        if stats.get("n_roads_beyond"):
+            feedback.pushWarning(
+                f"The new roads reach so far beyond the parcels that an image of them all "
+                f"would be too large: it covers the parcels, and "
+                f"{counted(stats['n_roads_beyond'], 'road')} farther than a road width from "
+                "them are left out.")
+        if not stats["roads_painted"] and with_roads:
             feedback.pushInfo("The new roads are not painted: "
                               + ("no example road lies on the image." if with_example_roads
                                  else "give the example's roads (EXAMPLE_ROADS)."))

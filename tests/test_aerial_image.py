@@ -306,3 +306,27 @@ def test_real_satellite_image_of_atlanta():
         ex_mean.append(image.array[ex_label == res.table.example_parcel.iloc[i] + 1, 0].mean())
     assert np.corrcoef(new_mean, ex_mean)[0, 1] > 0.9
     np.testing.assert_allclose(new_mean, ex_mean, rtol=0.15)
+
+
+def test_roads_far_beyond_the_parcels_do_not_refuse_the_image():
+    """A region's roads (Liechtenstein's whole hierarchy, 22 km) with a town's parcels: the
+    image of every road would have 44,494 x 21,174 pixels and the run was refused ('use a
+    larger pixel size'). The image covers the parcels and the roads near them; the roads
+    far off are counted; a road along the parcels is still painted."""
+    example = _gradient_image()
+    ex_road = shapely.LineString([(1005, 1950), (1195, 1950)])
+    near = shapely.LineString([(190, 195), (250, 195)])
+    far = shapely.LineString([(20000, 30000), (80000, 30000)])
+    res = ai.synthesize_image(
+        example, [shapely.box(1020, 1890, 1060, 1910)], [shapely.box(200, 200, 240, 220)],
+        roads=[near, far], example_roads=[ex_road],
+        settings=ai.ImageSettings(road_width=5.0, example_road_width=10.0))
+    assert res.stats["n_roads_beyond"] == 1
+    assert res.stats["roads_painted"] and res.stats["n_road_pixels"] > 0
+    assert res.stats["cols"] * PX < 100 and res.stats["rows"] * PX < 100
+    # a layout that fits keeps every road, as before
+    whole = ai.synthesize_image(
+        example, [shapely.box(1020, 1890, 1060, 1910)], [shapely.box(200, 200, 240, 220)],
+        roads=[near, shapely.LineString([(0, 0), (60, 60)])], example_roads=[ex_road],
+        settings=ai.ImageSettings(road_width=5.0, example_road_width=10.0))
+    assert whole.stats["n_roads_beyond"] == 0 and whole.stats["cols"] * PX > 240

@@ -412,6 +412,15 @@ class _Grid:
         return np.column_stack([self.x0 + (cc + 0.5) * self.size, self.y0 - (rr + 0.5) * self.size])
 
 
+def _too_large(geoms, margin: float, settings: ImageSettings) -> bool:
+    """Whether an image of the bounds of ``geoms`` (arrays of geometries), grown by
+    ``margin``, has more than ``settings.max_pixels`` pixels."""
+    x0, y0, x1, y1 = shapely.total_bounds(np.concatenate(
+        [np.asarray(g, dtype=object).ravel() for g in geoms]))
+    size = settings.pixel_size
+    return ((x1 - x0 + margin) / size + 1) * ((y1 - y0 + margin) / size + 1) > settings.max_pixels
+
+
 def _output_grid(geoms, pixel_size: float, max_pixels: int) -> _Grid:
     x0, y0, x1, y1 = shapely.total_bounds(geoms)
     x0, y0 = math.floor(x0 / pixel_size) * pixel_size, math.floor(y0 / pixel_size) * pixel_size
@@ -610,7 +619,10 @@ def synthesize_image(example: GeoImage, example_parcels, parcels, roads=None,
     ImageSynthesis
         ``image`` covers the new parcels and roads on the ``pixel_size`` grid (aligned to
         whole multiples of it), with the example's bands and dtype; ``alpha`` is 0 off the
-        layout and on parcels without a good match.
+        layout and on parcels without a good match. Where the roads reach so far beyond the
+        parcels that the image would be too large (``max_pixels``) and the parcels' alone
+        would not, it covers the parcels and the roads within a road width of their bounding
+        box; ``stats['n_roads_beyond']`` counts the roads left out.
 
     Raises
     ------
@@ -650,8 +662,20 @@ def synthesize_image(example: GeoImage, example_parcels, parcels, roads=None,
     ex_lo, ex_hi = scanline_extents(ex_parcels, ex_frames, s)
     extent = list(parcels)
     width = settings.road_width
+    n_roads_beyond = 0
     if roads is not None and len(roads):
-        extent.append(shapely.buffer(shapely.multilinestrings(roads), width / 2, cap_style="flat"))
+        if _too_large(extent + [roads], width, settings) and \
+                not _too_large(extent, width, settings):
+            # a region's (a country's) road layer with a town's parcels: the image of every
+            # road was refused as too large; it covers the parcels and the roads within a
+            # road width of them (the street sides above used every road)
+            x0, y0, x1, y1 = shapely.total_bounds(parcels)
+            reach = shapely.box(x0 - width, y0 - width, x1 + width, y1 + width)
+            n_roads_beyond = int((~shapely.intersects(roads, reach)).sum())
+            roads = _lines(shapely.intersection(roads, reach))
+        if len(roads):
+            extent.append(shapely.buffer(shapely.multilinestrings(roads), width / 2,
+                                         cap_style="flat"))
     grid = _output_grid(np.array(extent, dtype=object), settings.pixel_size, settings.max_pixels)
     progress.step(0.15)
 
@@ -687,6 +711,7 @@ def synthesize_image(example: GeoImage, example_parcels, parcels, roads=None,
         "n_example_used": int(len(np.unique(match[matched]))),
         "median_stretch": float(np.median(stretch[matched])) if matched.any() else float("nan"),
         "roads_painted": bool(painted_roads), "n_road_pixels": int(n_road),
+        "n_roads_beyond": n_roads_beyond,
         "rows": grid.rows, "cols": grid.cols,
     }
     progress.step(1.0)
