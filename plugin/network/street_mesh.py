@@ -228,7 +228,8 @@ def _clipped_to_surfaces(tris: np.ndarray, owner: np.ndarray, uv: np.ndarray, su
         return tris, owner, uv
     # polygons of the triangles of trimmed streets only (most streets are not)
     t2 = shapely.polygons(tris[sel][:, [0, 1, 2, 0], :2])
-    inside = shapely.intersection(t2, surfaces[owner[sel]])
+    with np.errstate(invalid="ignore"):   # GEOS flags some slivers' cuts; the result is right
+        inside = shapely.intersection(t2, surfaces[owner[sel]])
     # a triangle out by round-off (under a millionth of it: the fans of a bend follow the
     # surface's arc to the last digit) stays whole
     whole = shapely.area(inside) >= area[sel] * (1 - 1e-6)
