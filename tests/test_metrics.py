@@ -524,6 +524,8 @@ def test_the_plugins_own_road_classes_count_as_drivable():
     footway = M.compute_layout_metrics(roads=lines, road_class=["footway"] + classes[1:],
                                        drivable_only=True)
     assert any("1 line of non-drivable" in n for n in footway.notes)
+    # every line drivable: nothing to say ('0 lines of non-drivable classes left out' was)
+    assert not any("non-drivable" in n for n in res.notes)
 
 
 def test_lines_without_a_class_beside_classed_ones_are_not_streets():

@@ -997,9 +997,10 @@ def compute_layout_metrics(roads=None, blocks=None, parcels=None, buildings=None
                     raise InputError("no road line has a drivable highway class")
                 roads = roads[drivable]
                 road_z_layer = None if road_z_layer is None else road_z_layer[drivable]
-                res.notes.append(f"Roads: {counted((~drivable).sum(), 'line')} of "
-                                 "non-drivable classes (footways, paths, service roads ...) "
-                                 "left out.")
+                if not drivable.all():
+                    res.notes.append(f"Roads: {counted((~drivable).sum(), 'line')} of "
+                                     "non-drivable classes (footways, paths, service roads "
+                                     "...) left out.")
             elif not drivable.all():
                 res.notes.append(f"Roads: {counted((~drivable).sum(), 'line')} of "
                                  "non-drivable classes (footways, paths, service roads ...) "

@@ -107,6 +107,17 @@ CHECKS = (
 )
 
 
+#: How :meth:`NetworkCheck.summary` names one and several of each violation.
+_SUMMARY_NOUNS = {
+    "crossings_given": ("crossing of a given road", "crossings of given roads"),
+    "crossings_synthesised": ("crossing without a junction", "crossings without a junction"),
+    "overlaps": ("overlap", None), "floating_pieces": ("floating piece", None),
+    "parallel_duplicates": ("street along a given road", "streets along given roads"),
+    "controlled_access": ("motorway / trunk contact", None),
+    "outside_target": ("street leaving the target", "streets leaving the target"),
+}
+
+
 def is_controlled_access(road_class: Sequence) -> np.ndarray:
     """Which OSM classes are motorways or trunks (their links included): roads that take
     no new junction.
@@ -551,12 +562,15 @@ class NetworkCheck:
 
     def summary(self) -> str:
         v = self.violations()
-        bad = [f"{n} {name.replace('_', ' ')}" for name, n in v.items() if n]
+        bad = ["dead-end share outside the example's ±30 %" if name == "dead_end_share"
+               else counted(n, *_SUMMARY_NOUNS.get(name, (name.replace("_", " "), None)))
+               for name, n in v.items() if n]
         share = (f"dead-end share {self.dead_end_share:.2f}"
                  + (f" (example {self.example_dead_end_share:.2f})"
                     if self.example_dead_end_share is not None else ""))
-        head = (f"{counted(self.n_synthesised, 'synthesised line')} against {self.n_given} "
-                f"given: {counted(self.n_components, 'connected component')}, {share}")
+        head = (f"{counted(self.n_synthesised, 'synthesised line')} against {self.n_given} given"
+                if self.n_given else counted(self.n_synthesised, "line"))
+        head += f": {counted(self.n_components, 'connected component')}, {share}"
         return head + (": no violation." if not bad else ": " + ", ".join(bad) + ".")
 
 
