@@ -127,11 +127,28 @@ class ExtractRoadHierarchy(AlgorithmBase):
             "Parcels within this distance of an intersection count as nearby.", advanced=True)
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT, "Road hierarchy", QgsProcessing.SourceType.TypeVectorLine),
-            "Cleaned road edges with level (0 = arterial), road_class, length_m, street_id.")
+            "Cleaned road edges between intersections and street ends: edge_id; level (0 = "
+            "arterial, k + 1 = meets a level-k street); road_class; length_m; street_id (the "
+            "continuous street the edge is part of); name; osm_layer (vertical layer: bridge "
+            "+1, tunnel -1; the tools that read this layer keep such edges apart); node_from, "
+            "node_to (node_id in Intersections); tortuosity (length / straight distance "
+            "between its ends; empty for a closed loop); arterial_source (how its street "
+            "was seeded: osm = an arterial class, topological = longest / straightest, "
+            "component = the longest street of a part not connected to an arterial, which "
+            "starts at level 1; empty for streets levelled from their neighbours).")
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT_INTERSECTIONS, "Intersections", QgsProcessing.SourceType.TypeVectorPoint,
             optional=True, createByDefault=True),
-            "Intersection and street-end points with the Aliaga et al. 2008 attributes.")
+            "Intersection and street-end points with the Aliaga et al. 2008 attributes: "
+            "node_id; degree; street_a, street_b (street_id of the two most important streets "
+            "through it: lower level, then longer; street_b empty at a street's end); "
+            "level_a/b; and of each of the two streets: tortuosity_a/b (mean over its edges), "
+            "dist_mean_a/b and dist_var_a/b (mean and variance, m and m², of the straight "
+            "distance between its consecutive intersections), angle_mean_a/b and "
+            "angle_var_a/b (degrees, °², of its turns at them; empty for a street without "
+            "one); block_area (mean area, m², of the blocks around the point; empty where "
+            "none closes); parcel_area (mean area of the parcels within the search radius, "
+            "with Parcels).")
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         class_field = self.parameterAsString(parameters, self.CLASS_FIELD, context)

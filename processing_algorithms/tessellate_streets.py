@@ -154,14 +154,22 @@ class TessellateStreets(AlgorithmBase):
             "z-fighting with the terrain); side faces close the gap.", advanced=True)
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT_SURFACES, "Street surfaces", QgsProcessing.SourceType.TypeVectorPolygon),
-            "One polygon per street segment between junctions: segment_id, edge_id, "
-            "from_junction, to_junction, road_class, z_layer, width_m, length_m, area_m2; "
-            "with a DEM slope_long_pct, slope_lat_pct, too_steep_long, too_steep_lat.")
+            "One polygon per street segment between junctions: segment_id; edge_id (the "
+            "edge of the cleaned street graph it paves); from_junction, to_junction "
+            "(junction_id of its ends; a dead end's is the node's number without a junction "
+            "polygon); road_class; z_layer (vertical layer: bridge +1, tunnel -1); width_m; "
+            "length_m (of its centre line); area_m2. With a DEM: slope_long_pct (steepest "
+            "grade along it, %), slope_lat_pct (steepest cross slope, %), too_steep_long, "
+            "too_steep_lat (beyond the limits above).")
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT_JUNCTIONS, "Junctions", QgsProcessing.SourceType.TypeVectorPolygon,
             optional=True, createByDefault=True),
-            "One polygon per junction: junction_id (= from/to_junction of the surfaces), "
-            "degree, merged_nodes, z_layer, area_m2; with a DEM z_centre and slopes.")
+            "One polygon per junction: junction_id (= from/to_junction of the surfaces); "
+            "degree (streets meeting); merged_nodes (graph nodes merged into it, within "
+            "MERGE_DISTANCE); z_layer; area_m2. With a DEM: z_centre (height of its plane "
+            "at the centre); slope_pct (the plane's steepest slope, %); slope_long_pct, "
+            "slope_lat_pct (the plane's largest grade along and across one of its streets, "
+            "%); too_steep_long, too_steep_lat.")
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT_MESH, "3D street mesh (triangles)", QgsProcessing.SourceType.TypeVectorPolygon,
             optional=True, createByDefault=False),

@@ -201,3 +201,24 @@ def test_qgis_process_run_exits_zero(tmp_path):
     import pyogrio
 
     assert pyogrio.read_info(out)["features"] > 150
+
+
+def test_every_output_field_is_explained_in_the_help(qgis_processing):
+    """The roads' osm_layer, node_from, tortuosity, arterial_source and every field of the
+    intersections (dist_var_b, block_area ...) were named nowhere a user could read what
+    they hold."""
+    import re
+
+    from qgis.core import QgsApplication
+
+    from urban_synthesis.processing_algorithms import extract_road_hierarchy as erh
+
+    alg = QgsApplication.processingRegistry().algorithmById("urbansynth:extractroadhierarchy")
+    for output, fields in (("OUTPUT", erh.ROAD_FIELDS),
+                           ("OUTPUT_INTERSECTIONS", erh.INTERSECTION_FIELDS)):
+        text = alg.parameterDefinition(output).help()
+        named = set(re.findall(r"[a-z_0-9]+", text))
+        named |= {f"{stem}_{side}" for stem, sides in re.findall(r"([a-z_]+)_(a/b)", text)
+                  for side in "ab"}
+        missing = [name for name, _ in fields if name not in named]
+        assert not missing, (output, missing)

@@ -400,3 +400,25 @@ def test_a_bridge_stays_a_bridge_through_the_hierarchy(qgis_processing, tmp_path
         rows, _ = layer_features(out["OUTPUT_SURFACES"])
         assert sorted(r["z_layer"] for r in rows) == [0, 1]
         assert out["OUTPUT_JUNCTIONS"].featureCount() == 0
+
+
+def test_every_output_field_is_explained_in_the_help(qgis_processing):
+    """edge_id, slope_pct, merged_nodes ... were named (or summed up as 'slopes') without
+    a word on what they hold."""
+    import re
+
+    from qgis.core import QgsApplication
+
+    alg = QgsApplication.processingRegistry().algorithmById(ALG)
+    for output, fields in (("OUTPUT_SURFACES", SURFACE_FIELDS),
+                           ("OUTPUT_JUNCTIONS", JUNCTION_FIELDS)):
+        text = alg.parameterDefinition(output).help()
+        named = set(re.findall(r"[a-z_0-9]+", text))
+        assert not [f for f in fields if f not in named], output
+    # the ones that need it are followed by what they hold
+    for output, explained in (("OUTPUT_SURFACES", ("edge_id", "slope_long_pct", "slope_lat_pct")),
+                              ("OUTPUT_JUNCTIONS", ("slope_pct", "z_centre", "merged_nodes",
+                                                    "degree", "slope_lat_pct"))):
+        text = alg.parameterDefinition(output).help()
+        for f in explained:
+            assert re.search(rf"\b{f} \(", text), (output, f)
