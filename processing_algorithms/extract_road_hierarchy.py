@@ -12,7 +12,7 @@ from qgis.core import (
     QgsWkbTypes,
 )
 
-from ..plugin.network import hierarchy
+from ..plugin.network import hierarchy, street_surfaces
 from ..plugin.network import street_graph as roads
 from ..plugin.qgis_glue import qgis_io
 from ..plugin.core.text import counted
@@ -22,6 +22,7 @@ ROAD_FIELDS = [
     ("edge_id", "int"), ("level", "int"), ("road_class", "str"), ("length_m", "float"),
     ("street_id", "int"), ("name", "str"), ("osm_layer", "int"), ("node_from", "int"),
     ("node_to", "int"), ("tortuosity", "float"), ("arterial_source", "str"),
+    ("width_m", "float"), ("oneway", "str"),
 ]
 INTERSECTION_FIELDS = [
     ("node_id", "int"), ("degree", "int"), ("street_a", "int"), ("street_b", "int"),
@@ -135,7 +136,10 @@ class ExtractRoadHierarchy(AlgorithmBase):
             "between its ends; empty for a closed loop); arterial_source (how its street "
             "was seeded: osm = an arterial class, topological = longest / straightest, "
             "component = the longest street of a part not connected to an arterial, which "
-            "starts at level 1; empty for streets levelled from their neighbours).")
+            "starts at level 1; empty for streets levelled from their neighbours); width_m (the "
+            "line's own width, from its width_m field or OSM width tag, else empty); oneway "
+            "(OSM oneway: tessellatestreets gives a one-way carriageway half its class "
+            "width).")
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT_INTERSECTIONS, "Intersections", QgsProcessing.SourceType.TypeVectorPoint,
             optional=True, createByDefault=True),
@@ -153,8 +157,8 @@ class ExtractRoadHierarchy(AlgorithmBase):
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         class_field = self.parameterAsString(parameters, self.CLASS_FIELD, context)
         frame = qgis_io.read_source(self, parameters, self.INPUT, context, feedback, kind="lines",
-                                    fields=[class_field or "highway", "name",
-                                            *qgis_io.VERTICAL_LAYER_FIELDS,
+                                    fields=[class_field or "highway", "name", "oneway",
+                                            *qgis_io.WIDTH_FIELDS, *qgis_io.VERTICAL_LAYER_FIELDS,
                                             *qgis_io.ROAD_CLASS_FIELDS])
         label = frame.name
         classes = parse_class_list(self.parameterAsString(parameters, self.CLASSES, context))
@@ -191,8 +195,16 @@ class ExtractRoadHierarchy(AlgorithmBase):
         if parcels_frame is not None:
             parcels = parcels_frame.geometry
         results = {}
+        table = h.roads_table()
+        # what a street surface needs (tessellatestreets after this tool): each line's own
+        # width, and one-way (a dual carriageway's two lines get half a class width each)
+        widths = qgis_io.road_width_column(frame)
+        oneway = qgis_io.osm_tag_column(frame, "oneway")
+        table["width_m"] = np.nan if widths is None else \
+            [street_surfaces.parse_width(w) for w in widths[graph.source]]
+        table["oneway"] = None if oneway is None else oneway[graph.source]
         results[self.OUTPUT] = qgis_io.write_sink(
-            self, parameters, self.OUTPUT, context, graph.geometry, h.roads_table(), ROAD_FIELDS,
+            self, parameters, self.OUTPUT, context, graph.geometry, table, ROAD_FIELDS,
             QgsWkbTypes.Type.LineString, frame.source_crs, frame.crs, feedback)
         qgis_io.style_output(context, results[self.OUTPUT], "roads_by_level.qml")
         feedback.setProgress(85)

@@ -195,7 +195,7 @@ class TessellateStreets(AlgorithmBase):
         frame = qgis_io.read_source(
             self, parameters, self.ROADS, context, feedback, kind="lines",
             required_fields=[width_field] if width_field else (),
-            fields=[width_field, "width_m", "width", class_field or "highway", "road_class",
+            fields=[width_field, *qgis_io.WIDTH_FIELDS, class_field or "highway", "road_class",
                     "level", "oneway", *qgis_io.VERTICAL_LAYER_FIELDS])
         label = frame.name
         classes = parse_class_list(self.parameterAsString(parameters, self.CLASSES, context))
@@ -207,11 +207,7 @@ class TessellateStreets(AlgorithmBase):
         merge_heads = self.parameterAsBoolean(parameters, self.MERGE_OVERLAPPING, context)
 
         frame, road_class = drivable_lines(frame, class_field, classes, feedback)
-        width_values = None
-        for name in ([width_field] if width_field else ["width_m", "width"]):
-            width_values = qgis_io.osm_tag_column(frame, name)
-            if width_values is not None:
-                break
+        width_values = qgis_io.road_width_column(frame, width_field)
         class_for_width = road_class if road_class is not None else \
             qgis_io.osm_tag_column(frame, "road_class")
         widths, source = street_surfaces.road_widths(

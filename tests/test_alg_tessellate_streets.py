@@ -422,3 +422,25 @@ def test_every_output_field_is_explained_in_the_help(qgis_processing):
         text = alg.parameterDefinition(output).help()
         for f in explained:
             assert re.search(rf"\b{f} \(", text), (output, f)
+
+
+def test_the_hierarchy_keeps_what_the_street_surfaces_need(qgis_processing, tmp_path):
+    """hierarchy -> tessellate, as a model chains them: the hierarchy dropped OSM's 'oneway'
+    and 'width', so each carriageway of a dual carriageway was paved at the full class
+    width: Helsinki's paved area came out 38 % larger than from the same OSM lines
+    directly (188,522 m² for 136,232), 106 polygons trimmed instead of 46 and 18 streets
+    inside their junctions instead of 1. The hierarchy now writes width_m and oneway."""
+    from qgis.core import QgsVectorLayer
+
+    hierarchy = qgis_processing.run("urbansynth:extractroadhierarchy", {
+        "INPUT": helsinki_layer("lines"), "OUTPUT": str(tmp_path / "roads.gpkg"),
+        "OUTPUT_INTERSECTIONS": None})["OUTPUT"]
+    areas = {}
+    for name, source in (("direct", helsinki_layer("lines")), ("chained", hierarchy)):
+        out = qgis_processing.run(ALG, {"ROADS": source, "OUTPUT_SURFACES": "memory:",
+                                        "OUTPUT_JUNCTIONS": "memory:"})
+        surfaces, _ = layer_features(out["OUTPUT_SURFACES"])
+        areas[name] = sum(r["area_m2"] for r in surfaces)
+    assert areas["chained"] == pytest.approx(areas["direct"], rel=0.01)
+    rows, _ = layer_features(QgsVectorLayer(hierarchy, "roads", "ogr"))
+    assert sum(r["oneway"] == "yes" for r in rows) > 100

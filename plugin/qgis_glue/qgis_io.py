@@ -796,6 +796,21 @@ def osm_tag_column(frame: Frame, key: str) -> Optional[np.ndarray]:
     return None
 
 
+#: Fields a line's own width is read from, in this order: a tool's ``width_m`` (growroads,
+#: extractroadhierarchy), OSM's ``width`` (a field or in ``other_tags``).
+WIDTH_FIELDS = ("width_m", "width")
+
+
+def road_width_column(frame: Frame, width_field: Optional[str] = None) -> Optional[np.ndarray]:
+    """Each line's own width as given (``width_field``, else the first of
+    :data:`WIDTH_FIELDS` the layer holds), unparsed; None when none is there."""
+    for name in ([width_field] if width_field else WIDTH_FIELDS):
+        values = osm_tag_column(frame, name)
+        if values is not None:
+            return values
+    return None
+
+
 #: The fields :func:`road_classes` reads: ask read_source for them.
 ROAD_CLASS_FIELDS = ("highway", "other_tags", "road_class")
 
