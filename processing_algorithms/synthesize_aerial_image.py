@@ -143,20 +143,28 @@ class SynthesizeAerialImage(AlgorithmBase):
             target.geometry, roads=None if roads is None else roads.geometry,
             example_roads=None if example_roads is None else example_roads.geometry,
             settings=settings, seed=seed, progress=qgis_io.progress_for(feedback, 25, 90))
-        self._log(result.stats, feedback, roads is not None, example_roads is not None)
+        self._log(result.stats, feedback, roads is not None, example_roads is not None,
+                  settings.max_stretch)
         path = self.parameterAsOutputLayer(parameters, self.OUTPUT_IMAGE, context)
         qgis_io.write_image(path, result.image, result.alpha, target.crs, target.source_crs)
         feedback.setProgress(100)
         return {self.OUTPUT_IMAGE: path}
 
     @staticmethod
-    def _log(stats, feedback, with_roads: bool, with_example_roads: bool):
-        feedback.pushInfo(
-            f"{stats['n_matched']} of {counted(stats['n_parcels'], 'parcel')} filled from "
-            f"{stats['n_example_used']} of "
-            f"{counted(stats['n_example_on_image'], 'example parcel')} on the "
-            f"image (median stretch {stats['median_stretch']:.2f}).")
-        if stats["n_unmatched"]:
+    def _log(stats, feedback, with_roads: bool, with_example_roads: bool, max_stretch=None):
+        if not stats["n_matched"]:
+            feedback.pushWarning(
+                f"None of the {counted(stats['n_parcels'], 'parcel')} has an example parcel "
+                f"of a similar size and shape facing the street alike within the largest "
+                f"stretch ({max_stretch:g}): every parcel is transparent. Raise MAX_STRETCH, "
+                "or give example parcels nearer the new ones in size and shape.")
+        else:
+            feedback.pushInfo(
+                f"{stats['n_matched']} of {counted(stats['n_parcels'], 'parcel')} filled from "
+                f"{stats['n_example_used']} of "
+                f"{counted(stats['n_example_on_image'], 'example parcel')} on the "
+                f"image (median stretch {stats['median_stretch']:.2f}).")
+        if stats["n_unmatched"] and stats["n_matched"]:
             feedback.pushInfo(
                 f"{counted(stats['n_unmatched'], 'parcel')}: no example parcel of a similar "
                 "size and shape facing the street alike (within the largest stretch); left "

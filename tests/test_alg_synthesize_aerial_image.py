@@ -108,6 +108,20 @@ def test_bad_input(qgis_processing, layers, tmp_path):
     fails("PIXEL_SIZE", PIXEL_SIZE=-1)
 
 
+def test_no_match_at_all_is_a_warning_naming_the_stretch(qgis_processing, layers, tmp_path):
+    """MAX_STRETCH 1 (its lower limit) matches no parcel: the log said, as information,
+    '0 of 10 parcels filled from 0 of 46 example parcels on the image (median stretch nan)'
+    and the image was wholly transparent."""
+    from helpers import log_feedback
+
+    log = log_feedback()
+    qgis_processing.run(ALG, _params(layers, OUTPUT_IMAGE=str(tmp_path / "none.tif"),
+                                     MAX_STRETCH=1.0), feedback=log)
+    assert not any("nan" in m for m in log.messages + log.warnings)
+    assert any("every parcel is transparent" in w and "MAX_STRETCH" in w and "(1)" in w
+               for w in log.warnings), log.warnings
+
+
 def test_qgis_process_run(layers, tmp_path):
     """One real qgis_process.bin run: exit code 0 (no native-library crash at exit)."""
     target = tmp_path / "aerial_cli.tif"
