@@ -1,6 +1,5 @@
 """urbansynth:placelibrarybuildings - the best-fitting library building per parcel
 (Scharl 2010, ch. 6)."""
-import pandas as pd
 import shapely
 from qgis.core import (
     QgsProcessing,
@@ -15,10 +14,6 @@ from ..plugin.buildings import bestfit
 from ..plugin.core.ids import whole_ids
 from ..plugin.qgis_glue import qgis_io
 from .common import AlgorithmBase
-
-#: Output fields of the placement; the library's own attributes follow them.
-RESERVED = {name for name, _ in bestfit.PLACEMENT_FIELDS}
-
 
 class PlaceLibraryBuildings(AlgorithmBase):
     GROUP_ID = "synthesis"
@@ -111,13 +106,6 @@ class PlaceLibraryBuildings(AlgorithmBase):
         feedback.pushInfo(f"{s['n_placed']} of {s['n_parcels']} parcels got a building; "
                           f"{100 * s['empty_share']:.1f} % left empty ({s['no_street']} have "
                           "no side facing a street).")
-        extra = []
-        for col in result.table.columns:
-            if col in RESERVED or col.lower() == "fid":
-                continue
-            values = pd.to_numeric(result.table[col], errors="coerce")
-            numeric = values.notna().sum() == result.table[col].notna().sum()
-            extra.append((col, "float" if numeric else "str"))
         if s.get("too_steep"):
             feedback.pushInfo(f"{s['too_steep']} parcels are steeper than the maximum parcel "
                               "slope and stay empty.")
@@ -133,7 +121,7 @@ class PlaceLibraryBuildings(AlgorithmBase):
         # with a DEM the buildings stand at their base height: PolygonZ whatever is placed
         with_dem = self.given(parameters, self.DEM)
         dest = qgis_io.write_sink(self, parameters, self.OUTPUT, context, result.geometry,
-                                  result.table, bestfit.PLACEMENT_FIELDS + extra,
+                                  result.table, bestfit.PLACEMENT_FIELDS + bestfit.library_fields(library),
                                   QgsWkbTypes.Type.PolygonZ if with_dem else QgsWkbTypes.Type.Polygon,
                                   parcels.source_crs, crs, feedback)
         qgis_io.style_output(context, dest, "buildings_by_height.qml")

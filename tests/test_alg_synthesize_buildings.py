@@ -251,6 +251,40 @@ def test_library_layer(qgis_processing):
     assert rows[0]["rotation"] == pytest.approx(0.0)
 
 
+def test_the_output_fields_do_not_depend_on_what_fitted(qgis_processing):
+    """The library's fields and their types come from the whole library: one street house
+    placed (access '0') gave street_access_sides a Real field and levels a Real one, a
+    corner block placed gave it a String field, and a run where nothing fitted had no
+    height_m, name or levels at all (a model writing into one table, the height style)."""
+    from qgis.PyQt.QtCore import QVariant
+
+    crs = "EPSG:32633"
+    roads = memory_layer("LineString", ["LINESTRING (0 0, 300 0)"], crs)
+    fits = memory_layer("Polygon", [shapely.box(10, -40, 40, -5).wkt], crs)
+    too_small = memory_layer("Polygon", [shapely.box(10, -9, 14, -5).wkt], crs)
+    types = []
+    for plots in (fits, too_small):
+        out = qgis_processing.run(BESTFIT, {"PARCELS": plots, "ROADS": roads,
+                                            "OUTPUT": "memory:"})
+        layer = out["OUTPUT"]
+        assert layer.featureCount() == (1 if plots is fits else 0)
+        fields = layer.fields()
+        types.append({f.name(): f.type() for f in fields})
+    assert types[0] == types[1]
+    assert types[0]["street_access_sides"] == QVariant.Type.String
+    assert types[0]["blind_sides"] == QVariant.Type.String
+    assert types[0]["levels"] == QVariant.Type.LongLong
+    assert types[0]["height_m"] == QVariant.Type.Double
+    # a library whose sides are an integer field: text in the output as well
+    lib = memory_layer("Polygon", ["POLYGON ((0 0, 12 0, 12 10, 0 10, 0 0))"], crs,
+                       fields="&field=street_access_sides:integer&field=blind_sides:integer",
+                       rows=[(0, None)])
+    out = qgis_processing.run(BESTFIT, {"PARCELS": fits, "ROADS": roads,
+                                        "BUILDING_LIBRARY": lib, "OUTPUT": "memory:"})
+    rows, _ = layer_features(out["OUTPUT"])
+    assert [(r["street_access_sides"], r["blind_sides"]) for r in rows] == [("0", "")]
+
+
 def test_a_library_drawn_anywhere_keeps_its_size(qgis_processing):
     """The 12 x 10 m house of a library drawn in a metric CRS elsewhere (any position, the
     help says; here UTM zone 31N at the equator), placed on a plot in Prague: 120 m² (it

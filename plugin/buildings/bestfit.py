@@ -54,9 +54,9 @@ import shapely.ops
 from ..core import coordinates
 from ..core.progress import InputError, Progress, ensure
 
-__all__ = ["LibraryBuilding", "BestFit", "PLACEMENT_FIELDS", "MAX_ANGLE",
+__all__ = ["LibraryBuilding", "BestFit", "PLACEMENT_FIELDS", "SIDE_FIELDS", "MAX_ANGLE",
            "DEFAULT_MAX_PARCEL_SLOPE", "parcel_slopes", "parse_sides",
-           "library_from_table", "default_library", "side_normals",
+           "library_from_table", "library_fields", "default_library", "side_normals",
            "fit_buildings"]
 
 #: Scharl's maximum deviation from parallel for a side to face a street (degrees).
@@ -70,6 +70,8 @@ PLACEMENT_FIELDS = [("parcel_id", "int"), ("source_id", "int"), ("rotation", "fl
                     ("offset_x", "float"), ("offset_y", "float"), ("area_m2", "float"),
                     ("parcel_share", "float"), ("base_z", "float"),
                     ("parcel_slope_pct", "float"), ("sunk_m", "float")]
+#: A library building's side lists (comma-separated edge indices): text in any output.
+SIDE_FIELDS = ("street_access_sides", "blind_sides")
 #: Default steepest parcel (rise over run) that still gets a building, with a DEM.
 DEFAULT_MAX_PARCEL_SLOPE = 0.25
 
@@ -146,10 +148,51 @@ def library_from_table(geoms, access, blind, source_ids=None,
             raise InputError(f"{what}: edges {sorted(set(a) & set(b))} are both street access "
                              "and blind sides")
         attrs = {} if attributes is None else attributes.iloc[i].to_dict()
+        # the sides as read ('0' from an integer field, '0;2'): one spelling in the output
+        attrs.update(zip(SIDE_FIELDS, (",".join(map(str, a)), ",".join(map(str, b)))))
         out.append(LibraryBuilding(g, a, b, sid, attrs))
     if not out:
         raise InputError("the building library is empty")
     return out
+
+
+def library_fields(library: Sequence[LibraryBuilding]) -> List[Tuple[str, str]]:
+    """(name, type) of the library's own attributes as output fields, after
+    :data:`PLACEMENT_FIELDS` (whose names, and 'fid', they cannot take). Each type holds
+    over the whole library, not only over the buildings one run places, so the output's
+    fields do not change with what fitted (and are there when nothing fitted); the side
+    lists are text.
+
+    >>> library_fields(default_library())[:3]
+    [('name', 'str'), ('height_m', 'float'), ('levels', 'int')]
+    >>> dict(library_fields(default_library()))["street_access_sides"]
+    'str'
+    """
+    reserved = {name.lower() for name, _ in PLACEMENT_FIELDS} | {"fid"}
+    names = dict.fromkeys(k for b in library for k in b.attributes)
+    out = []
+    for name in names:
+        if str(name).lower() in reserved:
+            continue
+        values = [b.attributes.get(name) for b in library]
+        values = [v for v in values if v is not None and not pd.isna(v)]
+        out.append((name, "str" if name in SIDE_FIELDS else _value_kind(values)))
+    return out
+
+
+def _value_kind(values) -> str:
+    """int / float / bool / str: the one field type that holds every value."""
+    if not values:
+        return "str"
+    if all(isinstance(v, (bool, np.bool_)) for v in values):
+        return "bool"
+    if all(isinstance(v, (int, np.integer)) and not isinstance(v, (bool, np.bool_))
+           for v in values):
+        return "int"
+    if all(isinstance(v, (int, float, np.integer, np.floating))
+           and not isinstance(v, (bool, np.bool_)) for v in values):
+        return "float"
+    return "str"
 
 
 def _rect(w, d):
