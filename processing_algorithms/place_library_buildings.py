@@ -40,7 +40,7 @@ class PlaceLibraryBuildings(AlgorithmBase):
             "side faces one (within the maximum angle), and the building is moved to the "
             "street with a minimum setback. The default library holds twelve built-in "
             "buildings.\n\n"
-            "Output: the placed footprints with source_id, rotation, offset_x/y, parcel_id "
+            "Output: the placed footprints with source_id, rotation, offset_x, offset_y, parcel_id "
             "and the library's attributes, in the parcels' CRS, styled by height."
         )
 
@@ -83,8 +83,11 @@ class PlaceLibraryBuildings(AlgorithmBase):
             "get no building (Scharl's maxParcelSlope).")
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT, "Placed buildings", QgsProcessing.SourceType.TypeVectorPolygon),
-            "Placed library buildings with source_id, rotation, offset_x/y, parcel_id and the "
-            "library's attributes.")
+            "Placed library buildings with parcel_id, source_id (the library building), "
+            "rotation (°), offset_x and offset_y (m) that place it, area_m2, parcel_share (of the "
+            "parcel's area), base_z, parcel_slope_pct and sunk_m (with an elevation model), "
+            "then the library's own fields (those of the built-in library: name, height_m, "
+            "levels, building_type, roof_shape, street_access_sides, blind_sides).")
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         parcels = qgis_io.read_source(self, parameters, self.PARCELS, context, feedback,

@@ -121,8 +121,9 @@ class SynthesizeBuildingAttributes(AlgorithmBase):
                       "candidates).")
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT, "Buildings with attributes", QgsProcessing.SourceType.TypeVectorPolygon),
-            "Footprints with height_m, levels, building_type, roof_shape, source_id and "
-            "similarity.")
+            "Footprints with height_m, levels, building_type, roof_shape, source_id (the "
+            "example building's feature id), similarity (1 / (1 + feature distance) to it: 1 "
+            "is an identical example) and floor_area_m2 (footprint area x levels).")
 
     # ----------------------------------------------------------------------- run
 

@@ -370,3 +370,22 @@ def test_deprecated_tool(qgis_processing):
                                   (2, {}, "needs: Skeletons")):
         with pytest.raises(QgsProcessingException, match=match):
             qgis_processing.run(DEPRECATED, dict(params, METHOD=method, OUTPUT="memory:"))
+
+
+def test_the_output_help_names_every_output_field(qgis_processing):
+    """Each field the two tools add is named in the OUTPUT help (the dialog, qgis_process
+    help, the README's reference): the attributes' floor_area_m2 and the best fit's area_m2,
+    parcel_share, base_z, parcel_slope_pct and sunk_m were not."""
+    from qgis.core import QgsApplication
+
+    crs = "EPSG:32633"
+    roads = memory_layer("LineString", ["LINESTRING (0 0, 300 0)"], crs)
+    plots = memory_layer("Polygon", [shapely.box(10, -40, 40, -5).wkt], crs)
+    runs = {BESTFIT: {"PARCELS": plots, "ROADS": roads},
+            ATTRIBUTES: {"FOOTPRINTS": plots, "EXAMPLE_BUILDINGS": bubenec_layer("buildings")}}
+    for alg_id, params in runs.items():
+        layer = qgis_processing.run(alg_id, dict(params, OUTPUT="memory:"))["OUTPUT"]
+        help_text = QgsApplication.processingRegistry().algorithmById(
+            alg_id).parameterDefinition("OUTPUT").help()
+        added = [f.name() for f in layer.fields() if f.name() not in ("fid",)]
+        assert [f for f in added if f not in help_text] == [], alg_id
