@@ -570,3 +570,27 @@ def test_transfer_onto_grown_network(helsinki):
                                              seed=3, roads=lines)
     first = r.table.block_id.to_numpy() <= 6
     assert shapely.equals(again.geometry, r.geometry[first]).all()
+
+
+def test_a_street_along_the_outline_prints_no_warning(helsinki):
+    """A Vaduz block (Liechtenstein OSM) and one of its streets: clipping the street to
+    the block's inside made GEOS report round-off as numpy's 'invalid value encountered
+    in intersection', printed to the console of every qgis_process run over the country."""
+    import warnings
+
+    block = shapely.from_wkb(
+        "0103000000010000000E0000007799348761772041CEF70262B2F55341E006330DB07720417BF3FB"
+        "C0B4F553412561EEFC0A782041A44583D4B4F55341AFFD002A2578204174548D41BBF5534114CF06"
+        "4E187820413658915FBBF553416D56338D05782041544960A3BBF55341D5DF01F0F9772041D9E130"
+        "00BCF55341E1A96831D077204166B6D65FBDF553415B21B448BF772041934B6DAFBDF55341477486"
+        "3EA97720413891B7DBBCF5534140244CBD98772041B9090547BBF553416E22940E80772041C2D138"
+        "89B5F5534185DE8EE96B772041C98266F4B2F553417799348761772041CEF70262B2F55341")
+    street = shapely.from_wkb(
+        "0102000000030000000495A7D24A77204109F180B2B1F553414FFE5B9A527720418E6D9B8FB1F55341"
+        "7799348761772041CEF70262B2F55341")
+    for method in footprints.METHODS:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", RuntimeWarning)
+            r = footprints.synthesize_footprints(np.array([block]), [helsinki], method,
+                                                 roads=np.array([street]))
+        assert len(r.geometry) and r.table.source_block.notna().all()

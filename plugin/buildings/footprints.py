@@ -317,8 +317,11 @@ def synthesize_block(block, examples: Sequence[ExampleSet], method: str = "trans
     aligned = match.transform(ex.polygons[rows]) if len(rows) else np.zeros(0, object)
     road_lines = np.asarray(roads if roads is not None else [], dtype=object)
     if len(road_lines):
-        # the roads inside the block (dead ends), clipped to it
-        road_lines = shapely.intersection(road_lines, shapely.buffer(block, -0.5))
+        # the roads inside the block (dead ends), clipped to it; GEOS reports round-off on
+        # a street along the outline as an 'invalid value' warning (printed to the user's
+        # console), and its result, empty there, is sound
+        with np.errstate(invalid="ignore"):
+            road_lines = shapely.intersection(road_lines, shapely.buffer(block, -0.5))
         road_lines = road_lines[~shapely.is_empty(road_lines)
                                 & (shapely.get_dimensions(road_lines) == 1)]
     streets = frontage.street_segments(np.r_[np.array([block], dtype=object), road_lines])
