@@ -13,6 +13,7 @@ from qgis.core import (
 )
 
 from ..plugin.core.ids import as_numbers, whole_ids
+from ..plugin.core.text import counted
 from ..plugin.network import blocks
 from ..plugin.qgis_glue import qgis_io
 from ..plugin.retrieval import database
@@ -91,8 +92,8 @@ class BuildBlockDatabase(AlgorithmBase):
             # a block is one face (a dissolved layer holds many): each part is a block of its
             # own, numbered anew, its buildings found by location
             n_multi = int((np.bincount(owner) > 1).sum())
-            feedback.pushInfo(f"{label}: {n_multi} blocks of several parts split into "
-                              f"{len(parts)} blocks of one face each; blocks are numbered 1..n "
+            feedback.pushInfo(f"{label}: {counted(n_multi, 'block')} of several parts split "
+                              f"into {len(parts)} blocks of one face each; blocks are numbered 1..n "
                               "and buildings assigned by location.")
             block_frame = qgis_io.Frame(parts, block_frame.attributes.iloc[owner].reset_index(
                 drop=True).drop(columns=[c for c in (id_field,) if c], errors="ignore"),
@@ -126,17 +127,19 @@ class BuildBlockDatabase(AlgorithmBase):
                 located = index >= 0
                 bid[np.flatnonzero(~known)[located]] = block_ids[index[located]]
                 if located.any():
-                    feedback.pushInfo(f"{b_label}: {int(located.sum())} buildings name no block "
-                                      f"of {label} in '{id_field}' and are assigned by "
-                                      "location.")
+                    feedback.pushInfo(f"{b_label}: " + counted(
+                        located.sum(), "building names", "buildings name") + f" no block of "
+                        f"{label} in '{id_field}': assigned by location.")
                 known = np.isin(bid, block_ids) & np.isfinite(bid)
         if not by_field:
             index, _ = blocks.assign_to_blocks(block_frame.geometry, building_frame.geometry)
             known = index >= 0
             bid = np.where(known, block_ids[np.maximum(index, 0)], -1)
         if (~known).any():
-            feedback.pushInfo(f"{b_label}: {int((~known).sum())} of {len(known)} buildings lie in "
-                              "no block and are left out.")
+            feedback.pushInfo(f"{b_label}: {int((~known).sum())} of "
+                              f"{counted(len(known), 'building')} "
+                              f"{'lies' if (~known).sum() == 1 else 'lie'} in no block and "
+                              f"{'is' if (~known).sum() == 1 else 'are'} left out.")
         if not known.any():
             raise QgsProcessingException(
                 f"Layer {b_label}: no building lies in one of the blocks of {label}; "
@@ -151,7 +154,8 @@ class BuildBlockDatabase(AlgorithmBase):
                            progress=qgis_io.progress_for(feedback, 30, 100))
         n_buildings = int(known.sum())
         # the file's name, not ``output``: that is the run's staging copy until it succeeds
-        feedback.pushInfo(f"Block database written: {Path(output).name} ({len(block_frame)} "
-                          f"blocks, {n_buildings} buildings).")
+        feedback.pushInfo(f"Block database written: {Path(output).name} "
+                          f"({counted(len(block_frame), 'block')}, "
+                          f"{counted(n_buildings, 'building')}).")
         return {self.OUTPUT: output, self.N_BLOCKS: len(block_frame),
                 self.N_BUILDINGS: n_buildings}

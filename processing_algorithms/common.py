@@ -23,6 +23,7 @@ from qgis.PyQt.QtGui import QIcon
 from ..plugin.core.ids import whole_ids
 from ..plugin.core.progress import Canceled, InputError, MissingPackage
 from ..plugin.core.seeds import MAX_SEED
+from ..plugin.core.text import counted
 from ..plugin.network import blocks as block_rules
 from ..plugin.network import street_graph
 from ..plugin.qgis_glue import outputs, qgis_io
@@ -318,11 +319,12 @@ class AlgorithmBase(QgsProcessingAlgorithm):
                                                         predicate="intersects")[0]) \
             if len(blocks) else np.zeros(0)
         if len(reach) == 0:
-            feedback.pushWarning(f"None of the {len(layer)} polygons of {layer.name} reaches a "
-                                 f"block: no {what}.")
+            feedback.pushWarning((f"The polygon of {layer.name} reaches no block"
+                                  if len(layer) == 1 else f"None of the {len(layer)} polygons "
+                                  f"of {layer.name} reaches a block") + f": no {what}.")
             return None
-        feedback.pushInfo(f"{len(reach)} of the {len(layer)} polygons of {layer.name} reach "
-                          f"the blocks: {what}.")
+        feedback.pushInfo(f"{len(reach)} of the {counted(len(layer), 'polygon')} of {layer.name} "
+                          f"{'reaches' if len(reach) == 1 else 'reach'} the blocks: {what}.")
         return layer.geometry
 
     def keep_clear_areas(self, parameters, context, feedback, frame, blocks):

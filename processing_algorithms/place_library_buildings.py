@@ -12,6 +12,7 @@ from qgis.core import (
 
 from ..plugin.buildings import bestfit
 from ..plugin.core.ids import whole_ids
+from ..plugin.core.text import counted
 from ..plugin.qgis_glue import qgis_io
 from .common import AlgorithmBase
 
@@ -106,14 +107,16 @@ class PlaceLibraryBuildings(AlgorithmBase):
             max_parcel_slope=self.number(parameters, self.MAX_PARCEL_SLOPE, context) / 100.0,
             progress=qgis_io.progress_for(feedback, 10, 90))
         s = result.stats
-        feedback.pushInfo(f"{s['n_placed']} of {s['n_parcels']} parcels got a building; "
-                          f"{100 * s['empty_share']:.1f} % left empty ({s['no_street']} have "
-                          "no side facing a street).")
+        feedback.pushInfo(f"{s['n_placed']} of {counted(s['n_parcels'], 'parcel')} got a "
+                          f"building; {100 * s['empty_share']:.1f} % left empty "
+                          f"({counted(s['no_street'], 'has', 'have')} no side facing a street).")
         if s.get("too_steep"):
-            feedback.pushInfo(f"{s['too_steep']} parcels are steeper than the maximum parcel "
-                              "slope and stay empty.")
+            feedback.pushInfo(counted(s["too_steep"], "parcel is steeper than the maximum "
+                                      "parcel slope and stays empty.", "parcels are steeper "
+                                      "than the maximum parcel slope and stay empty."))
         if s.get("no_terrain"):
-            feedback.pushWarning(f"{s['no_terrain']} parcels stay empty because the DEM has no "
+            feedback.pushWarning(f"{counted(s['no_terrain'], 'parcel stays', 'parcels stay')} "
+                                 "empty because the DEM has no "
                                  "value under them (or under their building's corners): it "
                                  "has holes there or does not reach them.")
         if s["n_placed"] == 0:

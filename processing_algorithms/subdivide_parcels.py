@@ -16,6 +16,7 @@ from qgis.core import (
 
 from ..plugin.parcels import subdivision as parcels
 from ..plugin.core.ids import as_numbers
+from ..plugin.core.text import counted
 from ..plugin.qgis_glue import qgis_io
 from .common import AlgorithmBase
 
@@ -242,7 +243,7 @@ class SubdivideParcels(AlgorithmBase):
         frame = qgis_io.read_source(self, parameters, self.BLOCKS, context, feedback,
                                     kind="polygons", fields=["block_id", *PARCEL_SIZE_FIELDS])
         ids = self.block_ids(frame, feedback)
-        feedback.pushInfo(f"{len(frame)} blocks read from {frame.name}; every block edge is "
+        feedback.pushInfo(f"{counted(len(frame), 'block')} read from {frame.name}; every block edge is "
                           "taken as a street.")
         feedback.setProgress(30)
         return frame, frame.geometry, ids, None, None
@@ -309,38 +310,38 @@ class SubdivideParcels(AlgorithmBase):
 
     @staticmethod
     def _log(stats, method, feedback):
-        feedback.pushInfo(f"{stats['n_lots']} parcels ({method}) in {stats['n_blocks']} blocks.")
-        if stats["n_empty_blocks"]:
-            feedback.pushInfo(f"{stats['n_empty_blocks']} blocks are narrower than their "
-                              "streets (or smaller than the minimum area after shrinking) and "
-                              "get no parcel.")
-        over = stats["n_over_max_area"] - stats.get("n_over_max_area_merged", 0)
-        if over > 0:
-            feedback.pushInfo(f"{over} parcels stay larger than the maximum area: every cut "
-                              "would have made a piece too small, too thin or without street "
-                              "access.")
-        if stats.get("n_over_max_area_merged"):
-            feedback.pushInfo(f"{stats['n_over_max_area_merged']} parcels are larger than the "
-                              "maximum area because lots merged so that a building stands on "
-                              "one parcel.")
-        if stats["n_without_access"]:
-            feedback.pushInfo(f"{stats['n_without_access']} parcels have no street frontage.")
-        if stats.get("n_under_min_width"):
-            feedback.pushInfo(f"{stats['n_under_min_width']} parcels are narrower than the "
-                              "minimum width: their block part is too thin for a wider lot.")
-        if stats["n_merged_for_access"]:
-            feedback.pushInfo(f"{stats['n_merged_for_access']} lots without street frontage "
-                              "were merged into a neighbour.")
-        if stats.get("n_merged_for_buildings"):
-            feedback.pushInfo(f"{stats['n_merged_for_buildings']} lots merged into a neighbour "
-                              "so that a building stands on one parcel.")
-        if stats.get("n_buildings"):
-            feedback.pushInfo(
-                f"{stats['n_buildings_split']} of the {stats['n_buildings_on_lots']} buildings on "
-                "parcel land are crossed by a parcel line (no parcel holds 95 % of them): on "
-                "the line between two streets' strips, or in a row longer than a merged "
-                f"parcel may be ({stats['n_buildings'] - stats['n_buildings_on_lots']} of the "
-                f"{stats['n_buildings']} buildings stand mostly outside the parcels).")
-        feedback.pushInfo(f"{stats['n_undesirable']} parcels are undesirable by Yang's "
-                          "criteria (p_angle > 15° or p_area > 1.2).")
+        n = stats.get
+        lines = [f"{counted(n('n_lots'), 'parcel')} ({method}) in "
+                 f"{counted(n('n_blocks'), 'block')}."]
+        over = n("n_over_max_area") - n("n_over_max_area_merged", 0)
+        for count, one, many, text in (
+                (n("n_empty_blocks"), "block is", "blocks are", "narrower than their streets "
+                 "(or smaller than the minimum area after shrinking) and get no parcel."),
+                (over, "parcel stays", "parcels stay", "larger than the maximum area: every "
+                 "cut would have made a piece too small, too thin or without street access."),
+                (n("n_over_max_area_merged"), "parcel is", "parcels are", "larger than the "
+                 "maximum area because lots merged so that a building stands on one parcel."),
+                (n("n_without_access"), "parcel has", "parcels have", "no street frontage."),
+                (n("n_under_min_width"), "parcel is", "parcels are", "narrower than the minimum "
+                 "width: their block part is too thin for a wider lot."),
+                (n("n_merged_for_access"), "lot", "lots", "without street frontage were "
+                 "merged into a neighbour."),
+                (n("n_merged_for_buildings"), "lot", "lots", "merged into a neighbour so "
+                 "that a building stands on one parcel.")):
+            if count and count > 0:
+                lines.append(f"{counted(count, one, many)} {text}")
+        if n("n_buildings"):
+            on_lots, split = n("n_buildings_on_lots"), n("n_buildings_split")
+            lines.append(
+                f"{split} of the {counted(on_lots, 'building')} on parcel land "
+                f"{'is' if split == 1 else 'are'} crossed by a parcel line (no parcel holds "
+                "95 % of it): on the line between two streets' strips, or in a row longer "
+                f"than a merged parcel may be ({n('n_buildings') - on_lots} of the "
+                f"{counted(n('n_buildings'), 'building')} "
+                f"{'stands' if n('n_buildings') - on_lots == 1 else 'stand'} mostly outside "
+                "the parcels).")
+        lines.append(f"{counted(n('n_undesirable'), 'parcel is', 'parcels are')} undesirable "
+                     "by Yang's criteria (p_angle > 15° or p_area > 1.2).")
+        for line in lines:
+            feedback.pushInfo(line)
 

@@ -14,6 +14,7 @@ from qgis.core import (
 
 from ..plugin.buildings import attribute_transfer as transfer
 from ..plugin.buildings import attributes as building_attributes
+from ..plugin.core.text import counted
 from ..plugin.qgis_glue import qgis_io
 from .common import AlgorithmBase
 
@@ -160,7 +161,7 @@ class SynthesizeBuildingAttributes(AlgorithmBase):
             storey_height=self.number(parameters, self.STOREY_HEIGHT, context),
             choice_mode=self.CHOICES[self.parameterAsEnum(parameters, self.CHOICE, context)][0],
             progress=qgis_io.progress_for(feedback, 15, 85))
-        self._log(result.stats, lo, hi, far, feedback)
+        self._log(result.stats, lo, hi, far, blocks is not None, feedback)
         # the input's own fields first, then the new ones (replacing same-named fields)
         own = qgis_io.carried_fields(
             self.parameterAsSource(parameters, self.FOOTPRINTS, context).fields(),
@@ -226,41 +227,54 @@ class SynthesizeBuildingAttributes(AlgorithmBase):
             raise QgsProcessingException(f"Layer {frame.name} has no polygon with a "
                                          "'building' value.")
         if not keep.all():
-            feedback.pushInfo(f"{frame.name}: {int((~keep).sum())} polygons without a "
+            feedback.pushInfo(f"{frame.name}: {counted((~keep).sum(), 'polygon')} without a "
                               "'building' value skipped.")
             frame = qgis_io.subset(frame, keep)
         return frame
 
     @staticmethod
-    def _log(s, lo, hi, far, feedback):
+    def _log(s, lo, hi, far, per_block, feedback):
         if s["no_heights"]:
             feedback.reportError(
                 f"No example building has a height or a number of levels: the "
-                f"{s['n_footprints']} footprints get types and roofs from "
-                f"{s['n_donors']} example buildings, and their heights stay empty.",
-                fatalError=False)
+                f"{counted(s['n_footprints'], 'footprint gets', 'footprints get')} types and "
+                f"roofs from {counted(s['n_donors'], 'example building')}, and their heights "
+                "stay empty.", fatalError=False)
         else:
-            feedback.pushInfo(f"{s['n_footprints']} footprints attributed, "
-                              f"{s['n_with_height']} with a height, from {s['n_donors']} "
-                              f"example buildings with a height (features: {s['features']}).")
+            feedback.pushInfo(f"{counted(s['n_footprints'], 'footprint')} attributed, "
+                              f"{s['n_with_height']} with a height, from "
+                              f"{counted(s['n_donors'], 'example building')} with a height "
+                              f"(features: {s['features']}).")
         if s["n_clipped"]:
-            feedback.pushInfo(f"{s['n_clipped']} heights clipped into {lo:g}..{hi:g} m.")
+            feedback.pushInfo(f"{counted(s['n_clipped'], 'height')} clipped into "
+                              f"{lo:g}..{hi:g} m.")
         if far > 0:
             feedback.pushInfo(f"Floor-area ratio {s['far_min']:.2f}..{s['far_max']:.2f} "
                               f"(target {far:g}).")
+
+            def stays(n):   # the target is met per block, or for the district as a whole
+                if not per_block:
+                    return "The district stays", "its footprints cover", "it"
+                one = n == 1
+                return (counted(n, "block stays", "blocks stay"),
+                        "its footprints cover" if one else "their footprints cover",
+                        "it" if one else "them")
             if s.get("n_blocks_short_of_far"):
+                who, cover, it = stays(s["n_blocks_short_of_far"])
                 feedback.pushWarning(
-                    f"{s['n_blocks_short_of_far']} blocks stay more than "
-                    f"{100 * transfer.FAR_SHORT:.0f} % under the target floor-area "
-                    f"ratio: their footprints cover too little of them; {s['n_at_max_height']} "
-                    f"footprints stand at the maximum height ({hi:g} m). Raise MAX_HEIGHT "
-                    "or lower the target, or give denser footprints.")
+                    f"{who} more than {100 * transfer.FAR_SHORT:.0f} % under the target "
+                    f"floor-area ratio: {cover} too little of {it}; "
+                    f"{counted(s['n_at_max_height'], 'footprint stands', 'footprints stand')} "
+                    f"at the maximum height ({hi:g} m). Raise MAX_HEIGHT or lower the target, "
+                    "or give denser footprints.")
             if s.get("n_blocks_over_far"):
+                who, cover, it = stays(s["n_blocks_over_far"])
                 feedback.pushWarning(
-                    f"{s['n_blocks_over_far']} blocks (or the district) stay more than "
-                    f"{100 * transfer.FAR_SHORT:.0f} % over the target floor-area ratio: their "
-                    f"footprints cover more than it at the minimum height ({lo:g} m). Raise the "
-                    "target or lower MIN_HEIGHT, or give sparser footprints.")
+                    f"{who} more than {100 * transfer.FAR_SHORT:.0f} % over the target "
+                    f"floor-area ratio: {cover} more than it at the minimum height "
+                    f"({lo:g} m). Raise the target or lower MIN_HEIGHT, or give sparser "
+                    "footprints.")
             if s.get("n_outside_blocks"):
-                feedback.pushInfo(f"{s['n_outside_blocks']} footprints lie in no block and "
-                                  "keep their levels.")
+                feedback.pushInfo(counted(s["n_outside_blocks"], "footprint lies in no block "
+                                          "and keeps its levels.", "footprints lie in no "
+                                          "block and keep their levels."))

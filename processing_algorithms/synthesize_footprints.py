@@ -16,6 +16,7 @@ from qgis.core import (
 )
 
 from ..plugin.buildings import footprints
+from ..plugin.core.text import counted
 from ..plugin.qgis_glue import qgis_io
 from ..plugin.retrieval import database
 from .common import AlgorithmBase
@@ -190,9 +191,10 @@ class SynthesizeFootprints(AlgorithmBase):
             label = f"Block database {k + 1} ({p})"
             db = qgis_io.run_engine(label, database.load_block_database, p)
             ex = qgis_io.run_engine(label, footprints.prepare_examples, db, n, min_buildings)
-            feedback.pushInfo(f"database {k + 1} '{n}': {len(db)} blocks, "
-                              f"{len(db.buildings)} footprints, {len(ex.usable)} blocks "
-                              f"with at least {min_buildings} footprint(s) retrievable.")
+            feedback.pushInfo(f"database {k + 1} '{n}': {counted(len(db), 'block')}, "
+                              f"{counted(len(db.buildings), 'footprint')}, "
+                              f"{counted(len(ex.usable), 'block')} with at least "
+                              f"{counted(min_buildings, 'footprint')} retrievable.")
             examples.append(ex)
         return examples
 
@@ -200,7 +202,7 @@ class SynthesizeFootprints(AlgorithmBase):
         frame = qgis_io.read_source(self, parameters, self.BLOCKS, context, feedback,
                                     kind="polygons", fields=["block_id"])
         ids = self.block_ids(frame, feedback)
-        feedback.pushInfo(f"{len(frame)} blocks read from {frame.name}; every block edge is "
+        feedback.pushInfo(f"{counted(len(frame), 'block')} read from {frame.name}; every block edge is "
                           "taken as a street centreline.")
         return frame, frame.geometry, ids, None
 
@@ -229,15 +231,16 @@ class SynthesizeFootprints(AlgorithmBase):
         s = result.blocks
         filled = int((s.n_placed > 0).sum()) if len(s) else 0
         feedback.pushInfo(
-            f"{len(result.geometry)} footprints ({method}) in {filled} of {len(s)} blocks, "
+            f"{counted(len(result.geometry), 'footprint')} ({method}) in {filled} of "
+            f"{counted(len(s), 'block')}, "
             f"{result.seconds:.1f} s.")
         if len(s):
             if int(s.example.isna().sum()):
-                feedback.pushInfo(f"{int(s.example.isna().sum())} blocks got no example "
+                feedback.pushInfo(f"{counted(s.example.isna().sum(), 'block')} got no example "
                                   "(too small once the street width and the areas kept clear are taken off, or "
                                   "larger than a district).")
             feedback.pushInfo(
-                f"{int(s.n_deleted.sum())} example footprints outside their block deleted, "
+                f"{counted(s.n_deleted.sum(), 'example footprint')} outside their block deleted, "
                 f"{int(s.n_conflicted.sum())} moved off the street, {int(s.n_trimmed.sum())} "
                 f"trimmed and {int(s.n_dropped.sum())} dropped to keep footprints apart and "
                 "off the road surface.")

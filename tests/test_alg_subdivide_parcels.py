@@ -157,7 +157,7 @@ def test_keep_clear_and_buildings_layers_that_are_empty_or_elsewhere(qgis_proces
     assert any("is empty: no areas kept clear" in m for m in log.messages)
     log = log_feedback()
     qgis_processing.run(ALG, dict(base, KEEP_CLEAR=far, BUILDINGS=far), feedback=log)
-    assert any("None of the 1 polygons of 'far surfaces' reaches a block" in w
+    assert any("The polygon of 'far surfaces' reaches no block" in w
                for w in log.warnings)
     with pytest.raises(QgsProcessingException, match="covered by the areas to keep clear"):
         qgis_processing.run(ALG, dict(base, KEEP_CLEAR=cover))
@@ -242,7 +242,7 @@ def test_points_in_a_polygon_layer_are_skipped_and_counted(qgis_processing, tmp_
         feedback=log)["OUTPUT"])
     assert shapely.area(shapely.intersection(geoms, shapely.box(50, 0, 60, 60))).max() < 1e-6
     assert any("3 features without polygons skipped" in m for m in log.messages)
-    assert any("1 of the 1 polygons of 'surfaces'" in m for m in log.messages)
+    assert any("1 of the 1 polygon of 'surfaces' reaches" in m for m in log.messages)
 
 
 def test_qgis_process_run(tmp_path):
@@ -300,3 +300,28 @@ def test_a_shapefile_output_keeps_its_quality_style(qgis_processing, tmp_path):
     for feature in layer.getFeatures(QgsFeatureRequest()):
         assert renderer.symbolsForFeature(feature, context), feature.attributes()
     renderer.stopRender(context)
+
+
+#: A count of one with a plural noun ('1 parcels stay', '1 blocks read', '1 geometries').
+ONE_PLURAL = r"(?<![\d.,])1 (parcels|blocks|lots|buildings|footprints|geometries|features|" \
+             r"heights|polygons)\b"
+
+
+def test_the_log_counts_one_in_the_singular(qgis_processing):
+    """One block that no cut can split, with one building: the log said '1 parcels stay
+    larger than the maximum area', '1 blocks read', '(1 of the 1 buildings stand ...)'."""
+    import re
+
+    from helpers import log_feedback
+
+    block = _memory_layer("Polygon", [shapely.box(0, 0, 40, 40).wkt])
+    house = _memory_layer("Polygon", [shapely.box(5, 5, 15, 15).wkt])
+    log = log_feedback()
+    qgis_processing.run(ALG, {"BLOCKS": block, "BUILDINGS": house, "STREET_WIDTH": 0,
+                              "MAX_AREA": 1000, "MIN_AREA": 900, "OUTPUT": "memory:"},
+                        feedback=log)
+    text = "\n".join(log.messages)
+    assert "1 parcel (recursive) in 1 block." in text
+    assert "1 parcel stays larger than the maximum area" in text
+    assert "1 block read from" in text
+    assert not re.search(ONE_PLURAL, text), text

@@ -114,6 +114,11 @@ def test_footprints_that_are_no_buildings_are_skipped_and_far_overshoot_warned(
     assert all(r["building"] not in (None, "", "no") for r in layer_features(layer)[0])
     assert any("polygons without a 'building' value skipped" in m for m in log.messages)
     assert any("over the target floor-area ratio" in w for w in log.warnings), log.warnings
+    # without blocks the target is met for the district: the warning says so ('1 blocks
+    # (or the district) stay ...', '1 blocks stay ... under' of a run without blocks)
+    assert any(w.startswith("The district stays more than 10 % over the target floor-area "
+                            "ratio: its footprints cover more than it") for w in log.warnings)
+    assert not any("1 blocks" in w for w in log.warnings)
 
 
 def test_far_per_block(qgis_processing, helsinki_buildings):
@@ -220,7 +225,7 @@ def test_best_fit_on_a_slope(qgis_processing, tmp_path):
                               feedback=log)
     assert out["OUTPUT"].wkbType() == QgsWkbTypes.Type.PolygonZ
     assert out["OUTPUT"].featureCount() == 0
-    assert any("1 parcels stay empty because the DEM has no value" in w for w in log.warnings)
+    assert any("1 parcel stays empty because the DEM has no value" in w for w in log.warnings)
 
 
 def _ogr_layer(uri):

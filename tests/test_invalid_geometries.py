@@ -111,3 +111,22 @@ def test_polygons_written_back_in_degrees_stay_valid(qgis_app):
         back = qgis_io.reproject(fixed, Crs("EPSG:4326"), Crs("EPSG:32632"), None)
         assert shapely.area(back[0]) == pytest.approx(shapely.area(utm[0]), rel=1e-6)
     assert qgis_io.valid_after_transform(utm)[0] is utm[0]    # a valid one is left as it is
+
+
+def test_an_unreadable_geometry_that_stays_unreadable_is_not_called_repaired(qgis_processing):
+    """A ring of two points, both the same (GEOS cannot read it; QGIS's repair gives
+    nothing either): the
+    log said '1 unreadable geometries repaired by QGIS, 1 skipped' of a building that was
+    left out; now it says how many were repaired and how many skipped."""
+    from qgis.core import QgsFeatureRequest
+
+    roads, _ = _roads_and_buildings()
+    ok = [shapely.box(x + 20, y + 20, x + 60, y + 60).wkt for x in (0, 100) for y in (0, 100)]
+    buildings = memory_layer("Polygon", ok + ["POLYGON((20 220, 20 220))"],
+                             "EPSG:32633", name="houses", fields="&field=building:string",
+                             rows=[["yes"]] * 5)
+    layer, log = _run(qgis_processing, QgsFeatureRequest.InvalidGeometryCheck.GeometryNoCheck,
+                      buildings)
+    assert layer.featureCount() == 4
+    assert "houses': 1 unreadable geometry: 0 repaired by QGIS, 1 skipped." in log
+

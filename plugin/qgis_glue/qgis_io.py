@@ -396,9 +396,13 @@ def read_source(alg, parameters, name: str, context, feedback,
                 geoms[i] = shapely.from_wkb(bytes(fixed.asWkb()), on_invalid="ignore")
         bad = shapely.is_missing(geoms)
         if feedback is not None:
-            feedback.pushInfo(f"{label}: {counted(len(unreadable), 'unreadable geometry')} "
-                              "repaired by QGIS"
-                              + (f", {int(bad.sum())} skipped." if bad.any() else "."))
+            # how many QGIS made readable, and how many are left out ('11 repaired, 11
+            # skipped' said of 11 that none could be read)
+            n_bad = int(bad.sum())
+            feedback.pushInfo(
+                f"{label}: {counted(len(unreadable), 'unreadable geometry', 'unreadable geometries')}"
+                + (f": {len(unreadable) - n_bad} repaired by QGIS, {n_bad} skipped." if n_bad
+                   else " repaired by QGIS."))
         if bad.any():
             geoms, rows, fids = _kept(~bad, geoms, rows, fids)
             if len(geoms) == 0:
@@ -426,8 +430,9 @@ def read_source(alg, parameters, name: str, context, feedback,
         if empty.any():
             geoms, rows, fids = _kept(~empty, geoms, rows, fids)
             if feedback is not None:
-                feedback.pushInfo(f"{label}: {counted(empty.sum(), 'geometry')} could not be "
-                                  "repaired: skipped.")
+                feedback.pushInfo(f"{label}: " + counted(
+                    empty.sum(), "geometry could not be repaired and was skipped.",
+                    "geometries could not be repaired and were skipped."))
             if len(geoms) == 0:
                 raise QgsProcessingException(f"Layer {label} has no valid geometry.")
     if kind in ("polygons", "lines") and len(geoms) > 1 and not read_twice:
