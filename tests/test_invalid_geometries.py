@@ -130,3 +130,25 @@ def test_an_unreadable_geometry_that_stays_unreadable_is_not_called_repaired(qgi
     assert layer.featureCount() == 4
     assert "houses': 1 unreadable geometry: 0 repaired by QGIS, 1 skipped." in log
 
+
+def test_an_unreadable_ring_repaired_into_a_line_is_no_building(qgis_processing):
+    """A polygon ring of two points (OSM has them) is unreadable to GEOS; QGIS's repair
+    makes a line of it, which was kept in a polygon layer: extractblocks stopped with 'Could
+    not add feature with geometry type MultiLineString', buildblockdatabase stored it as a
+    building, synthesizebuildingattributes stopped with '... 1 of the footprints are not
+    polygons' naming the example layer. The line is no polygon: skipped."""
+    from qgis.core import QgsFeatureRequest
+
+    roads, _ = _roads_and_buildings()
+    ok = [shapely.box(x + 20, y + 20, x + 60, y + 60).wkt for x in (0, 100) for y in (0, 100)]
+    buildings = memory_layer("Polygon", ok + ["POLYGON((20 220, 60 260))"], "EPSG:32633",
+                             name="houses", fields="&field=building:string",
+                             rows=[["yes"]] * 5)
+    layer, log = _run(qgis_processing, QgsFeatureRequest.InvalidGeometryCheck.GeometryNoCheck,
+                      buildings)
+    assert layer.featureCount() == 4
+    assert all(f.geometry().type() == 2 for f in layer.getFeatures())
+    assert "houses': 1 unreadable geometry: 0 repaired by QGIS, 1 skipped." in log
+    out = qgis_processing.run("urbansynth:synthesizebuildingattributes", {
+        "FOOTPRINTS": buildings, "EXAMPLE_BUILDINGS": layer, "OUTPUT": "memory:"})
+    assert out["OUTPUT"].featureCount() == 4

@@ -394,6 +394,11 @@ def read_source(alg, parameters, name: str, context, feedback,
             fixed = g.makeValid()
             if fixed is not None and not fixed.isEmpty():
                 geoms[i] = shapely.from_wkb(bytes(fixed.asWkb()), on_invalid="ignore")
+                if kind is not None:
+                    # a ring of two points comes back a line: no polygon to keep
+                    geoms[i] = _keep_dimension(geoms[i], kind)
+                    if geoms[i] is not None and geoms[i].is_empty:
+                        geoms[i] = None
         bad = shapely.is_missing(geoms)
         if feedback is not None:
             # how many QGIS made readable, and how many are left out ('11 repaired, 11
