@@ -391,15 +391,16 @@ class AlgorithmBase(QgsProcessingAlgorithm):
             frame.attributes["level"] if "level" in frame.attributes else None, len(frame))
         return frame.geometry[keep], frame.geometry[arterial]
 
-    def block_ids(self, frame, feedback, field="block_id"):
-        """A block layer's own ids (:func:`core.ids.whole_ids`), or None with a note when
-        they are not a unique whole number per block (blocks are then numbered 1..n)."""
+    def block_ids(self, frame, feedback, field="block_id", what="block"):
+        """A block (or parcel, ``what``) layer's own ids (:func:`core.ids.whole_ids`), or
+        None with a note when they are not a unique whole number per feature (they are
+        then numbered 1..n)."""
         if field not in frame.attributes:
             return None
         ids = whole_ids(frame.attributes[field])
         if ids is None:
             feedback.pushInfo(f"{frame.name}: {field} is not a unique whole number per "
-                              "block; blocks are numbered 1..n in layer order instead.")
+                              f"{what}; {what}s are numbered 1..n in layer order instead.")
         return ids
 
     def blocks_or_roads_error(self, parameters, done: str, to_do: str):

@@ -11,7 +11,6 @@ from qgis.core import (
 )
 
 from ..plugin.buildings import bestfit
-from ..plugin.core.ids import whole_ids
 from ..plugin.core.text import counted
 from ..plugin.qgis_glue import qgis_io
 from .common import AlgorithmBase
@@ -48,8 +47,9 @@ class PlaceLibraryBuildings(AlgorithmBase):
     def initAlgorithm(self, config=None):  # noqa: N802
         poly = [QgsProcessing.SourceType.TypeVectorPolygon]
         self.add(QgsProcessingParameterFeatureSource(self.PARCELS, "Parcels", poly),
-                 "Parcels, e.g. from 'Subdivide blocks into parcels' (parcel_id is kept) or "
-                 "a cadastre.")
+                 "Parcels, e.g. from 'Subdivide blocks into parcels' or a cadastre. Their "
+                 "parcel_id is kept when it is a unique whole number per parcel; else (text, "
+                 "repeated, missing) parcels are numbered 1..n in layer order, as the log says.")
         self.add(QgsProcessingParameterFeatureSource(
             self.ROADS, "Roads", [QgsProcessing.SourceType.TypeVectorLine]),
             "Street centrelines: which parcel and building sides face a street.")
@@ -96,8 +96,7 @@ class PlaceLibraryBuildings(AlgorithmBase):
         crs = parcels.crs
         road_lines, _ = self.roads_and_arterials(parameters, self.ROADS, context, feedback, crs)
         library = self._library(parameters, context, feedback)
-        ids = whole_ids(parcels.attributes["parcel_id"]) \
-            if "parcel_id" in parcels.attributes else None
+        ids = self.block_ids(parcels, feedback, "parcel_id", "parcel")
         result = qgis_io.run_engine(
             parcels.name, bestfit.fit_buildings, parcels.geometry, road_lines, library,
             parcel_ids=ids, min_setback=self.number(parameters, self.MIN_SETBACK, context),

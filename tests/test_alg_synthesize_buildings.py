@@ -394,3 +394,24 @@ def test_the_output_help_names_every_output_field(qgis_processing):
             alg_id).parameterDefinition("OUTPUT").help()
         added = [f.name() for f in layer.fields() if f.name() not in ("fid",)]
         assert [f for f in added if f not in help_text] == [], alg_id
+
+
+def test_parcel_ids_that_cannot_be_kept_are_renumbered_with_a_note(qgis_processing):
+    """Cadastre parcels with text ids ('A-1') or one id twice: the buildings' parcel_id was
+    1..n without a word, so it silently named other parcels than the layer's own ids."""
+    crs = "EPSG:32633"
+    roads = memory_layer("LineString", ["LINESTRING (0 0, 300 0)"], crs)
+    boxes = [shapely.box(10, -40, 40, -5).wkt, shapely.box(50, -40, 80, -5).wkt]
+    for kind, ids in (("string", ("A-1", "A-2")), ("integer", (7, 7)), ("integer", (7, 9))):
+        plots = memory_layer("Polygon", boxes, crs, fields=f"&field=parcel_id:{kind}",
+                             rows=[(i,) for i in ids], name="cadastre")
+        log = log_feedback()
+        out = qgis_processing.run(BESTFIT, {"PARCELS": plots, "ROADS": roads,
+                                            "OUTPUT": "memory:"}, feedback=log)
+        got = sorted(r["parcel_id"] for r in layer_features(out["OUTPUT"])[0])
+        note = any("parcel_id is not a unique whole number per parcel; parcels are numbered "
+                   "1..n" in m for m in log.messages)
+        if ids == (7, 9):
+            assert got == [7, 9] and not note
+        else:
+            assert got == [1, 2] and note, ids
