@@ -239,8 +239,16 @@ class SynthesizeFootprints(AlgorithmBase):
                 feedback.pushInfo(f"{counted(s.example.isna().sum(), 'block')} got no example "
                                   "(too small once the street width and the areas kept clear are taken off, or "
                                   "larger than a district).")
-            feedback.pushInfo(
-                f"{counted(s.n_deleted.sum(), 'example footprint')} outside their block deleted, "
-                f"{int(s.n_conflicted.sum())} moved off the street, {int(s.n_trimmed.sum())} "
-                f"trimmed and {int(s.n_dropped.sum())} dropped to keep footprints apart and "
-                "off the road surface.")
+            if s.example.notna().any():
+                feedback.pushInfo(
+                    f"{counted(s.n_deleted.sum(), 'example footprint')} outside their block "
+                    f"deleted, {int(s.n_conflicted.sum())} moved off the street, "
+                    f"{int(s.n_trimmed.sum())} trimmed and {int(s.n_dropped.sum())} dropped to "
+                    "keep footprints apart and off the road surface.")
+        if len(result.geometry) == 0:
+            # an empty layer is no result a user should find only by opening it
+            feedback.pushWarning(
+                "No footprint was made: " + ("every block got no example (see above): lower "
+                "the street width, the setback or the areas kept clear, or give larger blocks."
+                if len(s) and s.example.isna().all() else "no example footprint stayed inside "
+                "its block and off the road surface (see the counts above)."))

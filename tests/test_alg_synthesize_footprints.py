@@ -141,6 +141,21 @@ def test_bad_input(qgis_processing, helsinki_db, tmp_path):
     fails({"ROADS": streets, "STYLE": style, "STYLE_FIELD": "db"}, "from 1 to 1")
 
 
+def test_no_footprint_at_all_is_a_warning(qgis_processing, helsinki_db, bubenec_blocks):
+    """Streets 200 m wide leave no block any land: the run made an empty layer with only
+    info lines ('0 footprints ... in 0 of 7 blocks'), and counted '0 example footprints
+    deleted, 0 moved ...' of examples it never retrieved."""
+    from helpers import log_feedback
+
+    log = log_feedback()
+    out = qgis_processing.run(ALG, {"BLOCKS": bubenec_blocks, "BLOCK_DB": helsinki_db,
+                                    "STREET_WIDTH": 200, "OUTPUT": "memory:"}, feedback=log)
+    assert out["OUTPUT"].featureCount() == 0 and out["N_FOOTPRINTS"] == 0
+    assert any(w.startswith("No footprint was made: every block got no example")
+               for w in log.warnings), log.warnings
+    assert not any("example footprints outside their block" in m for m in log.messages)
+
+
 def test_qgis_process_run(helsinki_db, tmp_path):
     """One real qgis_process.bin run on the example data: exit code 0."""
     target = tmp_path / "footprints.gpkg"
