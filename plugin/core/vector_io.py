@@ -20,6 +20,7 @@ __all__ = ["write_layer", "read_layer"]
 
 _GEOMETRY_TYPES = {"Point": 1, "LineString": 2, "Polygon": 3, "MultiPoint": 4,
                    "MultiLineString": 5, "MultiPolygon": 6}
+_SHAPELY_TYPES = {"Point": 0, "LineString": 1, "Polygon": 3}
 
 
 def _ogr():
@@ -74,7 +75,9 @@ def write_layer(path: str, layer: str, table: pd.DataFrame, geometry, crs: str,
     if len(table) != len(geometry):
         raise ValueError("one table row per geometry is needed")
     if geometry_type.startswith("Multi") and len(geometry):
-        single = shapely.get_type_id(geometry) == _GEOMETRY_TYPES[geometry_type[5:]] - 1
+        # shapely's own type id of the single part (OGR's are not shapely's: Polygon is 3
+        # in both, LineString 2 in OGR and 1 in shapely)
+        single = shapely.get_type_id(geometry) == _SHAPELY_TYPES[geometry_type[5:]]
         promote = {"MultiPolygon": shapely.multipolygons, "MultiLineString":
                    shapely.multilinestrings, "MultiPoint": shapely.multipoints}[geometry_type]
         geometry = geometry.copy()
