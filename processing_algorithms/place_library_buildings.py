@@ -108,7 +108,9 @@ class PlaceLibraryBuildings(AlgorithmBase):
         s = result.stats
         feedback.pushInfo(f"{s['n_placed']} of {counted(s['n_parcels'], 'parcel')} got a "
                           f"building; {100 * s['empty_share']:.1f} % left empty "
-                          f"({counted(s['no_street'], 'has', 'have')} no side facing a street).")
+                          f"({counted(s['no_street'], 'has', 'have')} no side facing a street, "
+                          f"{counted(s['no_fit'], 'fits', 'fit')} no library building with the "
+                          "minimum setback and the side rules).")
         if s.get("too_steep"):
             feedback.pushInfo(counted(s["too_steep"], "parcel is steeper than the maximum "
                                       "parcel slope and stays empty.", "parcels are steeper "
@@ -122,7 +124,9 @@ class PlaceLibraryBuildings(AlgorithmBase):
             feedback.pushWarning("No parcel got a building: " + (
                 "no parcel side faces a street within the street reach (are the roads the "
                 "parcels' roads?)." if s["no_street"] == s["n_parcels"] else
-                "see the counts above."))
+                "no library building fits with the minimum setback and the side rules (a "
+                "smaller setback, or smaller buildings in the library)." if s["no_fit"] ==
+                s["n_parcels"] - s["no_street"] else "see the counts above."))
         # with a DEM the buildings stand at their base height: PolygonZ whatever is placed
         with_dem = self.given(parameters, self.DEM)
         dest = qgis_io.write_sink(self, parameters, self.OUTPUT, context, result.geometry,

@@ -415,3 +415,21 @@ def test_parcel_ids_that_cannot_be_kept_are_renumbered_with_a_note(qgis_processi
             assert got == [7, 9] and not note
         else:
             assert got == [1, 2] and note, ids
+
+
+def test_parcels_no_building_fits_are_counted_and_named(qgis_processing):
+    """A setback deeper than the parcels: every parcel faces the street and stays empty.
+    The log said '0 of 2 parcels got a building; 100.0 % left empty (0 have no side facing
+    a street)' and warned 'see the counts above', which named no reason."""
+    crs = "EPSG:32633"
+    roads = memory_layer("LineString", ["LINESTRING (0 0, 300 0)"], crs)
+    plots = memory_layer("Polygon", [shapely.box(10, -40, 40, -5).wkt,
+                                     shapely.box(50, -40, 80, -5).wkt], crs)
+    log = log_feedback()
+    out = qgis_processing.run(BESTFIT, {"PARCELS": plots, "ROADS": roads, "MIN_SETBACK": 40,
+                                        "OUTPUT": "memory:"}, feedback=log)
+    assert out["OUTPUT"].featureCount() == 0
+    assert any("(0 have no side facing a street, 2 fit no library building with the minimum "
+               "setback" in m for m in log.messages), log.messages
+    assert any(w.startswith("No parcel got a building: no library building fits with the "
+                            "minimum setback") for w in log.warnings), log.warnings

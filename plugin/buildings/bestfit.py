@@ -412,7 +412,8 @@ def fit_buildings(parcels, roads, library: Sequence[LibraryBuilding],
         with ``n_parcels``, ``n_placed``, ``empty_share``, ``no_street`` (parcels with no
         street side), ``too_steep`` (parcels over the slope limit), ``no_terrain`` (parcels,
         or the corners of the building chosen for them, where the DEM has no value: left
-        empty, not guessed).
+        empty, not guessed), ``no_fit`` (the other empty parcels: facing a street, but no
+        library building fits inside with the setback and the side rules).
     """
     progress = ensure(progress)
     parcels = np.asarray(parcels, dtype=object)
@@ -502,5 +503,6 @@ def fit_buildings(parcels, roads, library: Sequence[LibraryBuilding],
     progress.step(1.0)
     n = len(parcels)
     stats = {"n_parcels": n, "n_placed": len(rows), "empty_share": 1.0 - len(rows) / n,
-             "no_street": no_street, "too_steep": too_steep, "no_terrain": no_terrain}
+             "no_street": no_street, "too_steep": too_steep, "no_terrain": no_terrain,
+             "no_fit": n - len(rows) - no_street - too_steep - no_terrain}
     return BestFit(np.array(geoms, dtype=object), pd.DataFrame(rows), stats)
