@@ -594,3 +594,24 @@ def test_a_street_along_the_outline_prints_no_warning(helsinki):
             r = footprints.synthesize_footprints(np.array([block]), [helsinki], method,
                                                  roads=np.array([street]))
         assert len(r.geometry) and r.table.source_block.notna().all()
+
+
+def test_every_part_of_a_multipart_block_is_filled(helsinki):
+    """Two Bubeneč blocks as one feature (a dissolved block layer): only the larger one got
+    footprints, the other stayed empty without a word. Each part is filled now; the larger
+    exactly as it is alone (the same random numbers), so single-part results are unchanged."""
+    streets = bubenec("streets").geometry.values
+    ext = blocks.extract_blocks(streets).geometry
+    a = max(ext, key=lambda g: g.area)
+    b = max((g for g in ext if g.disjoint(a)), key=lambda g: g.area)  # not sharing a street
+    for method in footprints.METHODS:
+        both = footprints.synthesize_footprints([shapely.MultiPolygon([a, b])], [helsinki],
+                                                method, seed=4)
+        alone = footprints.synthesize_footprints([a], [helsinki], method, seed=4)
+        g = both.geometry
+        in_a = shapely.within(g, a.buffer(1e-6))
+        in_b = shapely.within(g, b.buffer(1e-6))
+        assert (in_a | in_b).all() and in_a.any() and in_b.any(), method
+        assert sorted(shapely.to_wkt(g[in_a])) == sorted(shapely.to_wkt(alone.geometry))
+        assert (both.table.block_id == 1).all() and len(both.blocks) == 1
+        assert both.blocks.n_placed.iloc[0] == len(g)

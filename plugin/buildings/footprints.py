@@ -39,7 +39,7 @@ import numpy as np
 import pandas as pd
 import shapely
 
-from ..core.geometry import largest_polygons, without_areas
+from ..core.geometry import largest_polygons, polygon_parts, without_areas
 from ..core.progress import InputError, Progress, ensure
 from ..network.blocks import shape_metrics
 from ..retrieval import shape_context as sc
@@ -237,6 +237,19 @@ def _empty_layout(stats: Dict) -> BlockLayout:
     return BlockLayout([], pd.DataFrame(columns=[n for n, _ in OUTPUT_FIELDS]), stats)
 
 
+def _merged_layouts(layouts: Sequence[BlockLayout], seconds: float) -> BlockLayout:
+    """The layouts of a block's parts as one: footprints and rows of all, counts summed,
+    the example and cost those of the largest part (the first)."""
+    stats = dict(layouts[0].stats)
+    for key in stats:
+        if key.startswith("n_"):
+            stats[key] = int(sum(lay.stats[key] for lay in layouts))
+    stats["seconds"] = seconds
+    tables = [lay.table for lay in layouts if len(lay.table)]
+    table = pd.concat(tables, ignore_index=True) if tables else layouts[0].table
+    return BlockLayout([g for lay in layouts for g in lay.geometry], table, stats)
+
+
 def _retrieve(block, examples: Sequence[ExampleSet], db_choice: int, n_best: int, rng):
     """The best matches (db index, Match) for a block, among one or all databases."""
     m = shape_metrics([block])
@@ -264,7 +277,8 @@ def synthesize_block(block, examples: Sequence[ExampleSet], method: str = "trans
                      seed: int = 0, block_index: int = 0, street_width: float = STREET_WIDTH,
                      setback: float = 0.0, roads: Optional[Sequence] = None,
                      db_choice: int = -1, n_best: int = 1, block_id: Optional[int] = None,
-                     fill: bool = True, keep_clear: Optional[Sequence] = None) -> BlockLayout:
+                     fill: bool = True, keep_clear: Optional[Sequence] = None,
+                     part: int = 0) -> BlockLayout:
     """Footprints for one target block (a pure function of its arguments).
 
     Parameters
@@ -285,10 +299,13 @@ def synthesize_block(block, examples: Sequence[ExampleSet], method: str = "trans
         to the share of frontage the example block has built (:func:`frontage.fill_frontage`)
     keep_clear : optional polygons no footprint may cover (street surfaces and junctions
         near the block)
+    part : of a block of several polygons (a dissolved layer), which part this is: each
+        part is filled on its own, the largest as the whole block would be (its random
+        numbers from ``[seed, block_index]``), part k > 0 from ``[seed, block_index, k]``
 
     Returns
     -------
-    BlockLayout with :data:`OUTPUT_FIELDS` rows.
+    BlockLayout with :data:`OUTPUT_FIELDS` rows (of all its parts).
     """
     if method not in METHODS:
         raise InputError(f"unknown method '{method}' (use one of {', '.join(METHODS)})")
@@ -297,7 +314,15 @@ def synthesize_block(block, examples: Sequence[ExampleSet], method: str = "trans
     stats = dict(block_id=bid, method=method, example=None, database=None, cost=np.nan,
                  n_example=0, n_deleted=0, n_conflicted=0, n_turned=0, n_placed=0,
                  n_trimmed=0, n_dropped=0, n_filled=0, seconds=0.0)
-    block = largest_polygons(np.array([block], dtype=object))[0]
+    parts, _ = polygon_parts(shapely.make_valid(np.array([block], dtype=object)))
+    if len(parts) > 1:
+        # every part is land to fill (only the largest was filled, the others silently not)
+        parts = parts[np.argsort(-shapely.area(parts), kind="stable")]
+        layouts = [synthesize_block(p, examples, method, seed, block_index, street_width,
+                                    setback, roads, db_choice, n_best, bid, fill, keep_clear,
+                                    part=k) for k, p in enumerate(parts)]
+        return _merged_layouts(layouts, time.perf_counter() - t0)
+    block = parts[0] if len(parts) else None
     if block is None or block.area <= 0 or block.area > MAX_BLOCK_AREA:
         stats["seconds"] = time.perf_counter() - t0
         return _empty_layout(stats)
@@ -305,7 +330,7 @@ def synthesize_block(block, examples: Sequence[ExampleSet], method: str = "trans
     if buildable.is_empty or buildable.area < MIN_AREA:
         stats["seconds"] = time.perf_counter() - t0
         return _empty_layout(stats)
-    rng = np.random.default_rng([int(seed), int(block_index)])
+    rng = np.random.default_rng([int(seed), int(block_index)] + ([int(part)] if part else []))
     found = _retrieve(block, examples, db_choice, n_best, rng)
     if found is None:
         stats["seconds"] = time.perf_counter() - t0
