@@ -133,8 +133,13 @@ class SynthesizeFootprints(AlgorithmBase):
             advanced=True)
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT, "Footprints", QgsProcessing.SourceType.TypeVectorPolygon),
-            "Footprints with block_id, height_m, levels, building_type, source_block, "
-            "source_building, database, method and placement, styled by height.")
+            "Footprints with block_id, height_m, levels, building_type, source_block and "
+            "source_building (the example block and building in the database), database "
+            "(its name), method and placement: 'copied' or 'moved' (off the street) by "
+            "transfer; 'fixed', 'repeatable' or 'interior' (the kind of element along the "
+            "street) by re-synthesis; 'filled' where empty street frontage was built up; "
+            "any of them followed by ', trimmed' when cut back to the buildable land. Styled "
+            "by height.")
         self.addOutput(QgsProcessingOutputNumber(self.N_FOOTPRINTS, "Number of footprints"))
 
     # ----------------------------------------------------------------------- checks

@@ -171,3 +171,21 @@ def test_qgis_process_run(helsinki_db, tmp_path):
     assert len(df) == out["results"]["N_FOOTPRINTS"]
     assert list(df.columns[:len(FIELDS)]) == FIELDS
     assert df.geometry.is_valid.all() and (df.block_id >= 1).all()
+
+
+def test_the_output_help_says_what_each_placement_is(qgis_processing, helsinki_db):
+    """Every value of the placement field (both methods, Bubeneč from Helsinki) is named in
+    the OUTPUT help: the help listed the field without one of its values."""
+    from qgis.core import QgsApplication
+
+    help_text = QgsApplication.processingRegistry().algorithmById(ALG).parameterDefinition(
+        "OUTPUT").help()
+    seen = set()
+    for method in (0, 1):
+        out = qgis_processing.run(ALG, {"ROADS": bubenec_layer("streets"), "BLOCK_DB": helsinki_db,
+                                        "METHOD": method, "OUTPUT": "memory:"})
+        for r in layer_features(out["OUTPUT"])[0]:
+            seen.update(v.strip() for v in r["placement"].split(","))
+    assert {"copied", "trimmed"} <= seen
+    assert sorted(v for v in seen - {"trimmed"} if f"'{v}'" not in help_text) == []
+    assert "', trimmed'" in help_text
