@@ -234,12 +234,11 @@ class SynthesizeBuildingAttributes(AlgorithmBase):
 
     @staticmethod
     def _log(s, lo, hi, far, per_block, feedback):
-        if s["no_heights"]:
-            feedback.reportError(
-                f"No example building has a height or a number of levels: the "
-                f"{counted(s['n_footprints'], 'footprint gets', 'footprints get')} types and "
-                f"roofs from {counted(s['n_donors'], 'example building')}, and their heights "
-                "stay empty.", fatalError=False)
+        if s["no_heights"]:   # the error naming the example layer was given as it was read
+            feedback.pushInfo(
+                f"{counted(s['n_footprints'], 'footprint')} attributed with types and roofs "
+                f"from {counted(s['n_donors'], 'example building')}; heights and levels stay "
+                "empty.")
         else:
             feedback.pushInfo(f"{counted(s['n_footprints'], 'footprint')} attributed, "
                               f"{s['n_with_height']} with a height, from "
