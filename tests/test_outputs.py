@@ -292,3 +292,41 @@ def test_a_second_run_into_the_same_geopackage_layer_does_not_wait_for_a_dialog(
         n = db.execute("SELECT COUNT(*) FROM hierarchy").fetchone()[0]
     assert styles == [("hierarchy", 1)]
     assert n > 5
+
+
+def test_a_geopackage_holding_other_layers_is_not_replaced_whole(qgis_processing, tmp_path):
+    """An output named by a GeoPackage file alone (no layer) replaces the file whole in
+    QGIS: a project GeoPackage given as the output lost every other layer in it (its wells
+    and its pumps, for a layer of hierarchy). It is refused, naming the layers, and the file
+    is left as it was; a second run into a file that holds only the first run's output, or
+    a database written again over an earlier database, still replaces it."""
+    import sqlite3
+
+    from qgis.core import QgsProcessingException
+
+    project = tmp_path / "project.gpkg"
+    qgis_processing.run(ALG, {"INPUT": bubenec_layer("streets"), "OUTPUT_INTERSECTIONS": None,
+                              "OUTPUT": f"ogr:dbname='{project}' table=\"wells\" (geom)"})
+    qgis_processing.run(ALG, {"INPUT": bubenec_layer("streets"), "OUTPUT_INTERSECTIONS": None,
+                              "OUTPUT": f"ogr:dbname='{project}' table=\"pumps\" (geom)"})
+    before = _sha(project)
+    for alg, params in ((ALG, {"INPUT": bubenec_layer("streets"), "OUTPUT": str(project),
+                               "OUTPUT_INTERSECTIONS": None}),
+                        ("urbansynth:buildfragmentdatabase", {
+                            "ROADS": bubenec_layer("streets"), "OUTPUT": str(project)})):
+        with pytest.raises(QgsProcessingException,
+                           match=r"would replace the GeoPackage .*project\.gpkg whole, and "
+                                 r"with it its layers 'pumps', 'wells': nothing is written"):
+            qgis_processing.run(alg, params)
+        assert _sha(project) == before
+    # again into an earlier run's own file: replaced, as before
+    roads = tmp_path / "roads.gpkg"
+    db = tmp_path / "db.gpkg"
+    for _ in range(2):
+        qgis_processing.run(ALG, {"INPUT": bubenec_layer("streets"), "OUTPUT": str(roads),
+                                  "OUTPUT_INTERSECTIONS": None})
+        qgis_processing.run("urbansynth:buildfragmentdatabase", {"ROADS": str(roads),
+                                                               "OUTPUT": str(db)})
+    with sqlite3.connect(roads) as con:
+        assert [r[0] for r in con.execute("SELECT table_name FROM gpkg_contents "
+                                          "WHERE data_type = 'features'")] == ["roads"]

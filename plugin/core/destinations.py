@@ -24,8 +24,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable, List, Optional
 
-__all__ = ["STAGING_PREFIX", "Input", "same_file", "overwrite_error", "make_folders",
-           "remove_empty_folders"]
+__all__ = ["STAGING_PREFIX", "Input", "same_file", "overwrite_error", "geopackage_layers",
+           "replaced_layers_error", "make_folders", "remove_empty_folders"]
 
 #: Name prefix of the hidden folders outputs are written in before they are moved into
 #: place (``qgis_glue.outputs.OutputStaging``, ``scale.distributed.write_layer``).
@@ -71,6 +71,61 @@ def overwrite_error(label: str, path: Path, table: Optional[str],
         return (f"{label} would overwrite {what}the input {source.name} ({source.path}): "
                 "inputs are never modified; choose another output file.")
     return None
+
+
+def geopackage_layers(path: Path) -> Optional[List[str]]:
+    """The layers (``gpkg_contents`` tables) of the GeoPackage ``path``; None when it is no
+    GeoPackage that can be read."""
+    import sqlite3
+
+    try:
+        with open(path, "rb") as fh:
+            if not fh.read(16).startswith(b"SQLite format 3\x00"):
+                return None
+        # immutable: a reader of a GeoPackage in WAL mode would leave -wal / -shm files
+        con = sqlite3.connect(Path(path).resolve().as_uri() + "?mode=ro&immutable=1",
+                              uri=True)
+        try:
+            return [r[0] for r in con.execute("SELECT table_name FROM gpkg_contents")]
+        finally:
+            con.close()
+    except (OSError, sqlite3.DatabaseError):
+        return None
+
+
+def replaced_layers_error(label: str, path: Path, table: Optional[str],
+                          writes: Iterable[str], as_layer_hint: bool = True) -> Optional[str]:
+    """The message when the output ``label`` would replace the existing GeoPackage ``path``
+    whole (``table`` None) and with it layers the output does not write itself, else None.
+
+    ``writes`` are the layers the output makes (those an earlier run of it left may be
+    replaced: a run again into the same file); the styles table is the outputs' own.
+    QGIS replaces a GeoPackage named without a layer whole: a project GeoPackage given as
+    an output lost every other layer in it.
+
+    >>> import sqlite3, tempfile
+    >>> gpkg = Path(tempfile.mkdtemp()) / "project.gpkg"
+    >>> con = sqlite3.connect(gpkg); _ = con.execute("CREATE TABLE gpkg_contents "
+    ...     "(table_name TEXT)"); _ = con.executemany("INSERT INTO gpkg_contents VALUES (?)",
+    ...     [("wells",), ("project",)]); con.commit(); con.close()
+    >>> replaced_layers_error("Output", gpkg, None, ["project"], False)
+    "Output would replace the GeoPackage ... whole, and with it its layer 'wells': nothing is written; choose another file."
+    >>> replaced_layers_error("Output", gpkg, "blocks", [], False) is None
+    True
+    """
+    path = Path(path)
+    if table is not None or path.suffix.lower() != ".gpkg" or not path.is_file():
+        return None
+    other = sorted(set(geopackage_layers(path) or ()) - set(writes) - {"layer_styles"})
+    if not other:
+        return None
+    shown = ", ".join(f"'{name}'" for name in other[:5]) + \
+        (f" and {len(other) - 5} more" if len(other) > 5 else "")
+    return (f"{label} would replace the GeoPackage {path} whole, and with it its "
+            f"{'layer' if len(other) == 1 else 'layers'} {shown}: nothing is written; choose "
+            "another file" + (", or a new layer of this one for the output "
+                              "(ogr:dbname='...' table=\"...\", or 'Save to GeoPackage' in the "
+                              "dialog)." if as_layer_hint else "."))
 
 
 def make_folders(folder: Path) -> List[Path]:

@@ -43,7 +43,8 @@ from qgis.core import (
 
 from ..core.destinations import STAGING_PREFIX
 from ..core.destinations import Input as _Input
-from ..core.destinations import make_folders, overwrite_error, remove_empty_folders
+from ..core.destinations import (geopackage_layers, make_folders, overwrite_error,
+                                 remove_empty_folders, replaced_layers_error)
 from . import styles
 
 __all__ = ["STAGING_PREFIX", "OutputStaging", "destination_error"]
@@ -205,10 +206,31 @@ def destination_error(alg, parameters, context) -> Optional[str]:
                                   path, table, inputs)
         if message:
             return message
-        message = _file_type_error(definition, destination)
+        message = _file_type_error(definition, destination) or \
+            _replaced_layers_error(definition, path, table)
         if message:
             return message
     return None
+
+
+def _replaced_layers_error(definition, path: Path, table: Optional[str]) -> Optional[str]:
+    """:func:`core.destinations.replaced_layers_error` for one output: a layer output
+    written to a GeoPackage named without a layer makes the layer QGIS names after the file;
+    a database (a file output) replaces an earlier Urban Synthesis database whole."""
+    label = f"Output {definition.description()} ({definition.name()})"
+    if not isinstance(definition, QgsProcessingParameterFileDestination):
+        return replaced_layers_error(label, path, table, [path.stem])
+    if table is not None or path.suffix.lower() != ".gpkg" or not path.is_file():
+        return None
+    from ..core.progress import InputError
+    from ..retrieval import database   # the engine's packages: only when one is there
+
+    try:
+        database.read_metadata(path)
+        ours = geopackage_layers(path) or []
+    except InputError:
+        ours = []
+    return replaced_layers_error(label, path, None, ours, as_layer_hint=False)
 
 
 class OutputStaging:
