@@ -4,6 +4,7 @@ import numpy as np
 from qgis.core import (
     QgsProcessing,
     QgsProcessingException,
+    QgsProcessingParameterBoolean,
     QgsProcessingParameterEnum,
     QgsProcessingParameterFeatureSink,
     QgsProcessingParameterFeatureSource,
@@ -35,6 +36,7 @@ class SynthesizeBuildingAttributes(AlgorithmBase):
     MAX_HEIGHT = "MAX_HEIGHT"
     TARGET_FAR = "TARGET_FAR"
     STOREY_HEIGHT = "STOREY_HEIGHT"
+    KEEP_GIVEN = "KEEP_GIVEN"
     SEED = "SEED"
     OUTPUT = "OUTPUT"
 
@@ -64,7 +66,7 @@ class SynthesizeBuildingAttributes(AlgorithmBase):
         line = [QgsProcessing.SourceType.TypeVectorLine]
         self.add(QgsProcessingParameterFeatureSource(self.FOOTPRINTS, "Footprints", poly),
                  "Building footprints to attribute, e.g. from 'Synthesize building footprints' "
-                 "or a real layer with missing heights. A layer with a 'building' field (OSM "
+                 "or a real layer with missing heights (with KEEP_GIVEN on). A layer with a 'building' field (OSM "
                  "multipolygons) gives only its polygons with a building value; the others "
                  "(forests, water, boundaries) are skipped and counted.")
         self.add(QgsProcessingParameterFeatureSource(
@@ -118,13 +120,25 @@ class SynthesizeBuildingAttributes(AlgorithmBase):
             self.STOREY_HEIGHT, "Storey height (m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=building_attributes.STOREY_HEIGHT, minValue=0.5, maxValue=20.0),
             "Metres per storey for examples with only a height or only levels.", advanced=True)
+        self.add(QgsProcessingParameterBoolean(
+            # optional: a model saved before it existed still validates
+            self.KEEP_GIVEN, "Keep the footprints' own heights and types", defaultValue=False,
+            optional=True),
+            "On (for a real layer with missing heights): a footprint that has a height or a "
+            "number of storeys of its own (height_m / levels fields, OSM height / "
+            "building:levels tags) keeps them, and a known building type or roof shape too; "
+            "only what it lacks is copied (height_given says which kept theirs; their levels "
+            "stay as they are under a target FAR). Off (the default, for synthesized "
+            "footprints, which carry their source building's height): every footprint takes "
+            "its donor's.")
         self.add_seed("The same seed gives the same result (random choice among the "
                       "candidates).")
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT, "Buildings with attributes", QgsProcessing.SourceType.TypeVectorPolygon),
             "Footprints with height_m, levels, building_type, roof_shape, source_id (the "
             "example building's feature id), similarity (1 / (1 + feature distance) to it: 1 "
-            "is an identical example) and floor_area_m2 (footprint area x levels).")
+            "is an identical example), floor_area_m2 (footprint area x levels) and "
+            "height_given (the footprint kept its own height: KEEP_GIVEN).")
 
     # ----------------------------------------------------------------------- run
 
@@ -151,6 +165,8 @@ class SynthesizeBuildingAttributes(AlgorithmBase):
                                      kind="polygons", target_crs=crs, optional=True)
         if blocks is not None:
             blocks = blocks.geometry
+        given = self._attributes_of(footprints, "", "", parameters, context) \
+            if self.parameterAsBool(parameters, self.KEEP_GIVEN, context) else None
         result = qgis_io.run_engine(
             examples.name, transfer.transfer_attributes, footprints.geometry, examples.geometry,
             attrs, example_ids=examples.fids, roads=road_lines, arterials=arterials,
@@ -160,7 +176,7 @@ class SynthesizeBuildingAttributes(AlgorithmBase):
             target_far=far if far > 0 else None, blocks=blocks,
             storey_height=self.number(parameters, self.STOREY_HEIGHT, context),
             choice_mode=self.CHOICES[self.parameterAsEnum(parameters, self.CHOICE, context)][0],
-            progress=qgis_io.progress_for(feedback, 15, 85))
+            given=given, progress=qgis_io.progress_for(feedback, 15, 85))
         self._log(result.stats, lo, hi, far, blocks is not None, feedback)
         # the input's own fields first, then the new ones (replacing same-named fields)
         own = qgis_io.carried_fields(
@@ -190,6 +206,21 @@ class SynthesizeBuildingAttributes(AlgorithmBase):
             required_fields=[f for f in (hf, lf) if f])
         frame = qgis_io.example_in_place(self._only_buildings(frame, feedback),
                                          footprints.geometry, footprints.crs, context, feedback)
+        attrs = self._attributes_of(frame, hf, lf, parameters, context)
+        n_h = int(np.isfinite(attrs["height_m"].to_numpy(dtype=float)).sum())
+        feedback.pushInfo(f"{frame.name}: {n_h} of {len(frame)} example buildings have a "
+                          "height or levels.")
+        if n_h == 0:
+            feedback.reportError(
+                f"Layer {frame.name}: no example building has a height or a number of levels "
+                "(OSM height / building:levels, height_m / levels, or the height field): only "
+                "types and roof shapes are transferred, heights and levels stay empty.",
+                fatalError=False)
+        return frame, attrs
+
+    def _attributes_of(self, frame, hf, lf, parameters, context):
+        """Height, levels, type and roof of each building of ``frame``: from the fields
+        ``hf`` / ``lf`` when named, else height_m / levels, and the OSM tags."""
         a = frame.attributes
         height = a[hf] if hf else (a["height_m"] if "height_m" in a else None)
         levels = a[lf] if lf else (a["levels"] if "levels" in a else None)
@@ -203,16 +234,7 @@ class SynthesizeBuildingAttributes(AlgorithmBase):
             storey_height=self.number(parameters, self.STOREY_HEIGHT, context))
         if "building_type" in a and "building" not in a:
             attrs["building_type"] = a["building_type"].to_numpy(dtype=object)
-        n_h = int(np.isfinite(attrs["height_m"].to_numpy(dtype=float)).sum())
-        feedback.pushInfo(f"{frame.name}: {n_h} of {len(frame)} example buildings have a "
-                          "height or levels.")
-        if n_h == 0:
-            feedback.reportError(
-                f"Layer {frame.name}: no example building has a height or a number of levels "
-                "(OSM height / building:levels, height_m / levels, or the height field): only "
-                "types and roof shapes are transferred, heights and levels stay empty.",
-                fatalError=False)
-        return frame, attrs
+        return attrs
 
     @staticmethod
     def _only_buildings(frame, feedback):
@@ -244,6 +266,9 @@ class SynthesizeBuildingAttributes(AlgorithmBase):
                               f"{s['n_with_height']} with a height, from "
                               f"{counted(s['n_donors'], 'example building')} with a height "
                               f"(features: {s['features']}).")
+        if s.get("n_height_given"):
+            feedback.pushInfo(counted(s["n_height_given"], "footprint keeps its own height",
+                                      "footprints keep their own height") + " (KEEP_GIVEN).")
         if s["n_clipped"]:
             feedback.pushInfo(f"{counted(s['n_clipped'], 'height')} clipped into "
                               f"{lo:g}..{hi:g} m.")

@@ -14,7 +14,7 @@ ATTRIBUTES = "urbansynth:synthesizebuildingattributes"
 BESTFIT = "urbansynth:placelibrarybuildings"
 DEPRECATED = "urbansynth:synthesizebuildings"
 ATTRIBUTE_FIELDS = ["height_m", "levels", "building_type", "roof_shape", "source_id",
-                    "similarity", "floor_area_m2"]
+                    "similarity", "floor_area_m2", "height_given"]
 
 
 @pytest.fixture(scope="module")
@@ -154,6 +154,38 @@ def test_far_per_block(qgis_processing, helsinki_buildings):
             assert abs(diff) <= 0.5 * area[inside].max() + 1e-6
             hit += 1
     assert hit >= 10
+
+
+def test_a_real_layer_keeps_the_heights_it_has(qgis_processing, helsinki_buildings):
+    """A real layer with missing heights (Helsinki's buildings, some with height or
+    building:levels): with KEEP_GIVEN every known height and its levels stay as they were,
+    also under a target FAR per block (the other footprints make it up), and only the
+    others are synthesised; they were all replaced by their donors' heights. Off (the
+    default, for synthesised footprints), every footprint takes its donor's."""
+    blocks, buildings = helsinki_buildings
+    own, _ = layer_features(buildings)
+    known = np.array([r["height_m"] for r in own], dtype=float)
+    known_levels = np.array([r["levels"] if r["levels"] is not None else np.nan
+                             for r in own], dtype=float)
+    has = np.isfinite(known)
+    assert 50 < has.sum() < len(own)
+    log = log_feedback()
+    params = {"FOOTPRINTS": buildings, "EXAMPLE_BUILDINGS": buildings, "BLOCKS": blocks,
+              "TARGET_FAR": 2.0, "OUTPUT": "memory:"}
+    kept = qgis_processing.run(ATTRIBUTES, {**params, "KEEP_GIVEN": True},
+                               feedback=log)["OUTPUT"]
+    rows, _ = layer_features(kept)
+    h = np.array([r["height_m"] for r in rows], dtype=float)
+    lv = np.array([r["levels"] for r in rows], dtype=float)
+    assert np.allclose(h[has], known[has])
+    with_levels = has & np.isfinite(known_levels)
+    assert np.array_equal(lv[with_levels], np.round(known_levels[with_levels]))
+    assert [r["height_given"] for r in rows] == list(has)
+    assert np.isfinite(h[~has]).all() and (lv >= 1).all()
+    assert any(f"{has.sum()} footprints keep their own height" in m for m in log.messages)
+    replaced = qgis_processing.run(ATTRIBUTES, params)["OUTPUT"]
+    h_off = np.array([r["height_m"] for r in layer_features(replaced)[0]], dtype=float)
+    assert (h_off[has] != known[has]).mean() > 0.3     # about half changed (48 %)
 
 
 def test_best_fit_on_bubenec(qgis_processing):

@@ -74,7 +74,7 @@ NEIGHBOUR_RADIUS = 150.0
 #: Output columns with their types.
 OUTPUT_FIELDS = [("height_m", "float"), ("levels", "int"), ("building_type", "str"),
                  ("roof_shape", "str"), ("source_id", "int"), ("similarity", "float"),
-                 ("floor_area_m2", "float")]
+                 ("floor_area_m2", "float"), ("height_given", "bool")]
 
 
 @dataclass
@@ -237,6 +237,7 @@ def transfer_attributes(footprints, examples, example_attributes: pd.DataFrame,
                         seed: int = 0, min_height: float = 0.0, max_height: float = 1000.0,
                         target_far: Optional[float] = None, blocks=None,
                         storey_height: float = STOREY_HEIGHT, choice_mode: str = "medoid",
+                        given: Optional[pd.DataFrame] = None,
                         progress: Optional[Progress] = None) -> AttributeTransfer:
     """Assign height, levels, type and roof to footprints from the most similar examples.
 
@@ -274,6 +275,13 @@ def transfer_attributes(footprints, examples, example_attributes: pd.DataFrame,
         Storey height (m) for donors without levels or heights.
     choice_mode : {'medoid', 'random'}
         How the donor is chosen among the k candidates (see the module docstring).
+    given : DataFrame, optional
+        What the footprints know of themselves (``height_m``, ``levels``,
+        ``building_type``, ``roof_shape`` per footprint, as from
+        :func:`building_attributes.building_attributes`; NaN / None / 'unknown' where
+        nothing is known): a footprint with a height keeps it and its levels (not clipped
+        to the height range, not changed by the target FAR: ``height_given``), and a known
+        type or roof is kept; only what is missing is copied from the donor.
 
     Returns
     -------
@@ -316,17 +324,22 @@ def transfer_attributes(footprints, examples, example_attributes: pd.DataFrame,
                          min_height, max_height)
     progress.step(0.8)
     ex_h = model.ex_h
+    kept = _keep_given(table, given, shapely.area(fp))
     stats: Dict[str, float] = {
         "n_footprints": len(fp), "n_examples": len(model.ex_h),
         "n_donors": int(model.donor.sum()), "features": ",".join(model.cols),
-        "no_heights": bool(model.no_heights),
+        "no_heights": bool(model.no_heights), "n_height_given": int(kept.sum()),
         "n_clipped": 0 if model.no_heights else
-        int((np.clip(ex_h[pick], min_height, max_height) != ex_h[pick]).sum())}
+        int(((np.clip(ex_h[pick], min_height, max_height) != ex_h[pick]) & ~kept).sum())}
     if target_far is not None:
         area = shapely.area(fp)
         storey = _storey(ex_h, model.ex_l, storey_height)[pick]
         min_lv = np.maximum(np.ceil(min_height / storey - 1e-9), 1.0)
         max_lv = np.maximum(np.floor(max_height / storey + 1e-9), min_lv)
+        # a footprint's own levels are fixed: the others make up the target around them
+        given_levels = table["levels"].to_numpy(dtype=float)
+        min_lv = np.where(kept, given_levels, min_lv)
+        max_lv = np.where(kept, given_levels, max_lv)
         if blocks is not None and len(blocks):
             blocks = np.asarray(blocks, dtype=object)
             pts = shapely.point_on_surface(fp)
@@ -340,7 +353,8 @@ def transfer_attributes(footprints, examples, example_attributes: pd.DataFrame,
             ground = {0: float(shapely.area(shapely.convex_hull(shapely.union_all(fp))))}
         levels = meet_far(area, table["levels"].to_numpy(dtype=float), group, ground,
                           target_far, min_lv, max_lv)
-        table["height_m"] = np.round(levels * storey, 2)
+        table["height_m"] = np.where(kept, table["height_m"].to_numpy(dtype=float),
+                                     np.round(levels * storey, 2))
         table["levels"] = levels.astype(np.int64)
         table["floor_area_m2"] = area * levels
         far = [float((area[group == g] * levels[group == g]).sum() / a)
@@ -354,11 +368,45 @@ def transfer_attributes(footprints, examples, example_attributes: pd.DataFrame,
         placed = group >= 0
         stats["n_blocks_short_of_far"] = int(sum(f < (1 - FAR_SHORT) * target_far for f in far))
         stats["n_blocks_over_far"] = int(sum(f > (1 + FAR_SHORT) * target_far for f in far))
-        stats["n_at_max_height"] = int((placed & (levels >= max_lv) & (max_lv > min_lv)).sum())
+        stats["n_at_max_height"] = int((placed & ~kept & (levels >= max_lv)
+                                        & (max_lv > min_lv)).sum())
         stats["far_mean"] = float(np.mean(far)) if far else np.nan
     stats["n_with_height"] = int(pd.notna(table["height_m"]).sum())
     progress.step(1.0)
     return AttributeTransfer(table, stats)
+
+
+def _keep_given(table: pd.DataFrame, given: Optional[pd.DataFrame],
+                area: np.ndarray) -> np.ndarray:
+    """Put what the footprints know of themselves (:func:`transfer_attributes`' ``given``)
+    into the matched ``table`` in place; True per footprint that kept its own height."""
+    n = len(area)
+    if given is None:
+        return np.zeros(n, dtype=bool)
+    if len(given) != n:
+        raise InputError(f"{len(given)} rows of given attributes for {n} footprints")
+    height = pd.to_numeric(given.get("height_m", pd.Series([np.nan] * n)),
+                           errors="coerce").to_numpy(dtype=float)
+    levels = pd.to_numeric(given.get("levels", pd.Series([np.nan] * n)),
+                           errors="coerce").to_numpy(dtype=float)
+    kept = np.isfinite(height) & (height > 0)
+    if kept.any():
+        storey = table["height_m"].to_numpy(dtype=float) / \
+            np.maximum(table["levels"].to_numpy(dtype=float), 1.0)
+        storey = np.where(np.isfinite(storey) & (storey > 0), storey, STOREY_HEIGHT)
+        own_levels = np.where(np.isfinite(levels) & (levels >= 1), np.round(levels),
+                              np.maximum(np.round(height / storey), 1.0))
+        table["height_m"] = np.where(kept, height, table["height_m"].to_numpy(dtype=float))
+        lv = np.where(kept, own_levels, table["levels"].to_numpy(dtype=float))
+        table["levels"] = lv if not np.isfinite(lv).all() else lv.astype(np.int64)
+        table["floor_area_m2"] = np.asarray(area, dtype=float) * lv
+        table["height_given"] = kept
+    for column, unknown in (("building_type", "unknown"), ("roof_shape", None)):
+        if column in given:
+            own = given[column].to_numpy(dtype=object)
+            has = np.array([isinstance(v, str) and bool(v) and v != unknown for v in own])
+            table[column] = np.where(has, own, table[column].to_numpy(dtype=object))
+    return kept
 
 
 def block_median_baseline(footprints, known_height: np.ndarray, blocks) -> np.ndarray:
@@ -535,4 +583,5 @@ def _match(f_t, area, model: DonorModel, k, choice_mode, uniforms, min_height, m
                           for t in model.btype[pick]],
         "roof_shape": [r if isinstance(r, str) and r else None for r in model.roof[pick]],
         "source_id": model.ids[pick], "similarity": 1.0 / (1.0 + d),
-        "floor_area_m2": np.asarray(area) * levels}), pick
+        "floor_area_m2": np.asarray(area) * levels,
+        "height_given": np.zeros(n, dtype=bool)}), pick
