@@ -274,27 +274,10 @@ class GrowRoads(AlgorithmBase):
             dem = qgis_io.read_raster(dem_layer, crs, bounds, cell, feedback)
             feedback.pushInfo(f"DEM resampled to {cell:.1f} m cells; maximum slope "
                               f"{100 * settings.max_slope:g} %.")
-        density = None
-        density_layer = self.parameterAsRasterLayer(parameters, self.DENSITY, context)
-        if density_layer is not None:
-            cell = qgis_io.raster_cell_size(density_layer, crs, bounds, context)
-            try:
-                density = qgis_io.read_raster(density_layer, crs, bounds, cell,
-                                               what="Density raster", heights=False)
-            except QgsProcessingException as exc:
-                raise QgsProcessingException(
-                    f"Density raster '{density_layer.name()}' has no value over the boundary "
-                    "or cannot be reprojected: check that they overlap.") from exc
-        obstacle_raster = self.parameterAsRasterLayer(parameters, self.OBSTACLE_RASTER, context)
-        if obstacle_raster is not None:
-            cell = qgis_io.raster_cell_size(obstacle_raster, crs, bounds, context)
-            try:
-                grid = qgis_io.read_raster(obstacle_raster, crs, bounds, cell,
-                                           what="Obstacle raster", heights=False)
-            except QgsProcessingException as exc:
-                raise QgsProcessingException(
-                    f"Obstacle raster '{obstacle_raster.name()}' has no value over the boundary "
-                    "or cannot be reprojected: check that they overlap.") from exc
+        density = self._grid(parameters, self.DENSITY, "Density raster", context, crs, bounds)
+        grid = self._grid(parameters, self.OBSTACLE_RASTER, "Obstacle raster", context, crs,
+                          bounds)
+        if grid is not None:
             with np.errstate(invalid="ignore"):
                 cells = growth.mask_polygons(np.isfinite(grid.array) & (grid.array > 0),
                                              grid.geotransform)
@@ -351,3 +334,16 @@ class GrowRoads(AlgorithmBase):
         qgis_io.style_output(context, dest, "roads_by_level.qml")
         feedback.setProgress(100)
         return {self.OUTPUT: dest}
+
+    def _grid(self, parameters, name, what, context, crs, bounds):
+        """A raster parameter (not heights) on its own cell size over ``bounds``, or None."""
+        layer = self.parameterAsRasterLayer(parameters, name, context)
+        if layer is None:
+            return None
+        cell = qgis_io.raster_cell_size(layer, crs, bounds, context)
+        try:
+            return qgis_io.read_raster(layer, crs, bounds, cell, what=what, heights=False)
+        except QgsProcessingException as exc:
+            raise QgsProcessingException(
+                f"{what} '{layer.name()}' has no value over the boundary or cannot be "
+                "reprojected: check that they overlap.") from exc
