@@ -270,7 +270,7 @@ class GrowRoads(AlgorithmBase):
         dem = None
         dem_layer = self.parameterAsRasterLayer(parameters, self.DEM, context)
         if dem_layer is not None:
-            cell = qgis_io.raster_cell_size(dem_layer, crs, bounds, context)
+            cell = qgis_io.raster_cell_size(dem_layer, crs, bounds, context, feedback=feedback)
             dem = qgis_io.read_raster(dem_layer, crs, bounds, cell, feedback)
             feedback.pushInfo(f"DEM resampled to {cell:.1f} m cells; maximum slope "
                               f"{100 * settings.max_slope:g} %.")

@@ -144,7 +144,7 @@ class PlaceLibraryBuildings(AlgorithmBase):
             return None
         x0, y0, x1, y1 = shapely.total_bounds(frame.geometry)
         bounds = (x0 - 10, y0 - 10, x1 + 10, y1 + 10)
-        cell = qgis_io.raster_cell_size(layer, frame.crs, bounds, context)
+        cell = qgis_io.raster_cell_size(layer, frame.crs, bounds, context, feedback=feedback)
         return qgis_io.read_raster(layer, frame.crs, bounds, cell, feedback)
 
     def _library(self, parameters, context, feedback):

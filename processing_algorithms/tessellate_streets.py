@@ -229,7 +229,8 @@ class TessellateStreets(AlgorithmBase):
             reach = float(widths.max()) * 4
             x0, y0, x1, y1 = shapely.total_bounds(graph.geometry)
             bounds = (x0 - reach, y0 - reach, x1 + reach, y1 + reach)
-            cell = qgis_io.raster_cell_size(dem_layer, frame.crs, bounds, context)
+            cell = qgis_io.raster_cell_size(dem_layer, frame.crs, bounds, context,
+                                            feedback=feedback)
             dem = qgis_io.read_raster(dem_layer, frame.crs, bounds, cell, feedback)
             feedback.pushInfo(f"DEM resampled to {cell:.1f} m cells.")
 

@@ -988,10 +988,10 @@ def read_raster(layer, work_crs: QgsCoordinateReferenceSystem, bounds, cell_size
 
 
 def raster_cell_size(layer, work_crs, bounds, context, max_cells: int = 2048,
-                     min_cell: float = 1.0) -> float:
+                     min_cell: float = 1.0, feedback=None) -> float:
     """Cell size (m) for a raster in the working CRS: its own resolution, at least
     ``min_cell`` m, and coarse enough that the input's extent spans at most ``max_cells``
-    cells."""
+    cells (said in the log, with ``feedback``, when that coarsens the raster)."""
     ext = layer.extent()
     px, py = layer.rasterUnitsPerPixelX(), layer.rasterUnitsPerPixelY()
     native = max(px, py)
@@ -1007,6 +1007,10 @@ def raster_cell_size(layer, work_crs, bounds, context, max_cells: int = 2048,
         native_m = native
     span = max(bounds[2] - bounds[0], bounds[3] - bounds[1])
     cell = max(native_m if math.isfinite(native_m) and native_m > 0 else 1.0, min_cell)
+    if feedback is not None and span / max_cells > cell:
+        feedback.pushInfo(f"Raster {layer.name()}: its {cell:.1f} m cells are read as "
+                          f"{span / max_cells:.1f} m cells, so that the {span / 1000:,.1f} km "
+                          f"extent spans at most {max_cells:,} cells.")
     return max(cell, span / max_cells)
 
 
