@@ -85,7 +85,9 @@ class PlaceLibraryBuildings(AlgorithmBase):
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT, "Placed buildings", QgsProcessing.SourceType.TypeVectorPolygon),
             "Placed library buildings with parcel_id, source_id (the library building), "
-            "rotation (°), offset_x and offset_y (m) that place it, area_m2, parcel_share (of the "
+            "rotation (°, about its centroid) and offset_x, offset_y (m: the move of its "
+            "centroid in the metric working CRS the log names, not in the output's CRS) "
+            "that place it, area_m2, parcel_share (of the "
             "parcel's area), base_z, parcel_slope_pct and sunk_m (with an elevation model), "
             "then the library's own fields (those of the built-in library: name, height_m, "
             "levels, building_type, roof_shape, street_access_sides, blind_sides).")
