@@ -476,9 +476,12 @@ def test_recursive_cut_leaves_from_a_bend_of_the_street_side():
 def test_recursive_cut_across_the_longest_side_where_it_leaves_squarer_lots():
     """A wedge whose long street side (125 m) is not along its bounding rectangle: cut
     across the rectangle's axis it leaves skewed lots (p_area 1.54); with
-    ``cut_across_longest_side`` each cut is Scharl's across the lot's longest side where
-    that leaves the smaller bounding rectangles, and the same number of lots covers the
-    block with street access, squarer in both of Yang's measures."""
+    ``cut_across_longest_side`` each cut is the squarest of Scharl's across the lot's
+    longest (or second-longest) side and the rectangle's cuts (``_squarest_cut``), and
+    about as many lots (10 against 11: the cuts are chosen one level at a time) cover the
+    block with street access, squarer in both of Yang's measures (p_area 1.35 against
+    1.54, p_angle 16 against 20 degrees; 1.34 and 15 when only the longest side was tried
+    and judged by the pieces' summed rectangles)."""
     block = shapely.Polygon([(-13, 64), (-71, -47), (33, -62), (13, -23)])
     base = dict(max_area=864.0, min_area=162.0, min_width=7.2, lot_width=18.0,
                 irregularity=0.0)
@@ -493,5 +496,27 @@ def test_recursive_cut_across_the_longest_side_where_it_leaves_squarer_lots():
         p_angle, p_area, _ = parcels.lot_quality(lots)
         quality[across] = (len(lots), p_angle.mean(), p_area.mean())
     (n_axis, angle_axis, area_axis), (n_side, angle_side, area_side) = quality.values()
-    assert n_axis == n_side
-    assert area_side < area_axis - 0.1 and angle_side < angle_axis - 5
+    assert n_axis - 1 <= n_side <= n_axis
+    assert area_side < area_axis - 0.1 and angle_side < angle_axis - 3
+
+
+def test_recursive_cut_chosen_by_the_squareness_of_its_pieces():
+    """A bent fallback region of the fidelity benchmark's Triesenberg (simplified, 1,856 m²):
+    judged by the pieces' summed bounding rectangles (which weigh a small piece little,
+    though it is a whole lot in Yang's per-parcel mean) the cuts left a triangle
+    (rectangle / area 2.0) and the four lots a mean p_area of 1.41, p_angle 19 degrees.
+    Chosen by the pieces' squareness among the cuts across the longest and the
+    second-longest side and both rectangle axes, the same four lots, each on the street,
+    are squarer in both of Yang's measures (1.19 and 14.5 degrees, none above 1.3)."""
+    block = shapely.Polygon([(8, 41), (20, 53), (37, 40), (62, 28), (54, 6), (40, 0), (26, 1),
+                             (0, 35)])
+    lots = parcels.split_recursive(block, parcels.SubdivisionSettings(
+        max_area=864.0, min_area=162.0, min_width=7.2, lot_width=18.0, irregularity=0.0,
+        options={"pin_cuts_to_corners": 6.3, "cut_across_longest_side": True}),
+        np.random.default_rng(0))
+    assert len(lots) == 4
+    assert np.isclose(shapely.area(lots).sum(), block.area)
+    assert np.isclose(shapely.area(shapely.union_all(lots)), block.area)  # no overlaps
+    assert (parcels.street_frontage(lots, block) >= parcels.MIN_FRONTAGE).all()
+    p_angle, p_area, _ = parcels.lot_quality(lots)
+    assert p_area.mean() < 1.25 and p_angle.mean() < 16.0 and p_area.max() < 1.35
