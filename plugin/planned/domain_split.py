@@ -34,9 +34,10 @@ Pipeline of :func:`split_domain` (one layout) and :func:`split_variations` (k la
    and when a child can be neither matched nor split the split is undone and another
    streamline drawn (``MAX_TRIES`` per region, ``MAX_BACKTRACKS`` per layout; template
    ``max_count`` limits are kept during the search). A region that fails everything
-   gets rule-based parcels (``fallback_parcels``: recursive splits across its long axis
-   or its longest side, whichever leaves the smaller bounding rectangles, by default, or
-   the straight-skeleton parcels the paper names, Vanegas et al. 2012)
+   gets rule-based parcels (``fallback_parcels``: recursive splits, each the squarest by
+   Yang's p_area and p_angle of its two pieces among the cuts across the long axis, the
+   short axis, the longest and the second-longest side, by default, or the
+   straight-skeleton parcels the paper names, Vanegas et al. 2012)
    or, when small, a park.
 3. **Global optimisation of the road mesh** (sec. 6, :mod:`mesh_optimisation`): strip
    fitting, fairness and closeness on the noded street mesh, junctions sliding along the
@@ -186,8 +187,8 @@ class SplitSettings:
         (Yang sec. 3: "a rule-based assignment that either uses the parceling algorithm
         based on the straight skeleton [Vanegas et al. 2012] or places a park"), by the
         name of a :mod:`parcels.subdivision` method: ``"recursive"`` (the default: cuts
-        across the long axis of each lot's bounding rectangle, every piece with street
-        frontage) or ``"skeleton"`` (the paper's). Recursive is the default because its
+        across an axis of each lot's bounding rectangle or across one of its two longest
+        sides, whichever leaves the squarest pieces, every piece with street frontage) or ``"skeleton"`` (the paper's). Recursive is the default because its
         lots are squarer where the fallback is needed, odd leftover regions: on the
         domain-split benchmark's towns p_angle falls by 0.2-0.9 deg and p_area by up to
         0.012 against skeleton lots (README).
