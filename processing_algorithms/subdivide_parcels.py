@@ -111,8 +111,10 @@ class SubdivideParcels(AlgorithmBase):
             "narrower than the lot width to stay under it (never under the minimum width).")
         self.add(QgsProcessingParameterNumber(
             self.LOT_WIDTH, "Lot width along the street (m)", QgsProcessingParameterNumber.Type.Double,
-            defaultValue=parcels.DEFAULT_LOT_WIDTH, minValue=0.1, maxValue=self.MAX_WIDTH_LIMIT),
-            "Skeleton: target frontage of a parcel (Yang et al. 2013 aim at 18 m). Voronoi along "
+            defaultValue=parcels.DEFAULT_LOT_WIDTH, minValue=parcels.MIN_FRONTAGE,
+            maxValue=self.MAX_WIDTH_LIMIT),
+            "Skeleton: target frontage of a parcel (Yang et al. 2013 aim at 18 m; at least "
+            f"{parcels.MIN_FRONTAGE:g} m, the frontage that counts as street access). Voronoi along "
             "the OBB axis: sets the mean parcel area (lot width² x 1.5) of blocks without a "
             "parcel_area.")
         self.add(QgsProcessingParameterNumber(
