@@ -260,7 +260,11 @@ class LayoutMetrics(AlgorithmBase):
         if not cand_args:
             for name, _, _ in self.CANDIDATE:
                 if self.given(parameters, name):  # every one given empty: refused by its name
-                    qgis_io.read_source(self, parameters, name, context, feedback, fields=[])
+                    try:   # (the warning above said the run would go on without it)
+                        qgis_io.read_source(self, parameters, name, context, None, fields=[])
+                    except QgsProcessingException as exc:
+                        raise QgsProcessingException(
+                            f"Nothing to measure, no layer holds a feature: {exc}") from exc
             raise QgsProcessingException(
                 "No layer to measure could be loaded: check Roads, Blocks, Parcels and Buildings.")
         given = None
