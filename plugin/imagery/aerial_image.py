@@ -412,24 +412,32 @@ class _Grid:
         return np.column_stack([self.x0 + (cc + 0.5) * self.size, self.y0 - (rr + 0.5) * self.size])
 
 
-def _too_large(geoms, margin: float, settings: ImageSettings) -> bool:
-    """Whether an image of the bounds of ``geoms`` (arrays of geometries), grown by
-    ``margin``, has more than ``settings.max_pixels`` pixels."""
-    x0, y0, x1, y1 = shapely.total_bounds(np.concatenate(
-        [np.asarray(g, dtype=object).ravel() for g in geoms]))
-    size = settings.pixel_size
-    return ((x1 - x0 + margin) / size + 1) * ((y1 - y0 + margin) / size + 1) > settings.max_pixels
-
-
-def _output_grid(geoms, pixel_size: float, max_pixels: int) -> _Grid:
-    x0, y0, x1, y1 = shapely.total_bounds(geoms)
+def _grid_on(bounds, pixel_size: float) -> _Grid:
+    """The grid of whole multiples of ``pixel_size`` that covers ``bounds``."""
+    x0, y0, x1, y1 = bounds
     x0, y0 = math.floor(x0 / pixel_size) * pixel_size, math.floor(y0 / pixel_size) * pixel_size
     x1, y1 = math.ceil(x1 / pixel_size) * pixel_size, math.ceil(y1 / pixel_size) * pixel_size
     cols, rows = max(1, int(round((x1 - x0) / pixel_size))), max(1, int(round((y1 - y0) / pixel_size)))
-    if rows * cols > max_pixels:
-        raise InputError(f"the image would have {rows} x {cols} pixels (more than "
-                         f"{max_pixels:,}): use a larger pixel size")
     return _Grid(x0, y1, pixel_size, rows, cols)
+
+
+def _too_large(geoms, margin: float, settings: ImageSettings) -> bool:
+    """Whether the image :func:`_output_grid` would make of ``geoms`` (arrays of
+    geometries), their bounds grown by ``margin`` / 2 on every side, has more than
+    ``settings.max_pixels`` pixels."""
+    x0, y0, x1, y1 = shapely.total_bounds(np.concatenate(
+        [np.asarray(g, dtype=object).ravel() for g in geoms]))
+    h = margin / 2
+    grid = _grid_on((x0 - h, y0 - h, x1 + h, y1 + h), settings.pixel_size)
+    return grid.rows * grid.cols > settings.max_pixels
+
+
+def _output_grid(geoms, pixel_size: float, max_pixels: int) -> _Grid:
+    grid = _grid_on(shapely.total_bounds(geoms), pixel_size)
+    if grid.rows * grid.cols > max_pixels:
+        raise InputError(f"the image would have {grid.rows} x {grid.cols} pixels (more than "
+                         f"{max_pixels:,}): use a larger pixel size")
+    return grid
 
 
 def _label_polygons(grid: _Grid, polygons: Sequence) -> np.ndarray:
