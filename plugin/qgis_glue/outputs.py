@@ -43,8 +43,8 @@ from qgis.core import (
 
 from ..core.destinations import STAGING_PREFIX
 from ..core.destinations import Input as _Input
-from ..core.destinations import (geopackage_layers, make_folders, overwrite_error,
-                                 remove_empty_folders, replaced_layers_error)
+from ..core.destinations import (make_folders, overwrite_error, remove_empty_folders,
+                                 replaced_layers_error)
 from . import styles
 
 __all__ = ["STAGING_PREFIX", "OutputStaging", "destination_error"]
@@ -220,17 +220,17 @@ def _replaced_layers_error(definition, path: Path, table: Optional[str]) -> Opti
     label = f"Output {definition.description()} ({definition.name()})"
     if not isinstance(definition, QgsProcessingParameterFileDestination):
         return replaced_layers_error(label, path, table, [path.stem])
-    if table is not None or path.suffix.lower() != ".gpkg" or not path.is_file():
-        return None
-    from ..core.progress import InputError
-    from ..retrieval import database   # the engine's packages: only when one is there
+    message = replaced_layers_error(label, path, table, [], as_layer_hint=False)
+    if message:
+        from ..core.progress import InputError
+        from ..retrieval import database   # the engine's packages: only when one is there
 
-    try:
-        database.read_metadata(path)
-        ours = geopackage_layers(path) or []
-    except InputError:
-        ours = []
-    return replaced_layers_error(label, path, None, ours, as_layer_hint=False)
+        try:
+            database.read_metadata(path)
+            return None          # an earlier Urban Synthesis database: replaced whole
+        except InputError:
+            pass
+    return message
 
 
 class OutputStaging:
