@@ -881,7 +881,7 @@ def network_invariants(roads, z_layer=None, given_roads=None, given_class=None,
 def _classed_lines(roads, z_layer, road_class, notes):
     """Leave out the lines without a road class in a layer whose other lines have one: in an
     OSM 'lines' layer they are rivers, railways, power lines and boundaries, not streets
-    (Liechtenstein's country border made the study area 1,220 km² instead of 169). A layer
+    (Liechtenstein's country border made the study area 1,220 km² instead of 251). A layer
     without any class keeps every line (returns ``road_class`` None)."""
     none = np.array([c is None or (isinstance(c, float) and c != c) or not str(c).strip()
                      for c in road_class], dtype=bool)

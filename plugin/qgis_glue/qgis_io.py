@@ -405,7 +405,7 @@ def read_source(alg, parameters, name: str, context, feedback,
             # skipped' said of 11 that none could be read)
             n_bad = int(bad.sum())
             feedback.pushInfo(
-                f"{label}: {counted(len(unreadable), 'unreadable geometry', 'unreadable geometries')}"
+                f"{label}: {counted(len(unreadable), 'unreadable geometry')}"
                 + (f": {len(unreadable) - n_bad} repaired by QGIS, {n_bad} skipped." if n_bad
                    else " repaired by QGIS."))
         if bad.any():
