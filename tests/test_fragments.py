@@ -199,3 +199,30 @@ def test_relief_of_a_fragment_off_the_dem_is_unknown_not_flat():
     relief, slope, elevation, _, _ = fr.relief_patches(np.array([west, east]), dem)
     assert relief[0] == pytest.approx(5.0 - 0.1 * fr.RELIEF_CELL_SIZE, abs=0.05)
     assert np.isnan(relief[1]) and np.isnan(elevation[1]) and np.isnan(slope[1])
+
+
+def test_a_street_split_where_nothing_joins_it_is_one_interior_street():
+    """A bridge apart from its approach, or an OSM way cut at an arbitrary point, gives the
+    same fragments as the street cut only at its junctions."""
+    lines, levels = levelled_grid()
+    east_west = np.flatnonzero([g.equals(shapely.LineString([(0, 200), (400, 200)]))
+                                for g in lines])[0]
+
+    def cut_at(xs):
+        x = [0, *xs, 400]
+        pieces = [shapely.LineString([(a, 200), (b, 200)]) for a, b in zip(x[:-1], x[1:])]
+        return (np.r_[np.delete(lines, east_west), np.array(pieces, dtype=object)],
+                np.r_[np.delete(levels, east_west), np.ones(len(pieces), int)])
+
+    def rows(f):
+        return sorted(map(tuple, f.table[["level", "area_m2", "n_interior", "interior_length_m",
+                                          "is_block"]].round(6).values.tolist()))
+
+    # x = 100: the level 2 street ends there; x = 200: the level 1 street crosses
+    at_junctions = fr.extract_fragments(*cut_at([100, 200]))
+    also_at_350 = fr.extract_fragments(*cut_at([100, 200, 350]))
+    assert rows(also_at_350) == rows(at_junctions)
+    top = also_at_350.street_level == 1
+    assert sorted(np.round(shapely.length(also_at_350.street_geometry[top])).tolist()) == \
+        [100, 100, 200, 400]
+    assert also_at_350.counts["n_unassigned_streets"] == 0

@@ -33,6 +33,18 @@ def test_bridge_connects_where_it_shares_a_node():
     assert sorted(g.degree) == [1, 1, 1, 3]
 
 
+def test_a_bridge_is_not_merged_into_its_approaches():
+    # long ground approaches, a short bridge over a road: merged, the chain took the ground
+    # layer of its longest part and crossed the road below without a junction
+    approaches = [LineString([(0, 0), (200, 0)]), LineString([(230, 0), (430, 0)])]
+    bridge = LineString([(200, 0), (230, 0)])
+    below = LineString([(215, -100), (215, 100)])
+    g = roads.clean_network(approaches + [bridge, below], z_layer=[0, 0, 1, 0],
+                            min_dangle_length=0)
+    assert sorted(np.round(g.length[g.z_layer == 1]).tolist()) == [30]
+    assert_planar(g.geometry, g.z_layer)
+
+
 def test_degree2_chains_are_merged_with_longest_part_attributes():
     parts = [LineString([(0, 0), (10, 0)]), LineString([(10, 0), (60, 0)]),
              LineString([(60, 0), (70, 5)])]
@@ -129,10 +141,14 @@ def test_helsinki_graph_invariants():
     g = roads.clean_network(df.geometry.values, df.highway.values, df.name.values, df.z.values)
     assert g.n_edges > 150
     assert (g.length > 0).all()
-    # no degree-2 nodes are left except on isolated rings (u == v)
+    # no degree-2 nodes are left except on isolated rings (u == v) and where a bridge or
+    # tunnel meets its approach (two vertical layers)
     deg = g.degree
     ring_nodes = set(g.u[g.u == g.v])
-    assert all(n in ring_nodes for n in np.flatnonzero(deg == 2))
+    layers = [set(g.z_layer[(g.u == n) | (g.v == n)]) for n in np.flatnonzero(deg == 2)]
+    assert all(n in ring_nodes or len(z) == 2
+               for n, z in zip(np.flatnonzero(deg == 2), layers))
+    assert sum(len(z) == 2 for z in layers) > 0  # Helsinki has bridges
     # no duplicate edges
     lo, hi = np.minimum(g.u, g.v), np.maximum(g.u, g.v)
     pairs = set()

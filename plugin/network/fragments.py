@@ -35,10 +35,11 @@ import shapely
 
 from ..core.progress import InputError, Progress, ensure
 from ..retrieval.shape_context import DemGrid
+from .street_graph import degree2_chains
 from .blocks import MIN_BLOCK_AREA, MIN_BLOCK_WIDTH, block_faces, shape_metrics
 
 __all__ = ["RELIEF_CELL_SIZE", "MAX_PATCH_CELLS", "FRAGMENT_FIELDS", "Fragments",
-           "extract_fragments", "interior_streets", "relief_patches"]
+           "extract_fragments", "interior_streets", "relief_patches", "street_chains"]
 
 #: Cell size (m) of the relief patch stored per fragment.
 RELIEF_CELL_SIZE = 5.0
@@ -146,6 +147,57 @@ def interior_streets(faces: Sequence, lines: Sequence, min_length: float = 0.01)
     out, oidx = shapely.get_parts(merged, return_index=True)
     pair = uniq[oidx]
     return out, fi[pair], li[pair]
+
+
+def street_chains(pieces: np.ndarray, face: np.ndarray, source: np.ndarray, faces: Sequence,
+                  network: Sequence):
+    """Interior streets joined where two pieces of one face meet at a point that no other
+    line of the ``network`` (any level) touches, away from the face's outline, so that a fragment holds the same streets however its lines were split (a
+    bridge apart from its approach, OSM ways cut at arbitrary points).
+
+    A chain keeps the source of its longest piece; a chain that closes on itself, or whose
+    pieces do not join into one line, keeps its pieces.
+
+    >>> import shapely
+    >>> square = shapely.box(0, 0, 100, 100)
+    >>> halves = np.array([shapely.LineString([(0, 50), (50, 50)]),
+    ...                    shapely.LineString([(50, 50), (100, 50)])])
+    >>> side = shapely.LineString([(50, 50), (50, 100)])
+    >>> chains, _, _ = street_chains(halves, np.zeros(2, int), np.arange(2), [square], halves)
+    >>> [round(c.length) for c in chains]
+    [100]
+    >>> chains, _, _ = street_chains(halves, np.zeros(2, int), np.arange(2), [square],
+    ...                              np.r_[halves, side])
+    >>> [round(c.length) for c in chains]
+    [50, 50]
+    """
+    if len(pieces) < 2:
+        return pieces, face, source
+    faces = np.asarray(faces, dtype=object)
+    m = len(pieces)
+    ends = shapely.get_coordinates(np.r_[shapely.get_point(pieces, 0), shapely.get_point(pieces, -1)])
+    xy, node = np.unique(np.round(ends, 3), axis=0, return_inverse=True)  # nodes: mm
+    node = node.reshape(-1)
+    # a point where more than two lines of the network meet (or cross) is a junction
+    at, _ = shapely.STRtree(np.asarray(network, dtype=object)).query(
+        shapely.points(xy), predicate="dwithin", distance=1e-3)
+    junction = np.bincount(at, minlength=len(xy)) != 2
+    # an end on the face's outline meets the enclosing streets: never joined
+    outline = shapely.boundary(faces[np.r_[face, face]])
+    apart = junction[node] | shapely.dwithin(shapely.points(ends), outline, 1e-3)
+    node = np.where(apart, len(xy) + np.arange(2 * m), node)
+    comp = degree2_chains(node[:m], node[m:], len(xy) + 2 * m, face)
+    if comp is None:
+        return pieces, face, source
+    by = np.argsort(comp, kind="stable")
+    merged = shapely.line_merge(shapely.multilinestrings(pieces[by], indices=comp[by]))
+    single = shapely.get_type_id(merged) == 1
+    order = np.lexsort((-shapely.length(pieces), comp))
+    rep = order[np.r_[True, comp[order][1:] != comp[order][:-1]]]
+    kept = np.isin(comp, np.flatnonzero(~single))
+    return (np.concatenate([merged[single], pieces[kept]]),
+            np.concatenate([face[rep][single], face[kept]]),
+            np.concatenate([source[rep][single], source[kept]]))
 
 
 def relief_patches(polygons: Sequence, dem: DemGrid, cell_size: float = RELIEF_CELL_SIZE,
@@ -320,7 +372,7 @@ def extract_fragments(lines: Sequence, levels: Sequence, min_area: float = MIN_B
         progress.step(0.5 * (level + 1) / (max_level + 1))
 
     geoms, lvl, n_int, int_len, is_block = [], [], [], [], []
-    s_geom, s_frag, s_level, s_src = [], [], [], []
+    s_geom, s_frag, s_level, s_src, assigned = [], [], [], [], [np.zeros(0, np.int64)]
     offset = 0
     for level in range(max_level):
         faces = faces_by_level[level]
@@ -329,6 +381,8 @@ def extract_fragments(lines: Sequence, levels: Sequence, min_area: float = MIN_B
             continue
         sel = np.flatnonzero(levels == level + 1)
         pieces, face, source = interior_streets(faces, lines[sel])
+        assigned.append(sel[source])
+        pieces, face, source = street_chains(pieces, face, source, faces, lines)
         n_pieces = np.bincount(face, minlength=k)
         length = np.bincount(face, weights=shapely.length(pieces), minlength=k) \
             if len(pieces) else np.zeros(k)
@@ -381,7 +435,7 @@ def extract_fragments(lines: Sequence, levels: Sequence, min_area: float = MIN_B
     counts = {
         "per_level": {int(k): int(v) for k, v in per_level.items()},
         "blocks_per_level": {int(k): int(v) for k, v in blocks.items()},
-        "n_unassigned_streets": int((levels >= 1).sum()) - len(np.unique(np.concatenate(s_src))),
+        "n_unassigned_streets": int((levels >= 1).sum()) - len(np.unique(np.concatenate(assigned))),
         "n_faces_dropped": int(dropped),
         "max_level": max_level,
         # the level values given, in order: database level k is level_values[k]

@@ -867,10 +867,12 @@ def degree2_chains(u: np.ndarray, v: np.ndarray, n_nodes: int,
 def merge_degree2_chains(g: RoadGraph) -> RoadGraph:
     """Merge edges through nodes of degree 2 (OSM splits ways at arbitrary points).
 
-    Attributes of a merged edge come from its longest part.
+    Attributes of a merged edge come from its longest part. Only edges of one vertical layer
+    merge: a bridge joined to its approach would take the longer part's layer, and the
+    crossing it spans would read as one without a junction.
     """
     deg = g.degree
-    comp = degree2_chains(g.u, g.v, len(g.nodes))
+    comp = degree2_chains(g.u, g.v, len(g.nodes), g.z_layer)
     if comp is None:
         return g
     lengths = g.length
