@@ -165,7 +165,8 @@ class TessellateStreets(AlgorithmBase):
             self.OUTPUT_JUNCTIONS, "Junctions", QgsProcessing.SourceType.TypeVectorPolygon,
             optional=True, createByDefault=True),
             "One polygon per junction: junction_id (= from/to_junction of the surfaces); "
-            "degree (streets meeting); merged_nodes (graph nodes merged into it, within "
+            "degree (streets meeting; 2 where a bridge or tunnel meets its approach, the "
+            "joint between two vertical layers); merged_nodes (graph nodes merged into it, within "
             "MERGE_DISTANCE); z_layer; area_m2. With a DEM: z_centre (height of its plane "
             "at the centre); slope_pct (the plane's steepest slope, %); slope_long_pct, "
             "slope_lat_pct (the plane's largest grade along and across one of its streets, "

@@ -130,8 +130,9 @@ def test_helsinki_osm(qgis_processing):
     rows, _ = layer_features(surf)
     jrows, _ = layer_features(junc)
     assert 150 < len(rows) < 400 and 80 < len(jrows) < 250
-    degrees = [r["degree"] for r in jrows]
-    assert min(degrees) >= 3 and {3, 4} <= set(degrees)
+    degrees = np.array([r["degree"] for r in jrows])
+    # degree 2: joints where a bridge meets its approach (tests/test_street_surfaces.py)
+    assert min(degrees) >= 2 and {3, 4} <= set(degrees) and (degrees == 2).mean() < 0.2
     # widths from the class table (halved for one-way carriageways) and OSM width tags
     widths = np.array([r["width_m"] for r in rows])
     table = np.array(list(ss.CLASS_WIDTHS.values()) + [ss.LINK_WIDTH])
@@ -306,7 +307,8 @@ def test_qgis_process_helsinki(tmp_path):
     j = pyogrio.read_dataframe(junctions)
     assert list(s.columns[:len(SURFACE_FIELDS)]) == SURFACE_FIELDS
     assert 150 < len(s) < 400 and 60 < len(j) < 250
-    assert (j.degree >= 3).all() and j.merged_nodes.max() >= 2   # 6 m merges some centres
+    assert (j.degree >= 2).all() and (j.degree == 2).mean() < 0.2  # 2: bridge joints
+    assert j.merged_nodes.max() >= 2   # 6 m merges some centres
     assert s.geometry.is_valid.all() and j.geometry.is_valid.all()
 
 

@@ -65,6 +65,17 @@ def test_bridges_do_not_make_intersections():
     assert (bridge.distribution("roads", "node_degree") == 1).all()
 
 
+def test_a_bridge_is_part_of_its_street():
+    # a 430 m street whose middle 30 m bridge over a road: one segment, no node at its joints
+    street = [shapely.LineString([(0, 0), (200, 0)]), shapely.LineString([(200, 0), (230, 0)]),
+              shapely.LineString([(230, 0), (430, 0)])]
+    below = shapely.LineString([(215, -100), (215, 100)])
+    r = M.compute_layout_metrics(roads=street + [below], road_z_layer=[0, 1, 0, 0])
+    assert sorted(r.distribution("roads", "segment_length").round(6).tolist()) == [200, 430]
+    assert sorted(r.distribution("roads", "node_degree").tolist()) == [1, 1, 1, 1]
+    assert r.scalar("roads", "nodes") == 4 and r.scalar("roads", "intersections_per_km2") == 0
+
+
 def test_orientation_entropy_bounds():
     assert M.orientation_entropy([0.0, 90.0, 180.0, 270.0]) == pytest.approx(math.log(4))
     assert M.orientation_entropy([0.0]) == pytest.approx(math.log(2))

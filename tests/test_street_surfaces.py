@@ -307,7 +307,12 @@ def test_helsinki_streets():
     # the input graph itself (not a merged one) is what must be covered
     assert coverage_error(res, graph, w[graph.source])[0] < 0.01
     deg = res.junction_table.degree
-    assert (deg >= 3).all() and {3, 4} <= set(deg)
+    assert {3, 4} <= set(deg)
+    # a node of degree 2 is a joint where a bridge or tunnel meets its approach
+    joint = res.junction_table.junction_id[deg == 2].to_numpy() - 1
+    assert (deg >= 2).all() and 0 < len(joint) < 0.2 * len(deg)
+    for n in joint:
+        assert len(set(graph.z_layer[(graph.u == n) | (graph.v == n)])) == 2
     # every node of degree >= 3 of the cleaned graph has a junction, minus merged ones
     n_nodes = int((graph.degree >= 3).sum())
     assert len(res.junctions) + res.stats["merged_away"] >= n_nodes - 2

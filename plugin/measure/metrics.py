@@ -45,7 +45,7 @@ from ..core.text import counted
 from ..network import blocks as _blocks
 from ..network import invariants as _invariants
 from ..network.street_graph import (DRIVABLE_CLASSES, SYNTHESISED_CLASSES, RoadGraph,
-                                    measured_graph)
+                                    degree2_chains, measured_graph)
 
 __all__ = [
     "Scalar", "Distribution", "MetricsResult", "COMPARISON_COLUMNS",
@@ -528,16 +528,24 @@ def road_metrics(roads, area=None, snap_tolerance: float = 0.5, bearing_length: 
         length_in[cut] = np.bincount(index, shapely.length(parts), minlength=len(cut))
     bearing, piece_length = street_bearings(graph.geometry, bearing_length)
     res = MetricsResult()
-    res.add_distribution("roads", "segment_length", length, "m", "Segment length")
-    res.add_distribution("roads", "node_degree", deg, "", "Node degree")
+    # a bridge kept apart from its approach (its own vertical layer) is part of the street:
+    # the joint is no node, and the segment runs on through it
+    z_at = np.full((len(graph.nodes), 2), [np.inf, -np.inf])
+    np.minimum.at(z_at[:, 0], np.r_[graph.u, graph.v], np.r_[graph.z_layer, graph.z_layer])
+    np.maximum.at(z_at[:, 1], np.r_[graph.u, graph.v], np.r_[graph.z_layer, graph.z_layer])
+    node = ~((deg == 2) & (z_at[:, 0] != z_at[:, 1]))
+    chain = degree2_chains(graph.u, graph.v, len(graph.nodes))
+    segment = length if chain is None else np.bincount(chain, weights=length)
+    res.add_distribution("roads", "segment_length", segment, "m", "Segment length")
+    res.add_distribution("roads", "node_degree", deg[node], "", "Node degree")
     res.add_distribution("roads", "intersection_angle", intersection_angles(graph, bearing_length),
                          "°", "Intersection angle")
     res.add_distribution("roads", "street_bearing", bearing % 180.0, "°", "Street bearing")
     progress.step(0.9)
     h = orientation_entropy(bearing, piece_length)
     h_grid, h_max = np.log(4.0), np.log(36.0)
-    res.add_scalar("roads", "edges", graph.n_edges, "", "Street segments")
-    res.add_scalar("roads", "nodes", len(graph.nodes), "", "Nodes")
+    res.add_scalar("roads", "edges", len(segment), "", "Street segments")
+    res.add_scalar("roads", "nodes", int(node.sum()), "", "Nodes")
     res.add_scalar("roads", "street_length_km_per_km2", length_in.sum() / 1000.0 / km2,
                    "km/km²", "Street length per km² (s_l)")
     res.add_scalar("roads", "intersections_per_km2", ((deg >= 3) & node_in).sum() / km2, "1/km²",
@@ -1027,8 +1035,9 @@ def compute_layout_metrics(roads=None, blocks=None, parcels=None, buildings=None
         graph = road_graph(roads, snap_tolerance, road_z_layer, progress.sub(0.02, 0.5))
         res.extend(road_metrics(graph, area, bearing_length=bearing_length,
                                 edge_distance=edge_distance, progress=progress.sub(0.5, 0.55)))
-        res.notes.append(f"Road graph: {len(roads)} lines -> {graph.n_edges} street segments "
-                         f"between {len(graph.nodes)} nodes"
+        res.notes.append(f"Road graph: {len(roads)} lines -> "
+                         f"{int(res.scalar('roads', 'edges'))} street segments "
+                         f"between {int(res.scalar('roads', 'nodes'))} nodes"
                          + (f"; nodes within {edge_distance:g} m of the study-area boundary "
                             "are not counted" if edge_distance > 0 else "") + ".")
         res.extend(network_invariants(roads, road_z_layer, given_roads, given_class,
