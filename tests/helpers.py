@@ -17,9 +17,25 @@ def _helsinki_lines():
 
 def helsinki_roads(crs=32635):
     """Drivable Helsinki roads in UTM 35N with a vertical layer column ``z``."""
+    return _drivable(_helsinki_lines(), crs)
+
+
+@lru_cache(maxsize=1)
+def liechtenstein_roads(crs=32632):
+    """Drivable roads of the Liechtenstein extract in UTM 32N with a vertical layer ``z``."""
+    import pyogrio
+    import pytest
+
+    if not LIECHTENSTEIN.exists():
+        pytest.skip(f"{LIECHTENSTEIN} is not there (see DESIGN.md, real example data)")
+    return _drivable(pyogrio.read_dataframe(LIECHTENSTEIN, layer="lines",
+                                            columns=["highway", "name", "other_tags"]), crs)
+
+
+def _drivable(df, crs):
+    """The drivable OSM lines of ``df`` in ``crs``, with their vertical layer ``z``."""
     from urban_synthesis.plugin.network import street_graph as roads
 
-    df = _helsinki_lines()
     df = df[df.highway.isin(roads.DRIVABLE_CLASSES)].to_crs(crs).reset_index(drop=True)
     tags = [roads.parse_other_tags(t) for t in df.other_tags]
     df["z"] = [roads.vertical_layer(t.get("layer"), t.get("bridge"), t.get("tunnel")) for t in tags]
@@ -87,7 +103,10 @@ def assert_planar(lines, z_layer=None, tol=1e-6):
     a, b = tree.query(lines, predicate="intersects")
     sel = (a < b) & (z[a] == z[b])
     a, b = a[sel], b[sel]
-    ends = shapely.union_all([shapely.boundary(lines[a]), shapely.boundary(lines[b])], axis=0) \
+    # end points, not boundaries: a closed line (a loop) has an empty boundary, and two
+    # loops at one node met away from a node for this check
+    ends = shapely.multipoints(np.stack([shapely.get_point(lines[a], 0), shapely.get_point(
+        lines[a], -1), shapely.get_point(lines[b], 0), shapely.get_point(lines[b], -1)], axis=1)) \
         if len(a) else []
     inter = shapely.intersection(lines[a], lines[b])
     # the intersection of two edges must be a subset of their end points

@@ -6,8 +6,9 @@ from shapely.geometry import LineString
 
 from urban_synthesis.plugin.network import street_graph as roads
 from urban_synthesis.plugin.core.progress import Canceled, InputError, Progress
+from urban_synthesis.plugin.network.invariants import check_network
 
-from helpers import assert_planar, helsinki_roads, nearly_coincident_streets
+from helpers import assert_planar, helsinki_roads, liechtenstein_roads, nearly_coincident_streets
 
 
 def test_crossing_lines_are_noded():
@@ -78,6 +79,36 @@ def test_close_nodes_are_snapped():
     g = roads.clean_network([LineString([(0, 0), (100, 0)]), LineString([(100.4, 0.3), (200, 0)]),
                              LineString([(100, 0), (100, 100)])], snap_tolerance=1.0)
     assert sorted(g.degree) == [1, 1, 1, 3]
+
+
+def test_snapped_ends_that_now_cross_a_street_are_noded():
+    """Two dead ends 5 m apart on either side of a road, merged at a 10 m snapping tolerance:
+    the street they make crosses the road, and the crossing is a junction (snapping moved
+    the ends after the noding, and the street crossed the road without one). At the
+    default 1 m they stay two dead ends beside an unbroken road."""
+    road = LineString([(0, 0), (100, 0)])
+    north, south = LineString([(50, 50), (50, 2)]), LineString([(50, -50), (50, -3)])
+    g = roads.clean_network([road, north, south], snap_tolerance=10.0)
+    assert g.n_edges == 4 and sorted(g.degree) == [1, 1, 1, 1, 4]
+    assert_planar(g.geometry)
+    apart = roads.clean_network([road, north, south])
+    assert apart.n_edges == 3 and sorted(apart.degree) == [1] * 6
+
+
+@pytest.mark.parametrize("snap_tolerance", [20.0, 50.0])
+@pytest.mark.parametrize("place", ["helsinki", "liechtenstein"])
+def test_large_snapping_tolerances_keep_the_network_planar(place, snap_tolerance):
+    """Up to the largest SNAP_TOLERANCE (50 m), every crossing of two edges of one vertical
+    layer is a node and no edge runs back over itself. Moved ends crossed edges without a
+    junction (Liechtenstein: 13 crossings at 50 m; Helsinki: 2 at 20 m, 16 at 50 m), and a
+    stub whose far end merged with its start doubled back over itself."""
+    df = helsinki_roads() if place == "helsinki" else liechtenstein_roads()
+    g = roads.clean_network(df.geometry.values, df.highway.values, df.name.values, df.z.values,
+                            snap_tolerance=snap_tolerance)
+    check = check_network(g.geometry, synthesised_layer=g.z_layer, corridor_half_width=0)
+    assert len(check.crossings_synthesised) == 0 and len(check.overlaps) == 0
+    assert shapely.is_simple(g.geometry).all()
+    assert_planar(g.geometry, g.z_layer)
 
 
 def test_an_end_a_rounding_error_off_a_street_is_a_junction():

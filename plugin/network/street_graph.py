@@ -9,6 +9,7 @@ centerline endpoints"). Real OSM is dirty, so this module:
   tunnels do not connect to what they pass over; ways of different layers connect only
   where they share an OSM node (an endpoint of one on a vertex of the other);
 - snaps nodes closer than a tolerance together and drops the zero-length edges this makes;
+  an edge that its moved end now makes cross another is noded there again;
 - drops exact and near-duplicate edges (same end nodes, Hausdorff distance under the tolerance);
 - prunes dangling slivers (dead-end edges shorter than a minimum length);
 - merges chains through degree-2 nodes (OSM splits ways at arbitrary points).
@@ -654,8 +655,9 @@ def clean_network(geometries: Sequence, road_class: Optional[Sequence] = None,
     geometries : array of LineString / MultiLineString in a metric CRS
     road_class, name, z_layer : per-line attributes (optional)
     snap_tolerance : float
-        Nodes closer than this (metres) are merged; duplicates are edges with the same
-        end nodes whose Hausdorff distance is under it. Above 0, a line end within
+        Nodes closer than this (metres) are merged (an edge that this makes cross another
+        is noded at the crossing); duplicates are edges with the same end nodes whose
+        Hausdorff distance is under it. Above 0, a line end within
         :data:`JUNCTION_TOLERANCE` of another line also joins it (a junction, not a dead
         end beside the line); 0 is the plain noding of the lines as they are.
     min_dangle_length : float
@@ -758,11 +760,33 @@ def measured_graph(lines: Sequence, snap_tolerance: float, z_layer: Optional[Seq
 
 def graph_from_lines(lines: np.ndarray, road_class, name, z_layer, source,
                      snap_tolerance: float = 0.0) -> RoadGraph:
-    """Build a :class:`RoadGraph` from already noded lines, snapping close end nodes together."""
+    """Build a :class:`RoadGraph` from already noded lines, snapping close end nodes together.
+
+    Snapping moves every end of a merged node onto the cluster's centroid, and the edge's
+    last segment swings with it: across an edge that passed between the merged nodes, or
+    across itself. Such edges are noded again (:func:`_renode_crossed`), so that the graph
+    stays planar: every crossing of two edges of one vertical layer is a node.
+
+    Two dead ends 5 m apart on either side of a road, merged at 10 m: the road is crossed,
+    and the crossing is a node of degree 4 (the two halves of the street merge later, in
+    :func:`clean_network`, through the degree-2 node left where they meet):
+
+    >>> road = shapely.LineString([(0, 0), (100, 0)])
+    >>> north = shapely.LineString([(50, 50), (50, 2)])
+    >>> south = shapely.LineString([(50, -50), (50, -3)])
+    >>> g = graph_from_lines([road, north, south], [None] * 3, [None] * 3, [0] * 3, [0, 1, 2], 10.0)
+    >>> g.n_edges, sorted(g.degree.tolist())
+    (5, [1, 1, 1, 1, 2, 4])
+    """
     lines = np.asarray(lines, dtype=object)
+    road_class = np.asarray(road_class, dtype=object)
+    name = np.asarray(name, dtype=object)
+    z_layer, source = np.asarray(z_layer), np.asarray(source)
+    m = len(lines)
     a, b = _endpoints(lines)
     ends = np.vstack([a, b])
     nodes, inv = _node_ids(ends)
+    moved = np.zeros(m, dtype=bool)
     if snap_tolerance > 0 and len(nodes) > 1:
         pairs = cKDTree(nodes).query_pairs(snap_tolerance, output_type="ndarray")
         if len(pairs):
@@ -772,19 +796,58 @@ def graph_from_lines(lines: np.ndarray, road_class, name, z_layer, source,
             counts = np.bincount(label)
             centroid = np.column_stack([np.bincount(label, nodes[:, 0]) / counts,
                                         np.bincount(label, nodes[:, 1]) / counts])
+            merged = counts[label[inv]] > 1
+            moved = merged[:m] | merged[m:]
             inv = label[inv]
             nodes = centroid
             # move the line ends onto the merged node
-            m = len(lines)
             lines = pinned_ends(lines, nodes[inv[:m]], nodes[inv[m:]])
-    m = len(lines)
     u, v = inv[:m].astype(np.int64), inv[m:].astype(np.int64)
     # zero-length loops left by snapping
     keep = ~((u == v) & (shapely.length(lines) <= max(snap_tolerance, 1e-9) * 2))
-    g = RoadGraph(lines[keep], u[keep], v[keep], np.asarray(road_class, dtype=object)[keep],
-                  np.asarray(name, dtype=object)[keep], np.asarray(z_layer)[keep], nodes,
-                  np.asarray(source)[keep])
+    if moved[keep].any():
+        renoded = _renode_crossed(lines[keep], z_layer[keep], road_class[keep], moved[keep])
+        if renoded is not None:
+            lines, parent = renoded
+            parent = np.flatnonzero(keep)[parent]
+            return graph_from_lines(lines, road_class[parent], name[parent], z_layer[parent],
+                                    source[parent])
+    g = RoadGraph(lines[keep], u[keep], v[keep], road_class[keep], name[keep], z_layer[keep],
+                  nodes, source[keep])
     return _compact_nodes(g)
+
+
+def _renode_crossed(lines: np.ndarray, z_layer: np.ndarray, road_class: np.ndarray,
+                    moved: np.ndarray) -> Optional[Tuple[np.ndarray, np.ndarray]]:
+    """The lines noded again where a ``moved`` one (an end snapped) now touches a line of
+    its vertical layer (or itself) elsewhere than at an end both share, per layer
+    (:func:`renode`, the moved lines as the new ones); None when none does. Returns
+    (lines, parent): each line's index in ``lines``, in their order.
+    """
+    moved_idx = np.flatnonzero(moved)
+    i, j = shapely.STRtree(lines).query(lines[moved_idx], predicate="intersects")
+    i = moved_idx[i]
+    sel = (i != j) & (z_layer[i] == z_layer[j])
+    i, j = i[sel], j[sel]
+    a, b = _endpoints(lines)
+    ends = shapely.multipoints(np.stack([a, b], axis=1))
+    touch = shapely.intersection(lines[i], lines[j])
+    stray = ~(shapely.covers(ends[i], touch) & shapely.covers(ends[j], touch))
+    crossed = np.zeros(len(lines), dtype=bool)
+    crossed[i[stray]] = crossed[j[stray]] = True
+    crossed |= moved & ~shapely.is_simple(lines)
+    if not crossed.any():
+        return None
+    rank = np.array([class_rank(c) for c in road_class], dtype=np.int64)
+    out, parent = [lines[~crossed]], [np.flatnonzero(~crossed)]
+    for layer in np.unique(z_layer[crossed]):
+        sel = np.flatnonzero(crossed & (z_layer == layer))
+        pieces, src = renode(lines[sel], moved[sel], rank[sel])
+        out.append(pieces)
+        parent.append(sel[src])
+    lines, parent = np.concatenate(out), np.concatenate(parent)
+    order = np.argsort(parent, kind="stable")
+    return lines[order], parent[order]
 
 
 def _compact_nodes(g: RoadGraph) -> RoadGraph:
