@@ -13,6 +13,9 @@ handles its output files.
   and copied into the target file on success.
 - Outputs that are no files (memory layers, database connections) and QGIS's own
   temporary outputs (the Processing temporary folder) are written as they are.
+- What a destination's format allows (used by ``qgis_io.write_sink``): an attribute named
+  like the geometry column is renamed (``geom`` -> ``geom_1`` in a GeoPackage), and the
+  field names GDAL cuts in a shapefile are read back for the log.
 
 Used by ``processing_algorithms.common.AlgorithmBase`` (every algorithm) and by
 ``provider.ShippedModel`` (the district model: its outputs appear only when every step
@@ -47,7 +50,8 @@ from ..core.destinations import (make_folders, overwrite_error, remove_empty_fol
                                  replaced_layers_error)
 from . import styles
 
-__all__ = ["STAGING_PREFIX", "OutputStaging", "destination_error"]
+__all__ = ["STAGING_PREFIX", "OutputStaging", "destination_error", "sink_destination",
+           "is_shapefile", "field_names_for", "shapefile_renames"]
 
 #: The format every raster output is written in (a raster destination is named so).
 RASTER_FORMAT = "GeoTIFF (*.tif *.tiff)"
@@ -231,6 +235,88 @@ def _replaced_layers_error(definition, path: Path, table: Optional[str]) -> Opti
         except InputError:
             pass
     return message
+
+
+# ------------------------------------------------------- what a destination's format allows
+
+#: The geometry column GDAL's writer gives a new layer of these formats (its GEOMETRY_NAME
+#: default): an attribute of that name cannot be written beside it.
+_GEOMETRY_COLUMNS = {".gpkg": "geom", ".sqlite": "GEOMETRY", ".db": "GEOMETRY"}
+_OGR_GEOMETRY_COLUMN = re.compile(
+    r"^ogr:dbname='(?:[^']|'')*'\s+table=\"[^\"]+\"\s*\((?P<col>[^)]+)\)")
+
+
+def sink_destination(parameters, name: str, context) -> Optional[str]:
+    """The destination of a feature sink parameter as given (a path or a URI), read without
+    side effects (``parameterAsSink`` adds the layer to load on completion), None when it
+    is no string."""
+    value = parameters.get(name)
+    if isinstance(value, QgsProcessingOutputLayerDefinition):
+        value = value.sink.valueAsString(context.expressionContext(), "")[0]
+    return value if isinstance(value, str) and value else None
+
+
+def _geometry_column(destination: Optional[str]) -> Optional[str]:
+    """The geometry column of a layer written to ``destination`` (GeoPackage: 'geom'),
+    None for formats without one (shapefile, memory layer)."""
+    if not destination or destination == "TEMPORARY_OUTPUT":     # a memory layer
+        return None
+    match = _OGR_GEOMETRY_COLUMN.match(destination)
+    if match:
+        return match.group("col").strip()
+    target = _file_of(destination)
+    if target is None:
+        return None
+    # a file named without an extension is written in QGIS's default vector format
+    suffix = target[0].suffix or f".{QgsProcessingUtils.defaultVectorExtension()}"
+    return _GEOMETRY_COLUMNS.get(suffix.lower())
+
+
+def is_shapefile(destination: Optional[str]) -> bool:
+    """Whether ``destination`` is an ESRI shapefile (10-character field names, numbers as
+    fixed-width text)."""
+    target = _file_of(destination) if destination else None
+    return bool(target) and target[0].suffix.lower() == ".shp"
+
+
+def field_names_for(destination: Optional[str], names: List[str]):
+    """(names as written, message or None): an attribute named like the destination's
+    geometry column (a PostGIS export's ``geom`` written to a GeoPackage, where GDAL names
+    the geometry column ``geom`` and refuses the table) is written as ``geom_1`` (the first
+    free ``<name>_<n>``, as QGIS names a duplicate field); the message says so."""
+    column = _geometry_column(destination)
+    if column is None or column.lower() not in {n.lower() for n in names}:
+        return list(names), None
+    taken = {n.lower() for n in names} | {column.lower(), "fid"}
+    out, renamed = [], []
+    for name in names:
+        if name.lower() != column.lower():
+            out.append(name)
+            continue
+        n = 1
+        while f"{name}_{n}".lower() in taken:
+            n += 1
+        new = f"{name}_{n}"
+        taken.add(new.lower())
+        out.append(new)
+        renamed.append(f"'{name}' as '{new}'")
+    return out, (f"field {', '.join(renamed)}: '{column}' is the name of the geometry "
+                 f"column in {Path(_file_of(destination)[0]).name}.")
+
+
+def shapefile_renames(path: str, names: List[str]) -> List[tuple]:
+    """(declared, written) for each field GDAL renamed in the shapefile ``path`` (names of
+    over 10 characters are cut, and numbered where two cuts clash: ``tortuosity_b`` ->
+    ``tortuosi_1``). Read back from the file (closed first), so the names are GDAL's own."""
+    from osgeo import ogr
+
+    ds = ogr.Open(str(path).split("|")[0])
+    if ds is None or ds.GetLayerCount() == 0:
+        return []
+    definition = ds.GetLayer(0).GetLayerDefn()
+    written = [definition.GetFieldDefn(i).GetName() for i in range(definition.GetFieldCount())]
+    ds = None
+    return [(a, b) for a, b in zip(names, written) if a != b]
 
 
 class OutputStaging:
