@@ -395,3 +395,38 @@ def test_shapefile_outputs_keep_integers_and_list_the_cut_field_names(qgis_proce
     assert "tortuosity_a -> tortuosity, tortuosity_b -> tortuosi_1" in cut[0]
     assert "parcel_area -> parcel_are" in cut[0]
 
+
+def test_outputs_named_with_dots_load_under_their_full_name(qgis_processing, tmp_path,
+                                                           monkeypatch):
+    """'my.town.v2.shp' loaded as 'my', and 'my.town.v2.gpkg' held a layer 'my': QGIS
+    3.22 takes the name up to the file name's first dot (QFileInfo::baseName). The loaded
+    layer and the GeoPackage layer are 'my.town.v2'; each output is loaded once. (QGIS names
+    outputs in the system temporary folder after the output instead, so TMPDIR is moved.)"""
+    from qgis.core import (QgsProcessingContext, QgsProcessingOutputLayerDefinition,
+                           QgsProcessingUtils, QgsProject)
+
+    from urban_synthesis.plugin.core.destinations import geopackage_layers
+
+    (tmp_path / "elsewhere").mkdir()
+    monkeypatch.setenv("TMPDIR", str(tmp_path / "elsewhere"))
+    for destination, name in (("my.town.v2.shp", "my.town.v2"),
+                              ("my.town.v2.gpkg", "my.town.v2"), ("plain.gpkg", "plain"),
+                              ("ogr:dbname='{}/both.gpkg' table=\"roads\" (geom)", "roads")):
+        context = QgsProcessingContext()
+        context.setProject(QgsProject.instance())
+        out = destination.format(tmp_path) if destination.startswith("ogr:") else \
+            str(tmp_path / destination)
+        qgis_processing.run(ALG, {
+            "INPUT": bubenec_layer("streets"), "OUTPUT_INTERSECTIONS": None,
+            "OUTPUT": QgsProcessingOutputLayerDefinition(out, QgsProject.instance())},
+            context=context)
+        # once: not also under the destination as given (an ogr: URI, which QGIS fails to
+        # load, or the bare path of a GeoPackage whose layer is named)
+        loads = context.layersToLoadOnCompletion()
+        assert len(loads) == 1, loads
+        (key, details), = loads.items()
+        layer = QgsProcessingUtils.mapLayerFromString(key, context)
+        details.setOutputLayerName(layer)       # what Processing does when it loads it
+        assert layer.name() == name, (key, layer.name())
+    assert "my.town.v2" in geopackage_layers(tmp_path / "my.town.v2.gpkg")
+    assert "my" not in geopackage_layers(tmp_path / "my.town.v2.gpkg")
