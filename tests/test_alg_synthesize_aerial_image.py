@@ -133,3 +133,25 @@ def test_qgis_process_run(layers, tmp_path):
 
     ds = gdal.Open(str(target))
     assert ds.RasterCount == 2 and abs(ds.GetGeoTransform()[1]) > 1.2  # 1 m in 3857 units
+
+
+def test_an_image_named_with_dots_loads_under_its_full_name(qgis_processing, layers, tmp_path,
+                                                            monkeypatch):
+    """'my.town.v2.tif' loaded as 'my' (QGIS 3.22 names a loaded output after its file name
+    up to the first dot); it loads as 'my.town.v2' (outputs.OutputStaging). QGIS names
+    outputs in the system temporary folder after the output instead: TMPDIR is moved."""
+    from qgis.core import (QgsProcessingContext, QgsProcessingOutputLayerDefinition,
+                           QgsProcessingUtils, QgsProject)
+
+    (tmp_path / "elsewhere").mkdir()
+    monkeypatch.setenv("TMPDIR", str(tmp_path / "elsewhere"))
+    context = QgsProcessingContext()
+    context.setProject(QgsProject.instance())
+    target = tmp_path / "my.town.v2.tif"
+    output = QgsProcessingOutputLayerDefinition(str(target), QgsProject.instance())
+    qgis_processing.run(ALG, _params(layers, SEED=3, OUTPUT_IMAGE=output), context=context)
+    (key, details), = context.layersToLoadOnCompletion().items()
+    assert key == str(target)
+    layer = QgsProcessingUtils.mapLayerFromString(key, context)
+    details.setOutputLayerName(layer)           # what Processing does when it loads it
+    assert layer.name() == "my.town.v2"

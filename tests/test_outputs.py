@@ -330,3 +330,103 @@ def test_a_geopackage_holding_other_layers_is_not_replaced_whole(qgis_processing
     with sqlite3.connect(roads) as con:
         assert [r[0] for r in con.execute("SELECT table_name FROM gpkg_contents "
                                           "WHERE data_type = 'features'")] == ["roads"]
+
+
+def test_an_input_field_named_geom_is_kept_in_a_geopackage(qgis_processing, tmp_path):
+    """A field named 'geom' (a PostGIS export's) carried to a GeoPackage output clashed
+    with the geometry column GDAL names 'geom': 'duplicate column name: geom', nothing
+    written. It is written as 'geom_1' with its values, and the log says so; a shapefile,
+    which has no geometry column, keeps 'geom'."""
+    from qgis.core import QgsVectorLayer
+
+    from helpers import layer_rows, log_feedback
+
+    source = QgsVectorLayer(bubenec_layer("buildings"), "b", "ogr")
+    wkts = [f.geometry().asWkt() for f in source.getFeatures()]
+    export = memory_layer("Polygon", wkts, "EPSG:3857", "&field=geom:string&field=name:string",
+                          [[f"g{i}", f"n{i}"] for i in range(len(wkts))], name="pg export")
+    feedback = log_feedback()
+    gpkg = tmp_path / "buildings.gpkg"
+    qgis_processing.run("urbansynth:extractblocks", {
+        "ROADS": bubenec_layer("streets"), "BUILDINGS": export, "OUTPUT": "TEMPORARY_OUTPUT",
+        "OUTPUT_BUILDINGS": f"ogr:dbname='{gpkg}' table=\"buildings\" (geom)"},
+        feedback=feedback)
+    rows = layer_rows(QgsVectorLayer(f"{gpkg}|layername=buildings", "b", "ogr"))
+    assert len(rows) == len(wkts)
+    assert [r["geom_1"] for r in rows[:3]] == ["g0", "g1", "g2"]
+    assert rows[0]["name"] == "n0" and "geom" not in rows[0]
+    assert any("field 'geom' as 'geom_1': 'geom' is the name of the geometry column" in w
+               for w in feedback.warnings), feedback.warnings
+    shp = tmp_path / "buildings.shp"
+    qgis_processing.run("urbansynth:extractblocks", {
+        "ROADS": bubenec_layer("streets"), "BUILDINGS": export, "OUTPUT": "TEMPORARY_OUTPUT",
+        "OUTPUT_BUILDINGS": str(shp)})
+    assert layer_rows(QgsVectorLayer(str(shp), "b", "ogr"))[0]["geom"] == "g0"
+
+
+def test_shapefile_outputs_keep_integers_and_list_the_cut_field_names(qgis_processing,
+                                                                      tmp_path):
+    """A shapefile output had every integer field as Real (QGIS writes a 64-bit integer
+    without a length 20 digits wide, which GDAL reads back as Real), and GDAL cut the long
+    field names silently (tortuosity_a, tortuosity_b -> tortuosity, tortuosi_1). Integers
+    now read back as integers, and the log lists each renamed field; a GeoPackage output
+    keeps its full names, without that warning."""
+    from osgeo import ogr
+
+    from helpers import log_feedback
+
+    feedback = log_feedback()
+    qgis_processing.run(ALG, {"INPUT": bubenec_layer("streets"),
+                              "OUTPUT": str(tmp_path / "roads.gpkg"),
+                              "OUTPUT_INTERSECTIONS": str(tmp_path / "points.shp")},
+                        feedback=feedback)
+    for path in (tmp_path / "points.shp", tmp_path / "roads.gpkg"):
+        ds = ogr.Open(str(path))
+        defn = ds.GetLayer(0).GetLayerDefn()
+        types = {defn.GetFieldDefn(i).GetName(): defn.GetFieldDefn(i).GetTypeName()
+                 for i in range(defn.GetFieldCount())}
+        ds = None
+        for name in ("node_id", "degree", "level_a") if path.suffix == ".shp" else \
+                ("edge_id", "level", "street_id"):
+            assert types[name] == "Integer64", (path.name, types)
+    assert {"tortuosity", "tortuosi_1"} <= set(types) or path.suffix == ".gpkg"
+    cut = [w for w in feedback.warnings if "is a shapefile" in w]
+    assert len(cut) == 1 and cut[0].startswith("Output OUTPUT_INTERSECTIONS"), feedback.warnings
+    assert "tortuosity_a -> tortuosity, tortuosity_b -> tortuosi_1" in cut[0]
+    assert "parcel_area -> parcel_are" in cut[0]
+
+
+def test_outputs_named_with_dots_load_under_their_full_name(qgis_processing, tmp_path,
+                                                           monkeypatch):
+    """'my.town.v2.shp' loaded as 'my', and 'my.town.v2.gpkg' held a layer 'my': QGIS
+    3.22 takes the name up to the file name's first dot (QFileInfo::baseName). The loaded
+    layer and the GeoPackage layer are 'my.town.v2'; each output is loaded once. (QGIS names
+    outputs in the system temporary folder after the output instead, so TMPDIR is moved.)"""
+    from qgis.core import (QgsProcessingContext, QgsProcessingOutputLayerDefinition,
+                           QgsProcessingUtils, QgsProject)
+
+    from urban_synthesis.plugin.core.destinations import geopackage_layers
+
+    (tmp_path / "elsewhere").mkdir()
+    monkeypatch.setenv("TMPDIR", str(tmp_path / "elsewhere"))
+    for destination, name in (("my.town.v2.shp", "my.town.v2"),
+                              ("my.town.v2.gpkg", "my.town.v2"), ("plain.gpkg", "plain"),
+                              ("ogr:dbname='{}/both.gpkg' table=\"roads\" (geom)", "roads")):
+        context = QgsProcessingContext()
+        context.setProject(QgsProject.instance())
+        out = destination.format(tmp_path) if destination.startswith("ogr:") else \
+            str(tmp_path / destination)
+        qgis_processing.run(ALG, {
+            "INPUT": bubenec_layer("streets"), "OUTPUT_INTERSECTIONS": None,
+            "OUTPUT": QgsProcessingOutputLayerDefinition(out, QgsProject.instance())},
+            context=context)
+        # once: not also under the destination as given (an ogr: URI, which QGIS fails to
+        # load, or the bare path of a GeoPackage whose layer is named)
+        loads = context.layersToLoadOnCompletion()
+        assert len(loads) == 1, loads
+        (key, details), = loads.items()
+        layer = QgsProcessingUtils.mapLayerFromString(key, context)
+        details.setOutputLayerName(layer)       # what Processing does when it loads it
+        assert layer.name() == name, (key, layer.name())
+    assert "my.town.v2" in geopackage_layers(tmp_path / "my.town.v2.gpkg")
+    assert "my" not in geopackage_layers(tmp_path / "my.town.v2.gpkg")

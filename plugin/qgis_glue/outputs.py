@@ -13,6 +13,12 @@ handles its output files.
   and copied into the target file on success.
 - Outputs that are no files (memory layers, database connections) and QGIS's own
   temporary outputs (the Processing temporary folder) are written as they are.
+- What a destination's format allows (used by ``qgis_io.write_sink``): an attribute named
+  like the geometry column is renamed (``geom`` -> ``geom_1`` in a GeoPackage), and the
+  field names GDAL cuts in a shapefile are read back for the log.
+- A file named with dots ('my.town.v2.gpkg', '.shp', '.tif') gives its whole name before
+  the extension to the GeoPackage layer and to the layer QGIS loads ('my.town.v2'; QGIS
+  3.22 takes the name up to the first dot: 'my').
 
 Used by ``processing_algorithms.common.AlgorithmBase`` (every algorithm) and by
 ``provider.ShippedModel`` (the district model: its outputs appear only when every step
@@ -47,7 +53,8 @@ from ..core.destinations import (make_folders, overwrite_error, remove_empty_fol
                                  replaced_layers_error)
 from . import styles
 
-__all__ = ["STAGING_PREFIX", "OutputStaging", "destination_error"]
+__all__ = ["STAGING_PREFIX", "OutputStaging", "destination_error", "sink_destination",
+           "is_shapefile", "field_names_for", "shapefile_renames"]
 
 #: The format every raster output is written in (a raster destination is named so).
 RASTER_FORMAT = "GeoTIFF (*.tif *.tiff)"
@@ -233,6 +240,130 @@ def _replaced_layers_error(definition, path: Path, table: Optional[str]) -> Opti
     return message
 
 
+# ------------------------------------------------------- what a destination's format allows
+
+#: The geometry column GDAL's writer gives a new layer of these formats (its GEOMETRY_NAME
+#: default): an attribute of that name cannot be written beside it.
+_GEOMETRY_COLUMNS = {".gpkg": "geom", ".sqlite": "GEOMETRY", ".db": "GEOMETRY"}
+_OGR_GEOMETRY_COLUMN = re.compile(
+    r"^ogr:dbname='(?:[^']|'')*'\s+table=\"[^\"]+\"\s*\((?P<col>[^)]+)\)")
+
+
+def sink_destination(parameters, name: str, context) -> Optional[str]:
+    """The destination of a feature sink parameter as given (a path or a URI), read without
+    side effects (``parameterAsSink`` adds the layer to load on completion), None when it
+    is no string."""
+    value = parameters.get(name)
+    if isinstance(value, QgsProcessingOutputLayerDefinition):
+        value = value.sink.valueAsString(context.expressionContext(), "")[0]
+    return value if isinstance(value, str) and value else None
+
+
+def _geometry_column(destination: Optional[str]) -> Optional[str]:
+    """The geometry column of a layer written to ``destination`` (GeoPackage: 'geom'),
+    None for formats without one (shapefile, memory layer)."""
+    if not destination or destination == "TEMPORARY_OUTPUT":     # a memory layer
+        return None
+    match = _OGR_GEOMETRY_COLUMN.match(destination)
+    if match:
+        return match.group("col").strip()
+    target = _file_of(destination)
+    if target is None:
+        return None
+    # a file named without an extension is written in QGIS's default vector format
+    suffix = target[0].suffix or f".{QgsProcessingUtils.defaultVectorExtension()}"
+    return _GEOMETRY_COLUMNS.get(suffix.lower())
+
+
+def is_shapefile(destination: Optional[str]) -> bool:
+    """Whether ``destination`` is an ESRI shapefile (10-character field names, numbers as
+    fixed-width text)."""
+    target = _file_of(destination) if destination else None
+    return bool(target) and target[0].suffix.lower() == ".shp"
+
+
+def field_names_for(destination: Optional[str], names: List[str]):
+    """(names as written, message or None): an attribute named like the destination's
+    geometry column (a PostGIS export's ``geom`` written to a GeoPackage, where GDAL names
+    the geometry column ``geom`` and refuses the table) is written as ``geom_1`` (the first
+    free ``<name>_<n>``, as QGIS names a duplicate field); the message says so."""
+    column = _geometry_column(destination)
+    if column is None or column.lower() not in {n.lower() for n in names}:
+        return list(names), None
+    taken = {n.lower() for n in names} | {column.lower(), "fid"}
+    out, renamed = [], []
+    for name in names:
+        if name.lower() != column.lower():
+            out.append(name)
+            continue
+        n = 1
+        while f"{name}_{n}".lower() in taken:
+            n += 1
+        new = f"{name}_{n}"
+        taken.add(new.lower())
+        out.append(new)
+        renamed.append(f"'{name}' as '{new}'")
+    return out, (f"field {', '.join(renamed)}: '{column}' is the name of the geometry "
+                 f"column in {Path(_file_of(destination)[0]).name}.")
+
+
+def shapefile_renames(path: str, names: List[str]) -> List[tuple]:
+    """(declared, written) for each field GDAL renamed in the shapefile ``path`` (names of
+    over 10 characters are cut, and numbered where two cuts clash: ``tortuosity_b`` ->
+    ``tortuosi_1``). Read back from the file (closed first), so the names are GDAL's own."""
+    from osgeo import ogr
+
+    ds = ogr.Open(str(path).split("|")[0])
+    if ds is None or ds.GetLayerCount() == 0:
+        return []
+    definition = ds.GetLayer(0).GetLayerDefn()
+    written = [definition.GetFieldDefn(i).GetName() for i in range(definition.GetFieldCount())]
+    ds = None
+    return [(a, b) for a, b in zip(names, written) if a != b]
+
+
+def _dotted_geopackage_layer(definition, path: Path) -> bool:
+    """Whether a vector output to the bare GeoPackage path ``path`` has a dot in its name
+    (its layer is then named explicitly: :meth:`OutputStaging._stage`)."""
+    return isinstance(definition, (QgsProcessingParameterFeatureSink,
+                                   QgsProcessingParameterVectorDestination)) and \
+        path.suffix.lower() == ".gpkg" and "." in path.stem and '"' not in path.stem
+
+
+def _loaded_name_in_full(destination: str, details) -> Optional[str]:
+    """The name QGIS 3.22 gives a loaded output after its file, but with the whole file
+    name before the extension ('my.town.v2'); None where QGIS's own name is right: the
+    output is named explicitly (forceName, or the user prefers the output's name to the
+    file's), names a layer of its file, has no dot, or lies in a temporary folder (QGIS
+    then uses the output's name)."""
+    from qgis.core import QgsSettings
+    from qgis.PyQt.QtCore import QStandardPaths
+
+    prefer_file = QgsSettings().value("Processing/Configuration/PREFER_FILENAME_AS_LAYER_NAME",
+                                      True, bool)
+    if details.forceName or (details.name and not prefer_file) or "|layername=" in destination:
+        return None
+    target = _file_of(destination)
+    if target is None or target[1] is not None:
+        return None
+    path = target[0]
+    full = path.name.rsplit(".", 1)[0] if "." in path.name else path.name
+    if not full or full == path.name.split(".")[0]:
+        return None                      # no dot before the extension: QGIS names it right
+    temp = [Path(p) for p in QStandardPaths.standardLocations(QStandardPaths.TempLocation)]
+    if details.name and any(_inside(path, folder) for folder in temp):
+        return None
+    return full
+
+
+def _inside(path: Path, folder: Path) -> bool:
+    try:
+        path, folder = path.resolve(), folder.resolve()
+    except OSError:
+        return False
+    return folder == path.parent or folder in path.parents
+
+
 class OutputStaging:
     """The file outputs of one run, written to staging folders and moved into place by
     :meth:`commit`, or removed by :meth:`discard`."""
@@ -285,7 +416,9 @@ class OutputStaging:
         self.staged.append(_Staged(definition.name(), destination, path, table, staging,
                                    temp, temp_path))
         staged_parameters[definition.name()] = self._redirect(
-            self.parameters[definition.name()], definition, temp)
+            self.parameters[definition.name()], definition, temp,
+            path.stem if _dotted_geopackage_layer(definition, path) and table is None
+            else None)
 
     def _make_folder(self, folder: Path, definition):
         try:
@@ -296,18 +429,24 @@ class OutputStaging:
                 f"{folder} cannot be created: {exc.strerror or exc}.") from exc
 
     @staticmethod
-    def _redirect(value, definition, temp: str):
+    def _redirect(value, definition, temp: str, layer_name: Optional[str] = None):
         """The parameter value with its destination replaced (keeping the layer name and
-        options a QgsProcessingOutputLayerDefinition carries)."""
+        options a QgsProcessingOutputLayerDefinition carries); ``layer_name``: the name of
+        the GeoPackage layer to write. QGIS 3.22 names the layer of a GeoPackage given as
+        a bare path after the file name up to its first dot (QFileInfo::baseName:
+        'my.town.v2.gpkg' -> 'my'); the writer's ``layerName`` option names it in full."""
         if isinstance(value, QgsProcessingOutputLayerDefinition):
             copy = QgsProcessingOutputLayerDefinition(value)
             copy.sink = QgsProperty.fromValue(temp)
-            return copy
-        if isinstance(definition, (QgsProcessingParameterFeatureSink,
-                                   QgsProcessingParameterVectorDestination,
-                                   QgsProcessingParameterRasterDestination)):
-            return QgsProcessingOutputLayerDefinition(temp)
-        return temp
+        elif isinstance(definition, (QgsProcessingParameterFeatureSink,
+                                     QgsProcessingParameterVectorDestination,
+                                     QgsProcessingParameterRasterDestination)):
+            copy = QgsProcessingOutputLayerDefinition(temp)
+        else:
+            return temp
+        if layer_name:
+            copy.createOptions = dict(copy.createOptions or {}, layerName=layer_name)
+        return copy
 
     # --------------------------------------------------------------- end of the run
 
@@ -323,6 +462,7 @@ class OutputStaging:
         renames.update({str(item.temp_path): str(item.final_path) for item in self.staged})
         out = {k: self._renamed(v, renames) for k, v in results.items()}
         self._rename_layers_to_load(renames)
+        self._name_layers_in_full()
         self._store_styles(renames)
         return out
 
@@ -345,6 +485,15 @@ class OutputStaging:
         layers = self.context.layersToLoadOnCompletion()
         if all(self._renamed(k, renames) == k for k in layers):
             return
+        # checking the destinations before the run (parameterAsOutputLayer) added an entry
+        # under the destination as given; where the written layer's key differs from it (a
+        # GeoPackage layer: 'file.gpkg|layername=...'), that entry would load the output a
+        # second time, or fail to load (an ogr: URI)
+        written = {self._renamed(k, renames) for k in layers} - set(layers)
+        layers = {k: v for k, v in layers.items() if not any(
+            k == item.final and k not in written and
+            any(w.split("|")[0] == str(item.final_path) for w in written)
+            for item in self.staged)}
         rebuilt, kept_styles = {}, {}
         # a staged layer comes after any entry QGIS already holds for its final path: its
         # details and style win
@@ -360,6 +509,18 @@ class OutputStaging:
         for final, qml in kept_styles.items():
             if qml:
                 styles.attach_style(self.context, final, qml)
+
+    def _name_layers_in_full(self):
+        """A loaded output file named with dots ('my.town.v2.tif') is named 'my.town.v2'
+        in the project, not 'my': QGIS 3.22 takes a layer's name from its file name up to
+        the first dot (``LayerDetails.setOutputLayerName``: QFileInfo::baseName). Where
+        QGIS would name the layer after its file, the full name is given instead."""
+        for key in list(self.context.layersToLoadOnCompletion()):
+            details = self.context.layerToLoadOnCompletionDetails(key)
+            name = _loaded_name_in_full(key, details)
+            if name:
+                details.name = name
+                details.forceName = True
 
     @staticmethod
     def _renamed(value, renames):

@@ -42,7 +42,7 @@ from qgis.PyQt.QtCore import QVariant
 
 from ..core import coordinates
 from ..core import crs as crs_rule
-from . import dependencies, styles
+from . import dependencies, outputs, styles
 from ..core.progress import Canceled, InputError, MissingPackage, Progress
 from ..core.text import counted
 
@@ -665,11 +665,21 @@ def carried_fields(fields: QgsFields, reserved=()) -> List[tuple]:
     return [(f.name(), field_kind(f)) for f in fields if f.name().lower() not in reserved]
 
 
-def make_fields(spec: Sequence[tuple]) -> QgsFields:
-    """``spec`` is a sequence of (name, type) with type in int / float / str / bool."""
+#: Width of the integer fields of a shapefile output. QGIS's writer gives a 64-bit integer
+#: field without a length 20 digits, and GDAL reads a shapefile number of 19 digits or more
+#: back as Real: 18 digits (any id, OSM's included) read back as Integer64.
+SHAPEFILE_INT_WIDTH = 18
+
+
+def make_fields(spec: Sequence[tuple], names: Optional[Sequence[str]] = None,
+                int_width: int = 0) -> QgsFields:
+    """``spec`` is a sequence of (name, type) with type in int / float / str / bool;
+    ``names`` (optional) the names to write them as; ``int_width`` the length of the int
+    fields (0: the format's default)."""
     fields = QgsFields()
-    for name, typ in spec:
-        fields.append(QgsField(name, _QVARIANT[typ]))
+    for i, (name, typ) in enumerate(spec):
+        fields.append(QgsField(name if names is None else names[i], _QVARIANT[typ],
+                               len=int_width if typ == "int" else 0))
     return fields
 
 
@@ -682,8 +692,16 @@ def write_sink(alg, parameters, name: str, context, geoms: np.ndarray, table: pd
     Geometries with z values are written as such (``wkb_type`` gets its Z variant) and keep
     their z through the reprojection. Returns the destination id (None when the output was
     not requested).
+
+    The fields follow the destination's format (:mod:`outputs`): an attribute named like
+    its geometry column (``geom`` in a GeoPackage) is written as ``geom_1``; a shapefile
+    gets integer fields GDAL reads back as integers, and the log lists the field names
+    GDAL cut to 10 characters.
     """
-    fields = make_fields(spec)
+    destination = outputs.sink_destination(parameters, name, context)
+    names, renamed = outputs.field_names_for(destination, [n for n, _ in spec])
+    shapefile = outputs.is_shapefile(destination)
+    fields = make_fields(spec, names, SHAPEFILE_INT_WIDTH if shapefile else 0)
     geoms = np.asarray(geoms, dtype=object)
     has_z = bool(len(geoms)) and bool(shapely.has_z(geoms).any())
     if has_z:
@@ -715,6 +733,17 @@ def write_sink(alg, parameters, name: str, context, geoms: np.ndarray, table: pd
         features.append(f)
     if not sink.addFeatures(features, QgsFeatureSink.Flag.FastInsert):
         raise QgsProcessingException(f"Could not write the output {name}: {sink.lastError()}")
+    del sink                             # closes the file: its fields can be read back
+    if feedback is not None and renamed:
+        feedback.pushWarning(f"Output {name}: {renamed}")
+    if feedback is not None and shapefile:
+        cut = outputs.shapefile_renames(dest_id, names)
+        if cut:
+            feedback.pushWarning(
+                f"Output {name} is a shapefile, whose field names have at most 10 "
+                f"characters: {counted(len(cut), 'field')} renamed by GDAL: "
+                + ", ".join(f"{a} -> {b}" for a, b in cut)
+                + ". Write a GeoPackage to keep the full names.")
     return dest_id
 
 
