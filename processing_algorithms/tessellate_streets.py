@@ -86,7 +86,7 @@ class TessellateStreets(AlgorithmBase):
             self.ROADS, "Road centre lines", [QgsProcessing.SourceType.TypeVectorLine]),
             "Any line layer (OSM lines, grown or synthesized roads, a road shapefile). Lines "
             "are noded at crossings (not across bridges and tunnels) and joined through "
-            "nodes of degree 2.")
+            "nodes of degree 2 where both are of one vertical layer.")
         self.add(QgsProcessingParameterField(
             self.WIDTH_FIELD, "Width field (m)", parentLayerParameterName=self.ROADS,
             optional=True),

@@ -12,7 +12,8 @@ centerline endpoints"). Real OSM is dirty, so this module:
   an edge that its moved end now makes cross another is noded there again;
 - drops exact and near-duplicate edges (same end nodes, Hausdorff distance under the tolerance);
 - prunes dangling slivers (dead-end edges shorter than a minimum length);
-- merges chains through degree-2 nodes (OSM splits ways at arbitrary points).
+- merges chains through degree-2 nodes (OSM splits ways at arbitrary points), within one
+  vertical layer (a bridge stays apart from its approach: its layer is its own).
 
 Everything is vectorised with shapely 2 / numpy; the only Python loops are over groups of
 duplicates, which are rare.
@@ -663,7 +664,7 @@ def clean_network(geometries: Sequence, road_class: Optional[Sequence] = None,
     min_dangle_length : float
         Dead-end edges shorter than this are removed (dangling slivers of OSM digitising).
     merge_degree2 : bool
-        Merge chains through nodes of degree 2 into one edge.
+        Merge chains through nodes of degree 2 into one edge (of one vertical layer).
     duplicate_tolerance : float, optional
         Edges between the same nodes within this Hausdorff distance (m) are one street;
         default ``max(snap_tolerance, 0.5)``. 0 drops only exact duplicates (a plain count).
