@@ -107,7 +107,8 @@ class ExtractRoadHierarchy(AlgorithmBase):
         self.add(QgsProcessingParameterNumber(
             self.SNAP_TOLERANCE, "Node snapping tolerance (m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=1.0, minValue=0.0, maxValue=50.0),
-            "Intersections closer than this are merged; duplicate edges within it are dropped.",
+            "Intersections closer than this are merged, in groups no wider than it (a row of "
+            "close nodes is not chained into one); duplicate edges within it are dropped.",
             advanced=True)
         self.add(QgsProcessingParameterNumber(
             self.MIN_DANGLE_LENGTH, "Minimum dead-end length (m)", QgsProcessingParameterNumber.Type.Double,

@@ -166,8 +166,9 @@ class LayoutMetrics(AlgorithmBase):
         self.add(QgsProcessingParameterNumber(
             self.SNAP_TOLERANCE, "Node snapping (m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=0.5, minValue=0.0, maxValue=10.0),
-            "Road nodes closer than this are one node, and edges between the same nodes this "
-            "close are one street. 0 counts exactly what noding the lines gives.", advanced=True)
+            "Road nodes closer than this are one node (in groups no wider than it), and edges "
+            "between the same nodes this close are one street. 0 counts exactly what noding "
+            "the lines gives.", advanced=True)
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT, "Layout metrics table", QgsProcessing.SourceType.TypeVector),
             "One row per measure: kind, metric, statistic, unit, candidate and example values, "

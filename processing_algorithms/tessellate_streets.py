@@ -141,7 +141,8 @@ class TessellateStreets(AlgorithmBase):
             self.SNAP_TOLERANCE, "Node snapping tolerance (m)",
             QgsProcessingParameterNumber.Type.Double, defaultValue=1.0, minValue=0.0,
             maxValue=50.0),
-            "Line ends closer than this are joined when the network is noded.", advanced=True)
+            "Line ends closer than this are joined when the network is noded, in groups no "
+            "wider than it.", advanced=True)
         self.add(QgsProcessingParameterNumber(
             self.MESH_SPACING, "Mesh station spacing (m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=5.0, minValue=0.5, maxValue=100.0, optional=True),
