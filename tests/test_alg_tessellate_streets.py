@@ -446,3 +446,23 @@ def test_the_hierarchy_keeps_what_the_street_surfaces_need(qgis_processing, tmp_
     assert areas["chained"] == pytest.approx(areas["direct"], rel=0.01)
     rows, _ = layer_features(QgsVectorLayer(hierarchy, "roads", "ogr"))
     assert sum(r["oneway"] == "yes" for r in rows) > 100
+
+
+def test_a_shapefile_output_styles_each_flag_by_its_own_field(qgis_processing, stars, tmp_path):
+    """too_steep_long and too_steep_lat both cut to 'too_steep_' in a shapefile: GDAL numbers
+    the second ('too_stee_1'), and the style saved beside the file names each flag as GDAL
+    wrote it (cut alike, both rules read too_steep_long's values)."""
+    from qgis.core import QgsVectorLayer
+
+    dem = _write_plane(tmp_path / "plane.tif")
+    paths = {"OUTPUT_SURFACES": tmp_path / "surfaces.shp",
+             "OUTPUT_JUNCTIONS": tmp_path / "junctions.shp"}
+    qgis_processing.run(ALG, {"ROADS": stars, "WIDTH_FIELD": "w", "DEM": dem,
+                              **{k: str(v) for k, v in paths.items()}})
+    for output, path in paths.items():
+        layer = QgsVectorLayer(str(path), "out", "ogr")   # opens with the sidecar .qml
+        declared = SURFACE_FIELDS if output == "OUTPUT_SURFACES" else JUNCTION_FIELDS
+        written = dict(zip(declared, layer.fields().names()))
+        assert written["too_steep_long"] != written["too_steep_lat"]
+        filters = [r.filterExpression() for r in layer.renderer().rootRule().children()]
+        assert f'"{written["too_steep_long"]}" OR "{written["too_steep_lat"]}"' in filters

@@ -461,6 +461,7 @@ class OutputStaging:
         renames = {item.temp: item.final for item in self.staged}
         renames.update({str(item.temp_path): str(item.final_path) for item in self.staged})
         out = {k: self._renamed(v, renames) for k, v in results.items()}
+        styles.move_written_field_names(renames)
         self._rename_layers_to_load(renames)
         self._name_layers_in_full()
         self._store_styles(renames)

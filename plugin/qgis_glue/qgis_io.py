@@ -736,9 +736,12 @@ def write_sink(alg, parameters, name: str, context, geoms: np.ndarray, table: pd
     del sink                             # closes the file: its fields can be read back
     if feedback is not None and renamed:
         feedback.pushWarning(f"Output {name}: {renamed}")
-    if feedback is not None and shapefile:
+    if shapefile:
         cut = outputs.shapefile_renames(dest_id, names)
-        if cut:
+        # the shipped style names each field as GDAL wrote it (styles.style_for_fields)
+        styles.record_written_field_names(
+            dest_id, {spec[names.index(a)][0]: b for a, b in cut})
+        if cut and feedback is not None:
             feedback.pushWarning(
                 f"Output {name} is a shapefile, whose field names have at most 10 "
                 f"characters: {counted(len(cut), 'field')} renamed by GDAL: "

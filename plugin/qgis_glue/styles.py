@@ -36,25 +36,57 @@ def style_output(context, dest_id: Optional[str], qml_name: str) -> None:
 #: The longest field name a shapefile (dBase) keeps: longer ones are cut to it on writing.
 DBF_NAME_LENGTH = 10
 
+#: file written -> {field name declared: name GDAL wrote} for the fields GDAL renamed
+#: (``qgis_io.write_sink`` reads them back from a shapefile; ``outputs.OutputStaging``
+#: moves them to the final path): two names cut alike are numbered (``too_steep_long`` ->
+#: ``too_steep_``, ``too_steep_lat`` -> ``too_stee_1``), which no rule can guess
+WRITTEN_FIELD_NAMES: dict = {}
 
-def style_for_fields(qml: str, field_names) -> str:
-    """``qml`` with every field it names that the layer lacks but holds cut to a shapefile's
-    ten characters (``undesirable`` -> ``undesirabl``) named as the layer has it, in a
-    temporary copy; ``qml`` itself when the layer has every field (a GeoPackage) or none
+
+def _file_key(source: str) -> str:
+    return str(Path(str(source).split("|")[0]))
+
+
+def written_field_names(source: str) -> dict:
+    """The fields GDAL renamed in the file ``source`` (:data:`WRITTEN_FIELD_NAMES`)."""
+    return WRITTEN_FIELD_NAMES.get(_file_key(source), {})
+
+
+def record_written_field_names(source: str, renamed: dict) -> None:
+    if renamed:
+        WRITTEN_FIELD_NAMES[_file_key(source)] = dict(renamed)
+
+
+def move_written_field_names(renames: dict) -> None:
+    """Follow files moved from one path to another (``{old: new}``)."""
+    for old, new in renames.items():
+        if _file_key(old) in WRITTEN_FIELD_NAMES:
+            WRITTEN_FIELD_NAMES[_file_key(new)] = WRITTEN_FIELD_NAMES.pop(_file_key(old))
+
+
+def style_for_fields(qml: str, field_names, written: Optional[dict] = None) -> str:
+    """``qml`` with every field it names that the layer lacks named as the layer has it, in
+    a temporary copy: as GDAL wrote it (``written``: declared -> written names, read back
+    from the file), else cut to a shapefile's ten characters (``undesirable`` ->
+    ``undesirabl``); ``qml`` itself when the layer has every field (a GeoPackage) or none
     can be matched. A shipped style names the engine's fields, whose rules would otherwise
-    match nothing in a shapefile (tested in tests/test_alg_subdivide_parcels.py).
+    match nothing in a shapefile, or another field's values (tested in
+    tests/test_alg_subdivide_parcels.py and tests/test_alg_tessellate_streets.py).
     """
     import re
     import tempfile
 
     have = set(field_names)
+    written = written or {}
     text = Path(qml).read_text(encoding="utf-8")
     named = set(re.findall(r'(?:&quot;|(?:name|field|attr)=")([A-Za-z_][A-Za-z0-9_]*)'
                            r'(?:&quot;|")', text))
     renames = {}
     for name in named - have:
         cut = name[:DBF_NAME_LENGTH]
-        if len(name) > DBF_NAME_LENGTH and cut in have:
+        if written.get(name) in have:
+            renames[name] = written[name]
+        elif len(name) > DBF_NAME_LENGTH and cut in have and cut not in written.values():
             renames[name] = cut
     if not renames:
         return qml
@@ -79,7 +111,8 @@ def save_style_with_layer(destination: str, qml: str) -> Optional[str]:
     layer = QgsVectorLayer(destination, "output", "ogr")
     if not layer.isValid():
         return f"the output {destination} could not be opened to store its style"
-    message, ok = layer.loadNamedStyle(style_for_fields(qml, layer.fields().names()))
+    message, ok = layer.loadNamedStyle(style_for_fields(qml, layer.fields().names(),
+                                                        written_field_names(destination)))
     if not ok:
         return f"the style {qml} could not be read: {message}"
     if layer.dataProvider().storageType() == "GPKG":
@@ -119,7 +152,8 @@ def attach_style(context, dest_id: str, qml: str) -> None:
         def postProcessLayer(self, layer, ctx, feedback):  # noqa: N802
             if layer is not None and layer.isValid():
                 fields = layer.fields().names() if hasattr(layer, "fields") else []
-                layer.loadNamedStyle(style_for_fields(qml, fields) if fields else qml)
+                layer.loadNamedStyle(style_for_fields(
+                    qml, fields, written_field_names(layer.source())) if fields else qml)
                 layer.triggerRepaint()
                 _stack(layer, ctx.project() or QgsProject.instance(), Path(qml).name)
 
