@@ -409,9 +409,17 @@ def test_outputs_named_with_dots_load_under_their_full_name(qgis_processing, tmp
 
     (tmp_path / "elsewhere").mkdir()
     monkeypatch.setenv("TMPDIR", str(tmp_path / "elsewhere"))
+    from osgeo import ogr
+
+    ds = ogr.GetDriverByName("GPKG").CreateDataSource(str(tmp_path / "my.town.gpkg"))
+    ds.CreateLayer("wells", geom_type=ogr.wkbPoint)
+    ds = None
     for destination, name in (("my.town.v2.shp", "my.town.v2"),
                               ("my.town.v2.gpkg", "my.town.v2"), ("plain.gpkg", "plain"),
-                              ("ogr:dbname='{}/both.gpkg' table=\"roads\" (geom)", "roads")):
+                              ("ogr:dbname='{}/both.gpkg' table=\"roads\" (geom)", "roads"),
+                              # QGIS 3.22 read this URI's format after the first dot ('town.
+                              # gpkg') and failed once the run was done
+                              ("ogr:dbname='{}/my.town.gpkg' table=\"roads\" (geom)", "roads")):
         context = QgsProcessingContext()
         context.setProject(QgsProject.instance())
         out = destination.format(tmp_path) if destination.startswith("ogr:") else \
@@ -430,3 +438,4 @@ def test_outputs_named_with_dots_load_under_their_full_name(qgis_processing, tmp
         assert layer.name() == name, (key, layer.name())
     assert "my.town.v2" in geopackage_layers(tmp_path / "my.town.v2.gpkg")
     assert "my" not in geopackage_layers(tmp_path / "my.town.v2.gpkg")
+    assert {"wells", "roads"} <= set(geopackage_layers(tmp_path / "my.town.gpkg"))

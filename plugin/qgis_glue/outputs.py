@@ -408,17 +408,26 @@ class OutputStaging:
                 f"Output {definition.description()} ({definition.name()}) cannot be written "
                 f"to the folder {folder}: {exc.strerror or exc}.") from exc
         temp_path = staging / path.name
-        if table is not None:
+        dotted = _dotted_geopackage_layer(definition, path)
+        # QGIS 3.22 reads an ogr: URI's format from its file name after the first dot ('my.
+        # town.gpkg': no driver, after the whole run): the file is written by its path, the
+        # table named by the writer's layerName option (the geometry column: GeoPackage's)
+        if table is not None and not dotted:
             temp = destination.replace(_OGR_URI.match(destination).group("path"),
                                        str(temp_path).replace("'", "''"), 1)
         else:
             temp = str(temp_path)
+            column = _geometry_column(destination) if table is not None else None
+            if column and column != "geom" and self.feedback is not None:
+                self.feedback.pushWarning(
+                    f"Output {definition.name()}: the geometry column is named 'geom', not "
+                    f"'{column}': QGIS 3.22 cannot name it in a file whose name has a dot "
+                    f"before its extension ({path.name}).")
         self.staged.append(_Staged(definition.name(), destination, path, table, staging,
                                    temp, temp_path))
         staged_parameters[definition.name()] = self._redirect(
             self.parameters[definition.name()], definition, temp,
-            path.stem if _dotted_geopackage_layer(definition, path) and table is None
-            else None)
+            (table or path.stem) if dotted else None)
 
     def _make_folder(self, folder: Path, definition):
         try:
