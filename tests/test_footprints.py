@@ -565,6 +565,28 @@ def test_no_footprint_on_land_nowhere_the_minimum_width_wide(helsinki):
         assert len(r.geometry) and (r.table.block_id == 2).all(), method
 
 
+def test_no_footprint_on_an_untagged_roundabout_island(helsinki):
+    """A roundabout 25 m across in a 16 m primary, with no junction tag to say so (a
+    synthesised network): its island is a block (491 m², 12.5 m mean width) and keeps a
+    disc 9 m across off the road surface, wide enough but 64 m², under the minimum parcel
+    area: it gets no parcel, and got a footprint (one of Liechtenstein's two untagged-like
+    islands with land did, by re-synthesis). Land too small for a parcel takes no building."""
+    from urban_synthesis.plugin.core.geometry import MIN_BUILDABLE_AREA
+    from urban_synthesis.plugin.parcels import subdivision as parcels
+
+    island = shapely.Point(0, 0).buffer(12.5, quad_segs=16)
+    road = shapely.difference(island.exterior.buffer(8.0), shapely.Point(0, 0).buffer(4.5))
+    assert shapely.is_empty(footprints.street_offset(island, 0.0, keep_clear=[road]))
+    assert MIN_BUILDABLE_AREA == parcels.DEFAULT_MIN_AREA
+    # a piece of land of the minimum area and width is still built on
+    plot = shapely.box(0, 0, 15, 10)
+    assert footprints.street_offset(plot, 0.0).area == pytest.approx(150.0)
+    for method in footprints.METHODS:
+        r = footprints.synthesize_footprints([island], [helsinki], method, street_width=0.0,
+                                             seed=3, keep_clear=[road])
+        assert len(r.geometry) == 0, method
+
+
 def test_transfer_onto_bubenec(helsinki):
     streets = bubenec("streets").geometry.values
     ext = blocks.extract_blocks(streets)

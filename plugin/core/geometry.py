@@ -29,7 +29,7 @@ __all__ = ["group_starts", "group_ends", "unit", "substrings", "pinned_ends",
            "polygon_parts", "largest_polygons", "minimum_rectangles", "minimum_rectangle_corners",
            "longest_edge_directions", "ring_turns", "rounded_bends", "rounded_band_bends",
            "two_point_segments", "first_hits", "without_areas", "MIN_BUILDABLE_WIDTH",
-           "too_thin"]
+           "MIN_BUILDABLE_AREA", "too_thin"]
 
 #: Land (a block less its street surfaces) nowhere this wide (m) is no building land: no
 #: parcel is made on it and no footprint stands on it. A strip left between two wide streets
@@ -37,6 +37,11 @@ __all__ = ["group_starts", "group_ends", "unit", "substrings", "pinned_ends",
 #: is street furniture, not a plot. It is the default minimum lot width of the parcels
 #: (``parcels.DEFAULT_MIN_WIDTH``, which 'subdivideparcels' lets the analyst change).
 MIN_BUILDABLE_WIDTH = 8.0
+#: A piece of land smaller than this (m²) is no building land either: it gets no parcel
+#: (``parcels.DEFAULT_MIN_AREA``, the minimum parcel area) and no footprint. This takes the
+#: island of a roundabout that no tag names (a 25 m ring in a 16 m road keeps a 9 m disc,
+#: 64 m², wide enough by :data:`MIN_BUILDABLE_WIDTH`).
+MIN_BUILDABLE_AREA = 150.0
 
 
 # --------------------------------------------------------------------------- arrays

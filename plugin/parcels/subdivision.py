@@ -57,8 +57,9 @@ import shapely
 from scipy.spatial import cKDTree
 from shapely.geometry.polygon import orient
 
-from ..core.geometry import (MIN_BUILDABLE_WIDTH, group_starts, longest_edge_directions,
-                             minimum_rectangles, polygon_parts, too_thin, without_areas)
+from ..core.geometry import (MIN_BUILDABLE_AREA, MIN_BUILDABLE_WIDTH, group_starts,
+                             longest_edge_directions, minimum_rectangles, polygon_parts,
+                             too_thin, without_areas)
 from ..core.progress import InputError, Progress, ensure
 from ..measure import metrics as _metrics
 
@@ -83,8 +84,9 @@ PARCEL_FIELDS = [
 DEFAULT_STREET_WIDTH = 12.0
 #: Lots larger than this (m²) are split (recursive) or narrowed (skeleton).
 DEFAULT_MAX_AREA = 1200.0
-#: No lot is made smaller than this (m²); smaller pieces merge into a neighbour.
-DEFAULT_MIN_AREA = 150.0
+#: No lot is made smaller than this (m²); smaller pieces merge into a neighbour, and no
+#: footprint stands on a smaller piece of land (:data:`core.geometry.MIN_BUILDABLE_AREA`).
+DEFAULT_MIN_AREA = MIN_BUILDABLE_AREA
 #: No lot is made narrower than this (m, the short side of its minimum bounding rectangle),
 #: and shrunk block land nowhere this wide gets no lot (:func:`core.geometry.too_thin`).
 DEFAULT_MIN_WIDTH = MIN_BUILDABLE_WIDTH
