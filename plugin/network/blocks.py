@@ -18,9 +18,10 @@ perimeter`` (the width of a long strip) is under ``min_width``; the thesis does 
 for its raster artefacts (ch. 4.2, "delete the artefact blocks of area 0.5 px²"). The island
 inside a roundabout (OSM ``junction=roundabout``, when the roads say which they are) is
 road furniture too, however large: a face whose outline lies wholly on roundabout roads is
-dropped (:func:`roundabout_islands`). Without the tag, such an island is left to the
-parcel and footprint stages, which build on no land nowhere
-:data:`core.geometry.MIN_BUILDABLE_WIDTH` wide once the road surface is taken off.
+dropped (:func:`roundabout_islands`). Without the tag (a synthesised network) such an
+island stays a block, and the parcel and footprint stages build on none of what is left of
+it once the road surface is off: land under :data:`core.geometry.MIN_BUILDABLE_AREA` or
+nowhere :data:`core.geometry.MIN_BUILDABLE_WIDTH` wide is no building land.
 
 Buildings and parcels are assigned to at most one block each: the block that holds the
 largest share of their area, if that share is at least ``min_share`` (a half by default).

@@ -1446,7 +1446,7 @@ class Subdivision:
         (blocks with land nowhere ``min_width`` wide, which gets no lot), ``n_lots``,
         ``n_over_max_area`` (lots no acceptable cut could split), ``n_without_access``,
         ``n_merged_for_access``, ``n_under_min_width`` (lots narrower than ``min_width``:
-        a block part too thin for any lot), ``n_sized_by_block`` (blocks with their own
+        on a thin arm of land that is wider elsewhere), ``n_sized_by_block`` (blocks with their own
         parcel area), ``n_undesirable``.
     """
 
