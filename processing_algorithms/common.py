@@ -340,23 +340,29 @@ class AlgorithmBase(QgsProcessingAlgorithm):
         classes keeps every line) and its road classes (None without classes)."""
         frame = qgis_io.read_source(
             self, parameters, name, context, feedback, kind="lines",
-            fields=[class_field or "highway", "other_tags", "road_class", *fields],
+            fields=[class_field or "highway", "other_tags", "road_class", "junction", *fields],
             required_fields=required_fields)
         classes = set(street_graph.DRIVABLE_CLASSES) if classes is None else classes
         return drivable_lines(frame, class_field, classes, feedback)
 
     def blocks_from_roads(self, frame, road_class, feedback, progress=(5.0, 30.0), **kwargs):
         """The street graph and city blocks of a road frame (:func:`blocks.blocks_from_roads`,
-        the rule of 'Extract city blocks'), with the counts in the log. ``kwargs``:
-        buildings, parcels, min_area, min_width."""
+        the rule of 'Extract city blocks'), with the counts in the log; the islands of
+        OSM's ``junction=roundabout`` rings are no blocks. ``kwargs``: buildings, parcels,
+        min_area, min_width."""
+        junction = qgis_io.osm_tag_column(frame, "junction")
+        roundabout = None if junction is None else np.array(
+            [str(v).strip().lower() == "roundabout" for v in junction], dtype=bool)
         graph, result = qgis_io.run_engine(
             frame.name, block_rules.blocks_from_roads, frame.geometry, road_class,
-            progress=qgis_io.progress_for(feedback, *progress), **kwargs)
+            progress=qgis_io.progress_for(feedback, *progress), roundabout=roundabout,
+            **kwargs)
         st = result.stats
         feedback.pushInfo(
             f"Street graph: {graph.n_edges} edges, {len(graph.nodes)} nodes; "
             f"{st['n_blocks']} blocks from {st['n_faces']} closed faces of {frame.name} "
-            f"({st['n_small']} too small and {st['n_thin']} too thin dropped).")
+            f"({st['n_small']} too small, {st['n_thin']} too thin and "
+            f"{counted(st['n_roundabout'], 'roundabout island')} dropped).")
         return graph, result
 
     @staticmethod

@@ -160,10 +160,10 @@ class SubdivideParcels(AlgorithmBase):
             "pieces of shrunk blocks smaller than this get no parcel.", advanced=True)
         self.add(QgsProcessingParameterNumber(
             self.MIN_WIDTH, "Minimum parcel width (m)", QgsProcessingParameterNumber.Type.Double,
-            defaultValue=parcels.DEFAULT_MIN_WIDTH, minValue=0.0,
-            maxValue=self.MAX_WIDTH_LIMIT),
+            defaultValue=parcels.DEFAULT_MIN_WIDTH, minValue=0.0, maxValue=self.MAX_WIDTH_LIMIT),
             "No cut makes a parcel narrower (the short side of its minimum bounding "
-            "rectangle).", advanced=True)
+            "rectangle); land of a shrunk block nowhere this wide (a strip between wide "
+            "streets, a roundabout's island) gets no parcel.", advanced=True)
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT, "Parcels", QgsProcessing.SourceType.TypeVectorPolygon),
             "Parcels with parcel_id, block_id, area_m2, frontage_m, has_street_access, "
@@ -196,11 +196,10 @@ class SubdivideParcels(AlgorithmBase):
             max_area=number[self.MAX_AREA], min_area=number[self.MIN_AREA],
             min_width=number[self.MIN_WIDTH], lot_width=number[self.LOT_WIDTH],
             irregularity=number[self.IRREGULARITY],
-            force_street_access=self.parameterAsBoolean(parameters, self.FORCE_STREET_ACCESS,
-                                                        context))
+            force_street_access=self.parameterAsBoolean(
+                parameters, self.FORCE_STREET_ACCESS, context))
         qgis_io.run_engine("Parameters", settings.validate)
         seed = self.seed(parameters, context)
-        street_width = number[self.STREET_WIDTH]
 
         size = {}
         if self.given(parameters, self.BLOCKS):
@@ -221,17 +220,17 @@ class SubdivideParcels(AlgorithmBase):
                         "subdivide the blocks in parts, or raise the maximum parcel area")
         result = qgis_io.run_engine(
             frame.name, parcels.subdivide_blocks, block_geoms, method, settings, seed=seed,
-            block_ids=block_ids, street_width=street_width, roads=road_lines,
+            block_ids=block_ids, street_width=number[self.STREET_WIDTH], roads=road_lines,
             road_widths=road_widths, keep_clear=keep_clear, keep_whole=keep_whole,
             progress=qgis_io.progress_for(feedback, 30, 90), **size)
         self._log(result.stats, method, feedback)
         if len(result.geometry) == 0:
+            clear = keep_clear is not None
             raise QgsProcessingException(
                 f"{frame.name}: no parcel: every block is narrower than its streets"
-                + (", covered by the areas to keep clear," if keep_clear is not None else "")
-                + " or smaller than the minimum parcel area (lower the street width or the "
-                "minimum area" + (", or check the areas to keep clear" if keep_clear is not None
-                                  else "") + ").")
+                f"{', covered by the areas to keep clear,' if clear else ''} or smaller than "
+                "the minimum parcel area or width (lower the street width or the minimum area "
+                f"or width{', or check the areas to keep clear' if clear else ''}).")
         dest = qgis_io.write_sink(
             self, parameters, self.OUTPUT, context, result.geometry, result.table,
             parcels.PARCEL_FIELDS, QgsWkbTypes.Type.Polygon, frame.source_crs, frame.crs, feedback)
@@ -319,15 +318,16 @@ class SubdivideParcels(AlgorithmBase):
         for count, one, many, text in (
                 (n("n_empty_blocks"), "block is", "blocks are", "narrower than their streets "
                  "(or smaller than the minimum area after shrinking) and get no parcel."),
+                (n("n_thin_blocks"), "block has", "blocks have", "land nowhere the minimum "
+                 "width wide after shrinking (a strip, a roundabout's island): no parcel there."),
                 (over, "parcel stays", "parcels stay", "larger than the maximum area: every "
                  "cut would have made a piece too small, too thin or without street access."),
                 (n("n_over_max_area_merged"), "parcel is", "parcels are", "larger than the "
                  "maximum area because lots merged so that a building stands on one parcel."),
                 (n("n_without_access"), "parcel has", "parcels have", "no street frontage."),
                 (n("n_under_min_width"), "parcel is", "parcels are", "narrower than the minimum "
-                 "width: their block part is too thin for a wider lot."),
-                (n("n_merged_for_access"), "lot", "lots", "without street frontage were "
-                 "merged into a neighbour."),
+                 "width: a thin arm of their block part."),
+                (n("n_merged_for_access"), "lot", "lots", "without frontage merged into others."),
                 (n("n_merged_for_buildings"), "lot", "lots", "merged into a neighbour so "
                  "that a building stands on one parcel.")):
             if count and count > 0:

@@ -16,6 +16,7 @@ from qgis.core import (
 )
 
 from ..plugin.buildings import footprints
+from ..plugin.core.geometry import MIN_BUILDABLE_AREA, MIN_BUILDABLE_WIDTH
 from ..plugin.core.text import counted
 from ..plugin.qgis_glue import qgis_io
 from ..plugin.retrieval import database
@@ -63,8 +64,10 @@ class SynthesizeFootprints(AlgorithmBase):
             "repeated or left out to fit a longer or shorter street, none is distorted.\n\n"
             "Every footprint lies inside its block and off the road surface (half the street "
             "width from each centreline, plus the setback, and off the areas to keep clear, "
-            "e.g. the street surfaces of 'Tessellate streets (surfaces and junctions)'); none "
-            "overlaps another; what "
+            "e.g. the street surfaces of 'Tessellate streets (surfaces and junctions)'), and "
+            f"off land that would get no parcel: pieces nowhere {MIN_BUILDABLE_WIDTH:g} m wide "
+            f"(a strip between wide streets) or under {MIN_BUILDABLE_AREA:g} m² (a roundabout's "
+            "island). None overlaps another; what "
             "still conflicts is trimmed or dropped. Databases come from 'Build block "
             "database'; a second one mixes styles, chosen per area by STYLE polygons.\n\n"
             "Output: footprints with the example building's height_m, levels and "

@@ -335,3 +335,32 @@ def test_the_log_names_the_working_crs(qgis_processing, crs, said):
     else:
         assert any(m.startswith("'house'") and f"projected to the working CRS, {work}" in m
                    for m in log.messages), log.messages
+
+
+def test_roundabout_islands_of_osm_are_no_blocks(qgis_processing):
+    """Liechtenstein's OSM lines: the islands of its junction=roundabout rings (in
+    other_tags) became blocks (371); 6 of them are over the minimum block area. They are
+    dropped, and the log counts them."""
+    from conftest import LIECHTENSTEIN
+
+    if not LIECHTENSTEIN.exists():
+        pytest.skip(f"{LIECHTENSTEIN} is not there")
+    log = log_feedback()
+    out = qgis_processing.run("urbansynth:extractblocks", {
+        "ROADS": f"{LIECHTENSTEIN}|layername=lines", "OUTPUT": "memory:"}, feedback=log)
+    assert out["OUTPUT"].featureCount() == 365
+    assert any("6 roundabout islands dropped" in m for m in log.messages), log.messages
+    # a layer with its own junction field, as a hand-drawn one would have
+    ring = shapely.LineString(shapely.Point(100, 100).buffer(12.5, quad_segs=16).exterior.coords)
+    wkts = ["LINESTRING (0 0, 200 0, 200 200, 0 200, 0 0)", shapely.to_wkt(ring),
+            "LINESTRING (100 0, 100 87.5)", "LINESTRING (100 112.5, 100 200)",
+            "LINESTRING (0 100, 87.5 100)", "LINESTRING (112.5 100, 200 100)"]
+    layer = memory_layer("LineString", wkts, "EPSG:32632",
+                         fields="&field=highway:string&field=junction:string",
+                         rows=[["residential", "roundabout" if i == 1 else None]
+                               for i in range(6)])
+    log = log_feedback()
+    out = qgis_processing.run("urbansynth:extractblocks", {"ROADS": layer, "OUTPUT": "memory:"},
+                              feedback=log)
+    assert out["OUTPUT"].featureCount() == 4
+    assert any("1 roundabout island dropped" in m for m in log.messages), log.messages

@@ -30,7 +30,8 @@ def test_street_grid_gives_four_square_blocks():
     # ids follow the lower-left corner: row by row from the south-west
     assert [tuple(np.round(shapely.bounds(p)[:2])) for p in r.geometry] == \
         [(0, 0), (100, 0), (0, 100), (100, 100)]
-    assert r.stats == {"n_faces": 4, "n_small": 0, "n_thin": 0, "n_blocks": 4}
+    assert r.stats == {"n_faces": 4, "n_small": 0, "n_thin": 0, "n_roundabout": 0,
+                       "n_blocks": 4}
 
 
 def test_dead_end_street_stays_inside_its_block():
@@ -51,6 +52,63 @@ def test_sliver_faces_are_dropped():
     assert r.stats["n_thin"] == 2       # the 6 m strip between the carriageways, both halves
     assert len(r.geometry) == 4
     assert (r.table.area_m2 > 9_000).all()
+
+
+def roundabout_cross(radius=12.5):
+    """A 200 m square of streets, a cross through it meeting at a roundabout of ``radius``
+    in the middle (25 m across: 491 m² and 12.5 m mean width, a block by area and width)."""
+    ring = LineString(shapely.Point(100, 100).buffer(radius, quad_segs=16).exterior.coords)
+    square = LineString([(0, 0), (200, 0), (200, 200), (0, 200), (0, 0)])
+    arms = [LineString([(100, 0), (100, 100 - radius)]),
+            LineString([(100, 100 + radius), (100, 200)]),
+            LineString([(0, 100), (100 - radius, 100)]),
+            LineString([(100 + radius, 100), (200, 100)])]
+    return [square, ring, *arms], np.array([False, True, False, False, False, False])
+
+
+def test_a_roundabout_island_is_no_block():
+    """The island inside a junction=roundabout ring is road furniture: it became a block
+    (and then got a parcel and footprints); with the roads' roundabout flags it is dropped
+    and counted, from lines, from a graph and through blocks_from_roads."""
+    lines, ring = roundabout_cross()
+    plain = blocks.extract_blocks(lines)
+    assert plain.stats["n_blocks"] == 5 and plain.stats["n_roundabout"] == 0
+    r = blocks.extract_blocks(lines, roundabout=ring)
+    assert r.stats["n_blocks"] == 4 and r.stats["n_roundabout"] == 1
+    assert not shapely.intersects(r.geometry, shapely.Point(100, 100)).any()
+    graph, r = blocks.blocks_from_roads(lines, roundabout=ring)
+    assert r.stats["n_blocks"] == 4 and r.stats["n_roundabout"] == 1
+    assert (r.table.area_m2 > 9_000).all()
+    g = roads.clean_network(lines, merge_degree2=False)
+    r = blocks.extract_blocks(g, roundabout=ring[g.source])
+    assert r.stats["n_roundabout"] == 1
+    # a face only partly on the ring (a block beside it) stays
+    assert blocks.roundabout_islands(r.geometry, g.geometry, ring[g.source]).sum() == 0
+    with pytest.raises(InputError, match="roundabout flags"):
+        blocks.extract_blocks(lines, roundabout=ring[:3])
+
+
+def test_liechtenstein_roundabout_islands_are_no_blocks():
+    """Liechtenstein (2013) has 13 junction=roundabout rings; 6 of their islands, 400 to
+    492 m², were blocks (the 7 smaller ones fall under the minimum block area)."""
+    import pyogrio
+
+    from conftest import LIECHTENSTEIN
+
+    if not LIECHTENSTEIN.exists():
+        pytest.skip(f"{LIECHTENSTEIN} is not there")
+    lines = pyogrio.read_dataframe(LIECHTENSTEIN, layer="lines",
+                                   columns=["highway", "other_tags"])
+    lines = lines[lines.highway.isin(roads.DRIVABLE_CLASSES)].to_crs(32632)
+    ring = lines.other_tags.fillna("").str.contains('"junction"=>"roundabout"').to_numpy()
+    _, before = blocks.blocks_from_roads(lines.geometry.values, lines.highway.values)
+    _, after = blocks.blocks_from_roads(lines.geometry.values, lines.highway.values,
+                                        roundabout=ring)
+    assert ring.sum() == 13 and after.stats["n_roundabout"] == 6
+    assert after.stats["n_blocks"] == before.stats["n_blocks"] - 6
+    islands = shapely.polygonize(lines.geometry.values[ring]).geoms
+    assert not shapely.intersects(after.geometry[:, None],
+                                  shapely.point_on_surface(islands)[None, :]).any()
 
 
 def test_lines_and_graph_give_the_same_blocks():

@@ -541,6 +541,52 @@ def test_footprints_stay_off_the_areas_kept_clear(helsinki):
                                                  shapely.union_all(clear))).sum() > 100
 
 
+def test_no_footprint_on_land_nowhere_the_minimum_width_wide(helsinki):
+    """A block 17.3 m across between two 16 m primaries keeps a 1.3 m strip (240 m²) off
+    the road surface, which was buildable land (a footprint small enough for it could
+    stand there); land nowhere MIN_BUILDABLE_WIDTH wide is no building land, as it gets no
+    parcel. The block beside it (30 m, 14 m of land) is still built on."""
+    from urban_synthesis.plugin.core.geometry import MIN_BUILDABLE_WIDTH
+
+    roads = [shapely.LineString([(0, y), (200, y)]) for y in (0.0, 17.3, 47.3)] + \
+        [shapely.LineString([(x, 0), (x, 47.3)]) for x in (0.0, 200.0)]
+    widths = np.array([16.0, 16.0, 8.0, 16.0, 16.0])
+    clear = shapely.buffer(np.array(roads, dtype=object), widths / 2, cap_style="flat")
+    thin, wide = shapely.box(0, 0, 200, 17.3), shapely.box(0, 17.3, 200, 47.3)
+    assert shapely.is_empty(footprints.street_offset(thin, 0.0, keep_clear=clear))
+    # the setback counts: 9 m of land less 2 x 1 m is still a place to build
+    assert not shapely.is_empty(footprints.street_offset(
+        shapely.box(0, 0, 100, 9.0 + 16), 16.0, setback=1.0))
+    assert shapely.is_empty(footprints.street_offset(
+        shapely.box(0, 0, 100, MIN_BUILDABLE_WIDTH - 0.5 + 16), 16.0))
+    for method in footprints.METHODS:
+        r = footprints.synthesize_footprints([thin, wide], [helsinki], method, street_width=0.0,
+                                             seed=3, keep_clear=clear)
+        assert len(r.geometry) and (r.table.block_id == 2).all(), method
+
+
+def test_no_footprint_on_an_untagged_roundabout_island(helsinki):
+    """A roundabout 25 m across in a 16 m primary, with no junction tag to say so (a
+    synthesised network): its island is a block (491 m², 12.5 m mean width) and keeps a
+    disc 9 m across off the road surface, wide enough but 64 m², under the minimum parcel
+    area: it gets no parcel, and got a footprint (one of Liechtenstein's two untagged-like
+    islands with land did, by re-synthesis). Land too small for a parcel takes no building."""
+    from urban_synthesis.plugin.core.geometry import MIN_BUILDABLE_AREA
+    from urban_synthesis.plugin.parcels import subdivision as parcels
+
+    island = shapely.Point(0, 0).buffer(12.5, quad_segs=16)
+    road = shapely.difference(island.exterior.buffer(8.0), shapely.Point(0, 0).buffer(4.5))
+    assert shapely.is_empty(footprints.street_offset(island, 0.0, keep_clear=[road]))
+    assert MIN_BUILDABLE_AREA == parcels.DEFAULT_MIN_AREA
+    # a piece of land of the minimum area and width is still built on
+    plot = shapely.box(0, 0, 15, 10)
+    assert footprints.street_offset(plot, 0.0).area == pytest.approx(150.0)
+    for method in footprints.METHODS:
+        r = footprints.synthesize_footprints([island], [helsinki], method, street_width=0.0,
+                                             seed=3, keep_clear=[road])
+        assert len(r.geometry) == 0, method
+
+
 def test_transfer_onto_bubenec(helsinki):
     streets = bubenec("streets").geometry.values
     ext = blocks.extract_blocks(streets)

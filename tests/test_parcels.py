@@ -83,6 +83,42 @@ def test_shrink_cuts_dead_ends_and_drops_slivers():
     assert shapely.area(kept[0]) == pytest.approx(35 * 35)
 
 
+@pytest.mark.parametrize("method", ["recursive", "skeleton", "voronoi-obb"])
+def test_land_nowhere_the_minimum_width_wide_gets_no_parcel(method):
+    """A 17.3 m wide block between two 16 m primaries keeps a strip 1.3 m x 200 m (260 m²,
+    over the minimum area) after shrinking: it got a parcel (one 1.3 m wide lot, counted
+    only as 'narrower than the minimum width'). Land nowhere the minimum lot width wide is
+    no building land: no parcel, and the count says so. The 30 m block beside it, 14 m wide
+    after shrinking, still gets its parcels."""
+    roads = [shapely.LineString([(0, y), (200, y)]) for y in (0.0, 17.3, 47.3)]
+    widths = [16.0, 16.0, 8.0]
+    blocks = [shapely.box(0, 0, 200, 17.3), shapely.box(0, 17.3, 200, 47.3)]
+    result = parcels.subdivide_blocks(blocks, method, seed=0, street_width=0, roads=roads,
+                                      road_widths=widths)
+    strip = shapely.box(0, 8, 200, 9.3)
+    assert not shapely.intersects(result.geometry, strip).any()
+    assert set(result.table.block_id) == {2}
+    assert result.stats["n_thin_blocks"] == 1 and result.stats["n_empty_blocks"] == 1
+    # the rule follows the analyst's minimum width: at 1 m the strip gets its lots again
+    loose = parcels.subdivide_blocks(blocks, method, settings(min_width=1.0, lot_width=18),
+                                     seed=0, street_width=0, roads=roads, road_widths=widths)
+    assert set(loose.table.block_id) == {1, 2} and loose.stats["n_thin_blocks"] == 0
+
+
+def test_too_thin_is_the_one_rule_of_building_land():
+    from urban_synthesis.plugin.core.geometry import MIN_BUILDABLE_WIDTH, too_thin
+
+    assert parcels.DEFAULT_MIN_WIDTH == MIN_BUILDABLE_WIDTH
+    # an L of two 6 m arms is thin however long; a 9 m disc (a roundabout island of a 25 m
+    # ring shrunk by a 16 m road) is not; a block with one wide part is not
+    ell = shapely.union_all([shapely.box(0, 0, 100, 6), shapely.box(0, 0, 6, 100)])
+    disc = shapely.Point(0, 0).buffer(4.5)
+    wide_end = shapely.union_all([shapely.box(0, 0, 100, 3), shapely.box(90, 0, 100, 10)])
+    assert too_thin([ell, disc, wide_end]).tolist() == [True, False, False]
+    shrunk = parcels.shrink_blocks([shapely.box(0, 0, 200, 17.3)], 8.0, min_width=8.0)
+    assert shapely.is_empty(shrunk[0])
+
+
 def test_lots_stay_off_the_areas_kept_clear():
     """A 16 m arterial surface on one side and a dead end's surface inside the block (which
     a block outlined by centrelines does not show): no lot takes any of either, and the

@@ -39,7 +39,8 @@ import numpy as np
 import pandas as pd
 import shapely
 
-from ..core.geometry import largest_polygons, polygon_parts, without_areas
+from ..core.geometry import (MIN_BUILDABLE_AREA, MIN_BUILDABLE_WIDTH, largest_polygons,
+                             polygon_parts, too_thin, without_areas)
 from ..core.progress import InputError, Progress, ensure
 from ..network.blocks import shape_metrics
 from ..retrieval import shape_context as sc
@@ -143,7 +144,12 @@ def street_offset(block, street_width: float = STREET_WIDTH, setback: float = 0.
     its boundary, and from dead-end streets inside it when ``roads`` are given) and the
     ``setback`` behind it, and less the ``keep_clear`` areas (e.g. the street surfaces and
     junctions of 'tessellatestreets', as wide as each street's class) and the ``setback``
-    around them.
+    around them; less its parts on land that is no building land (nor gets a parcel):
+    nowhere :data:`core.geometry.MIN_BUILDABLE_WIDTH` wide (:func:`core.geometry.too_thin`:
+    a strip between wide streets) or smaller than :data:`core.geometry.MIN_BUILDABLE_AREA`
+    (the island of a roundabout). With a setback, a part is dropped when it is nowhere
+    that width less twice the setback wide, or when what the setback leaves of it is
+    smaller than that area.
     """
     inset = street_width / 2.0 + setback
     if roads is not None and len(roads):
@@ -156,7 +162,15 @@ def street_offset(block, street_width: float = STREET_WIDTH, setback: float = 0.
     if keep_clear is not None and len(keep_clear):
         clear = np.asarray(keep_clear, dtype=object)
         area = without_areas([area], shapely.buffer(clear, setback) if setback > 0 else clear)[0]
-    return shapely.make_valid(area) if not shapely.is_valid(area) else area
+    area = shapely.make_valid(area) if not shapely.is_valid(area) else area
+    parts, _ = polygon_parts([area])
+    thin = too_thin(parts, max(MIN_BUILDABLE_WIDTH - 2.0 * setback, 0.0)) | \
+        (shapely.area(parts) < MIN_BUILDABLE_AREA)
+    if not thin.any():
+        return area
+    kept = parts[~thin]
+    return kept[0] if len(kept) == 1 else shapely.multipolygons(kept) if len(kept) else \
+        shapely.Polygon()
 
 
 def legalise(polygons: Sequence, order: Sequence[int], buildable, block,

@@ -5,6 +5,7 @@
   axis of the Voronoi parcels, template frames, grid directions of road growth);
 - :func:`largest_polygons`: the largest polygon part of each (repaired) geometry;
 - :func:`without_areas`: geometries less the areas to keep clear that reach them;
+- :func:`too_thin`: land nowhere :data:`MIN_BUILDABLE_WIDTH` wide (no lot, no building);
 - :func:`substrings`: stretches of lines between arc lengths;
 - :func:`unit`: unit vectors; :func:`group_starts` / :func:`group_ends`: runs of equal keys;
 - :func:`ring_turns`: the signed turn at each vertex of a closed ring;
@@ -27,7 +28,20 @@ import shapely
 __all__ = ["group_starts", "group_ends", "unit", "substrings", "pinned_ends",
            "polygon_parts", "largest_polygons", "minimum_rectangles", "minimum_rectangle_corners",
            "longest_edge_directions", "ring_turns", "rounded_bends", "rounded_band_bends",
-           "two_point_segments", "first_hits", "without_areas"]
+           "two_point_segments", "first_hits", "without_areas", "MIN_BUILDABLE_WIDTH",
+           "MIN_BUILDABLE_AREA", "too_thin"]
+
+#: Land (a block less its street surfaces) nowhere this wide (m) is no building land: no
+#: parcel is made on it and no footprint stands on it. A strip left between two wide streets
+#: (a block 17 m across between two 16 m primaries keeps 1.3 m) or the island of a roundabout
+#: is street furniture, not a plot. It is the default minimum lot width of the parcels
+#: (``parcels.DEFAULT_MIN_WIDTH``, which 'subdivideparcels' lets the analyst change).
+MIN_BUILDABLE_WIDTH = 8.0
+#: A piece of land smaller than this (m²) is no building land either: it gets no parcel
+#: (``parcels.DEFAULT_MIN_AREA``, the minimum parcel area) and no footprint. This takes the
+#: island of a roundabout that no tag names (a 25 m ring in a 16 m road keeps a 9 m disc,
+#: 64 m², wide enough by :data:`MIN_BUILDABLE_WIDTH`).
+MIN_BUILDABLE_AREA = 150.0
 
 
 # --------------------------------------------------------------------------- arrays
@@ -234,6 +248,30 @@ def without_areas(geoms: Sequence, areas: Sequence) -> np.ndarray:
             i = g_idx[s]
             out[i] = shapely.difference(shapely.force_2d(geoms[i]),
                                         shapely.union_all(areas[a_idx[s:e]]))
+    return out
+
+
+def too_thin(polygons: Sequence, width: float = MIN_BUILDABLE_WIDTH) -> np.ndarray:
+    """Per polygon: True where no disc ``width`` across fits in it anywhere (its inward
+    offset by ``width / 2`` is empty), i.e. it is narrower than ``width`` everywhere.
+
+    The one rule of what land is too thin to build on (:data:`MIN_BUILDABLE_WIDTH`): a
+    strip, a sliver or a small island is; a block with one wide part is not, however thin
+    its other arms. Empty geometries are too thin; with ``width`` 0 nothing is.
+
+    >>> strip, plot = shapely.box(0, 0, 120, 1.3), shapely.box(0, 0, 20, 9)
+    >>> too_thin([strip, plot, shapely.Polygon()]).tolist()
+    [True, False, True]
+    >>> too_thin([plot], 10.0).tolist()
+    [True]
+    """
+    polygons = np.asarray(polygons, dtype=object).ravel()
+    empty = shapely.is_missing(polygons) | shapely.is_empty(polygons)
+    if width <= 0:
+        return empty
+    out = empty.copy()
+    core = shapely.buffer(polygons[~empty], -width / 2.0, quad_segs=2, join_style="mitre")
+    out[~empty] = shapely.is_empty(core) | (shapely.area(core) <= 0)
     return out
 
 

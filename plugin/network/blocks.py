@@ -15,7 +15,13 @@ Real OSM makes artefact faces (docs/ARCHITECTURE.md, "Real example data"): dual 
 roads and traffic islands close small or thin faces that are road surface, not blocks.
 A face is dropped when its area is under ``min_area`` or its mean width ``2 * area /
 perimeter`` (the width of a long strip) is under ``min_width``; the thesis does the same
-for its raster artefacts (ch. 4.2, "delete the artefact blocks of area 0.5 px²").
+for its raster artefacts (ch. 4.2, "delete the artefact blocks of area 0.5 px²"). The island
+inside a roundabout (OSM ``junction=roundabout``, when the roads say which they are) is
+road furniture too, however large: a face whose outline lies wholly on roundabout roads is
+dropped (:func:`roundabout_islands`). Without the tag (a synthesised network) such an
+island stays a block, and the parcel and footprint stages build on none of what is left of
+it once the road surface is off: land under :data:`core.geometry.MIN_BUILDABLE_AREA` or
+nowhere :data:`core.geometry.MIN_BUILDABLE_WIDTH` wide is no building land.
 
 Buildings and parcels are assigned to at most one block each: the block that holds the
 largest share of their area, if that share is at least ``min_share`` (a half by default).
@@ -47,7 +53,7 @@ from .street_graph import RoadGraph, node_lines
 
 __all__ = [
     "MIN_BLOCK_AREA", "MIN_BLOCK_WIDTH", "MIN_SHARE", "BLOCK_FIELDS", "BlockExtraction",
-    "planar_faces", "block_faces", "shape_metrics", "assign_to_blocks",
+    "planar_faces", "block_faces", "roundabout_islands", "shape_metrics", "assign_to_blocks",
     "extract_blocks", "blocks_from_roads",
 ]
 
@@ -61,6 +67,8 @@ MIN_SHARE = 0.5
 
 #: Walks enclosing less than this (m²) are the zero-area cycles of duplicate edges.
 _MIN_FACE_AREA = 1e-6
+#: A face outline within this (m) of a road lies on it (round-off of the traced walk).
+_ON_LINE = 1e-3
 
 #: Per-block attributes of :attr:`BlockExtraction.table` with their types.
 BLOCK_FIELDS = [
@@ -87,8 +95,9 @@ class BlockExtraction:
         every block), ``block_share`` (share of the feature's area inside that block, 0
         outside), ``in_block`` (bool).
     stats : dict
-        Counts for the log: ``n_faces`` (all faces), ``n_small``, ``n_thin`` (dropped
-        faces), ``n_blocks``, ``n_buildings_in_blocks``, ``n_parcels_in_blocks``.
+        Counts for the log: ``n_faces`` (all faces), ``n_small``, ``n_thin``,
+        ``n_roundabout`` (dropped faces), ``n_blocks``, ``n_buildings_in_blocks``,
+        ``n_parcels_in_blocks``.
     """
 
     geometry: np.ndarray
@@ -389,6 +398,38 @@ def _filtered_faces(net: "_Network", min_area: float, min_width: float):
                           "n_thin": int(thin.sum())}
 
 
+def roundabout_islands(faces: Sequence, lines: Sequence, roundabout: Sequence) -> np.ndarray:
+    """Per face: True where its outline lies wholly on roundabout roads (the island of a
+    roundabout, OSM ``junction=roundabout``): road furniture, not a block.
+
+    Parameters
+    ----------
+    faces : array of Polygon
+        Faces of ``lines`` (their outlines are made of the lines' coordinates).
+    lines : array of LineString
+    roundabout : bool per line
+
+    Examples
+    --------
+    >>> import shapely
+    >>> ring = shapely.Point(0, 0).buffer(12.5).exterior
+    >>> island, beside = shapely.Polygon(ring), shapely.box(20, -5, 40, 5)
+    >>> roundabout_islands([island, beside], [ring], [True]).tolist()
+    [True, False]
+    """
+    faces = np.asarray(faces, dtype=object)
+    out = np.zeros(len(faces), dtype=bool)
+    ring_lines = np.asarray(lines, dtype=object)[np.asarray(roundabout, dtype=bool)]
+    ring_lines = ring_lines[~(shapely.is_missing(ring_lines) | shapely.is_empty(ring_lines))]
+    if len(faces) == 0 or len(ring_lines) == 0:
+        return out
+    near = np.unique(shapely.STRtree(faces).query(ring_lines, predicate="intersects")[1])
+    if len(near):
+        band = shapely.buffer(shapely.union_all(ring_lines), _ON_LINE, quad_segs=2)
+        out[near] = shapely.covered_by(shapely.get_exterior_ring(faces[near]), band)
+    return out
+
+
 def _planar_lines(graph: RoadGraph) -> np.ndarray:
     """The edges of a cleaned graph, noded where edges of different vertical layers cross.
 
@@ -527,7 +568,8 @@ def extract_blocks(roads, buildings: Optional[Sequence] = None,
                    parcels: Optional[Sequence] = None,
                    min_area: float = MIN_BLOCK_AREA, min_width: float = MIN_BLOCK_WIDTH,
                    min_share: float = MIN_SHARE,
-                   progress: Optional[Progress] = None) -> BlockExtraction:
+                   progress: Optional[Progress] = None,
+                   roundabout: Optional[Sequence[bool]] = None) -> BlockExtraction:
     """City blocks of a street network, with their footprints and parcels.
 
     Parameters
@@ -543,6 +585,9 @@ def extract_blocks(roads, buildings: Optional[Sequence] = None,
     min_share : float
         Assignment rule of :func:`assign_to_blocks`.
     progress : Progress, optional
+    roundabout : bool per road (per edge of a RoadGraph), optional
+        Roads that are roundabouts (OSM ``junction=roundabout``): the faces they enclose
+        alone are roundabout islands, not blocks (:func:`roundabout_islands`).
 
     Returns
     -------
@@ -582,12 +627,19 @@ def extract_blocks(roads, buildings: Optional[Sequence] = None,
         dead_ends = net.dead_ends()
     progress.step(0.1)
     faces, counts = _filtered_faces(net, min_area, min_width)
+    counts["n_roundabout"] = 0
+    if roundabout is not None:
+        lines = roads.geometry if isinstance(roads, RoadGraph) else roads
+        if len(roundabout) != len(lines):
+            raise InputError(f"{len(roundabout)} roundabout flags for {len(lines)} roads")
+        island = roundabout_islands(faces, lines, roundabout)
+        faces, counts["n_roundabout"] = faces[~island], int(island.sum())
     progress.step(0.4)
     if len(faces) == 0:
         raise InputError(
             f"no closed block: all {counts['n_faces']} faces of the roads are smaller than "
-            f"{min_area:g} m² or narrower than {min_width:g} m (lower the minimum block area "
-            "or width)")
+            f"{min_area:g} m², narrower than {min_width:g} m or roundabout islands (lower "
+            "the minimum block area or width)")
     n = len(faces)
     columns = {"block_id": np.arange(1, n + 1, dtype=np.int64)}
     columns.update(_shape_columns(faces))
@@ -630,7 +682,8 @@ def extract_blocks(roads, buildings: Optional[Sequence] = None,
 def blocks_from_roads(lines: Sequence, road_class: Optional[Sequence] = None,
                       buildings: Optional[Sequence] = None, parcels: Optional[Sequence] = None,
                       min_area: float = MIN_BLOCK_AREA, min_width: float = MIN_BLOCK_WIDTH,
-                      progress: Optional[Progress] = None):
+                      progress: Optional[Progress] = None,
+                      roundabout: Optional[Sequence[bool]] = None):
     """City blocks of raw road lines: the one rule of every tool that takes roads instead
     of blocks ('Extract city blocks', parcels and footprints from roads).
 
@@ -644,6 +697,8 @@ def blocks_from_roads(lines: Sequence, road_class: Optional[Sequence] = None,
     road_class : per-line class (optional)
     buildings, parcels, min_area, min_width : as :func:`extract_blocks`
     progress : Progress, optional
+    roundabout : bool per line, optional
+        Lines that are roundabouts (OSM ``junction=roundabout``): their islands are no blocks.
 
     Returns
     -------
@@ -663,6 +718,8 @@ def blocks_from_roads(lines: Sequence, road_class: Optional[Sequence] = None,
     progress = ensure(progress)
     graph = clean_network(lines, road_class, None, None, merge_degree2=False,
                           progress=progress.sub(0.0, 0.6))
+    flags = None if roundabout is None else \
+        np.asarray(roundabout, dtype=bool)[np.asarray(graph.source, dtype=np.int64)]
     result = extract_blocks(graph, buildings, parcels, min_area=min_area, min_width=min_width,
-                            progress=progress.sub(0.6, 1.0))
+                            progress=progress.sub(0.6, 1.0), roundabout=flags)
     return graph, result

@@ -57,8 +57,9 @@ import shapely
 from scipy.spatial import cKDTree
 from shapely.geometry.polygon import orient
 
-from ..core.geometry import (group_starts, longest_edge_directions, minimum_rectangles,
-                             polygon_parts, without_areas)
+from ..core.geometry import (MIN_BUILDABLE_AREA, MIN_BUILDABLE_WIDTH, group_starts,
+                             longest_edge_directions, minimum_rectangles, polygon_parts,
+                             too_thin, without_areas)
 from ..core.progress import InputError, Progress, ensure
 from ..measure import metrics as _metrics
 
@@ -83,10 +84,12 @@ PARCEL_FIELDS = [
 DEFAULT_STREET_WIDTH = 12.0
 #: Lots larger than this (m²) are split (recursive) or narrowed (skeleton).
 DEFAULT_MAX_AREA = 1200.0
-#: No lot is made smaller than this (m²); smaller pieces merge into a neighbour.
-DEFAULT_MIN_AREA = 150.0
-#: No lot is made narrower than this (m, the short side of its minimum bounding rectangle).
-DEFAULT_MIN_WIDTH = 8.0
+#: No lot is made smaller than this (m²); smaller pieces merge into a neighbour, and no
+#: footprint stands on a smaller piece of land (:data:`core.geometry.MIN_BUILDABLE_AREA`).
+DEFAULT_MIN_AREA = MIN_BUILDABLE_AREA
+#: No lot is made narrower than this (m, the short side of its minimum bounding rectangle),
+#: and shrunk block land nowhere this wide gets no lot (:func:`core.geometry.too_thin`).
+DEFAULT_MIN_WIDTH = MIN_BUILDABLE_WIDTH
 #: Target street frontage of a skeleton lot (m); Yang 2013 aims at 18 m wide parcels.
 DEFAULT_LOT_WIDTH = 18.0
 #: Randomness of the cut positions (and of the recursive cut angles), 0..1.
@@ -165,7 +168,8 @@ class SubdivisionSettings:
         No split makes a lot smaller than this (m²); skeleton slivers below it merge into
         a neighbour; shrunk block pieces below it are not subdivided (no lot fits).
     min_width : float
-        No split makes a lot narrower than this (m).
+        No split makes a lot narrower than this (m); shrunk block land nowhere this wide
+        gets no lot (:func:`core.geometry.too_thin`).
     lot_width : float
         Target frontage of skeleton lots (m).
     irregularity : float in [0, 1]
@@ -564,7 +568,8 @@ def _merge_along_shared_edges(lots: np.ndarray, bad: np.ndarray) -> np.ndarray:
 
 @_quiet
 def shrink_blocks(blocks, half_width=DEFAULT_STREET_WIDTH / 2, roads=None,
-                  road_half_widths=None, min_area: float = 0.0, keep_clear=None) -> np.ndarray:
+                  road_half_widths=None, min_area: float = 0.0, keep_clear=None,
+                  min_width: float = 0.0) -> np.ndarray:
     """Shrink blocks by the half-widths of the streets on their edges (Scharl 4.2.6).
 
     Parameters
@@ -586,6 +591,9 @@ def shrink_blocks(blocks, half_width=DEFAULT_STREET_WIDTH / 2, roads=None,
         Areas no lot may take, e.g. the street surfaces and junctions of
         'tessellatestreets' (whose widths follow each street's class): each block also
         loses the part of them that reaches into it.
+    min_width : float
+        Pieces nowhere this wide (m) are dropped (:func:`core.geometry.too_thin`: a strip
+        left between two wide streets, the island of a roundabout is no building land).
 
     Returns
     -------
@@ -644,7 +652,23 @@ def shrink_blocks(blocks, half_width=DEFAULT_STREET_WIDTH / 2, roads=None,
             parts = _polygon_parts([out[i]], max(min_area, _CRUMB))
             out[i] = (parts[0] if len(parts) == 1 else shapely.multipolygons(parts)) \
                 if len(parts) else shapely.Polygon()
-    return out
+    return _without_thin_land(out, min_width)[0]
+
+
+def _without_thin_land(shrunk: np.ndarray, min_width: float, min_area: float = 0.0):
+    """Shrunk blocks less their pieces nowhere ``min_width`` wide (:func:`too_thin`), and
+    per block whether it lost such a piece larger than ``min_area`` (one that the area
+    rule alone would have given a lot)."""
+    shrunk = np.asarray(shrunk, dtype=object).copy()
+    parts, owner = polygon_parts(shrunk)
+    thin = too_thin(parts, min_width) if len(parts) else np.zeros(0, dtype=bool)
+    lost = np.zeros(len(shrunk), dtype=bool)
+    lost[owner[thin & (shapely.area(parts) > min_area)]] = True
+    for i in np.unique(owner[thin]):
+        kept = parts[(owner == i) & ~thin]
+        shrunk[i] = kept[0] if len(kept) == 1 else \
+            shapely.multipolygons(kept) if len(kept) else shapely.Polygon()
+    return shrunk, lost
 
 
 # --------------------------------------------------------------------------- recursive
@@ -1418,10 +1442,11 @@ class Subdivision:
     blocks : ndarray of Polygon / MultiPolygon
         The shrunk blocks, one per input block (possibly empty): the lots of a block cover it.
     stats : dict
-        ``n_blocks``, ``n_empty_blocks`` (nothing left after shrinking), ``n_lots``,
+        ``n_blocks``, ``n_empty_blocks`` (nothing left after shrinking), ``n_thin_blocks``
+        (blocks with land nowhere ``min_width`` wide, which gets no lot), ``n_lots``,
         ``n_over_max_area`` (lots no acceptable cut could split), ``n_without_access``,
         ``n_merged_for_access``, ``n_under_min_width`` (lots narrower than ``min_width``:
-        a block part too thin for any lot), ``n_sized_by_block`` (blocks with their own
+        on a thin arm of land that is wider elsewhere), ``n_sized_by_block`` (blocks with their own
         parcel area), ``n_undesirable``.
     """
 
@@ -1665,6 +1690,9 @@ def subdivide_blocks(blocks, method: str = "recursive",
     shrunk = shrink_blocks(blocks, street_width / 2.0, roads, road_hw,
                            min_area=settings.min_area if keep_whole is None else 0.0,
                            keep_clear=keep_clear)
+    # land nowhere min_width wide gets no lot, whatever stands on it: a strip left between
+    # two wide streets, a roundabout's island (core.geometry.too_thin, the one rule)
+    shrunk, thin = _without_thin_land(shrunk, settings.min_width, settings.min_area)
     block_settings = _block_settings(settings, n, parcel_area, parcel_area_sd)
     n_sized = sum(b is not None for b in block_settings)
     whole = None
@@ -1741,7 +1769,8 @@ def subdivide_blocks(blocks, method: str = "recursive",
     })
     empty = shapely.is_empty(shrunk)
     stats = {
-        "n_blocks": n, "n_empty_blocks": int(empty.sum()), "n_lots": len(geometry),
+        "n_blocks": n, "n_empty_blocks": int(empty.sum()), "n_thin_blocks": int(thin.sum()),
+        "n_lots": len(geometry),
         "n_over_max_area": int((area > settings.max_area * (1 + 1e-6)).sum()),
         "n_without_access": int((~table.has_street_access).sum()),
         "n_merged_for_access": n_merged,
