@@ -255,3 +255,21 @@ def test_motorways_in_the_existing_roads_take_no_new_junction(qgis_processing):
     check = invariants.check_network(geoms, case["given"], cls, case["area"])
     assert len(check.controlled_access) == 0 and check.floating_pieces == 0, check.summary()
     assert any("motorway or trunk" in m for m in log.messages), log.messages
+
+
+def test_in_place_example_elsewhere_says_so(qgis_processing, helsinki_points):
+    """Placement 'in place' with an example that lies elsewhere (Helsinki's points, a target
+    in Liechtenstein): the error says that the example is outside the target and what to
+    choose instead (it said the target was smaller than the example's street spacing)."""
+    target = memory_layer("Polygon", ["POLYGON((9.515 47.133, 9.530 47.133, 9.530 47.143, "
+                                      "9.515 47.143, 9.515 47.133))"], "EPSG:4326",
+                          name="vaduz square")
+    with pytest.raises(Exception, match="vaduz square'?: the example lies outside the target.*"
+                                        "in place.*automatically or shifted") as err:
+        qgis_processing.run(ALG, {"EXAMPLE": helsinki_points, "TARGET": target,
+                                  "PLACEMENT": 1, "OUTPUT": "memory:"})
+    assert "spacing" not in str(err.value)
+    # automatic placement copies the same example there
+    out = qgis_processing.run(ALG, {"EXAMPLE": helsinki_points, "TARGET": target,
+                                    "PLACEMENT": 0, "SEED": 1, "OUTPUT": "memory:"})
+    assert out["OUTPUT"].featureCount() > 20
