@@ -166,9 +166,9 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT_BLOCKS, "Blocks", QgsProcessing.SourceType.TypeVectorPolygon, optional=True,
             createByDefault=False),
-            "The faces the new streets close (block_id, area_m2, neighbours in the block "
-            "graph, parcel_area: the mean parcel or block area of the example points on "
-            "the outline), ready for 'Subdivide blocks into parcels'.")
+            "The faces the new streets close, cut to the target (block_id, area_m2, "
+            "neighbours in the block graph, parcel_area: the mean parcel or block area of "
+            "the example points on the outline), ready for 'Subdivide blocks into parcels'.")
 
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT_EXISTING, "Existing roads with the new junctions",
@@ -336,7 +336,7 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
                 QgsWkbTypes.Type.Point, target.source_crs, target.crs, feedback)
             qgis_io.style_output(context, results[self.OUTPUT_INTERSECTIONS], "intersections.qml")
         if self.given(parameters, self.OUTPUT_BLOCKS):
-            faces, table = random_walk.block_table(result)
+            faces, table = random_walk.block_table(result, target=target.geometry)
             feedback.pushInfo(f"{len(faces)} blocks closed by the new streets.")
             results[self.OUTPUT_BLOCKS] = qgis_io.write_sink(
                 self, parameters, self.OUTPUT_BLOCKS, context, faces, table,

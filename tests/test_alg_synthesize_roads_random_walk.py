@@ -273,3 +273,24 @@ def test_in_place_example_elsewhere_says_so(qgis_processing, helsinki_points):
     out = qgis_processing.run(ALG, {"EXAMPLE": helsinki_points, "TARGET": target,
                                     "PLACEMENT": 0, "SEED": 1, "OUTPUT": "memory:"})
     assert out["OUTPUT"].featureCount() > 20
+
+
+def test_blocks_stay_in_the_target(qgis_processing, helsinki_graph):
+    """Expand into a hole of Helsinki's streets: the blocks are cut to the hole. The faces
+    that the new streets close with the existing roads outside it are existing land there
+    (uncut, 80,700 m² of the blocks lay outside the 282,000 m² hole); every block is valid
+    and lies in the hole, and together they cover a good part of it (46 %)."""
+    centre = np.median(helsinki_graph.nodes, axis=0)
+    hole = shapely.Point(centre).buffer(300)
+    outside = shapely.get_parts(shapely.difference(helsinki_graph.geometry, hole))
+    existing = memory_layer("LineString", shapely.to_wkt(outside[shapely.length(outside) > 1]),
+                            UTM)
+    out = qgis_processing.run(ALG, {
+        "EXAMPLE": existing, "TARGET": memory_layer("Polygon", [hole.wkt], UTM),
+        "EXISTING_ROADS": existing, "SEED": 1, "OUTPUT": "memory:", "OUTPUT_BLOCKS": "memory:"})
+    rows, blocks = layer_features(out["OUTPUT_BLOCKS"])
+    assert len(rows) > 10 and shapely.is_valid(blocks).all()
+    assert shapely.area(shapely.difference(blocks, hole.buffer(0.01))).sum() < 1.0
+    assert shapely.area(shapely.union_all(blocks)) > 0.35 * hole.area
+    np.testing.assert_allclose([r["area_m2"] for r in rows], shapely.area(blocks))
+    assert [r["block_id"] for r in rows] == list(range(1, len(rows) + 1))

@@ -2227,10 +2227,15 @@ def blocks_and_dual(lines, extra_lines=None, min_area: float = 50.0):
     return faces, np.column_stack([i[keep], j[keep]])
 
 
-def block_table(result: Synthesis, min_area: float = 50.0):
+def block_table(result: Synthesis, min_area: float = 50.0, target=None):
     """The blocks made by a synthesis (faces with a new street on their outline), with
     their number of neighbours in the block graph and Aliaga's a(v): the mean parcel (else
     block) area stored in the points on their outline, which sizes their parcels.
+
+    ``target``: the target polygon(s), optional: a face that the given roads close outside
+    it is cut to it (each part of at least ``min_area`` a block): the land outside is the
+    given roads' own, not the new streets' (a face of a country's roads 98 % outside a
+    1.3 km² target made a 1.3 km² block).
 
     Returns (geometry: array of Polygon, table: DataFrame with :data:`BLOCK_FIELDS`).
     """
@@ -2244,6 +2249,15 @@ def block_table(result: Synthesis, min_area: float = 50.0):
     neighbours = np.bincount(dual.ravel(), minlength=len(faces)) if len(dual) else \
         np.zeros(len(faces), dtype=np.int64)
     faces, neighbours = faces[keep], neighbours[keep]
+    if target is not None and len(faces):
+        area = iq._as_target(target)
+        out = ~shapely.covers(area, faces)
+        with np.errstate(invalid="ignore"):
+            cut = faces.copy()
+            cut[out] = shapely.intersection(faces[out], area)
+        parts, index = shapely.get_parts(cut, return_index=True)
+        big = (shapely.get_type_id(parts) == 3) & (shapely.area(parts) >= min_area)
+        faces, neighbours = parts[big], neighbours[index[big]]
     area_attr = np.full(len(faces), np.nan)
     if len(faces):
         pts = shapely.points(result.points.xy)
