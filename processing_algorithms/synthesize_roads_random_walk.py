@@ -159,10 +159,10 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT_INTERSECTIONS, "Intersection points used", QgsProcessing.SourceType.TypeVectorPoint,
             optional=True, createByDefault=False),
-            "The attributed points placed in the target (example 0 = first, 1 = second, "
-            "-1 = a node of the existing roads, -2 = a junction slot offered on an existing "
-            "road) with the connections they got: degree is what the point had in its "
-            "example, connections what it got here (a point or slot with 0 was not taken).")
+            "The attributed points placed in the target (example 0 = first, 1 = second, -1 = a "
+            "node of the existing roads in the target or at a new street's end, -2 = a junction "
+            "slot offered on an existing road) with the connections they got: degree is what the "
+            "point had in its example, connections what it got here (0: not taken).")
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT_BLOCKS, "Blocks", QgsProcessing.SourceType.TypeVectorPolygon, optional=True,
             createByDefault=False),
@@ -332,7 +332,7 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
         if self.given(parameters, self.OUTPUT_INTERSECTIONS):
             results[self.OUTPUT_INTERSECTIONS] = qgis_io.write_sink(
                 self, parameters, self.OUTPUT_INTERSECTIONS, context,
-                shapely.points(result.points.xy), result.point_table, random_walk.POINT_FIELDS,
+                *random_walk.points_used(result, target.geometry), random_walk.POINT_FIELDS,
                 QgsWkbTypes.Type.Point, target.source_crs, target.crs, feedback)
             qgis_io.style_output(context, results[self.OUTPUT_INTERSECTIONS], "intersections.qml")
         if self.given(parameters, self.OUTPUT_BLOCKS):

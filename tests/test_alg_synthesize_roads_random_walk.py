@@ -275,11 +275,13 @@ def test_in_place_example_elsewhere_says_so(qgis_processing, helsinki_points):
     assert out["OUTPUT"].featureCount() > 20
 
 
-def test_blocks_stay_in_the_target(qgis_processing, helsinki_graph):
+def test_blocks_and_points_stay_in_the_target(qgis_processing, helsinki_graph):
     """Expand into a hole of Helsinki's streets: the blocks are cut to the hole. The faces
     that the new streets close with the existing roads outside it are existing land there
     (uncut, 80,700 m² of the blocks lay outside the 282,000 m² hole); every block is valid
-    and lies in the hole, and together they cover a good part of it (46 %)."""
+    and lies in the hole, and together they cover a good part of it (46 %). The points
+    used hold the existing roads' nodes in the hole or at a new street's end, not every
+    node of the city's roads (148 more of them, none in the hole or at a street)."""
     centre = np.median(helsinki_graph.nodes, axis=0)
     hole = shapely.Point(centre).buffer(300)
     outside = shapely.get_parts(shapely.difference(helsinki_graph.geometry, hole))
@@ -287,7 +289,16 @@ def test_blocks_stay_in_the_target(qgis_processing, helsinki_graph):
                             UTM)
     out = qgis_processing.run(ALG, {
         "EXAMPLE": existing, "TARGET": memory_layer("Polygon", [hole.wkt], UTM),
-        "EXISTING_ROADS": existing, "SEED": 1, "OUTPUT": "memory:", "OUTPUT_BLOCKS": "memory:"})
+        "EXISTING_ROADS": existing, "SEED": 1, "OUTPUT": "memory:", "OUTPUT_BLOCKS": "memory:",
+        "OUTPUT_INTERSECTIONS": "memory:"})
+    road_rows, roads_ = layer_features(out["OUTPUT"])
+    p_rows, points = layer_features(out["OUTPUT_INTERSECTIONS"])
+    given = np.array([r["example"] == -1 for r in p_rows])
+    ends = {n for r in road_rows for n in (r["node_from"], r["node_to"])}
+    at_end = np.array([r["node_id"] in ends for r in p_rows])
+    assert given.sum() > 10 and at_end[given].any()
+    assert (shapely.within(points[given & ~at_end], hole.buffer(1.0))).all()
+    assert {r["example"] for r in p_rows} == {0, -1, -2}
     rows, blocks = layer_features(out["OUTPUT_BLOCKS"])
     assert len(rows) > 10 and shapely.is_valid(blocks).all()
     assert shapely.area(shapely.difference(blocks, hole.buffer(0.01))).sum() < 1.0

@@ -92,7 +92,7 @@ from ..network.street_graph import ends_as_vertices, node_lines, snap_ends_onto_
 from . import intersection_quadtree as iq
 
 __all__ = ["WalkSettings", "Synthesis", "StreetShapes", "street_shapes", "connect_points",
-           "synthesize", "given_with_junctions", "blocks_and_dual", "block_table",
+           "synthesize", "given_with_junctions", "points_used", "blocks_and_dual", "block_table",
            "dead_end_share_of", "crossing_share_of", "ROAD_FIELDS", "POINT_FIELDS",
            "BLOCK_FIELDS"]
 
@@ -2150,6 +2150,23 @@ def _streets_across(lines, table, ptab, pts, may_cross, existing_lines, area, sh
     # each new T counts as a node: the dead-end share as the invariants now measure it
     stats["dead_end_share"] = measured_dead_end_share(np.concatenate([lines, given]), area)
     return lines, table
+
+
+def points_used(result: Synthesis, target) -> Tuple[np.ndarray, pd.DataFrame]:
+    """The points of a synthesis for its intersections output: the example points and
+    junction slots placed in the target, and of the given roads' nodes those in the target
+    or where a new street ends. The other nodes of the given roads are left out: a
+    country's roads given for a 1.3 km² target put 1,582 of its 1,879 points far outside.
+
+    Returns (geometry: array of Point, table: rows of ``result.point_table``).
+    """
+    xy = result.points.xy
+    keep = result.points.example != EXISTING
+    ends = np.r_[result.table.node_from, result.table.node_to].astype(np.int64)
+    keep[ends[(ends >= 0) & (ends < len(xy))]] = True
+    area = iq._as_target(target)
+    keep |= shapely.intersects_xy(shapely.buffer(area, ROAD_SNAP_TOLERANCE), xy[:, 0], xy[:, 1])
+    return shapely.points(xy[keep]), result.point_table[keep].reset_index(drop=True)
 
 
 def given_with_junctions(existing_lines, lines) -> Tuple[np.ndarray, pd.DataFrame]:
