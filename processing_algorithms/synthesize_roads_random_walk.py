@@ -75,8 +75,8 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
             "at its edge are no dead ends), and "
             "every piece is joined to the rest (or to the existing roads) by a step, else "
             "by the shortest street through the target (bent along it), or dropped where "
-            "none reaches it (a part of the target apart): the "
-            "result is one network whose every crossing is a junction. Segments take the "
+            "none reaches it (a part of the target apart keeps its longest piece, with a "
+            "warning): one network whose every crossing is a junction. Segments take the "
             "shapes of the example's street segments (with roads as the example: the same "
             "tortuosity and bends), else parabolas of the points' tortuosity.\n\n"
             "EXISTING_ROADS: their dead ends at the target continue into the new streets "
@@ -219,8 +219,7 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
         return frame, points, shapes, share
 
     def _bound(self, target, *examples):
-        """The points the target receives (its area at the densest example's intersections
-        per km²) within what one run connects."""
+        """The points the target receives (its area at the densest example's) within bounds."""
         area = shapely.area(shapely.union_all(target.geometry))
         density = max(len(p) / max(shapely.area(shapely.convex_hull(shapely.multipoints(p.xy))),
                                    1.0) for p in examples if p is not None)
@@ -251,8 +250,7 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
         feedback.setProgress(5)
         _, points, shapes, share = self._read_example(parameters, self.EXAMPLE, context, feedback,
                                                target.crs, target.geometry, 0)
-        points_b, shapes_b = None, None
-        blend = 0.0
+        points_b, shapes_b, blend = None, None, 0.0
         if parameters.get(self.EXAMPLE_B) not in (None, ""):
             _, points_b, shapes_b, _ = self._read_example(parameters, self.EXAMPLE_B, context,
                                                        feedback, target.crs, target.geometry, 1)
@@ -290,7 +288,8 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
             f"{st['n_dead_ends']} dead ends ({100 * st['dead_end_share']:.0f} %, the "
             f"example's {100 * st['example_dead_end_share']:.0f} %).")
         feedback.pushInfo(
-            f"One network: {st['n_closed']} stubs closed, {st['n_crossings_made']} crossing "
+            f"{'Network' if st.get('n_pieces_left_apart') else 'One network'}: "
+            f"{st['n_closed']} stubs closed, {st['n_crossings_made']} crossing "
             f"streets completed, {st['n_crossings_matched']} T junctions made crossings "
             f"({100 * st['crossing_share']:.0f} % 4-way junctions, the example's "
             f"{100 * st['example_crossing_share']:.0f} %), "
@@ -316,11 +315,13 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
                               "of it, or went where their other end is a junction; "
                               f"{st['n_controlled_access_dropped']} street(s) of pieces that "
                               "only such a road reached dropped.")
-        results = {}
-        results[self.OUTPUT] = qgis_io.write_sink(
+        if st.get("n_pieces_left_apart"):
+            feedback.pushWarning(f"{st['n_pieces_left_apart']} piece(s) of the network stay "
+                                 "apart: no street through the target reaches them.")
+        results = {self.OUTPUT: qgis_io.write_sink(
             self, parameters, self.OUTPUT, context, result.geometry, result.table,
             random_walk.ROAD_FIELDS, QgsWkbTypes.Type.LineString, target.source_crs, target.crs,
-            feedback)
+            feedback)}
         qgis_io.style_output(context, results[self.OUTPUT], "roads_by_level.qml")
         if self.given(parameters, self.OUTPUT_EXISTING):
             given, table = random_walk.given_with_junctions(existing_lines, result.geometry)

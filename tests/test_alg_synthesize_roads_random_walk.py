@@ -305,3 +305,24 @@ def test_blocks_and_points_stay_in_the_target(qgis_processing, helsinki_graph):
     assert shapely.area(shapely.union_all(blocks)) > 0.35 * hole.area
     np.testing.assert_allclose([r["area_m2"] for r in rows], shapely.area(blocks))
     assert [r["block_id"] for r in rows] == list(range(1, len(rows) + 1))
+
+
+def test_parts_of_the_target_apart_are_named(qgis_processing, helsinki_points):
+    """A target of two squares 300 m apart and no existing roads: each part keeps its own
+    network, and the log says so with a warning (it said 'One network' and warned of
+    nothing); the count is the output's pieces less one."""
+    from urban_synthesis.plugin.network import invariants
+
+    squares = [shapely.box(385600, 6671600, 386100, 6672100),
+               shapely.box(386400, 6671600, 386900, 6672100)]
+    log = log_feedback()
+    out = qgis_processing.run(ALG, {
+        "EXAMPLE": helsinki_points, "SEED": 2, "OUTPUT": "memory:",
+        "TARGET": memory_layer("MultiPolygon", [shapely.MultiPolygon(squares).wkt], UTM)},
+        feedback=log)
+    _, geoms = layer_features(out["OUTPUT"])
+    pieces = len(np.unique(invariants.connected_pieces(geoms)))
+    assert pieces >= 2
+    assert any(f"{pieces - 1} piece(s) of the network stay apart" in w for w in log.warnings), \
+        log.warnings
+    assert not any(m.startswith("One network") for m in log.messages)

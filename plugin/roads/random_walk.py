@@ -2053,6 +2053,11 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
     # of every street returned: the given-road joins and the streets across are straight,
     # a piece's link bends only along the target
     stats["mean_tortuosity"] = float(table.tortuosity.mean())
+    # pieces left apart: a part of the target that no street inside it reaches keeps its
+    # own (its longest piece anchors it, :func:`_link_pieces_apart`); 0 for one network
+    label = connected_pieces(np.concatenate([lines, given_roads]))
+    stats["n_pieces_left_apart"] = len(set(label[:len(lines)]) - set(label[len(lines):])) \
+        if len(given_roads) else max(len(np.unique(label)) - 1, 0)
     progress.step(1.0)
     return Synthesis(lines, table, pts, ptab, stats, quadtrees, ex_lines)
 
