@@ -141,6 +141,12 @@ class RasterRoadsToVector(AlgorithmBase):
                 f"Raster '{layer.name()}': every pixel is above the threshold {threshold:g} "
                 f"(values {low:g} .. {high:g}), so roads cannot be told from the background: "
                 "set THRESHOLD between the background and the road values.")
+        if above > 0.5:  # roads are a minority of any road image: likely dark roads
+            feedback.pushWarning(
+                f"Raster '{layer.name()}': {100 * above:.0f} % of the pixels are above the "
+                f"threshold {threshold:g}, so most of the image would be road: if its roads "
+                "are dark on a bright background, invert it first (Raster calculator: "
+                f"{low + high:g} - value); else raise THRESHOLD.")
         no_data = int(array.size - valid.sum())
         feedback.pushInfo(f"{array.shape[0]} x {array.shape[1]} px, {100 * above:.1f} % "
                           f"above the threshold (values {low:g} .. {high:g})"

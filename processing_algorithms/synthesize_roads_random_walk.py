@@ -75,8 +75,8 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
             "at its edge are no dead ends), and "
             "every piece is joined to the rest (or to the existing roads) by a step, else "
             "by the shortest street through the target (bent along it), or dropped where "
-            "none reaches it (a part of the target apart): the "
-            "result is one network whose every crossing is a junction. Segments take the "
+            "none reaches it (a part of the target apart keeps its longest piece, with a "
+            "warning): one network whose every crossing is a junction. Segments take the "
             "shapes of the example's street segments (with roads as the example: the same "
             "tortuosity and bends), else parabolas of the points' tortuosity.\n\n"
             "EXISTING_ROADS: their dead ends at the target continue into the new streets "
@@ -159,16 +159,16 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT_INTERSECTIONS, "Intersection points used", QgsProcessing.SourceType.TypeVectorPoint,
             optional=True, createByDefault=False),
-            "The attributed points placed in the target (example 0 = first, 1 = second, "
-            "-1 = a node of the existing roads, -2 = a junction slot offered on an existing "
-            "road) with the connections they got: degree is what the point had in its "
-            "example, connections what it got here (a point or slot with 0 was not taken).")
+            "The attributed points placed in the target (example 0 = first, 1 = second, -1 = a "
+            "node of the existing roads in the target or at a new street's end, -2 = a junction "
+            "slot offered on an existing road) with the connections they got: degree is what the "
+            "point had in its example, connections what it got here (0: not taken).")
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT_BLOCKS, "Blocks", QgsProcessing.SourceType.TypeVectorPolygon, optional=True,
             createByDefault=False),
-            "The faces the new streets close (block_id, area_m2, neighbours in the block "
-            "graph, parcel_area: the mean parcel or block area of the example points on "
-            "the outline), ready for 'Subdivide blocks into parcels'.")
+            "The faces the new streets close, cut to the target (block_id, area_m2, "
+            "neighbours in the block graph, parcel_area: the mean parcel or block area of "
+            "the example points on the outline), ready for 'Subdivide blocks into parcels'.")
 
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT_EXISTING, "Existing roads with the new junctions",
@@ -219,8 +219,7 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
         return frame, points, shapes, share
 
     def _bound(self, target, *examples):
-        """The points the target receives (its area at the densest example's intersections
-        per km²) within what one run connects."""
+        """The points the target receives (its area at the densest example's) within bounds."""
         area = shapely.area(shapely.union_all(target.geometry))
         density = max(len(p) / max(shapely.area(shapely.convex_hull(shapely.multipoints(p.xy))),
                                    1.0) for p in examples if p is not None)
@@ -251,8 +250,7 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
         feedback.setProgress(5)
         _, points, shapes, share = self._read_example(parameters, self.EXAMPLE, context, feedback,
                                                target.crs, target.geometry, 0)
-        points_b, shapes_b = None, None
-        blend = 0.0
+        points_b, shapes_b, blend = None, None, 0.0
         if parameters.get(self.EXAMPLE_B) not in (None, ""):
             _, points_b, shapes_b, _ = self._read_example(parameters, self.EXAMPLE_B, context,
                                                        feedback, target.crs, target.geometry, 1)
@@ -290,7 +288,8 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
             f"{st['n_dead_ends']} dead ends ({100 * st['dead_end_share']:.0f} %, the "
             f"example's {100 * st['example_dead_end_share']:.0f} %).")
         feedback.pushInfo(
-            f"One network: {st['n_closed']} stubs closed, {st['n_crossings_made']} crossing "
+            f"{'Network' if st.get('n_pieces_left_apart') else 'One network'}: "
+            f"{st['n_closed']} stubs closed, {st['n_crossings_made']} crossing "
             f"streets completed, {st['n_crossings_matched']} T junctions made crossings "
             f"({100 * st['crossing_share']:.0f} % 4-way junctions, the example's "
             f"{100 * st['example_crossing_share']:.0f} %), "
@@ -316,11 +315,13 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
                               "of it, or went where their other end is a junction; "
                               f"{st['n_controlled_access_dropped']} street(s) of pieces that "
                               "only such a road reached dropped.")
-        results = {}
-        results[self.OUTPUT] = qgis_io.write_sink(
+        if st.get("n_pieces_left_apart"):
+            feedback.pushWarning(f"{st['n_pieces_left_apart']} piece(s) of the network stay "
+                                 "apart: no street through the target reaches them.")
+        results = {self.OUTPUT: qgis_io.write_sink(
             self, parameters, self.OUTPUT, context, result.geometry, result.table,
             random_walk.ROAD_FIELDS, QgsWkbTypes.Type.LineString, target.source_crs, target.crs,
-            feedback)
+            feedback)}
         qgis_io.style_output(context, results[self.OUTPUT], "roads_by_level.qml")
         if self.given(parameters, self.OUTPUT_EXISTING):
             given, table = random_walk.given_with_junctions(existing_lines, result.geometry)
@@ -332,11 +333,11 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
         if self.given(parameters, self.OUTPUT_INTERSECTIONS):
             results[self.OUTPUT_INTERSECTIONS] = qgis_io.write_sink(
                 self, parameters, self.OUTPUT_INTERSECTIONS, context,
-                shapely.points(result.points.xy), result.point_table, random_walk.POINT_FIELDS,
+                *random_walk.points_used(result, target.geometry), random_walk.POINT_FIELDS,
                 QgsWkbTypes.Type.Point, target.source_crs, target.crs, feedback)
             qgis_io.style_output(context, results[self.OUTPUT_INTERSECTIONS], "intersections.qml")
         if self.given(parameters, self.OUTPUT_BLOCKS):
-            faces, table = random_walk.block_table(result)
+            faces, table = random_walk.block_table(result, target=target.geometry)
             feedback.pushInfo(f"{len(faces)} blocks closed by the new streets.")
             results[self.OUTPUT_BLOCKS] = qgis_io.write_sink(
                 self, parameters, self.OUTPUT_BLOCKS, context, faces, table,

@@ -141,6 +141,24 @@ def test_raster_roads_to_vector_helsinki(qgis_processing, tmp_path):
         qgis_processing.run(R2V, {"INPUT": str(geo), "OUTPUT": "memory:"})
 
 
+def test_raster_with_dark_roads_is_warned_of(qgis_processing, tmp_path):
+    """A road mask with dark roads on a bright background (Helsinki's, inverted): 58 % of
+    its pixels pass the threshold, and the skeleton of its blocks came out as roads with
+    no word in the log; a warning now says that most of the image would be road and how
+    to invert it. The road mask itself runs without it."""
+    from helpers import log_feedback
+
+    lines = np.asarray(helsinki_roads().geometry.values, dtype=object)
+    img, gt = raster_graph.rasterize_lines(lines)
+    for name, array, warned in (("roads", img, False), ("dark roads", 255 - img, True)):
+        tif = tmp_path / f"{name.replace(' ', '_')}.tif"
+        _write_geotiff(tif, array, gt, 32635)
+        log = log_feedback()
+        qgis_processing.run(R2V, {"INPUT": str(tif), "OUTPUT": "memory:"}, feedback=log)
+        said = [w for w in log.warnings if "invert it first" in w and "255 - value" in w]
+        assert bool(said) == warned, log.warnings
+
+
 def test_qgis_process_on_bubenec(tmp_path):
     """The real qgis_process.bin: onnxruntime and OpenCV load inside QGIS and it exits 0.
     Target: the cadastre plots of Prague-Bubeneč (EPSG:3857), output in that CRS. (The

@@ -255,3 +255,74 @@ def test_motorways_in_the_existing_roads_take_no_new_junction(qgis_processing):
     check = invariants.check_network(geoms, case["given"], cls, case["area"])
     assert len(check.controlled_access) == 0 and check.floating_pieces == 0, check.summary()
     assert any("motorway or trunk" in m for m in log.messages), log.messages
+
+
+def test_in_place_example_elsewhere_says_so(qgis_processing, helsinki_points):
+    """Placement 'in place' with an example that lies elsewhere (Helsinki's points, a target
+    in Liechtenstein): the error says that the example is outside the target and what to
+    choose instead (it said the target was smaller than the example's street spacing)."""
+    target = memory_layer("Polygon", ["POLYGON((9.515 47.133, 9.530 47.133, 9.530 47.143, "
+                                      "9.515 47.143, 9.515 47.133))"], "EPSG:4326",
+                          name="vaduz square")
+    with pytest.raises(Exception, match="vaduz square'?: the example lies outside the target.*"
+                                        "in place.*automatically or shifted") as err:
+        qgis_processing.run(ALG, {"EXAMPLE": helsinki_points, "TARGET": target,
+                                  "PLACEMENT": 1, "OUTPUT": "memory:"})
+    assert "spacing" not in str(err.value)
+    # automatic placement copies the same example there
+    out = qgis_processing.run(ALG, {"EXAMPLE": helsinki_points, "TARGET": target,
+                                    "PLACEMENT": 0, "SEED": 1, "OUTPUT": "memory:"})
+    assert out["OUTPUT"].featureCount() > 20
+
+
+def test_blocks_and_points_stay_in_the_target(qgis_processing, helsinki_graph):
+    """Expand into a hole of Helsinki's streets: the blocks are cut to the hole. The faces
+    that the new streets close with the existing roads outside it are existing land there
+    (uncut, 80,700 m² of the blocks lay outside the 282,000 m² hole); every block is valid
+    and lies in the hole, and together they cover a good part of it (46 %). The points
+    used hold the existing roads' nodes in the hole or at a new street's end, not every
+    node of the city's roads (148 more of them, none in the hole or at a street)."""
+    centre = np.median(helsinki_graph.nodes, axis=0)
+    hole = shapely.Point(centre).buffer(300)
+    outside = shapely.get_parts(shapely.difference(helsinki_graph.geometry, hole))
+    existing = memory_layer("LineString", shapely.to_wkt(outside[shapely.length(outside) > 1]),
+                            UTM)
+    out = qgis_processing.run(ALG, {
+        "EXAMPLE": existing, "TARGET": memory_layer("Polygon", [hole.wkt], UTM),
+        "EXISTING_ROADS": existing, "SEED": 1, "OUTPUT": "memory:", "OUTPUT_BLOCKS": "memory:",
+        "OUTPUT_INTERSECTIONS": "memory:"})
+    road_rows, roads_ = layer_features(out["OUTPUT"])
+    p_rows, points = layer_features(out["OUTPUT_INTERSECTIONS"])
+    given = np.array([r["example"] == -1 for r in p_rows])
+    ends = {n for r in road_rows for n in (r["node_from"], r["node_to"])}
+    at_end = np.array([r["node_id"] in ends for r in p_rows])
+    assert given.sum() > 10 and at_end[given].any()
+    assert (shapely.within(points[given & ~at_end], hole.buffer(1.0))).all()
+    assert {r["example"] for r in p_rows} == {0, -1, -2}
+    rows, blocks = layer_features(out["OUTPUT_BLOCKS"])
+    assert len(rows) > 10 and shapely.is_valid(blocks).all()
+    assert shapely.area(shapely.difference(blocks, hole.buffer(0.01))).sum() < 1.0
+    assert shapely.area(shapely.union_all(blocks)) > 0.35 * hole.area
+    np.testing.assert_allclose([r["area_m2"] for r in rows], shapely.area(blocks))
+    assert [r["block_id"] for r in rows] == list(range(1, len(rows) + 1))
+
+
+def test_parts_of_the_target_apart_are_named(qgis_processing, helsinki_points):
+    """A target of two squares 300 m apart and no existing roads: each part keeps its own
+    network, and the log says so with a warning (it said 'One network' and warned of
+    nothing); the count is the output's pieces less one."""
+    from urban_synthesis.plugin.network import invariants
+
+    squares = [shapely.box(385600, 6671600, 386100, 6672100),
+               shapely.box(386400, 6671600, 386900, 6672100)]
+    log = log_feedback()
+    out = qgis_processing.run(ALG, {
+        "EXAMPLE": helsinki_points, "SEED": 2, "OUTPUT": "memory:",
+        "TARGET": memory_layer("MultiPolygon", [shapely.MultiPolygon(squares).wkt], UTM)},
+        feedback=log)
+    _, geoms = layer_features(out["OUTPUT"])
+    pieces = len(np.unique(invariants.connected_pieces(geoms)))
+    assert pieces >= 2
+    assert any(f"{pieces - 1} piece(s) of the network stay apart" in w for w in log.warnings), \
+        log.warnings
+    assert not any(m.startswith("One network") for m in log.messages)

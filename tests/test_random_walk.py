@@ -418,8 +418,12 @@ def test_bad_inputs(helsinki):
     with pytest.raises(InputError, match="between 0 and 1"):
         rw.synthesize(pts, shapely.box(*pts.xy.min(0), *pts.xy.max(0)), example_b=pts,
                       blend=1.5, seed=0)
-    with pytest.raises(InputError, match="no example point"):
+    # in place: an example elsewhere is named as such, a target between its points is small
+    with pytest.raises(InputError, match="example lies outside the target.*'in place'"):
         rw.synthesize(pts, shapely.box(0, 0, 1, 1), seed=0, in_place=True)
+    gap = shapely.centroid(shapely.convex_hull(shapely.multipoints(pts.xy))).buffer(0.5)
+    with pytest.raises(InputError, match="no example point falls into the target"):
+        rw.synthesize(pts, gap, seed=0, in_place=True)
     with pytest.raises(InputError, match="min_angle"):
         rw.WalkSettings(min_angle=120).validate()
     road = shapely.LineString(pts.xy[:2])

@@ -432,6 +432,11 @@ def place_points(points: PointSet, quadtree: QuadTree, target, rng: np.random.Ge
         if in_place is False or shifted_key[0] > 1.25 * in_place_count:
             best = shifted
     if not best and not fill:
+        if in_place and not shapely.intersects(example_hull, area):
+            # at its own coordinates the example lies elsewhere: not a target too small
+            raise InputError("the example lies outside the target, and placement 'in place' "
+                             "keeps its points where they are: place it automatically or "
+                             "shifted to copy it into the target")
         raise InputError("no example point falls into the target: the target is smaller than "
                          "the example's street spacing")
     placed = PointSet.concat([points.take(idx).moved(shift) for idx, shift in best]) \

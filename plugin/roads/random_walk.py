@@ -92,7 +92,7 @@ from ..network.street_graph import ends_as_vertices, node_lines, snap_ends_onto_
 from . import intersection_quadtree as iq
 
 __all__ = ["WalkSettings", "Synthesis", "StreetShapes", "street_shapes", "connect_points",
-           "synthesize", "given_with_junctions", "blocks_and_dual", "block_table",
+           "synthesize", "given_with_junctions", "points_used", "blocks_and_dual", "block_table",
            "dead_end_share_of", "crossing_share_of", "ROAD_FIELDS", "POINT_FIELDS",
            "BLOCK_FIELDS"]
 
@@ -2053,6 +2053,11 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
     # of every street returned: the given-road joins and the streets across are straight,
     # a piece's link bends only along the target
     stats["mean_tortuosity"] = float(table.tortuosity.mean())
+    # pieces left apart: a part of the target that no street inside it reaches keeps its
+    # own (its longest piece anchors it, :func:`_link_pieces_apart`); 0 for one network
+    label = connected_pieces(np.concatenate([lines, given_roads]))
+    stats["n_pieces_left_apart"] = len(set(label[:len(lines)]) - set(label[len(lines):])) \
+        if len(given_roads) else max(len(np.unique(label)) - 1, 0)
     progress.step(1.0)
     return Synthesis(lines, table, pts, ptab, stats, quadtrees, ex_lines)
 
@@ -2152,6 +2157,23 @@ def _streets_across(lines, table, ptab, pts, may_cross, existing_lines, area, sh
     return lines, table
 
 
+def points_used(result: Synthesis, target) -> Tuple[np.ndarray, pd.DataFrame]:
+    """The points of a synthesis for its intersections output: the example points and
+    junction slots placed in the target, and of the given roads' nodes those in the target
+    or where a new street ends. The other nodes of the given roads are left out: a
+    country's roads given for a 1.3 km² target put 1,582 of its 1,879 points far outside.
+
+    Returns (geometry: array of Point, table: rows of ``result.point_table``).
+    """
+    xy = result.points.xy
+    keep = result.points.example != EXISTING
+    ends = np.r_[result.table.node_from, result.table.node_to].astype(np.int64)
+    keep[ends[(ends >= 0) & (ends < len(xy))]] = True
+    area = iq._as_target(target)
+    keep |= shapely.intersects_xy(shapely.buffer(area, ROAD_SNAP_TOLERANCE), xy[:, 0], xy[:, 1])
+    return shapely.points(xy[keep]), result.point_table[keep].reset_index(drop=True)
+
+
 def given_with_junctions(existing_lines, lines) -> Tuple[np.ndarray, pd.DataFrame]:
     """The given roads with every new street's end on them as a vertex: (lines, their table
     in :data:`ROAD_FIELDS`, origin 'given', level 0, no points (-1), and ``source``: the
@@ -2227,10 +2249,15 @@ def blocks_and_dual(lines, extra_lines=None, min_area: float = 50.0):
     return faces, np.column_stack([i[keep], j[keep]])
 
 
-def block_table(result: Synthesis, min_area: float = 50.0):
+def block_table(result: Synthesis, min_area: float = 50.0, target=None):
     """The blocks made by a synthesis (faces with a new street on their outline), with
     their number of neighbours in the block graph and Aliaga's a(v): the mean parcel (else
     block) area stored in the points on their outline, which sizes their parcels.
+
+    ``target``: the target polygon(s), optional: a face that the given roads close outside
+    it is cut to it (each part of at least ``min_area`` a block): the land outside is the
+    given roads' own, not the new streets' (a face of a country's roads 98 % outside a
+    1.3 km² target made a 1.3 km² block).
 
     Returns (geometry: array of Polygon, table: DataFrame with :data:`BLOCK_FIELDS`).
     """
@@ -2244,6 +2271,15 @@ def block_table(result: Synthesis, min_area: float = 50.0):
     neighbours = np.bincount(dual.ravel(), minlength=len(faces)) if len(dual) else \
         np.zeros(len(faces), dtype=np.int64)
     faces, neighbours = faces[keep], neighbours[keep]
+    if target is not None and len(faces):
+        area = iq._as_target(target)
+        out = ~shapely.covers(area, faces)
+        with np.errstate(invalid="ignore"):
+            cut = faces.copy()
+            cut[out] = shapely.intersection(faces[out], area)
+        parts, index = shapely.get_parts(cut, return_index=True)
+        big = (shapely.get_type_id(parts) == 3) & (shapely.area(parts) >= min_area)
+        faces, neighbours = parts[big], neighbours[index[big]]
     area_attr = np.full(len(faces), np.nan)
     if len(faces):
         pts = shapely.points(result.points.xy)
