@@ -326,3 +326,30 @@ def test_parts_of_the_target_apart_are_named(qgis_processing, helsinki_points):
     assert any(f"{pieces - 1} piece(s) of the network stay apart" in w for w in log.warnings), \
         log.warnings
     assert not any(m.startswith("One network") for m in log.messages)
+
+
+def test_intersections_saved_as_a_shapefile_are_read_back_whole(qgis_processing, helsinki_graph,
+                                                                  tmp_path):
+    """A shapefile cuts tortuosity_a / tortuosity_b to 'tortuosity' / 'tortuosi_1', which no
+    rule tells apart: 'Extract road hierarchy' keeps the full names as the fields' aliases in
+    its sidecar style, and the walk reads its points by them (the points from the shapefile
+    give the walk of the points from memory)."""
+    from qgis.core import QgsVectorLayer
+
+    shp = tmp_path / "points.shp"
+    qgis_processing.run("urbansynth:extractroadhierarchy", {
+        "INPUT": helsinki_layer(), "OUTPUT": "memory:", "OUTPUT_INTERSECTIONS": str(shp)})
+    written = QgsVectorLayer(str(shp), "points", "ogr").fields().names()
+    assert {"tortuosity", "tortuosi_1"} <= set(written) and "tortuosity_b" not in written
+    target = memory_layer("Polygon", [_hull_wkt(helsinki_graph, 200)], UTM)
+    runs, logs = [], []
+    for example in (str(shp), qgis_processing.run("urbansynth:extractroadhierarchy", {
+            "INPUT": helsinki_layer(), "OUTPUT": "memory:",
+            "OUTPUT_INTERSECTIONS": "memory:"})["OUTPUT_INTERSECTIONS"]):
+        log = log_feedback()
+        out = qgis_processing.run(ALG, {"EXAMPLE": example, "TARGET": target, "SEED": 2,
+                                        "PLACEMENT": 1, "OUTPUT": "memory:"}, feedback=log)
+        runs.append(sorted(g.wkt for g in layer_features(out["OUTPUT"])[1]))
+        logs.append(log.messages)
+    assert any("'tortuosity_b' read from 'tortuosi_1'" in m for m in logs[0])
+    assert runs[0] == runs[1]

@@ -485,6 +485,13 @@ class OutputStaging:
             warning = styles.save_style_with_layer(final, qml)
             if warning and self.feedback is not None:
                 self.feedback.pushWarning(f"Output {final}: {warning}.")
+        # an output with no style but fields GDAL renamed: the full names as aliases
+        for item in self.staged:
+            final = str(item.final_path)
+            if styles.written_field_names(final) and not Path(final).with_suffix(".qml").exists():
+                warning = styles.save_style_with_layer(final, None)
+                if warning and self.feedback is not None:
+                    self.feedback.pushWarning(f"Output {final}: {warning}.")
 
     def _rename_layers_to_load(self, renames):
         """The layers QGIS loads on completion keyed by their final destinations, each with

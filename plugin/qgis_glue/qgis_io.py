@@ -11,7 +11,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import List, Optional, Sequence
+from pathlib import Path
+from typing import Dict, List, Optional, Sequence
 
 import numpy as np
 import pandas as pd
@@ -245,6 +246,33 @@ def layer_name(alg, parameters, name, context) -> str:
     return f"'{definition.description()}'" if definition is not None else f"'{name}'"
 
 
+def _field_aliases(alg, parameters, name, context, source) -> Dict[str, str]:
+    """{alias: field name} of a source: the layer's own aliases, else those of the sidecar
+    style of a file layer (Processing opens a file without its default style, and the
+    plugin's shapefile outputs keep the full names GDAL cut there:
+    ``styles.save_style_with_layer``)."""
+    aliases = {f.alias(): f.name() for f in source.fields() if f.alias()}
+    if aliases:
+        return aliases
+    try:
+        layer = alg.parameterAsVectorLayer(parameters, name, context)
+    except Exception:  # noqa: BLE001 - sources that are not layers (e.g. feature iterators)
+        layer = None
+    if layer is None or layer.providerType() != "ogr":
+        return {}
+    qml = Path(layer.source().split("|")[0]).with_suffix(".qml")
+    if not qml.is_file():
+        return {}
+    import xml.etree.ElementTree as ElementTree
+
+    try:
+        root = ElementTree.parse(qml).getroot()
+    except (ElementTree.ParseError, OSError):
+        return {}
+    return {a.get("name"): a.get("field") for a in root.iter("alias")
+            if a.get("name") and a.get("field")}
+
+
 def read_source(alg, parameters, name: str, context, feedback,
                 kind: Optional[str] = None, required_fields: Sequence[str] = (),
                 target_crs: Optional[QgsCoordinateReferenceSystem] = None,
@@ -286,9 +314,18 @@ def read_source(alg, parameters, name: str, context, feedback,
     field_names = all_names if fields is None else \
         [f for f in dict.fromkeys(fields) if f and f in all_names]
     # a field asked for by its full name that a shapefile (dBase: 10 characters) holds cut
-    # short: read under its full name (building_type from 'building_t')
+    # short: read under its full name, which the plugin's own outputs give it as its alias
+    # (styles.save_style_with_layer: 'tortuosity_b' from 'tortuosi_1'), else when the cut
+    # is the full name's ten first characters and no other name cuts to them
+    # ('building_type' from 'building_t')
     cut = styles.DBF_NAME_LENGTH
     wanted = [] if fields is None else [f for f in dict.fromkeys(fields) if f]
+    by_alias = {alias: field for alias, field in _field_aliases(alg, parameters, name, context,
+                                                                source).items()
+                if alias != field and alias not in all_names and field in all_names}
+    aliased = {by_alias[f]: f for f in wanted if f not in all_names and f in by_alias}
+    field_names += [name for name in aliased if name not in field_names]
+    wanted = [f for f in wanted if f not in aliased.values()]
     shorts = pd.Series([f[:cut] for f in wanted]).value_counts()
     # two names cut to the same ten characters cannot be told apart: neither is guessed
     cut_short = {f[:cut]: f for f in wanted
@@ -298,7 +335,7 @@ def read_source(alg, parameters, name: str, context, feedback,
              and shorts[f[:cut]] > 1]
     field_names += [short for short in cut_short if short not in field_names]
     field_idx = [all_names.index(f) for f in field_names]
-    missing = [f for f in required_fields if f not in all_names]
+    missing = [f for f in required_fields if f not in all_names and f not in aliased.values()]
     if missing:
         raise QgsProcessingException(
             f"Layer {label} has no field {', '.join(repr(m) for m in missing)} "
@@ -455,6 +492,12 @@ def read_source(alg, parameters, name: str, context, feedback,
         feedback.pushInfo(f"{label}: " + ", ".join(f"'{f}'" for f in alike) + " are cut to "
                           "the same 10 characters in a shapefile and cannot be told apart: "
                           "they are not read (a GeoPackage keeps whole field names).")
+    if aliased:
+        attrs = attrs.rename(columns=aliased)
+        if feedback is not None:
+            feedback.pushInfo(f"{label}: " + ", ".join(f"'{full}' read from '{short}'"
+                                                       for short, full in aliased.items())
+                              + " (the full names the layer keeps as aliases).")
     if cut_short:
         attrs = attrs.rename(columns=cut_short)
         if feedback is not None:

@@ -102,19 +102,28 @@ def style_for_fields(qml: str, field_names, written: Optional[dict] = None) -> s
     return str(out)
 
 
-def save_style_with_layer(destination: str, qml: str) -> Optional[str]:
+def save_style_with_layer(destination: str, qml: Optional[str]) -> Optional[str]:
     """Store ``qml`` with the written layer as its default style: in the GeoPackage's
-    ``layer_styles`` table, or as the sidecar ``.qml`` QGIS reads for other files. Returns
-    a warning, or None when the style was stored."""
+    ``layer_styles`` table, or as the sidecar ``.qml`` QGIS reads for other files. A field
+    GDAL renamed (:func:`written_field_names`) gets its full name as its alias there, which
+    the plugin's tools read it by (``qgis_io.read_source``): a shapefile output of one tool
+    is the input of the next. ``qml`` None: the aliases alone. Returns a warning, or None
+    when the style was stored."""
     from qgis.core import QgsVectorLayer
 
     layer = QgsVectorLayer(destination, "output", "ogr")
     if not layer.isValid():
         return f"the output {destination} could not be opened to store its style"
-    message, ok = layer.loadNamedStyle(style_for_fields(qml, layer.fields().names(),
-                                                        written_field_names(destination)))
-    if not ok:
-        return f"the style {qml} could not be read: {message}"
+    written = written_field_names(destination)
+    if qml is not None:
+        message, ok = layer.loadNamedStyle(style_for_fields(qml, layer.fields().names(),
+                                                            written))
+        if not ok:
+            return f"the style {qml} could not be read: {message}"
+    for declared, name in written.items():
+        index = layer.fields().indexOf(name)
+        if index >= 0:
+            layer.setFieldAlias(index, declared)
     if layer.dataProvider().storageType() == "GPKG":
         _drop_stored_style(layer, layer.name())
         error = layer.saveStyleToDatabase(layer.name(), "Urban Synthesis default style",
