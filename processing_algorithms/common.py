@@ -332,6 +332,27 @@ class AlgorithmBase(QgsProcessingAlgorithm):
         return self.optional_polygons(parameters, self.KEEP_CLEAR, context, feedback, frame,
                                       blocks, "areas kept clear")
 
+    @staticmethod
+    def only_buildings(frame, feedback):
+        """The polygons of ``frame`` with a 'building' value (not 'no') when the layer has
+        that field -- an OSM multipolygons layer holds land use, parks, water and boundaries
+        too -- the others skipped with a count in the log; every polygon of a layer without
+        the field. One rule for every tool that reads buildings."""
+        if frame is None or "building" not in frame.attributes:
+            return frame
+        value = frame.attributes["building"].to_numpy(dtype=object)
+        keep = np.array([v is not None and not (isinstance(v, float) and math.isnan(v))
+                         and str(v).strip() not in ("", "no") for v in value], dtype=bool)
+        if not keep.any():
+            raise QgsProcessingException(f"Layer {frame.name} has a 'building' field but no "
+                                         "polygon with a value in it: no building to read.")
+        if not keep.all():
+            feedback.pushInfo(f"{frame.name}: {counted((~keep).sum(), 'polygon')} of "
+                              f"{len(frame)} without a 'building' value skipped (land use, "
+                              "water ... of an OSM layer are no buildings).")
+            frame = qgis_io.subset(frame, keep)
+        return frame
+
     # ----------------------------------------------------------------- roads and blocks
 
     def drivable_roads(self, parameters, name, context, feedback, class_field=None,
