@@ -2,6 +2,7 @@
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import shapely
 from qgis.core import (
     QgsProcessing,
@@ -122,8 +123,21 @@ class BuildBlockDatabase(AlgorithmBase):
         if by_field:
             bid = as_numbers(building_frame.attributes[id_field])
             known = np.isin(bid, block_ids) & np.isfinite(bid)
+            # an id counts only where the building lies in the block it names: blocks
+            # numbered anew (extracted again, or another town's) name other blocks
+            named = np.flatnonzero(known)
+            a = building_frame.geometry[named]
+            b = block_frame.geometry[pd.Index(block_ids).get_indexer(bid[named])]
+            elsewhere = ~shapely.intersects(a, b) | shapely.touches(a, b)
+            if elsewhere.any():
+                feedback.pushWarning(
+                    f"{b_label}: {int(elsewhere.sum())} of {counted(len(named), 'building')} "
+                    f"lie outside the block of {label} that '{id_field}' names (were the "
+                    "blocks numbered anew?): they are assigned by location.")
+                known[named[elsewhere]] = False
+                bid[named[elsewhere]] = np.nan
             if not known.any():
-                feedback.pushInfo(f"{b_label}: no building names one of the blocks in "
+                feedback.pushInfo(f"{b_label}: no building lies in a block it names in "
                                   f"'{id_field}'; buildings are assigned by location.")
                 by_field = False
             elif not known.all():
@@ -135,7 +149,7 @@ class BuildBlockDatabase(AlgorithmBase):
                 if located.any():
                     feedback.pushInfo(f"{b_label}: " + counted(
                         located.sum(), "building names", "buildings name") + f" no block of "
-                        f"{label} in '{id_field}': assigned by location.")
+                        f"{label} it lies in in '{id_field}': assigned by location.")
                 known = np.isin(bid, block_ids) & np.isfinite(bid)
         if not by_field:
             index, _ = blocks.assign_to_blocks(block_frame.geometry, building_frame.geometry)
