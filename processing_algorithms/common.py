@@ -347,9 +347,9 @@ class AlgorithmBase(QgsProcessingAlgorithm):
             raise QgsProcessingException(f"Layer {frame.name} has a 'building' field but no "
                                          "polygon with a value in it: no building to read.")
         if not keep.all():
-            feedback.pushInfo(f"{frame.name}: {counted((~keep).sum(), 'polygon')} of "
-                              f"{len(frame)} without a 'building' value skipped (land use, "
-                              "water ... of an OSM layer are no buildings).")
+            feedback.pushInfo(f"{frame.name}: {counted((~keep).sum(), 'polygon')} without a "
+                              f"'building' value skipped (of {len(frame)}: land use, water ... "
+                              "of an OSM layer are no buildings).")
             frame = qgis_io.subset(frame, keep)
         return frame
 
