@@ -415,10 +415,14 @@ class AlgorithmBase(QgsProcessingAlgorithm):
     def block_ids(self, frame, feedback, field="block_id", what="block"):
         """A block (or parcel, ``what``) layer's own ids (:func:`core.ids.whole_ids`), or
         None with a note when they are not a unique whole number per feature (they are
-        then numbered 1..n)."""
+        then numbered 1..n); the parts of a multi-part feature read apart keep its id."""
         if field not in frame.attributes:
             return None
-        ids = whole_ids(frame.attributes[field])
+        # the parts of one feature (read_source's ``parts``) follow each other and share its id
+        first = ~pd.Series(np.asarray(frame.fids)).duplicated().to_numpy()
+        ids = whole_ids(frame.attributes[field].to_numpy()[first])
+        if ids is not None:
+            ids = ids[np.cumsum(first) - 1]
         if ids is None:
             feedback.pushInfo(f"{frame.name}: {field} is not a unique whole number per "
                               f"{what}; {what}s are numbered 1..n in layer order instead.")
