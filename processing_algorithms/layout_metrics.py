@@ -195,6 +195,8 @@ class LayoutMetrics(AlgorithmBase):
                                         target_crs=crs, optional=True)
             if frame is None:   # empty: a model step before made nothing
                 continue
+            if arg == "buildings":   # an OSM multipolygons layer: its buildings only
+                frame = self.only_buildings(frame, feedback)
             crs = frame.crs
             kwargs[arg] = frame.geometry
             if arg == "roads":  # bridges and tunnels cross without an intersection
