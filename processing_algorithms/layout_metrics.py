@@ -101,7 +101,8 @@ class LayoutMetrics(AlgorithmBase):
             "Parcels (cadastre plots or a subdivision) for the Yang et al. 2013 parcel measures.")
         self.add(QgsProcessingParameterFeatureSource(
             self.BUILDINGS, "Buildings", poly, optional=True),
-            "Building footprints for coverage, overlap and setback measures.")
+            "Building footprints for coverage, overlap and setback measures (of an OSM "
+            "multipolygons layer, the polygons with a 'building' value).")
         self.add(QgsProcessingParameterFeatureSource(
             self.EXAMPLE_ROADS, "Example roads", line, optional=True),
             "Roads of the example the layout should resemble.")
