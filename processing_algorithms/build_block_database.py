@@ -2,6 +2,7 @@
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import shapely
 from qgis.core import (
     QgsProcessing,
@@ -12,6 +13,7 @@ from qgis.core import (
     QgsProcessingParameterString,
 )
 
+from ..plugin.buildings import attributes as building_attributes
 from ..plugin.core.ids import as_numbers, whole_ids
 from ..plugin.core.text import counted
 from ..plugin.network import blocks
@@ -41,9 +43,11 @@ class BuildBlockDatabase(AlgorithmBase):
             "GeoPackage example database for footprint synthesis by example (Hartmann, ch. 5.1 "
             "and 5.2).\n\n"
             "Use the blocks and buildings written by 'Extract city blocks'. Buildings are "
-            "matched to blocks by the block id field; when the buildings have no such field "
-            "they are assigned by location (the block holding most of their area). Buildings "
-            "outside every block are left out.\n\n"
+            "matched to blocks by the block id field; when the buildings have no such field, "
+            "or an id names a block the building does not lie in (blocks numbered anew), they "
+            "are assigned by location (the block holding most of their area). Buildings "
+            "outside every block are left out. In an OSM multipolygons layer only the polygons "
+            "with a 'building' value are buildings.\n\n"
             "The database holds the blocks (area, perimeter, aspect ratio, compactness, number "
             "of buildings, coverage), the footprints (block_id, height_m, levels, building_type "
             "...) and 100 boundary samples with scale-aware shape-context histograms per block."
@@ -56,7 +60,9 @@ class BuildBlockDatabase(AlgorithmBase):
         self.add(QgsProcessingParameterFeatureSource(
             self.BUILDINGS, "Buildings", [QgsProcessing.SourceType.TypeVectorPolygon]),
             "Building footprints, e.g. the buildings output of 'Extract city blocks' (with "
-            "block_id, height_m, levels, building_type).")
+            "block_id, height_m, levels, building_type). In a layer with a 'building' field "
+            "(OSM multipolygons) only the polygons with a value in it are buildings; their "
+            "height, levels and type are then read from the OSM tags.")
         self.add(QgsProcessingParameterString(
             self.BLOCK_ID_FIELD, "Block id field", defaultValue="block_id", optional=True),
             "Field naming the block in both layers. Blocks without it are numbered 1..n; "
@@ -75,9 +81,12 @@ class BuildBlockDatabase(AlgorithmBase):
                                           kind="polygons", fields=[id_field])
         label = block_frame.name
         feedback.setProgress(10)
-        building_frame = qgis_io.read_source(self, parameters, self.BUILDINGS, context, feedback,
-                                             kind="polygons", target_crs=block_frame.crs,
-                                             fields=[id_field, *database.BUILDING_FIELDS])
+        # an OSM multipolygons layer: its buildings only, their attributes from the tags
+        building_frame = self.only_buildings(qgis_io.read_source(
+            self, parameters, self.BUILDINGS, context, feedback, kind="polygons",
+            target_crs=block_frame.crs, fields=[id_field, *database.BUILDING_FIELDS, "building",
+                                                "other_tags", *building_attributes.TAG_FIELDS]),
+            feedback)
         feedback.setProgress(25)
 
         if id_field and id_field not in block_frame.attributes:
@@ -116,8 +125,21 @@ class BuildBlockDatabase(AlgorithmBase):
         if by_field:
             bid = as_numbers(building_frame.attributes[id_field])
             known = np.isin(bid, block_ids) & np.isfinite(bid)
+            # an id counts only where the building lies in the block it names: blocks
+            # numbered anew (extracted again, or another town's) name other blocks
+            named = np.flatnonzero(known)
+            a = building_frame.geometry[named]
+            b = block_frame.geometry[pd.Index(block_ids).get_indexer(bid[named])]
+            elsewhere = ~shapely.intersects(a, b) | shapely.touches(a, b)
+            if elsewhere.any():
+                feedback.pushWarning(
+                    f"{b_label}: {int(elsewhere.sum())} of {counted(len(named), 'building')} "
+                    f"lie outside the block of {label} that '{id_field}' names (were the "
+                    "blocks numbered anew?): they are assigned by location.")
+                known[named[elsewhere]] = False
+                bid[named[elsewhere]] = np.nan
             if not known.any():
-                feedback.pushInfo(f"{b_label}: no building names one of the blocks in "
+                feedback.pushInfo(f"{b_label}: no building lies in a block it names in "
                                   f"'{id_field}'; buildings are assigned by location.")
                 by_field = False
             elif not known.all():
@@ -129,7 +151,7 @@ class BuildBlockDatabase(AlgorithmBase):
                 if located.any():
                     feedback.pushInfo(f"{b_label}: " + counted(
                         located.sum(), "building names", "buildings name") + f" no block of "
-                        f"{label} in '{id_field}': assigned by location.")
+                        f"{label} it lies in in '{id_field}': assigned by location.")
                 known = np.isin(bid, block_ids) & np.isfinite(bid)
         if not by_field:
             index, _ = blocks.assign_to_blocks(block_frame.geometry, building_frame.geometry)
@@ -144,8 +166,7 @@ class BuildBlockDatabase(AlgorithmBase):
             raise QgsProcessingException(
                 f"Layer {b_label}: no building lies in one of the blocks of {label}; "
                 "check that the two layers cover the same area.")
-        attrs = building_frame.attributes.loc[known, [c for c in database.BUILDING_FIELDS
-                                                      if c in building_frame.attributes]]
+        attrs = self._attributes(building_frame, feedback).loc[known]
         source = f"blocks {label}, buildings {b_label}"
         qgis_io.run_engine(label, database.write_block_database, output, block_frame.geometry,
                            building_frame.geometry[known], bid[known].astype(np.int64),
@@ -159,3 +180,22 @@ class BuildBlockDatabase(AlgorithmBase):
                           f"{counted(n_buildings, 'building')}).")
         return {self.OUTPUT: output, self.N_BLOCKS: len(block_frame),
                 self.N_BUILDINGS: n_buildings}
+
+    @staticmethod
+    def _attributes(frame, feedback):
+        """The stored building attributes: the layer's own (the buildings of 'Extract city
+        blocks'), else -- an OSM layer, with a 'building' field and no building_type -- read
+        from its tags as 'Extract city blocks' reads them."""
+        a = frame.attributes
+        if "building" in a and not any(c in a for c in database.BUILDING_FIELDS):
+            attrs = qgis_io.run_engine(
+                frame.name, building_attributes.building_attributes, len(frame),
+                building=qgis_io.field_values(frame, "building"),
+                other_tags=qgis_io.field_values(frame, "other_tags"),
+                tags={k: a[k].to_numpy(dtype=object) for k in building_attributes.TAG_FIELDS
+                      if k in a})
+            feedback.pushInfo(f"{frame.name}: height, levels and type read from the OSM tags "
+                              f"({int(attrs['height_m'].notna().sum())} of "
+                              f"{counted(len(frame), 'building')} with a height).")
+            return attrs[list(database.BUILDING_FIELDS)]
+        return a[[c for c in database.BUILDING_FIELDS if c in a]]

@@ -332,6 +332,27 @@ class AlgorithmBase(QgsProcessingAlgorithm):
         return self.optional_polygons(parameters, self.KEEP_CLEAR, context, feedback, frame,
                                       blocks, "areas kept clear")
 
+    @staticmethod
+    def only_buildings(frame, feedback):
+        """The polygons of ``frame`` with a 'building' value (not 'no') when the layer has
+        that field -- an OSM multipolygons layer holds land use, parks, water and boundaries
+        too -- the others skipped with a count in the log; every polygon of a layer without
+        the field. One rule for every tool that reads buildings."""
+        if frame is None or "building" not in frame.attributes:
+            return frame
+        value = frame.attributes["building"].to_numpy(dtype=object)
+        keep = np.array([v is not None and not (isinstance(v, float) and math.isnan(v))
+                         and str(v).strip() not in ("", "no") for v in value], dtype=bool)
+        if not keep.any():
+            raise QgsProcessingException(f"Layer {frame.name} has a 'building' field but no "
+                                         "polygon with a value in it: no building to read.")
+        if not keep.all():
+            feedback.pushInfo(f"{frame.name}: {counted((~keep).sum(), 'polygon')} without a "
+                              f"'building' value skipped (of {len(frame)}: land use, water ... "
+                              "of an OSM layer are no buildings).")
+            frame = qgis_io.subset(frame, keep)
+        return frame
+
     # ----------------------------------------------------------------- roads and blocks
 
     def drivable_roads(self, parameters, name, context, feedback, class_field=None,
@@ -400,10 +421,14 @@ class AlgorithmBase(QgsProcessingAlgorithm):
     def block_ids(self, frame, feedback, field="block_id", what="block"):
         """A block (or parcel, ``what``) layer's own ids (:func:`core.ids.whole_ids`), or
         None with a note when they are not a unique whole number per feature (they are
-        then numbered 1..n)."""
+        then numbered 1..n); the parts of a multi-part feature read apart keep its id."""
         if field not in frame.attributes:
             return None
-        ids = whole_ids(frame.attributes[field])
+        # the parts of one feature (read_source's ``parts``) follow each other and share its id
+        first = ~pd.Series(np.asarray(frame.fids)).duplicated().to_numpy()
+        ids = whole_ids(frame.attributes[field].to_numpy()[first])
+        if ids is not None:
+            ids = ids[np.cumsum(first) - 1]
         if ids is None:
             feedback.pushInfo(f"{frame.name}: {field} is not a unique whole number per "
                               f"{what}; {what}s are numbered 1..n in layer order instead.")

@@ -198,21 +198,9 @@ class ExtractBlocks(AlgorithmBase):
     # ----------------------------------------------------------------------- helpers
 
     def _buildings(self, parameters, context, feedback, crs):
-        frame = qgis_io.read_source(self, parameters, self.BUILDINGS, context, feedback,
-                                    kind="polygons", target_crs=crs, optional=True)
-        if frame is None or "building" not in frame.attributes:
-            return frame
-        # an OSM multipolygons layer also holds land use, parks, water ...: only buildings
-        value = frame.attributes["building"].to_numpy(dtype=object)
-        keep = [v is not None and str(v).strip() not in ("", "no") for v in value]
-        n_drop = len(frame) - sum(keep)
-        if n_drop:
-            feedback.pushInfo(f"{frame.name}: {n_drop} of {len(frame)} polygons have no "
-                              "'building' value and are not buildings; they are skipped.")
-        if not any(keep):
-            raise QgsProcessingException(
-                f"Layer {frame.name} has a 'building' field but no feature with a value in it.")
-        return qgis_io.subset(frame, keep)
+        return self.only_buildings(qgis_io.read_source(
+            self, parameters, self.BUILDINGS, context, feedback, kind="polygons",
+            target_crs=crs, optional=True), feedback)
 
     def _warn_unreadable(self, parameters, context, feedback, label, heights, levels):
         """Values of the cadastre fields that are no height or number of storeys."""

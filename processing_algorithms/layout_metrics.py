@@ -101,7 +101,8 @@ class LayoutMetrics(AlgorithmBase):
             "Parcels (cadastre plots or a subdivision) for the Yang et al. 2013 parcel measures.")
         self.add(QgsProcessingParameterFeatureSource(
             self.BUILDINGS, "Buildings", poly, optional=True),
-            "Building footprints for coverage, overlap and setback measures.")
+            "Building footprints for coverage, overlap and setback measures (of an OSM "
+            "multipolygons layer, the polygons with a 'building' value).")
         self.add(QgsProcessingParameterFeatureSource(
             self.EXAMPLE_ROADS, "Example roads", line, optional=True),
             "Roads of the example the layout should resemble.")
@@ -196,6 +197,8 @@ class LayoutMetrics(AlgorithmBase):
                                         target_crs=crs, optional=True)
             if frame is None:   # empty: a model step before made nothing
                 continue
+            if arg == "buildings":   # an OSM multipolygons layer: its buildings only
+                frame = self.only_buildings(frame, feedback)
             crs = frame.crs
             kwargs[arg] = frame.geometry
             if arg == "roads":  # bridges and tunnels cross without an intersection

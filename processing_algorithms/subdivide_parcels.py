@@ -241,7 +241,7 @@ class SubdivideParcels(AlgorithmBase):
     # ----------------------------------------------------------------------- helpers
 
     def _blocks(self, parameters, context, feedback):
-        frame = qgis_io.read_source(self, parameters, self.BLOCKS, context, feedback,
+        frame = qgis_io.read_source(self, parameters, self.BLOCKS, context, feedback, parts=True,
                                     kind="polygons", fields=["block_id", *PARCEL_SIZE_FIELDS])
         ids = self.block_ids(frame, feedback)
         feedback.pushInfo(f"{counted(len(frame), 'block')} read from {frame.name}; every block edge is "

@@ -149,7 +149,7 @@ class SynthesizeBuildingAttributes(AlgorithmBase):
         if hi <= lo:
             raise QgsProcessingException(f"The maximum height ({hi:g} m) must be larger than "
                                          f"the minimum height ({lo:g} m).")
-        footprints = self._only_buildings(
+        footprints = self.only_buildings(
             qgis_io.read_source(self, parameters, self.FOOTPRINTS, context, feedback,
                                 kind="polygons"), feedback)
         crs = footprints.crs
@@ -204,7 +204,7 @@ class SynthesizeBuildingAttributes(AlgorithmBase):
             fields=["building", "other_tags", "height_m", "levels", "building_type", hf, lf,
                     *building_attributes.TAG_FIELDS],
             required_fields=[f for f in (hf, lf) if f])
-        frame = qgis_io.example_in_place(self._only_buildings(frame, feedback),
+        frame = qgis_io.example_in_place(self.only_buildings(frame, feedback),
                                          footprints.geometry, footprints.crs, context, feedback)
         attrs = self._attributes_of(frame, hf, lf, parameters, context)
         n_h = int(np.isfinite(attrs["height_m"].to_numpy(dtype=float)).sum())
@@ -235,24 +235,6 @@ class SynthesizeBuildingAttributes(AlgorithmBase):
         if "building_type" in a and "building" not in a:
             attrs["building_type"] = a["building_type"].to_numpy(dtype=object)
         return attrs
-
-    @staticmethod
-    def _only_buildings(frame, feedback):
-        """The polygons with a 'building' value (not 'no') when the layer has that field (OSM
-        multipolygons hold forests, water and boundaries too), the others skipped and
-        counted; every polygon of a layer without it."""
-        if "building" not in frame.attributes:
-            return frame
-        value = frame.attributes["building"].to_numpy(dtype=object)
-        keep = np.array([v is not None and str(v).strip() not in ("", "no") for v in value])
-        if not keep.any():
-            raise QgsProcessingException(f"Layer {frame.name} has no polygon with a "
-                                         "'building' value.")
-        if not keep.all():
-            feedback.pushInfo(f"{frame.name}: {counted((~keep).sum(), 'polygon')} without a "
-                              "'building' value skipped.")
-            frame = qgis_io.subset(frame, keep)
-        return frame
 
     @staticmethod
     def _log(s, lo, hi, far, per_block, feedback):

@@ -207,8 +207,10 @@ class SynthesizeFootprints(AlgorithmBase):
         return examples
 
     def _blocks(self, parameters, context, feedback):
+        # each part of a multi-part feature is a block: repaired whole, the parts of a
+        # collected layer merged across the streets between them
         frame = qgis_io.read_source(self, parameters, self.BLOCKS, context, feedback,
-                                    kind="polygons", fields=["block_id"])
+                                    kind="polygons", fields=["block_id"], parts=True)
         ids = self.block_ids(frame, feedback)
         feedback.pushInfo(f"{counted(len(frame), 'block')} read from {frame.name}; every block edge is "
                           "taken as a street centreline.")

@@ -118,6 +118,32 @@ def test_two_databases_with_style_and_seed(qgis_processing, helsinki_db, bubenec
     assert any(shapely.to_wkb(o[1]).tolist() != shapely.to_wkb(geoms).tolist() for o in others)
 
 
+def test_collected_blocks_stay_apart_across_their_streets(qgis_processing, helsinki_db,
+                                                          bubenec_blocks):
+    """Bubeneč's blocks gathered into one multi-part feature ('Collect geometries'): each
+    part is a block, filled as the blocks are one by one. Its parts share the street
+    centrelines, so the feature is invalid, and its repair merged them across the streets:
+    footprints stood on the centrelines between the old blocks (0 m from one)."""
+    from helpers import log_feedback
+
+    one = qgis_processing.run("native:collect", {"INPUT": bubenec_blocks,
+                                                 "OUTPUT": "memory:"})["OUTPUT"]
+    assert one.featureCount() == 1
+    log = log_feedback()
+    collected = qgis_processing.run(ALG, {"BLOCKS": one, "BLOCK_DB": helsinki_db,
+                                          "OUTPUT": "memory:"}, feedback=log)["OUTPUT"]
+    apart = qgis_processing.run(ALG, {"BLOCKS": bubenec_blocks, "BLOCK_DB": helsinki_db,
+                                      "OUTPUT": "memory:"})["OUTPUT"]
+    _, g = layer_features(collected)
+    _, g0 = layer_features(apart)
+    assert len(g) == len(g0) > 0
+    assert np.allclose(np.sort(shapely.area(g)), np.sort(shapely.area(g0)))
+    _, blocks = layer_features(bubenec_blocks)
+    edges = shapely.union_all(shapely.boundary(utm(blocks)))
+    assert shapely.distance(utm(g), edges).min() > HALF_WIDTH - 0.1
+    assert any("1 multi-part feature read as" in m for m in log.messages)
+
+
 def test_bad_input(qgis_processing, helsinki_db, tmp_path):
     from qgis.core import QgsProcessingException
 

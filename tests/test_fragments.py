@@ -87,6 +87,10 @@ def test_slivers_are_dropped_and_no_fragment_is_an_error():
     with pytest.raises(InputError, match="no closed fragment"):
         fr.extract_fragments([shapely.LineString([(0, 0), (100, 0)]),
                               shapely.LineString([(50, 0), (50, 50)])], [0, 1])
+    # faces dropped by the width limit alone: the message names it (it gave the area
+    # limit only, 'larger than 400 m²', though the 400 m square is 160,000 m²)
+    with pytest.raises(InputError, match="at least 400 m² and 1000 m mean width"):
+        fr.extract_fragments(lines, levels, min_width=1000.0)
     with pytest.raises(InputError, match="two street levels"):
         fr.extract_fragments(lines, np.zeros(len(lines), int))
     with pytest.raises(InputError, match="whole numbers"):

@@ -408,7 +408,8 @@ def extract_fragments(lines: Sequence, levels: Sequence, min_area: float = MIN_B
 
     if offset == 0:
         raise InputError("no closed fragment at any level: the streets of level <= l form no "
-                         f"closed face larger than {min_area:g} m² for any l < {max_level}")
+                         f"closed face of at least {min_area:g} m² and {min_width:g} m mean "
+                         f"width for any l < {max_level}")
     geometry = np.concatenate(geoms)
     metrics = shape_metrics(geometry)
     table = pd.DataFrame({

@@ -280,7 +280,7 @@ def read_source(alg, parameters, name: str, context, feedback,
                 progress_range: tuple = (0.0, 5.0),
                 expression: Optional[str] = None,
                 fields: Optional[Sequence[str]] = None,
-                read_twice: bool = False) -> Optional[Frame]:
+                read_twice: bool = False, parts: bool = False) -> Optional[Frame]:
     """Read a feature source parameter into a :class:`Frame` in a metric working CRS.
 
     Raises a QgsProcessingException naming the layer for: a missing layer, the wrong geometry
@@ -293,8 +293,12 @@ def read_source(alg, parameters, name: str, context, feedback,
     holds no feature with a geometry (a model step that made nothing), gives None (the
     latter with a warning naming the layer and the parameter). Lines and polygons drawn twice (the same
     geometry, in either direction) are read once, with a count in the log, unless
-    ``read_twice`` (a library of shapes, where two entries may share one outline). The
-    source is never modified.
+    ``read_twice`` (a library of shapes, where two entries may share one outline). With
+    ``parts`` each part of a multi-part feature is read as a feature of its own (its
+    attributes and fid repeated, with a count in the log) before the validity check: the
+    parts of a collected layer (blocks gathered by 'Collect geometries') touch along the
+    streets between them, and the repair of the whole would merge them across the streets.
+    The source is never modified.
     """
     source = alg.parameterAsSource(parameters, name, context)
     label = layer_name(alg, parameters, name, context)
@@ -419,6 +423,10 @@ def read_source(alg, parameters, name: str, context, feedback,
                       != (2 if kind == "polygons" else 1)).any())
     if mixed:
         geoms, rows, fids = _parts_of_kind(geoms, rows, fids, kind, label, feedback)
+    if parts:
+        geoms, owner = _split_parts(geoms, label, feedback)
+        # the attributes, ids and source geometries (for the repair by QGIS) of each part
+        rows, fids, wkbs = ([r[i] for i in owner] for r in (rows, fids, wkbs))
     if kind in ("polygons", "lines"):
         geoms, rows, fids = _apply_invalid_rule(
             invalid_geometry_rule(parameters, name, context), geoms, rows, fids, label, feedback)
@@ -605,6 +613,28 @@ def _kept(keep, geoms, rows, fids):
     keep = np.asarray(keep, dtype=bool)
     return (geoms[keep], [r for r, k in zip(rows, keep) if k],
             [f for f, k in zip(fids, keep) if k])
+
+
+def _split_parts(geoms, label: str, feedback):
+    """Each part of a multi-part feature as a geometry of its own (see :func:`read_source`),
+    and the index of the feature each comes from; a geometry GEOS cannot read stays whole,
+    for the repair by QGIS."""
+    readable = ~shapely.is_missing(geoms)
+    n_parts = np.ones(len(geoms), dtype=np.int64)
+    n_parts[readable] = np.maximum(shapely.get_num_geometries(geoms[readable]), 1)
+    multi = readable & (shapely.get_type_id(np.where(readable, geoms, None)) >= 4)
+    if not (n_parts[multi] > 1).any():
+        return geoms, np.arange(len(geoms))
+    out, owner = [], []
+    for i, g in enumerate(geoms):
+        pieces = shapely.get_parts(g) if multi[i] else [g]
+        out.extend(pieces)
+        owner.extend([i] * len(pieces))
+    n_split = int((multi & (n_parts > 1)).sum())
+    if feedback is not None:
+        feedback.pushInfo(f"{label}: {counted(n_split, 'multi-part feature')} read as "
+                          f"{int(n_parts[multi & (n_parts > 1)].sum())} parts of their own.")
+    return np.array(out, dtype=object), np.asarray(owner, dtype=np.int64)
 
 
 def _parts_of_kind(geoms, rows, fids, kind: str, label: str, feedback):
