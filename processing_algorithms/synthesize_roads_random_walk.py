@@ -143,7 +143,7 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
             self.MIN_ANGLE, "Minimum angle between streets (degrees)",
             QgsProcessingParameterNumber.Type.Double,
             defaultValue=random_walk.WalkSettings.min_angle, minValue=0.0, maxValue=89.0),
-            "No two streets leave an intersection closer in direction than this.",
+            "Walk steps keep streets this far apart at a junction; later joins may not.",
             advanced=True)
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT, "Synthesized roads", QgsProcessing.SourceType.TypeVectorLine),
