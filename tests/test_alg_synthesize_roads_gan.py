@@ -418,3 +418,26 @@ def test_an_extent_without_a_crs_is_refused(qgis_processing):
                                                      "reference system"):
         qgis_processing.run(GAN, {"EXTENT": EXTENT.split(" [")[0], "MODEL": 0, "SEED": 3,
                                   "OUTPUT": "memory:"})
+
+
+def test_synthesize_roads_keeps_the_arterials_inside_the_district(qgis_processing):
+    """'Synthesize roads' with StreetGAN kept the arterials whole where they run on beyond the
+    district (4.8 of 7.5 km outside on a Liechtenstein trial), while fragments and growth keep
+    what lies inside: the output's extent changed with the method."""
+    from qgis.core import QgsVectorLayer
+
+    streets = QgsVectorLayer(bubenec_layer("streets"), "streets", "ogr")
+    _, lines = layer_features(streets)
+    box = shapely.box(*shapely.bounds(shapely.union_all(lines)))
+    minx, miny, maxx, maxy = box.bounds
+    half = shapely.box(minx, miny, (minx + maxx) / 2, maxy)      # the western half
+    district = memory_layer("Polygon", [half.wkt], streets.crs().authid())
+    out = qgis_processing.run("urbansynth:synthesizeroads", {
+        "METHOD": 2, "ARTERIALS": streets, "BOUNDARY": district, "SEED": 1,
+        "OUTPUT": "memory:"})
+    rows, geoms = layer_features(out["OUTPUT"])
+    assert len(geoms)
+    assert shapely.covers(half.buffer(0.5), shapely.union_all(geoms))  # mm: reprojection
+    inside = shapely.length(shapely.intersection(lines, half)).sum()
+    kept = shapely.length(geoms[np.array([r["level"] == 0 for r in rows])]).sum()
+    assert kept == pytest.approx(inside, rel=0.01)
