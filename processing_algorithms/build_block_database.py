@@ -172,6 +172,7 @@ class BuildBlockDatabase(AlgorithmBase):
                            building_frame.geometry[known], bid[known].astype(np.int64),
                            qgis_io.crs_text(block_frame.crs), block_ids=block_ids,
                            building_attributes=attrs, source=source,
+                           extra={"name": self.database_name(b_label)},
                            progress=qgis_io.progress_for(feedback, 30, 100))
         n_buildings = int(known.sum())
         # the file's name, not ``output``: that is the run's staging copy until it succeeds

@@ -150,7 +150,8 @@ class BuildFragmentDatabase(AlgorithmBase):
             f", DEM '{dem_layer.name()}'" if dem_layer is not None else "")
         qgis_io.run_engine(label, database.write_fragment_database, output, frags,
                            qgis_io.crs_text(frame.crs), source=source, elevation=dem,
-                           extra={"min_area_m2": min_area, "min_width_m": min_width,
+                           extra={"name": self.database_name(label),
+                                  "min_area_m2": min_area, "min_width_m": min_width,
                                   "relief_cell_m": cell if dem is not None else None,
                                   **({"dead_end_share": share} if np.isfinite(share) else {})},
                            progress=qgis_io.progress_for(feedback, 60, 100))

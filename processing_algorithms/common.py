@@ -3,6 +3,7 @@ rules every algorithm follows once: numbers checked against the range they were 
 with, seeds, field types by the declaration, roads -> blocks, the example databases."""
 import functools
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +17,7 @@ from qgis.core import (
     QgsProcessingParameterFeatureSource,
     QgsProcessingParameterField,
     QgsProcessingParameterNumber,
+    QgsProcessingUtils,
 )
 from qgis.PyQt.QtCore import QCoreApplication
 from qgis.PyQt.QtGui import QIcon
@@ -454,10 +456,36 @@ class AlgorithmBase(QgsProcessingAlgorithm):
             paths.append(extra)
         if not paths[0]:
             raise QgsProcessingException(f"A {what} database is needed ({first}).")
-        names = [Path(p).stem for p in paths]
+        names = [self._database_name(p) for p in paths]
         if len(names) == 2 and names[0] == names[1]:
             names = [f"{n}_{k + 1}" for k, n in enumerate(names)]
         return paths, names
+
+    @staticmethod
+    def database_name(layer_label: str) -> str:
+        """A database's name from the layer it is built from, as a file stem: 'Helsinki'
+        for the lines of 'Helsinki.osm.pbf' (recorded in its metadata: a database that a
+        model step writes to a temporary file is named after the step's output, 'OUTPUT')."""
+        return re.sub(r"\W+", "_", str(layer_label).split(" (")[0]).strip("_") or "example"
+
+    @staticmethod
+    def _database_name(path: str) -> str:
+        """The file's stem, or for a model step's temporary database (in Processing's
+        temporary folder) the name recorded in it (:meth:`database_name`)."""
+        stem = Path(path).stem
+        try:
+            temporary = Path(QgsProcessingUtils.tempFolder()).resolve() in \
+                Path(path).resolve().parents
+        except OSError:
+            return stem
+        if temporary:
+            from ..plugin.retrieval import database
+
+            try:
+                return database.read_metadata(path).get("name") or stem
+            except Exception:  # noqa: BLE001 - loading the database says what is wrong
+                return stem
+        return stem
 
     def style_databases(self, parameters, context, feedback, target_crs, n_databases: int):
         """The STYLE polygons and the 0-based database each one chooses (its STYLE_FIELD

@@ -1,6 +1,5 @@
 """urbansynth:synthesizeroads - one entry point that runs the road synthesis method chosen by
 METHOD (the district model uses it so that the method is a model parameter)."""
-import re
 from collections import namedtuple
 
 import numpy as np
@@ -205,7 +204,7 @@ class SynthesizeRoads(AlgorithmBase):
                               {"ROADS": parameters[self.EXAMPLE_ROADS],
                                "DEM": self._example_dem(parameters, context, feedback),
                                "OUTPUT": QgsProcessingUtils.generateTempFilename(
-                                   (re.sub(r"\W+", "_", example).strip("_") or "example")
+                                   self.database_name(example)
                                    + "_fragments.gpkg")})["OUTPUT"]
             steps.setCurrentStep(1)
         # every method fills the district: the boundary given, or the arterials' convex hull,

@@ -81,6 +81,9 @@ def test_model_runs_end_to_end_on_bubenec(tmp_path):
     assert len(roads) > 20 and len(blocks) >= 5 and len(parcels) > len(blocks)
     assert len(buildings) > 10
     assert {"height_m", "levels", "building_type", "source_block"} <= set(buildings.columns)
+    # the block database the model builds in a temporary file is named after the layer it
+    # was built from (extractblocks' buildings), not after the step's output ('OUTPUT')
+    assert set(buildings["database"]) == {"Buildings_with_blocks_and_attributes"}
     # Bubeneč's buildings carry no heights: types come across, heights stay empty
     assert buildings["building_type"].notna().all()
     assert buildings["height_m"].isna().all()
@@ -146,7 +149,7 @@ def test_synthesize_roads_runs_each_method(qgis_processing, helsinki_arterials, 
     assert not any(".urbansynth-run-" in m for m in log.messages + log.warnings)
     roads = _read(out, None)
     if method == 0:   # the database built from the example is named after it, not 'OUTPUT'
-        assert set(roads["database"].dropna()) - {""} == {"roads_fragments"}
+        assert set(roads["database"].dropna()) - {""} == {"roads"}
     sketch = _read(arterials, None).to_crs(roads.crs)
     # the arterials are kept and streets are added to them (Helsinki's clipped extract closes
     # few arterial faces, so the fragment refill is sparse)
