@@ -216,6 +216,24 @@ class Frame:
         return len(self.geometry)
 
 
+def _vector_layer(alg, parameters, name, context):
+    """The vector layer a source parameter names, also one given with "Selected features
+    only" (a QgsProcessingFeatureSourceDefinition, which parameterAsVectorLayer does not
+    resolve on 3.22); None for sources that are no layer."""
+    try:
+        layer = alg.parameterAsVectorLayer(parameters, name, context)
+    except Exception:  # noqa: BLE001 - sources that are not layers (e.g. feature iterators)
+        layer = None
+    value = parameters.get(name) if isinstance(parameters, dict) else None
+    if layer is None and isinstance(value, QgsProcessingFeatureSourceDefinition):
+        try:
+            layer = alg.parameterAsVectorLayer(
+                {name: value.source.staticValue()}, name, context)
+        except Exception:  # noqa: BLE001 - an expression-based source: no layer
+            layer = None
+    return layer
+
+
 def layer_name(alg, parameters, name, context) -> str:
     """A name for messages: the layer's name, else the parameter's description.
 
@@ -224,19 +242,9 @@ def layer_name(alg, parameters, name, context) -> str:
     its selection: "layer 'Region' is empty" named no layer of the user's, and the layer
     was not empty, its selection was.
     """
-    layer = None
-    try:
-        layer = alg.parameterAsVectorLayer(parameters, name, context)
-    except Exception:  # noqa: BLE001 - sources that are not layers (e.g. feature iterators)
-        layer = None
+    layer = _vector_layer(alg, parameters, name, context)
     value = parameters.get(name) if isinstance(parameters, dict) else None
     definition = value if isinstance(value, QgsProcessingFeatureSourceDefinition) else None
-    if layer is None and definition is not None:
-        try:
-            layer = alg.parameterAsVectorLayer(
-                {name: definition.source.staticValue()}, name, context)
-        except Exception:  # noqa: BLE001 - an expression-based source: no layer to name
-            layer = None
     selected = " (selected features)" if definition is not None and \
         definition.selectedFeaturesOnly else ""
     if layer is not None and layer.name():
@@ -257,10 +265,9 @@ def _field_aliases(alg, parameters, name, context, source) -> Dict[str, str]:
     aliases = {f.alias(): f.name() for f in source.fields() if f.alias()}
     if aliases:
         return aliases
-    try:
-        layer = alg.parameterAsVectorLayer(parameters, name, context)
-    except Exception:  # noqa: BLE001 - sources that are not layers (e.g. feature iterators)
-        layer = None
+    # the layer of a selection too: Processing loads its outputs without their sidecar
+    # style, so a selection in one had no full names to be read by
+    layer = _vector_layer(alg, parameters, name, context)
     if layer is None or layer.providerType() != "ogr":
         return {}
     qml = Path(layer.source().split("|")[0]).with_suffix(".qml")
