@@ -426,6 +426,14 @@ def read_source(alg, parameters, name: str, context, feedback,
         # OSM driver serves a file's layers from one dataset and a second reader of the same
         # .pbf waited on it once (tests/test_model_chain.py)
         features.close()
+    value = parameters.get(name) if isinstance(parameters, dict) else None
+    if isinstance(value, QgsProcessingFeatureSourceDefinition) and value.selectedFeaturesOnly \
+            and fids != sorted(fids):
+        # a memory layer serves its selection in the order of a hash set, which Qt seeds
+        # anew in each process: one SEED gave other parcels from one run to the next, and
+        # others than the whole layer's. A selection is read in the layer's order.
+        order = np.argsort(np.asarray(fids), kind="stable")
+        wkbs, rows, fids = ([r[i] for i in order] for r in (wkbs, rows, fids))
     definition = alg.parameterDefinition(name)
     declared_optional = definition is None or bool(
         definition.flags() & QgsProcessingParameterDefinition.Flag.FlagOptional)
