@@ -57,8 +57,8 @@ import shapely
 from scipy.spatial import cKDTree
 from shapely.geometry.polygon import orient
 
-from ..core.geometry import (MIN_BUILDABLE_AREA, MIN_BUILDABLE_WIDTH, group_starts,
-                             longest_edge_directions, minimum_rectangles, polygon_parts,
+from ..core.geometry import (MIN_BUILDABLE_AREA, MIN_BUILDABLE_WIDTH, counter_clockwise,
+                             group_starts, longest_edge_directions, minimum_rectangles, polygon_parts,
                              too_thin, without_areas)
 from ..core.progress import InputError, Progress, ensure
 from ..measure import metrics as _metrics
@@ -1474,18 +1474,7 @@ def _as_polygons(blocks) -> np.ndarray:
     # one way round: a shapefile stores outer rings clockwise, GEOS and GeoPackage keep
     # them counter-clockwise, and the lots were laid out from the way the outline runs
     # (Helsinki's blocks: 762 parcels from a shapefile, 761 from memory)
-    out[present] = [_counter_clockwise(g) for g in out[present]]
-    return out
-
-
-def _counter_clockwise(geom):
-    """``geom`` with its outer rings counter-clockwise and its holes clockwise (the way
-    GEOS builds polygons: the same coordinates when they already run so)."""
-    if geom.geom_type == "Polygon":
-        return orient(geom, 1.0)
-    if geom.geom_type == "MultiPolygon":
-        return shapely.MultiPolygon([orient(p, 1.0) for p in geom.geoms])
-    return geom
+    return counter_clockwise(out)
 
 
 def _block_settings(settings: SubdivisionSettings, n: int, parcel_area,
