@@ -233,12 +233,13 @@ class ExtractBlocks(AlgorithmBase):
         """Write features with their source fields plus ``fields`` (ours win on a clash)."""
         source_fields = self.parameterAsSource(parameters, source_name, context).fields()
         ours = {f.lower() for f, _ in fields}
-        replaced = [f.name() for f in source_fields if f.name().lower() in ours]
+        replaced = [f.name() for f in source_fields
+                    if frame.renamed.get(f.name(), f.name()).lower() in ours]
         if replaced:
             feedback.pushInfo(f"{frame.name}: field(s) {', '.join(replaced)} replaced by the "
                               "computed ones.")
         carried = [(name, kind) for name, kind in
-                   qgis_io.carried_fields(source_fields, ours - {"fid"})
+                   qgis_io.carried_fields(source_fields, ours - {"fid"}, frame.renamed)
                    if name in frame.attributes]
         out = table.copy()
         for field, kind in carried:

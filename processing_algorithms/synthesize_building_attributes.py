@@ -181,7 +181,7 @@ class SynthesizeBuildingAttributes(AlgorithmBase):
         # the input's own fields first, then the new ones (replacing same-named fields)
         own = qgis_io.carried_fields(
             self.parameterAsSource(parameters, self.FOOTPRINTS, context).fields(),
-            [n for n, _ in transfer.OUTPUT_FIELDS])
+            [n for n, _ in transfer.OUTPUT_FIELDS], footprints.renamed)
         table = result.table.copy()
         for n, _ in own:
             if n in footprints.attributes:

@@ -466,3 +466,54 @@ def test_parcels_no_building_fits_are_counted_and_named(qgis_processing):
                "setback" in m for m in log.messages), log.messages
     assert any(w.startswith("No parcel got a building: no library building fits with the "
                             "minimum setback") for w in log.warnings), log.warnings
+
+
+def test_footprints_from_a_shapefile_keep_their_full_names(qgis_processing, tmp_path):
+    """Footprints saved as a shapefile (building_type cut to 'building_t', building_tag to
+    'building_1') are read by the full names their sidecar style keeps as aliases, also
+    where a tool reads every field: KEEP_GIVEN keeps their types, and the output has the
+    fields of the run on the footprints from memory, not the cut name next to a new
+    'building_type' (written 'building_1' beside the input's 'building_t')."""
+    from qgis.core import QgsVectorLayer
+
+    shp = tmp_path / "buildings.shp"
+    made = {}
+    for key, dest in (("memory", "memory:"), ("shapefile", str(shp))):
+        made[key] = qgis_processing.run("urbansynth:extractblocks", {
+            "ROADS": helsinki_layer("lines"), "BUILDINGS": helsinki_layer("multipolygons"),
+            "OUTPUT": "memory:", "OUTPUT_BUILDINGS": dest})["OUTPUT_BUILDINGS"]
+    assert "building_t" in QgsVectorLayer(str(shp), "b", "ogr").fields().names()
+    outs = {}
+    for key, footprints in made.items():
+        out = qgis_processing.run(ATTRIBUTES, {
+            "FOOTPRINTS": footprints, "EXAMPLE_BUILDINGS": made["memory"], "KEEP_GIVEN": True,
+            "SEED": 2, "OUTPUT": "memory:"})["OUTPUT"]
+        outs[key] = layer_features(out)[0]
+    names = {key: list(rows[0].keys()) for key, rows in outs.items()}
+    assert names["shapefile"] == names["memory"]
+    assert "building_t" not in names["shapefile"]
+    for field in ("building_type", "height_m", "levels", "height_given", "block_id"):
+        assert [r[field] for r in outs["shapefile"]] == [r[field] for r in outs["memory"]], field
+
+
+def test_a_library_from_a_shapefile(qgis_processing, tmp_path):
+    """A building library saved as a shapefile cuts street_access_sides and blind_sides to
+    'street_acc' and 'blind_side': the library written by 'Place library buildings' is
+    read back by the full names its sidecar style keeps, not refused for missing them."""
+    crs = "EPSG:32633"
+    roads = memory_layer("LineString", ["LINESTRING (0 0, 300 0)"], crs)
+    plots = memory_layer("Polygon", ["POLYGON ((10 -5, 40 -5, 40 -40, 10 -40, 10 -5))"], crs)
+    lib = memory_layer("Polygon", ["POLYGON ((1000 1000, 1000 1010, 1012 1010, 1012 1000, "
+                                   "1000 1000))"], crs,
+                       fields="&field=street_access_sides:string&field=blind_sides:string"
+                              "&field=height_m:double",
+                       rows=[("1", "3", 8.5)])
+    shp = tmp_path / "placed.shp"
+    qgis_processing.run(BESTFIT, {"PARCELS": plots, "ROADS": roads, "BUILDING_LIBRARY": lib,
+                                  "MIN_SETBACK": 3, "OUTPUT": str(shp)})
+    out = qgis_processing.run(BESTFIT, {"PARCELS": plots, "ROADS": roads,
+                                        "BUILDING_LIBRARY": str(shp), "MIN_SETBACK": 3,
+                                        "OUTPUT": "memory:"})
+    rows, geoms = layer_features(out["OUTPUT"])
+    assert len(rows) == 1 and rows[0]["height_m"] == 8.5
+    assert shapely.bounds(geoms[0])[3] == pytest.approx(-8.0)

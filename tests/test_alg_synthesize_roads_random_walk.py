@@ -353,3 +353,40 @@ def test_intersections_saved_as_a_shapefile_are_read_back_whole(qgis_processing,
         logs.append(log.messages)
     assert any("'tortuosity_b' read from 'tortuosi_1'" in m for m in logs[0])
     assert runs[0] == runs[1]
+
+
+def test_selected_intersections_of_a_shapefile_are_read_by_their_full_names(
+        qgis_processing, helsinki_graph, tmp_path):
+    """The intersections shapefile as Processing loads it into the project on completion
+    (without its sidecar style, so without the aliases that keep the full names), with
+    "Selected features only": the selection was refused ("no field dist_mean_a") where the
+    whole layer was read; the selection is read by the sidecar's full names too, and gives
+    the walk of the same selection in the layer opened with its style (aliases)."""
+    from qgis.core import (QgsProcessingContext, QgsProcessingFeatureSourceDefinition,
+                           QgsProcessingUtils, QgsProject, QgsVectorLayer)
+
+    shp = tmp_path / "points.shp"
+    qgis_processing.run("urbansynth:extractroadhierarchy", {
+        "INPUT": helsinki_layer(), "OUTPUT": "memory:", "OUTPUT_INTERSECTIONS": str(shp)})
+    context = QgsProcessingContext()
+    loaded = QgsProcessingUtils.mapLayerFromString(str(shp), context, True)
+    context.temporaryLayerStore().takeMapLayer(loaded)
+    assert not any(f.alias() for f in loaded.fields())
+    styled = QgsVectorLayer(str(shp), "styled", "ogr")
+    assert styled.fields().field("dist_mea_1").alias() == "dist_mean_b"
+    target = memory_layer("Polygon", [_hull_wkt(helsinki_graph, 200)], UTM)
+    QgsProject.instance().addMapLayers([loaded, styled])
+    try:
+        runs, logs = [], []
+        for layer in (loaded, styled):
+            layer.selectByIds([f.id() for f in layer.getFeatures() if f["node_id"] % 3])
+            log = log_feedback()
+            out = qgis_processing.run(ALG, {
+                "EXAMPLE": QgsProcessingFeatureSourceDefinition(layer.id(), True),
+                "TARGET": target, "SEED": 2, "OUTPUT": "memory:"}, feedback=log)
+            runs.append(sorted(g.wkt for g in layer_features(out["OUTPUT"])[1]))
+            logs.append(log.messages)
+        assert any("'dist_mean_b' read from 'dist_mea_1'" in m for m in logs[0])
+        assert runs[0] == runs[1] and len(runs[0]) > 20
+    finally:
+        QgsProject.instance().removeMapLayers([loaded.id(), styled.id()])

@@ -39,8 +39,8 @@ import numpy as np
 import pandas as pd
 import shapely
 
-from ..core.geometry import (MIN_BUILDABLE_AREA, MIN_BUILDABLE_WIDTH, largest_polygons,
-                             polygon_parts, too_thin, without_areas)
+from ..core.geometry import (MIN_BUILDABLE_AREA, MIN_BUILDABLE_WIDTH, counter_clockwise,
+                             largest_polygons, polygon_parts, too_thin, without_areas)
 from ..core.progress import InputError, Progress, ensure
 from ..network.blocks import shape_metrics
 from ..retrieval import shape_context as sc
@@ -484,7 +484,8 @@ def synthesize_footprints(blocks: Sequence, examples: Sequence[ExampleSet],
     if not examples:
         raise InputError("at least one block database is needed")
     t0 = time.perf_counter()
-    blocks = np.asarray(blocks, dtype=object)
+    # one way round: a block from a shapefile (clockwise) gave other footprints
+    blocks = counter_clockwise(blocks)
     n = len(blocks)
     ids = np.arange(1, n + 1) if block_ids is None else np.asarray(block_ids, dtype=np.int64)
     choice = np.full(n, -1) if block_database is None else np.asarray(block_database)

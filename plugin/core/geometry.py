@@ -29,7 +29,7 @@ __all__ = ["group_starts", "group_ends", "unit", "substrings", "pinned_ends",
            "polygon_parts", "largest_polygons", "minimum_rectangles", "minimum_rectangle_corners",
            "longest_edge_directions", "ring_turns", "rounded_bends", "rounded_band_bends",
            "two_point_segments", "first_hits", "without_areas", "MIN_BUILDABLE_WIDTH",
-           "MIN_BUILDABLE_AREA", "too_thin"]
+           "MIN_BUILDABLE_AREA", "too_thin", "counter_clockwise"]
 
 #: Land (a block less its street surfaces) nowhere this wide (m) is no building land: no
 #: parcel is made on it and no footprint stands on it. A strip left between two wide streets
@@ -198,6 +198,31 @@ def pinned_ends(lines: Sequence, start: np.ndarray, end: np.ndarray) -> np.ndarr
     coords[first] = start
     coords[last] = end
     return shapely.linestrings(coords, indices=index)
+
+
+def counter_clockwise(geoms: Sequence) -> np.ndarray:
+    """Polygons with their outer rings counter-clockwise and their holes clockwise, the
+    way GEOS builds them (the same coordinates where they already run so; anything but a
+    polygon or multipolygon as it is). A shapefile stores outer rings clockwise: a block
+    read from one gave other lots and footprints than the same block from memory, laid
+    out from the way its outline runs.
+
+    >>> square = shapely.Polygon([(0, 0), (0, 1), (1, 1), (1, 0)])   # clockwise
+    >>> shapely.is_ccw(counter_clockwise([square])[0].exterior)
+    True
+    """
+    from shapely.geometry.polygon import orient
+
+    def one(geom):
+        if geom is None:
+            return geom
+        if geom.geom_type == "Polygon":
+            return orient(geom, 1.0)
+        if geom.geom_type == "MultiPolygon":
+            return shapely.MultiPolygon([orient(p, 1.0) for p in geom.geoms])
+        return geom
+
+    return np.array([one(g) for g in np.asarray(geoms, dtype=object).ravel()], dtype=object)
 
 
 def polygon_parts(geoms: Sequence):

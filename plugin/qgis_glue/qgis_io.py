@@ -10,7 +10,7 @@ cancel from a failure by type, never by searching the message.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field as dataclass_field
 from pathlib import Path
 from typing import Dict, List, Optional, Sequence
 
@@ -208,9 +208,30 @@ class Frame:
     source_crs: QgsCoordinateReferenceSystem
     crs: QgsCoordinateReferenceSystem  # the working CRS
     name: str
+    #: {field name in the layer: the name it is read as} for the fields a shapefile cut
+    #: short (:func:`read_source`): carry them under their full names (:func:`carried_fields`)
+    renamed: Dict[str, str] = dataclass_field(default_factory=dict)
 
     def __len__(self):
         return len(self.geometry)
+
+
+def _vector_layer(alg, parameters, name, context):
+    """The vector layer a source parameter names, also one given with "Selected features
+    only" (a QgsProcessingFeatureSourceDefinition, which parameterAsVectorLayer does not
+    resolve on 3.22); None for sources that are no layer."""
+    try:
+        layer = alg.parameterAsVectorLayer(parameters, name, context)
+    except Exception:  # noqa: BLE001 - sources that are not layers (e.g. feature iterators)
+        layer = None
+    value = parameters.get(name) if isinstance(parameters, dict) else None
+    if layer is None and isinstance(value, QgsProcessingFeatureSourceDefinition):
+        try:
+            layer = alg.parameterAsVectorLayer(
+                {name: value.source.staticValue()}, name, context)
+        except Exception:  # noqa: BLE001 - an expression-based source: no layer
+            layer = None
+    return layer
 
 
 def layer_name(alg, parameters, name, context) -> str:
@@ -221,19 +242,9 @@ def layer_name(alg, parameters, name, context) -> str:
     its selection: "layer 'Region' is empty" named no layer of the user's, and the layer
     was not empty, its selection was.
     """
-    layer = None
-    try:
-        layer = alg.parameterAsVectorLayer(parameters, name, context)
-    except Exception:  # noqa: BLE001 - sources that are not layers (e.g. feature iterators)
-        layer = None
+    layer = _vector_layer(alg, parameters, name, context)
     value = parameters.get(name) if isinstance(parameters, dict) else None
     definition = value if isinstance(value, QgsProcessingFeatureSourceDefinition) else None
-    if layer is None and definition is not None:
-        try:
-            layer = alg.parameterAsVectorLayer(
-                {name: definition.source.staticValue()}, name, context)
-        except Exception:  # noqa: BLE001 - an expression-based source: no layer to name
-            layer = None
     selected = " (selected features)" if definition is not None and \
         definition.selectedFeaturesOnly else ""
     if layer is not None and layer.name():
@@ -254,10 +265,9 @@ def _field_aliases(alg, parameters, name, context, source) -> Dict[str, str]:
     aliases = {f.alias(): f.name() for f in source.fields() if f.alias()}
     if aliases:
         return aliases
-    try:
-        layer = alg.parameterAsVectorLayer(parameters, name, context)
-    except Exception:  # noqa: BLE001 - sources that are not layers (e.g. feature iterators)
-        layer = None
+    # the layer of a selection too: Processing loads its outputs without their sidecar
+    # style, so a selection in one had no full names to be read by
+    layer = _vector_layer(alg, parameters, name, context)
     if layer is None or layer.providerType() != "ogr":
         return {}
     qml = Path(layer.source().split("|")[0]).with_suffix(".qml")
@@ -271,6 +281,20 @@ def _field_aliases(alg, parameters, name, context, source) -> Dict[str, str]:
         return {}
     return {a.get("name"): a.get("field") for a in root.iter("alias")
             if a.get("name") and a.get("field")}
+
+
+def _cut_by_gdal(full: str, short: str) -> bool:
+    """Whether ``short`` is a name GDAL gives the field ``full`` in a shapefile: its ten
+    first characters, or fewer numbered ('tortuosity_b' -> 'tortuosi_1'). Only such an
+    alias names a field read in full where every field is read: a user's alias ('Height
+    (m)') is no field name of the plugin's."""
+    cut = styles.DBF_NAME_LENGTH
+    if len(full) <= cut or len(short) > cut or not full.isidentifier():
+        return False
+    if short == full[:cut]:
+        return True
+    stem, _, number = short.rpartition("_")
+    return number.isdigit() and bool(stem) and full.startswith(stem)
 
 
 def read_source(alg, parameters, name: str, context, feedback,
@@ -327,7 +351,13 @@ def read_source(alg, parameters, name: str, context, feedback,
     by_alias = {alias: field for alias, field in _field_aliases(alg, parameters, name, context,
                                                                 source).items()
                 if alias != field and alias not in all_names and field in all_names}
-    aliased = {by_alias[f]: f for f in wanted if f not in all_names and f in by_alias}
+    if fields is None:
+        # every field read: those a shapefile cut short under their full names (a tool
+        # that carries the input's fields, or looks one up by its full name, gets it)
+        aliased = {field: alias for alias, field in by_alias.items()
+                   if _cut_by_gdal(alias, field)}
+    else:
+        aliased = {by_alias[f]: f for f in wanted if f not in all_names and f in by_alias}
     field_names += [name for name in aliased if name not in field_names]
     wanted = [f for f in wanted if f not in aliased.values()]
     shorts = pd.Series([f[:cut] for f in wanted]).value_counts()
@@ -396,6 +426,14 @@ def read_source(alg, parameters, name: str, context, feedback,
         # OSM driver serves a file's layers from one dataset and a second reader of the same
         # .pbf waited on it once (tests/test_model_chain.py)
         features.close()
+    value = parameters.get(name) if isinstance(parameters, dict) else None
+    if isinstance(value, QgsProcessingFeatureSourceDefinition) and value.selectedFeaturesOnly \
+            and fids != sorted(fids):
+        # a memory layer serves its selection in the order of a hash set, which Qt seeds
+        # anew in each process: one SEED gave other parcels from one run to the next, and
+        # others than the whole layer's. A selection is read in the layer's order.
+        order = np.argsort(np.asarray(fids), kind="stable")
+        wkbs, rows, fids = ([r[i] for i in order] for r in (wkbs, rows, fids))
     definition = alg.parameterDefinition(name)
     declared_optional = definition is None or bool(
         definition.flags() & QgsProcessingParameterDefinition.Flag.FlagOptional)
@@ -512,7 +550,8 @@ def read_source(alg, parameters, name: str, context, feedback,
             feedback.pushInfo(f"{label}: " + ", ".join(f"'{full}' read from '{short}'"
                                                        for short, full in cut_short.items())
                               + " (field names cut to 10 characters, as a shapefile keeps them).")
-    return Frame(geoms, attrs, np.asarray(fids), src_crs, target_crs, label)
+    return Frame(geoms, attrs, np.asarray(fids), src_crs, target_crs, label,
+                 {**aliased, **cut_short})
 
 
 def example_in_place(frame: Frame, target_geoms, work_crs, context, feedback=None) -> Frame:
@@ -730,12 +769,17 @@ def field_kind(field: QgsField) -> str:
     return "bool" if field.type() == QVariant.Type.Bool else "str"
 
 
-def carried_fields(fields: QgsFields, reserved=()) -> List[tuple]:
+def carried_fields(fields: QgsFields, reserved=(), renamed: Optional[Dict[str, str]] = None
+                   ) -> List[tuple]:
     """(name, type) of a layer's own fields to carry to an output, leaving out ``reserved``
     names (the computed ones win; compared case-insensitively, as GeoPackage and shapefiles
-    do) and 'fid' (the GeoPackage key)."""
+    do) and 'fid' (the GeoPackage key). ``renamed`` (:attr:`Frame.renamed`): the full names
+    of fields a shapefile cut short, which they are carried (and reserved) under: a cut
+    'building_t' beside a new 'building_type' would be a second, stale copy of it."""
     reserved = {r.lower() for r in reserved} | {"fid"}
-    return [(f.name(), field_kind(f)) for f in fields if f.name().lower() not in reserved]
+    renamed = renamed or {}
+    named = [(renamed.get(f.name(), f.name()), field_kind(f)) for f in fields]
+    return [(name, kind) for name, kind in named if name.lower() not in reserved]
 
 
 #: Width of the integer fields of a shapefile output. QGIS's writer gives a 64-bit integer
@@ -891,7 +935,7 @@ def field_values(frame: Frame, field: Optional[str], default=None) -> np.ndarray
 def subset(frame: Frame, keep) -> Frame:
     keep = np.asarray(keep, dtype=bool)
     return Frame(frame.geometry[keep], frame.attributes[keep].reset_index(drop=True),
-                 frame.fids[keep], frame.source_crs, frame.crs, frame.name)
+                 frame.fids[keep], frame.source_crs, frame.crs, frame.name, frame.renamed)
 
 
 def osm_tag_column(frame: Frame, key: str) -> Optional[np.ndarray]:

@@ -52,6 +52,7 @@ import pandas as pd
 import shapely
 
 from ..core import vector_io
+from ..core.geometry import counter_clockwise
 from ..core.progress import InputError, Progress, ensure
 from ..network.blocks import shape_metrics
 from ..network.fragments import Fragments
@@ -371,6 +372,8 @@ def write_block_database(path: str, blocks: Sequence, buildings: Sequence,
     # same for the descriptors), so the layer holds plain polygons
     if (shapely.get_type_id(blocks) != 3).any():
         blocks = _largest_parts(blocks)
+    # one way round (a shapefile's are clockwise): the same blocks, the same database
+    blocks = counter_clockwise(blocks)
     ids = np.arange(1, len(blocks) + 1) if block_ids is None else np.asarray(block_ids)
     if len(ids) != len(blocks) or len(np.unique(ids)) != len(ids):
         raise InputError("block ids must be unique, one per block")
