@@ -234,3 +234,16 @@ def test_helsinki_graph_invariants():
             assert all(shapely.hausdorff_distance(g.geometry[i], g.geometry[j]) > 1.0 for j in others)
         pairs.add((a, b))
     assert_planar(g.geometry, g.z_layer)
+
+
+def test_a_loop_under_a_millimetre_is_no_street():
+    """A loop 0.4 mm long at a junction (left by noding or snapping) is a point once its ends
+    are pinned onto its node: merging the chains made it an empty line and the graph's
+    ends and edges fell out of step (a ValueError on splitdomain's Vaduz network)."""
+    lines = [LineString([(0, 0), (10, 0)]), LineString([(10, 0), (20, 0)]),
+             LineString([(20, 0), (30, 5)]), LineString([(20, 0), (20, 8)]),
+             LineString([(20, 0), (20.0004, 0.0001)])]
+    g = roads.graph_from_lines(lines, [None] * 5, [None] * 5, [0] * 5, list(range(5)))
+    merged = roads.merge_degree2_chains(g)
+    assert sorted(np.round(merged.length, 4).tolist()) == [8.0, 11.1803, 20.0]
+    assert sorted(merged.degree.tolist()) == [1, 1, 1, 3]

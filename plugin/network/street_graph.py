@@ -802,7 +802,7 @@ def snap_clusters(points: np.ndarray, tolerance: float) -> Optional[np.ndarray]:
 
 
 def graph_from_lines(lines: np.ndarray, road_class, name, z_layer, source,
-                     snap_tolerance: float = 0.0) -> RoadGraph:
+                     snap_tolerance: float = 0.0, min_loop: Optional[float] = None) -> RoadGraph:
     """Build a :class:`RoadGraph` from already noded lines, snapping close end nodes together.
 
     Snapping moves every end of a merged node onto the cluster's centroid, and the edge's
@@ -843,15 +843,17 @@ def graph_from_lines(lines: np.ndarray, road_class, name, z_layer, source,
             # move the line ends onto the merged node
             lines = pinned_ends(lines, nodes[inv[:m]], nodes[inv[m:]])
     u, v = inv[:m].astype(np.int64), inv[m:].astype(np.int64)
-    # zero-length loops left by snapping
-    keep = ~((u == v) & (shapely.length(lines) <= max(snap_tolerance, 1e-9) * 2))
+    # zero-length loops left by snapping (``min_loop``: those of the snapping before a
+    # re-noding, which leaves some of its own)
+    min_loop = max(snap_tolerance, 1e-9) * 2 if min_loop is None else min_loop
+    keep = ~((u == v) & (shapely.length(lines) <= min_loop))
     if moved[keep].any():
         renoded = _renode_crossed(lines[keep], z_layer[keep], road_class[keep], moved[keep])
         if renoded is not None:
             lines, parent = renoded
             parent = np.flatnonzero(keep)[parent]
             return graph_from_lines(lines, road_class[parent], name[parent], z_layer[parent],
-                                    source[parent])
+                                    source[parent], min_loop=min_loop)
     g = RoadGraph(lines[keep], u[keep], v[keep], road_class[keep], name[keep], z_layer[keep],
                   nodes, source[keep])
     return _compact_nodes(g)
@@ -998,6 +1000,9 @@ def merge_degree2_chains(g: RoadGraph) -> RoadGraph:
     if not single.all():
         merged = np.where(single, merged, shapely.get_geometry(merged, 0))
     merged = _loops_start_at_their_node(merged, g, comp, deg)
+    # a loop under a millimetre, pinned onto its node, is a point: no street
+    kept = ~(shapely.is_missing(merged) | shapely.is_empty(merged))
+    merged, rep = merged[kept], rep[kept]
     return graph_from_lines(merged, g.road_class[rep], g.name[rep], g.z_layer[rep], g.source[rep])
 
 
