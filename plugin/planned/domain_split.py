@@ -1049,7 +1049,13 @@ def road_network(roads, level, kind, stub: float = 1.0):
     # computed twice met as two bends 9 cm apart on Triesenberg)
     pieces = weld_ends(pieces, level != LEVEL_KEY, stub / 2)
     pieces, level, kind = _merge_through(pieces, level, kind, stub)
-    return pieces, level, kind, int(stubs.sum())
+    # a street's piece welded onto a key road's (a split street along the road for a metre,
+    # Mauren): one street there, the most important
+    same = shapely.to_wkb(shapely.normalize(shapely.set_precision(pieces, NODING_GRID)))
+    order = np.argsort(level, kind="stable")
+    _, first = np.unique(same[order], return_index=True)
+    keep = np.sort(order[first])
+    return pieces[keep], level[keep], kind[keep], int(stubs.sum())
 
 
 def _merge_through(pieces, level, kind, shorter: float):
