@@ -350,7 +350,8 @@ def _loaded_name_in_full(destination: str, details) -> Optional[str]:
     full = path.name.rsplit(".", 1)[0] if "." in path.name else path.name
     if not full or full == path.name.split(".")[0]:
         return None                      # no dot before the extension: QGIS names it right
-    temp = [Path(p) for p in QStandardPaths.standardLocations(QStandardPaths.StandardLocation.TempLocation)]
+    temp = [Path(p) for p in QStandardPaths.standardLocations(
+        QStandardPaths.StandardLocation.TempLocation)]
     if details.name and any(_inside(path, folder) for folder in temp):
         return None
     return full
