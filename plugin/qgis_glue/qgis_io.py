@@ -538,18 +538,15 @@ def read_source(alg, parameters, name: str, context, feedback,
         feedback.pushInfo(f"{label}: " + ", ".join(f"'{f}'" for f in alike) + " are cut to "
                           "the same 10 characters in a shapefile and cannot be told apart: "
                           "they are not read (a GeoPackage keeps whole field names).")
-    if aliased:
-        attrs = attrs.rename(columns=aliased)
-        if feedback is not None:
-            feedback.pushInfo(f"{label}: " + ", ".join(f"'{full}' read from '{short}'"
-                                                       for short, full in aliased.items())
-                              + " (the full names the layer keeps as aliases).")
-    if cut_short:
-        attrs = attrs.rename(columns=cut_short)
-        if feedback is not None:
-            feedback.pushInfo(f"{label}: " + ", ".join(f"'{full}' read from '{short}'"
-                                                       for short, full in cut_short.items())
-                              + " (field names cut to 10 characters, as a shapefile keeps them).")
+    for renamed, why in ((aliased, "the full names the layer keeps as aliases"),
+                         (cut_short, "field names cut to 10 characters, as a shapefile "
+                                     "keeps them")):
+        if renamed:
+            attrs = attrs.rename(columns=renamed)
+            if feedback is not None:
+                feedback.pushInfo(f"{label}: " + ", ".join(f"'{full}' read from '{short}'"
+                                                           for short, full in renamed.items())
+                                  + f" ({why}).")
     return Frame(geoms, attrs, np.asarray(fids), src_crs, target_crs, label,
                  {**aliased, **cut_short})
 
