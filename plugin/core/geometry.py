@@ -213,6 +213,8 @@ def counter_clockwise(geoms: Sequence) -> np.ndarray:
     """
     from shapely.geometry.polygon import orient
 
+    # one by one: shapely 2.0 has no vectorised orient (2.1: orient_polygons); blocks are
+    # thousands at most
     def one(geom):
         if geom is None:
             return geom
