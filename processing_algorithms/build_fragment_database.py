@@ -93,6 +93,15 @@ class BuildFragmentDatabase(AlgorithmBase):
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         level_field = self.parameterAsString(parameters, self.LEVEL_FIELD, context) or "level"
+        source = self.parameterAsSource(parameters, self.ROADS, context)
+        if source is not None and level_field not in source.fields().names() and \
+                level_field not in qgis_io.field_aliases(self, parameters, self.ROADS, context,
+                                                         source):
+            raise QgsProcessingException(
+                f"Layer {qgis_io.layer_name(self, parameters, self.ROADS, context)} has no "
+                f"field '{level_field}' with the street levels: run 'Extract road hierarchy' "
+                "on the roads first (its roads have 'level'), or name the level field in "
+                "LEVEL_FIELD.")
         frame = qgis_io.read_source(self, parameters, self.ROADS, context, feedback,
                                     kind="lines", required_fields=[level_field],
                                     fields=[level_field])

@@ -257,7 +257,7 @@ def layer_name(alg, parameters, name, context) -> str:
     return f"'{definition.description()}'" if definition is not None else f"'{name}'"
 
 
-def _field_aliases(alg, parameters, name, context, source) -> Dict[str, str]:
+def field_aliases(alg, parameters, name, context, source) -> Dict[str, str]:
     """{alias: field name} of a source: the layer's own aliases, else those of the sidecar
     style of a file layer (Processing opens a file without its default style, and the
     plugin's shapefile outputs keep the full names GDAL cut there:
@@ -348,8 +348,8 @@ def read_source(alg, parameters, name: str, context, feedback,
     # ('building_type' from 'building_t')
     cut = styles.DBF_NAME_LENGTH
     wanted = [] if fields is None else [f for f in dict.fromkeys(fields) if f]
-    by_alias = {alias: field for alias, field in _field_aliases(alg, parameters, name, context,
-                                                                source).items()
+    by_alias = {alias: field for alias, field in field_aliases(alg, parameters, name, context,
+                                                               source).items()
                 if alias != field and alias not in all_names and field in all_names}
     if fields is None:
         # every field read: those a shapefile cut short under their full names (a tool

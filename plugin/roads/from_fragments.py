@@ -74,6 +74,7 @@ from ..network.blocks import (
     planar_faces,
     shape_metrics,
 )
+from ..core.text import counted
 from ..retrieval import shape_context as sc
 from ..retrieval.database import N_CANDIDATES, FragmentDatabase
 from ..retrieval.shape_context import DemGrid
@@ -1153,7 +1154,8 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
                       f"blocks, {counts['procedural']} split procedurally"
                       + (f", {rest} left as they are (too small, or no fragment or split "
                          "fits)" if rest else "")
-                      + (f" ({counts['rejected']} warps rejected)" if counts["rejected"] else "")
+                      + (f" ({counted(counts['rejected'], 'warp')} rejected)"
+                         if counts["rejected"] else "")
                       + ".")
     if fill and max_level is None and np.isfinite(max_block):
         t_fill = time.perf_counter()
