@@ -35,8 +35,8 @@ import shapely
 
 from ..core.progress import InputError, Progress, ensure
 from ..retrieval.shape_context import DemGrid
-from .street_graph import degree2_chains
 from .blocks import MIN_BLOCK_AREA, MIN_BLOCK_WIDTH, block_faces, shape_metrics
+from .street_graph import degree2_chains, merge_chains
 
 __all__ = ["RELIEF_CELL_SIZE", "MAX_PATCH_CELLS", "FRAGMENT_FIELDS", "Fragments",
            "extract_fragments", "interior_streets", "relief_patches", "street_chains"]
@@ -152,8 +152,9 @@ def interior_streets(faces: Sequence, lines: Sequence, min_length: float = 0.01)
 def street_chains(pieces: np.ndarray, face: np.ndarray, source: np.ndarray, faces: Sequence,
                   network: Sequence):
     """Interior streets joined where two pieces of one face meet at a point that no other
-    line of the ``network`` (any level) touches, away from the face's outline, so that a fragment holds the same streets however its lines were split (a
-    bridge apart from its approach, OSM ways cut at arbitrary points).
+    line of the ``network`` (any level) touches, away from the face's outline, so that a
+    fragment holds the same streets however its lines were split (a bridge apart from its
+    approach, OSM ways cut at arbitrary points).
 
     A chain keeps the source of its longest piece; a chain that closes on itself, or whose
     pieces do not join into one line, keeps its pieces.
@@ -175,7 +176,8 @@ def street_chains(pieces: np.ndarray, face: np.ndarray, source: np.ndarray, face
         return pieces, face, source
     faces = np.asarray(faces, dtype=object)
     m = len(pieces)
-    ends = shapely.get_coordinates(np.r_[shapely.get_point(pieces, 0), shapely.get_point(pieces, -1)])
+    ends = shapely.get_coordinates(np.r_[shapely.get_point(pieces, 0),
+                                         shapely.get_point(pieces, -1)])
     xy, node = np.unique(np.round(ends, 3), axis=0, return_inverse=True)  # nodes: mm
     node = node.reshape(-1)
     # a point where more than two lines of the network meet (or cross) is a junction
@@ -189,15 +191,8 @@ def street_chains(pieces: np.ndarray, face: np.ndarray, source: np.ndarray, face
     comp = degree2_chains(node[:m], node[m:], len(xy) + 2 * m, face)
     if comp is None:
         return pieces, face, source
-    by = np.argsort(comp, kind="stable")
-    merged = shapely.line_merge(shapely.multilinestrings(pieces[by], indices=comp[by]))
-    single = shapely.get_type_id(merged) == 1
-    order = np.lexsort((-shapely.length(pieces), comp))
-    rep = order[np.r_[True, comp[order][1:] != comp[order][:-1]]]
-    kept = np.isin(comp, np.flatnonzero(~single))
-    return (np.concatenate([merged[single], pieces[kept]]),
-            np.concatenate([face[rep][single], face[kept]]),
-            np.concatenate([source[rep][single], source[kept]]))
+    chains, rows = merge_chains(pieces, comp, longest=True)
+    return chains, face[rows], source[rows]
 
 
 def relief_patches(polygons: Sequence, dem: DemGrid, cell_size: float = RELIEF_CELL_SIZE,

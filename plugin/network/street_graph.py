@@ -43,7 +43,8 @@ __all__ = [
     "clean_network", "measured_graph", "collapse_short_pieces", "graph_from_lines",
     "node_lines", "renode", "snap_ends_onto_lines", "ends_as_vertices", "split_at_ends",
     "weld_ends", "close_short_gaps", "move_ends_onto_lines", "junction_points", "synthesised",
-    "renode_attributed", "add_streets", "degree2_chains", "snap_clusters", "JUNCTION_TOLERANCE",
+    "renode_attributed", "add_streets", "degree2_chains", "merge_chains", "snap_clusters",
+    "JUNCTION_TOLERANCE",
 ]
 
 #: OSM highway classes kept by default: what cars drive on and what forms city blocks.
@@ -1075,15 +1076,33 @@ def renode_attributed(geometry: np.ndarray, level: np.ndarray, attrs: Dict[str, 
                     for i, s in enumerate(src)], dtype=object)
     comp = degree2_chains(u, v, len(g.nodes), key)
     if comp is not None:
-        by = np.argsort(comp, kind="stable")
-        merged = shapely.line_merge(shapely.multilinestrings(geom[by], indices=comp[by]))
-        single = shapely.get_type_id(merged) == 1
-        rep = by[np.r_[True, comp[by][1:] != comp[by][:-1]]]
-        # a chain that does not merge into one line (a ring) keeps its pieces
-        multi_members = np.isin(comp, np.flatnonzero(~single))
-        geom = np.concatenate([merged[single], geom[multi_members]])
-        src = np.concatenate([src[rep][single], src[multi_members]])
+        geom, rows = merge_chains(geom, comp)
+        src = src[rows]
     return geom, src
+
+
+def merge_chains(lines: np.ndarray, comp: np.ndarray, longest: bool = False):
+    """Lines joined chain by chain (``comp``: a chain label 0..k-1 per line, as
+    :func:`degree2_chains` gives them): (the joined lines, the row of ``lines`` whose
+    attributes each keeps: its chain's first line, or its longest with ``longest``). A chain
+    that does not join into one line (a ring, pieces that do not touch) keeps its lines.
+
+    >>> parts = np.array([shapely.LineString([(0, 0), (1, 0)]),
+    ...                   shapely.LineString([(1, 0), (3, 0)]),
+    ...                   shapely.LineString([(5, 5), (6, 5)])])
+    >>> lines, rows = merge_chains(parts, np.array([0, 0, 1]), longest=True)
+    >>> [round(g.length) for g in lines], rows.tolist()
+    ([3, 1], [1, 2])
+    """
+    lines = np.asarray(lines, dtype=object)
+    by = np.argsort(comp, kind="stable")
+    merged = shapely.line_merge(shapely.multilinestrings(lines[by], indices=comp[by]))
+    single = shapely.get_type_id(merged) == 1
+    order = np.lexsort((-shapely.length(lines), comp)) if longest else by
+    rep = order[np.r_[True, comp[order][1:] != comp[order][:-1]]]
+    apart = np.isin(comp, np.flatnonzero(~single))
+    return (np.concatenate([merged[single], lines[apart]]),
+            np.concatenate([rep[single], np.flatnonzero(apart)]))
 
 
 def add_streets(geometry, level, attrs, new_geoms, new_attrs, new_level: int,
