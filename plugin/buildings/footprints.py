@@ -40,7 +40,8 @@ import pandas as pd
 import shapely
 
 from ..core.geometry import (MIN_BUILDABLE_AREA, MIN_BUILDABLE_WIDTH, counter_clockwise,
-                             largest_polygons, polygon_parts, too_thin, without_areas)
+                             largest_polygons, one_areal, polygon_parts, too_thin,
+                             without_areas)
 from ..core.progress import InputError, Progress, ensure
 from ..network.blocks import shape_metrics
 from ..retrieval import shape_context as sc
@@ -168,9 +169,7 @@ def street_offset(block, street_width: float = STREET_WIDTH, setback: float = 0.
         (shapely.area(parts) < MIN_BUILDABLE_AREA)
     if not thin.any():
         return area
-    kept = parts[~thin]
-    return kept[0] if len(kept) == 1 else shapely.multipolygons(kept) if len(kept) else \
-        shapely.Polygon()
+    return one_areal(parts[~thin])
 
 
 def legalise(polygons: Sequence, order: Sequence[int], buildable, block,

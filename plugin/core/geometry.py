@@ -29,7 +29,7 @@ __all__ = ["group_starts", "group_ends", "unit", "substrings", "pinned_ends",
            "polygon_parts", "largest_polygons", "minimum_rectangles", "minimum_rectangle_corners",
            "longest_edge_directions", "ring_turns", "rounded_bends", "rounded_band_bends",
            "two_point_segments", "first_hits", "without_areas", "MIN_BUILDABLE_WIDTH",
-           "MIN_BUILDABLE_AREA", "too_thin", "counter_clockwise"]
+           "MIN_BUILDABLE_AREA", "too_thin", "counter_clockwise", "one_areal"]
 
 #: Land (a block less its street surfaces) nowhere this wide (m) is no building land: no
 #: parcel is made on it and no footprint stands on it. A strip left between two wide streets
@@ -225,6 +225,18 @@ def counter_clockwise(geoms: Sequence) -> np.ndarray:
         return geom
 
     return np.array([one(g) for g in np.asarray(geoms, dtype=object).ravel()], dtype=object)
+
+
+def one_areal(parts: Sequence) -> shapely.Geometry:
+    """Polygon parts as one geometry: the polygon itself, a MultiPolygon of several, an
+    empty Polygon of none.
+
+    >>> one_areal([]).wkt, one_areal([shapely.box(0, 0, 1, 1)]).geom_type
+    ('POLYGON EMPTY', 'Polygon')
+    """
+    parts = np.asarray(parts, dtype=object).ravel()
+    return parts[0] if len(parts) == 1 else \
+        shapely.multipolygons(parts) if len(parts) else shapely.Polygon()
 
 
 def polygon_parts(geoms: Sequence):

@@ -58,8 +58,8 @@ from scipy.spatial import cKDTree
 from shapely.geometry.polygon import orient
 
 from ..core.geometry import (MIN_BUILDABLE_AREA, MIN_BUILDABLE_WIDTH, counter_clockwise,
-                             group_starts, longest_edge_directions, minimum_rectangles, polygon_parts,
-                             too_thin, without_areas)
+                             group_starts, longest_edge_directions, minimum_rectangles,
+                             one_areal, polygon_parts, too_thin, without_areas)
 from ..core.progress import InputError, Progress, ensure
 from ..measure import metrics as _metrics
 
@@ -301,9 +301,7 @@ def _areal(geoms) -> np.ndarray:
     simple = shapely.get_type_id(geoms) == 3
     out[simple] = geoms[simple]
     for i in np.flatnonzero(~simple):
-        parts = _polygon_parts([geoms[i]])
-        out[i] = parts[0] if len(parts) == 1 else \
-            shapely.multipolygons(parts) if len(parts) else shapely.Polygon()
+        out[i] = one_areal(_polygon_parts([geoms[i]]))
     return out
 
 
@@ -649,10 +647,8 @@ def shrink_blocks(blocks, half_width=DEFAULT_STREET_WIDTH / 2, roads=None,
     small = shapely.area(shapely.get_parts(out)) <= max(min_area, _CRUMB)
     if small.any() or not np.isin(shapely.get_type_id(out), (3, 6)).all():
         for i in range(n):
-            parts = _polygon_parts([out[i]], max(min_area, _CRUMB))
-            out[i] = (parts[0] if len(parts) == 1 else shapely.multipolygons(parts)) \
-                if len(parts) else shapely.Polygon()
-    return _without_thin_land(out, min_width)[0]
+            out[i] = one_areal(_polygon_parts([out[i]], max(min_area, _CRUMB)))
+    return _without_thin_land(out, min_width)[0] if min_width > 0 else out
 
 
 def _without_thin_land(shrunk: np.ndarray, min_width: float, min_area: float = 0.0):
@@ -665,9 +661,7 @@ def _without_thin_land(shrunk: np.ndarray, min_width: float, min_area: float = 0
     lost = np.zeros(len(shrunk), dtype=bool)
     lost[owner[thin & (shapely.area(parts) > min_area)]] = True
     for i in np.unique(owner[thin]):
-        kept = parts[(owner == i) & ~thin]
-        shrunk[i] = kept[0] if len(kept) == 1 else \
-            shapely.multipolygons(kept) if len(kept) else shapely.Polygon()
+        shrunk[i] = one_areal(parts[(owner == i) & ~thin])
     return shrunk, lost
 
 
@@ -1729,8 +1723,7 @@ def subdivide_blocks(blocks, method: str = "recursive",
                     on = shapely.area(shapely.intersection(parts[p_idx], own[w_idx])) > 1.0
                     held[p_idx[on]] = True
                 parts = parts[~small | held]
-                shrunk[i] = parts[0] if len(parts) == 1 else \
-                    shapely.multipolygons(parts) if len(parts) else shapely.Polygon()
+                shrunk[i] = one_areal(parts)
         for part in parts:
             zone = _street_zone(part)
             got = _polygon_parts(spec.subdivide(part, block_settings[i] or settings, rng))
