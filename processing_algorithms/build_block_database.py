@@ -182,19 +182,13 @@ class BuildBlockDatabase(AlgorithmBase):
         return {self.OUTPUT: output, self.N_BLOCKS: len(block_frame),
                 self.N_BUILDINGS: n_buildings}
 
-    @staticmethod
-    def _attributes(frame, feedback):
+    def _attributes(self, frame, feedback):
         """The stored building attributes: the layer's own (the buildings of 'Extract city
         blocks'), else -- an OSM layer, with a 'building' field and no building_type -- read
         from its tags as 'Extract city blocks' reads them."""
         a = frame.attributes
         if "building" in a and not any(c in a for c in database.BUILDING_FIELDS):
-            attrs = qgis_io.run_engine(
-                frame.name, building_attributes.building_attributes, len(frame),
-                building=qgis_io.field_values(frame, "building"),
-                other_tags=qgis_io.field_values(frame, "other_tags"),
-                tags={k: a[k].to_numpy(dtype=object) for k in building_attributes.TAG_FIELDS
-                      if k in a})
+            attrs = self.building_attributes_of(frame)
             feedback.pushInfo(f"{frame.name}: height, levels and type read from the OSM tags "
                               f"({int(attrs['height_m'].notna().sum())} of "
                               f"{counted(len(frame), 'building')} with a height).")

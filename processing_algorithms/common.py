@@ -22,6 +22,7 @@ from qgis.core import (
 from qgis.PyQt.QtCore import QCoreApplication
 from qgis.PyQt.QtGui import QIcon
 
+from ..plugin.buildings import attributes as building_attributes
 from ..plugin.core.ids import whole_ids
 from ..plugin.core.progress import Canceled, InputError, MissingPackage
 from ..plugin.core.seeds import MAX_SEED
@@ -354,6 +355,19 @@ class AlgorithmBase(QgsProcessingAlgorithm):
                               "of an OSM layer are no buildings).")
             frame = qgis_io.subset(frame, keep)
         return frame
+
+    @staticmethod
+    def building_attributes_of(frame, **kwargs):
+        """Height, levels, type and roof of each building of ``frame`` from its 'building'
+        field, its OSM tags ('other_tags' and the tag fields) and ``kwargs`` (height,
+        levels, storey_height: :func:`buildings.attributes.building_attributes`)."""
+        a = frame.attributes
+        return qgis_io.run_engine(
+            frame.name, building_attributes.building_attributes, len(frame),
+            building=qgis_io.field_values(frame, "building"),
+            other_tags=qgis_io.field_values(frame, "other_tags"),
+            tags={k: a[k].to_numpy(dtype=object) for k in building_attributes.TAG_FIELDS
+                  if k in a}, **kwargs)
 
     # ----------------------------------------------------------------- roads and blocks
 

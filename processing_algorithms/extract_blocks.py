@@ -161,12 +161,8 @@ class ExtractBlocks(AlgorithmBase):
         qgis_io.style_output(context, results[self.OUTPUT], "blocks.qml")
         feedback.setProgress(80)
         if buildings is not None:
-            attrs = qgis_io.run_engine(
-                buildings.name, building_attributes.building_attributes, len(buildings), building=qgis_io.field_values(buildings, "building"),
-                other_tags=qgis_io.field_values(buildings, "other_tags"),
-                tags={k: buildings.attributes[k].to_numpy(dtype=object)
-                      for k in building_attributes.TAG_FIELDS if k in buildings.attributes},
-                height=heights, levels=levels, storey_height=storey)
+            attrs = self.building_attributes_of(buildings, height=heights, levels=levels,
+                                                storey_height=storey)
             n_h = int(attrs["height_m"].notna().sum())
             n_est = int(attrs["height_estimated"].fillna(False).sum())
             feedback.pushInfo(f"Buildings: {n_h} of {len(buildings)} have a height "

@@ -224,12 +224,8 @@ class SynthesizeBuildingAttributes(AlgorithmBase):
         a = frame.attributes
         height = a[hf] if hf else (a["height_m"] if "height_m" in a else None)
         levels = a[lf] if lf else (a["levels"] if "levels" in a else None)
-        attrs = qgis_io.run_engine(
-            frame.name, building_attributes.building_attributes, len(frame),
-            building=qgis_io.field_values(frame, "building"),
-            other_tags=qgis_io.field_values(frame, "other_tags"),
-            tags={k: a[k].to_numpy(dtype=object) for k in building_attributes.TAG_FIELDS if k in a},
-            height=None if height is None else height.to_numpy(dtype=object),
+        attrs = self.building_attributes_of(
+            frame, height=None if height is None else height.to_numpy(dtype=object),
             levels=None if levels is None else levels.to_numpy(dtype=object),
             storey_height=self.number(parameters, self.STOREY_HEIGHT, context))
         if "building_type" in a and "building" not in a:
