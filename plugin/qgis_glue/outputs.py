@@ -479,20 +479,17 @@ class OutputStaging:
 
     def _store_styles(self, renames):
         """Every styled output keeps its style in the file (GeoPackage default style or a
-        sidecar .qml), so that it opens styled in a new project."""
-        for key in [k for k in styles.STYLE_REQUESTS if self._renamed(k, renames) != k]:
-            qml = styles.STYLE_REQUESTS.pop(key)
-            final = self._renamed(key, renames)
+        sidecar .qml), so that it opens styled in a new project; an output with no style but
+        fields GDAL renamed keeps their full names as aliases (a style of aliases alone)."""
+        stored = {self._renamed(k, renames): styles.STYLE_REQUESTS.pop(k)
+                  for k in [k for k in styles.STYLE_REQUESTS if self._renamed(k, renames) != k]}
+        for item in self.staged:
+            if styles.written_field_names(str(item.final_path)):
+                stored.setdefault(str(item.final_path), None)
+        for final, qml in stored.items():
             warning = styles.save_style_with_layer(final, qml)
             if warning and self.feedback is not None:
                 self.feedback.pushWarning(f"Output {final}: {warning}.")
-        # an output with no style but fields GDAL renamed: the full names as aliases
-        for item in self.staged:
-            final = str(item.final_path)
-            if styles.written_field_names(final) and not Path(final).with_suffix(".qml").exists():
-                warning = styles.save_style_with_layer(final, None)
-                if warning and self.feedback is not None:
-                    self.feedback.pushWarning(f"Output {final}: {warning}.")
 
     def _rename_layers_to_load(self, renames):
         """The layers QGIS loads on completion keyed by their final destinations, each with

@@ -655,22 +655,22 @@ def _split_parts(geoms, label: str, feedback):
     """Each part of a multi-part feature as a geometry of its own (see :func:`read_source`),
     and the index of the feature each comes from; a geometry GEOS cannot read stays whole,
     for the repair by QGIS."""
-    readable = ~shapely.is_missing(geoms)
-    n_parts = np.ones(len(geoms), dtype=np.int64)
-    n_parts[readable] = np.maximum(shapely.get_num_geometries(geoms[readable]), 1)
-    multi = readable & (shapely.get_type_id(np.where(readable, geoms, None)) >= 4)
-    if not (n_parts[multi] > 1).any():
+    geoms = np.asarray(geoms, dtype=object)
+    # collections (get_num_geometries: 0 for what GEOS cannot read, which stays whole)
+    n_parts = shapely.get_num_geometries(geoms)
+    multi = (shapely.get_type_id(geoms) >= 4) & (n_parts > 0)
+    n_parts = np.where(multi, n_parts, 1)
+    if not (n_parts > 1).any():
         return geoms, np.arange(len(geoms))
-    out, owner = [], []
-    for i, g in enumerate(geoms):
-        pieces = shapely.get_parts(g) if multi[i] else [g]
-        out.extend(pieces)
-        owner.extend([i] * len(pieces))
-    n_split = int((multi & (n_parts > 1)).sum())
+    owner = np.repeat(np.arange(len(geoms)), n_parts)
+    out = np.empty(len(owner), dtype=object)
+    out[~multi[owner]] = geoms[~multi]
+    out[multi[owner]] = shapely.get_parts(geoms[multi])   # in feature order
     if feedback is not None:
-        feedback.pushInfo(f"{label}: {counted(n_split, 'multi-part feature')} read as "
-                          f"{int(n_parts[multi & (n_parts > 1)].sum())} parts of their own.")
-    return np.array(out, dtype=object), np.asarray(owner, dtype=np.int64)
+        split = n_parts > 1
+        feedback.pushInfo(f"{label}: {counted(int(split.sum()), 'multi-part feature')} read "
+                          f"as {int(n_parts[split].sum())} parts of their own.")
+    return out, owner
 
 
 def _parts_of_kind(geoms, rows, fids, kind: str, label: str, feedback):
