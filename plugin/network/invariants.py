@@ -310,9 +310,9 @@ def node_degrees(lines: Sequence, area=None, edge_distance: float = EDGE_DISTANC
     Lines are noded at crossings (within their vertical layer ``z_layer`` when given: a
     bridge makes no node with the street under it), nodes closer than ``snap_tolerance``
     merged and chains through degree-2 nodes dissolved: the street graph of
-    ``layoutmetrics`` (its default 0.5 m); with ``area``, only nodes inside it (or on its boundary, within the millimetre
-    the nodes are rounded to) and at least ``edge_distance`` m from its boundary count (the
-    ends of a network clipped to the area are not dead ends).
+    ``layoutmetrics`` (its default 0.5 m); with ``area``, only nodes inside it (or on its
+    boundary, within the millimetre the nodes are rounded to) and at least ``edge_distance``
+    m from its boundary count (the ends of a network clipped to the area are not dead ends).
     """
     lines, layer = _lines(lines, "roads", z_layer)
     if not len(lines):

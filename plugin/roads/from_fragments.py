@@ -61,6 +61,7 @@ import pandas as pd
 import shapely
 
 from ..core.progress import InputError, Progress, ensure
+from ..core.text import counted
 from ..network import street_graph as _roads
 from ..network.controlled_access import end_short_of_controlled_access
 from ..network.dead_ends import MIN_DANGLE, steer_attributed
@@ -74,7 +75,6 @@ from ..network.blocks import (
     planar_faces,
     shape_metrics,
 )
-from ..core.text import counted
 from ..retrieval import shape_context as sc
 from ..retrieval.database import N_CANDIDATES, FragmentDatabase
 from ..retrieval.shape_context import DemGrid
