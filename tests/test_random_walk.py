@@ -95,11 +95,12 @@ def test_points_from_table_errors_and_defaults():
 def test_grid_is_reconnected_planar_within_capacity():
     pts, edges = _grid_points(n=6, jitter=2.0)
     square = shapely.box(-10, -10, 510, 510)
-    res = rw.synthesize(pts, square, seed=3, in_place=True)
-    got = _edge_set(res)
-    # most grid edges come back; a crossing street completed onto a street (a new T) splits
-    # an edge now and then
-    assert len(got & edges) / len(edges) > 0.75
+    runs = [rw.synthesize(pts, square, seed=seed, in_place=True) for seed in range(6)]
+    # most grid edges come back (seeds 0-11: 44-60 of 60, mean 51); a crossing street
+    # completed onto a street (a new T) splits an edge now and then
+    recall = [len(_edge_set(res) & edges) / len(edges) for res in runs]
+    assert np.mean(recall) > 0.8 and min(recall) > 0.7
+    res = runs[3]
     assert_planar(res.geometry)
     # no duplicate edges; only a street made across ends on a street between points (-1)
     between = (res.table.node_to == -1).to_numpy()
@@ -187,16 +188,19 @@ def test_transition_probability_prefers_mean_distance_and_angle():
     table = pd.DataFrame({"level_a": [0] * 6, "dist_mean_a": 100.0, "dist_var_a": 100.0,
                           "angle_mean_a": 0.0, "angle_var_a": 100.0})
     pts = iq.points_from_table(xy, table)
+    start, ahead = (int(np.flatnonzero((pts.xy == p).all(axis=1))[0]) for p in xy[[0, 2]])
+    count = np.array([[0, 2]] * 6)
+    count[start, 0] = 1
+    dirs = [[] for _ in range(6)]
+    dirs[start] = [np.array([-1.0, 0.0])]
     picks = []
     for seed in range(40):
         w = rw._Walker(pts, rw.WalkSettings(clearance=0.0, min_clearance=0.0),
-                       np.random.default_rng(seed), np.full(6, 4),
-                       np.array([[1, 2]] + [[0, 2]] * 5),
-                       np.zeros((6, 2, 2)), [[np.array([-1.0, 0.0])]] + [[] for _ in range(5)],
-                       np.zeros((0, 4)))
-        w.slot_dir[0, 0] = [1.0, 0.0]
-        picks.append(w.step(0, 0, 0, np.array([1.0, 0.0]))[0])
-    assert set(picks) == {2}
+                       np.random.default_rng(seed), np.full(6, 4), count.copy(),
+                       np.zeros((6, 2, 2)), [list(d) for d in dirs], np.zeros((0, 4)))
+        w.slot_dir[start, 0] = [1.0, 0.0]
+        picks.append(w.step(start, 0, 0, np.array([1.0, 0.0]))[0])
+    assert set(picks) == {ahead}
 
 
 
@@ -290,6 +294,24 @@ def test_copy_and_reconnect_helsinki(helsinki):
     assert table.loc["node_degree", "wasserstein_norm"] < 0.6
     dead_example = (pts.degree == 1).mean()
     assert abs(res.stats["dead_end_share"] - dead_example) < 0.12
+
+
+def test_the_same_points_in_another_order_give_the_same_network(helsinki):
+    """An intersection layer's rows in another order (a selection, a shapefile written in
+    another order) are the same example: the walks drew points by their position in the
+    layer, so Eschen's example in a shuffled order gave 143 streets for 152."""
+    pts, _, _ = helsinki
+    table = pts.table()
+    shuffled = np.random.default_rng(0).permutation(len(pts))
+    again = iq.points_from_table(pts.xy[shuffled], table.iloc[shuffled].reset_index(drop=True))
+    assert np.array_equal(again.xy, pts.xy) and np.array_equal(again.level, pts.level)
+    assert np.array_equal(shuffled[again.source], np.arange(len(pts)))  # the rows it read
+    x0, y0 = pts.xy.min(axis=0)
+    target = shapely.box(x0 + 200, y0 + 200, x0 + 900, y0 + 900)
+    first = rw.synthesize(pts, target, seed=2, in_place=False).geometry
+    second = rw.synthesize(again, target, seed=2, in_place=False).geometry
+    assert len(first) > 20
+    assert len(first) == len(second) and shapely.equals_exact(first, second, 0.0).all()
 
 
 def test_expand_into_a_hole_connects_the_seam(helsinki):

@@ -182,8 +182,13 @@ def points_from_table(xy, table: pd.DataFrame, example: int = 0) -> PointSet:
         raise InputError("negative distances in dist_mean_a / dist_mean_b")
     if not np.isfinite(dm[keep, 0]).any():
         raise InputError("no intersection point has a mean street distance (dist_mean_a)")
-    xy, level = xy[keep], level[keep]
-    cols = {k: v[keep] for k, v in cols.items()}
+    # one order whatever order the rows came in (a layer's, a selection's, a shapefile's):
+    # the walks draw points by position, so the same points in another order gave another
+    # network; x then y is the order of a cleaned graph's nodes, which stay as they were
+    rows = np.flatnonzero(keep)
+    rows = rows[np.lexsort((level[rows, 1], level[rows, 0], xy[rows, 1], xy[rows, 0]))]
+    xy, level = xy[rows], level[rows]
+    cols = {k: v[rows] for k, v in cols.items()}
     filled = {}
     flat_level = level.ravel()
     for name, default in (("tortuosity", 1.0), ("dist_mean", 100.0), ("dist_var", np.nan),
@@ -199,14 +204,14 @@ def points_from_table(xy, table: pd.DataFrame, example: int = 0) -> PointSet:
                                  np.full_like(dist_mean, MIN_DIST_SD)])
     angle_sd = np.maximum(np.sqrt(np.maximum(filled["angle_var"], 0.0)), MIN_ANGLE_SD)
     tort = np.clip(filled["tortuosity"], 1.0, 3.0)
-    degree = _column(table, "degree")[keep]
+    degree = _column(table, "degree")[rows]
     degree = np.where(np.isfinite(degree), np.clip(degree, 1, 4), 4).astype(np.int64)
-    area = _column(table, "parcel_area")[keep]
-    block_area = _column(table, "block_area")[keep]
+    area = _column(table, "parcel_area")[rows]
+    block_area = _column(table, "block_area")[rows]
     area = np.where(np.isfinite(area), area, block_area)
     n = len(xy)
     return PointSet(xy, level, tort, dist_mean, dist_sd, filled["angle_mean"], angle_sd,
-                    degree, area, np.flatnonzero(keep), np.full(n, example, dtype=np.int64))
+                    degree, area, rows, np.full(n, example, dtype=np.int64))
 
 
 def points_from_roads(lines, road_class=None, parcels=None, example: int = 0,
