@@ -601,6 +601,24 @@ def test_transfer_onto_bubenec(helsinki):
         assert set(r.table.source_block) <= set(helsinki.db.ids.tolist())
 
 
+def test_a_blocks_footprints_do_not_depend_on_the_other_blocks(helsinki):
+    """The choice among the best matches drew from (seed, position among the blocks): a
+    selection of blocks, or the layer in another order, gave a block other footprints."""
+    streets = bubenec("streets").geometry.values
+    ext = blocks.extract_blocks(streets).geometry[:8]
+    runs = [footprints.synthesize_footprints(b, [helsinki], "transfer", street_width=6.0,
+                                             seed=5, roads=streets, n_best=4)
+            for b in (ext, ext[::-1], ext[5:6])]
+    def of_block(run, block):
+        own = run.table.block_id.to_numpy() - 1
+        return shapely.to_wkb(run.geometry[own == block]).tolist()
+    n = len(ext)
+    assert sum(len(of_block(runs[0], i)) for i in range(n)) > 20
+    for i in range(n):
+        assert of_block(runs[1], n - 1 - i) == of_block(runs[0], i)
+    assert of_block(runs[2], 0) == of_block(runs[0], 5)
+
+
 def test_transfer_onto_grown_network(helsinki):
     from urban_synthesis.plugin.roads import growth
 

@@ -354,10 +354,16 @@ def test_determinism_per_seed():
         c = parcels.subdivide_blocks(blocks_, method, settings(irregularity=0.7), seed=12)
         assert shapely.to_wkb(a.geometry).tolist() == shapely.to_wkb(b.geometry).tolist()
         assert shapely.to_wkb(a.geometry).tolist() != shapely.to_wkb(c.geometry).tolist()
-        # a block's lots do not depend on the blocks after it
-        alone = parcels.subdivide_blocks(blocks_[:1], method, settings(irregularity=0.7), seed=11)
-        first = a.table.block_id.to_numpy() == 1
-        assert shapely.to_wkb(alone.geometry).tolist() == shapely.to_wkb(a.geometry[first]).tolist()
+        # a block's lots depend neither on the other blocks nor on its place among them (a
+        # selection, a layer in another order): the second block alone, or first, was
+        # subdivided with the first block's random numbers
+        for subset in ([0], [1], [1, 0]):
+            again = parcels.subdivide_blocks([blocks_[i] for i in subset], method,
+                                             settings(irregularity=0.7), seed=11)
+            for k, i in enumerate(subset):
+                got = again.geometry[again.table.block_id.to_numpy() == k + 1]
+                want = a.geometry[a.table.block_id.to_numpy() == i + 1]
+                assert shapely.to_wkb(got).tolist() == shapely.to_wkb(want).tolist()
 
 
 def test_cancel():

@@ -43,6 +43,7 @@ from ..core.geometry import (MIN_BUILDABLE_AREA, MIN_BUILDABLE_WIDTH, counter_cl
                              largest_polygons, one_areal, polygon_parts, too_thin,
                              without_areas)
 from ..core.progress import InputError, Progress, ensure
+from ..core.seeds import place_key
 from ..network.blocks import shape_metrics
 from ..retrieval import shape_context as sc
 from ..retrieval.database import N_CANDIDATES, BlockDatabase
@@ -290,8 +291,7 @@ def synthesize_block(block, examples: Sequence[ExampleSet], method: str = "trans
                      seed: int = 0, block_index: int = 0, street_width: float = STREET_WIDTH,
                      setback: float = 0.0, roads: Optional[Sequence] = None,
                      db_choice: int = -1, n_best: int = 1, block_id: Optional[int] = None,
-                     fill: bool = True, keep_clear: Optional[Sequence] = None,
-                     part: int = 0) -> BlockLayout:
+                     fill: bool = True, keep_clear: Optional[Sequence] = None) -> BlockLayout:
     """Footprints for one target block (a pure function of its arguments).
 
     Parameters
@@ -300,8 +300,10 @@ def synthesize_block(block, examples: Sequence[ExampleSet], method: str = "trans
         invariant to rotation and translation)
     examples : prepared databases (:func:`prepare_examples`)
     method : 'transfer' (ch. 5.1) or 'resynthesis' (ch. 5.2)
-    seed, block_index : the random choice among the ``n_best`` matches uses
-        ``default_rng([seed, block_index])``
+    seed : the random choice among the ``n_best`` matches uses
+        ``default_rng([seed, *place_key(block)])`` (where the block lies, not its position
+        among the blocks: a selection or another order gives each block the same footprints)
+    block_index : the block's position (the default id)
     street_width, setback : the street offset (:func:`street_offset`)
     roads : optional road centrelines near the block (dead ends inside it)
     db_choice : database index to use, -1 = the best match over all
@@ -312,9 +314,6 @@ def synthesize_block(block, examples: Sequence[ExampleSet], method: str = "trans
         to the share of frontage the example block has built (:func:`frontage.fill_frontage`)
     keep_clear : optional polygons no footprint may cover (street surfaces and junctions
         near the block)
-    part : of a block of several polygons (a dissolved layer), which part this is: each
-        part is filled on its own, the largest as the whole block would be (its random
-        numbers from ``[seed, block_index]``), part k > 0 from ``[seed, block_index, k]``
 
     Returns
     -------
@@ -329,11 +328,12 @@ def synthesize_block(block, examples: Sequence[ExampleSet], method: str = "trans
                  n_trimmed=0, n_dropped=0, n_filled=0, seconds=0.0)
     parts, _ = polygon_parts(shapely.make_valid(np.array([block], dtype=object)))
     if len(parts) > 1:
-        # every part is land to fill (only the largest was filled, the others silently not)
+        # every part is land to fill (only the largest was filled, the others silently not),
+        # each on its own, with the random numbers of where it lies
         parts = parts[np.argsort(-shapely.area(parts), kind="stable")]
         layouts = [synthesize_block(p, examples, method, seed, block_index, street_width,
-                                    setback, roads, db_choice, n_best, bid, fill, keep_clear,
-                                    part=k) for k, p in enumerate(parts)]
+                                    setback, roads, db_choice, n_best, bid, fill, keep_clear)
+                   for p in parts]
         return _merged_layouts(layouts, time.perf_counter() - t0)
     block = parts[0] if len(parts) else None
     if block is None or block.area <= 0 or block.area > MAX_BLOCK_AREA:
@@ -343,7 +343,7 @@ def synthesize_block(block, examples: Sequence[ExampleSet], method: str = "trans
     if buildable.is_empty or buildable.area < MIN_AREA:
         stats["seconds"] = time.perf_counter() - t0
         return _empty_layout(stats)
-    rng = np.random.default_rng([int(seed), int(block_index)] + ([int(part)] if part else []))
+    rng = np.random.default_rng([int(seed), *place_key(block)])
     found = _retrieve(block, examples, db_choice, n_best, rng)
     if found is None:
         stats["seconds"] = time.perf_counter() - t0

@@ -28,8 +28,9 @@ Every lot gets its frontage, street access and Yang et al.'s (2013) parcel quali
 :func:`metrics.parcel_metrics`).
 
 Nothing here imports QGIS. Geometry is in a metric CRS (metres); each block is subdivided
-with its own random generator derived from (seed, block index), so one block's lots do
-not depend on the other blocks.
+with its own random generator derived from the seed and where the block lies
+(:func:`seeds.place_key`), so one block's lots do not depend on the other blocks, nor on
+its position in the layer.
 
 References
 ----------
@@ -61,6 +62,7 @@ from ..core.geometry import (MIN_BUILDABLE_AREA, MIN_BUILDABLE_WIDTH, counter_cl
                              group_starts, longest_edge_directions, minimum_rectangles,
                              one_areal, polygon_parts, too_thin, without_areas)
 from ..core.progress import InputError, Progress, ensure
+from ..core.seeds import place_key
 from ..measure import metrics as _metrics
 
 __all__ = [
@@ -1611,8 +1613,9 @@ def subdivide_blocks(blocks, method: str = "recursive",
         A name of :data:`METHODS` ('recursive', 'skeleton').
     settings : SubdivisionSettings, optional
     seed : int >= 0
-        Block ``i`` uses ``numpy.random.default_rng([seed, i])``: the same seed gives the
-        same lots, and a block's lots do not depend on the other blocks.
+        A block uses ``numpy.random.default_rng([seed, *place_key(block)])``: the same seed
+        gives the same lots, and a block's lots depend neither on the other blocks nor on
+        its position among them (a selection, a layer in another order).
     block_ids : int sequence, optional
         The ``block_id`` of each block (default 1..n).
     street_width : float
@@ -1711,7 +1714,7 @@ def subdivide_blocks(blocks, method: str = "recursive",
     fix_access = spec.street_access or settings.force_street_access
     for i in range(n):
         progress.step(0.05 + 0.9 * i / n)
-        rng = np.random.default_rng([int(seed), i])
+        rng = np.random.default_rng([int(seed), *place_key(blocks[i])])
         own = block_settings[i].options.get("keep_whole") if block_settings[i] else None
         parts = _polygon_parts([shrunk[i]])
         if keep_whole is not None:

@@ -2,8 +2,9 @@
 
 **Footprints by example** (thesis ch. 5.1 transfer, ch. 5.2 guided re-synthesis). The
 footprints of a block depend only on the block, the road centrelines touching it, the
-block databases and ``(seed, block index)`` (:func:`footprints.synthesize_block` is a pure
-function), so a district splits into independent partitions of blocks:
+block databases and the seed (:func:`footprints.synthesize_block` is a pure function; its
+random numbers come from the seed and where the block lies), so a district splits into
+independent partitions of blocks:
 
 1. the driver reads the block layer once (a GeoPackage, or PostGIS through a GDAL
    ``PG:`` connection string) and cuts it into spatially compact partitions: blocks in
@@ -13,7 +14,7 @@ function), so a district splits into independent partitions of blocks:
    once, from the same array as the serial run, so its STR-tree answers in the same order;
 3. each task reads its own blocks from the source by feature id, reprojects them to the
    driver's metric CRS, calls :func:`footprints.synthesize_block` with the block's
-   *global* index (the seed of its random choice) and returns footprints + statistics;
+   *global* index (its default id) and returns footprints + statistics;
 4. the driver merges the partitions in block order.
 
 Result: the same footprints, attributes and order as :func:`footprints.synthesize_footprints`
