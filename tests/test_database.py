@@ -133,6 +133,22 @@ def test_block_database_footprints_are_multipolygons_as_the_layer_declares(block
     assert kinds == {ogr.wkbMultiPolygon}, kinds
 
 
+def test_buildings_drawn_either_way_round_give_the_same_database(tmp_path):
+    """A shapefile stores outer rings clockwise, OSM ways run either way (24 of Helsinki's
+    493 buildings counter-clockwise): the same buildings from a shapefile and from memory
+    gave two databases. Both are written counter-clockwise, as the blocks are."""
+    blocks, buildings, owner = sample_blocks()
+    written = []
+    for sign in (1.0, -1.0):
+        turned = [shapely.geometry.polygon.orient(b, sign) for b in buildings]
+        path = tmp_path / f"db{sign:+.0f}.gpkg"
+        db.write_block_database(str(path), blocks, turned, owner, CRS, block_ids=range(10, 17))
+        written.append(db.load_block_database(path).building_geometry)
+    assert shapely.to_wkb(written[0]).tolist() == shapely.to_wkb(written[1]).tolist()
+    outer = shapely.get_exterior_ring(shapely.get_geometry(written[0], 0))
+    assert shapely.is_ccw(outer).all()
+
+
 def test_writing_replaces_an_existing_file(tmp_path):
     blocks, buildings, owner = sample_blocks()
     path = tmp_path / "blocks.gpkg"

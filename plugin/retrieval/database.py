@@ -372,8 +372,10 @@ def write_block_database(path: str, blocks: Sequence, buildings: Sequence,
     # same for the descriptors), so the layer holds plain polygons
     if (shapely.get_type_id(blocks) != 3).any():
         blocks = _largest_parts(blocks)
-    # one way round (a shapefile's are clockwise): the same blocks, the same database
+    # one way round (a shapefile's are clockwise, OSM's either way): the same blocks and
+    # buildings, the same database
     blocks = counter_clockwise(blocks)
+    buildings = counter_clockwise(buildings)
     ids = np.arange(1, len(blocks) + 1) if block_ids is None else np.asarray(block_ids)
     if len(ids) != len(blocks) or len(np.unique(ids)) != len(ids):
         raise InputError("block ids must be unique, one per block")
