@@ -396,6 +396,36 @@ def test_shapefile_outputs_keep_integers_and_list_the_cut_field_names(qgis_proce
     assert "parcel_area -> parcel_are" in cut[0]
 
 
+def test_a_loaded_shapefile_output_shows_the_full_field_names(qgis_processing, tmp_path):
+    """The shapefile's sidecar style holds the full names as aliases, but Processing loads
+    an output without its default style: the attribute table showed 'tortuosi_1'. The
+    loaded layer gets them as aliases (with its style, or alone where it has none)."""
+    from qgis.core import (QgsProcessingContext, QgsProcessingFeedback,
+                           QgsProcessingOutputLayerDefinition, QgsProcessingUtils, QgsProject)
+
+    context = QgsProcessingContext()
+    context.setProject(QgsProject.instance())
+    points = QgsProcessingOutputLayerDefinition(str(tmp_path / "points.shp"),
+                                                QgsProject.instance())
+    qgis_processing.run(ALG, {"INPUT": bubenec_layer("streets"),
+                              "OUTPUT": str(tmp_path / "roads.gpkg"),
+                              "OUTPUT_INTERSECTIONS": points}, context=context)
+    details = context.layerToLoadOnCompletionDetails(str(tmp_path / "points.shp"))
+    layer = QgsProcessingUtils.mapLayerFromString(str(tmp_path / "points.shp"), context)
+    assert layer.attributeAlias(layer.fields().indexOf("tortuosi_1")) == ""
+    details.postProcessor().postProcessLayer(layer, context, QgsProcessingFeedback())
+    assert layer.attributeAlias(layer.fields().indexOf("tortuosi_1")) == "tortuosity_b"
+    assert layer.attributeAlias(layer.fields().indexOf("parcel_are")) == "parcel_area"
+    # an output with no style of its own gets its aliases alone
+    from urban_synthesis.plugin.qgis_glue import styles
+
+    plain = QgsProcessingUtils.mapLayerFromString(str(tmp_path / "points.shp"), context)
+    styles.attach_style(context, str(tmp_path / "points.shp"), None)
+    details = context.layerToLoadOnCompletionDetails(str(tmp_path / "points.shp"))
+    details.postProcessor().postProcessLayer(plain, context, QgsProcessingFeedback())
+    assert plain.attributeAlias(plain.fields().indexOf("tortuosi_1")) == "tortuosity_b"
+
+
 def test_outputs_named_with_dots_load_under_their_full_name(qgis_processing, tmp_path,
                                                            monkeypatch):
     """'my.town.v2.shp' loaded as 'my', and 'my.town.v2.gpkg' held a layer 'my': QGIS

@@ -490,6 +490,10 @@ class OutputStaging:
             warning = styles.save_style_with_layer(final, qml)
             if warning and self.feedback is not None:
                 self.feedback.pushWarning(f"Output {final}: {warning}.")
+            # loaded now, an output with no style of its own gets its aliases all the same
+            if qml is None and self.context.willLoadLayerOnCompletion(final) and \
+                    self.context.layerToLoadOnCompletionDetails(final).postProcessor() is None:
+                styles.attach_style(self.context, final, None)
 
     def _rename_layers_to_load(self, renames):
         """The layers QGIS loads on completion keyed by their final destinations, each with

@@ -152,18 +152,26 @@ STACK = ("intersections.qml", "junctions.qml", "roads_by_level.qml", "buildings_
 _STACK_PROPERTY = "urban_synthesis/stack"
 
 
-def attach_style(context, dest_id: str, qml: str) -> None:
+def attach_style(context, dest_id: str, qml: Optional[str]) -> None:
     """Give the layer QGIS loads on completion for ``dest_id`` the style file ``qml`` and
-    its place in the layer list (:data:`STACK`)."""
+    its place in the layer list (:data:`STACK`), and the fields GDAL renamed their full
+    names as aliases (Processing loads a file without its sidecar style, which holds them).
+    ``qml`` None: the aliases alone."""
     from qgis.core import QgsProcessingLayerPostProcessorInterface
 
     class _Styler(QgsProcessingLayerPostProcessorInterface):
         def postProcessLayer(self, layer, ctx, feedback):  # noqa: N802
-            if layer is not None and layer.isValid():
-                fields = layer.fields().names() if hasattr(layer, "fields") else []
-                layer.loadNamedStyle(style_for_fields(
-                    qml, fields, written_field_names(layer.source())) if fields else qml)
-                layer.triggerRepaint()
+            if layer is None or not layer.isValid():
+                return
+            fields = layer.fields().names() if hasattr(layer, "fields") else []
+            written = written_field_names(layer.source())
+            if qml:
+                layer.loadNamedStyle(style_for_fields(qml, fields, written) if fields else qml)
+            for declared, name in written.items():
+                if name in fields:
+                    layer.setFieldAlias(fields.index(name), declared)
+            layer.triggerRepaint()
+            if qml:
                 _stack(layer, ctx.project() or QgsProject.instance(), Path(qml).name)
 
     styler = _Styler()
