@@ -6,7 +6,7 @@ import pytest
 import shapely
 
 from conftest import run_qgis_process
-from helpers import assert_planar, layer_features, memory_layer
+from helpers import assert_planar, layer_features, log_feedback, memory_layer
 
 # a Helsinki-sized 1 km x 1 km square in ETRS-TM35FIN (EPSG:3067), central Helsinki
 X0, Y0 = 385000.0, 6671000.0
@@ -108,7 +108,11 @@ def test_geographic_boundary_terrain_obstacles_density_sketch(qgis_processing, t
 
 
 @pytest.mark.parametrize("params, match", [
-    ({"BOUNDARY": "empty"}, "empty"),
+    ({"BOUNDARY": "empty"}, r"Layer 'test input' is empty"),
+    # with a sketch given empty too: one message naming both
+    ({"BOUNDARY": "empty", "MAJOR_ROADS": "empty_lines"},
+     r"no place to grow roads \(layer 'test input' \(Boundary\) and layer 'test input' "
+     r"\(Sketched major roads\) are empty"),
     ({"BOUNDARY": "points"}, "BOUNDARY|polygons"),
     ({"MINOR_SEGMENT_LENGTH": 100000.0}, "MINOR_SEGMENT_LENGTH"),
     ({"MAX_SLOPE": 0.0}, "MAX_SLOPE"),
@@ -121,6 +125,7 @@ def test_bad_input(qgis_processing, params, match):
 
     layers = {
         "empty": lambda: memory_layer("Polygon", [], CRS),
+        "empty_lines": lambda: memory_layer("LineString", [], CRS),
         "points": lambda: memory_layer("Point", [f"POINT({X0} {Y0})"], CRS),
         "tiny": lambda: memory_layer("Polygon", [f"POLYGON(({X0} {Y0}, {X0 + 5} {Y0}, "
                                                  f"{X0 + 5} {Y0 + 5}, {X0} {Y0}))"], CRS),
@@ -130,8 +135,12 @@ def test_bad_input(qgis_processing, params, match):
     p = {"BOUNDARY": memory_layer("Polygon", [SQUARE], CRS), "OUTPUT": "memory:"}
     for k, v in params.items():
         p[k] = layers[v]() if isinstance(v, str) else v
+    feedback = log_feedback()
     with pytest.raises(QgsProcessingException, match=match):
-        qgis_processing.run("urbansynth:growroads", p)
+        qgis_processing.run("urbansynth:growroads", p, feedback=feedback)
+    # no 'the run goes on without Boundary' before the boundary alone is refused
+    assert not any("goes on without" in w for w in feedback.warnings) or \
+        "MAJOR_ROADS" in params, feedback.warnings
 
 
 def test_qgis_process_run(tmp_path):
