@@ -209,26 +209,19 @@ class GrowRoads(AlgorithmBase):
             "Roads with level (0 major, 1 minor), road_class, pattern, width_m, length_m.")
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
-        # a boundary given empty is one not given only where a sketch bounds the growth
-        # instead; alone it is refused by its name (it warned 'the run goes on without
-        # Boundary', then failed)
+        # a boundary given empty is one not given only where a sketch bounds the growth;
+        # alone it is refused by its name (it warned 'goes on without Boundary', then failed)
         frame = qgis_io.read_source(
             self, parameters, self.BOUNDARY, context, feedback, kind="polygons", fields=[],
             optional=self.given(parameters, self.MAJOR_ROADS) or
             not self.given(parameters, self.BOUNDARY))
         if frame is None:  # no boundary: the sketch bounds the growth (bulged hull)
-            frame = qgis_io.read_source(self, parameters, self.MAJOR_ROADS, context, feedback,
-                                        kind="lines", fields=[], optional=True)
-            if frame is None:
-                empty = [f"layer '{self.parameterAsSource(parameters, name, context).sourceName()}'"
-                         f" ({self.parameterDefinition(name).description()})"
-                         for name in (self.BOUNDARY, self.MAJOR_ROADS)
-                         if self.given(parameters, name)]
+            if not self.given(parameters, self.MAJOR_ROADS):
                 raise QgsProcessingException(
                     "Give a boundary polygon or sketched major roads: without either there "
-                    "is no place to grow roads" + (
-                        f" ({' and '.join(empty)} {'is' if len(empty) == 1 else 'are'} empty)"
-                        if empty else "") + ".")
+                    "is no place to grow roads.")
+            frame = qgis_io.read_source(self, parameters, self.MAJOR_ROADS, context, feedback,
+                                        kind="lines", fields=[])  # given empty: refused
         boundary = frame.geometry if shapely.get_dimensions(frame.geometry).max() == 2 else None
         label = frame.name
         crs = frame.crs

@@ -109,10 +109,7 @@ def test_geographic_boundary_terrain_obstacles_density_sketch(qgis_processing, t
 
 @pytest.mark.parametrize("params, match", [
     ({"BOUNDARY": "empty"}, r"Layer 'test input' is empty"),
-    # with a sketch given empty too: one message naming both
-    ({"BOUNDARY": "empty", "MAJOR_ROADS": "empty_lines"},
-     r"no place to grow roads \(layer 'test input' \(Boundary\) and layer 'test input' "
-     r"\(Sketched major roads\) are empty"),
+    ({"BOUNDARY": "empty", "MAJOR_ROADS": "empty_lines"}, r"Layer 'test input' is empty"),
     ({"BOUNDARY": "points"}, "BOUNDARY|polygons"),
     ({"MINOR_SEGMENT_LENGTH": 100000.0}, "MINOR_SEGMENT_LENGTH"),
     ({"MAX_SLOPE": 0.0}, "MAX_SLOPE"),
