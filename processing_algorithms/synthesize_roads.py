@@ -128,12 +128,20 @@ class SynthesizeRoads(AlgorithmBase):
     def unused_inputs(self, parameters, method):
         """The optional inputs given that ``method`` does not read (an analyst who switched
         the method in a model would otherwise not know)."""
-        uses = {"fragments": {self.FRAGMENT_DB, self.DEM}, "growth": {self.DEM},
-                "gan": {self.EXAMPLE_ROADS}}[method.key]
+        uses = {"fragments": {self.FRAGMENT_DB, self.DEM, self.FILL_QUANTILE},
+                "growth": {self.DEM}, "gan": {self.EXAMPLE_ROADS}}[method.key]
         if method.key == "fragments" and not self.given(parameters, self.FRAGMENT_DB):
             uses.add(self.EXAMPLE_ROADS)  # the database is built from it
-        return [n for n in (self.EXAMPLE_ROADS, self.FRAGMENT_DB, self.DEM)
-                if n not in uses and self.given(parameters, n)]
+        # a number is always given (a model passes its default): set, it differs from that
+        quantile = parameters.get(self.FILL_QUANTILE)
+        try:
+            changed = float(quantile) != self.parameterDefinition(
+                self.FILL_QUANTILE).defaultValue()
+        except (TypeError, ValueError):  # not given, or an expression
+            changed = False
+        return [n for n in (self.EXAMPLE_ROADS, self.FRAGMENT_DB, self.DEM, self.FILL_QUANTILE)
+                if n not in uses and (changed if n == self.FILL_QUANTILE
+                                      else self.given(parameters, n))]
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         message = self.input_error(parameters, context)
@@ -271,8 +279,9 @@ class SynthesizeRoads(AlgorithmBase):
         arterials' CRS, named so that messages say what it is."""
         hull = qgis_io.reproject(np.array([area], dtype=object), arterials.crs,
                                  arterials.source_crs, context)[0]
-        layer = QgsVectorLayer(f"MultiPolygon?crs={arterials.source_crs.authid()}", name,
-                               "memory")
+        # the names given are quoted for messages: the child quotes this one again
+        layer = QgsVectorLayer(f"MultiPolygon?crs={arterials.source_crs.authid()}",
+                               name.replace("'", ""), "memory")
         if not layer.crs().isValid():
             layer.setCrs(arterials.source_crs)
         feature = QgsFeature()

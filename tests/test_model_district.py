@@ -140,10 +140,15 @@ def test_synthesize_roads_runs_each_method(qgis_processing, helsinki_arterials, 
     log = log_feedback()
     qgis_processing.run("urbansynth:synthesizeroads", {
         "METHOD": method, "EXAMPLE_ROADS": hierarchy, "ARTERIALS": arterials, "SEED": 3,
-        "OUTPUT": out}, feedback=log)
-    # growth reads no example: the analyst is told that the example roads are ignored
+        "FILL_QUANTILE": 98.0, "OUTPUT": out}, feedback=log)
+    # growth reads no example, and only fragments fill faces: the analyst is told that
+    # what the method does not read is ignored
     unused = [w for w in log.warnings if "(EXAMPLE_ROADS) is not used" in w]
     assert len(unused) == (method == 1)
+    unused = [w for w in log.warnings if "(FILL_QUANTILE) is not used" in w]
+    assert len(unused) == (method > 0)
+    # the district's layer is named once ('boundary 't_2056'' in the method's log)
+    assert not any("''" in m for m in log.messages + log.warnings), log.messages
     # the method's own log comes through, not the staging paths of its results
     assert any(m.startswith("Method:") for m in log.messages)
     assert not any(".urbansynth-run-" in m for m in log.messages + log.warnings)
