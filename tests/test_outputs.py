@@ -5,7 +5,7 @@ import hashlib
 
 import pytest
 
-from conftest import bubenec_layer, run_qgis_process
+from conftest import bubenec_layer, helsinki_layer, run_qgis_process
 from helpers import memory_layer
 
 ALG = "urbansynth:extractroadhierarchy"
@@ -424,6 +424,30 @@ def test_a_loaded_shapefile_output_shows_the_full_field_names(qgis_processing, t
     details = context.layerToLoadOnCompletionDetails(str(tmp_path / "points.shp"))
     details.postProcessor().postProcessLayer(plain, context, QgsProcessingFeedback())
     assert plain.attributeAlias(plain.fields().indexOf("tortuosi_1")) == "tortuosity_b"
+
+
+def test_a_shapefile_output_keeps_its_text_in_utf8(qgis_processing, tmp_path):
+    """A shapefile output was written in Processing's 'System' encoding (its .cpg said so):
+    the machine's code page, which on a Western Windows has no 'č' (Bubeneč) and on others
+    no 'ä' (Helsinki's street names). It is UTF-8 now; its text fields are 254 wide,
+    dBase's most (GDAL warned 'Field name of width 255 truncated to 254' for every one)."""
+    from osgeo import ogr
+    from qgis.core import QgsVectorLayer
+
+    qgis_processing.run(ALG, {"INPUT": helsinki_layer(), "OUTPUT": str(tmp_path / "roads.shp"),
+                              "OUTPUT_INTERSECTIONS": None})
+    assert (tmp_path / "roads.cpg").read_text().strip() == "UTF-8"
+    ds = ogr.Open(str(tmp_path / "roads.shp"))
+    layer = ds.GetLayer(0)
+    defn = layer.GetLayerDefn()
+    text = [defn.GetFieldDefn(i) for i in range(defn.GetFieldCount())
+            if defn.GetFieldDefn(i).GetType() == ogr.OFTString]
+    assert text and {f.GetWidth() for f in text} == {254}
+    names = {f.GetField("name") for f in layer} - {None}
+    ds = None
+    lines = QgsVectorLayer(helsinki_layer(), "lines", "ogr")
+    source = {f["name"] for f in lines.getFeatures()} - {None}
+    assert any(not n.isascii() for n in names) and names <= source
 
 
 def test_outputs_named_with_dots_load_under_their_full_name(qgis_processing, tmp_path,

@@ -785,15 +785,21 @@ def carried_fields(fields: QgsFields, reserved=(), renamed: Optional[Dict[str, s
 SHAPEFILE_INT_WIDTH = 18
 
 
+#: Width of the text fields of a shapefile output: dBase's most (QGIS asks for 255, and
+#: GDAL warned 'Field road_class of width 255 truncated to 254' for every text field).
+SHAPEFILE_TEXT_WIDTH = 254
+
+
 def make_fields(spec: Sequence[tuple], names: Optional[Sequence[str]] = None,
-                int_width: int = 0) -> QgsFields:
+                int_width: int = 0, text_width: int = 0) -> QgsFields:
     """``spec`` is a sequence of (name, type) with type in int / float / str / bool;
-    ``names`` (optional) the names to write them as; ``int_width`` the length of the int
-    fields (0: the format's default)."""
+    ``names`` (optional) the names to write them as; ``int_width`` / ``text_width`` the
+    length of the int / text fields (0: the format's default)."""
     fields = QgsFields()
+    width = {"int": int_width, "str": text_width}
     for i, (name, typ) in enumerate(spec):
         fields.append(QgsField(name if names is None else names[i], _QVARIANT[typ],
-                               len=int_width if typ == "int" else 0))
+                               len=width.get(typ, 0)))
     return fields
 
 
@@ -815,12 +821,23 @@ def write_sink(alg, parameters, name: str, context, geoms: np.ndarray, table: pd
     destination = outputs.sink_destination(parameters, name, context)
     names, renamed = outputs.field_names_for(destination, [n for n, _ in spec])
     shapefile = outputs.is_shapefile(destination)
-    fields = make_fields(spec, names, SHAPEFILE_INT_WIDTH if shapefile else 0)
+    fields = make_fields(spec, names, *((SHAPEFILE_INT_WIDTH, SHAPEFILE_TEXT_WIDTH)
+                                        if shapefile else (0, 0)))
     geoms = np.asarray(geoms, dtype=object)
     has_z = bool(len(geoms)) and bool(shapely.has_z(geoms).any())
     if has_z:
         wkb_type = QgsWkbTypes.addZ(wkb_type)
-    sink, dest_id = alg.parameterAsSink(parameters, name, context, fields, wkb_type, out_crs)
+    # a shapefile's text in UTF-8 unless the run chose an encoding: 'System' or none (what
+    # Processing and qgis_process pass) is the machine's code page: no 'č' on a Western
+    # Windows
+    encoding = context.defaultEncoding()
+    if shapefile and encoding.lower() in ("", "system"):
+        context.setDefaultEncoding("UTF-8")
+    try:
+        sink, dest_id = alg.parameterAsSink(parameters, name, context, fields, wkb_type,
+                                            out_crs)
+    finally:
+        context.setDefaultEncoding(encoding)
     if sink is None:
         return None
     if len(geoms):
@@ -831,6 +848,17 @@ def write_sink(alg, parameters, name: str, context, geoms: np.ndarray, table: pd
     wkbs = shapely.to_wkb(geoms, output_dimension=3 if has_z else 2) if len(geoms) else []
     n = len(geoms)
     columns = [_column_values(table[f] if f in table else None, typ, n) for f, typ in spec]
+    if shapefile:  # dBase holds 254 bytes of text: cut here, and said (GDAL cut silently)
+        n_cut = 0
+        for k, (_, typ) in enumerate(spec):
+            if typ == "str":
+                columns[k], cut = _cut_text(columns[k], SHAPEFILE_TEXT_WIDTH)
+                n_cut += cut
+        if n_cut and feedback is not None:
+            feedback.pushWarning(
+                f"Output {name} is a shapefile, whose text values hold at most "
+                f"{SHAPEFILE_TEXT_WIDTH} bytes: {counted(n_cut, 'value')} cut to it. Write a "
+                "GeoPackage to keep them whole.")
     rows = list(zip(*columns)) if columns else [()] * n
     features = []
     multi = QgsWkbTypes.isMultiType(wkb_type)
@@ -862,6 +890,16 @@ def write_sink(alg, parameters, name: str, context, geoms: np.ndarray, table: pd
                 + ", ".join(f"{a} -> {b}" for a, b in cut)
                 + ". Write a GeoPackage to keep the full names.")
     return dest_id
+
+
+def _cut_text(values: list, width: int) -> tuple:
+    """Text values cut to ``width`` bytes of UTF-8 (whole characters), and how many were."""
+    out, n_cut = list(values), 0
+    for i, v in enumerate(out):
+        if v is not None and len(v) * 4 > width and len(v.encode("utf-8")) > width:
+            out[i] = v.encode("utf-8")[:width].decode("utf-8", "ignore")
+            n_cut += 1
+    return out, n_cut
 
 
 def _column_values(column, typ: str, n: int) -> list:
