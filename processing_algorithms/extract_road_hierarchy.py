@@ -22,7 +22,7 @@ ROAD_FIELDS = [
     ("edge_id", "int"), ("level", "int"), ("road_class", "str"), ("length_m", "float"),
     ("street_id", "int"), ("name", "str"), ("osm_layer", "int"), ("node_from", "int"),
     ("node_to", "int"), ("tortuosity", "float"), ("arterial_source", "str"),
-    ("width_m", "float"), ("oneway", "str"),
+    ("width_m", "float"), ("oneway", "str"), ("junction", "str"),
 ]
 INTERSECTION_FIELDS = [
     ("node_id", "int"), ("degree", "int"), ("street_a", "int"), ("street_b", "int"),
@@ -140,7 +140,7 @@ class ExtractRoadHierarchy(AlgorithmBase):
             "starts at level 1; empty for streets levelled from their neighbours); width_m (the "
             "line's own width, from its width_m field or OSM width tag, else empty); oneway "
             "(OSM oneway: tessellatestreets gives a one-way carriageway half its class "
-            "width).")
+            "width); junction (OSM junction: the island of a roundabout is no block).")
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT_INTERSECTIONS, "Intersections", QgsProcessing.SourceType.TypeVectorPoint,
             optional=True, createByDefault=True),
@@ -159,6 +159,7 @@ class ExtractRoadHierarchy(AlgorithmBase):
         class_field = self.parameterAsString(parameters, self.CLASS_FIELD, context)
         frame = qgis_io.read_source(self, parameters, self.INPUT, context, feedback, kind="lines",
                                     fields=[class_field or "highway", "name", "oneway",
+                                            "junction",
                                             *qgis_io.WIDTH_FIELDS, *qgis_io.VERTICAL_LAYER_FIELDS,
                                             *qgis_io.ROAD_CLASS_FIELDS])
         label = frame.name
@@ -200,10 +201,12 @@ class ExtractRoadHierarchy(AlgorithmBase):
         # what a street surface needs (tessellatestreets after this tool): each line's own
         # width, and one-way (a dual carriageway's two lines get half a class width each)
         widths = qgis_io.road_width_column(frame)
-        oneway = qgis_io.osm_tag_column(frame, "oneway")
         table["width_m"] = np.nan if widths is None else \
             [street_surfaces.parse_width(w) for w in widths[graph.source]]
-        table["oneway"] = None if oneway is None else oneway[graph.source]
+        # and what 'Extract city blocks' reads after it: a roundabout's ring (its island)
+        for tag in ("oneway", "junction"):
+            values = qgis_io.osm_tag_column(frame, tag)
+            table[tag] = None if values is None else values[graph.source]
         results[self.OUTPUT] = qgis_io.write_sink(
             self, parameters, self.OUTPUT, context, graph.geometry, table, ROAD_FIELDS,
             QgsWkbTypes.Type.LineString, frame.source_crs, frame.crs, feedback)

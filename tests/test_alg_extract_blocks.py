@@ -350,6 +350,17 @@ def test_roundabout_islands_of_osm_are_no_blocks(qgis_processing):
         "ROADS": f"{LIECHTENSTEIN}|layername=lines", "OUTPUT": "memory:"}, feedback=log)
     assert out["OUTPUT"].featureCount() == 365
     assert any("6 roundabout islands dropped" in m for m in log.messages), log.messages
+    # the same from the road hierarchy of those lines (it had no junction field: the
+    # islands were blocks again in the chain the demo runs)
+    ranked = qgis_processing.run("urbansynth:extractroadhierarchy", {
+        "INPUT": f"{LIECHTENSTEIN}|layername=lines", "OUTPUT": "memory:",
+        "OUTPUT_INTERSECTIONS": None})["OUTPUT"]
+    assert "roundabout" in {f["junction"] for f in ranked.getFeatures()}
+    log = log_feedback()
+    out = qgis_processing.run("urbansynth:extractblocks", {"ROADS": ranked, "OUTPUT": "memory:"},
+                              feedback=log)
+    assert any("6 roundabout islands dropped" in m for m in log.messages), log.messages
+    assert out["OUTPUT"].featureCount() == 365
     # a layer with its own junction field, as a hand-drawn one would have
     ring = shapely.LineString(shapely.Point(100, 100).buffer(12.5, quad_segs=16).exterior.coords)
     wkts = ["LINESTRING (0 0, 200 0, 200 200, 0 200, 0 0)", shapely.to_wkt(ring),
