@@ -19,6 +19,7 @@ from qgis.core import (
 )
 
 from ..plugin.network import crossings
+from ..plugin.network import edge_streets
 from ..plugin.network import street_graph as roads
 from ..plugin.qgis_glue import qgis_io
 from ..plugin.retrieval.shape_context import DemGrid
@@ -47,6 +48,7 @@ class SynthesizeRoadsGan(AlgorithmBase):
     MIN_BLOCK_AREA = "MIN_BLOCK_AREA"
     MEDIAN_BLOCK_AREA = "MEDIAN_BLOCK_AREA"
     CROSSING_SHARE = "CROSSING_SHARE"
+    EDGE_JOIN = "EDGE_JOIN"
     OUTPUT = "OUTPUT"
     OUTPUT_RASTER = "OUTPUT_RASTER"
 
@@ -178,6 +180,17 @@ class SynthesizeRoadsGan(AlgorithmBase):
             "the blocks are smaller. A small cell with no removable street to another block "
             "(at the network's edge) opens onto the land around it. Empty: not held to the "
             "example's median.", advanced=True)
+        self.add(QgsProcessingParameterNumber(
+            self.EDGE_JOIN, "Join streets cut by the target's edge (m apart at most)",
+            QgsProcessingParameterNumber.Type.Double, minValue=0.0, maxValue=5000.0,
+            defaultValue=edge_streets.EDGE_JOIN_MAX),
+            "The generator draws beyond the target and its streets are clipped to it: two "
+            "neighbouring streets (or a given road) that end on the target's edge at most "
+            "this far apart along it are joined by a street along the edge, which closes the "
+            "cell between them into a block, as a town's outer streets close theirs (none "
+            f"under {edge_streets.EDGE_JOIN_MIN:g} m, none ending on a motorway or trunk, "
+            "none along a road that follows the edge). 0: the streets stay cut at the edge "
+            "(the thesis).", advanced=True)
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT, "StreetGAN roads", QgsProcessing.SourceType.TypeVectorLine),
             "Roads with edge_id, level, road_class, length_m, model, seed.")
@@ -266,7 +279,8 @@ class SynthesizeRoadsGan(AlgorithmBase):
             from_edge=self.parameterAsBoolean(parameters, self.FROM_EDGE, context),
             progress=qgis_io.progress_for(feedback, 5, 90), given=given,
             given_class=given_class, dead_end_share=share, min_block_area=min_block,
-            median_block_area=median_block, crossing_share=crossing_share)
+            median_block_area=median_block, crossing_share=crossing_share,
+            edge_join=self.number(parameters, self.EDGE_JOIN, context))
         s = result.stats
         n_new = int((~result.given).sum())
         feedback.pushInfo(f"Generated {s['pixels'][0]} x {s['pixels'][1]} px in "
@@ -281,6 +295,9 @@ class SynthesizeRoadsGan(AlgorithmBase):
                 f"of pieces that reach no road dropped; {s['n_given_joined']} "
                 f"street(s) joining given roads that lay apart; {s['n_components']} "
                 "connected component(s).")
+        if s.get("edge_streets"):
+            feedback.pushInfo(f"{s['edge_streets']} street(s) along the target's edge join "
+                              "streets that the edge cut.")
         if min_block is not None or median_block is not None:
             under = " and ".join(f"{a:,.0f} m² ({what})" for a, what in
                                  ((median_block, "median"), (min_block, "10th percentile"))

@@ -101,3 +101,23 @@ def test_streetgan_closes_the_cells_its_clip_opened():
         assert sum(v.values()) == 0, (name, check.summary())
     assert measured["joined"][0] < 0.5 * measured["cut"][0], measured
     assert measured["joined"][1] > measured["cut"][1] + 0.1, measured
+
+
+
+def test_the_tool_joins_along_the_edge_unless_told_not_to(qgis_processing):
+    """synthesizeroadsgan over an extent: by default far fewer streets end on its edge than
+    with EDGE_JOIN=0 (the thesis's clipped network)."""
+    from helpers import layer_features
+
+    x0, y0 = 385000.0, 6671000.0
+    extent = f"{x0},{x0 + 1200},{y0},{y0 + 900} [EPSG:3067]"
+    box = shapely.box(x0, y0, x0 + 1200, y0 + 900)
+    cut = {}
+    for join in (None, 0):
+        params = {"EXTENT": extent, "MODEL": 0, "SEED": 3, "OUTPUT": "memory:"}
+        if join is not None:
+            params["EDGE_JOIN"] = join
+        _, geoms = layer_features(qgis_processing.run("urbansynth:synthesizeroadsgan",
+                                                      params)["OUTPUT"])
+        cut[join] = fidelity.edge_ends(geoms, box)
+    assert cut[None] < 0.5 * cut[0], cut
