@@ -177,9 +177,10 @@ class SynthesizeRoadsGan(AlgorithmBase):
             QgsProcessingParameterNumber.Type.Double, optional=True, minValue=1.0),
             "The example's median block area (layoutmetrics of the example): generated "
             "streets are removed the same way, before the smallest blocks, until at most half "
-            "the blocks are smaller. A small cell with no removable street to another block "
-            "(at the network's edge) opens onto the land around it. Empty: not held to the "
-            "example's median.", advanced=True)
+            "the blocks are smaller (before the edge streets of EDGE_JOIN, which close cells "
+            "of any size). A small cell with no removable street to another block (at the "
+            "network's edge) opens onto the land around it. Empty: not held to the example's "
+            "median.", advanced=True)
         self.add(QgsProcessingParameterNumber(
             self.EDGE_JOIN, "Join streets cut by the target's edge (m apart at most)",
             QgsProcessingParameterNumber.Type.Double, minValue=0.0, maxValue=5000.0,

@@ -237,14 +237,15 @@ def test_given_roads_on_a_town(qgis_processing):
                                      case["area"], example_dead_end_share=share)
     assert check.ok, check.summary()
     # and with the example's median block: the median comes up to it (half the blocks
-    # smaller at most, counted as the merge counts them: every face in the target)
+    # smaller at most, counted as the merge counts them: every face in the target), before
+    # the cells at the edge are closed (EDGE_JOIN, after the merging)
     p50 = fidelity.fidelity_statistics(case["example"], case["example_area"])["block_area_p50"]
     assert after["block_area_p50"] < 0.6 * p50
     out = qgis_processing.run(GAN, {
         "TARGET": memory_layer("Polygon", [case["area"].wkt], "EPSG:32632"),
         "GIVEN_ROADS": given, "MODEL": streetgan.shipped_models().index("streetgan_helsinki"),
         "SEED": 3, "DEAD_END_SHARE": share, "MIN_BLOCK_AREA": p10, "MEDIAN_BLOCK_AREA": p50,
-        "OUTPUT": "memory:"})
+        "EDGE_JOIN": 0, "OUTPUT": "memory:"})
     rows, geoms = layer_features(out["OUTPUT"])
     is_given = np.array([r["road_class"] == "given" for r in rows])
     faces = shapely.get_parts(shapely.polygonize(shapely.get_parts(shapely.node(

@@ -36,6 +36,18 @@ def test_the_cells_a_clip_opened_become_blocks_and_no_street_is_cut():
     assert sum(v.values()) == 0, check.summary()
 
 
+def test_a_street_that_touches_the_edge_and_turns_back_is_met_where_it_touches():
+    """A street that runs up to the edge and back down touches it at a vertex that lies on
+    the edge only up to round-off: an edge street passed it without a junction (1e-10 m
+    off; the fidelity benchmark's invariants found 12 such crossings in 100 runs). It is a
+    stop: the edge streets end on it."""
+    # a street from the road up to the edge and back down, touching it at one vertex
+    touch = shapely.LineString([(120, 100), (200, 300 - 1e-10), (280, 100)])
+    edge, n = join_along_edge([ROAD, touch] + _comb((40, 360)), SQUARE, max_length=450)
+    ends = shapely.get_coordinates(shapely.boundary(edge))
+    assert n == 4 and np.isclose(ends, [200, 300 - 1e-10]).all(axis=1).sum() == 2
+
+
 def test_too_far_apart_or_too_close_on_the_edge_no_street():
     """Two streets 450 m apart along the edge (round a corner), or 30 m apart: none."""
     far = [shapely.LineString([(100, 100), (100, 300)]),

@@ -61,13 +61,14 @@ def _ring_pieces(ring, pos, xy, ok, max_length, min_length):
 
 
 def _stops(edge, lines):
-    """Where lines meet the edge rings: every line end on a ring (a clipped street, a given
-    road clipped to the target) and every crossing of one (a given road that runs on).
-    Returns the ring, the point (x, y) and the line of each."""
+    """Where lines meet the edge rings: every vertex of a line on a ring (the end of a
+    clipped street or of a given road clipped to the target; a street that touches the edge
+    and turns back, whose vertex there lies on the ring only up to round-off: an edge
+    street past it met it without a junction) and every crossing of one (a given road that
+    runs on). Returns the ring, the point (x, y) and the line of each."""
     ring, li = shapely.STRtree(lines).query(edge, predicate="dwithin", distance=1e-3)
-    ends = np.vstack([shapely.get_coordinates(shapely.get_point(lines[li], 0)),
-                      shapely.get_coordinates(shapely.get_point(lines[li], -1))])
-    at = shapely.dwithin(edge[np.r_[ring, ring]], shapely.points(ends), 1e-3)
+    ends, of = shapely.get_coordinates(lines[li], return_index=True)
+    at = shapely.dwithin(edge[ring[of]], shapely.points(ends), 1e-3)
     with np.errstate(invalid="ignore"):
         cross = shapely.intersection(edge[ring], lines[li])
     parts, k = shapely.get_parts(cross, return_index=True)
@@ -78,8 +79,7 @@ def _stops(edge, lines):
     xy = np.vstack([ends[at], shapely.get_coordinates(parts[point]),
                     shapely.get_coordinates(shapely.get_point(parts[along], 0)),
                     shapely.get_coordinates(shapely.get_point(parts[along], -1))])
-    idx = np.r_[np.r_[np.arange(len(li)), np.arange(len(li))][at], k[point], k[along],
-                k[along]]
+    idx = np.r_[of[at], k[point], k[along], k[along]]
     return ring[idx], xy, li[idx]
 
 

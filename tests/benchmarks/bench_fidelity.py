@@ -1071,7 +1071,9 @@ def edge_ends_paragraph(results: dict) -> str:
             f"walks stay inside), the fragments {cut('fragments')} (the target's outline closes "
             "the sketch's faces and is dropped at the end, so a fragment street that ended on "
             f"it ends at the edge) and StreetGAN {cut('streetgan')} (its generator draws over "
-            "the whole envelope and beyond, and the network is clipped to it).")
+            "the whole envelope and beyond and the network is clipped to it; neighbouring "
+            "streets cut by the edge 60-400 m apart are joined along it, "
+            "`network/edge_streets.py`).")
 
 
 #: Issue 15's (fragments) and issue 16's (random walk, StreetGAN) per-town goals: the most
