@@ -19,6 +19,10 @@ errors against the town's real drivable streets, beside the ceiling: the real ne
 itself rasterised and sent through the same post-processing (what the raster pipeline
 alone loses), and the network invariants of every run.
 
+Every synthesis here runs without the edge streets (``edge_join=0``): the cards measure the
+generator and its read-back as the thesis has them; what the tool's default adds at the
+target's edge is measured by the fidelity benchmark (``bench_fidelity.py``).
+
 Performance: a 769 x 769 image (z of 25 x 25 x 100) with onnxruntime, raster -> graph of
 that image, and a whole synthesis per km². Prints tables, writes
 tests/benchmarks/results/gan.json and docs/streetgan.png; ``--cards`` also stores the
@@ -147,7 +151,8 @@ def evaluate_model(name: str, figures: dict) -> dict:
         variants["untrained generator"] = dict(model=raw, from_edge=True)
     samples = {}
     for label, kw in variants.items():
-        res = [streetgan.synthesize(target, kw["model"], seed=s, from_edge=kw["from_edge"]) for s in SEEDS]
+        res = [streetgan.synthesize(target, kw["model"], seed=s, from_edge=kw["from_edge"],
+                                    edge_join=0) for s in SEEDS]
         samples[label] = res[0]
         rows[label] = distances(pooled([window_metrics(r.geometry, target) for r in res]), real_o)
     if raw is None:
@@ -238,7 +243,7 @@ def evaluate_held_out(name: str, figures: dict) -> dict:
             seeds = (1,) if "generate_fn" in kw else SEEDS
             for seed in seeds:
                 res = streetgan.synthesize(area, gen, seed=seed, given=given, given_class=cls,
-                                           **kw)
+                                           edge_join=0, **kw)
                 new = res.geometry[~res.given]
                 vals.append(fidelity_values(np.concatenate([new, given]), area))
                 check = invariants.check_network(new, given, cls, area)
@@ -320,7 +325,7 @@ def performance(name: str) -> dict:
         stats = r.stats
     target = shapely.box(0, 0, 2000, 2000)
     t = time.perf_counter()
-    res = streetgan.synthesize(target, gen, seed=5)
+    res = streetgan.synthesize(target, gen, seed=5, edge_join=0)
     t_total = time.perf_counter() - t
     return {"model": name, "image_px": list(img.shape), "image_km2": round((769 * 3.0) ** 2 / 1e6, 2),
             "generate_769_s": round(float(np.median(t_gen)), 3),
