@@ -295,6 +295,10 @@ def test_cap_stops_growth():
 
 @pytest.mark.parametrize("kwargs, match", [
     ({"obstacles": BOX.buffer(10)}, "obstacles cover the whole boundary"),
+    # the boundary moved by 5 cm (an obstacle equal to it, reprojected from another CRS):
+    # a sliver along one side, nowhere a metre wide; growth stopped in a numpy error
+    ({"obstacles": shapely.affinity.translate(BOX, 0.05, 0)},
+     "obstacles cover the whole boundary"),
     ({"boundary": shapely.box(0, 0, 5, 5)}, "too small"),
     ({"boundary": shapely.LineString([(0, 0), (1, 1)])}, "no polygon"),
     ({"settings": growth.GrowthSettings(snap_distance=40)}, "snap_distance"),

@@ -1050,7 +1050,9 @@ class _Grower:
         r = threshold
         ids = self.query(x0 - r, y0 - r, x1 + r, y1 + r)
         dist2 = np.full(len(pts), np.inf)
-        if len(ids) * len(pts) <= 250_000:
+        if not len(ids):
+            pass                         # no road near the region yet: every point is a gap
+        elif len(ids) * len(pts) <= 250_000:
             dist2 = self._dist2(pts, ids)
         else:
             # a large region (the major stage): each point looks only at the roads within
@@ -1130,7 +1132,10 @@ def grow_roads(boundary, *, settings: Optional[GrowthSettings] = None, major_roa
         area = _growth_extent(dem, dens, major_roads, s)
     obst = _as_area(obstacles, "obstacles", required=False)
     free = area if obst is None else shapely.difference(area, obst)
-    if free.is_empty or free.area < 1e-6 * area.area:
+    # land nowhere a metre wide is none: an obstacle equal to the boundary, reprojected from
+    # another CRS, left a sliver of millimetres along it (growth then stopped in a numpy
+    # error)
+    if free.is_empty or free.area < 1e-6 * area.area or shapely.buffer(free, -0.5).is_empty:
         raise InputError("the obstacles cover the whole boundary: there is nowhere to grow roads")
     shortest = min(s.major_length, s.minor_length)
     extent, _, _ = minimum_rectangles([area])
