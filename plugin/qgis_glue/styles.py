@@ -120,10 +120,7 @@ def save_style_with_layer(destination: str, qml: Optional[str]) -> Optional[str]
                                                             written))
         if not ok:
             return f"the style {qml} could not be read: {message}"
-    for declared, name in written.items():
-        index = layer.fields().indexOf(name)
-        if index >= 0:
-            layer.setFieldAlias(index, declared)
+    _alias_written_names(layer, written)
     if layer.dataProvider().storageType() == "GPKG":
         _drop_stored_style(layer, layer.name())
         error = layer.saveStyleToDatabase(layer.name(), "Urban Synthesis default style",
@@ -131,6 +128,15 @@ def save_style_with_layer(destination: str, qml: Optional[str]) -> Optional[str]
         return f"the style could not be stored in {destination}: {error}" if error else None
     message, ok = layer.saveNamedStyle(str(Path(destination.split("|")[0]).with_suffix(".qml")))
     return None if ok else f"the style could not be saved next to {destination}: {message}"
+
+
+def _alias_written_names(layer, written: dict) -> None:
+    """Each field GDAL renamed (``written``: {declared: written}) gets its declared name as
+    its alias."""
+    for declared, name in written.items():
+        index = layer.fields().indexOf(name)
+        if index >= 0:
+            layer.setFieldAlias(index, declared)
 
 
 def _drop_stored_style(layer, name: str) -> None:
@@ -167,9 +173,8 @@ def attach_style(context, dest_id: str, qml: Optional[str]) -> None:
             written = written_field_names(layer.source())
             if qml:
                 layer.loadNamedStyle(style_for_fields(qml, fields, written) if fields else qml)
-            for declared, name in written.items():
-                if name in fields:
-                    layer.setFieldAlias(fields.index(name), declared)
+            if fields:
+                _alias_written_names(layer, written)
             layer.triggerRepaint()
             if qml:
                 _stack(layer, ctx.project() or QgsProject.instance(), Path(qml).name)
