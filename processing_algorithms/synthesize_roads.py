@@ -132,16 +132,15 @@ class SynthesizeRoads(AlgorithmBase):
                 "growth": {self.DEM}, "gan": {self.EXAMPLE_ROADS}}[method.key]
         if method.key == "fragments" and not self.given(parameters, self.FRAGMENT_DB):
             uses.add(self.EXAMPLE_ROADS)  # the database is built from it
+        given = {n: self.given(parameters, n)
+                 for n in (self.EXAMPLE_ROADS, self.FRAGMENT_DB, self.DEM)}
         # a number is always given (a model passes its default): set, it differs from that
-        quantile = parameters.get(self.FILL_QUANTILE)
         try:
-            changed = float(quantile) != self.parameterDefinition(
-                self.FILL_QUANTILE).defaultValue()
+            given[self.FILL_QUANTILE] = float(parameters.get(self.FILL_QUANTILE)) != \
+                self.parameterDefinition(self.FILL_QUANTILE).defaultValue()
         except (TypeError, ValueError):  # not given, or an expression
-            changed = False
-        return [n for n in (self.EXAMPLE_ROADS, self.FRAGMENT_DB, self.DEM, self.FILL_QUANTILE)
-                if n not in uses and (changed if n == self.FILL_QUANTILE
-                                      else self.given(parameters, n))]
+            pass
+        return [n for n, set_ in given.items() if set_ and n not in uses]
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         message = self.input_error(parameters, context)
