@@ -26,7 +26,8 @@
   the KS between the example database and the town, which no example-based method can
   beat on average), share below the example's 10th percentile area, dead-end streets
   served; and the conflicted footprints freed by each relaxation (rigid, PBD, both).
-  ``--loto`` runs only these (keeping the other results of the JSON).
+  ``--loto`` runs only these (keeping the other results of the JSON); ``--picture`` only
+  redraws the README's picture of them (``docs/loto_footprints.png``).
 
 Prints tables and writes ``tests/benchmarks/results/footprints.json``.
 """
@@ -567,7 +568,7 @@ def draw_loto(data: dict, town: str, path: Path, window=None, seed: int = 0) -> 
             panels.append((f"{method} (from the other towns)", r.geometry, filled))
     x0, y0, x1, y1 = shapely.total_bounds(B) if window is None else window
     roads = data["roads"][shapely.intersects(data["roads"], shapely.box(x0, y0, x1, y1))]
-    fig, axes = plt.subplots(1, 3, figsize=(18, 6.5))
+    fig, axes = plt.subplots(1, 3, figsize=(18, 5))
     for ax, panel in zip(axes, panels):
         title, geoms = panel[0], panel[1]
         filled = panel[2] if len(panel) > 2 else np.zeros(len(geoms), bool)
@@ -593,6 +594,10 @@ def draw_loto(data: dict, town: str, path: Path, window=None, seed: int = 0) -> 
     return path
 
 
+# The README's picture: Balzers' densest 1.2 x 0.9 km of buildings (UTM 32N), seed 0.
+PICTURE_TOWN, PICTURE_WINDOW = "Balzers", (537700.0, 5212300.0, 538900.0, 5213200.0)
+
+
 def main_loto(results: dict, towns=None) -> None:
     data = liechtenstein()
     results["loto"] = loto(towns, data=data)
@@ -611,6 +616,11 @@ def main():
     results = {"machine": {"python": platform.python_version(), "cpus": os.cpu_count(),
                            "platform": platform.platform(),
                            "load_average": list(os.getloadavg())}}
+    if "--picture" in sys.argv:
+        path = draw_loto(liechtenstein(), PICTURE_TOWN, ROOT / "docs" / "loto_footprints.png",
+                         window=PICTURE_WINDOW)
+        print(f"wrote {path}")
+        return
     if "--loto" in sys.argv:
         target = ROOT / "tests" / "benchmarks" / "results" / "footprints.json"
         if target.exists():
