@@ -12,6 +12,7 @@ from urban_synthesis.plugin.roads import intersection_quadtree as iq
 from urban_synthesis.plugin.measure import fidelity, metrics
 from urban_synthesis.plugin.network import invariants
 from urban_synthesis.plugin.roads import random_walk as rw
+from urban_synthesis.plugin.roads import street_shapes as ss
 from urban_synthesis.plugin.core.progress import InputError
 
 
@@ -547,7 +548,7 @@ def test_street_shapes_round_trip(helsinki):
     keep = (np.linalg.norm(graph.nodes[graph.v] - graph.nodes[graph.u], axis=1) > 1.0) & \
         (graph.u != graph.v)
     a, b = graph.nodes[graph.u[keep]], graph.nodes[graph.v[keep]]
-    back = rw._shape_lines(shapes, np.arange(len(shapes)), a, b, np.ones(len(shapes)))
+    back = ss._shape_lines(shapes, np.arange(len(shapes)), a, b, np.ones(len(shapes)))
     err = shapely.hausdorff_distance(back, graph.geometry[keep])
     assert (err <= 0.0021 * shapes.chord + 1e-6).all()
     np.testing.assert_allclose(shapely.length(back) / shapes.chord, shapes.tortuosity,
