@@ -6,7 +6,8 @@
 - :func:`largest_polygons`: the largest polygon part of each (repaired) geometry;
 - :func:`without_areas`: geometries less the areas to keep clear that reach them;
 - :func:`too_thin`: land nowhere :data:`MIN_BUILDABLE_WIDTH` wide (no lot, no building);
-- :func:`substrings`: stretches of lines between arc lengths;
+- :func:`substrings`: stretches of lines between arc lengths; :func:`end_sections`:
+  the cross-sections at their ends;
 - :func:`unit`: unit vectors; :func:`group_starts` / :func:`group_ends`: runs of equal keys;
 - :func:`ring_turns`: the signed turn at each vertex of a closed ring;
 - :func:`first_hits`: how far each of many rays goes before it meets a set of lines;
@@ -25,7 +26,7 @@ from typing import Sequence
 import numpy as np
 import shapely
 
-__all__ = ["group_starts", "group_ends", "unit", "substrings", "pinned_ends",
+__all__ = ["group_starts", "group_ends", "unit", "substrings", "end_sections", "pinned_ends",
            "polygon_parts", "largest_polygons", "minimum_rectangles", "minimum_rectangle_corners",
            "longest_edge_directions", "ring_turns", "rounded_bends", "rounded_band_bends",
            "two_point_segments", "first_hits", "without_areas", "MIN_BUILDABLE_WIDTH",
@@ -179,6 +180,26 @@ def substrings(lines: Sequence, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     all_pos = np.r_[a, cum[inner], b]
     order = np.lexsort((all_pos, all_line))
     return shapely.linestrings(all_xy[order], indices=all_line[order])
+
+
+def end_sections(lines: Sequence, half: np.ndarray):
+    """Left and right points (n, 2, 2) of each line's cross-section at its start ([:, 0])
+    and end ([:, 1]), ``half`` to either side of its end vertex, perpendicular to the end
+    segment, as a flat-capped buffer cuts it. Whoever needs an end's edge takes these:
+    the same arithmetic on the same vertices, so two polygons that share an end share
+    its edge to the last bit (the end seen from the other side: its left is ``right``).
+
+    >>> left, right = end_sections([shapely.LineString([(0, 0), (2, 0), (2, 2)])], np.r_[1.0])
+    >>> left.tolist(), right.tolist()
+    ([[[0.0, 1.0], [1.0, 2.0]]], [[[0.0, -1.0], [3.0, 2.0]]])
+    """
+    xy, idx = shapely.get_coordinates(lines, return_index=True)
+    first = np.searchsorted(idx, np.arange(len(lines)))
+    last = np.r_[first[1:], len(xy)] - 1
+    p = np.stack([xy[first], xy[last]], axis=1)
+    d = unit(np.stack([xy[first + 1] - xy[first], xy[last] - xy[last - 1]], axis=1))
+    off = np.asarray(half, dtype=np.float64)[:, None, None] * np.stack([-d[..., 1], d[..., 0]], -1)
+    return p + off, p - off
 
 
 # --------------------------------------------------------------------------- polygons

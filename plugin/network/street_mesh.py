@@ -13,9 +13,9 @@ rotated into the terrain's tangent plane (Fig. 5.3).
 
 * **streets**: stations every ``spacing`` metres along each surface's centre line, from
   connecting line to connecting line, and at each of its bends; the left and right edge
-  points are the station offset by half the width along the normal (the end stations use
-  the same direction as the junction's connecting line, so street and junction meet edge
-  to edge), at a bend the surface's inner corner and a fan over its round outer side
+  points are the station offset by half the width along the normal (the end stations are
+  the ends of the junction's connecting line, to the last bit: street and junction share
+  that edge), at a bend the surface's inner corner and a fan over its round outer side
   (:func:`_stations`); each pair of stations makes two triangles, cut back where a
   street's strip folds over itself (hairpins: :func:`_without_folds`) or over a street or
   junction that trimmed its surface; z is the draped height of the surface (terrain
@@ -71,6 +71,7 @@ import numpy as np
 import pandas as pd
 import shapely
 
+from ..core.geometry import end_sections
 from ..core.progress import InputError, require
 
 __all__ = ["MESH_FIELDS", "TEXTURE_ROWS", "StreetMesh", "street_mesh", "tin_wkb",
@@ -396,6 +397,11 @@ def _stations(centres: np.ndarray, half: np.ndarray, spacing: float):
     d = _unit(ahead - behind)
     nrm = np.column_stack([-d[:, 1], d[:, 0]])
     left, right = p + half[k][:, None] * nrm, p - half[k][:, None] * nrm
+    # the end stations: the surface's and the junction's edge, to the last bit
+    ends = np.r_[start, start + count - 1]
+    end_left, end_right = end_sections(centres, half)
+    left[ends], right[ends] = end_left.transpose(1, 0, 2).reshape(-1, 2), \
+        end_right.transpose(1, 0, 2).reshape(-1, 2)
 
     # the bends: interior vertices where the line turns
     xy, line = shapely.get_coordinates(centres, return_index=True)

@@ -37,7 +37,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from ..core import coordinates
-from ..core.geometry import pinned_ends, substrings, unit
+from ..core.geometry import end_sections, pinned_ends, substrings, unit
 from ..core.progress import InputError, Progress, ensure
 from ..retrieval.shape_context import DemGrid
 from .street_graph import RoadGraph, clean_network
@@ -280,12 +280,10 @@ def _cut_points(lines, at_end, cut, length):
     return here, unit(ahead - here)
 
 
-def _junction_rings(h, cut_xy, cut_dir):
+def _junction_rings(h, right, left):
     """One ring per node of degree >= 2: per head (CCW) its right and left cut point, then
     the corner point with the next head, or a round fill where they diverge (> 180 deg)."""
-    half, nrm_cut = h["half"], np.column_stack([-cut_dir[:, 1], cut_dir[:, 0]])
-    right = cut_xy - half[:, None] * nrm_cut
-    left = cut_xy + half[:, None] * nrm_cut
+    half = h["half"]
     nxt = h["nxt"]
     # corner slots (_ARC + 2 points each): corner point, chord, or round fill
     slots = np.repeat(left[:, None, :], _ARC + 2, axis=1)
@@ -312,6 +310,25 @@ def _junction_rings(h, cut_xy, cut_dir):
     coords = ring.reshape(-1, 2)
     owner = np.repeat(h["node"], ring.shape[1])
     return coords, owner
+
+
+def _pinned_caps(surfaces, caps, tol):
+    """``surfaces`` with their vertex nearest each of their cap points ``caps`` (n, 4, 2:
+    :func:`end_sections`) set to it where it is within ``tol`` (per surface) of it: GEOS
+    offsets a flat cap's vertices its own way, a cut snaps them to the micrometre."""
+    xy, idx = shapely.get_coordinates(surfaces, return_index=True)
+    if not len(xy):
+        return surfaces
+    span = 4.0 * (np.abs(xy).max() + np.abs(caps).max() + 1.0)
+    tree = cKDTree(np.column_stack([xy, idx * span]))   # one surface's vertices only
+    own = np.repeat(np.arange(len(surfaces)), 4)
+    pts = caps.reshape(-1, 2)
+    dist, j = tree.query(np.column_stack([pts, own * span]), k=2)
+    ok = dist[:, 0] < tol[own]
+    twin = ok & (xy[j[:, 1]] == xy[j[:, 0]]).all(1)
+    xy[j[ok, 0]] = pts[ok]
+    xy[j[twin, 1]] = pts[twin]
+    return shapely.set_coordinates(surfaces.copy(), xy)
 
 
 def _cut_overlaps(polys, layer, fixed=None, fixed_layer=None, incident=None, priority=None,
@@ -523,6 +540,27 @@ def tessellate_network(graph: RoadGraph, widths: Sequence[float],
     h["cut"] = np.where(is_junction_inc, h["cut"], 0.0)
     lines_inc = graph.geometry[h["edge"]]
     cut_xy, cut_dir = _cut_points(lines_inc, h["at_end"], h["cut"], h["length"])
+    nrm_cut = h["half"][:, None] * np.column_stack([-cut_dir[:, 1], cut_dir[:, 0]])
+    right, left = cut_xy - nrm_cut, cut_xy + nrm_cut
+    # the street centre lines between the cuts; where a street has one, its ends' edges
+    # are the junctions' connecting lines, to the last bit (computed apart, the two
+    # differed by round-off and the paved area had cracks a nanometre wide)
+    cut_start = np.zeros(graph.n_edges)
+    cut_end = np.zeros(graph.n_edges)
+    cut_start[h["edge"][~h["at_end"]]] = h["cut"][~h["at_end"]]
+    cut_end[h["edge"][h["at_end"]]] = h["cut"][h["at_end"]]
+    length = graph.length
+    a, b = cut_start, length - cut_end
+    has_surface = (b - a) > 1e-3
+    centre = substrings(graph.geometry[has_surface], a[has_surface], b[has_surface])
+    surf_edge = np.flatnonzero(has_surface)
+    cap_left, cap_right = end_sections(centre, widths[surf_edge] / 2.0)
+    row = np.cumsum(has_surface) - 1
+    on = has_surface[h["edge"]]
+    r, e = row[h["edge"][on]], h["at_end"][on].astype(np.int64)
+    # seen from the junction, a street's end runs backwards: its left is the right
+    right[on] = np.where(e[:, None] == 1, cap_left[r, e], cap_right[r, e])
+    left[on] = np.where(e[:, None] == 1, cap_right[r, e], cap_left[r, e])
     sel = is_junction_inc
     hj = {k: (v[sel] if isinstance(v, np.ndarray) and len(v) == len(sel) else v)
           for k, v in h.items()}
@@ -530,7 +568,7 @@ def tessellate_network(graph: RoadGraph, widths: Sequence[float],
     remap = np.full(len(sel), -1)
     remap[np.flatnonzero(sel)] = np.arange(int(sel.sum()))
     hj["nxt"] = remap[h["nxt"][sel]]
-    coords, owner = _junction_rings(hj, cut_xy[sel], cut_dir[sel])
+    coords, owner = _junction_rings(hj, right[sel], left[sel])
     progress.step(0.3)
 
     junction_nodes = np.unique(owner)
@@ -560,17 +598,11 @@ def tessellate_network(graph: RoadGraph, widths: Sequence[float],
     progress.step(0.4)
 
     # 3. street surfaces between the connecting lines
-    cut_start = np.zeros(graph.n_edges)
-    cut_end = np.zeros(graph.n_edges)
-    cut_start[h["edge"][~h["at_end"]]] = h["cut"][~h["at_end"]]
-    cut_end[h["edge"][h["at_end"]]] = h["cut"][h["at_end"]]
-    length = graph.length
-    a, b = cut_start, length - cut_end
-    has_surface = (b - a) > 1e-3
-    centre = substrings(graph.geometry[has_surface], a[has_surface], b[has_surface])
-    surf_edge = np.flatnonzero(has_surface)
+    caps = np.concatenate([cap_left, cap_right], axis=1)
     surfaces = shapely.buffer(centre, widths[surf_edge] / 2.0, quad_segs=_QUAD_SEGS,
                               cap_style="flat", join_style="round")
+    # GEOS simplifies the line by 1 % of the half width
+    surfaces = _pinned_caps(surfaces, caps, 0.005 * widths[surf_edge])
     progress.step(0.55)
 
     # 4. overlaps: junctions keep their shape; later junctions and all surfaces give way
@@ -595,6 +627,7 @@ def tessellate_network(graph: RoadGraph, widths: Sequence[float],
     prio = np.empty(len(priority), dtype=np.int64)
     prio[priority] = np.arange(len(priority))
     surfaces, n_sscut = _cut_overlaps(surfaces, s_layer, priority=prio)
+    surfaces = _pinned_caps(surfaces, caps, np.full(len(surfaces), 1e-6))
     keep_s = ~shapely.is_empty(surfaces) & (shapely.area(surfaces) > 1e-6)
     progress.step(0.7)
 
