@@ -26,7 +26,8 @@ rotated into the terrain's tangent plane (Fig. 5.3).
   overlapped) is ear-clipped instead (hand-written: shapely 2.0 has no constrained
   triangulation and no other library here does it; rings are a few dozen vertices);
 * **side faces**: along both street edges where they are the paved area's outline (not
-  inside a hairpin or under the street beside: :func:`_on_outline`), across a dead end's
+  inside a hairpin or under the street beside: :func:`_on_outline`; an edge that is so in
+  part split where it leaves it: :func:`_walls`), across a dead end's
   last cross-section, and
   along the junction rings' outer edges (the
   corner fills between the street heads; not the connecting lines a street continues
@@ -335,6 +336,50 @@ def _on_outline(a: np.ndarray, b: np.ndarray, own: np.ndarray, paved) -> np.ndar
     return on_own & ~np.isin(np.arange(len(mid)), i[~mine])
 
 
+def _walls(top, ground, a, b, own, paved, terrain_z, skirt):
+    """Side faces (:func:`_side_faces`) under the top edges a -> b of feature ``own`` where
+    they are the paved area's outline (:func:`_on_outline`). An edge whose middle and
+    vertices disagree on that is split where it crosses the outline of its own or another
+    polygon and each piece is tested alone: tested whole, it got its wall whole or lost
+    it whole. Returns (the faces' two triangle arrays, the owner of each quad)."""
+    pa, pb = top[a, :2], top[b, :2]
+    length = np.hypot(*(pb - pa).T)
+    mid = _on_outline(pa, pb, own, paved)
+    # the vertices (most are two edges'), with their feature
+    vtx, inv = np.unique(np.r_[a, b], return_inverse=True)
+    v_own = np.empty(len(vtx), dtype=np.int64)
+    v_own[inv] = np.r_[own, own]
+    at = _on_outline(top[vtx, :2], top[vtx, :2], v_own, paved)[inv].reshape(2, -1)
+    part = (at[0] != mid) | (at[1] != mid)
+    whole = mid & ~part
+    faces = _side_faces(top, ground, a[whole], b[whole], skirt)
+    owner = own[whole]
+    if part.any():
+        e = np.flatnonzero(part)
+        seg = shapely.linestrings(np.stack([pa[e], pb[e]], axis=1))
+        i, q = paved[1].query(seg, predicate="intersects")
+        cross = shapely.intersection(seg[i], shapely.boundary(paved[0][q]))
+        xy, w = shapely.get_coordinates(cross, return_index=True)
+        d = pb[e] - pa[e]
+        t = ((xy - pa[e][i[w]]) * d[i[w]]).sum(1) / (d[i[w]] ** 2).sum(1)
+        t = np.r_[t, np.zeros(len(e)), np.ones(len(e))]              # and both ends
+        g = np.r_[i[w], np.arange(len(e)), np.arange(len(e))]
+        order = np.lexsort((t, g))
+        t, g = np.clip(t[order], 0.0, 1.0), g[order]
+        piece = np.flatnonzero((g[1:] == g[:-1]) & (np.diff(t) * length[e][g[1:]] > 1e-6))
+        t0, t1, g = t[piece], t[piece + 1], g[piece]
+        ta, tb = top[a[e][g]], top[b[e][g]]       # t = 1 is the vertex b itself
+        ta, tb = ta + t0[:, None] * (tb - ta), \
+            np.where(t1[:, None] < 1, ta + t1[:, None] * (tb - ta), tb)
+        on = _on_outline(ta[:, :2], tb[:, :2], own[e][g], paved)
+        n = int(on.sum())
+        pts = np.vstack([ta[on], tb[on]])
+        faces = [np.concatenate(x) for x in zip(faces, _side_faces(
+            pts, terrain_z(pts[:, :2]), np.arange(n), np.arange(n) + n, skirt))]
+        owner = np.r_[owner, own[e][g][on]]
+    return faces, owner
+
+
 def _side_faces(top: np.ndarray, ground: np.ndarray, a: np.ndarray, b: np.ndarray,
                 skirt: float) -> list:
     """The two triangles of each vertical face from the top edges a -> b (the outside on
@@ -537,12 +582,12 @@ def street_mesh(tess, spacing: float = 5.0, z_offset: float = 0.1, skirt: float 
                 # outward: the left edge runs backwards, the right edge forwards
                 gap = np.nan_to_num(top[:, 2] - ground_, nan=0.0)
                 up = (gap[a] > min_gap) | (gap[b] > min_gap)
-                up[up] = _on_outline(top[a[up], :2], top[b[up], :2], k[a[up] % n_st], paved)
-                a, b = a[up], b[up]
-                tris += _side_faces(top, ground_, a, b, skirt)
-                owner += [k[a % n_st], k[a % n_st]]
-                side += [np.ones(2 * len(a), dtype=bool)]
-                uv += _quad_uv(len(a), "side")
+                faces, own = _walls(top, ground_, a[up], b[up], k[a[up] % n_st], paved,
+                                    tess.terrain_z, skirt)
+                tris += faces
+                owner += [own, own]
+                side += [np.ones(2 * len(own), dtype=bool)]
+                uv += _quad_uv(len(own), "side")
     n_j = len(tess.junctions)
     if n_j:
         nodes = tess.graph.nodes[tess.junction_node]
@@ -561,14 +606,14 @@ def street_mesh(tess, spacing: float = 5.0, z_offset: float = 0.1, skirt: float 
             node = tess.junction_node[jr]
             top = np.column_stack([xy, tess.junction_z(node, xy) + z_offset])
             gap = np.nan_to_num(top[:, 2] - tess.terrain_z(xy), nan=0.0)
-            up = (gap > min_gap) | (gap[nxt] > min_gap)
-            # not an edge a street continues from (its connecting line)
-            up[up] = _on_outline(xy[up], xy[nxt[up]], n_s + jr[up], paved)
-            a = np.flatnonzero(up)                   # the outside is right of a -> nxt
-            tris += _side_faces(top, tess.terrain_z(xy), a, nxt[a], skirt)
-            owner += [n_s + jr[a], n_s + jr[a]]
-            side += [np.ones(2 * len(a), dtype=bool)]
-            uv += _quad_uv(len(a), "side")
+            # (not an edge a street continues from: its connecting line)
+            a = np.flatnonzero((gap > min_gap) | (gap[nxt] > min_gap))   # outside: right
+            faces, own = _walls(top, tess.terrain_z(xy), a, nxt[a], n_s + jr[a], paved,
+                                tess.terrain_z, skirt)
+            tris += faces
+            owner += [own, own]
+            side += [np.ones(2 * len(own), dtype=bool)]
+            uv += _quad_uv(len(own), "side")
     triangles = np.concatenate(tris) if tris else np.zeros((0, 3, 3))
     owner = np.concatenate(owner).astype(np.int64) if owner else np.zeros(0, np.int64)
     side = np.concatenate(side) if side else np.zeros(0, bool)
