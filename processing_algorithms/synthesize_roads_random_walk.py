@@ -199,7 +199,8 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
             shapes, share = None, None
             feedback.pushInfo(f"{frame.name}: {len(points)} attributed intersection points "
                               "(no street shapes: segments bend as parabolas of the points' "
-                              "tortuosity).")
+                              "tortuosity; give the example's roads instead to bend them "
+                              "like its streets).")
         elif kinds <= {1, 5}:
             frame, road_class = drivable_lines(frame, None, set(roads.DRIVABLE_CLASSES),
                                                feedback)
