@@ -182,8 +182,14 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
     # ----------------------------------------------------------------------- reading
 
     def _read_example(self, parameters, name, context, feedback, work_crs, target_src, index):
-        frame = qgis_io.read_source(self, parameters, name, context, feedback,
-                                    fields=_POINT_FIELDS + ["highway", "other_tags"])
+        # the fields of what the layer holds: a roads layer's own 'tortuosity' is no cut
+        # name of the points' 'tortuosity_a' and 'tortuosity_b' (a shapefile's 10 characters)
+        source = self.parameterAsSource(parameters, name, context)
+        kind = None if source is None else QgsWkbTypes.geometryType(source.wkbType())
+        lines = list(qgis_io.ROAD_CLASS_FIELDS)   # road_class: 'Extract road hierarchy's
+        fields = {QgsWkbTypes.GeometryType.PointGeometry: _POINT_FIELDS,
+                  QgsWkbTypes.GeometryType.LineGeometry: lines}.get(kind, _POINT_FIELDS + lines)
+        frame = qgis_io.read_source(self, parameters, name, context, feedback, fields=fields)
         # an example elsewhere keeps its own metric CRS (it is shifted onto the target anyway);
         # one that overlaps the target is used in the target's CRS, so it can stay in place
         frame = qgis_io.example_in_place(frame, target_src, work_crs, context, feedback)

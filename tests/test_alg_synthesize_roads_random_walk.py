@@ -355,6 +355,32 @@ def test_intersections_saved_as_a_shapefile_are_read_back_whole(qgis_processing,
     assert runs[0] == runs[1]
 
 
+def test_the_hierarchys_roads_as_a_shapefile_are_an_example_with_classes(qgis_processing,
+                                                                         helsinki_graph,
+                                                                         tmp_path):
+    """'Extract road hierarchy's roads saved as a shapefile, given as the example: their
+    classes are read from road_class (it said "no road classes: every line is used"), no
+    warning about the points' tortuosity_a / tortuosity_b (a roads layer's own 'tortuosity'
+    is no cut name of theirs), and the walk is the one of the same roads from memory."""
+    shp = tmp_path / "roads.shp"
+    qgis_processing.run("urbansynth:extractroadhierarchy", {
+        "INPUT": helsinki_layer(), "OUTPUT": str(shp)})
+    in_memory = qgis_processing.run("urbansynth:extractroadhierarchy", {
+        "INPUT": helsinki_layer(), "OUTPUT": "memory:"})["OUTPUT"]
+    target = memory_layer("Polygon", [_hull_wkt(helsinki_graph, 200)], UTM)
+    runs, logs = [], []
+    for example in (str(shp), in_memory):
+        log = log_feedback()
+        out = qgis_processing.run(ALG, {"EXAMPLE": example, "TARGET": target, "SEED": 2,
+                                        "PLACEMENT": 1, "OUTPUT": "memory:"}, feedback=log)
+        runs.append(sorted(g.wkt for g in layer_features(out["OUTPUT"])[1]))
+        logs.append(" ".join(log.messages))
+    for text in logs:
+        assert "no road classes" not in text and "cannot be told apart" not in text
+        assert "street segment shapes" in text
+    assert runs[0] == runs[1]
+
+
 def test_selected_intersections_of_a_shapefile_are_read_by_their_full_names(
         qgis_processing, helsinki_graph, tmp_path):
     """The intersections shapefile as Processing loads it into the project on completion
