@@ -11,8 +11,8 @@ of the full sweep.
 
 Generic cases are derived from each algorithm's declaration (every Number parameter out of
 range and not whole, every vector input empty, null, of the wrong geometry type, without a
-CRS, with an undefined CRS, geographic, with heights and measures (Z, M); every optional line
-or polygon input the same, and every optional raster without a CRS, elsewhere and flat,
+CRS, with an undefined CRS, geographic, with heights and measures (Z, M), multi-part; every
+optional line or polygon input the same, and every optional raster without a CRS, elsewhere and flat,
 where a result or any clear message will do; every file output onto an input and into a
 read-only folder); specific cases are the findings of issue 22.
 """
@@ -44,12 +44,13 @@ UNCLEAR = re.compile(r"Traceback \(most recent call last\)|\b(KeyError|Attribute
 
 def _translate(src: str, dst: Path, layer: Optional[str] = None, sql: Optional[str] = None,
                srs: Optional[str] = None, name: Optional[str] = None, fmt: str = "GPKG",
-               dim: Optional[str] = None):
+               dim: Optional[str] = None, geometry_type: Optional[str] = None):
     from osgeo import gdal
 
     options = gdal.VectorTranslateOptions(
         format=fmt, layers=[layer] if layer and not sql else None, SQLStatement=sql,
-        dstSRS=srs, reproject=bool(srs), layerName=name or layer, accessMode=None, dim=dim)
+        dstSRS=srs, reproject=bool(srs), layerName=name or layer, accessMode=None, dim=dim,
+        geometryType=geometry_type)
     ds = gdal.VectorTranslate(str(dst), src, options=options)
     assert ds is not None, (src, dst)
     ds = None
@@ -100,6 +101,9 @@ def make_inputs(folder: Path) -> Dict[str, str]:
     for layer in ("streets", "plots"):
         _translate(bub, folder / f"{layer}_zm.gpkg", layer, dim="XYZM")
         out[f"{layer}_zm"] = f"{folder / f'{layer}_zm.gpkg'}|layername={layer}"
+    # every feature a multi-part one (as shapefiles and many tools' GeoJSON hold them)
+    _translate(bub, folder / "streets_multi.gpkg", "streets", geometry_type="PROMOTE_TO_MULTI")
+    out["streets_multi"] = f"{folder / 'streets_multi.gpkg'}|layername=streets"
     _translate(bub, folder / "plots_noprj.shp", "plots", fmt="ESRI Shapefile")
     (folder / "plots_noprj.prj").unlink()
     out["plots_noprj"] = str(folder / "plots_noprj.shp")
@@ -319,6 +323,9 @@ def derive_inputs(processing, inputs: Dict[str, str], folder: Path) -> Dict[str,
         ds.ExecuteSQL("UPDATE gpkg_contents SET srs_id = 0")
         ds = None
         out["plots_srs0"] = f"{folder / 'plots_srs0.gpkg'}|layername=plots"
+        _translate(str(folder / "plots.gpkg"), folder / "plots_multi.gpkg", "plots",
+                   geometry_type="PROMOTE_TO_MULTI")
+        out["plots_multi"] = f"{folder / 'plots_multi.gpkg'}|layername=plots"
     # a 300 m square region (split domain, parts) and a 1 km² target, both UTM 33N
     from osgeo import osr
 
@@ -401,6 +408,9 @@ VECTOR_MUTATIONS = {
     "invalid_rings": ({"lines": "tiny_lines", "polygons": "bowties"}, EITHER),
     "geographic": ({"lines": "streets_4326", "polygons": "plots_4326"}, EITHER),
     "z_and_m": ({"lines": "streets_zm", "polygons": "plots_zm"}, EITHER),
+    # a shapefile's lines are MultiLineStrings: synthesizeroads took StreetGAN's example
+    # roads for points ("TypeError: ... incorrect geometry type", 2026-12-07)
+    "multi_part": ({"lines": "streets_multi", "polygons": "plots_multi"}, EITHER),
 }
 #: Replacements of an optional raster input (each a result or a clear message).
 RASTER_MUTATIONS = {"no_crs": "mask_nocrs", "elsewhere": "road_mask", "flat": "all255"}
@@ -608,6 +618,11 @@ def specific_cases() -> List[Case]:
         Case("roads-gan-keeps-arterials", U + "synthesizeroads",
              {"METHOD": 2, "ARTERIALS": "{streets}", "SEED": 1, "OUTPUT": "{out}/roads.gpkg"},
              None, check=_arterials_kept, core=True),
+        # StreetGAN measures the example roads it is held to: a shapefile's (multi-part)
+        # lines were taken for points (TypeError, 2026-12-07)
+        Case("roads-gan-multi-part-example", U + "synthesizeroads",
+             {"METHOD": 2, "ARTERIALS": "{streets}", "EXAMPLE_ROADS": "{streets_multi}",
+              "SEED": 1, "OUTPUT": "{out}/roads.gpkg"}, None, check=_len_ok(10), core=True),
         Case("roads-polygons-as-arterials", U + "synthesizeroads",
              {"METHOD": 2, "ARTERIALS": "{plots}", "OUTPUT": "{out}/roads.gpkg"},
              r"has polygons; lines are needed", core=True),

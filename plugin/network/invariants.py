@@ -395,8 +395,15 @@ def _share_of_extract(share, lines) -> float:
 
 def extract_hull(lines: Sequence):
     """The area an example known only by its lines is measured in: their convex hull (its
-    streets are cut at the extract's edge, which the hull follows)."""
-    return shapely.convex_hull(shapely.multilinestrings(list(lines)))
+    streets are cut at the extract's edge, which the hull follows). Lines or multi-part
+    lines (a shapefile's, GeoJSON's).
+
+    >>> two = shapely.MultiLineString([[(0, 0), (10, 0)], [(0, 5), (10, 5)]])
+    >>> extract_hull([two, shapely.LineString([(0, 0), (0, 10)])]).area
+    100.0
+    """
+    return shapely.convex_hull(shapely.multipoints(shapely.get_coordinates(
+        np.asarray(lines, dtype=object))))
 
 
 def corridor_of(given: Sequence, half_width: float = CORRIDOR_HALF_WIDTH, quad_segs: int = 4):
