@@ -122,3 +122,25 @@ def test_every_algorithm_file_stays_thin():
             if p.name != "common.py"
             and (n := len(p.read_text(encoding="utf-8").splitlines())) >= 350}
     assert not long, long
+
+
+def test_a_parameter_no_tool_has_is_named_in_a_warning(qgis_processing):
+    """QGIS ignores a parameter the tool does not have, so a typo on the command line ran
+    the tool with the default (SNAP_TOLERENCE) and another tool's parameter (a road
+    method's EXAMPLE_ROADS given to synthesizeroadsgan) did nothing, both without a word.
+    Each is named in a warning, with the nearest names; a run with the tool's own
+    parameters warns of none."""
+    from conftest import helsinki_layer
+    from helpers import log_feedback
+
+    params = {"INPUT": helsinki_layer(), "OUTPUT": "memory:"}
+    quiet, typo = log_feedback(), log_feedback()
+    qgis_processing.run("urbansynth:extractroadhierarchy", params, feedback=quiet)
+    qgis_processing.run("urbansynth:extractroadhierarchy",
+                        dict(params, SNAP_TOLERENCE=3, EXAMPLE_ROADS="x"), feedback=typo)
+    assert not [w for w in quiet.warnings if "not a parameter" in w]
+    named = [w for w in typo.warnings if "not a parameter" in w]
+    assert len(named) == 2
+    assert any("SNAP_TOLERENCE" in w and "Did you mean SNAP_TOLERANCE?" in w for w in named)
+    assert any(w.startswith("EXAMPLE_ROADS is not a parameter of extractroadhierarchy")
+               for w in named)
