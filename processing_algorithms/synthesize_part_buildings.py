@@ -246,9 +246,8 @@ class SynthesizePartBuildings(AlgorithmBase):
     def _skeletons(self, parameters, context, feedback):
         """Skeleton parts (multi-part features split, lines merged and simplified) with the
         feature id each belongs to and its street side."""
-        source = self.parameterAsSource(parameters, self.SKELETON, context)
-        gtype = QgsWkbTypes.geometryType(source.wkbType()) if source is not None else None
-        kind = "polygons" if gtype == QgsWkbTypes.GeometryType.PolygonGeometry else "lines"
+        kind = "polygons" if qgis_io.geometry_kind(self, parameters, self.SKELETON,
+                                                   context) == "polygons" else "lines"
         frame = qgis_io.read_source(self, parameters, self.SKELETON, context, feedback,
                                     kind=kind, fields=["front"])
         geoms = frame.geometry

@@ -17,10 +17,6 @@ from ..plugin.qgis_glue import qgis_io
 from ..plugin.roads import intersection_quadtree, random_walk
 from .common import AlgorithmBase, drivable_lines
 
-_POINT_FIELDS = ["level_a", "level_b", "degree", "tortuosity_a", "tortuosity_b", "dist_mean_a",
-                 "dist_var_a", "dist_mean_b", "dist_var_b", "angle_mean_a", "angle_var_a",
-                 "angle_mean_b", "angle_var_b", "parcel_area", "block_area"]
-
 
 class SynthesizeRoadsRandomWalk(AlgorithmBase):
     GROUP_ID = "synthesis"
@@ -182,13 +178,10 @@ class SynthesizeRoadsRandomWalk(AlgorithmBase):
     # ----------------------------------------------------------------------- reading
 
     def _read_example(self, parameters, name, context, feedback, work_crs, target_src, index):
-        # the fields of what the layer holds: a roads layer's own 'tortuosity' is no cut
-        # name of the points' 'tortuosity_a' and 'tortuosity_b' (a shapefile's 10 characters)
-        source = self.parameterAsSource(parameters, name, context)
-        kind = None if source is None else QgsWkbTypes.geometryType(source.wkbType())
-        lines = list(qgis_io.ROAD_CLASS_FIELDS)   # road_class: 'Extract road hierarchy's
-        fields = {QgsWkbTypes.GeometryType.PointGeometry: _POINT_FIELDS,
-                  QgsWkbTypes.GeometryType.LineGeometry: lines}.get(kind, _POINT_FIELDS + lines)
+        # the fields of what it holds: a roads layer's 'tortuosity' is no cut 'tortuosity_a'
+        points, lines = intersection_quadtree.TABLE_FIELDS, qgis_io.ROAD_CLASS_FIELDS
+        fields = {"points": points, "lines": lines}.get(
+            qgis_io.geometry_kind(self, parameters, name, context), points + lines)
         frame = qgis_io.read_source(self, parameters, name, context, feedback, fields=fields)
         # an example elsewhere keeps its own metric CRS (it is shifted onto the target anyway);
         # one that overlaps the target is used in the target's CRS, so it can stay in place

@@ -53,6 +53,14 @@ _KIND_TO_GEOMTYPE = {"points": QgsWkbTypes.GeometryType.PointGeometry, "lines": 
                      "polygons": QgsWkbTypes.GeometryType.PolygonGeometry}
 
 
+def geometry_kind(alg, parameters, name: str, context) -> Optional[str]:
+    """'points', 'lines' or 'polygons': what a source parameter's layer holds (None when it
+    is not given or holds mixed types), known before it is read."""
+    source = alg.parameterAsSource(parameters, name, context)
+    gtype = None if source is None else QgsWkbTypes.geometryType(source.wkbType())
+    return next((kind for kind, g in _KIND_TO_GEOMTYPE.items() if g == gtype), None)
+
+
 class ProcessingCanceled(QgsProcessingException):
     """The user canceled the run (a QgsProcessingException, so QGIS ends the run with its
     message; a type of its own, so the plugin's code and tests tell it from a failure)."""

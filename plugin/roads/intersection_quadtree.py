@@ -54,6 +54,10 @@ __all__ = ["REQUIRED_FIELDS", "PointSet", "points_from_table", "points_from_road
 
 #: Attribute columns a point layer must have (street a; street b is optional per point).
 REQUIRED_FIELDS = ("level_a", "dist_mean_a")
+#: Every field :func:`points_from_table` reads (``extractroadhierarchy``'s intersections).
+TABLE_FIELDS = ("level_a", "level_b", "degree", "tortuosity_a", "tortuosity_b", "dist_mean_a",
+                "dist_var_a", "dist_mean_b", "dist_var_b", "angle_mean_a", "angle_var_a",
+                "angle_mean_b", "angle_var_b", "parcel_area", "block_area")
 _SLOT_COLUMNS = ("level", "tortuosity", "dist_mean", "dist_var", "angle_mean", "angle_var")
 #: Floors of the transition Gaussian's spreads: a street with two equal gaps has variance 0.
 MIN_DIST_SD_SHARE = 0.15   # of the mean distance
