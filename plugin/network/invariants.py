@@ -400,7 +400,7 @@ def extract_hull(lines: Sequence):
 
     >>> two = shapely.MultiLineString([[(0, 0), (10, 0)], [(0, 5), (10, 5)]])
     >>> extract_hull([two, shapely.LineString([(0, 0), (0, 10)])]).area
-    100.0
+    75.0
     """
     return shapely.convex_hull(shapely.multipoints(shapely.get_coordinates(
         np.asarray(lines, dtype=object))))
