@@ -557,3 +557,29 @@ def test_lines_without_a_class_beside_classed_ones_are_not_streets():
     unclassed = M.compute_layout_metrics(roads=lines, road_class=[None] * len(lines))
     assert unclassed.scalar("roads", "street_length_km_per_km2") == pytest.approx(
         plain.scalar("roads", "street_length_km_per_km2"))
+
+
+def test_an_example_of_a_whole_region_is_flagged_as_mostly_empty_land():
+    """A whole country's roads as the example (Liechtenstein, as an analyst reads the OSM
+    extract) count their densities over the convex hull of 169 km² of mountains and
+    valleys, a quarter of it settled: the report said a town had 10 times the example's
+    junctions per km². The settled share is measured and the report says the figures per
+    km² compare poorly; a town measured in its outline is not flagged."""
+    from towns import LI_PBF, liechtenstein_towns
+    from urban_synthesis.plugin.network import street_graph as sg
+
+    if not LI_PBF.exists():
+        pytest.skip(f"{LI_PBF} is missing")
+    import pyogrio
+
+    lines = pyogrio.read_dataframe(LI_PBF, layer="lines").to_crs(32632)
+    roads = lines[lines.highway.isin(sg.DRIVABLE_CLASSES)].geometry.values
+    vaduz = next(t for t in liechtenstein_towns() if t.name == "Vaduz")
+    country = M.compute_layout_metrics(roads=roads)
+    town = M.compute_layout_metrics(roads=vaduz.lines, area=vaduz.area)
+    assert country.scalar("layout", "settled_share") < 0.3
+    assert town.scalar("layout", "settled_share") > 0.9
+    assert any("mostly of empty land" in n for n in country.notes)
+    flagged = R.summary_html(M.compare(town, country), True)
+    assert "compare poorly" in flagged and "the example's settle only" in flagged
+    assert "compare poorly" not in R.summary_html(M.compare(town, town), True)

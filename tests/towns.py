@@ -34,13 +34,14 @@ import numpy as np
 import shapely
 
 from conftest import BUBENEC, HELSINKI
+from urban_synthesis.plugin.measure import metrics
 from urban_synthesis.plugin.network import hierarchy
 from urban_synthesis.plugin.network import street_graph as sg
 
 LI_PBF = Path(os.environ.get("URBANSYNTH_LI_PBF",
                              "/work/shared/data/liechtenstein-2013-08-03.osm.pbf"))
-#: Settlement envelope: buffer out, buffer in (m), smallest part kept (m²).
-ENVELOPE_OUT, ENVELOPE_IN, ENVELOPE_MIN_PART = 120.0, 100.0, 2e5
+#: Settlement envelope (metrics.settled_area, closed by 120 m / 100 m): smallest part kept (m²).
+ENVELOPE_MIN_PART = 2e5
 #: A municipality is a town when this much drivable street (km) lies in its envelope.
 MIN_STREET_KM = 15.0
 
@@ -81,18 +82,7 @@ def _drivable_graph(df):
 
 def envelope(streets: np.ndarray, within=None) -> shapely.Geometry:
     """Settlement envelope of a street network (see the module docstring)."""
-    grown = shapely.union_all(shapely.buffer(streets, ENVELOPE_OUT, quad_segs=4))
-    env = shapely.buffer(grown, -ENVELOPE_IN, quad_segs=4)
-    if within is not None:
-        env = shapely.intersection(env, within)
-    parts = shapely.get_parts(env)
-    parts = parts[shapely.area(parts) >= ENVELOPE_MIN_PART]
-    # a town has no holes: fields enclosed by its streets belong to it
-    parts = shapely.polygons(shapely.get_exterior_ring(parts))
-    if within is not None:
-        parts = shapely.get_parts(shapely.intersection(parts, within))
-        parts = parts[shapely.area(parts) >= ENVELOPE_MIN_PART]
-    return shapely.make_valid(shapely.union_all(parts))
+    return metrics.settled_area(streets, within, ENVELOPE_MIN_PART)
 
 
 def _coverage(streets: np.ndarray) -> shapely.Geometry:

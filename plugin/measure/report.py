@@ -27,7 +27,7 @@ import shapely
 
 from ..core.progress import Progress, ensure
 from ..network.invariants import CHECKS, DEAD_END_TOLERANCE
-from .metrics import Distribution, MetricsResult, compare
+from .metrics import SETTLED_SHARE_LOW, Distribution, MetricsResult, compare
 
 __all__ = ["render_report", "write_report", "histogram_png", "rose_png", "map_png",
            "summary_html"]
@@ -348,6 +348,15 @@ def summary_html(comparison: pd.DataFrame, has_example: bool) -> str:
     if not has_example:
         out.append("<p>No example was given: the tables below describe the layout alone.</p>")
         return "".join(out)
+    settled = rows.get(("layout", "settled_share", True))
+    sparse = [f"{who} settle only {share:.0%}" for who, share in
+              (("the layout's streets", settled.candidate), ("the example's", settled.example))
+              if np.isfinite(share) and share < SETTLED_SHARE_LOW] if settled else []
+    if sparse:
+        out.append("<p class='warn'><b>The figures per km² compare poorly</b>: "
+                   f"{' and '.join(sparse)} of the area their densities are counted in; the "
+                   "rest is empty land around them (a whole region's extract). Give a study "
+                   "area for each side, such as the town's outline.</p>")
     good, bad = [], []
     for key, what in SUMMARY_MEASURES.items():
         row = rows.get(key)
