@@ -66,10 +66,9 @@ from ..network import street_graph as _roads
 from ..network.controlled_access import end_short_of_controlled_access
 from ..network.dead_ends import MIN_DANGLE, steer_attributed
 from ..network.links import join_pieces, link_floating_pieces
-from ..network.invariants import (SNAP_TOLERANCE, corridor_around, doubles_a_street,
-                                  is_controlled_access)
+from ..network.invariants import SNAP_TOLERANCE, corridor_around, doubles_a_street
 from ..network.street_graph import add_streets, close_short_gaps, synthesised
-from ..network.undershoots import join_undershoots
+from ..network.undershoots import clear_undershoots
 from ..network.blocks import (
     MIN_BLOCK_AREA,
     MIN_BLOCK_WIDTH,
@@ -1214,12 +1213,9 @@ def synthesize(arterials: Sequence, databases: Sequence[FragmentDatabase],
     new = synthesised(level, attrs["source_fragment"])
     geometry, keep = close_short_gaps(geometry, new, SNAP_TOLERANCE)
     level, attrs = level[keep], {k: v[keep] for k, v in attrs.items()}
-    # nor a metre or two short of a street (a warped street's end, a stub by a junction)
-    geometry, parent = join_undershoots(
-        geometry, new[keep], target if target is not None else area,
-        closed_roads=None if arterial_class is None else
-        np.asarray(arterials, dtype=object)[is_controlled_access(arterial_class)])
-    level, attrs = level[parent], {k: v[parent] for k, v in attrs.items()}
+    # nor a metre or two short of one (a warped street's end, a stub by a junction)
+    geometry, keep = clear_undershoots(geometry, new[keep])
+    level, attrs = level[keep], {k: v[keep] for k, v in attrs.items()}
     keep = shapely.length(geometry) > 1e-6
     geometry = geometry[keep]
     if "fill" in stats:  # counted on the network returned, the outline closing its faces

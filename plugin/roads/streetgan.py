@@ -591,13 +591,11 @@ def synthesize(target, model, seed: int = 0, cell_size: Optional[float] = None,
 
         lines, keep = close_short_gaps(lines, ~is_given, SNAP_TOLERANCE)
         is_given = is_given[keep]
-        # nor a metre or two short of a street (a read-back street's end, a stub by a
-        # junction): joined onto it
-        from ..network.undershoots import join_undershoots
+        # nor a metre or two short of one (a read-back street's end, a stub by a junction)
+        from ..network.undershoots import clear_undershoots
 
-        lines, parent = join_undershoots(lines, ~is_given, area,
-                                         closed_roads=given_lines[~_open_roads(given_cls)])
-        is_given = is_given[parent]
+        lines, keep = clear_undershoots(lines, ~is_given)
+        is_given = is_given[keep]
     t_vec = time.perf_counter() - t
     level = np.zeros(len(lines), dtype=np.int64)
     if levels and len(lines):
