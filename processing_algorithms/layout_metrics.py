@@ -305,7 +305,7 @@ class LayoutMetrics(AlgorithmBase):
             for note in example.notes:
                 feedback.pushInfo(f"Example: {note}")
         elif self.given(parameters, self.EXAMPLE_STUDY_AREA):
-            feedback.reportError("An example study area was given without example layers; "
+            feedback.pushWarning("An example study area was given without example layers; "
                                  "it is ignored.")
         table = metrics.compare(candidate, example)
         feedback.pushInfo(f"{len(table)} measures"

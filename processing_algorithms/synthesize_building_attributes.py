@@ -211,11 +211,11 @@ class SynthesizeBuildingAttributes(AlgorithmBase):
         feedback.pushInfo(f"{frame.name}: {n_h} of {len(frame)} example buildings have a "
                           "height or levels.")
         if n_h == 0:
-            feedback.reportError(
+            # a warning, not an error: the run goes on and writes types and roofs
+            feedback.pushWarning(
                 f"Layer {frame.name}: no example building has a height or a number of levels "
                 "(OSM height / building:levels, height_m / levels, or the height field): only "
-                "types and roof shapes are transferred, heights and levels stay empty.",
-                fatalError=False)
+                "types and roof shapes are transferred, heights and levels stay empty.")
         return frame, attrs
 
     def _attributes_of(self, frame, hf, lf, parameters, context):
