@@ -137,8 +137,8 @@ def district_model() -> QgsProcessingModelAlgorithm:
     _param(model, parcel_method, "How the blocks are cut into parcels (see 'Subdivide blocks "
            "into parcels'). Skeleton (Vanegas et al. 2012, the default) gives every parcel a "
            "street frontage; Voronoi along the OBB axis (Aliaga et al. 2008) gives about as "
-           "many, about as regular parcels (the demo's district, seed 1: 234 parcels, 44 % "
-           "undesirable by Yang's test, against the skeleton's 212 and 46 %).", 0, 500)
+           "many, about as regular parcels (the demo's district, seed 1: 232 parcels, 42 % "
+           "undesirable by Yang's test, against the skeleton's 205 and 43 %).", 0, 500)
 
     fill = fill_quantile_parameter()
     fill.setFlags(fill.flags() | QgsProcessingParameterDefinition.Flag.FlagAdvanced)
