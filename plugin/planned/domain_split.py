@@ -196,7 +196,8 @@ class SplitSettings:
         Each joint between two lots with frontage moved to where the two are squarest
         (:func:`settle_joints`; not in the paper, a discrete regression of the warp's
         joints by Table 1's measures): lower p_area, no higher p_angle, the same streets
-        and lot count. On by default.
+        and lot count, at 2.5-3.3 times the split's CPU. Off by default until the
+        README's tables are measured with it (README, splitdomain).
     """
 
     parcel_length: float = 30.0
@@ -210,7 +211,7 @@ class SplitSettings:
     outline_streets: bool = True
     back_to_back: bool = True
     fallback_parcels: str = "recursive"
-    settle_joints: bool = True
+    settle_joints: bool = False
 
     def validate(self) -> "SplitSettings":
         if self.fallback_parcels not in FALLBACK_PARCELS:
