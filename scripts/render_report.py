@@ -3,16 +3,16 @@
     python scripts/render_report.py out/demo_metrics.html docs/metrics_report.png
 
 The README's picture of the layoutmetrics report is this, after ``make demo``. QtWebKit
-(Debian's python3-pyqt5.qtwebkit) draws it; no browser is needed.
+(Debian's python3-pyqt5.qtwebkit; QGIS 4 has no QtWebKit) draws it; no browser is needed.
 """
 import os
 import sys
 
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
-from PyQt5.QtCore import QEventLoop, QSize, QUrl  # noqa: E402
-from PyQt5.QtGui import QImage, QPainter  # noqa: E402
-from PyQt5.QtWebKitWidgets import QWebPage  # noqa: E402
-from PyQt5.QtWidgets import QApplication  # noqa: E402
+from qgis.PyQt.QtCore import QEventLoop, QSize, QUrl  # noqa: E402
+from qgis.PyQt.QtGui import QImage, QPainter  # noqa: E402
+from qgis.PyQt.QtWebKitWidgets import QWebPage  # noqa: E402
+from qgis.PyQt.QtWidgets import QApplication  # noqa: E402
 
 WIDTH, HEIGHT = 1200, 2150   # the report's header, road measures and first four histograms
 
@@ -24,8 +24,8 @@ def render(html: str, png: str, width: int = WIDTH, height: int = HEIGHT) -> Non
     loop = QEventLoop()
     page.mainFrame().loadFinished.connect(lambda ok: loop.quit())
     page.mainFrame().load(QUrl.fromLocalFile(os.path.abspath(html)))
-    loop.exec_()
-    image = QImage(QSize(width, height), QImage.Format_ARGB32)
+    loop.exec()
+    image = QImage(QSize(width, height), QImage.Format.Format_ARGB32)
     image.fill(0xFFFFFFFF)
     painter = QPainter(image)
     page.mainFrame().render(painter)
