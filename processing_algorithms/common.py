@@ -1,7 +1,6 @@
 """Shared plumbing of the urbansynth algorithms: identity, icon, parameter help, and the
 rules every algorithm follows once: numbers checked against the range they were declared
 with, seeds, field types by the declaration, roads -> blocks, the example databases."""
-import difflib
 import functools
 import math
 import re
@@ -115,7 +114,7 @@ def _guarded(run):
         message = self.declaration_error(parameters, context)
         if message:
             raise QgsProcessingException(message)
-        for warning in self.unknown_parameters(parameters):
+        for warning in qgis_io.unknown_parameters(self, parameters):
             feedback.pushWarning(warning)
         staging = outputs.OutputStaging(self, parameters, context, feedback)
         staged = staging.prepare()
@@ -196,21 +195,6 @@ class AlgorithmBase(QgsProcessingAlgorithm):
         return (False, message) if message else (True, "")
 
     # ----------------------------------------------------------------- declared once
-
-    def unknown_parameters(self, parameters) -> list:
-        """A warning for each name in ``parameters`` that is none of this tool's parameters
-        or outputs, with the nearest names: QGIS ignores them silently, so a typo on the
-        command line (EXAMPLE_ROAD) or a parameter of another tool ran with its default."""
-        names = [d.name() for d in self.parameterDefinitions()] + \
-            [d.name() for d in self.outputDefinitions()]
-        warnings = []
-        for name in parameters:
-            if not isinstance(name, str) or name in names:
-                continue
-            near = difflib.get_close_matches(name.upper(), names, n=2, cutoff=0.6)
-            hint = f" Did you mean {' or '.join(near)}?" if near else ""
-            warnings.append(f"{name} is not a parameter of {self.name()}: ignored.{hint}")
-        return warnings
 
     def declaration_error(self, parameters, context):
         """The first value that breaks its parameter's declaration (a mandatory parameter

@@ -144,3 +144,17 @@ def test_a_parameter_no_tool_has_is_named_in_a_warning(qgis_processing):
     assert any("SNAP_TOLERENCE" in w and "Did you mean SNAP_TOLERANCE?" in w for w in named)
     assert any(w.startswith("EXAMPLE_ROADS is not a parameter of extractroadhierarchy")
                for w in named)
+
+
+def test_the_shipped_model_names_a_parameter_it_does_not_have(qgis_processing):
+    """The model warns the same way (its outputs are named 'child:NAME', which are its own)."""
+    from qgis.core import QgsApplication
+
+    from urban_synthesis.plugin.qgis_glue import qgis_io
+
+    model = QgsApplication.processingRegistry().algorithmById("urbansynth:synthesizedistrict")
+    own = {"ARTERIALS": "a", "SEED": 1, "roads:ROADS": "memory:", "metrics:REPORT": "r.html"}
+    assert qgis_io.unknown_parameters(model, own) == []
+    said = qgis_io.unknown_parameters(model, dict(own, PARCELS_METHOD=2))
+    assert said == ["PARCELS_METHOD is not a parameter of synthesizedistrict: ignored. Did you "
+                    "mean PARCEL_METHOD or ROAD_METHOD?"]

@@ -89,6 +89,8 @@ class ShippedModel(QgsProcessingModelAlgorithm):
         message = self.empty_input_error(parameters, context)  # models in models: no check
         if message:
             raise QgsProcessingException(message)
+        for warning in qgis_io.unknown_parameters(self, parameters):
+            feedback.pushWarning(warning)
         staging = outputs.OutputStaging(self, parameters, context)
         staged = staging.prepare()
         recorder = _StepErrors(feedback)

@@ -61,6 +61,25 @@ def geometry_kind(alg, parameters, name: str, context) -> Optional[str]:
     return next((kind for kind, g in _KIND_TO_GEOMTYPE.items() if g == gtype), None)
 
 
+def unknown_parameters(alg, parameters) -> List[str]:
+    """A warning for each name in ``parameters`` that is none of the algorithm's (or the
+    model's) parameters or outputs, with the nearest names: QGIS ignores them silently, so
+    a typo on the command line (SNAP_TOLERENCE) ran with the default, and another tool's
+    parameter (EXAMPLE_ROADS given to synthesizeroadsgan) did nothing."""
+    import difflib
+
+    names = [d.name() for d in alg.parameterDefinitions()] + \
+        [d.name() for d in alg.outputDefinitions()]
+    warnings = []
+    for name in parameters:
+        if not isinstance(name, str) or name in names:
+            continue
+        near = difflib.get_close_matches(name.upper(), names, n=2, cutoff=0.6)
+        hint = f" Did you mean {' or '.join(near)}?" if near else ""
+        warnings.append(f"{name} is not a parameter of {alg.name()}: ignored.{hint}")
+    return warnings
+
+
 class ProcessingCanceled(QgsProcessingException):
     """The user canceled the run (a QgsProcessingException, so QGIS ends the run with its
     message; a type of its own, so the plugin's code and tests tell it from a failure)."""
