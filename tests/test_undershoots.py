@@ -39,18 +39,21 @@ def test_a_stub_beside_a_junction_and_a_street_too_short_to_clear_are_dropped():
     assert lines[-1].equals(far)
 
 
-def test_fragments_and_streetgan_end_no_street_short_of_another():
+def test_the_three_methods_end_no_street_short_of_another():
     """Vaduz from the other towns (the fidelity benchmark's example; seed 0): fragment
     synthesis ended three streets 0.8-1.4 m short of a street (two warped fragment streets
-    and a 1 m procedural stub); Balzers from the Helsinki model (seed 1) StreetGAN one. None
-    now, and every invariant holds (the dead-end share in its band)."""
+    and a 1 m procedural stub); Balzers from the Helsinki model (seed 1) StreetGAN one, and
+    the random walk on Vaduz (seed 0) one. None now, and every invariant holds (the dead-end
+    share in its band)."""
     from urban_synthesis.plugin.measure import fidelity
     from urban_synthesis.plugin.network import fragments as fr
     from urban_synthesis.plugin.retrieval import database
     from urban_synthesis.plugin.roads import from_fragments as ff
+    from urban_synthesis.plugin.roads import random_walk as rw
     from urban_synthesis.plugin.roads import streetgan
 
-    for name, method in (("Vaduz", "fragments"), ("Balzers", "streetgan")):
+    for name, method in (("Vaduz", "fragments"), ("Balzers", "streetgan"),
+                         ("Vaduz", "random_walk")):
         target, others = left_out_town(name)
         lines = np.concatenate([t.lines for t in others])
         stats = fidelity.fidelity_statistics(lines, shapely.union_all([t.area for t in others]))
@@ -66,6 +69,16 @@ def test_fragments_and_streetgan_end_no_street_short_of_another():
                                     arterial_class=target.given_class)
             g = np.asarray(res.geometry, dtype=object)
             new = g[invariants.new_streets(g, target.given)]
+        elif method == "random_walk":
+            points, shapes = rw.example_from_roads(lines, np.concatenate(
+                [t.road_class for t in others]))
+            res = rw.synthesize(points, target.area, existing_lines=target.given, seed=0,
+                                in_place=False, shapes=shapes,
+                                dead_end_share=stats["degree1_share"],
+                                given_class=target.given_class)
+            new = np.asarray(res.geometry, dtype=object)
+            # the given roads with a vertex where a new street ends (its OUTPUT_EXISTING)
+            g = np.concatenate([new, rw.given_with_junctions(target.given, new)[0]])
         else:
             res = streetgan.synthesize(target.area, streetgan.load_model("streetgan_helsinki"),
                                        seed=1, given=target.given,

@@ -88,6 +88,7 @@ from ..network.invariants import (DEAD_END_TOLERANCE, MIN_DUPLICATE_LENGTH, conn
 from ..network.invariants import dead_end_share as measured_dead_end_share
 from ..network.links import allowed_area, join_pieces, link_floating_pieces
 from ..network.street_graph import ends_as_vertices, node_lines, snap_ends_onto_lines
+from ..network.undershoots import clear_undershoots
 from . import intersection_quadtree as iq
 from .street_shapes import (StreetShapes, blend_shapes, draw_geometry, example_from_roads,
                             street_shapes)
@@ -1727,6 +1728,7 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
     if given_class is not None and ex_lines is not None:
         lines, table, ptab = _off_controlled_access(lines, table, ptab, pts, given_roads,
                                                     existing_lines, given_class, area, stats)
+    lines, table, ptab = _clear_undershoots(lines, table, ptab, pts, given_roads, area, stats)
     # of every street returned: the given-road joins and the streets across are straight,
     # a piece's link bends only along the target
     stats["mean_tortuosity"] = float(table.tortuosity.mean())
@@ -1757,16 +1759,40 @@ def _off_controlled_access(lines, table, ptab, pts, roads, existing_lines, given
     if not (ca["n_ended_short"] or ca["n_removed"]):
         return lines, table, ptab
     new = (source < n)
-    kept = source[new & (source >= 0)]
-    joins = out[source < 0]
-    out = out[new & (source >= 0)]
+    return _followed(lines, table, ptab, pts, source[new & (source >= 0)],
+                     out[new & (source >= 0)], out[source < 0], roads, area, stats)
+
+
+def _clear_undershoots(lines, table, ptab, pts, roads, area, stats):
+    """New streets that end within 2 m of another street, not on it, cut back until they
+    keep 8 m from every street, or dropped (:func:`network.undershoots.clear_undershoots`,
+    as the other methods; the walk's steps keep only 0.5 m from other segments). The table
+    and the points' connections follow."""
+    n = len(lines)
+    out, keep = clear_undershoots(np.concatenate([lines, roads]),
+                                  np.r_[np.ones(n, bool), np.zeros(len(roads), bool)])
+    kept = np.flatnonzero(keep[:n])
+    out = out[:len(kept)]
+    changed = int(n - len(kept) + (~shapely.equals_exact(out, lines[kept], 0.0)).sum())
+    stats["n_undershoots_cleared"] = changed
+    if not changed:
+        return lines, table, ptab
+    return _followed(lines, table, ptab, pts, kept, out, np.empty(0, dtype=object), roads,
+                     area, stats)
+
+
+def _followed(lines, table, ptab, pts, kept, out, joins, roads, area, stats):
+    """The table and the points' connections after the streets ``kept`` (indices into
+    ``lines``) became ``out`` (cut back, or as they were) and the others went, with
+    ``joins`` added (origin 'piece_link'). A street cut back no longer reaches the node at
+    its cut end (-1 there, one connection less)."""
+    n = len(lines)
     connections = ptab["connections"].to_numpy().copy()
     rows = table.iloc[kept].reset_index(drop=True)
     node = rows[["node_from", "node_to"]].to_numpy().copy()
     gone = np.setdiff1d(np.arange(n), kept)
     ends = table[["node_from", "node_to"]].to_numpy()[gone].ravel()
     np.add.at(connections, ends[ends >= 0], -1)
-    # a street cut back no longer reaches the node at its cut end
     for k in np.flatnonzero(~shapely.equals_exact(out, lines[kept], 0.0)):
         for j, at in enumerate((0, -1)):
             v = node[k, j]
