@@ -94,10 +94,13 @@ def clear_undershoots(geometry: Sequence, new: Sequence, distance: float = UNDER
         todo = np.union1d(short, np.flatnonzero(stub))
         if not len(todo):
             break
+        tree = shapely.STRtree(geometry)       # this round's lines, dropped ones filtered
         for k in todo:
             i = int(line[k])
-            cut = None if stub[k] else _cut_back(geometry[i], int(side[k]),
-                                                 geometry[kept & (index != i)], clear)
+            near = tree.query(geometry[i], predicate="dwithin", distance=clear)
+            near = near[kept[near] & (near != i)]
+            cut = None if stub[k] else _cut_back(geometry[i], int(side[k]), geometry[near],
+                                                 clear)
             if cut is None:
                 kept[i] = False
             else:
@@ -107,9 +110,10 @@ def clear_undershoots(geometry: Sequence, new: Sequence, distance: float = UNDER
 
 def _cut_back(line, side: int, others: np.ndarray, clear: float):
     """``line`` cut back from its ``side`` end to the first point ``clear`` m from every one
-    of ``others`` (in :data:`_STEP` m steps); None when less than that is left of it."""
+    of ``others`` (the lines within that of it; in :data:`_STEP` m steps); None when less
+    than that is left of it."""
     length = float(line.length)
-    near = others[shapely.dwithin(others, line, clear)]
+    near = others
     steps = np.arange(_STEP, length - UNDERSHOOT_DISTANCE, _STEP)
     at = length - steps if side == 1 else steps       # arc positions from the start
     pts = shapely.line_interpolate_point(line, at)
