@@ -51,7 +51,7 @@ between street centerlines" - so every crossing must be a node); Hartmann thesis
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Dict, List, Optional, Sequence
+from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 import pandas as pd
@@ -67,7 +67,7 @@ __all__ = [
     "JUNCTION_TOLERANCE", "CORRIDOR_HALF_WIDTH", "MIN_DUPLICATE_LENGTH", "JUNCTION_RADIUS",
     "corridor_of",
     "DEAD_END_TOLERANCE", "EDGE_DISTANCE", "SNAP_TOLERANCE", "UNDERSHOOT_DISTANCE",
-    "CONTROLLED_ACCESS", "is_controlled_access",
+    "CONTROLLED_ACCESS", "is_controlled_access", "short_ends",
     "CHECKS", "Contacts", "NetworkCheck", "line_contacts", "connected_pieces", "node_degrees",
     "dead_end_share",
     "crossing_share", "counted_nodes", "dead_end_share_of_extract", "crossing_share_of_extract",
@@ -391,6 +391,35 @@ def _share_of_extract(share, lines) -> float:
     if not len(lines):
         return float("nan")
     return share(lines, extract_hull(lines))
+
+
+def short_ends(lines: Sequence, synthesised: Sequence, tolerance: float = 1e-3,
+               distance: float = UNDERSHOOT_DISTANCE) -> Tuple[np.ndarray, np.ndarray]:
+    """(line, end: 0 its first point, 1 its last) of each end of a ``synthesised`` line
+    that lies within ``distance`` of another line but not within ``tolerance`` of one: a
+    street that stops just short of another (an undershoot; one rule for the checker and
+    :func:`network.undershoots.clear_undershoots`). First ends, then last ends, each in line
+    order.
+
+    >>> road = shapely.LineString([(0, 0), (100, 0)])
+    >>> short = shapely.LineString([(50, 60), (50, 1.2)])
+    >>> [a.tolist() for a in short_ends([road, short], [False, True])]
+    [[1], [1]]
+    """
+    lines = np.asarray(lines, dtype=object)
+    idx = np.flatnonzero(np.asarray(synthesised, dtype=bool))
+    ends = np.concatenate([shapely.get_point(lines[idx], 0), shapely.get_point(lines[idx], -1)])
+    own = np.r_[idx, idx]
+    side = np.repeat([0, 1], len(idx))
+    tree = shapely.STRtree(lines)
+    near = []
+    for reach in (tolerance, distance):
+        e_i, l_i = tree.query(ends, predicate="dwithin", distance=reach)
+        hit = np.zeros(len(ends), bool)
+        hit[e_i[l_i != own[e_i]]] = True
+        near.append(hit)
+    sel = near[1] & ~near[0]
+    return own[sel], side[sel]
 
 
 def extract_hull(lines: Sequence):
@@ -731,16 +760,8 @@ def check_network(synthesised: Sequence, given: Optional[Sequence] = None,
     # dangling synthesised ends just short of another line (information)
     undershoots = np.empty(0, dtype=object)
     if n_s and n > 1:
-        ends = np.concatenate([shapely.get_point(syn, 0), shapely.get_point(syn, -1)])
-        own = np.r_[np.arange(n_s), np.arange(n_s)]
-        tree = shapely.STRtree(lines)
-        e_i, l_i = tree.query(ends, predicate="dwithin", distance=tolerance)
-        touching = np.zeros(len(ends), bool)
-        touching[e_i[l_i != own[e_i]]] = True
-        e_i, l_i = tree.query(ends, predicate="dwithin", distance=UNDERSHOOT_DISTANCE)
-        close = np.zeros(len(ends), bool)
-        close[e_i[l_i != own[e_i]]] = True
-        undershoots = ends[close & ~touching]
+        line, side = short_ends(lines, np.arange(n) < n_s, tolerance)
+        undershoots = shapely.get_point(lines[line], np.where(side == 0, 0, -1))
 
     # pieces of synthesised streets outside the target
     outside = None if target is None else np.empty(0, dtype=object)

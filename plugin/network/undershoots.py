@@ -8,10 +8,11 @@ a run on the fidelity benchmark's towns: warped fragment streets and read-back s
 end 0.8-1.4 m from a street, and stubs of 1-2 m left beside a junction by the noding. The
 method meant a dead end there (its dead-end steering counted it), so it stays one:
 
-- a new dead-end line shorter than the distance (a stub, not a street) is dropped;
-- a new street's dangling end within the distance of another line is cut back until it
-  keeps :data:`invariants.CORRIDOR_HALF_WIDTH` (8 m) from every other line, as the dead-end
-  steering's cul-de-sacs do; a street too short for that is dropped.
+- a new street's end within the distance of another line, not on it
+  (:func:`invariants.short_ends`, the checker's rule), is cut back until it keeps
+  :data:`invariants.CORRIDOR_HALF_WIDTH` (8 m) from every other line, as the dead-end
+  steering's cul-de-sacs do; a street too short for that is dropped, a stub shorter than
+  the distance beside a junction among them.
 
 Joining such ends onto the street instead (a T) was measured and not kept: each closed a
 small block (Mauren, fragments: the 10th-percentile block 6,050 -> 4,553 m² on seed 7) and
@@ -26,7 +27,7 @@ import numpy as np
 import shapely
 
 from ..core.geometry import substrings
-from .invariants import CORRIDOR_HALF_WIDTH, UNDERSHOOT_DISTANCE
+from .invariants import CORRIDOR_HALF_WIDTH, UNDERSHOOT_DISTANCE, short_ends
 
 __all__ = ["clear_undershoots"]
 
@@ -34,24 +35,6 @@ __all__ = ["clear_undershoots"]
 _ON_LINE = 1e-6
 #: Steps (m) in which a dead end is cut back.
 _STEP = 0.5
-
-
-def _dangling(geometry: np.ndarray, new: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
-    """(line, which end: 0 first, 1 last) of the ends of new lines that no other line's end
-    shares and that lie on no line but their own: a street's dead end."""
-    first = shapely.get_coordinates(shapely.get_point(geometry, 0))
-    last = shapely.get_coordinates(shapely.get_point(geometry, -1))
-    _, inverse, count = np.unique(np.concatenate([first, last]), axis=0, return_inverse=True,
-                                  return_counts=True)
-    alone = (count[inverse.ravel()] == 1).reshape(2, -1).T
-    line, side = np.nonzero(alone & new[:, None])
-    if not len(line):
-        return line, side
-    pts = shapely.points(np.where(side[:, None] == 0, first[line], last[line]))
-    e_i, l_i = shapely.STRtree(geometry).query(pts, predicate="dwithin", distance=_ON_LINE)
-    on_other = np.zeros(len(pts), bool)
-    on_other[e_i[l_i != line[e_i]]] = True
-    return line[~on_other], side[~on_other]
 
 
 def clear_undershoots(geometry: Sequence, new: Sequence, distance: float = UNDERSHOOT_DISTANCE,
@@ -84,23 +67,17 @@ def clear_undershoots(geometry: Sequence, new: Sequence, distance: float = UNDER
         return geometry, kept
     index = np.arange(len(geometry))
     for _ in range(3):   # a dropped line may leave the line it continued dangling
-        line, side = _dangling(geometry[kept], new[kept])
-        line = index[kept][line]
-        ends = shapely.get_point(geometry[line], np.where(side == 0, 0, -1))
-        others = geometry[kept]
-        e_i, l_i = shapely.STRtree(others).query(ends, predicate="dwithin", distance=distance)
-        short = np.unique(e_i[index[kept][l_i] != line[e_i]])
-        stub = shapely.length(geometry[line]) < distance
-        todo = np.union1d(short, np.flatnonzero(stub))
-        if not len(todo):
+        line, side = short_ends(geometry[kept], new[kept], _ON_LINE, distance)
+        if not len(line):
             break
+        order = np.lexsort((side, line))        # line by line, its first end first
+        line, side = index[kept][line[order]], side[order]
         tree = shapely.STRtree(geometry)       # this round's lines, dropped ones filtered
-        for k in todo:
-            i = int(line[k])
+        for i, end in zip(line.tolist(), side.tolist()):
             near = tree.query(geometry[i], predicate="dwithin", distance=clear)
             near = near[kept[near] & (near != i)]
-            cut = None if stub[k] else _cut_back(geometry[i], int(side[k]), geometry[near],
-                                                 clear)
+            # a stub (shorter than the distance) has nothing to cut back to: dropped
+            cut = _cut_back(geometry[i], end, geometry[near], clear)
             if cut is None:
                 kept[i] = False
             else:
@@ -113,11 +90,10 @@ def _cut_back(line, side: int, others: np.ndarray, clear: float):
     of ``others`` (the lines within that of it; in :data:`_STEP` m steps); None when less
     than that is left of it."""
     length = float(line.length)
-    near = others
     steps = np.arange(_STEP, length - UNDERSHOOT_DISTANCE, _STEP)
     at = length - steps if side == 1 else steps       # arc positions from the start
     pts = shapely.line_interpolate_point(line, at)
-    free = ~shapely.dwithin(pts[:, None], near[None, :], clear).any(axis=1) if len(near) \
+    free = ~shapely.dwithin(pts[:, None], others[None, :], clear).any(axis=1) if len(others) \
         else np.ones(len(pts), bool)
     if not free.any():
         return None
