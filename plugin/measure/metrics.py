@@ -1063,8 +1063,7 @@ def compute_layout_metrics(roads=None, blocks=None, parcels=None, buildings=None
     if roads is not None and len(roads):
         # how much of that area the streets settle: a whole region's extract (a country's
         # OSM lines) counts its densities over mountains and lakes
-        within = area_geom if area_geom is not None else None
-        share = min(float(shapely.area(settled_area(roads, within))) / area_m2, 1.0)
+        share = min(float(shapely.area(settled_area(roads, area_geom))) / area_m2, 1.0)
         res.add_scalar("layout", "settled_share", share, "",
                        "Share of the area the streets settle (their closing by "
                        f"{SETTLED_OUT:g} m)")
