@@ -253,9 +253,9 @@ def _streets_across(graph: _CountedGraph, lines, is_new, share, area, rng, given
             tangent = (b - a) / max(np.linalg.norm(b - a), 1e-9)
             if abs(float(tangent @ d[stem])) >= cos_min:
                 return False   # would meet the street at a glancing angle
-        if any(shapely.intersects(s, shapely.LineString([p, q])) for s in added):
-            return False   # a street this pass made is in the way
         seg = shapely.LineString([p, q])
+        if added and shapely.intersects(np.asarray(added, dtype=object), seg).any():
+            return False   # a street this pass made is in the way
         if not shapely.contains(inside, seg):
             return False
         if not meets_only_at_ends(seg, lines):

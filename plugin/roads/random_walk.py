@@ -1716,9 +1716,6 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
                             np.full(len(bridge), "given_join", object)],
             "node_from": join_node[:, 0], "node_to": join_node[:, 1]})], ignore_index=True)
         stats["n_edges"] = len(lines)
-    if len(links) or n_dropped:  # the share as the invariants measure it, as returned
-        stats["dead_end_share"] = measured_dead_end_share(np.concatenate([lines, given_roads]),
-                                                          area)
     if settings.match_crossings and settings.max_capacity >= 4:
         # the saturation rule kept: only a point that had four streets in the example, or a
         # junction on a given road, takes a fourth
@@ -1728,7 +1725,13 @@ def synthesize(example: iq.PointSet, target, existing_lines=None,
     if given_class is not None and ex_lines is not None:
         lines, table, ptab = _off_controlled_access(lines, table, ptab, pts, given_roads,
                                                     existing_lines, given_class, area, stats)
-    lines, table, ptab = _clear_undershoots(lines, table, ptab, pts, given_roads, area, stats)
+    lines, table, ptab = _clear_undershoots(lines, table, ptab, pts, given_roads, stats)
+    if len(links) or n_dropped or stats.get("n_streets_across") or \
+            stats.get("n_controlled_access_ended_short") or stats["n_undershoot_streets_dropped"]:
+        # the share as the invariants measure it, as returned: counted once, after every
+        # step that moved it (a whole network's cleaning, about 1 s at 10,000 points)
+        stats["dead_end_share"] = measured_dead_end_share(np.concatenate([lines, given_roads]),
+                                                          area)
     # of every street returned: the given-road joins and the streets across are straight,
     # a piece's link bends only along the target
     stats["mean_tortuosity"] = float(table.tortuosity.mean())
@@ -1760,10 +1763,10 @@ def _off_controlled_access(lines, table, ptab, pts, roads, existing_lines, given
         return lines, table, ptab
     new = (source < n)
     return _followed(lines, table, ptab, pts, source[new & (source >= 0)],
-                     out[new & (source >= 0)], out[source < 0], roads, area, stats)
+                     out[new & (source >= 0)], out[source < 0], stats)
 
 
-def _clear_undershoots(lines, table, ptab, pts, roads, area, stats):
+def _clear_undershoots(lines, table, ptab, pts, roads, stats):
     """New streets that end within 2 m of another street, not on it, cut back until they
     keep 8 m from every street, or dropped (:func:`network.undershoots.clear_undershoots`,
     as the other methods; the walk's steps keep only 0.5 m from other segments). The table
@@ -1775,20 +1778,19 @@ def _clear_undershoots(lines, table, ptab, pts, roads, area, stats):
     out = out[:len(kept)]
     changed = int(n - len(kept) + (~shapely.equals_exact(out, lines[kept], 0.0)).sum())
     stats["n_undershoots_cleared"] = changed
+    # a street cut back stays a dead end: the share moves only where one went
+    stats["n_undershoot_streets_dropped"] = n - len(kept)
     if not changed:
         return lines, table, ptab
-    # a street cut back stays a dead end: the share moves only where one went
-    return _followed(lines, table, ptab, pts, kept, out, np.empty(0, dtype=object), roads,
-                     area, stats, recount=len(kept) < n)
+    return _followed(lines, table, ptab, pts, kept, out, np.empty(0, dtype=object), stats)
 
 
-def _followed(lines, table, ptab, pts, kept, out, joins, roads, area, stats,
-              recount: bool = True):
+def _followed(lines, table, ptab, pts, kept, out, joins, stats):
     """The table and the points' connections after the streets ``kept`` (indices into
     ``lines``) became ``out`` (cut back, or as they were) and the others went, with
     ``joins`` added (origin 'piece_link'). A street cut back no longer reaches the node at
-    its cut end (-1 there, one connection less). ``recount``: the dead-end share measured
-    again."""
+    its cut end (-1 there, one connection less). The dead-end share is measured again by
+    the caller."""
     n = len(lines)
     connections = ptab["connections"].to_numpy().copy()
     rows = table.iloc[kept].reset_index(drop=True)
@@ -1820,8 +1822,6 @@ def _followed(lines, table, ptab, pts, kept, out, joins, roads, area, stats,
     ptab["connections"] = connections
     stats["n_edges"] = len(out)
     stats["n_dead_ends"] = int(((connections == 1) & (pts.example >= 0)).sum())
-    if recount:   # as the invariants count it (a whole network's cleaning: 1 s at 10,000)
-        stats["dead_end_share"] = measured_dead_end_share(np.concatenate([out, roads]), area)
     return out, rows[table.columns], ptab
 
 
@@ -1859,9 +1859,7 @@ def _streets_across(lines, table, ptab, pts, may_cross, existing_lines, area, sh
         "tortuosity": 1.0, "origin": "across_street", "node_from": start,
         "node_to": -1})], ignore_index=True)
     stats["n_edges"] = len(lines)
-    # each new T counts as a node: the dead-end share as the invariants now measure it
-    stats["dead_end_share"] = measured_dead_end_share(np.concatenate([lines, given]), area)
-    return lines, table
+    return lines, table   # each new T counts as a node: the caller counts the share again
 
 
 def points_used(result: Synthesis, target) -> Tuple[np.ndarray, pd.DataFrame]:
