@@ -809,12 +809,13 @@ def cut_areas(lots: np.ndarray, angle: np.ndarray, t: np.ndarray,
     a, b, sa, sb = p[:-1], p[1:], side[:-1], side[1:]
     edge = ring[:-1] == ring[1:]
     a, b, sa, sb, of = a[edge], b[edge], sa[edge], sb[edge], ring[:-1][edge]
+    a_in, b_in = sa <= 0, sb <= 0
+    # where the line crosses the edge (NaN for an edge along it, beyond: never used)
     with np.errstate(divide="ignore", invalid="ignore"):
         x = a + (b - a) * (sa / (sa - sb))[:, None]
-    a_in, b_in = sa <= 0, sb <= 0
-    start = np.where(a_in[:, None], a, x)
-    end = np.where(b_in[:, None], b, x)
-    part = np.where(a_in | b_in, start[:, 0] * end[:, 1] - start[:, 1] * end[:, 0], 0.0)
+        start = np.where(a_in[:, None], a, x)
+        end = np.where(b_in[:, None], b, x)
+        part = np.where(a_in | b_in, start[:, 0] * end[:, 1] - start[:, 1] * end[:, 0], 0.0)
     whole = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
     n_rings = len(rings)
     ring_whole = np.bincount(of, whole, minlength=n_rings)
