@@ -577,3 +577,32 @@ def test_lots_do_not_depend_on_which_way_the_outline_runs(method):
     runs = [parcels.subdivide_blocks(b, method, seed=1) for b in (ccw, cw)]
     a, b = (shapely.normalize(r.geometry) for r in runs)
     assert len(a) == len(b) and bool(shapely.equals_exact(a, b, 1e-6).all())
+
+
+def test_cut_areas_are_the_areas_of_the_cut_sides():
+    """The areas of a cut's two sides without cutting (concave lots with holes, both ring
+    orientations, map coordinates) equal the areas of GEOS's two sides (up to the crumbs
+    the cut drops)."""
+    rng = np.random.default_rng(0)
+    lots = []
+    for i in range(120):
+        c = rng.uniform(0, 1e5, 2) + 5e5
+        turn = np.sort(rng.uniform(0, 2 * np.pi, rng.integers(5, 20)))
+        r = rng.uniform(10, 50, len(turn))
+        lot = shapely.Polygon(np.c_[c[0] + r * np.cos(turn), c[1] + r * np.sin(turn)])
+        if i % 3 == 0:
+            lot = shapely.difference(lot, shapely.buffer(shapely.Point(c), 4))
+        lot = shapely.reverse(lot) if i % 5 == 0 else lot
+        lots += [p for p in shapely.get_parts(shapely.make_valid(lot))
+                 if p.geom_type == "Polygon"]
+    lots = np.array(lots, dtype=object)
+    assert sum(len(shapely.get_rings(p)) > 1 for p in lots) > 20
+    k = len(lots)
+    angle, t = rng.uniform(0, np.pi, k), rng.uniform(0.05, 0.95, k)
+    turn = rng.uniform(-0.3, 0.3, k)
+    below, beyond = parcels.cut_areas(lots, angle, t, turn)
+    parts, owner, side = parcels._cut(lots, angle, t, turn)
+    np.testing.assert_allclose(below, np.bincount(owner[~side], shapely.area(parts[~side]),
+                                                  minlength=k), atol=parcels._CRUMB)
+    np.testing.assert_allclose(beyond, np.bincount(owner[side], shapely.area(parts[side]),
+                                                   minlength=k), atol=parcels._CRUMB)
