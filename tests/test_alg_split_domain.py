@@ -350,3 +350,24 @@ def test_selected_features_only_name_the_layer_and_its_selection(qgis_processing
                 "OUTPUT_ROADS": "memory:", "OUTPUT_PARCELS": "memory:"})
     finally:
         QgsProject.instance().removeMapLayer(region.id())
+
+
+def test_settle_joints_reaches_the_layout_and_the_log(qgis_processing):
+    """SETTLE_JOINTS on (the default) moves joints of the parallelogram's slanted row ends
+    and lowers p_area; off keeps the warp's joints; the log says how many moved."""
+    from helpers import log_feedback
+
+    region = memory_layer("Polygon", ["POLYGON((0 0,300 0,380 200,80 200,0 0))"],
+                          crs="EPSG:32633", name="parallelogram")
+    p_area, settled = {}, {}
+    for on in (False, True):
+        log = log_feedback()
+        out = qgis_processing.run(ALG, {"REGION": region, "SEED": 1, "OPTIMISE": False,
+                                        "SETTLE_JOINTS": on, "OUTPUT_ROADS": "memory:",
+                                        "OUTPUT_PARCELS": "memory:",
+                                        "OUTPUT_METRICS": "memory:"}, feedback=log)
+        p_area[on] = layer_features(out["OUTPUT_METRICS"])[0][0]["p_area"]
+        settled[on] = [int(m.split(" joints settled")[0].rsplit(" ", 1)[1])
+                       for m in log.messages if " joints settled" in m]
+    assert settled[False] == [0] and settled[True][0] > 0
+    assert p_area[True] < p_area[False] - 0.001

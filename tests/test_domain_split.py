@@ -1402,8 +1402,9 @@ def test_a_joint_moves_where_its_two_lots_are_squarer():
     lots = np.array([shapely.box(0, 0, 18, 30),
                      shapely.Polygon([(18, 0), (38, 0), (26, 30), (18, 30)])], dtype=object)
     p_angle, p_area, _ = parcels_mod.lot_quality(lots)
-    new, front = domain_split.settle_joints(lots, frontage(lots), frontage, 0.3 * 540, 0.4 * 18)
-    assert len(new) == 2
+    new, front, moved = domain_split.settle_joints(lots, frontage(lots), frontage, 0.3 * 540,
+                                                   0.4 * 18)
+    assert len(new) == 2 and moved == 1
     new_angle, new_area, _ = parcels_mod.lot_quality(new)
     assert new_area.sum() < p_area.sum() - 0.05
     assert new_angle.sum() <= p_angle.sum() + 1e-9
@@ -1413,7 +1414,8 @@ def test_a_joint_moves_where_its_two_lots_are_squarer():
     assert (front >= parcels_mod.MIN_FRONTAGE).all()
     np.testing.assert_allclose(front, frontage(new))
     row = np.array([shapely.box(18 * k, 0, 18 * (k + 1), 30) for k in range(4)], dtype=object)
-    same, _ = domain_split.settle_joints(row, frontage(row), frontage)
+    same, _, moved = domain_split.settle_joints(row, frontage(row), frontage)
+    assert moved == 0
     assert sorted(g.wkt for g in same) == sorted(g.wkt for g in row)
 
 

@@ -1606,7 +1606,7 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
         max_area=1.6 * L * W, min_area=0.3 * L * W, min_width=0.4 * W, lot_width=W,
         irregularity=0.0, options={"pin_cuts_to_corners": CUT_TO_CORNER * W,
                                     "cut_across_longest_side": True})
-    n_inner = n_pocket = 0
+    n_inner = n_pocket = n_settled = 0
     for k, (reg, name, _) in enumerate(leaves):
         progress.step(0.7 + 0.25 * k / max(len(leaves), 1))
         shrunk = net_block(reg, S, splitter.no_street)
@@ -1655,8 +1655,9 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
                 front = frontage(lots)
             if s.settle_joints and len(lots) > 1:
                 # each joint where its two lots are squarest (a discrete regression)
-                lots, front = settle_joints(lots, front, frontage, lot_settings.min_area,
-                                            lot_settings.min_width)
+                lots, front, moved = settle_joints(lots, front, frontage,
+                                                   lot_settings.min_area, lot_settings.min_width)
+                n_settled += moved
             remnant = np.zeros(len(lots), dtype=bool)
             if s.repair_lots:
                 lots, front, remnant = repair_lots(lots, front, part, L, W)
@@ -1725,6 +1726,7 @@ def split_domain(region, key_roads=None, key_areas=None, key_area_use=None,
         "n_parcels": int(residential.sum()),
         "n_no_access": int((residential & ~table.has_street_access.to_numpy(bool)).sum()),
         "n_inner_parks": n_inner, "n_pocket_parks": n_pocket, "n_no_street_joints": n_joints,
+        "n_joints_settled": n_settled,
         "time_split_s": t_split, "time_backtrack_s": t_back, "time_optimise_s": t_opt,
         "optimisation": opt_stats,
     }
@@ -1927,11 +1929,12 @@ def settle_joints(lots, front, frontage, min_area: float = 0.0, min_width: float
     rounds try the pairs a new joint touched. No lot is merged, dropped or changes use.
     Not in the paper: a discrete regression of the joints by Table 1's measures.
 
-    Returns the lots (as many as given) and their frontage.
+    Returns the lots (as many as given), their frontage and how many joints moved.
     """
     lots = np.asarray(lots, dtype=object)
     front = np.asarray(front, dtype=float)
     changed = np.ones(len(lots), dtype=bool)
+    moved = 0
     for _ in range(max_rounds):
         n = len(lots)
         if n < 2 or not changed.any():
@@ -2041,13 +2044,14 @@ def settle_joints(lots, front, frontage, min_area: float = 0.0, min_width: float
             new_changed += [True, True]
         if not taken.any():
             break
+        moved += int(taken.sum()) // 2
         out += list(lots[~taken])
         out_front += list(front[~taken])
         new_changed += [False] * int((~taken).sum())
         lots = np.asarray(out, dtype=object)
         front = np.asarray(out_front, dtype=float)
         changed = np.asarray(new_changed, dtype=bool)
-    return lots, front
+    return lots, front, moved
 
 
 def _rule_based_lots(part, s: SplitSettings, lot_settings, rng) -> np.ndarray:
@@ -2105,6 +2109,26 @@ def split_variations(region, variations: int = 1, seed: int = 0, progress=None,
                                 progress=progress.sub((v - 1) / variations, v / variations),
                                 **kwargs))
     return out
+
+
+def variation_summary(variation: int, stats: dict, table1: dict) -> str:
+    """One line of the log on a variation: its splits, blocks, parcels and their quality
+    (``table1``: :func:`table1`), and the steps' counts and times (``stats``:
+    ``Layout.stats``)."""
+    st, m, opt = stats, table1, stats["optimisation"]
+    return (f"Variation {variation}: {st['n_splits']} streamline splits "
+            f"({st['n_rejected_splits']} candidates rejected), {st['n_blocks']} blocks "
+            f"(templates {st['templates']}), {st['n_parcels']} parcels, "
+            f"{st['n_backtracked']} splits undone by backtracking; p_angle "
+            f"{m['p_angle']:.2f}°, p_area {m['p_area']:.3f}, {m['undesirable']} "
+            f"undesirable; {st['n_joints_settled']} joints settled; {st['n_no_access']} "
+            f"parcels without street access ({st['n_inner_parks']} lots cut off from the "
+            f"street kept as inner greens, {st['n_pocket_parks']} pocket parks from the "
+            f"optional repair); {st['n_ended_short_of_motorways']} streets ended short of a "
+            f"motorway; road mesh optimisation: {opt.get('iterations', 0)} iterations, "
+            f"{'kept' if opt.get('kept') else 'not kept'} (it is kept when it lowers the "
+            f"warp distortion); times split {st['time_split_s']:.1f} s, optimise "
+            f"{st['time_optimise_s']:.1f} s.")
 
 
 def unused_drawn_templates(templates: Sequence, layouts: Sequence[Layout]) -> List[str]:
