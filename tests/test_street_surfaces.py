@@ -477,6 +477,16 @@ def test_a_hairpin_turning_back_on_itself_has_no_face_off_its_surface():
         xyz = top.reshape(-1, 3)
         drape = t.surface_z(np.zeros(len(xyz), dtype=int), xyz[:, :2]) + 0.1
         np.testing.assert_allclose(xyz[:, 2], drape, atol=1e-3)
+        # u by the offset from the centre line (0 at 4 m to its left, 1 to its right), not
+        # from the fan's far inner corner: it was up to 0.99 off on the cut-back pieces
+        pts = shapely.points(xyz[:, :2])
+        along = shapely.line_locate_point(line, pts)
+        p0, p1 = (shapely.get_coordinates(shapely.line_interpolate_point(line, a))
+                  for a in (np.maximum(along - 0.01, 0.0), along + 0.01))
+        d, r = p1 - p0, xyz[:, :2] - 0.5 * (p0 + p1)
+        offset = np.sign(d[:, 0] * r[:, 1] - d[:, 1] * r[:, 0]) * shapely.distance(line, pts)
+        np.testing.assert_allclose(m.uv[~m.side][:, :, 0].ravel(),
+                                   np.clip(0.5 - offset / 8.0, 0, 1), atol=1e-3)
 
 
 def test_a_dead_end_street_is_closed_by_a_side_face():

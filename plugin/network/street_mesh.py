@@ -219,7 +219,7 @@ def _trimmed(area: np.ndarray, owner: np.ndarray, surfaces: np.ndarray) -> np.nd
 
 
 def _clipped_to_surfaces(tris: np.ndarray, owner: np.ndarray, uv: np.ndarray, surfaces,
-                         z_of=None):
+                         z_of=None, u_of=None):
     """Street top triangles (n, 3, 3) cut back to their own surface polygons where those
     were trimmed (streets overlapping each other or a junction: the strips between the
     connecting lines ignore the trim). A triangle partly outside becomes the ear-clipped
@@ -236,10 +236,11 @@ def _clipped_to_surfaces(tris: np.ndarray, owner: np.ndarray, uv: np.ndarray, su
     # surface's arc to the last digit) stays whole
     whole = shapely.area(inside) >= area[sel] * (1 - 1e-6)
     cut = sel[~whole]
-    return _replaced(tris, owner, uv, cut, inside[~whole], z_of)
+    return _replaced(tris, owner, uv, cut, inside[~whole], z_of, u_of)
 
 
-def _without_folds(tris: np.ndarray, owner: np.ndarray, uv: np.ndarray, may_fold, z_of=None):
+def _without_folds(tris: np.ndarray, owner: np.ndarray, uv: np.ndarray, may_fold, z_of=None,
+                   u_of=None):
     """Street top triangles with no two of one street over each other: a triangle that
     overlaps earlier ones of its street (where a street bends back on itself -- a hairpin,
     a bend whose inner corner lies beyond the next bend or the street's end -- its strip
@@ -265,16 +266,16 @@ def _without_folds(tris: np.ndarray, owner: np.ndarray, uv: np.ndarray, may_fold
                        dtype=object)
     with np.errstate(invalid="ignore"):
         rest = shapely.difference(t2[later], earlier)
-    return _replaced(tris, owner, uv, sel[later], rest, z_of)
+    return _replaced(tris, owner, uv, sel[later], rest, z_of, u_of)
 
 
-def _replaced(tris, owner, uv, which, shapes, z_of=None):
+def _replaced(tris, owner, uv, which, shapes, z_of=None, u_of=None):
     """The triangles ``which`` replaced by the ear-clipped parts of ``shapes`` (their parts
     to keep, polygons within them), with (u, v) interpolated in each triangle's plane and z
-    too, or from ``z_of(owner, xy)`` (the drape) when given: a triangle of a bend's fan
-    reaches to the bend's inner corner, beyond the surface on a hairpin (kilometres on one
-    of 179.9°), and z interpolated from there was metres off the drape. Returns (tris,
-    owner, uv)."""
+    too, or z from ``z_of(owner, xy)`` (the drape) and u from ``u_of(owner, xy)`` when
+    given: a triangle of a bend's fan reaches to the bend's inner corner, beyond the
+    surface on a hairpin (kilometres on one of 179.9°), and z interpolated from there was
+    metres off the drape, u up to the street's width off. Returns (tris, owner, uv)."""
     keep = np.ones(len(tris), dtype=bool)
     keep[which] = False
     pieces, parent = shapely.get_parts(shapes, return_index=True)
@@ -302,7 +303,10 @@ def _replaced(tris, owner, uv, which, shapes, z_of=None):
             z_of(np.repeat(own, 3), xy.reshape(-1, 2)).reshape(-1, 3)
         tris = np.concatenate([tris, np.concatenate([xy, z[:, :, None]], axis=2)])
         owner = np.concatenate([owner, own])
-        uv = np.concatenate([uv] + new_uv)
+        new_uv = np.concatenate(new_uv)
+        if u_of is not None:
+            new_uv[:, :, 0] = u_of(np.repeat(own, 3), xy.reshape(-1, 2)).reshape(-1, 3)
+        uv = np.concatenate([uv, new_uv])
     return tris, owner, uv
 
 
@@ -387,6 +391,22 @@ def _side_faces(top: np.ndarray, ground: np.ndarray, a: np.ndarray, b: np.ndarra
     lo_a = np.column_stack([top[a, :2], np.nan_to_num(ground[a], nan=top[a, 2]) - skirt])
     lo_b = np.column_stack([top[b, :2], np.nan_to_num(ground[b], nan=top[b, 2]) - skirt])
     return [np.stack([top[a], lo_a, lo_b], axis=1), np.stack([top[a], lo_b, top[b]], axis=1)]
+
+
+def _across(centres: np.ndarray, widths: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    """u of points (n, 2) on streets of centre lines ``centres`` and ``widths`` (one per
+    point): 0.5 on the centre line, 0 at its width's half to the left, 1 to the right (as
+    the stations give their edges), by the distance to the line, on the side of its
+    direction there (a bend's outer arc is that far from the bend's vertex)."""
+    pts = shapely.points(xy)
+    along = shapely.line_locate_point(centres, pts)
+    p0 = shapely.get_coordinates(shapely.line_interpolate_point(
+        centres, np.maximum(along - 0.01, 0.0)))    # (a negative distance: from the end)
+    p1 = shapely.get_coordinates(shapely.line_interpolate_point(centres, along + 0.01))
+    d, r = p1 - p0, xy - 0.5 * (p0 + p1)
+    side = np.sign(d[:, 0] * r[:, 1] - d[:, 1] * r[:, 0])
+    offset = side * shapely.distance(centres, pts)
+    return np.clip(0.5 - offset / np.maximum(widths, 1e-9), 0.0, 1.0)
 
 
 def _quad_uv(n: int, kind: str) -> list:
@@ -554,10 +574,14 @@ def street_mesh(tess, spacing: float = 5.0, z_offset: float = 0.1, skirt: float 
         top_uv = np.stack(_quad_uv(len(i), "street"), axis=1).reshape(-1, 3, 2)  # u: 0 left
         flat_surfaces = shapely.force_2d(np.asarray(tess.surfaces))
         drape = (lambda own, xy: tess.surface_z(own, xy) + z_offset) if draped else None
+
+        def across(own, xy):
+            return _across(centres[own], widths[own], xy)
+
         top, top_owner, top_uv = _without_folds(top, np.repeat(k[i], 2), top_uv, may_fold,
-                                                drape)
+                                                drape, across)
         top, top_owner, top_uv = _clipped_to_surfaces(top, top_owner, top_uv, flat_surfaces,
-                                                      drape)
+                                                      drape, across)
         tris.append(top)
         owner.append(top_owner)
         side.append(np.zeros(len(top), dtype=bool))
