@@ -2008,49 +2008,33 @@ def settle_joints(lots, front, frontage, min_area: float = 0.0, min_width: float
         d_count = np.bincount(owner, p_count, minlength=m) - (count[i] + count[j])[pair]
         ok &= (gain > 1e-6) & (d_dev <= mean_dev * d_count + 1e-9)
         cand = np.flatnonzero(ok)
-        cand_pair = list(pair[cand])
-        cand_gain = list(gain[cand])
-        keep_parts = ok[owner]
-        sub_parts, sub_owner = parts[keep_parts], owner[keep_parts]
-        by_cand = np.argsort(sub_owner, kind="stable")
-        bounds = np.searchsorted(sub_owner[by_cand], cand)
-        cand_parts = [sub_parts[by_cand[b:b + 2]] for b in bounds]
-        if not cand_pair:
+        if not len(cand):
             break
-        cand_pair, cand_gain = np.asarray(cand_pair), np.asarray(cand_gain)
-        # the best candidate of each pair that keeps both pieces on a street
-        order = np.lexsort((-cand_gain, cand_pair))
-        taken = np.zeros(n, dtype=bool)
-        pending = list(order)
+        cand_pair, cand_gain = pair[cand], gain[cand]
+        mine = ok[owner]    # each candidate's two pieces, in candidate order
+        pieces = parts[mine][np.argsort(owner[mine], kind="stable")].reshape(-1, 2)
         # frontage once for every candidate piece (one street band)
-        pieces = np.concatenate([cand_parts[o] for o in pending])
-        f = frontage(pieces)
-        f_of = np.split(f, np.cumsum([len(cand_parts[o]) for o in pending])[:-1])
-        best = {}
-        for o, fo in zip(pending, f_of):
-            c = cand_pair[o]
-            if c in best or (fo < _parcels.MIN_FRONTAGE).any():
-                continue
-            best[c] = (cand_gain[o], o, fo)
+        f = np.asarray(frontage(pieces.ravel()), dtype=float).reshape(-1, 2)
+        on_street = np.flatnonzero((f >= _parcels.MIN_FRONTAGE).all(axis=1))
+        # each pair's best candidate that keeps both pieces on a street, the pairs by gain
+        by_pair = on_street[np.lexsort((-cand_gain[on_street], cand_pair[on_street]))]
+        best = by_pair[np.unique(cand_pair[by_pair], return_index=True)[1]]
+        best = best[np.argsort(-cand_gain[best], kind="stable")]
+        taken = np.zeros(n, dtype=bool)
         out, out_front = [], []
-        new_changed = []
-        for c, (g, o, fo) in sorted(best.items(), key=lambda kv: -kv[1][0]):
-            a, b = i[c], j[c]
+        for o in best:
+            a, b = i[cand_pair[o]], j[cand_pair[o]]
             if taken[a] or taken[b]:
                 continue
             taken[a] = taken[b] = True
-            out += list(cand_parts[o])
-            out_front += list(fo)
-            new_changed += [True, True]
-        if not taken.any():
+            out += list(pieces[o])
+            out_front += list(f[o])
+        if not out:
             break
-        moved += int(taken.sum()) // 2
-        out += list(lots[~taken])
-        out_front += list(front[~taken])
-        new_changed += [False] * int((~taken).sum())
-        lots = np.asarray(out, dtype=object)
-        front = np.asarray(out_front, dtype=float)
-        changed = np.asarray(new_changed, dtype=bool)
+        moved += len(out) // 2
+        lots = np.concatenate([np.asarray(out, dtype=object), lots[~taken]])
+        front = np.r_[np.asarray(out_front, dtype=float), front[~taken]]
+        changed = np.r_[np.ones(len(out), dtype=bool), np.zeros(int((~taken).sum()), bool)]
     return lots, front, moved
 
 
