@@ -78,7 +78,9 @@ class SplitDomain(AlgorithmBase):
             "be made at once; each parcel has street access, land use and Yang's quality "
             "(p_angle, p_area, undesirable). The metrics table has one row per variation "
             "with the paper's Table 1 columns, counting every designed parcel, parks "
-            "included. The optional lot repair (off by default, not in the paper) cuts "
+            "included. Each joint between two lots is then moved to where the two are "
+            "squarest (on by default, not in the paper). The optional lot repair (off by "
+            "default, not in the paper) cuts "
             "misshapen lots to the rectangle on their street and turns the wedges into "
             "pocket parks, which still count. Outputs are in the region's CRS."
         )
