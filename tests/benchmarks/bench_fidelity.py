@@ -1348,7 +1348,7 @@ def main(argv=None):
     ap.add_argument("--seeds", type=int, default=10)
     ap.add_argument("--reference-seeds", type=int, default=3,
                     help="seeds of the non-example references growroads and splitdomain "
-                         "(splitdomain takes 11-28 s / km² per seed on 2 cores; issue 21's "
+                         "(splitdomain takes 12-39 s / km² per seed on 2 cores; issue 21's "
                          "table shows each seed)")
     ap.add_argument("--no-pictures", action="store_true")
     ap.add_argument("--fill-quantile", type=float, default=90.0,
