@@ -797,12 +797,13 @@ def cut_areas(lots: np.ndarray, angle: np.ndarray, t: np.ndarray,
     lots = np.asarray(lots, dtype=object)
     k = len(lots)
     coords, idx = shapely.get_coordinates(lots, return_index=True)
-    cu, at = _cut_line(coords, idx, np.flatnonzero(group_starts(idx)), angle, t, turn)
+    starts = np.flatnonzero(group_starts(idx))
+    cu, at = _cut_line(coords, idx, starts, angle, t, turn)
     rings, ring_owner = shapely.get_rings(lots, return_index=True)
     xy, ring = shapely.get_coordinates(rings, return_index=True)
     owner = ring_owner[ring]
     # the origin on the line, beside the lot (few digits lost to the map's offsets)
-    near = coords[np.flatnonzero(group_starts(idx))]
+    near = coords[starts]
     origin = near - cu * (np.einsum("ij,ij->i", near, cu) - at)[:, None]
     p = xy - origin[owner]
     side = np.einsum("ij,ij->i", p, cu[owner])
