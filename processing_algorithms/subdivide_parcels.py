@@ -78,8 +78,9 @@ class SubdivideParcels(AlgorithmBase):
         self.method_keys = list(parcels.method_names())
         self.add(QgsProcessingParameterFeatureSource(
             self.BLOCKS, "Blocks", [QgsProcessing.SourceType.TypeVectorPolygon], optional=True),
-            "Block polygons outlined by street centrelines, e.g. the output of 'Extract city "
-            "blocks' (its block_id is kept). Give either Blocks or Roads.")
+            "Block polygons outlined by street centrelines, e.g. 'Extract city blocks' "
+            "(block_id kept); a hole (a pond, a park) is land kept free, whose edge is no "
+            "street. Give either Blocks or Roads.")
         self.add(QgsProcessingParameterFeatureSource(
             self.ROADS, "Roads (instead of blocks)", [QgsProcessing.SourceType.TypeVectorLine],
             optional=True),
@@ -131,8 +132,7 @@ class SubdivideParcels(AlgorithmBase):
             "Roads and a street width field, the width of roads without a value. 0 keeps "
             "the blocks as they are.")
         self.add_keep_clear("parcel", "Their edges count as street frontage, as the block "
-                            "outline does: give other land to keep free (a pond, a park) "
-                            "as holes in the blocks instead.")
+                            "outline does: other land to keep free goes in as block holes.")
         self.add(QgsProcessingParameterFeatureSource(
             self.BUILDINGS, "Buildings to keep whole",
             [QgsProcessing.SourceType.TypeVectorPolygon], optional=True),

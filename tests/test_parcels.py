@@ -606,3 +606,23 @@ def test_cut_areas_are_the_areas_of_the_cut_sides():
                                                   minlength=k), atol=parcels._CRUMB)
     np.testing.assert_allclose(beyond, np.bincount(owner[side], shapely.area(parts[side]),
                                                    minlength=k), atol=parcels._CRUMB)
+
+
+@pytest.mark.parametrize("method", ["recursive", "skeleton", "voronoi-obb"])
+def test_a_hole_in_a_block_is_no_street(method):
+    """A block with a pond cut out of it (the KEEP_CLEAR help: other land to keep free goes
+    in as holes): the lots reach the pond's edge (the street width kept only along the
+    outline: 6 m was kept round the pond too) and no lot counts the pond's edge as street
+    frontage (skeleton strips along the pond had 'street access' there alone)."""
+    pond = shapely.Point(80, 32).buffer(15)
+    block = shapely.box(0, 0, 160, 100).difference(pond)
+    result = parcels.subdivide_blocks([block], method, seed=0, street_width=12)
+    lots = result.geometry
+    assert shapely.distance(shapely.union_all(lots), pond) < 1e-6
+    assert abs(shapely.area(lots).sum() - (148 * 88 - pond.area)) < 1.0
+    street = shapely.buffer(shapely.box(6, 6, 154, 94).exterior, 1e-3)
+    on_street = shapely.length(shapely.intersection(shapely.boundary(lots), street))
+    access = result.table.has_street_access.to_numpy()
+    assert access.any()
+    np.testing.assert_allclose(result.table.frontage_m[access], on_street[access], atol=0.05)
+    assert (on_street[access] >= parcels.MIN_FRONTAGE - 0.05).all()

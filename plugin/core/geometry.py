@@ -248,6 +248,24 @@ def counter_clockwise(geoms: Sequence) -> np.ndarray:
     return np.array([one(g) for g in np.asarray(geoms, dtype=object).ravel()], dtype=object)
 
 
+def filled(polygons: Sequence) -> np.ndarray:
+    """Each polygon or multipolygon with its holes filled (its parts' outer rings).
+
+    >>> ring = shapely.box(0, 0, 10, 10).difference(shapely.box(4, 4, 6, 6))
+    >>> float(shapely.area(filled([ring])[0]))
+    100.0
+    """
+    polys = np.asarray(polygons, dtype=object).ravel()
+    parts, owner = shapely.get_parts(polys, return_index=True)
+    shells = shapely.polygons(shapely.get_exterior_ring(parts))
+    out = np.array([shapely.Polygon()] * len(polys), dtype=object)
+    single = np.bincount(owner, minlength=len(polys)) == 1
+    out[owner[single[owner]]] = shells[single[owner]]
+    for i in np.flatnonzero(~single & (np.bincount(owner, minlength=len(polys)) > 1)):
+        out[i] = shapely.union_all(shells[owner == i])
+    return out
+
+
 def one_areal(parts: Sequence) -> shapely.Geometry:
     """Polygon parts as one geometry: the polygon itself, a MultiPolygon of several, an
     empty Polygon of none.

@@ -59,8 +59,9 @@ from scipy.spatial import cKDTree
 from shapely.geometry.polygon import orient
 
 from ..core.geometry import (MIN_BUILDABLE_AREA, MIN_BUILDABLE_WIDTH, counter_clockwise,
-                             group_starts, longest_edge_directions, minimum_rectangles,
-                             one_areal, polygon_parts, too_thin, without_areas)
+                             filled, group_starts, longest_edge_directions,
+                             minimum_rectangles, one_areal, polygon_parts, too_thin,
+                             without_areas)
 from ..core.progress import InputError, Progress, ensure
 from ..core.seeds import place_key
 from ..measure import metrics as _metrics
@@ -307,16 +308,27 @@ def _areal(geoms) -> np.ndarray:
     return out
 
 
-def _street_zone(block) -> shapely.Geometry:
+def _street_zone(block, no_street=None) -> shapely.Geometry:
     """A thin zone around the block outline: outline pieces inside it are street frontage.
 
     Lots come out of overlay operations whose vertices lie on the block outline only up to
     rounding; a millimetre zone measures the shared length robustly where a line overlay
-    of two nearly collinear segments would return points.
+    of two nearly collinear segments would return points. ``no_street``: areas whose
+    outline is no street (a block's holes: a pond, a park), left out of the zone.
     """
     zone = shapely.buffer(shapely.boundary(block), _TOUCH, quad_segs=1)
+    if no_street is not None and not shapely.is_empty(no_street):
+        zone = shapely.difference(zone, shapely.buffer(shapely.boundary(no_street),
+                                                       2 * _TOUCH, quad_segs=1))
     shapely.prepare(zone)
     return zone
+
+
+def _holes(blocks) -> np.ndarray:
+    """Each block's holes as one (multi)polygon: land kept out of it (a pond, a park),
+    whose edge is no street."""
+    blocks = np.asarray(blocks, dtype=object)
+    return shapely.difference(filled(blocks), blocks)
 
 
 @_quiet
@@ -575,9 +587,10 @@ def shrink_blocks(blocks, half_width=DEFAULT_STREET_WIDTH / 2, roads=None,
     Parameters
     ----------
     blocks : array of Polygon / MultiPolygon (metric CRS)
-        Blocks whose outlines are street centrelines (e.g. :func:`blocks.extract_blocks`).
+        Blocks whose outlines are street centrelines (e.g. :func:`blocks.extract_blocks`);
+        a hole (a pond, a park kept out of the block) is no street and does not move.
     half_width : float or float array (per block)
-        Offset of every block edge (m) when ``roads`` is not given.
+        Offset of every outer block edge (m) when ``roads`` is not given.
     roads : array of LineString, optional
         The street centrelines the blocks were made from. Each block loses the part within
         each street's half-width of that street (so edges on a wide street move further
@@ -629,7 +642,11 @@ def shrink_blocks(blocks, half_width=DEFAULT_STREET_WIDTH / 2, roads=None,
         hw = np.broadcast_to(np.asarray(half_width, dtype=float), (n,))
         if (hw < 0).any() or not np.isfinite(hw).all():
             raise InputError("street half-widths must be finite and not negative")
-        out = shapely.buffer(blocks, -hw, join_style="mitre", mitre_limit=10.0)
+        # the outline moves in, a hole (a pond, a park kept out of the block) does not:
+        # its edge is no street
+        out = shapely.difference(
+            shapely.buffer(filled(blocks), -hw, join_style="mitre", mitre_limit=10.0),
+            _holes(blocks))
     else:
         roads = np.asarray(roads, dtype=object).ravel()
         hw = np.broadcast_to(np.asarray(half_width if road_half_widths is None
@@ -1661,7 +1678,8 @@ def subdivide_blocks(blocks, method: str = "recursive",
     ----------
     blocks : array of Polygon / MultiPolygon (metric CRS)
         Blocks outlined by street centrelines (e.g. :func:`blocks.extract_blocks`); each
-        part of a multipolygon is subdivided on its own.
+        part of a multipolygon is subdivided on its own. A hole is land kept free (a pond,
+        a park): it keeps no street width and gives no frontage.
     method : str
         A name of :data:`METHODS` ('recursive', 'skeleton').
     settings : SubdivisionSettings, optional
@@ -1780,8 +1798,9 @@ def subdivide_blocks(blocks, method: str = "recursive",
                     held[p_idx[on]] = True
                 parts = parts[~small | held]
                 shrunk[i] = one_areal(parts)
+        holes = _holes(blocks[i:i + 1])[0]
         for part in parts:
-            zone = _street_zone(part)
+            zone = _street_zone(part, holes)
             got = _polygon_parts(spec.subdivide(part, block_settings[i] or settings, rng))
             leaks = shapely.area(shapely.difference(got, part)) > _CRUMB
             if leaks.any():
