@@ -493,3 +493,28 @@ def test_outputs_named_with_dots_load_under_their_full_name(qgis_processing, tmp
     assert "my.town.v2" in geopackage_layers(tmp_path / "my.town.v2.gpkg")
     assert "my" not in geopackage_layers(tmp_path / "my.town.v2.gpkg")
     assert {"wells", "roads"} <= set(geopackage_layers(tmp_path / "my.town.gpkg"))
+
+
+def test_a_table_output_to_a_shapefile_or_csv_says_what_was_written(qgis_processing, tmp_path):
+    """A table (layoutmetrics' metrics, no geometry) written to a .shp: GDAL writes its .dbf
+    alone, so the .shp named never exists; the log said nothing of it, read the renamed
+    fields from the missing .shp (no warning) and could not open it to store the style.
+    A polygon output written to a CSV (a table: no symbology) warned that its style could
+    not be applied."""
+    from helpers import log_feedback
+
+    log = log_feedback()
+    qgis_processing.run("urbansynth:layoutmetrics", {
+        "ROADS": bubenec_layer("streets"), "OUTPUT": str(tmp_path / "metrics.shp")},
+        feedback=log)
+    assert (tmp_path / "metrics.dbf").exists() and not (tmp_path / "metrics.shp").exists()
+    assert any("has no geometry" in w and "metrics.dbf" in w for w in log.warnings), log.warnings
+    renamed = [w for w in log.warnings if "is a shapefile" in w]
+    assert len(renamed) == 1 and "n_candidate -> n_candidat" in renamed[0], log.warnings
+    assert not any("style" in w for w in log.warnings), log.warnings
+    log = log_feedback()
+    qgis_processing.run("urbansynth:extractblocks", {
+        "ROADS": bubenec_layer("streets"), "OUTPUT": str(tmp_path / "blocks.csv")},
+        feedback=log)
+    assert (tmp_path / "blocks.csv").exists()
+    assert not any("style" in w for w in log.warnings), log.warnings

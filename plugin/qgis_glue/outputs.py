@@ -313,7 +313,10 @@ def shapefile_renames(path: str, names: List[str]) -> List[tuple]:
     ``tortuosi_1``). Read back from the file (closed first), so the names are GDAL's own."""
     from osgeo import ogr
 
-    ds = ogr.Open(str(path).split("|")[0])
+    file = Path(str(path).split("|")[0])
+    if not file.exists() and file.with_suffix(".dbf").exists():
+        file = file.with_suffix(".dbf")   # a table without geometry: GDAL writes no .shp
+    ds = ogr.Open(str(file))
     if ds is None or ds.GetLayerCount() == 0:
         return []
     definition = ds.GetLayer(0).GetLayerDefn()

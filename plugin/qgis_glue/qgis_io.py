@@ -905,6 +905,11 @@ def write_sink(alg, parameters, name: str, context, geoms: np.ndarray, table: pd
     del sink                             # closes the file: its fields can be read back
     if feedback is not None and renamed:
         feedback.pushWarning(f"Output {name}: {renamed}")
+    if shapefile and wkb_type == QgsWkbTypes.Type.NoGeometry and feedback is not None:
+        dbf = Path(str(destination).split("|")[0]).with_suffix(".dbf").name
+        feedback.pushWarning(
+            f"Output {name} has no geometry: GDAL writes a shapefile of a table as its .dbf "
+            f"alone ({dbf}), not the .shp named. Write a CSV or a GeoPackage instead.")
     if shapefile:
         cut = outputs.shapefile_renames(dest_id, names)
         # the shipped style names each field as GDAL wrote it (styles.style_for_fields)

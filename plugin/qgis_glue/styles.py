@@ -111,10 +111,17 @@ def save_style_with_layer(destination: str, qml: Optional[str]) -> Optional[str]
     when the style was stored."""
     from qgis.core import QgsVectorLayer
 
+    file = Path(destination.split("|")[0])
+    if file.suffix.lower() == ".shp" and not file.exists() and file.with_suffix(".dbf").exists():
+        destination = str(file.with_suffix(".dbf"))   # a table: GDAL wrote no .shp
     layer = QgsVectorLayer(destination, "output", "ogr")
     if not layer.isValid():
         return f"the output {destination} could not be opened to store its style"
     written = written_field_names(destination)
+    if not layer.isSpatial():
+        qml = None            # a table (a CSV, a layer without geometry): no symbology
+        if not written:
+            return None
     if qml is not None:
         message, ok = layer.loadNamedStyle(style_for_fields(qml, layer.fields().names(),
                                                             written))
@@ -171,7 +178,7 @@ def attach_style(context, dest_id: str, qml: Optional[str]) -> None:
                 return
             fields = layer.fields().names() if hasattr(layer, "fields") else []
             written = written_field_names(layer.source())
-            if qml:
+            if qml and layer.isSpatial():
                 layer.loadNamedStyle(style_for_fields(qml, fields, written) if fields else qml)
             if fields:
                 _alias_written_names(layer, written)
