@@ -517,3 +517,16 @@ def test_a_library_from_a_shapefile(qgis_processing, tmp_path):
     rows, geoms = layer_features(out["OUTPUT"])
     assert len(rows) == 1 and rows[0]["height_m"] == 8.5
     assert shapely.bounds(geoms[0])[3] == pytest.approx(-8.0)
+    # a shapefile written by other software has no sidecar style: the names cut to ten
+    # characters are read as the full ones (it was refused: "has no field
+    # 'street_access_sides'")
+    sidecar = tmp_path / "placed.qml"
+    assert sidecar.exists()
+    sidecar.unlink()
+    log = log_feedback()
+    out = qgis_processing.run(BESTFIT, {"PARCELS": plots, "ROADS": roads,
+                                        "BUILDING_LIBRARY": str(shp), "MIN_SETBACK": 3,
+                                        "OUTPUT": "memory:"}, feedback=log)
+    assert [r["height_m"] for r in layer_features(out["OUTPUT"])[0]] == [8.5]
+    assert any("'street_access_sides' read from 'street_acc'" in m and "cut to 10" in m
+               for m in log.messages), log.messages

@@ -374,7 +374,7 @@ def read_source(alg, parameters, name: str, context, feedback,
     # is the full name's ten first characters and no other name cuts to them
     # ('building_type' from 'building_t')
     cut = styles.DBF_NAME_LENGTH
-    wanted = [] if fields is None else [f for f in dict.fromkeys(fields) if f]
+    wanted = [f for f in dict.fromkeys([*(fields or ()), *required_fields]) if f]
     by_alias = {alias: field for alias, field in field_aliases(alg, parameters, name, context,
                                                                source).items()
                 if alias != field and alias not in all_names and field in all_names}
@@ -396,7 +396,8 @@ def read_source(alg, parameters, name: str, context, feedback,
              and shorts[f[:cut]] > 1]
     field_names += [short for short in cut_short if short not in field_names]
     field_idx = [all_names.index(f) for f in field_names]
-    missing = [f for f in required_fields if f not in all_names and f not in aliased.values()]
+    missing = [f for f in required_fields if f not in all_names and f not in aliased.values()
+               and f not in cut_short.values()]
     if missing:
         raise QgsProcessingException(
             f"Layer {label} has no field {', '.join(repr(m) for m in missing)} "
