@@ -61,7 +61,9 @@ class PlaceLibraryBuildings(AlgorithmBase):
         self.add(QgsProcessingParameterNumber(
             self.MIN_SETBACK, "Minimum setback (m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=bestfit.DEFAULT_SETBACK, minValue=0.0, maxValue=100.0),
-            "Distance kept between a building and its parcel's street sides.")
+            "Distance kept between a building and its parcel's street sides, and between a "
+            "building and any road centreline running through or beside its parcel (a "
+            "building never crosses a road).")
         self.add(QgsProcessingParameterNumber(
             self.STREET_REACH, "Street reach (m)", QgsProcessingParameterNumber.Type.Double,
             defaultValue=bestfit.DEFAULT_REACH, minValue=0.1, maxValue=1000.0),
@@ -113,6 +115,11 @@ class PlaceLibraryBuildings(AlgorithmBase):
                           f"({counted(s['no_street'], 'has', 'have')} no side facing a street, "
                           f"{counted(s['no_fit'], 'fits', 'fit')} no library building with the "
                           "minimum setback and the side rules).")
+        if s.get("crossed_by_road"):
+            feedback.pushInfo(counted(s["crossed_by_road"], "parcel stays", "parcels stay")
+                              + " empty because a road centreline runs through or along "
+                              "the parcel and no library building fits clear of it with the "
+                              "minimum setback.")
         if s.get("too_steep"):
             feedback.pushInfo(counted(s["too_steep"], "parcel is steeper than the maximum "
                                       "parcel slope and stays empty.", "parcels are steeper "

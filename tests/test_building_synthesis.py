@@ -252,6 +252,50 @@ def test_a_street_drawn_on_the_parcel_side_faces_it():
                            lib, 20.0)
 
 
+def _clear_of(result, lines, setback):
+    """No placed building crosses a road centreline; each keeps the setback from all."""
+    lines = np.asarray(lines, dtype=object)
+    for g in result.geometry:
+        assert not shapely.intersects(g, lines).any()
+        assert shapely.distance(g, lines).min() >= setback - 1e-6
+
+
+def test_fit_keeps_clear_of_a_road_through_the_parcel():
+    """A road centreline running into (a dead end) or across a parcel (parcels made from
+    blocks that cover their dead-end streets) is a street side for the setback: no
+    building crosses it or comes nearer than the minimum setback (buildings were placed
+    across such roads); a parcel with no room left beside it stays empty, counted."""
+    lib = bf.default_library()
+    parcel = [shapely.box(0, -40, 60, -5)]
+    street = shapely.LineString([(-50, 0), (200, 0)])
+    dead_end = shapely.LineString([(20, 0), (20, -25)])
+    for setback in (2.0, 0.0):
+        r = bf.fit_buildings(parcel, [street, dead_end], lib, min_setback=setback)
+        assert r.stats["n_placed"] == 1 and r.stats["crossed_by_road"] == 0, setback
+        _clear_of(r, [street, dead_end], setback)
+        assert_constraints(r, parcel, [1], np.array([street, dead_end], dtype=object), lib,
+                           20.0)
+    # (off the middle: a perpendicular road hit first hides the street from the side's
+    # ray.) Without the dead end the 36 m office sits on the middle, across it
+    r = bf.fit_buildings(parcel, [street], lib, min_setback=2.0)
+    assert r.table.source_id.tolist() == [9] and shapely.intersects(r.geometry[0], dead_end)
+    # a road across the whole parcel: the building lies on one side of it, clear by 2 m
+    across = shapely.LineString([(20, 10), (20, -60)])
+    r = bf.fit_buildings(parcel, [street, across], lib, min_setback=2.0)
+    assert r.stats["n_placed"] == 1
+    _clear_of(r, [street, across], 2.0)
+    x0, _, x1, _ = shapely.bounds(r.geometry[0])
+    assert x1 <= 18 + 1e-6 or x0 >= 22 - 1e-6
+    # a road across a small parcel leaves 6 m, no room for the narrowest house (7 m): empty,
+    # counted as crossed by a road, not as no fit; without that road a house fits
+    small = [shapely.box(0, -17, 10, -5)]
+    r = bf.fit_buildings(small, [street, shapely.LineString([(3, 10), (3, -30)])], lib)
+    assert r.stats["n_placed"] == 0 and r.stats["crossed_by_road"] == 1
+    assert r.stats["no_fit"] == 0
+    r = bf.fit_buildings(small, [street], lib)
+    assert r.stats["n_placed"] == 1 and r.stats["crossed_by_road"] == 0
+
+
 def test_fit_on_a_slope_sinks_to_the_lowest_corner_and_skips_steep_parcels():
     """Scharl ch. 6.2: on a slope the building goes down until every vertex is on the
     ground or beneath; a parcel steeper than maxParcelSlope gets no building."""

@@ -17,6 +17,13 @@ library, sorted by footprint area from largest to smallest, is enumerated:
   footprint inside the parcel minus the setback zone are the intersection of that region
   shifted by each vertex (a Minkowski difference), and the one furthest towards the
   street, nearest to the centre of the street side, is taken;
+- a road centreline that runs through the parcel or beside it (a dead-end street the
+  parcel covers, a road along a side that does not count as a street side) is a street
+  side too for the setback: the translations that bring the footprint's convex hull
+  within ``min_setback`` of it (the Minkowski sum of each road segment with the mirrored
+  hull, buffered by the setback) are removed, so no building crosses a road centreline
+  or comes closer to it than the setback; a parcel left without room for any building
+  that way stays empty and is counted (``crossed_by_road``);
 - the footprint must lie inside the parcel (step 5) and satisfy the side constraints;
   the first building that passes is placed (step 6), else the parcel stays empty.
 
@@ -258,6 +265,17 @@ class _Streets:
         self.lines = np.asarray(roads, dtype=object)
         self.tree = shapely.STRtree(self.lines)
 
+    def near(self, parcel, clear: float) -> np.ndarray:
+        """The road centrelines within ``clear`` of the parcel (through it, along its
+        sides), clipped to a little more than that around it: single lines."""
+        idx = self.tree.query(parcel, predicate="dwithin", distance=clear + 1e-3)
+        if len(idx) == 0:
+            return np.empty(0, dtype=object)
+        parts = shapely.get_parts(shapely.intersection(
+            self.lines[idx], shapely.buffer(parcel, clear + 0.1)))
+        parts = shapely.get_parts(parts)  # lines and points of a geometry collection
+        return parts[(shapely.get_type_id(parts) == 1) & (shapely.length(parts) > 0)]
+
     def faces(self, mids: np.ndarray, dirs: np.ndarray, normals: np.ndarray, reach: float,
               max_angle: float = MAX_ANGLE) -> np.ndarray:
         """Does each side face a street: the ray of length ``reach`` from its midpoint along
@@ -299,9 +317,29 @@ def _angle(v) -> float:
     return math.degrees(math.atan2(v[1], v[0]))
 
 
+#: Segments of the buffers' round caps: a circumscribed polygon keeps the full distance.
+_QUAD_SEGS = 8
+
+
+def _road_blocked(lines, verts: np.ndarray, clear: float):
+    """The reference-point positions at which a footprint whose convex hull has the
+    vertices ``verts`` (relative to the reference point) comes within ``clear`` of one of
+    the ``lines``: per segment ``ab`` the convex hull of ``a - verts`` and ``b - verts``
+    (the Minkowski sum of the segment and the mirrored hull), buffered by ``clear``."""
+    xy, which = shapely.get_coordinates(lines, return_index=True)
+    same = which[1:] == which[:-1]
+    a, b = xy[:-1][same], xy[1:][same]
+    pts = np.concatenate([a[:, None, :] - verts[None], b[:, None, :] - verts[None]], axis=1)
+    sums = shapely.convex_hull(shapely.multipoints(pts))
+    # the polygon of a round buffer lies inside the circle: widen it to circumscribe it
+    grow = clear / math.cos(math.pi / (4 * _QUAD_SEGS)) + 1e-6
+    return shapely.union_all(shapely.buffer(sums, grow, quad_segs=_QUAD_SEGS))
+
+
 def _placements(allowed, street_sides, building: LibraryBuilding,
-                rotations: Sequence[Tuple[float, int]]):
-    """Yield (rotation, placed footprint, offset) for each candidate rotation (step 4)."""
+                rotations: Sequence[Tuple[float, int]], roads=None, clear: float = 0.0):
+    """Yield (rotation, placed footprint, offset) for each candidate rotation (step 4);
+    with ``roads`` (lines), none within ``clear`` of one."""
     centroid = building.footprint.centroid
     hull = np.asarray(building.footprint.convex_hull.exterior.coords)[:-1]
     for rot, side in rotations:
@@ -314,6 +352,11 @@ def _placements(allowed, street_sides, building: LibraryBuilding,
             region = shapely.intersection_all(shifted)
         if region.is_empty:
             continue
+        if roads is not None and len(roads):
+            # off the roads through or beside the parcel: edges too, not only vertices
+            region = region.difference(_road_blocked(roads, verts, clear))
+            if region.is_empty:
+                continue
         mid, _, normal = street_sides[side]
         # furthest towards the street, then nearest to the middle of the street side
         ring = shapely.get_coordinates(region)
@@ -348,6 +391,30 @@ def _rotations(building: LibraryBuilding, street_sides, parcel_lengths) -> List[
             if not any(abs((rot - r + 180) % 360 - 180) < 1e-6 and s == j for r, s in out):
                 out.append((rot, int(j)))
     return out
+
+
+def _best(allowed, parcel, sides, side_len, lib, lib_areas, streets, reach, max_angle,
+          roads=None, clear: float = 0.0):
+    """(building, rotation, footprint, offset) of the largest library building that fits
+    the parcel (steps 1-6), clear of ``roads`` by ``clear``; None when none does."""
+    area = parcel.area
+    for b_i in np.flatnonzero(lib_areas <= area):
+        b = lib[b_i]
+        if len(b.access) > len(sides):  # constraint 2: not enough street sides
+            continue
+        for rot, g, off in _placements(allowed, sides, b, _rotations(b, sides, side_len),
+                                       roads, clear):
+            if not parcel.buffer(1e-6).contains(g):  # step 5
+                continue
+            if roads is not None and len(roads) and (
+                    shapely.intersects(g, roads).any()
+                    or shapely.distance(g, roads).min() < clear - 1e-6):
+                continue  # the hull's clearance holds; a guard against rounding
+            m, d, n = side_normals(np.asarray(g.exterior.coords))
+            ok = streets.faces(m, d, n, reach, max_angle)
+            if all(ok[list(b.access)]) and not any(ok[list(b.blind)]):
+                return b, rot, g, off
+    return None
 
 
 def parcel_slopes(parcels, dem, spacing: float = 2.0) -> np.ndarray:
@@ -392,7 +459,9 @@ def fit_buildings(parcels, roads, library: Sequence[LibraryBuilding],
     library : LibraryBuilding sequence
     parcel_ids : int sequence, optional (default 1..n)
     min_setback : float
-        Minimum distance (m) between the building and the parcel's street sides.
+        Minimum distance (m) between the building and the parcel's street sides, and
+        between the building and any road centreline through or beside the parcel (no
+        building crosses a road centreline, even with no setback).
     reach : float
         Length (m) of the perpendicular ray of the facing test: a side faces a street when
         a road centreline lies within this distance in front of it.
@@ -412,7 +481,9 @@ def fit_buildings(parcels, roads, library: Sequence[LibraryBuilding],
         with ``n_parcels``, ``n_placed``, ``empty_share``, ``no_street`` (parcels with no
         street side), ``too_steep`` (parcels over the slope limit), ``no_terrain`` (parcels,
         or the corners of the building chosen for them, where the DEM has no value: left
-        empty, not guessed), ``no_fit`` (the other empty parcels: facing a street, but no
+        empty, not guessed), ``crossed_by_road`` (parcels left empty because a road
+        centreline runs through them, or along them: a building would fit without it, none
+        fits clear of it), ``no_fit`` (the other empty parcels: facing a street, but no
         library building fits inside with the setback and the side rules).
     """
     progress = ensure(progress)
@@ -435,7 +506,7 @@ def fit_buildings(parcels, roads, library: Sequence[LibraryBuilding],
     geoms, rows = [], []
     no_street = 0
     slopes = parcel_slopes(parcels, dem) if dem is not None else np.full(len(parcels), np.nan)
-    too_steep = no_terrain = 0
+    too_steep = no_terrain = crossed_by_road = 0
     for pi, parcel in enumerate(parcels):
         if pi % 20 == 0:
             progress.step(pi / len(parcels))
@@ -463,26 +534,24 @@ def fit_buildings(parcels, roads, library: Sequence[LibraryBuilding],
         zone = shapely.union_all(shapely.buffer(shapely.linestrings(
             np.stack([ring[:-1][facing], ring[1:][facing]], axis=1)), min_setback,
             cap_style="flat")) if min_setback > 0 else None
-        allowed = parcel.difference(zone) if zone is not None else parcel
-        if allowed.is_empty:
+        allowed_streets = parcel.difference(zone) if zone is not None else parcel
+        # roads through the parcel or beside it count as street sides for the setback
+        clear = max(min_setback, 1e-3)
+        near = streets.near(parcel, clear)
+        allowed = allowed_streets
+        if len(near):
+            allowed = allowed.difference(shapely.union_all(shapely.buffer(
+                near, clear / math.cos(math.pi / (4 * _QUAD_SEGS)), quad_segs=_QUAD_SEGS)))
+        if allowed_streets.is_empty:
             continue
         area = parcel.area
-        placed = None
-        for b_i in np.flatnonzero(lib_areas <= area):
-            b = lib[b_i]
-            if len(b.access) > len(sides):  # constraint 2: not enough street sides
-                continue
-            for rot, g, off in _placements(allowed, sides, b, _rotations(b, sides, side_len)):
-                if not parcel.buffer(1e-6).contains(g):  # step 5
-                    continue
-                m, d, n = side_normals(np.asarray(g.exterior.coords))
-                ok = streets.faces(m, d, n, reach, max_angle)
-                if all(ok[list(b.access)]) and not any(ok[list(b.blind)]):
-                    placed = (b, rot, g, off)
-                    break
-            if placed:
-                break
+        fit = (parcel, sides, side_len, lib, lib_areas, streets, reach, max_angle)
+        placed = None if allowed.is_empty else _best(allowed, *fit, near, clear)
         if placed is None:
+            # a road through the parcel (or along it) that leaves no room is counted apart
+            # when a building would have fitted without it
+            if len(near) and _best(allowed_streets, *fit) is not None:
+                crossed_by_road += 1
             continue
         b, rot, g, off = placed
         base = sunk = np.nan
@@ -504,5 +573,6 @@ def fit_buildings(parcels, roads, library: Sequence[LibraryBuilding],
     n = len(parcels)
     stats = {"n_parcels": n, "n_placed": len(rows), "empty_share": 1.0 - len(rows) / n,
              "no_street": no_street, "too_steep": too_steep, "no_terrain": no_terrain,
-             "no_fit": n - len(rows) - no_street - too_steep - no_terrain}
+             "crossed_by_road": crossed_by_road,
+             "no_fit": n - len(rows) - no_street - too_steep - no_terrain - crossed_by_road}
     return BestFit(np.array(geoms, dtype=object), pd.DataFrame(rows), stats)
