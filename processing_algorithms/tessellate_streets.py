@@ -218,6 +218,14 @@ class TessellateStreets(AlgorithmBase):
         counts = {k: int((source == k).sum()) for k in ("field", "class", "level", "default")}
         feedback.pushInfo("Widths from " + ", ".join(f"{k}: {v}" for k, v in counts.items() if v)
                           + f" lines; median {np.median(widths):.1f} m.")
+        refused = [v for v in (width_values if width_values is not None else ())
+                   if v is not None and str(v).strip() not in ("", "nan", "NULL")
+                   and not np.isfinite(street_surfaces.parse_width(v))]
+        if refused:
+            feedback.pushWarning(
+                f"{counted(len(refused), 'width')} of {label} not used (not a number of metres "
+                f"from 0.5 to 200: {', '.join(map(str, refused[:5]))}"
+                f"{', ...' if len(refused) > 5 else ''}): those lines take their class width.")
         z_layer = qgis_io.osm_vertical_layers(frame)
         graph = qgis_io.run_engine(label, roads.clean_network, frame.geometry, class_for_width,
                                    None, z_layer, snap_tolerance=snap, min_dangle_length=0.0,

@@ -466,3 +466,23 @@ def test_a_shapefile_output_styles_each_flag_by_its_own_field(qgis_processing, s
         assert written["too_steep_long"] != written["too_steep_lat"]
         filters = [r.filterExpression() for r in layer.renderer().rootRule().children()]
         assert f'"{written["too_steep_long"]}" OR "{written["too_steep_lat"]}"' in filters
+
+
+def test_widths_out_of_range_are_counted_in_the_log(qgis_processing):
+    """Widths the field gives that are no width (250 m, -3, 0) take the class width, as
+    before, and the log now says how many and which (they were replaced silently)."""
+    from helpers import log_feedback
+
+    wkts = _star_wkts(X0, Y0, STAR5)
+    rows = [[w, "residential"] for w in (250.0, -3.0, 0.0, 9.0, None)]
+    roads = memory_layer("LineString", wkts, CRS, "&field=w:double&field=highway:string", rows,
+                         name="odd widths")
+    log = log_feedback()
+    out = qgis_processing.run(ALG, {"ROADS": roads, "WIDTH_FIELD": "w",
+                                    "OUTPUT_SURFACES": "memory:", "OUTPUT_JUNCTIONS": "memory:"},
+                              feedback=log)
+    widths = sorted(r["width_m"] for r in layer_features(out["OUTPUT_SURFACES"])[0])
+    assert widths == [8.0, 8.0, 8.0, 8.0, 9.0]
+    refused = [w for w in log.warnings if "not used" in w]
+    assert len(refused) == 1 and refused[0].startswith("3 widths of 'odd widths'"), log.warnings
+    assert "250" in refused[0] and "-3" in refused[0]
