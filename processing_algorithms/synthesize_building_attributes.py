@@ -167,6 +167,16 @@ class SynthesizeBuildingAttributes(AlgorithmBase):
             blocks = blocks.geometry
         given = self._attributes_of(footprints, "", "", parameters, context) \
             if self.parameterAsBool(parameters, self.KEEP_GIVEN, context) else None
+        if given is not None and "height_m" in footprints.attributes:
+            raw = footprints.attributes["height_m"].to_numpy(dtype=object)
+            refused = [v for v in raw if v is not None and str(v).strip() not in ("", "nan")
+                       and not np.isfinite(building_attributes.parse_height(v))]
+            if refused:
+                feedback.pushWarning(
+                    f"{counted(len(refused), 'height')} of {footprints.name} not kept (no height "
+                    f"from 0 to 1,000 m: {', '.join(map(str, refused[:5]))}"
+                    f"{', ...' if len(refused) > 5 else ''}): those footprints get one from "
+                    "the example.")
         result = qgis_io.run_engine(
             examples.name, transfer.transfer_attributes, footprints.geometry, examples.geometry,
             attrs, example_ids=examples.fids, roads=road_lines, arterials=arterials,

@@ -530,3 +530,26 @@ def test_a_library_from_a_shapefile(qgis_processing, tmp_path):
     assert [r["height_m"] for r in layer_features(out["OUTPUT"])[0]] == [8.5]
     assert any("'street_access_sides' read from 'street_acc'" in m and "cut to 10" in m
                for m in log.messages), log.messages
+
+
+def test_a_given_height_that_is_no_height_is_said_so(qgis_processing):
+    """KEEP_GIVEN with a given height over 1,000 m (a typo: the rule of every height read)
+    synthesises that footprint's height as for a missing one, and now says so; it was
+    dropped silently."""
+    crs = "EPSG:32633"
+    squares = [f"POLYGON (({x} {y}, {x + 12} {y}, {x + 12} {y + 10}, {x} {y + 10}, {x} {y}))"
+               for x in range(0, 200, 40) for y in range(0, 160, 40)]
+    examples = memory_layer("Polygon", squares, crs, "&field=height_m:double",
+                            [(10.0 + k,) for k in range(len(squares))], name="examples")
+    footprints = memory_layer("Polygon", squares[:3], crs, "&field=height_m:double",
+                              [(12.0,), (1200.0,), (None,)], name="given")
+    log = log_feedback()
+    out = qgis_processing.run(ATTRIBUTES, {"FOOTPRINTS": footprints, "EXAMPLE_BUILDINGS":
+                                           examples, "KEEP_GIVEN": True, "OUTPUT": "memory:"},
+                              feedback=log)
+    rows, _ = layer_features(out["OUTPUT"])
+    assert [r["height_given"] for r in rows] == [True, False, False]
+    assert rows[0]["height_m"] == 12.0 and 10 <= rows[1]["height_m"] <= 29
+    warned = [w for w in log.warnings if "not kept" in w]
+    assert len(warned) == 1 and warned[0].startswith("1 height of 'given'") and \
+        "1200" in warned[0], log.warnings
