@@ -148,8 +148,8 @@ class RasterRoadsToVector(AlgorithmBase):
                 "are dark on a bright background, invert it first (Raster calculator: "
                 f"{low + high:g} - value); else raise THRESHOLD.")
         no_data = int(array.size - valid.sum())
-        feedback.pushInfo(f"{array.shape[0]} x {array.shape[1]} px, {100 * above:.1f} % "
-                          f"above the threshold (values {low:g} .. {high:g})"
+        feedback.pushInfo(f"{array.shape[1]} x {array.shape[0]} px (width x height), "
+                          f"{100 * above:.1f} % above the threshold (values {low:g} .. {high:g})"
                           + (f"; {no_data} no-data pixels taken as background." if no_data
                              else "."))
         result = qgis_io.run_engine(
