@@ -320,8 +320,8 @@ class SubdivideParcels(AlgorithmBase):
                  "(or smaller than the minimum area after shrinking) and get no parcel."),
                 (n("n_thin_blocks"), "block has", "blocks have", "land nowhere the minimum "
                  "width wide after shrinking (a strip, a roundabout's island): no parcel there."),
-                (over, "parcel stays", "parcels stay", "larger than the maximum area: every "
-                 "cut would have made a piece too small, too thin or without street access."),
+                (over, "parcel stays", "parcels stay", "larger than the maximum area: land "
+                 "without frontage merged into it, or no cut left pieces big, wide, on a street."),
                 (n("n_over_max_area_merged"), "parcel is", "parcels are", "larger than the "
                  "maximum area because lots merged so that a building stands on one parcel."),
                 (n("n_without_access"), "parcel has", "parcels have", "no street frontage."),
