@@ -168,9 +168,9 @@ class SynthesizeBuildingAttributes(AlgorithmBase):
         given = self._attributes_of(footprints, "", "", parameters, context) \
             if self.parameterAsBool(parameters, self.KEEP_GIVEN, context) else None
         if given is not None and "height_m" in footprints.attributes:
-            raw = footprints.attributes["height_m"].to_numpy(dtype=object)
-            refused = [v for v in raw if v is not None and str(v).strip() not in ("", "nan")
-                       and not np.isfinite(building_attributes.parse_height(v))]
+            refused = building_attributes.unreadable_values(
+                footprints.attributes["height_m"].to_numpy(dtype=object),
+                building_attributes.parse_height)
             if refused:
                 feedback.pushWarning(
                     f"{counted(len(refused), 'height')} of {footprints.name} not kept (no height "

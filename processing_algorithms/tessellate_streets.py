@@ -16,6 +16,7 @@ from qgis.core import (
     QgsWkbTypes,
 )
 
+from ..plugin.buildings.attributes import unreadable_values
 from ..plugin.network import street_graph as roads
 from ..plugin.network import street_mesh, street_surfaces
 from ..plugin.qgis_glue import qgis_io
@@ -218,9 +219,8 @@ class TessellateStreets(AlgorithmBase):
         counts = {k: int((source == k).sum()) for k in ("field", "class", "level", "default")}
         feedback.pushInfo("Widths from " + ", ".join(f"{k}: {v}" for k, v in counts.items() if v)
                           + f" lines; median {np.median(widths):.1f} m.")
-        refused = [v for v in (width_values if width_values is not None else ())
-                   if v is not None and str(v).strip() not in ("", "nan", "NULL")
-                   and not np.isfinite(street_surfaces.parse_width(v))]
+        refused = [] if width_values is None else \
+            unreadable_values(width_values, street_surfaces.parse_width)
         if refused:
             feedback.pushWarning(
                 f"{counted(len(refused), 'width')} of {label} not used (not a number of metres "

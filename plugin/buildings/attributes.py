@@ -257,9 +257,10 @@ def _first_present(*candidates):
 
 
 def unreadable_values(values: Sequence, parse) -> list:
-    """The values given but not readable by ``parse`` (:func:`parse_height` or
-    :func:`parse_levels`): text that is no number, negatives, absurd sizes. Such a value is
-    no height (NaN) to :func:`building_attributes`; the caller says how many there were.
+    """The values given but not readable by ``parse`` (:func:`parse_height`,
+    :func:`parse_levels`, a street's ``street_surfaces.parse_width``): text that is no
+    number, negatives, absurd sizes. Such a value is none (NaN) to the parser's user; the
+    caller says how many there were.
 
     >>> unreadable_values(["12", None, "tall", -3, 8.5], parse_height)
     ['tall', -3]
