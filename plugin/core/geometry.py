@@ -259,9 +259,10 @@ def filled(polygons: Sequence) -> np.ndarray:
     parts, owner = shapely.get_parts(polys, return_index=True)
     shells = shapely.polygons(shapely.get_exterior_ring(parts))
     out = np.array([shapely.Polygon()] * len(polys), dtype=object)
-    single = np.bincount(owner, minlength=len(polys)) == 1
-    out[owner[single[owner]]] = shells[single[owner]]
-    for i in np.flatnonzero(~single & (np.bincount(owner, minlength=len(polys)) > 1)):
+    count = np.bincount(owner, minlength=len(polys))
+    alone = count[owner] == 1
+    out[owner[alone]] = shells[alone]
+    for i in np.flatnonzero(count > 1):   # a part may lie in another's hole: a union
         out[i] = shapely.union_all(shells[owner == i])
     return out
 

@@ -1783,6 +1783,7 @@ def subdivide_blocks(blocks, method: str = "recursive",
     frontage: List[np.ndarray] = []
     n_merged = n_merged_for_buildings = n_merged_over_max = 0
     fix_access = spec.street_access or settings.force_street_access
+    holes = _holes(blocks)   # land kept free: no frontage on its edge
     for i in range(n):
         progress.step(0.05 + 0.9 * i / n)
         rng = np.random.default_rng([int(seed), *place_key(blocks[i])])
@@ -1798,9 +1799,8 @@ def subdivide_blocks(blocks, method: str = "recursive",
                     held[p_idx[on]] = True
                 parts = parts[~small | held]
                 shrunk[i] = one_areal(parts)
-        holes = _holes(blocks[i:i + 1])[0]
         for part in parts:
-            zone = _street_zone(part, holes)
+            zone = _street_zone(part, holes[i])
             got = _polygon_parts(spec.subdivide(part, block_settings[i] or settings, rng))
             leaks = shapely.area(shapely.difference(got, part)) > _CRUMB
             if leaks.any():
