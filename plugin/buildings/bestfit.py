@@ -321,6 +321,13 @@ def _angle(v) -> float:
 _QUAD_SEGS = 8
 
 
+def _buffer_at_least(geoms, distance: float, margin: float = 0.0):
+    """Round buffers that keep ``distance`` everywhere (plus ``margin``): the polygon of a
+    round buffer lies inside its circle, so the radius is widened to circumscribe it."""
+    return shapely.buffer(geoms, distance / math.cos(math.pi / (4 * _QUAD_SEGS)) + margin,
+                          quad_segs=_QUAD_SEGS)
+
+
 def _road_blocked(lines, verts: np.ndarray, clear: float):
     """The reference-point positions at which a footprint whose convex hull has the
     vertices ``verts`` (relative to the reference point) comes within ``clear`` of one of
@@ -331,9 +338,7 @@ def _road_blocked(lines, verts: np.ndarray, clear: float):
     a, b = xy[:-1][same], xy[1:][same]
     pts = np.concatenate([a[:, None, :] - verts[None], b[:, None, :] - verts[None]], axis=1)
     sums = shapely.convex_hull(shapely.multipoints(pts))
-    # the polygon of a round buffer lies inside the circle: widen it to circumscribe it
-    grow = clear / math.cos(math.pi / (4 * _QUAD_SEGS)) + 1e-6
-    return shapely.union_all(shapely.buffer(sums, grow, quad_segs=_QUAD_SEGS))
+    return shapely.union_all(_buffer_at_least(sums, clear, 1e-6))
 
 
 def _placements(allowed, street_sides, building: LibraryBuilding,
@@ -540,8 +545,7 @@ def fit_buildings(parcels, roads, library: Sequence[LibraryBuilding],
         near = streets.near(parcel, clear)
         allowed = allowed_streets
         if len(near):
-            allowed = allowed.difference(shapely.union_all(shapely.buffer(
-                near, clear / math.cos(math.pi / (4 * _QUAD_SEGS)), quad_segs=_QUAD_SEGS)))
+            allowed = allowed.difference(shapely.union_all(_buffer_at_least(near, clear)))
         if allowed_streets.is_empty:
             continue
         area = parcel.area
