@@ -384,11 +384,12 @@ class AlgorithmBase(QgsProcessingAlgorithm):
         classes = set(street_graph.DRIVABLE_CLASSES) if classes is None else classes
         return drivable_lines(frame, class_field, classes, feedback)
 
-    def blocks_from_roads(self, frame, road_class, feedback, progress=(5.0, 30.0), **kwargs):
+    def blocks_from_roads(self, frame, road_class, feedback, progress=(5.0, 30.0),
+                          boundary_name=None, **kwargs):
         """The street graph and city blocks of a road frame (:func:`blocks.blocks_from_roads`,
         the rule of 'Extract city blocks'), with the counts in the log; the islands of
         OSM's ``junction=roundabout`` rings are no blocks. ``kwargs``: buildings, parcels,
-        min_area, min_width."""
+        min_area, min_width, boundary (named ``boundary_name`` in the log)."""
         junction = qgis_io.osm_tag_column(frame, "junction")
         roundabout = None if junction is None else np.array(
             [str(v).strip().lower() == "roundabout" for v in junction], dtype=bool)
@@ -397,11 +398,19 @@ class AlgorithmBase(QgsProcessingAlgorithm):
             progress=qgis_io.progress_for(feedback, *progress), roundabout=roundabout,
             **kwargs)
         st = result.stats
+        closed = "" if boundary_name is None else f" and the boundary {boundary_name}"
         feedback.pushInfo(
             f"Street graph: {graph.n_edges} edges, {len(graph.nodes)} nodes; "
-            f"{st['n_blocks']} blocks from {st['n_faces']} closed faces of {frame.name} "
-            f"({st['n_small']} too small, {st['n_thin']} too thin and "
+            f"{st['n_blocks']} blocks from {st['n_faces']} closed faces of {frame.name}"
+            f"{closed} ({st['n_small']} too small, {st['n_thin']} too thin and "
             f"{counted(st['n_roundabout'], 'roundabout island')} dropped).")
+        if boundary_name is not None:
+            feedback.pushInfo(
+                f"{counted(st['n_on_boundary'], 'block lies', 'blocks lie')} on the boundary "
+                f"{boundary_name} (its edges are no street); "
+                f"{counted(st['n_outside'], 'face lies', 'faces lie')} outside it and "
+                f"{counted(st['n_without_street'], 'face', 'faces')} inside it no road "
+                "reaches: no blocks.")
         return graph, result
 
     @staticmethod

@@ -27,6 +27,7 @@ BUILDING_FIELDS = MEMBERSHIP_FIELDS + building_attributes.ATTRIBUTE_FIELDS
 class ExtractBlocks(AlgorithmBase):
     GROUP_ID = "analysis"
     ROADS = "ROADS"
+    BOUNDARY = "BOUNDARY"
     CLASS_FIELD = "CLASS_FIELD"
     CLASSES = "CLASSES"
     BUILDINGS = "BUILDINGS"
@@ -62,7 +63,11 @@ class ExtractBlocks(AlgorithmBase):
             "block (common at the edge of a clipped extract) are kept with an empty block_id "
             "and in_block = false. Buildings also get height_m (from height tags or fields, "
             "else levels x storey height, flagged height_estimated), levels and a normalised "
-            "building_type from OSM tags. Outputs are in the CRS of their input layer."
+            "building_type from OSM tags. Outputs are in the CRS of their input layer.\n\n"
+            "With a boundary (a district's outline), its outline closes the faces the roads "
+            "leave open (an open sketch of arterials), and only faces inside it that a road "
+            "reaches are blocks; 'Subdivide blocks into parcels' with the same boundary "
+            "takes its edges as no street."
         )
 
     def initAlgorithm(self, config=None):  # noqa: N802
@@ -70,6 +75,12 @@ class ExtractBlocks(AlgorithmBase):
             self.ROADS, "Road lines", [QgsProcessing.SourceType.TypeVectorLine]),
             "Any road line layer: the output of 'Extract road hierarchy', the 'lines' layer of "
             "an .osm.pbf file, or a cadastre street layer.")
+        self.add(QgsProcessingParameterFeatureSource(
+            self.BOUNDARY, "Boundary (closes open faces)",
+            [QgsProcessing.SourceType.TypeVectorPolygon], optional=True),
+            "Optional polygon(s), e.g. a district's outline: the faces the roads leave open "
+            "are closed by it, faces outside it are dropped, and so are faces inside it "
+            "that no road reaches (no street to front). Its edges are no streets.")
         self.add(QgsProcessingParameterField(
             self.CLASS_FIELD, "Road class field", defaultValue="highway",
             parentLayerParameterName=self.ROADS, optional=True),
@@ -120,7 +131,8 @@ class ExtractBlocks(AlgorithmBase):
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT, "City blocks", QgsProcessing.SourceType.TypeVectorPolygon),
             "Block polygons with block_id, area_m2, perimeter_m, compactness, aspect_ratio, "
-            "n_dead_ends, n_buildings, building_coverage, n_parcels.")
+            "n_dead_ends, n_buildings, building_coverage, n_parcels and boundary_m (the "
+            "length of its outline on the boundary, no street; 0 without one).")
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT_BUILDINGS, "Buildings with blocks and attributes",
             QgsProcessing.SourceType.TypeVectorPolygon, optional=True, createByDefault=True),
@@ -147,11 +159,16 @@ class ExtractBlocks(AlgorithmBase):
             heights, levels = self._cadastre_fields(parameters, context, buildings)
         parcels = qgis_io.read_source(self, parameters, self.PARCELS, context, feedback,
                                       kind="polygons", target_crs=frame.crs, optional=True)
+        boundary = qgis_io.read_source(self, parameters, self.BOUNDARY, context, feedback,
+                                       kind="polygons", target_crs=frame.crs, optional=True,
+                                       fields=[])
         _, result = self.blocks_from_roads(
             frame, road_class, feedback, (5, 70),
             buildings=None if buildings is None else buildings.geometry,
             parcels=None if parcels is None else parcels.geometry,
-            min_area=min_area, min_width=min_width)
+            min_area=min_area, min_width=min_width,
+            boundary=None if boundary is None else boundary.geometry,
+            boundary_name=None if boundary is None else boundary.name)
         self._log(result.stats, feedback)
 
         results = {}

@@ -28,6 +28,7 @@ class SubdivideParcels(AlgorithmBase):
     GROUP_ID = "synthesis"
     BLOCKS = "BLOCKS"
     ROADS = "ROADS"
+    BOUNDARY = "BOUNDARY"
     STREET_WIDTH_FIELD = "STREET_WIDTH_FIELD"
     METHOD = "METHOD"
     MAX_AREA = "MAX_AREA"
@@ -88,6 +89,13 @@ class SubdivideParcels(AlgorithmBase):
             "(OSM lines are filtered to drivable 'highway' classes; a layer without that field "
             "uses every line), and each block is shrunk by the width of its own streets. "
             "Give either Blocks or Roads.")
+        self.add(QgsProcessingParameterFeatureSource(
+            self.BOUNDARY, "Boundary (its edges are no street)",
+            [QgsProcessing.SourceType.TypeVectorPolygon], optional=True),
+            "Optional polygon(s), e.g. the district outline given to 'Extract city blocks': "
+            "block edges on it are no street (no street width, no frontage, no skeleton "
+            "strip), so the lots of a block the outline closes front its streets and reach "
+            "back to the outline. With Roads, it also closes the faces the roads leave open.")
         self.add(QgsProcessingParameterField(
             self.STREET_WIDTH_FIELD, "Street width field (on roads)",
             parentLayerParameterName=self.ROADS, type=QgsProcessingParameterField.DataType.Numeric,
@@ -206,8 +214,9 @@ class SubdivideParcels(AlgorithmBase):
             frame, block_geoms, block_ids, road_lines, road_widths = \
                 self._blocks(parameters, context, feedback)
             size = self._parcel_sizes(frame, method, feedback)
+            boundary = self._boundary(parameters, context, feedback, frame)
         else:
-            frame, block_geoms, block_ids, road_lines, road_widths = \
+            frame, block_geoms, block_ids, road_lines, road_widths, boundary = \
                 self._blocks_from_roads(parameters, context, feedback)
 
         keep_clear = self.keep_clear_areas(parameters, context, feedback, frame, block_geoms)
@@ -222,8 +231,10 @@ class SubdivideParcels(AlgorithmBase):
             frame.name, parcels.subdivide_blocks, block_geoms, method, settings, seed=seed,
             block_ids=block_ids, street_width=number[self.STREET_WIDTH], roads=road_lines,
             road_widths=road_widths, keep_clear=keep_clear, keep_whole=keep_whole,
+            boundary=None if boundary is None else boundary.geometry,
             progress=qgis_io.progress_for(feedback, 30, 90), **size)
-        self._log(result.stats, method, feedback)
+        for line in parcels.summary(result.stats, method):
+            feedback.pushInfo(line)
         if len(result.geometry) == 0:
             clear = keep_clear is not None
             raise QgsProcessingException(
@@ -288,6 +299,12 @@ class SubdivideParcels(AlgorithmBase):
                               f"parcels by it ({method} uses the maximum area and lot width).")
         return size
 
+    def _boundary(self, parameters, context, feedback, frame):
+        """The optional BOUNDARY in the working CRS of ``frame`` (the blocks or roads)."""
+        return qgis_io.read_source(self, parameters, self.BOUNDARY, context, feedback,
+                                   kind="polygons", target_crs=frame.crs, optional=True,
+                                   fields=[])
+
     def _blocks_from_roads(self, parameters, context, feedback):
         width_field = self.parameterAsString(parameters, self.STREET_WIDTH_FIELD, context)
         frame, road_class = self.drivable_roads(
@@ -304,46 +321,11 @@ class SubdivideParcels(AlgorithmBase):
             if n_missing:
                 feedback.pushInfo(f"{frame.name}: {n_missing} roads have no width in "
                                   f"'{width_field}' and use the street width.")
-        graph, extraction = self.blocks_from_roads(frame, road_class, feedback, (5, 30))
+        boundary = self._boundary(parameters, context, feedback, frame)
+        graph, extraction = self.blocks_from_roads(
+            frame, road_class, feedback, (5, 30),
+            boundary=None if boundary is None else boundary.geometry,
+            boundary_name=None if boundary is None else boundary.name)
         road_widths = None if widths is None else widths[graph.source]
         return (frame, extraction.geometry, extraction.table["block_id"].to_numpy(),
-                graph.geometry, road_widths)
-
-    @staticmethod
-    def _log(stats, method, feedback):
-        n = stats.get
-        lines = [f"{counted(n('n_lots'), 'parcel')} ({method}) in "
-                 f"{counted(n('n_blocks'), 'block')}."]
-        over = n("n_over_max_area") - n("n_over_max_area_merged", 0)
-        for count, one, many, text in (
-                (n("n_empty_blocks"), "block is", "blocks are", "narrower than their streets "
-                 "(or smaller than the minimum area after shrinking) and get no parcel."),
-                (n("n_thin_blocks"), "block has", "blocks have", "land nowhere the minimum "
-                 "width wide after shrinking (a strip, a roundabout's island): no parcel there."),
-                (over, "parcel stays", "parcels stay", "larger than the maximum area: land "
-                 "without frontage merged into it, or no cut left pieces big, wide, on a street."),
-                (n("n_over_max_area_merged"), "parcel is", "parcels are", "larger than the "
-                 "maximum area because lots merged so that a building stands on one parcel."),
-                (n("n_without_access"), "parcel has", "parcels have", "no street frontage."),
-                (n("n_under_min_width"), "parcel is", "parcels are", "narrower than the minimum "
-                 "width: a thin arm of their block part."),
-                (n("n_merged_for_access"), "lot", "lots", "without frontage merged into others."),
-                (n("n_merged_for_buildings"), "lot", "lots", "merged into a neighbour so "
-                 "that a building stands on one parcel.")):
-            if count and count > 0:
-                lines.append(f"{counted(count, one, many)} {text}")
-        if n("n_buildings"):
-            on_lots, split = n("n_buildings_on_lots"), n("n_buildings_split")
-            lines.append(
-                f"{split} of the {counted(on_lots, 'building')} on parcel land "
-                f"{'is' if split == 1 else 'are'} crossed by a parcel line (no parcel holds "
-                "95 % of it): on the line between two streets' strips, or in a row longer "
-                f"than a merged parcel may be ({n('n_buildings') - on_lots} of the "
-                f"{counted(n('n_buildings'), 'building')} "
-                f"{'stands' if n('n_buildings') - on_lots == 1 else 'stand'} mostly outside "
-                "the parcels).")
-        lines.append(f"{counted(n('n_undesirable'), 'parcel is', 'parcels are')} undesirable "
-                     "by Yang's criteria (p_angle > 15° or p_area > 1.2).")
-        for line in lines:
-            feedback.pushInfo(line)
-
+                graph.geometry, road_widths, boundary)

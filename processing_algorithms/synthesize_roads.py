@@ -3,6 +3,7 @@ METHOD (the district model uses it so that the method is a model parameter)."""
 from collections import namedtuple
 
 import numpy as np
+import pandas as pd
 import shapely
 from qgis.core import (
     QgsCoordinateTransform,
@@ -19,6 +20,7 @@ from qgis.core import (
     QgsProcessingParameterRasterLayer,
     QgsProcessingUtils,
     QgsVectorLayer,
+    QgsWkbTypes,
 )
 
 from ..plugin.measure import fidelity
@@ -53,6 +55,7 @@ class SynthesizeRoads(AlgorithmBase):
     SEED = "SEED"
     FILL_QUANTILE = "FILL_QUANTILE"
     OUTPUT = "OUTPUT"
+    OUTPUT_BOUNDARY = "OUTPUT_BOUNDARY"
 
     def name(self):
         return "synthesizeroads"
@@ -116,6 +119,12 @@ class SynthesizeRoads(AlgorithmBase):
         self.add(QgsProcessingParameterFeatureSink(
             self.OUTPUT, "Synthesized roads", QgsProcessing.SourceType.TypeVectorLine),
             "The new road network with level (0 = arterial), styled by level.")
+        self.add(QgsProcessingParameterFeatureSink(
+            self.OUTPUT_BOUNDARY, "District outline", QgsProcessing.SourceType.TypeVectorPolygon,
+            optional=True, createByDefault=False),
+            "The polygon the district fills: the BOUNDARY given, or the arterials' convex "
+            "hull (what 'Extract city blocks' and 'Subdivide blocks into parcels' take as "
+            "BOUNDARY to close the faces the streets leave open, as the district model does).")
 
     def input_error(self, parameters, context):
         method = METHODS[self.parameterAsEnum(parameters, self.METHOD, context)]
@@ -186,8 +195,16 @@ class SynthesizeRoads(AlgorithmBase):
                               f"{stats['degree4_share']:.2f}, blocks "
                               f"{stats['block_area_p10']:,.0f} m² (10th percentile) and "
                               f"{stats['block_area_p50']:,.0f} m² (median).")
-        return self._child_method(parameters, context, feedback, method, arterials, area,
-                                  area_name, seed, held_to)
+        results = self._child_method(parameters, context, feedback, method, arterials, area,
+                                     area_name, seed, held_to)
+        outline = qgis_io.write_sink(
+            self, parameters, self.OUTPUT_BOUNDARY, context, np.array([area], dtype=object),
+            pd.DataFrame({"outline": [area_name], "area_m2": [float(shapely.area(area))]}),
+            [("outline", "str"), ("area_m2", "float")], QgsWkbTypes.Type.MultiPolygon,
+            arterials.source_crs, arterials.crs, feedback)
+        if outline is not None:
+            results[self.OUTPUT_BOUNDARY] = outline
+        return results
 
     def _child_method(self, parameters, context, feedback, method, arterials, area, area_name,
                       seed, held_to=None):

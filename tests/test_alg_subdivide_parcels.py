@@ -367,3 +367,46 @@ def test_a_selection_of_a_memory_layer_gives_the_parcels_of_the_same_blocks(qgis
         assert len(runs[0]) > 50 and runs[0] == runs[1]
     finally:
         QgsProject.instance().removeMapLayer(blocks.id())
+
+
+def test_a_district_boundary_closes_open_faces_and_is_no_street(qgis_processing):
+    """An open sketch (a road across the district, one north from it) and its district's
+    outline, given in another CRS: 'Extract city blocks' closes the faces with it, and
+    'Subdivide blocks into parcels' with the same boundary keeps every lot on a street (the
+    lots behind reach back to the outline, which keeps no street width); with Roads
+    instead of Blocks the boundary closes the faces too."""
+    from helpers import log_feedback
+
+    x0, y0 = 458_000, 5_553_000
+    sketch = _memory_layer("LineString", [
+        f"LINESTRING ({x0} {y0 + 50}, {x0 + 260} {y0 + 50})",
+        f"LINESTRING ({x0 + 100} {y0 + 50}, {x0 + 100} {y0 + 300})"])
+    district = shapely.Polygon([(x0 + 10, y0), (x0 + 190, y0), (x0 + 230, y0 + 120),
+                                (x0 + 160, y0 + 230), (x0 + 20, y0 + 200)])
+    outline = qgis_processing.run("native:reprojectlayer", {
+        "INPUT": _memory_layer("Polygon", [district.wkt]), "TARGET_CRS": "EPSG:4326",
+        "OUTPUT": "memory:"})["OUTPUT"]
+    log = log_feedback()
+    blocks = qgis_processing.run("urbansynth:extractblocks", {
+        "ROADS": sketch, "BOUNDARY": outline, "OUTPUT": "memory:"}, feedback=log)["OUTPUT"]
+    rows, faces = layer_features(blocks)
+    assert len(rows) == 3 and all(r["boundary_m"] > 100 for r in rows)
+    assert any("3 blocks lie on the boundary" in m for m in log.messages), log.messages
+    assert abs(shapely.area(faces).sum() - district.area) < 1.0
+    streets = shapely.buffer(shapely.union_all([shapely.from_wkt(
+        f"LINESTRING ({x0} {y0 + 50}, {x0 + 260} {y0 + 50})"), shapely.from_wkt(
+        f"LINESTRING ({x0 + 100} {y0 + 50}, {x0 + 100} {y0 + 300})")]), 6, cap_style="flat")
+    land = shapely.area(shapely.difference(district, streets))
+    for inputs in ({"BLOCKS": blocks}, {"ROADS": sketch}):
+        log = log_feedback()
+        out = qgis_processing.run(ALG, dict(inputs, BOUNDARY=outline, METHOD=1, SEED=2,
+                                            STREET_WIDTH=12, OUTPUT="memory:"),
+                                  feedback=log)["OUTPUT"]
+        parcel_rows, lots = layer_features(out)
+        assert all(r["has_street_access"] for r in parcel_rows)
+        assert abs(shapely.area(lots).sum() - land) < 0.005 * land, list(inputs)
+        assert any("3 blocks lie on the boundary" in m for m in log.messages), log.messages
+    plain = qgis_processing.run(ALG, {"BLOCKS": blocks, "METHOD": 1, "SEED": 2,
+                                      "STREET_WIDTH": 12, "OUTPUT": "memory:"})["OUTPUT"]
+    # without the boundary its edges are streets: 6 m kept along them
+    assert shapely.area(layer_features(plain)[1]).sum() < land - 0.9 * 6 * district.length

@@ -294,3 +294,48 @@ def test_bubenec_blocks_properties():
     assert r.table.compactness.min() > 0.5   # triangles at the oblique streets
     assert r.table.n_parcels.sum() == r.parcels.in_block.sum() > 100
     assert r.table.n_buildings.sum() == 96   # the two north-western courtyards are open
+
+
+# --------------------------------------------------------------------------- boundary
+
+def open_sketch():
+    """Arterials that close no face: a road across a 180 x 200 m district and a road north
+    from it that runs out of the district (both reach past its outline)."""
+    return [LineString([(0, 50), (200, 50)]), LineString([(100, 50), (100, 300)])]
+
+
+@pytest.mark.parametrize("as_graph", [False, True])
+def test_a_boundary_closes_the_faces_an_open_sketch_leaves(as_graph):
+    district = box(10, 0, 190, 200)
+    lines = open_sketch()
+    with pytest.raises(InputError, match="no closed"):   # the roads alone close nothing
+        blocks.extract_blocks(roads.clean_network(lines) if as_graph else lines)
+    r = blocks.extract_blocks(roads.clean_network(lines) if as_graph else lines,
+                              boundary=district)
+    # three blocks tile the district: south of the road, and west and east of the road north
+    assert len(r.geometry) == 3
+    assert sum(shapely.area(r.geometry)) == pytest.approx(district.area)
+    assert shapely.within(r.geometry, district.buffer(1e-6)).all()
+    np.testing.assert_allclose(sorted(r.table.area_m2), [9_000, 13_500, 13_500])
+    # the length of each outline on the district's edge: no street there
+    south = np.argmin(shapely.bounds(r.geometry)[:, 1])
+    assert r.table.boundary_m[south] == pytest.approx(50 + 180 + 50)
+    assert r.table.boundary_m.sum() == pytest.approx(district.length)
+    assert r.stats["n_on_boundary"] == 3 and r.stats["n_outside"] == 0
+
+
+def test_a_boundary_drops_faces_outside_it_and_land_no_road_reaches():
+    district = shapely.union_all([box(10, 0, 190, 200), box(500, 0, 600, 100)])
+    r = blocks.extract_blocks(grid() + open_sketch(), boundary=district)
+    assert r.stats["n_without_street"] == 1          # the second square, far from the roads
+    assert r.stats["n_outside"] >= 1                 # the grid's faces beyond x = 190
+    assert shapely.within(r.geometry, district.buffer(1e-6)).all()
+    assert not shapely.intersects(r.geometry, box(500, 0, 600, 100)).any()
+    assert (r.table.boundary_m >= 0).all()
+    without = blocks.extract_blocks(grid() + open_sketch())
+    assert (without.table.boundary_m == 0).all()      # no boundary: no edge on one
+
+
+def test_a_boundary_no_road_reaches_is_a_clear_error():
+    with pytest.raises(InputError, match="no block inside the boundary.*1 have no road"):
+        blocks.extract_blocks(open_sketch(), boundary=box(1000, 0, 1100, 100))

@@ -80,6 +80,11 @@ def test_model_runs_end_to_end_on_bubenec(tmp_path):
     roads = _read(gpkg, "roads")
     assert len(roads) > 20 and len(blocks) >= 5 and len(parcels) > len(blocks)
     assert len(buildings) > 10
+    # the district's outline (the arterials' hull) closes the faces the streets leave
+    # open: blocks tile it, the ones on it say how much of their outline is no street
+    hull = shapely.convex_hull(shapely.union_all(roads.geometry.values))
+    assert shapely.area(shapely.union_all(blocks.geometry.values)) > 0.97 * hull.area
+    assert (blocks["boundary_m"] > 0).any() and (blocks["boundary_m"] >= 0).all()
     assert {"height_m", "levels", "building_type", "source_block"} <= set(buildings.columns)
     # the block database the model builds in a temporary file is named after the layer it
     # was built from (extractblocks' buildings), not after the step's output ('OUTPUT')

@@ -626,3 +626,35 @@ def test_a_hole_in_a_block_is_no_street(method):
     assert access.any()
     np.testing.assert_allclose(result.table.frontage_m[access], on_street[access], atol=0.05)
     assert (on_street[access] >= parcels.MIN_FRONTAGE - 0.05).all()
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_edges_on_a_district_boundary_are_no_street(method):
+    """Blocks an open sketch leaves to the district's outline (extract_blocks with a
+    boundary): the outline keeps no street width, gives no frontage and, for the skeleton,
+    no strip: every lot fronts a street, and the lots behind reach back to the outline."""
+    sketch = [shapely.LineString([(0, 50), (260, 50)]),
+              shapely.LineString([(100, 50), (100, 300)])]
+    district = shapely.Polygon([(10, 0), (190, 0), (230, 120), (160, 230), (20, 200)])
+    faces = blocks.extract_blocks(sketch, boundary=district).geometry
+    result = parcels.subdivide_blocks(faces, method, seed=3, street_width=10,
+                                      boundary=district,
+                                      settings=parcels.SubdivisionSettings(max_area=1500))
+    lots = result.geometry
+    assert shapely.is_valid(lots).all()
+    # the outline stays where it is: the lots tile the district less the roads' bands
+    streets = shapely.buffer(shapely.union_all(sketch), 5, cap_style="flat")
+    expected = shapely.area(shapely.difference(district, streets))
+    assert abs(shapely.area(lots).sum() - expected) < 0.01 * expected
+    assert shapely.area(shapely.intersection(shapely.union_all(lots), streets)) < 1.0
+    # frontage is counted on the streets only, and every lot has it
+    street_edges = shapely.buffer(shapely.boundary(shapely.difference(district, streets)), 1e-3)
+    street_edges = shapely.difference(street_edges, shapely.buffer(district.exterior, 0.1))
+    on_street = shapely.length(shapely.intersection(shapely.boundary(lots), street_edges))
+    np.testing.assert_allclose(result.table.frontage_m, on_street, atol=0.2)
+    assert result.table.has_street_access.all()
+    assert result.stats["n_blocks_on_boundary"] == len(faces)
+    # without the boundary, the outline is a street like any other edge
+    plain = parcels.subdivide_blocks(faces, method, seed=3, street_width=10,
+                                     settings=parcels.SubdivisionSettings(max_area=1500))
+    assert shapely.area(plain.geometry).sum() < expected - 1000

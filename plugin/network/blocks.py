@@ -54,7 +54,7 @@ from .street_graph import RoadGraph, node_lines
 __all__ = [
     "MIN_BLOCK_AREA", "MIN_BLOCK_WIDTH", "MIN_SHARE", "BLOCK_FIELDS", "BlockExtraction",
     "planar_faces", "block_faces", "roundabout_islands", "shape_metrics", "assign_to_blocks",
-    "extract_blocks", "blocks_from_roads",
+    "extract_blocks", "blocks_from_roads", "with_outline",
 ]
 
 #: Faces smaller than this (m²) are traffic islands and junction artefacts, not blocks.
@@ -76,7 +76,7 @@ BLOCK_FIELDS = [
     ("compactness", "float"), ("aspect_ratio", "float"), ("mbr_length_m", "float"),
     ("mbr_width_m", "float"), ("mbr_angle_deg", "float"), ("n_holes", "int"),
     ("n_dead_ends", "int"), ("n_buildings", "int"), ("building_coverage", "float"),
-    ("n_parcels", "int"),
+    ("n_parcels", "int"), ("boundary_m", "float"),
 ]
 
 
@@ -452,6 +452,59 @@ def _planar_lines(graph: RoadGraph) -> np.ndarray:
     return np.concatenate([lines[~involved], node_lines(lines[involved])])
 
 
+def _area_of(boundary) -> shapely.Geometry:
+    """The boundary as one polygonal geometry (its polygons united)."""
+    geoms = np.atleast_1d(np.asarray(boundary, dtype=object))
+    geoms = geoms[~(shapely.is_missing(geoms) | shapely.is_empty(geoms))]
+    area = shapely.union_all(shapely.make_valid(geoms)) if len(geoms) else None
+    if area is None or not (shapely.area(area) > 0):
+        raise InputError("the boundary has no area")
+    return area
+
+
+def with_outline(lines: Sequence, area) -> np.ndarray:
+    """Noded lines with the outline of ``area`` added: the lines that reach the outline are
+    noded with it (the rest are noded already, as a cleaned graph's edges are), so that
+    the outline closes the faces the lines leave open.
+
+    >>> roads = [shapely.LineString([(50, -20), (50, 120)])]
+    >>> len(with_outline(roads, shapely.box(0, 0, 100, 100)))  # 3 + 3 (ring start kept)
+    6
+    """
+    lines = np.asarray(lines, dtype=object)
+    outline = shapely.get_parts(shapely.boundary(area))
+    reach = np.zeros(len(lines), dtype=bool)
+    if len(lines):
+        reach[np.unique(shapely.STRtree(lines).query(outline, predicate="intersects")[1])] = True
+    return np.concatenate([lines[~reach], node_lines(np.concatenate([lines[reach], outline]))])
+
+
+def _inside(faces: np.ndarray, area, counts: dict):
+    """The faces inside ``area`` that a road reaches: the rest lie outside the district, or
+    are land the outline alone closes (no street to front): no blocks. Returns them, the
+    length (m) of each one's outline on the area's outline, and the counts:
+    ``n_outside``, ``n_without_street`` and ``n_on_boundary`` (the blocks on the outline)."""
+    shapely.prepare(area)
+    inside = shapely.contains(area, shapely.point_on_surface(faces))
+    n_outside = int((~inside).sum())
+    faces = faces[inside]
+    # a block on the outline shares a length of it, not a point; the faces' vertices there
+    # are the noded outline's (a micrometre band: the roads' edges add 2 µm at a corner)
+    outline = shapely.buffer(shapely.boundary(area), 1e-6, quad_segs=1)
+    near = np.unique(shapely.STRtree(faces).query(outline, predicate="intersects")) \
+        if len(faces) else np.zeros(0, dtype=np.int64)
+    rings = shapely.boundary(faces[near])
+    shared = shapely.length(shapely.intersection(rings, outline))
+    on = shared > 10 * _ON_LINE
+    no_street = np.zeros(len(faces), dtype=bool)
+    no_street[near] = shared > shapely.length(rings) - 10 * _ON_LINE
+    length = np.zeros(len(faces))
+    length[near[on]] = shared[on]
+    return faces[~no_street], length[~no_street], dict(
+        counts, n_outside=n_outside, n_without_street=int(no_street.sum()),
+        n_on_boundary=int((on & ~no_street[near]).sum()))
+
+
 # --------------------------------------------------------------------------- shape
 
 def shape_metrics(polygons: Sequence) -> pd.DataFrame:
@@ -569,7 +622,8 @@ def extract_blocks(roads, buildings: Optional[Sequence] = None,
                    min_area: float = MIN_BLOCK_AREA, min_width: float = MIN_BLOCK_WIDTH,
                    min_share: float = MIN_SHARE,
                    progress: Optional[Progress] = None,
-                   roundabout: Optional[Sequence[bool]] = None) -> BlockExtraction:
+                   roundabout: Optional[Sequence[bool]] = None,
+                   boundary=None) -> BlockExtraction:
     """City blocks of a street network, with their footprints and parcels.
 
     Parameters
@@ -588,6 +642,10 @@ def extract_blocks(roads, buildings: Optional[Sequence] = None,
     roundabout : bool per road (per edge of a RoadGraph), optional
         Roads that are roundabouts (OSM ``junction=roundabout``): the faces they enclose
         alone are roundabout islands, not blocks (:func:`roundabout_islands`).
+    boundary : Polygon / MultiPolygon (or an array of them), optional
+        The area the blocks fill (a district's outline): its outline closes the faces the
+        roads leave open, and faces outside it are no blocks (:func:`with_outline`). Its
+        edges are no streets: the stats count the blocks on it (``n_on_boundary``).
 
     Returns
     -------
@@ -618,15 +676,22 @@ def extract_blocks(roads, buildings: Optional[Sequence] = None,
     [1]
     """
     progress = ensure(progress)
+    area = None if boundary is None else _area_of(boundary)
     if isinstance(roads, RoadGraph):
         # a cleaned graph is planar per layer: node only across layers (cheap)
-        net = _Network(_planar_lines(roads), node=False)
+        lines = _planar_lines(roads)
+        net = _Network(lines if area is None else with_outline(lines, area), node=False)
         dead_ends = shapely.points(roads.nodes[roads.degree == 1])
     else:
-        net = _Network(roads, node=True)
-        dead_ends = net.dead_ends()
+        lines = np.asarray(roads, dtype=object)
+        dead_ends = _Network(lines, node=True).dead_ends()
+        net = _Network(lines if area is None else np.append(
+            lines, shapely.get_parts(shapely.boundary(area))), node=True)
     progress.step(0.1)
     faces, counts = _filtered_faces(net, min_area, min_width)
+    on_outline = np.zeros(len(faces))
+    if area is not None:
+        faces, on_outline, counts = _inside(faces, area, counts)
     counts["n_roundabout"] = 0
     if roundabout is not None:
         lines = roads.geometry if isinstance(roads, RoadGraph) else roads
@@ -634,14 +699,23 @@ def extract_blocks(roads, buildings: Optional[Sequence] = None,
             raise InputError(f"{len(roundabout)} roundabout flags for {len(lines)} roads")
         island = roundabout_islands(faces, lines, roundabout)
         faces, counts["n_roundabout"] = faces[~island], int(island.sum())
+        on_outline = on_outline[~island]
     progress.step(0.4)
+    if len(faces) == 0 and area is not None:
+        raise InputError(
+            f"no block inside the boundary: of the {counts['n_faces']} faces of the roads "
+            f"and the boundary, {counts['n_outside']} lie outside it, "
+            f"{counts['n_without_street']} have no road on their outline and "
+            f"{counts['n_small'] + counts['n_thin'] + counts['n_roundabout']} are smaller "
+            f"than {min_area:g} m², narrower than {min_width:g} m or roundabout islands "
+            "(do the roads and the boundary cover the same place?)")
     if len(faces) == 0:
         raise InputError(
             f"no closed block: all {counts['n_faces']} faces of the roads are smaller than "
             f"{min_area:g} m², narrower than {min_width:g} m or roundabout islands (lower "
             "the minimum block area or width)")
     n = len(faces)
-    columns = {"block_id": np.arange(1, n + 1, dtype=np.int64)}
+    columns = {"block_id": np.arange(1, n + 1, dtype=np.int64), "boundary_m": on_outline}
     columns.update(_shape_columns(faces))
     tree = shapely.STRtree(faces)
     progress.step(0.55)
@@ -683,7 +757,7 @@ def blocks_from_roads(lines: Sequence, road_class: Optional[Sequence] = None,
                       buildings: Optional[Sequence] = None, parcels: Optional[Sequence] = None,
                       min_area: float = MIN_BLOCK_AREA, min_width: float = MIN_BLOCK_WIDTH,
                       progress: Optional[Progress] = None,
-                      roundabout: Optional[Sequence[bool]] = None):
+                      roundabout: Optional[Sequence[bool]] = None, boundary=None):
     """City blocks of raw road lines: the one rule of every tool that takes roads instead
     of blocks ('Extract city blocks', parcels and footprints from roads).
 
@@ -695,7 +769,7 @@ def blocks_from_roads(lines: Sequence, road_class: Optional[Sequence] = None,
     ----------
     lines : array of LineString in a metric CRS (already filtered to drivable classes)
     road_class : per-line class (optional)
-    buildings, parcels, min_area, min_width : as :func:`extract_blocks`
+    buildings, parcels, min_area, min_width, boundary : as :func:`extract_blocks`
     progress : Progress, optional
     roundabout : bool per line, optional
         Lines that are roundabouts (OSM ``junction=roundabout``): their islands are no blocks.
@@ -721,5 +795,6 @@ def blocks_from_roads(lines: Sequence, road_class: Optional[Sequence] = None,
     flags = None if roundabout is None else \
         np.asarray(roundabout, dtype=bool)[np.asarray(graph.source, dtype=np.int64)]
     result = extract_blocks(graph, buildings, parcels, min_area=min_area, min_width=min_width,
-                            progress=progress.sub(0.6, 1.0), roundabout=flags)
+                            progress=progress.sub(0.6, 1.0), roundabout=flags,
+                            boundary=boundary)
     return graph, result

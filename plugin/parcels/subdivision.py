@@ -64,6 +64,7 @@ from ..core.geometry import (MIN_BUILDABLE_AREA, MIN_BUILDABLE_WIDTH, counter_cl
                              without_areas)
 from ..core.progress import InputError, Progress, ensure
 from ..core.seeds import place_key
+from ..core.text import counted
 from ..measure import metrics as _metrics
 
 __all__ = [
@@ -146,6 +147,9 @@ BUILDING_CLEARANCE = 0.5
 MERGE_LIMIT = 16.0
 
 _TOUCH = 1e-3       # m: half-width of the street zone that counts as frontage
+# m: an edge this near the land outside a boundary is on it (blocks read back from a file
+# or reprojected lie on the boundary up to round-off)
+_OUTSIDE_OVERLAP = 0.05
 _CRUMB = 1e-3       # m²: polygon parts smaller than this are numerical crumbs
 # m: shrunk blocks and the skeleton's overlays are snap-rounded to this grid, so that razor
 # slivers between faces (a zone edge nearly on a face edge) collapse instead of separating
@@ -318,10 +322,15 @@ def _street_zone(block, no_street=None) -> shapely.Geometry:
     """
     zone = shapely.buffer(shapely.boundary(block), _TOUCH, quad_segs=1)
     if no_street is not None and not shapely.is_empty(no_street):
-        zone = shapely.difference(zone, shapely.buffer(shapely.boundary(no_street),
-                                                       2 * _TOUCH, quad_segs=1))
+        zone = shapely.difference(zone, _no_street_zone(no_street))
     shapely.prepare(zone)
     return zone
+
+
+def _no_street_zone(no_street) -> shapely.Geometry:
+    """Where a lot's edge is no street: on or near the areas ``no_street`` (a block's
+    holes, the land outside a boundary)."""
+    return shapely.buffer(no_street, _OUTSIDE_OVERLAP, quad_segs=1, join_style="mitre")
 
 
 def _holes(blocks) -> np.ndarray:
@@ -329,6 +338,25 @@ def _holes(blocks) -> np.ndarray:
     whose edge is no street."""
     blocks = np.asarray(blocks, dtype=object)
     return shapely.difference(filled(blocks), blocks)
+
+
+def outside_land(blocks, area, reach: float) -> np.ndarray:
+    """Per block, the land outside ``area`` (a district's boundary) within ``reach`` m of
+    it: empty for a block away from the boundary's outline. The block's edges on that
+    land are no street (no street width, no frontage).
+
+    >>> land = outside_land([shapely.box(0, 0, 50, 50)], shapely.box(0, 0, 100, 100), 10.0)
+    >>> round(float(shapely.area(land[0])))  # strips west and south (2 x 500 m²), 3 round ends
+    1234
+    """
+    blocks = np.asarray(blocks, dtype=object)
+    out = np.array([shapely.Polygon()] * len(blocks), dtype=object)
+    if area is None or not len(blocks):
+        return out
+    outline = shapely.boundary(area)
+    near = shapely.dwithin(blocks, outline, reach)
+    out[near] = shapely.difference(shapely.buffer(blocks[near], reach), area)
+    return _areal(out)
 
 
 @_quiet
@@ -581,7 +609,7 @@ def _merge_along_shared_edges(lots: np.ndarray, bad: np.ndarray) -> np.ndarray:
 @_quiet
 def shrink_blocks(blocks, half_width=DEFAULT_STREET_WIDTH / 2, roads=None,
                   road_half_widths=None, min_area: float = 0.0, keep_clear=None,
-                  min_width: float = 0.0) -> np.ndarray:
+                  min_width: float = 0.0, outside=None) -> np.ndarray:
     """Shrink blocks by the half-widths of the streets on their edges (Scharl 4.2.6).
 
     Parameters
@@ -607,6 +635,10 @@ def shrink_blocks(blocks, half_width=DEFAULT_STREET_WIDTH / 2, roads=None,
     min_width : float
         Pieces nowhere this wide (m) are dropped (:func:`core.geometry.too_thin`: a strip
         left between two wide streets, the island of a roundabout is no building land).
+    outside : array of Polygon (per block), optional
+        Land beyond the block's edges that are no street (:func:`outside_land`: beyond a
+        district's boundary); those edges do not move when ``roads`` is not given (with
+        ``roads`` only the roads' bands are taken off anyway).
 
     Returns
     -------
@@ -643,10 +675,13 @@ def shrink_blocks(blocks, half_width=DEFAULT_STREET_WIDTH / 2, roads=None,
         if (hw < 0).any() or not np.isfinite(hw).all():
             raise InputError("street half-widths must be finite and not negative")
         # the outline moves in, a hole (a pond, a park kept out of the block) does not:
-        # its edge is no street
+        # its edge is no street; nor does an edge on the land outside (the block grown
+        # over that land before the offset has no outline there)
+        grown = filled(blocks) if outside is None else shapely.union(
+            filled(blocks), shapely.buffer(outside, _OUTSIDE_OVERLAP, join_style="mitre"))
         out = shapely.difference(
-            shapely.buffer(filled(blocks), -hw, join_style="mitre", mitre_limit=10.0),
-            _holes(blocks))
+            shapely.buffer(grown, -hw, join_style="mitre", mitre_limit=10.0),
+            _holes(blocks) if outside is None else shapely.union(_holes(blocks), outside))
     else:
         roads = np.asarray(roads, dtype=object).ravel()
         hw = np.broadcast_to(np.asarray(half_width if road_half_widths is None
@@ -1297,6 +1332,26 @@ def _swap_corners(polygon, sides: List[_Side], faces: np.ndarray) -> np.ndarray:
     return faces
 
 
+def _street_sides_only(block, sides: List[_Side], faces: np.ndarray, no_street):
+    """The street sides and their faces, with the faces of the sides on ``no_street`` (a
+    district's boundary, a hole's edge: most of the side's length in it) shared out among
+    the street sides, each part to the nearest (Vanegas et al. 2012 give strips to street
+    edges only): the lots behind a boundary reach to it."""
+    on = np.array([shapely.length(shapely.intersection(side.line, no_street))
+                   > 0.5 * side.length for side in sides], dtype=bool)
+    if not on.any():
+        return sides, faces
+    street = [side for side, o in zip(sides, on) if not o]
+    if not street:
+        return street, faces[:0]
+    rest = shapely.union_all(faces[on])
+    faces = faces[~on].copy()
+    if not shapely.is_empty(rest):
+        shared = edge_faces(rest, street)
+        faces = _areal(shapely.union(faces, shared, grid_size=_GRID))
+    return street, faces
+
+
 def _strip_parts(sides: List[_Side], faces: np.ndarray):
     """Polygon parts of the faces, each with its side; parts that do not lie on their own
     side (beyond a reflex corner, cut off by a corner swap) merge into a neighbour."""
@@ -1473,6 +1528,11 @@ def split_skeleton(block, settings: SubdivisionSettings,
     if len(sides) < 2:
         return _polygon_parts([block])
     faces = _swap_corners(block, sides, edge_faces(block, sides))
+    no_street = (settings.options or {}).get("no_street")
+    if no_street is not None:
+        sides, faces = _street_sides_only(block, sides, faces, no_street)
+        if not sides:
+            return _polygon_parts([block])
     strips, side_of = _strip_parts(sides, faces)
     lots = [_cut_strip(strip, sides[k], settings, rng) for strip, k in zip(strips, side_of)]
     lots = np.concatenate(lots) if lots else np.empty(0, dtype=object)
@@ -1670,7 +1730,7 @@ def subdivide_blocks(blocks, method: str = "recursive",
                      block_ids: Optional[Sequence[int]] = None,
                      street_width: float = DEFAULT_STREET_WIDTH, roads=None,
                      road_widths=None, parcel_area=None, parcel_area_sd=None,
-                     keep_clear=None, keep_whole=None,
+                     keep_clear=None, keep_whole=None, boundary=None,
                      progress: Optional[Progress] = None) -> Subdivision:
     """Shrink blocks by their streets and subdivide them into lots (Scharl 4.2.6).
 
@@ -1708,6 +1768,10 @@ def subdivide_blocks(blocks, method: str = "recursive",
         Buildings each to stand on one lot: the skeleton's cuts move off them
         (:func:`_cuts_off_buildings`), and with any method the lots a building still stands
         on merge (:func:`merge_lots_under_buildings`).
+    boundary : Polygon / MultiPolygon, optional
+        The district's outline (e.g. the BOUNDARY of :func:`blocks.extract_blocks`): block
+        edges on it are no street. They keep no street width, give no frontage and get
+        no strip of their own (:func:`_street_sides_only`); like a hole's edges.
     progress : Progress, optional
         Stepped once per block (cancellation raises :class:`progress.Canceled`).
 
@@ -1756,11 +1820,16 @@ def subdivide_blocks(blocks, method: str = "recursive",
         if (w < 0).any():
             raise InputError(f"{int((w < 0).sum())} roads have a negative street width")
         road_hw = w / 2.0
+    outside = None
+    if boundary is not None:
+        area = shapely.union_all(np.atleast_1d(np.asarray(boundary, dtype=object)))
+        widest = max([street_width, *([] if road_hw is None else 2 * road_hw)])
+        outside = outside_land(blocks, area, widest + 1.0)
     # with buildings to keep whole, a piece of land under the minimum area stays if a
     # building stands on it (it gets a parcel of its own, not none)
     shrunk = shrink_blocks(blocks, street_width / 2.0, roads, road_hw,
                            min_area=settings.min_area if keep_whole is None else 0.0,
-                           keep_clear=keep_clear)
+                           keep_clear=keep_clear, outside=outside)
     # land nowhere min_width wide gets no lot, whatever stands on it: a strip left between
     # two wide streets, a roundabout's island (core.geometry.too_thin, the one rule)
     shrunk, thin = _without_thin_land(shrunk, settings.min_width, settings.min_area)
@@ -1783,7 +1852,14 @@ def subdivide_blocks(blocks, method: str = "recursive",
     frontage: List[np.ndarray] = []
     n_merged = n_merged_for_buildings = n_merged_over_max = 0
     fix_access = spec.street_access or settings.force_street_access
-    holes = _holes(blocks)   # land kept free: no frontage on its edge
+    # land kept free (holes) and land outside the boundary: no frontage on its edge
+    no_street = _holes(blocks) if outside is None else \
+        shapely.union(_holes(blocks), outside)
+    empty_no_street = shapely.is_empty(no_street)
+    for i in np.flatnonzero(~empty_no_street):   # no skeleton strip along it either
+        own = block_settings[i] or settings
+        block_settings[i] = replace(own, options=dict(
+            own.options or {}, no_street=_no_street_zone(no_street[i])))
     for i in range(n):
         progress.step(0.05 + 0.9 * i / n)
         rng = np.random.default_rng([int(seed), *place_key(blocks[i])])
@@ -1800,7 +1876,7 @@ def subdivide_blocks(blocks, method: str = "recursive",
                 parts = parts[~small | held]
                 shrunk[i] = one_areal(parts)
         for part in parts:
-            zone = _street_zone(part, holes[i])
+            zone = _street_zone(part, no_street[i])
             got = _polygon_parts(spec.subdivide(part, block_settings[i] or settings, rng))
             leaks = shapely.area(shapely.difference(got, part)) > _CRUMB
             if leaks.any():
@@ -1849,6 +1925,8 @@ def subdivide_blocks(blocks, method: str = "recursive",
         "n_sized_by_block": n_sized,
         "n_undesirable": int(bad.sum()),
     }
+    if outside is not None:
+        stats["n_blocks_on_boundary"] = int((~shapely.is_empty(outside)).sum())
     if whole is not None:
         stats["n_buildings"] = len(whole)
         on_land, split = _on_parcels(whole, geometry)
@@ -1858,3 +1936,49 @@ def subdivide_blocks(blocks, method: str = "recursive",
         stats["n_over_max_area_merged"] = n_merged_over_max
     progress.step(1.0)
     return Subdivision(geometry, table, shrunk, stats)
+
+
+def summary(stats: Mapping, method: str) -> List[str]:
+    """The log lines of a subdivision's ``stats`` (:class:`Subdivision`): what was made and
+    each count of lots that are not as asked (over the maximum area, without access, ...).
+
+    >>> summary({"n_lots": 2, "n_blocks": 1, "n_over_max_area": 0, "n_undesirable": 1},
+    ...         "skeleton")[0]
+    '2 parcels (skeleton) in 1 block.'
+    """
+    n = stats.get
+    lines = [f"{counted(n('n_lots'), 'parcel')} ({method}) in "
+             f"{counted(n('n_blocks'), 'block')}."]
+    over = n("n_over_max_area") - n("n_over_max_area_merged", 0)
+    for count, one, many, text in (
+            (n("n_empty_blocks"), "block is", "blocks are", "narrower than their streets "
+             "(or smaller than the minimum area after shrinking) and get no parcel."),
+            (n("n_thin_blocks"), "block has", "blocks have", "land nowhere the minimum "
+             "width wide after shrinking (a strip, a roundabout's island): no parcel there."),
+            (over, "parcel stays", "parcels stay", "larger than the maximum area: land "
+             "without frontage merged into it, or no cut left pieces big, wide, on a street."),
+            (n("n_over_max_area_merged"), "parcel is", "parcels are", "larger than the "
+             "maximum area because lots merged so that a building stands on one parcel."),
+            (n("n_without_access"), "parcel has", "parcels have", "no street frontage."),
+            (n("n_under_min_width"), "parcel is", "parcels are", "narrower than the minimum "
+             "width: a thin arm of their block part."),
+            (n("n_merged_for_access"), "lot", "lots", "without frontage merged into others."),
+            (n("n_merged_for_buildings"), "lot", "lots", "merged into a neighbour so "
+             "that a building stands on one parcel."),
+            (n("n_blocks_on_boundary"), "block lies", "blocks lie", "on the boundary: its "
+             "edges there are no street (no street width, no strip, no frontage).")):
+        if count and count > 0:
+            lines.append(f"{counted(count, one, many)} {text}")
+    if n("n_buildings"):
+        on_lots, split = n("n_buildings_on_lots"), n("n_buildings_split")
+        lines.append(
+            f"{split} of the {counted(on_lots, 'building')} on parcel land "
+            f"{'is' if split == 1 else 'are'} crossed by a parcel line (no parcel holds "
+            "95 % of it): on the line between two streets' strips, or in a row longer "
+            f"than a merged parcel may be ({n('n_buildings') - on_lots} of the "
+            f"{counted(n('n_buildings'), 'building')} "
+            f"{'stands' if n('n_buildings') - on_lots == 1 else 'stand'} mostly outside "
+            "the parcels).")
+    lines.append(f"{counted(n('n_undesirable'), 'parcel is', 'parcels are')} undesirable "
+                 "by Yang's criteria (p_angle > 15° or p_area > 1.2).")
+    return lines
